@@ -1,0 +1,136 @@
+//! Command-line interface: one file per subcommand; each only wires stages and files together.
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::cloud::{Format, Units};
+
+mod info;
+mod synth;
+
+/// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
+#[derive(Debug, Parser)]
+#[command(name = "polishbot", version, about, long_about = None)]
+pub struct Cli {
+    /// Optional TOML file with settings for the command (its keys mirror the flags).
+    #[arg(long, global = true, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// The command to run.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Options every command that reads geometry takes.
+#[derive(Debug, Clone, Args, Default)]
+pub struct GeometryInput {
+    /// Length unit of the input files (m or mm). Required when a file looks like metres.
+    #[arg(long, value_enum)]
+    pub units: Option<Units>,
+    /// File format, overriding the file's extension.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+}
+
+/// The subcommands of DESIGN.md's CLI contract.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Print one JSON object describing a geometry file: points, faces, bbox_min, bbox_max, units.
+    Info(info::InfoArgs),
+    /// Merge turntable range views into one cloud.
+    Merge(NotYet),
+    /// Statistical outlier filter and down-sampling.
+    Filter(NotYet),
+    /// Register a scan onto a reference: DIR/registration.json.
+    Register(NotYet),
+    /// Whole metrology chain: registration, deviations, regions, report.
+    Inspect(NotYet),
+    /// Plan grinding passes and the joint trajectory from an inspection.
+    Plan(NotYet),
+    /// Stream a plan to the arm (serial port or simulated arm).
+    Run(NotYet),
+    /// Direct arm commands: ping, read, move, torque.
+    Arm(NotYet),
+    /// Calibration routines: servos, workcell, verify.
+    Calibrate(NotYet),
+    /// Write a synthetic reference, a defective moved scan and the truth.
+    Synth(synth::SynthArgs),
+    /// The whole chain on a built-in part against the simulated arm.
+    Demo(NotYet),
+}
+
+/// Arguments of a command whose issue has not landed yet.
+#[derive(Debug, Args)]
+pub struct NotYet {
+    /// Arguments (accepted and ignored until the command exists).
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+    pub args: Vec<String>,
+}
+
+/// Parses the command line, runs the command and maps errors to a one-line message and exit 1.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_tracing();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("polishbot: {}", one_line(&err));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    let config = cli.config.as_deref();
+    match cli.command {
+        Command::Info(args) => info::run(args, config),
+        Command::Synth(args) => synth::run(args, config),
+        Command::Merge(_) => not_yet("merge"),
+        Command::Filter(_) => not_yet("filter"),
+        Command::Register(_) => not_yet("register"),
+        Command::Inspect(_) => not_yet("inspect"),
+        Command::Plan(_) => not_yet("plan"),
+        Command::Run(_) => not_yet("run"),
+        Command::Arm(_) => not_yet("arm"),
+        Command::Calibrate(_) => not_yet("calibrate"),
+        Command::Demo(_) => not_yet("demo"),
+    }
+}
+
+fn not_yet(name: &str) -> anyhow::Result<()> {
+    anyhow::bail!("{name}: not implemented yet")
+}
+
+/// Joins an error chain into one line: "outer: inner: root".
+pub fn one_line(err: &anyhow::Error) -> String {
+    let parts: Vec<String> = err.chain().map(|e| e.to_string()).collect();
+    let mut line = String::new();
+    for part in parts {
+        if !line.contains(&part) {
+            if !line.is_empty() {
+                line.push_str(": ");
+            }
+            line.push_str(&part);
+        }
+    }
+    line.replace('\n', " ")
+}
+
+fn init_tracing() {
+    let _ = tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_max_level(tracing::Level::WARN)
+        .try_init();
+}
+
+/// Reads an optional TOML config file into `T` (missing file argument: `T::default()`).
+pub fn load_config<T: serde::de::DeserializeOwned + Default>(
+    path: Option<&std::path::Path>,
+) -> anyhow::Result<T> {
+    let Some(path) = path else {
+        return Ok(T::default());
+    };
+    let text =
+        std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
+}

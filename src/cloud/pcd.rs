@@ -1,0 +1,194 @@
+//! PCD reader (Point Cloud Library format v0.7): ascii and binary data; `binary_compressed`
+//! is refused with a message. Fields with COUNT > 1 (e.g. descriptors) are skipped.
+use super::columns::Columns;
+use super::error::{fail, ParseError, Place};
+use super::text::{self, Cursor};
+use super::types::Geometry;
+
+struct Field {
+    name: String,
+    size: usize,
+    kind: char,
+    count: usize,
+}
+
+/// Parses a PCD file.
+pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
+    if bytes.is_empty() {
+        return fail(Place::Byte(0), "empty file");
+    }
+    let (mut names, mut sizes, mut kinds, mut counts) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut points: Option<usize> = None;
+    let (mut width, mut height) = (None, 1usize);
+    let mut data = None;
+    for item in text::lines(bytes) {
+        let (line_no, start, line) = item?;
+        let place = Place::Line(line_no);
+        let mut tok = text::tokens(line);
+        let key = tok.next();
+        let rest: Vec<&str> = tok.collect();
+        match key {
+            None => {}
+            Some(k) if k.starts_with('#') => {}
+            Some("VERSION") | Some("VIEWPOINT") => {}
+            Some("FIELDS") => names = rest.iter().map(|s| s.to_string()).collect(),
+            Some("SIZE") => {
+                sizes = rest
+                    .iter()
+                    .map(|s| text::count(s, place))
+                    .collect::<Result<_, _>>()?
+            }
+            Some("TYPE") => {
+                kinds = rest
+                    .iter()
+                    .map(|s| s.chars().next().unwrap_or('?'))
+                    .collect()
+            }
+            Some("COUNT") => {
+                counts = rest
+                    .iter()
+                    .map(|s| text::count(s, place))
+                    .collect::<Result<_, _>>()?
+            }
+            Some("WIDTH") => width = Some(text::count(rest.first().copied().unwrap_or(""), place)?),
+            Some("HEIGHT") => height = text::count(rest.first().copied().unwrap_or(""), place)?,
+            Some("POINTS") => {
+                points = Some(text::count(rest.first().copied().unwrap_or(""), place)?)
+            }
+            Some("DATA") => {
+                let body = (start + line.len() + 1).min(bytes.len());
+                data = Some((
+                    rest.first().copied().unwrap_or("").to_string(),
+                    body,
+                    line_no + 1,
+                    place,
+                ));
+                break;
+            }
+            Some(other) => {
+                return fail(
+                    place,
+                    format!("unknown PCD header keyword {:?}", text::shorten(other)),
+                )
+            }
+        }
+    }
+    let Some((mode, body, body_line, data_place)) = data else {
+        return fail(Place::Byte(bytes.len()), "PCD header has no DATA line");
+    };
+    if counts.is_empty() {
+        counts = vec![1; names.len()];
+    }
+    if names.is_empty()
+        || sizes.len() != names.len()
+        || kinds.len() != names.len()
+        || counts.len() != names.len()
+    {
+        return fail(
+            data_place,
+            "FIELDS, SIZE, TYPE and COUNT must list the same number of entries",
+        );
+    }
+    let fields: Vec<Field> = (0..names.len())
+        .map(|i| Field {
+            name: names[i].clone(),
+            size: sizes[i],
+            kind: kinds[i],
+            count: counts[i],
+        })
+        .collect();
+    for f in &fields {
+        let ok = matches!(
+            (f.kind, f.size),
+            ('F', 4) | ('F', 8) | ('I' | 'U', 1 | 2 | 4 | 8)
+        );
+        if !ok {
+            return fail(
+                data_place,
+                format!(
+                    "field {} has unsupported TYPE {} SIZE {}",
+                    f.name, f.kind, f.size
+                ),
+            );
+        }
+    }
+    let n = points
+        .or(width.map(|w| w * height))
+        .ok_or_else(|| ParseError::new(data_place, "no POINTS or WIDTH"))?;
+    // Only single-valued fields become columns.
+    let scalar_names: Vec<String> = fields
+        .iter()
+        .filter(|f| f.count == 1)
+        .map(|f| f.name.clone())
+        .collect();
+    let layout = Columns::from_names(&scalar_names, data_place)?;
+    let mut cloud = layout.empty_cloud(text::capacity(n, bytes.len() - body, 3));
+    let mut row = Vec::with_capacity(scalar_names.len());
+    match mode.as_str() {
+        "ascii" => {
+            let mut lines = text::lines(&bytes[body..])
+                .filter(|l| !matches!(l, Ok((_, _, s)) if s.trim().is_empty()));
+            let width: usize = fields.iter().map(|f| f.count).sum();
+            for i in 0..n {
+                let (k, _, line) = match lines.next() {
+                    Some(item) => item?,
+                    None => return fail(Place::Point(i), format!("file ends at point {i} of {n}")),
+                };
+                let place = Place::Line(body_line + k - 1);
+                let toks: Vec<&str> = text::tokens(line).collect();
+                if toks.len() != width {
+                    return fail(
+                        place,
+                        format!("expected {width} values, found {}", toks.len()),
+                    );
+                }
+                row.clear();
+                let mut t = 0;
+                for f in &fields {
+                    if f.count == 1 {
+                        row.push(text::number(toks[t], place)?);
+                    }
+                    t += f.count;
+                }
+                layout.push(&mut cloud, &row);
+            }
+        }
+        "binary" => {
+            let mut cur = Cursor::new(bytes, body);
+            for _ in 0..n {
+                row.clear();
+                for f in &fields {
+                    let raw = cur.take(f.size * f.count, &f.name)?;
+                    if f.count == 1 {
+                        row.push(decode(raw, f.kind));
+                    }
+                }
+                layout.push(&mut cloud, &row);
+            }
+        }
+        other => {
+            return fail(
+                data_place,
+                format!("DATA {other:?} is not supported (ascii or binary only)"),
+            )
+        }
+    }
+    cloud.check_finite()?;
+    Ok(Geometry::Cloud(cloud))
+}
+
+fn decode(b: &[u8], kind: char) -> f64 {
+    let mut a = [0u8; 8];
+    a[..b.len()].copy_from_slice(b);
+    match (kind, b.len()) {
+        ('F', 4) => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        ('F', _) => f64::from_le_bytes(a),
+        ('U', _) => u64::from_le_bytes(a) as f64,
+        (_, n) => {
+            // Sign-extend an n-byte little-endian integer.
+            let shift = 64 - 8 * n as u32;
+            ((i64::from_le_bytes(a) << shift) >> shift) as f64
+        }
+    }
+}

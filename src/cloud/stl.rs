@@ -1,0 +1,138 @@
+//! STL reader (binary and ascii). Vertices are merged by exact position, so the mesh counts
+//! unique vertices; facet normals in the file are ignored (winding defines them).
+use std::collections::HashMap;
+
+use nalgebra::Point3;
+
+use super::error::{fail, ParseError, Place};
+use super::text::{self, Cursor};
+use super::types::{Geometry, Mesh, PointCloud};
+
+/// Merges equal positions into one vertex index.
+#[derive(Default)]
+struct Welder {
+    index: HashMap<[u64; 3], u32>,
+    vertices: Vec<Point3<f64>>,
+}
+
+impl Welder {
+    fn add(&mut self, p: [f64; 3], place: Place) -> Result<u32, ParseError> {
+        if !p.iter().all(|c| c.is_finite()) {
+            return fail(place, "coordinate is NaN or infinite");
+        }
+        // +0.0 and -0.0 are the same position.
+        let key = p.map(|c| (c + 0.0).to_bits());
+        let next = self.vertices.len() as u32;
+        let id = *self.index.entry(key).or_insert(next);
+        if id == next {
+            self.vertices.push(Point3::from(p));
+        }
+        Ok(id)
+    }
+
+    fn finish(self, faces: Vec<[u32; 3]>) -> Geometry {
+        let attributes = PointCloud::from_points(self.vertices.clone());
+        Geometry::Mesh {
+            mesh: Mesh {
+                vertices: self.vertices,
+                faces,
+            },
+            attributes,
+        }
+    }
+}
+
+/// Parses an STL file, binary or ascii.
+pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
+    if bytes.is_empty() {
+        return fail(Place::Byte(0), "empty file");
+    }
+    if bytes.len() >= 84 {
+        let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
+        if 84 + 50 * n == bytes.len() {
+            return read_binary(bytes, n);
+        }
+    }
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(512)]);
+    if head.trim_start().starts_with("solid") && std::str::from_utf8(bytes).is_ok() {
+        return read_ascii(bytes);
+    }
+    if bytes.len() < 84 {
+        return fail(
+            Place::Byte(bytes.len()),
+            "truncated: a binary STL needs an 84-byte header",
+        );
+    }
+    let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
+    fail(
+        Place::Byte(80),
+        format!(
+            "binary STL header says {n} triangles ({} bytes), the file has {} bytes",
+            84 + 50 * n,
+            bytes.len()
+        ),
+    )
+}
+
+fn read_binary(bytes: &[u8], n: usize) -> Result<Geometry, ParseError> {
+    let mut cur = Cursor::new(bytes, 84);
+    let mut welder = Welder::default();
+    let mut faces = Vec::with_capacity(n);
+    for t in 0..n {
+        let rec = cur.take(50, "triangle record")?;
+        let mut face = [0u32; 3];
+        for (k, slot) in face.iter_mut().enumerate() {
+            let base = 12 + 12 * k;
+            let c = |j: usize| {
+                f32::from_le_bytes(rec[base + 4 * j..base + 4 * j + 4].try_into().unwrap()) as f64
+            };
+            *slot = welder.add([c(0), c(1), c(2)], Place::Face(t))?;
+        }
+        faces.push(face);
+    }
+    Ok(welder.finish(faces))
+}
+
+fn read_ascii(bytes: &[u8]) -> Result<Geometry, ParseError> {
+    let mut welder = Welder::default();
+    let mut faces = Vec::new();
+    let mut corners: Vec<u32> = Vec::with_capacity(3);
+    for item in text::lines(bytes) {
+        let (line_no, _, line) = item?;
+        let place = Place::Line(line_no);
+        let mut tok = text::tokens(line);
+        match tok.next() {
+            Some("vertex") => {
+                let mut c = [0.0; 3];
+                for v in &mut c {
+                    *v = text::number(tok.next().unwrap_or(""), place)?;
+                }
+                if corners.len() == 3 {
+                    return fail(place, "facet with more than 3 vertices");
+                }
+                corners.push(welder.add(c, place)?);
+            }
+            Some("endloop") => {
+                if corners.len() != 3 {
+                    return fail(
+                        place,
+                        format!("facet has {} vertices, needs 3", corners.len()),
+                    );
+                }
+                faces.push([corners[0], corners[1], corners[2]]);
+                corners.clear();
+            }
+            Some("solid" | "facet" | "outer" | "endfacet" | "endsolid") | None => {}
+            Some(other) => {
+                return fail(
+                    place,
+                    format!("unexpected {:?} in ascii STL", text::shorten(other)),
+                )
+            }
+        }
+    }
+    if faces.is_empty() {
+        return fail(Place::File, "ascii STL has no facets");
+    }
+    Ok(welder.finish(faces))
+}

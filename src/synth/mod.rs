@@ -1,0 +1,1 @@
+//! Synthetic parts with known defects, pose and outliers, for accuracy tests.
