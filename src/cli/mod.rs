@@ -54,7 +54,7 @@ pub enum Command {
     /// Calibration routines: servos, workcell, verify.
     Calibrate(NotYet),
     /// Write a synthetic reference, a defective moved scan and the truth.
-    Synth(synth::SynthArgs),
+    Synth(Box<synth::SynthArgs>),
     /// The whole chain on a built-in part against the simulated arm.
     Demo(NotYet),
 }
@@ -84,7 +84,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let config = cli.config.as_deref();
     match cli.command {
         Command::Info(args) => info::run(args, config),
-        Command::Synth(args) => synth::run(args, config),
+        Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
         Command::Filter(_) => not_yet("filter"),
         Command::Register(_) => not_yet("register"),

@@ -51,7 +51,10 @@ pub struct SynthArgs {
 }
 
 fn parse_range(s: &str) -> Result<[f64; 2], String> {
-    let v: Vec<f64> = s.split(',').map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}"))).collect::<Result<_, _>>()?;
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
     match v.as_slice() {
         [a, b] if a <= b => Ok([*a, *b]),
         _ => Err("expected \"min,max\" with min <= max".into()),
@@ -64,7 +67,17 @@ pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<
     macro_rules! set {
         ($($field:ident),*) => {$(if let Some(v) = args.$field { cfg.$field = v; })*};
     }
-    set!(seed, defects, noise, outliers, reference_points, scan_points, height_range, width_range, max_translation);
+    set!(
+        seed,
+        defects,
+        noise,
+        outliers,
+        reference_points,
+        scan_points,
+        height_range,
+        width_range,
+        max_translation
+    );
     if args.mesh.is_some() {
         cfg.mesh = args.mesh;
         cfg.surface = args.surface;

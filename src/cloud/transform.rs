@@ -23,11 +23,17 @@ pub fn isometry_from_rows(rows: &[[f64; 4]; 4]) -> Result<Isometry3<f64>> {
         bail!("transform's rotation part is not a rotation (orthonormality error {err:.2e}, det {:.6})", r.determinant());
     }
     let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
-    Ok(Isometry3::from_parts(Translation3::new(rows[0][3], rows[1][3], rows[2][3]), rot))
+    Ok(Isometry3::from_parts(
+        Translation3::new(rows[0][3], rows[1][3], rows[2][3]),
+        rot,
+    ))
 }
 
 /// Rotation angle (degrees) and translation distance between two poses: how far `a` is from `b`.
 pub fn pose_difference(a: &Isometry3<f64>, b: &Isometry3<f64>) -> (f64, f64) {
     let d = a.inverse() * b;
-    (d.rotation.angle().to_degrees(), (a.translation.vector - b.translation.vector).norm())
+    (
+        d.rotation.angle().to_degrees(),
+        (a.translation.vector - b.translation.vector).norm(),
+    )
 }

@@ -63,7 +63,13 @@ fn sagittal_profile() -> Profile {
     Profile::new(
         Vector2::new(22.0, 45.0),
         Vector2::new(0.06, -1.0),
-        vec![Piece::Line(34.0), Piece::Arc(40.0, 50.0), Piece::Arc(27.0, 75.0), Piece::Arc(21.0, 58.43), Piece::Line(12.0)],
+        vec![
+            Piece::Line(34.0),
+            Piece::Arc(40.0, 50.0),
+            Piece::Arc(27.0, 75.0),
+            Piece::Arc(21.0, 58.43),
+            Piece::Line(12.0),
+        ],
     )
 }
 
@@ -90,10 +96,18 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
     xs.sort_by(f64::total_cmp);
     xs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
     let nx = xs.len();
-    let j_nl = xs.iter().position(|&x| (x + nh).abs() < 1e-9).expect("notch edge in grid");
-    let j_nr = xs.iter().position(|&x| (x - nh).abs() < 1e-9).expect("notch edge in grid");
+    let j_nl = xs
+        .iter()
+        .position(|&x| (x + nh).abs() < 1e-9)
+        .expect("notch edge in grid");
+    let j_nr = xs
+        .iter()
+        .position(|&x| (x - nh).abs() < 1e-9)
+        .expect("notch edge in grid");
 
-    let stations: Vec<_> = (0..=m).map(|i| profile.at(len * i as f64 / m as f64)).collect();
+    let stations: Vec<_> = (0..=m)
+        .map(|i| profile.at(len * i as f64 / m as f64))
+        .collect();
     // The notch opens where the distal arc is half done and runs to the posterior end.
     let breaks = profile.breaks();
     let s_notch = 0.5 * (breaks[2] + breaks[3]);
@@ -103,7 +117,9 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
 
     let drop = |i: usize, x: f64| -> f64 {
         let s = len * i as f64 / m as f64;
-        let groove = shape.groove_depth * (-x * x / (2.0 * shape.groove_sigma.powi(2))).exp() * (1.0 - smoothstep(breaks[1], groove_end, s));
+        let groove = shape.groove_depth
+            * (-x * x / (2.0 * shape.groove_sigma.powi(2))).exp()
+            * (1.0 - smoothstep(breaks[1], groove_end, s));
         let mut edge_dist = half - x.abs();
         if i >= i_notch {
             edge_dist = edge_dist.min(x.abs() - nh);
@@ -143,15 +159,37 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
     let to3 = |v: Vector2<f64>| Vector3::new(0.0, v.x, v.y);
     let in_notch = |i: usize, j: usize| i >= i_notch && j >= j_nl && j < j_nr;
 
-    let mut builder = Builder { vertices: &vertices, faces: Vec::new(), articular: Vec::new() };
+    let mut builder = Builder {
+        vertices: &vertices,
+        faces: Vec::new(),
+        articular: Vec::new(),
+    };
     for i in 0..m {
         let n_out = to3(stations[i].normal + stations[i + 1].normal);
         for j in 0..nx - 1 {
             if in_notch(i, j) {
                 continue;
             }
-            builder.quad([outer_id(i, j), outer_id(i + 1, j), outer_id(i + 1, j + 1), outer_id(i, j + 1)], n_out, true);
-            builder.quad([inner_id(i, j), inner_id(i + 1, j), inner_id(i + 1, j + 1), inner_id(i, j + 1)], -n_out, false);
+            builder.quad(
+                [
+                    outer_id(i, j),
+                    outer_id(i + 1, j),
+                    outer_id(i + 1, j + 1),
+                    outer_id(i, j + 1),
+                ],
+                n_out,
+                true,
+            );
+            builder.quad(
+                [
+                    inner_id(i, j),
+                    inner_id(i + 1, j),
+                    inner_id(i + 1, j + 1),
+                    inner_id(i, j + 1),
+                ],
+                -n_out,
+                false,
+            );
         }
         // Side walls and, in the notch zone, notch walls.
         let mut walls = vec![(0, -Vector3::x()), (nx - 1, Vector3::x())];
@@ -159,21 +197,59 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
             walls.extend([(j_nl, Vector3::x()), (j_nr, -Vector3::x())]);
         }
         for (j, hint) in walls {
-            builder.quad([outer_id(i, j), outer_id(i + 1, j), inner_id(i + 1, j), inner_id(i, j)], hint, false);
+            builder.quad(
+                [
+                    outer_id(i, j),
+                    outer_id(i + 1, j),
+                    inner_id(i + 1, j),
+                    inner_id(i, j),
+                ],
+                hint,
+                false,
+            );
         }
     }
     // End caps and the notch roof.
     for j in 0..nx - 1 {
-        builder.quad([outer_id(0, j), outer_id(0, j + 1), inner_id(0, j + 1), inner_id(0, j)], -to3(stations[0].tangent), false);
+        builder.quad(
+            [
+                outer_id(0, j),
+                outer_id(0, j + 1),
+                inner_id(0, j + 1),
+                inner_id(0, j),
+            ],
+            -to3(stations[0].tangent),
+            false,
+        );
         if !in_notch(m, j) {
-            builder.quad([outer_id(m, j), outer_id(m, j + 1), inner_id(m, j + 1), inner_id(m, j)], to3(stations[m].tangent), false);
+            builder.quad(
+                [
+                    outer_id(m, j),
+                    outer_id(m, j + 1),
+                    inner_id(m, j + 1),
+                    inner_id(m, j),
+                ],
+                to3(stations[m].tangent),
+                false,
+            );
         }
         if (j_nl..j_nr).contains(&j) {
             let t = to3(stations[i_notch].tangent);
-            builder.quad([outer_id(i_notch, j), outer_id(i_notch, j + 1), inner_id(i_notch, j + 1), inner_id(i_notch, j)], t, false);
+            builder.quad(
+                [
+                    outer_id(i_notch, j),
+                    outer_id(i_notch, j + 1),
+                    inner_id(i_notch, j + 1),
+                    inner_id(i_notch, j),
+                ],
+                t,
+                false,
+            );
         }
     }
-    let Builder { faces, articular, .. } = builder;
+    let Builder {
+        faces, articular, ..
+    } = builder;
     let mut mesh = Mesh { vertices, faces };
     let centre = Aabb::of(&mesh.vertices).expect("vertices").centre();
     mesh.vertices.iter_mut().for_each(|p| *p -= centre.coords);
@@ -195,7 +271,11 @@ impl Builder<'_> {
             if n.norm() < 1e-12 {
                 continue;
             }
-            self.faces.push(if n.dot(&outward) >= 0.0 { tri } else { [tri[0], tri[2], tri[1]] });
+            self.faces.push(if n.dot(&outward) >= 0.0 {
+                tri
+            } else {
+                [tri[0], tri[2], tri[1]]
+            });
             self.articular.push(articular);
         }
     }

@@ -97,8 +97,14 @@ pub struct SynthCase {
 impl SynthCase {
     /// Writes reference.ply, scan.ply and truth.json into `dir` (created if missing).
     pub fn write(&self, dir: &Path) -> Result<()> {
-        std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-        cloud::write_ply(&dir.join("reference.ply"), &self.reference, None, PlyPrecision::F64)?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        cloud::write_ply(
+            &dir.join("reference.ply"),
+            &self.reference,
+            None,
+            PlyPrecision::F64,
+        )?;
         cloud::write_ply(&dir.join("scan.ply"), &self.scan, None, PlyPrecision::F64)?;
         self.truth.save(&dir.join("truth.json"))
     }
@@ -115,20 +121,40 @@ struct Part {
 fn load_part(cfg: &SynthConfig) -> Result<Part> {
     let Some(path) = &cfg.mesh else {
         let part = build_femoral(&cfg.shape);
-        let faces = part.mesh.faces.iter().zip(&part.articular).filter(|(_, a)| **a).map(|(f, _)| *f).collect();
-        let articular = Mesh { vertices: part.mesh.vertices.clone(), faces };
-        return Ok(Part { mesh: part.mesh, source: "parametric femoral component".into(), articular: Some(articular) });
+        let faces = part
+            .mesh
+            .faces
+            .iter()
+            .zip(&part.articular)
+            .filter(|(_, a)| **a)
+            .map(|(f, _)| *f)
+            .collect();
+        let articular = Mesh {
+            vertices: part.mesh.vertices.clone(),
+            faces,
+        };
+        return Ok(Part {
+            mesh: part.mesh,
+            source: "parametric femoral component".into(),
+            articular: Some(articular),
+        });
     };
     let load_mesh = |p: &Path| -> Result<Mesh> {
         match cloud::load(p, None, cfg.units)?.geometry {
             Geometry::Mesh { mesh, .. } => Ok(mesh),
-            Geometry::Cloud(_) => anyhow::bail!("{}: has no faces; synth needs a mesh", p.display()),
+            Geometry::Cloud(_) => {
+                anyhow::bail!("{}: has no faces; synth needs a mesh", p.display())
+            }
         }
     };
     let mut mesh = load_mesh(path)?;
     placement::orient_outward(&mut mesh);
     let articular = cfg.surface.as_deref().map(load_mesh).transpose()?;
-    Ok(Part { mesh, source: path.display().to_string(), articular })
+    Ok(Part {
+        mesh,
+        source: path.display().to_string(),
+        articular,
+    })
 }
 
 /// A uniformly random rotation and a translation of random direction and length up to `max`.
@@ -148,9 +174,18 @@ pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
 
 /// Makes a case.
 pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
-    anyhow::ensure!(cfg.reference_points > 0 && cfg.scan_points > 0, "point counts must be positive");
-    anyhow::ensure!((0.0..0.5).contains(&cfg.outliers), "outlier share must be in [0, 0.5)");
-    anyhow::ensure!(cfg.noise >= 0.0 && cfg.noise.is_finite(), "noise must be a finite non-negative number");
+    anyhow::ensure!(
+        cfg.reference_points > 0 && cfg.scan_points > 0,
+        "point counts must be positive"
+    );
+    anyhow::ensure!(
+        (0.0..0.5).contains(&cfg.outliers),
+        "outlier share must be in [0, 0.5)"
+    );
+    anyhow::ensure!(
+        cfg.noise >= 0.0 && cfg.noise.is_finite(),
+        "noise must be a finite non-negative number"
+    );
     let part = load_part(cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let defects = placement::place_defects(&part.mesh, part.articular.as_ref(), cfg, &mut rng)?;
@@ -184,5 +219,10 @@ pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
         defects,
     };
     truth.set_pose(&move_scan.inverse());
-    Ok(SynthCase { reference, scan, mesh: part.mesh, truth })
+    Ok(SynthCase {
+        reference,
+        scan,
+        mesh: part.mesh,
+        truth,
+    })
 }

@@ -35,7 +35,10 @@ struct Grid {
 
 impl Grid {
     fn new(cell: f64, points: impl IntoIterator<Item = Point3<f64>>) -> Grid {
-        let mut g = Grid { cell, cells: HashMap::new() };
+        let mut g = Grid {
+            cell,
+            cells: HashMap::new(),
+        };
         for p in points {
             g.cells.entry(g.key(&p)).or_default().push(p);
         }
@@ -77,7 +80,12 @@ fn sharp_edge_points(mesh: &Mesh, step: f64) -> Vec<Point3<f64>> {
     let cos_limit = 25f64.to_radians().cos();
     let mut out = Vec::new();
     for ((a, b), faces) in edges {
-        let sharp = faces.len() != 2 || mesh.face_normal_area(faces[0]).0.dot(&mesh.face_normal_area(faces[1]).0) < cos_limit;
+        let sharp = faces.len() != 2
+            || mesh
+                .face_normal_area(faces[0])
+                .0
+                .dot(&mesh.face_normal_area(faces[1]).0)
+                < cos_limit;
         if sharp {
             let (pa, pb) = (mesh.vertices[a as usize], mesh.vertices[b as usize]);
             let n = ((pb - pa).norm() / step).ceil().max(1.0) as usize;
@@ -89,18 +97,29 @@ fn sharp_edge_points(mesh: &Mesh, step: f64) -> Vec<Point3<f64>> {
 
 /// Plants `cfg.defects` defects on the surface (on `articular` when given), each clear of
 /// sharp edges by its support plus 1 mm and clear of the others.
-pub fn place_defects(mesh: &Mesh, articular: Option<&Mesh>, cfg: &SynthConfig, rng: &mut ChaCha8Rng) -> Result<Vec<Defect>> {
+pub fn place_defects(
+    mesh: &Mesh,
+    articular: Option<&Mesh>,
+    cfg: &SynthConfig,
+    rng: &mut ChaCha8Rng,
+) -> Result<Vec<Defect>> {
     if cfg.defects == 0 {
         return Ok(Vec::new());
     }
     let [hmin, hmax] = cfg.height_range;
     let [wmin, wmax] = cfg.width_range;
-    anyhow::ensure!(0.0 < hmin && hmin <= hmax && 0.0 < wmin && wmin <= wmax, "height and width ranges must be positive and ordered");
+    anyhow::ensure!(
+        0.0 < hmin && hmin <= hmax && 0.0 < wmin && wmin <= wmax,
+        "height and width ranges must be positive and ordered"
+    );
     let mut sharp = sharp_edge_points(mesh, 0.5);
     let on_articular = match articular {
         Some(a) => {
             sharp.extend(sharp_edge_points(a, 0.5));
-            Some(Grid::new(1.0, sample_mesh(a, 200_000, rng.gen())?.cloud.points))
+            Some(Grid::new(
+                1.0,
+                sample_mesh(a, 200_000, rng.gen())?.cloud.points,
+            ))
         }
         None => None,
     };
@@ -134,9 +153,20 @@ pub fn place_defects(mesh: &Mesh, articular: Option<&Mesh>, cfg: &SynthConfig, r
         } else {
             (Vector3::zeros(), 0.0)
         };
-        let d = Defect { id: defects.len(), kind, centre: p.coords.into(), normal: (*n).into(), height, width, direction: direction.into(), length };
+        let d = Defect {
+            id: defects.len(),
+            kind,
+            centre: p.coords.into(),
+            normal: (*n).into(),
+            height,
+            width,
+            direction: direction.into(),
+            length,
+        };
         let reach = 2.0 * width + 1.0;
-        let probes: Vec<Point3<f64>> = (-4..=4).map(|k| p + direction * (length / 2.0) * (k as f64 / 4.0)).collect();
+        let probes: Vec<Point3<f64>> = (-4..=4)
+            .map(|k| p + direction * (length / 2.0) * (k as f64 / 4.0))
+            .collect();
         if probes.iter().any(|q| sharp.any_within(q, reach)) {
             continue;
         }
@@ -145,7 +175,10 @@ pub fn place_defects(mesh: &Mesh, articular: Option<&Mesh>, cfg: &SynthConfig, r
                 continue;
             }
         }
-        let clear = |o: &Defect| (Point3::from(o.centre) - p).norm() > 2.0 * (width + o.width) + (length + o.length) / 2.0 + 1.0;
+        let clear = |o: &Defect| {
+            (Point3::from(o.centre) - p).norm()
+                > 2.0 * (width + o.width) + (length + o.length) / 2.0 + 1.0
+        };
         if defects.iter().all(clear) {
             defects.push(d);
         }
@@ -158,11 +191,19 @@ pub fn place_defects(mesh: &Mesh, articular: Option<&Mesh>, cfg: &SynthConfig, r
 
 /// Appends outliers to `points` (half scattered 2-15 mm off the surface, half in clusters of
 /// 15-40 points 1-5 mm off it) and returns their indices.
-pub fn add_outliers(points: &mut Vec<Point3<f64>>, surface: &PointCloud, share: f64, rng: &mut ChaCha8Rng) -> OutlierTruth {
+pub fn add_outliers(
+    points: &mut Vec<Point3<f64>>,
+    surface: &PointCloud,
+    share: f64,
+    rng: &mut ChaCha8Rng,
+) -> OutlierTruth {
     let n_surface = points.len();
     let total = (n_surface as f64 * share / (1.0 - share)).round() as usize;
     let normals = surface.normals.as_ref().expect("sampled normals");
-    let mut truth = OutlierTruth { fraction: share, ..Default::default() };
+    let mut truth = OutlierTruth {
+        fraction: share,
+        ..Default::default()
+    };
     let pick = |rng: &mut ChaCha8Rng| {
         let k = rng.gen_range(0..n_surface);
         (points[k], normals[k])
@@ -182,7 +223,11 @@ pub fn add_outliers(points: &mut Vec<Point3<f64>>, surface: &PointCloud, share: 
         let centre = p + n * cluster_rng.gen_range(1.0..5.0);
         let size = cluster_rng.gen_range(15..=40).min(total - extra.len());
         for _ in 0..size {
-            let offset = Vector3::new(gauss(&mut cluster_rng), gauss(&mut cluster_rng), gauss(&mut cluster_rng)) * 0.25;
+            let offset = Vector3::new(
+                gauss(&mut cluster_rng),
+                gauss(&mut cluster_rng),
+                gauss(&mut cluster_rng),
+            ) * 0.25;
             truth.clustered.push(n_surface + extra.len());
             extra.push(centre + offset);
         }

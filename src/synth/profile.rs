@@ -38,7 +38,11 @@ fn left(v: Vector2<f64>) -> Vector2<f64> {
 impl Profile {
     /// A profile starting at `start` heading along `heading` (normalised).
     pub fn new(start: Vector2<f64>, heading: Vector2<f64>, pieces: Vec<Piece>) -> Self {
-        Profile { start, heading: heading.normalize(), pieces }
+        Profile {
+            start,
+            heading: heading.normalize(),
+            pieces,
+        }
     }
 
     /// Total arc length.
@@ -71,7 +75,8 @@ impl Profile {
                     let phi = -step / r;
                     let (c, sn) = (phi.cos(), phi.sin());
                     let radial = point - centre;
-                    let rotate = |v: Vector2<f64>| Vector2::new(c * v.x - sn * v.y, sn * v.x + c * v.y);
+                    let rotate =
+                        |v: Vector2<f64>| Vector2::new(c * v.x - sn * v.y, sn * v.x + c * v.y);
                     point = centre + rotate(radial);
                     tangent = rotate(tangent);
                 }
@@ -81,7 +86,11 @@ impl Profile {
             }
             left_s -= len;
         }
-        Station { point, tangent, normal: left(tangent) }
+        Station {
+            point,
+            tangent,
+            normal: left(tangent),
+        }
     }
 
     /// Arc lengths of the piece boundaries (0, ends of each piece).

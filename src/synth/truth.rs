@@ -62,8 +62,10 @@ impl Truth {
 
     /// Reads truth.json.
     pub fn load(path: &Path) -> Result<Truth> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-        serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: line {}: {}", path.display(), e.line(), e))
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        serde_json::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: line {}: {}", path.display(), e.line(), e))
     }
 
     /// Writes truth.json.
