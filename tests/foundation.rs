@@ -137,7 +137,7 @@ fn csv_round_trip_is_exact() {
 
 #[test]
 fn every_format_reads_the_same_tetrahedron() {
-    let expect = [
+    let expect: [[f64; 3]; 4] = [
         [0.0, 0.0, 0.0],
         [10.0, 0.0, 0.0],
         [0.0, 10.0, 0.0],
