@@ -6,6 +6,7 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::cloud::{Format, Units};
 
+mod demo;
 mod info;
 mod synth;
 
@@ -56,7 +57,7 @@ pub enum Command {
     /// Write a synthetic reference, a defective moved scan and the truth.
     Synth(Box<synth::SynthArgs>),
     /// The whole chain on a built-in part against the simulated arm.
-    Demo(NotYet),
+    Demo(demo::DemoArgs),
 }
 
 /// Arguments of a command whose issue has not landed yet.
@@ -93,7 +94,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(_) => not_yet("run"),
         Command::Arm(_) => not_yet("arm"),
         Command::Calibrate(_) => not_yet("calibrate"),
-        Command::Demo(_) => not_yet("demo"),
+        Command::Demo(args) => demo::run(args, config),
     }
 }
 
