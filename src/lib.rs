@@ -3,4 +3,6 @@
 //! config struct.
 pub mod cli;
 pub mod cloud;
+pub mod plan;
+pub mod robot;
 pub mod synth;
