@@ -4,5 +4,6 @@
 pub mod cli;
 pub mod cloud;
 pub mod plan;
+pub mod progress;
 pub mod robot;
 pub mod synth;
