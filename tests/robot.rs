@@ -182,13 +182,7 @@ fn unreachable_poses_say_why() {
     // narrow joint 3 to a sliver: a pose made with joint 3 far outside it cannot be reached
     let dir = common::tempdir();
     let servos = std::fs::read_to_string(calib("servos.toml")).unwrap();
-    let servos = servos.replacen(
-        "joint = \"arm_joint3\"",
-        "joint = \"arm_joint3\"\njoint_limits_marker = 0",
-        1,
-    );
-    let servos = narrow_joint3(&servos);
-    std::fs::write(dir.path().join("servos.toml"), servos).unwrap();
+    std::fs::write(dir.path().join("servos.toml"), narrow_joint3(&servos)).unwrap();
     let narrow = Robot::load(
         &calib("dofbot.urdf"),
         &calib("tool.toml"),
@@ -201,7 +195,11 @@ fn unreachable_poses_say_why() {
         axis: pose.axis,
         roll: None,
     };
-    match narrow.ik(&target, &home, &config) {
+    let exact = IkConfig {
+        axis_search: false,
+        ..IkConfig::default()
+    };
+    match narrow.ik(&target, &home, &exact) {
         Err(Unreachable::JointLimit { joint, .. }) => {
             assert!(joint.starts_with("arm_joint"), "{joint}")
         }
@@ -209,14 +207,64 @@ fn unreachable_poses_say_why() {
     }
 }
 
+#[test]
+fn axis_search_tilts_the_tool_in_the_arm_plane_only_as_far_as_needed() {
+    let robot = dofbot();
+    let exact = IkConfig {
+        axis_search: false,
+        ..IkConfig::default()
+    };
+    let search = IkConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let (mut found, mut tried) = (0, 0);
+    while tried < 300 {
+        // a reachable pose, then its axis turned in the arm plane by 10..40 degrees
+        let q = random_q(&robot, &mut rng);
+        let pose = robot.fk(&q);
+        let radial = Vector3::new(pose.position.x, pose.position.y, 0.0);
+        if radial.norm() < 1e-3 {
+            continue;
+        }
+        let normal = nalgebra::Unit::new_normalize(radial.cross(&Vector3::z()));
+        let turn =
+            rng.gen_range(10f64..40.0).to_radians() * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        let axis = UnitQuaternion::from_axis_angle(&normal, turn) * pose.axis;
+        let target = IkTarget {
+            position: pose.position,
+            axis,
+            roll: None,
+        };
+        if robot.ik(&target, &q, &exact).is_ok() {
+            continue;
+        }
+        tried += 1;
+        let sol = robot
+            .ik(&target, &q, &search)
+            .expect("the original axis is within the cone");
+        let back = robot.fk(&sol.q);
+        assert!((back.position - pose.position).norm() < 1e-9);
+        // never worse than the known-feasible original axis (bisection to 1/128 degree)
+        assert!(
+            sol.axis_miss <= turn.abs() + 1f64.to_radians() / 100.0,
+            "{} > {}",
+            sol.axis_miss,
+            turn.abs()
+        );
+        assert!((angle_between(&back.axis, &axis) - sol.axis_miss).abs() < 1e-9);
+        // and the achieved axis stays in the arm plane
+        assert!(back.axis.dot(&normal).abs() < 1e-9);
+        found += 1;
+    }
+    assert_eq!(found, tried);
+}
+
 /// servos.toml with joint 3's joint_limits narrowed to [-0.1, 0.1].
 fn narrow_joint3(text: &str) -> String {
     let mut out = String::new();
     let mut in3 = false;
     for line in text.lines() {
-        if line.starts_with("joint_limits_marker") {
+        if line == "joint = \"arm_joint3\"" {
             in3 = true;
-            continue;
         }
         if in3 && line.starts_with("joint_limits") {
             out.push_str("joint_limits = [-0.1, 0.1]\n");
@@ -464,9 +512,11 @@ fn sampled_moves_stay_within_every_limit_and_violations_are_found() {
 fn servo_resolution_error_bounds_the_quantised_tip() {
     let robot = dofbot();
     let mut rng = ChaCha8Rng::seed_from_u64(29);
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
     for _ in 0..200 {
         let q = random_q(&robot, &mut rng);
         let bound = resolution_error(&robot, &q);
+        (lo, hi) = (lo.min(bound), hi.max(bound));
         let tip = robot.fk(&q).position;
         let half: Vec<f64> = robot
             .joints
@@ -503,4 +553,9 @@ fn servo_resolution_error_bounds_the_quantised_tip() {
             "{bound} vs {corner_max}"
         );
     }
+    println!(
+        "servo-resolution tip error bound over random poses: {:.3}..{:.3} mm",
+        lo * 1e3,
+        hi * 1e3
+    );
 }

@@ -19,6 +19,10 @@ pub struct IkConfig {
     /// Largest tool-tip distance (m) and axis angle (rad) between FK(IK) and the target
     /// before an answer is rejected (1e-9).
     pub verify_tolerance: f64,
+    /// When the requested axis is out of reach or joint limits, tilt the tool within the arm
+    /// plane (up to `max_axis_miss_deg` in all) to the nearest reachable axis (true): a
+    /// ball-nosed burr grinds the same spot at any axis within that cone.
+    pub axis_search: bool,
 }
 
 impl Default for IkConfig {
@@ -26,6 +30,7 @@ impl Default for IkConfig {
         IkConfig {
             max_axis_miss_deg: 45.0,
             verify_tolerance: 1e-9,
+            axis_search: true,
         }
     }
 }
@@ -265,11 +270,80 @@ impl Robot {
             self.dof(),
             "previous pose has the wrong number of joints"
         );
-        let q = match &self.planar {
-            Some(planar) => self.ik_closed(planar, target, previous, config)?,
-            None => self.ik_numeric(target, previous)?,
+        let first = match &self.planar {
+            Some(planar) => self
+                .ik_closed(planar, target, previous, config)
+                .and_then(|q| self.check(target, q, config)),
+            None => self
+                .ik_numeric(target, previous)
+                .and_then(|q| self.check(target, q, config)),
         };
-        self.check(target, q, config)
+        match (&first, &self.planar) {
+            (
+                Err(Unreachable::OutOfReach { .. } | Unreachable::JointLimit { .. }),
+                Some(planar),
+            ) if config.axis_search => self
+                .ik_axis_search(planar, target, previous, config)
+                .unwrap_or(first),
+            _ => first,
+        }
+    }
+
+    /// When the requested axis cannot be reached, tilts the tool within the arm plane by
+    /// growing angles (1 degree steps, then bisection to 0.01 degree) while the total miss
+    /// stays within `max_axis_miss_deg`; the smallest feasible tilt wins.
+    fn ik_axis_search(
+        &self,
+        planar: &Planar,
+        target: &IkTarget,
+        previous: &[f64],
+        config: &IkConfig,
+    ) -> Option<Result<IkSolution, Unreachable>> {
+        let a = target.axis.normalize();
+        let d = target.position.xy() - planar.base;
+        let u2 = if d.norm() > 1e-9 {
+            d.normalize()
+        } else {
+            return None;
+        };
+        let u = Vector3::new(u2.x, u2.y, 0.0);
+        let n = Vector3::new(u2.y, -u2.x, 0.0);
+        let off = a.dot(&n).abs().asin();
+        let alpha = a.z.atan2(a.dot(&u));
+        let max = config.max_axis_miss_deg.to_radians();
+        let try_tilt = |delta: f64| {
+            let tilted = IkTarget {
+                axis: u * (alpha + delta).cos() + Vector3::z() * (alpha + delta).sin(),
+                ..*target
+            };
+            self.ik_closed(planar, &tilted, previous, config)
+                .and_then(|q| self.check(&tilted, q, config))
+                .ok()
+        };
+        let total_miss = |delta: f64| (off.cos() * delta.cos()).clamp(-1.0, 1.0).acos();
+        let step = 1f64.to_radians();
+        let mut k = 1.0;
+        while total_miss(k * step) <= max {
+            for sign in [1.0, -1.0] {
+                if try_tilt(sign * k * step).is_some() {
+                    // bisect between the last infeasible and the first feasible tilt
+                    let (mut bad, mut good) = ((k - 1.0) * step, k * step);
+                    for _ in 0..7 {
+                        let mid = 0.5 * (bad + good);
+                        if try_tilt(sign * mid).is_some() {
+                            good = mid;
+                        } else {
+                            bad = mid;
+                        }
+                    }
+                    let mut sol = try_tilt(sign * good)?;
+                    sol.axis_miss = angle_between(&a, &self.fk(&sol.q).axis);
+                    return Some(Ok(sol));
+                }
+            }
+            k += 1.0;
+        }
+        None
     }
 
     fn ik_closed(
