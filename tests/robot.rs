@@ -319,6 +319,21 @@ fn other_urdfs_fall_back_to_k_jacobian_ik() {
 
 #[test]
 fn calibration_errors_name_file_and_key() {
+    // the shipped files load, and the workcell maps reference millimetres to robot metres
+    let (_, cell) = polishbot::robot::load(&polishbot::robot::RobotConfig {
+        urdf: calib("dofbot.urdf"),
+        tool: calib("tool.toml"),
+        servos: calib("servos.toml"),
+        workcell: calib("workcell.toml"),
+        ..Default::default()
+    })
+    .unwrap();
+    let origin = cell.point_from_reference_mm(&nalgebra::Point3::origin());
+    let moved = cell.point_from_reference_mm(&nalgebra::Point3::new(0.0, 0.0, 1000.0));
+    assert!(
+        ((moved - origin).norm() - 1.0).abs() < 1e-12,
+        "1000 mm must map to 1 m"
+    );
     let dir = common::tempdir();
     let tool = dir.path().join("tool.toml");
     std::fs::write(
