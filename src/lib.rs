@@ -3,6 +3,8 @@
 //! config struct.
 pub mod cli;
 pub mod cloud;
+pub mod plan;
 pub mod progress;
 pub mod report;
+pub mod robot;
 pub mod synth;
