@@ -141,6 +141,16 @@ impl AnyTarget {
         }
         Ok(AnyTarget { id, raw })
     }
+
+    /// The bus servo.
+    pub fn id(&self) -> BusId {
+        self.id
+    }
+
+    /// The raw position.
+    pub fn raw(&self) -> u16 {
+        self.raw
+    }
 }
 
 fn bus_scale(id: u8) -> ServoScale {
@@ -164,6 +174,11 @@ impl EveryRaw {
             id.scale().check_raw(raw)?;
         }
         Ok(EveryRaw(raw))
+    }
+
+    /// The raw position.
+    pub fn get(self) -> u16 {
+        self.0
     }
 }
 

@@ -27,7 +27,7 @@ pub mod servo;
 #[cfg(test)]
 mod proptests;
 
-pub use commands::{AnyTarget, Buzzer, Command, Pose, Target};
+pub use commands::{AnyTarget, BusId, Buzzer, Command, EveryRaw, ParseError, Pose, Target};
 pub use frame::{checksum, Decoder, Direction, EncodeError, Frame, FrameError};
 pub use replies::{OffsetState, Reply, ReplyError};
 pub use servo::{RangeError, ServoId, ServoScale};
