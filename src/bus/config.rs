@@ -306,12 +306,15 @@ impl ServoMap {
     }
 }
 
-/// Moves an angle that lies within 1e-6 deg outside `0..=max` onto the end (the URDF's
-/// rounded pi/2 limits land a hair outside the servo span otherwise).
+/// Angles this close outside a servo's span (degrees) are moved onto its end: the URDF's
+/// limits (1.5708 for pi/2) land 0.0002 deg outside otherwise. 1e-3 deg is 0.012 raw counts.
+const SNAP_DEG: f64 = 1e-3;
+
+/// Moves an angle that lies within [`SNAP_DEG`] outside `0..=max` onto the end.
 fn snap(deg: f64, max: f64) -> f64 {
-    if (-1e-6..0.0).contains(&deg) {
+    if (-SNAP_DEG..0.0).contains(&deg) {
         0.0
-    } else if deg > max && deg - max < 1e-6 {
+    } else if deg > max && deg - max < SNAP_DEG {
         max
     } else {
         deg
