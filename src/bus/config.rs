@@ -137,7 +137,8 @@ pub struct ServoMap {
     pub gripper: GripperCalib,
 }
 
-/// DOFBOT.md's URDF limits, in chain order (rad).
+/// DOFBOT.md's URDF limits, in chain order (rad), as the URDF writes them (not exactly pi/2).
+#[allow(clippy::approx_constant)]
 const URDF_LIMITS: [(&str, f64, f64); JOINT_COUNT] = [
     ("arm_joint1", -1.5708, 1.5708),
     ("arm_joint2", -1.5708, 1.5708),
@@ -203,10 +204,12 @@ impl ServoMap {
                 return bad(format!("joint {} must use servo {}", j.name, i + 1));
             }
             j.scale.to_scale(j.servo)?;
-            if !(j.lower_rad < j.upper_rad) || !(j.direction == 1.0 || j.direction == -1.0) {
+            if j.lower_rad.partial_cmp(&j.upper_rad) != Some(std::cmp::Ordering::Less)
+                || (j.direction != 1.0 && j.direction != -1.0)
+            {
                 return bad(format!("joint {}: limits or direction", j.name));
             }
-            if !(j.max_velocity_rad_s > 0.0) {
+            if j.max_velocity_rad_s.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 return bad(format!("joint {}: max_velocity_rad_s must be > 0", j.name));
             }
             for q in [j.lower_rad, j.upper_rad] {
@@ -218,7 +221,10 @@ impl ServoMap {
             return bad(format!("gripper must use servo {SERVO_COUNT}"));
         }
         g.scale.to_scale(g.servo)?;
-        if !(g.min_deg <= g.max_deg) {
+        if g.min_deg
+            .partial_cmp(&g.max_deg)
+            .is_none_or(|o| o == std::cmp::Ordering::Greater)
+        {
             return bad("gripper min_deg > max_deg".into());
         }
         Ok(())
@@ -281,7 +287,11 @@ impl ServoMap {
     }
 
     /// Raw positions of all six servos for joints `q` (rad) and gripper angle (deg).
-    pub fn pose_raw(&self, q: &[f64; JOINT_COUNT], gripper_deg: f64) -> Result<[u16; SERVO_COUNT], BusError> {
+    pub fn pose_raw(
+        &self,
+        q: &[f64; JOINT_COUNT],
+        gripper_deg: f64,
+    ) -> Result<[u16; SERVO_COUNT], BusError> {
         let mut raw = [0u16; SERVO_COUNT];
         for (i, qi) in q.iter().enumerate() {
             raw[i] = self.joint_raw(i, *qi)?;
@@ -297,7 +307,11 @@ impl ServoMap {
             *q = self.joint_from_raw(i, raw[i])?;
         }
         let gripper_deg = self.gripper_from_raw(raw[SERVO_COUNT - 1])?;
-        Ok(JointState { joints, gripper_deg, raw })
+        Ok(JointState {
+            joints,
+            gripper_deg,
+            raw,
+        })
     }
 
     /// The raw pose at joint zero with the gripper at `gripper_deg` (the simulators' start).
@@ -330,7 +344,10 @@ mod tests {
         let m = ServoMap::default();
         m.validate().unwrap();
         // Joint zero is servo 90 deg: raw 2000 on servos 1..4, 1487 on the wrist roll.
-        assert_eq!(m.home_raw(90.0).unwrap(), [2000, 2000, 2000, 2000, 1487, 2000]);
+        assert_eq!(
+            m.home_raw(90.0).unwrap(),
+            [2000, 2000, 2000, 2000, 1487, 2000]
+        );
         // Joint 2 at +pi/2 -> servo 180 deg -> inverted raw 900.
         assert_eq!(m.joint_raw(1, std::f64::consts::FRAC_PI_2).unwrap(), 900);
         assert!(m.joint_raw(0, 1.6).is_err());

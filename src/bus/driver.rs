@@ -89,7 +89,12 @@ impl<T: Transport> Bus<T> {
         self.journal.write(entry, t)
     }
 
-    fn log_error(&mut self, err: &BusError, motion: Option<u64>, kind: EntryKind) -> Result<(), BusError> {
+    fn log_error(
+        &mut self,
+        err: &BusError,
+        motion: Option<u64>,
+        kind: EntryKind,
+    ) -> Result<(), BusError> {
         let mut e = Entry::new(kind);
         e.code = Some(err.code().into());
         e.message = Some(err.to_string());
@@ -121,7 +126,11 @@ impl<T: Transport> Bus<T> {
 
     /// Sends `cmd` and waits for the reply `accept` recognises (`None`: not for us, keep
     /// waiting; `Some(Err)`: a failed attempt, retried), up to `config.attempts` times.
-    fn request<R>(&mut self, cmd: Command, accept: impl Fn(&Reply, u32) -> Option<Attempt<R>>) -> Result<R, BusError> {
+    fn request<R>(
+        &mut self,
+        cmd: Command,
+        accept: impl Fn(&Reply, u32) -> Option<Attempt<R>>,
+    ) -> Result<R, BusError> {
         let attempts = self.config.attempts.max(1);
         let timeout = Duration::from_secs_f64(self.config.read_timeout_ms.max(0.0) / 1000.0);
         let what = format!("{} (0x{:02X})", cmd.name(), cmd.func());
@@ -250,15 +259,18 @@ impl<T: Transport> Bus<T> {
     pub fn read_raw(&mut self, id: ServoId) -> Result<u16, BusError> {
         let scale = self.scale(id)?;
         self.request(Command::ReadPosition(id), |r, attempt| match *r {
-            Reply::Position { servo, raw } if servo.is_none_or(|s| s == id) => {
-                Some(scale.check_raw(raw).map(|_| raw).map_err(|_| BusError::ReadFailure {
-                    servo: id.get(),
-                    raw,
-                    min: scale.raw_min,
-                    max: scale.raw_max,
-                    attempts: attempt,
-                }))
-            }
+            Reply::Position { servo, raw } if servo.is_none_or(|s| s == id) => Some(
+                scale
+                    .check_raw(raw)
+                    .map(|_| raw)
+                    .map_err(|_| BusError::ReadFailure {
+                        servo: id.get(),
+                        raw,
+                        min: scale.raw_min,
+                        max: scale.raw_max,
+                        attempts: attempt,
+                    }),
+            ),
             _ => None,
         })
     }
@@ -294,7 +306,11 @@ impl<T: Transport> Bus<T> {
 
     /// Reads the pose back and checks every servo against `expected` within the configured
     /// tolerance; journals a `verified` line for motion `index` or a stop line.
-    pub fn verify(&mut self, index: u64, expected: [u16; SERVO_COUNT]) -> Result<JointState, BusError> {
+    pub fn verify(
+        &mut self,
+        index: u64,
+        expected: [u16; SERVO_COUNT],
+    ) -> Result<JointState, BusError> {
         let raw = self.read_pose_raw().inspect_err(|e| {
             let _ = self.log_error(e, Some(index), EntryKind::Stop);
         })?;
@@ -351,13 +367,16 @@ impl<T: Transport> Bus<T> {
         };
         let time_ms = (secs * 1000.0).ceil();
         if time_ms > u16::MAX as f64 {
-            return Err(BusError::Refused(format!("move time {secs} s exceeds 65.535 s")));
+            return Err(BusError::Refused(format!(
+                "move time {secs} s exceeds 65.535 s"
+            )));
         }
         let index = self.next_motion;
         self.send_motion(index, pose, time_ms as u16)?;
         self.next_motion += 1;
         let settle = self.config.settle_ms.max(0.0) / 1000.0;
-        self.link.sleep(Duration::from_secs_f64(time_ms / 1000.0 + settle));
+        self.link
+            .sleep(Duration::from_secs_f64(time_ms / 1000.0 + settle));
         self.verify(index, target)
     }
 }

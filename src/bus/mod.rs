@@ -21,7 +21,9 @@ pub mod transport;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-pub use config::{BusConfig, GripperCalib, JointCalib, JointState, ScaleCalib, ServoMap, JOINT_COUNT};
+pub use config::{
+    BusConfig, GripperCalib, JointCalib, JointState, ScaleCalib, ServoMap, JOINT_COUNT,
+};
 pub use driver::Bus;
 pub use error::BusError;
 pub use journal::{Entry, EntryKind, Journal, ResumePoint};
@@ -33,5 +35,6 @@ pub use transport::Transport;
 /// Sets `flag` on Ctrl-C (SIGINT) so the bus sends no further motion frames. Call once per
 /// process.
 pub fn install_ctrlc(flag: Arc<AtomicBool>) -> Result<(), BusError> {
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).map_err(|e| BusError::Refused(format!("cannot install the Ctrl-C handler: {e}")))
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .map_err(|e| BusError::Refused(format!("cannot install the Ctrl-C handler: {e}")))
 }

@@ -171,7 +171,11 @@ impl Board {
             Ok(cmd) => self.execute(cmd, t),
             Err(_) => None,
         };
-        if self.faults.disconnect_after.is_some_and(|n| self.frames >= n) {
+        if self
+            .faults
+            .disconnect_after
+            .is_some_and(|n| self.frames >= n)
+        {
             self.disconnected = true;
             return None;
         }
@@ -199,7 +203,8 @@ impl Board {
             Command::ReadPosition(id) => return self.read(id, t),
             Command::Ping(id) => {
                 let id = id.get();
-                let alive = (1..=SERVO_COUNT as u8).contains(&id) && self.faults.absent_servo != Some(id);
+                let alive =
+                    (1..=SERVO_COUNT as u8).contains(&id) && self.faults.absent_servo != Some(id);
                 return Some(Reply::Ping { id, alive });
             }
             Command::Torque(on) => {
@@ -219,7 +224,8 @@ impl Board {
 
     fn move_servo(&mut self, id: u8, raw: u16, time_ms: u16, t: f64) {
         let idx = id as usize;
-        if !self.torque || !(1..=SERVO_COUNT).contains(&idx) || self.faults.stall_servo == Some(id) {
+        if !self.torque || !(1..=SERVO_COUNT).contains(&idx) || self.faults.stall_servo == Some(id)
+        {
             return;
         }
         let speed = self.timing.max_speed_counts_s;
@@ -232,14 +238,22 @@ impl Board {
         }
         self.reads += 1;
         let k = self.faults.fail_read_every;
-        let fail = self.faults.fail_read_servo == Some(id.get()) || (k > 0 && self.reads % k as u64 == 0);
-        let raw = if fail { 0 } else { round_raw(self.servos[id.index()].position(t)) };
-        Some(Reply::Position { servo: Some(id), raw })
+        let fail = self.faults.fail_read_servo == Some(id.get())
+            || (k > 0 && self.reads.is_multiple_of(k as u64));
+        let raw = if fail {
+            0
+        } else {
+            round_raw(self.servos[id.index()].position(t))
+        };
+        Some(Reply::Position {
+            servo: Some(id),
+            raw,
+        })
     }
 
     fn send(&mut self, reply: Reply) -> Option<Outgoing> {
         self.replies += 1;
-        let hit = |k: u32| k > 0 && self.replies % k as u64 == 0;
+        let hit = |k: u32| k > 0 && self.replies.is_multiple_of(k as u64);
         if hit(self.faults.drop_every) {
             return None;
         }

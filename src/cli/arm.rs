@@ -7,7 +7,9 @@ use clap::{Args, Subcommand};
 use serde::Deserialize;
 use serde_json::json;
 
-use crate::bus::{self, Bus, BusConfig, Journal, SerialTransport, SimArm, SimOptions, Transport, JOINT_COUNT};
+use crate::bus::{
+    self, Bus, BusConfig, Journal, SerialTransport, SimArm, SimOptions, Transport, JOINT_COUNT,
+};
 
 /// Arguments of `polishbot arm`.
 #[derive(Debug, Args)]
@@ -36,7 +38,13 @@ pub enum ArmAction {
     /// Move to joint angles, wait, read back and verify.
     Move {
         /// Joint angles q1,..,q5 in radians (URDF convention: servo deg = q*180/pi + 90).
-        #[arg(long, value_delimiter = ',', num_args = 1, allow_hyphen_values = true, required = true)]
+        #[arg(
+            long,
+            value_delimiter = ',',
+            num_args = 1,
+            allow_hyphen_values = true,
+            required = true
+        )]
         joints: Vec<f64>,
         /// Move time in seconds (default: the fastest the joint velocity limits allow).
         #[arg(long, value_name = "S")]
@@ -80,7 +88,10 @@ pub fn run(args: ArmArgs, config: Option<&Path>) -> anyhow::Result<()> {
         act(Bus::connect(link, bus_cfg, journal)?, &args.action)
     } else if args.sim {
         let arm = SimArm::new(&cfg.sim, &bus_cfg.servo_map)?;
-        act(Bus::connect(arm.transport(), bus_cfg, journal)?, &args.action)
+        act(
+            Bus::connect(arm.transport(), bus_cfg, journal)?,
+            &args.action,
+        )
     } else {
         anyhow::bail!("arm: give --port DEV or --sim")
     }
@@ -95,7 +106,10 @@ fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> 
                 servos.push(json!({"id": id, "alive": bus.ping(id)?}));
             }
             let version = bus.version()?;
-            println!("{}", json!({"port": port, "servos": servos, "version": version}));
+            println!(
+                "{}",
+                json!({"port": port, "servos": servos, "version": version})
+            );
             if let Some(dead) = servos.iter().find(|s| s["alive"] == false) {
                 return Err(bus::BusError::NotAnswering {
                     servo: dead["id"].as_u64().unwrap_or(0) as u8,
