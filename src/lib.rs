@@ -3,5 +3,6 @@
 //! config struct.
 pub mod cli;
 pub mod cloud;
+pub mod compare;
 pub mod progress;
 pub mod synth;
