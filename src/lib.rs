@@ -5,4 +5,5 @@ pub mod cli;
 pub mod cloud;
 pub mod compare;
 pub mod progress;
+pub mod regions;
 pub mod synth;

@@ -3,9 +3,10 @@ mod common;
 
 use std::path::Path;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use polishbot::cloud::{PointCloud, Units};
-use polishbot::compare::{compare, CompareConfig, Method};
+use polishbot::compare::{compare, CompareConfig, Deviations, Method};
+use polishbot::regions::{find_regions, RegionConfig, Regions};
 use polishbot::synth::{synth, SynthCase, SynthConfig};
 
 /// A femoral_dm case with the scan moved back into the reference frame by the true pose.
@@ -113,5 +114,140 @@ fn classic_equals_py4dgeo() {
         }
         eprintln!("r {radius} L {max_distance}: {} core points, {nan_d} NaN distances, {nan_lod} NaN LoD", core.len());
         assert!(nan_d > 0 && nan_lod > nan_d, "the case must exercise the NaN paths");
+    }
+}
+
+/// Scores of one method on one case against truth.
+#[derive(Debug)]
+struct Score {
+    iou: f64,
+    rms: f64,
+    /// (defect height, region peak) for every defect taller than the tolerance.
+    peaks: Vec<(f64, Option<f64>)>,
+    false_regions: usize,
+    regions: usize,
+}
+
+fn score(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
+    let truth: Vec<f64> = dev
+        .points
+        .iter()
+        .zip(&dev.normals)
+        .map(|(p, n)| case.truth.deviation_at(p, n))
+        .collect();
+    if let Some(dump) = std::env::var_os("POLISHBOT_DUMP") {
+        let mut cloud = polishbot::compare::to_cloud(dev, &regions.labels);
+        cloud.set_field("truth", truth.clone());
+        let path = format!("{}-{:?}.csv", dump.to_string_lossy(), dev.method);
+        polishbot::cloud::write_csv(Path::new(&path), &cloud).unwrap();
+    }
+    let is_true: Vec<bool> = truth.iter().map(|t| t.abs() > tol).collect();
+    let detected: Vec<bool> = dev
+        .values
+        .iter()
+        .map(|v| v.significant && v.distance.abs() > tol)
+        .collect();
+    let both = is_true.iter().zip(&detected).filter(|(a, b)| **a && **b).count();
+    let either = is_true.iter().zip(&detected).filter(|(a, b)| **a || **b).count();
+    let errs: Vec<f64> = (0..truth.len())
+        .filter(|&i| is_true[i])
+        .map(|i| dev.values[i].distance - truth[i])
+        .collect();
+    let rms = (errs.iter().map(|e| e * e).sum::<f64>() / errs.len().max(1) as f64).sqrt();
+    let peaks = case
+        .truth
+        .defects
+        .iter()
+        .filter(|d| d.height.abs() > tol)
+        .map(|d| {
+            let c = Point3::from(d.centre);
+            let near = (0..dev.points.len())
+                .filter(|&i| regions.labels[i] >= 0 && (dev.points[i] - c).norm() < d.support())
+                .map(|i| regions.regions[regions.labels[i] as usize].peak)
+                .max_by(|a, b| a.abs().total_cmp(&b.abs()));
+            (d.height, near)
+        })
+        .collect();
+    let mut with_truth = vec![false; regions.regions.len()];
+    for i in 0..dev.points.len() {
+        if regions.labels[i] >= 0 && is_true[i] {
+            with_truth[regions.labels[i] as usize] = true;
+        }
+    }
+    Score {
+        iou: both as f64 / either.max(1) as f64,
+        rms,
+        peaks,
+        false_regions: with_truth.iter().filter(|t| !**t).count(),
+        regions: regions.regions.len(),
+    }
+}
+
+fn seeds() -> Vec<u64> {
+    match std::env::var("POLISHBOT_SEEDS") {
+        Ok(s) => s.split(',').map(|x| x.parse().unwrap()).collect(),
+        Err(_) => vec![11, 12],
+    }
+}
+
+/// Scores of (adaptive, classic) on the femoral_dm cases, scan aligned by the true pose.
+fn scores() -> Vec<(u64, Score, Score)> {
+    let tol = RegionConfig::default().tolerance;
+    seeds()
+        .into_iter()
+        .map(|seed| {
+            let case = aligned_case(seed, 400_000, 300_000);
+            let idx: Vec<usize> = (0..case.reference.len()).step_by(4).collect();
+            let core = case.reference.select(&idx);
+            let run = |method| {
+                let cfg = CompareConfig {
+                    method,
+                    ..CompareConfig::default()
+                };
+                let dev = compare(&core, &case.reference, &case.scan, &cfg).unwrap();
+                let regions = find_regions(&dev, &RegionConfig::default());
+                score(&case, &dev, &regions, tol)
+            };
+            let (ours, classic) = (run(Method::Adaptive), run(Method::Classic));
+            eprintln!("seed {seed} adaptive: {ours:?}");
+            eprintln!("seed {seed} classic:  {classic:?}");
+            (seed, ours, classic)
+        })
+        .collect()
+}
+
+/// What the adaptive method reaches today (a regression floor, below issue 5's targets; see
+/// `acceptance_targets`): it beats classic on IoU and RMS, raises no region that truth does
+/// not have (classic raises dozens along the box-cut edges) and finds every defect taller
+/// than twice the tolerance (seed 12 has a narrow 0.09 mm pit that both methods miss).
+#[test]
+fn adaptive_finds_the_planted_defects_and_beats_classic() {
+    for (seed, ours, classic) in scores() {
+        assert!(ours.iou > classic.iou + 0.3, "seed {seed}: adaptive must beat classic on IoU");
+        assert!(ours.rms < classic.rms, "seed {seed}: adaptive must beat classic on RMS");
+        assert!(ours.iou >= 0.75, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.rms <= 0.02, "seed {seed}: RMS {}", ours.rms);
+        assert_eq!(ours.false_regions, 0, "seed {seed}: regions truth does not have");
+        assert!(classic.false_regions > 0, "seed {seed}: the case must have sharp-edge traps");
+        for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.1) {
+            let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
+            assert!(peak.signum() == h.signum(), "seed {seed}: peak {peak} for height {h}");
+        }
+    }
+}
+
+/// Issue 5's acceptance targets (IoU >= 0.95, RMS <= 0.01 mm, every peak within 10 %): not
+/// reached yet (narrow defects: a 0.4-1 mm wide bump holds 2-15 scan points at 19 points/mm²,
+/// and the quadric at the smallest radius flattens its peak). Run with --ignored.
+#[test]
+#[ignore]
+fn acceptance_targets() {
+    for (seed, ours, _) in scores() {
+        assert!(ours.iou >= 0.95, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
+        for (h, peak) in &ours.peaks {
+            let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
+            assert!((peak - h).abs() <= 0.1 * h.abs(), "seed {seed}: peak {peak} for height {h}");
+        }
     }
 }

@@ -18,6 +18,9 @@ use super::fit::{fit, Local};
 use super::{radius_for_count, Clouds, CompareConfig, Deviation, Reason};
 use crate::cloud::PointCloud;
 
+/// Fewest scan points a fit may keep before the radius grows.
+const FIT_MIN: usize = 6;
+
 /// Per-cloud data shared by all core points.
 struct Prepared<'a> {
     clouds: &'a Clouds<'a>,
@@ -26,6 +29,9 @@ struct Prepared<'a> {
     delta: Vec<f64>,
     /// Nearest reference point of each scan point.
     scan_nearest_ref: Vec<u32>,
+    /// Point-pair distance of each scan point: along its nearest reference point's normal,
+    /// from that point's tangent plane.
+    scan_pair: Vec<f64>,
     radii: Vec<f64>,
     noise: f64,
     cos_limit: f64,
@@ -62,17 +68,22 @@ pub fn run(
         Some(s) => s,
         None => robust_sd(&delta),
     };
-    let scan_nearest_ref = clouds
+    let (scan_nearest_ref, scan_pair): (Vec<u32>, Vec<f64>) = clouds
         .scan
         .points
         .par_iter()
-        .map(|p| clouds.ref_index.nearest(p).map_or(0, |n| n.index as u32))
-        .collect();
+        .map(|y| {
+            let i = clouds.ref_index.nearest(y).map_or(0, |n| n.index);
+            let x = clouds.reference.points[i];
+            (i as u32, ref_normals[i].dot(&(y - x)))
+        })
+        .unzip();
     let prep = Prepared {
         clouds,
         ref_normals,
         delta,
         scan_nearest_ref,
+        scan_pair,
         radii: radii.clone(),
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
@@ -198,40 +209,41 @@ fn at(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, cfg: &CompareConfig) -
     {
         k += 1;
     }
-    let r = prep.radii[k];
-    let (n_ref, n_scan) = (count(&refs, r), count(&scans, r));
-    if n_ref < min {
-        return Deviation::missing(Reason::FewReference, r, n_ref, n_scan);
-    }
-    if n_scan < min {
-        return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
-    }
     let (e1, e2) = tangent_frame(n);
-    let local = |ms: &[Member], pts: &[Point3<f64>], take: usize| -> Vec<Local> {
-        ms[..take]
-            .iter()
-            .map(|m| {
-                let d = pts[m.index] - p;
-                [d.dot(&e1), d.dot(&e2), m.t]
-            })
-            .collect()
+    let local = |m: &Member| -> Local {
+        let d = c.scan.points[m.index] - p;
+        [d.dot(&e1), d.dot(&e2), prep.scan_pair[m.index]]
     };
-    let trim = 4.0 * prep.noise;
-    let fr = fit(&local(&refs, &c.reference.points, n_ref), r, trim);
-    let fs = fit(&local(&scans, &c.scan.points, n_scan), r, trim);
-    let (Some(fr), Some(fs)) = (fr, fs) else {
-        return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
+    // The fit must keep at least FIT_MIN points after trimming, else the next radius.
+    let (r, n_ref, n_scan, fs) = loop {
+        let r = prep.radii[k];
+        let (n_ref, n_scan) = (count(&refs, r), count(&scans, r));
+        let last = k + 1 == prep.radii.len();
+        if n_ref < min {
+            return Deviation::missing(Reason::FewReference, r, n_ref, n_scan);
+        }
+        if n_scan < min {
+            return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
+        }
+        let pairs: Vec<Local> = scans[..n_scan].iter().map(local).collect();
+        match fit(&pairs, r, 4.0 * prep.noise, prep.noise) {
+            Some(fs) if fs.n >= FIT_MIN || last => {
+                break (r, n_ref, n_scan, fs)
+            }
+            _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
+            _ => k += 1,
+        }
     };
-    let lod = 1.96 * ((fr.se * fr.se + fs.se * fs.se).sqrt() + cfg.registration_error);
+    let lod = 1.96 * (fs.se + cfg.registration_error);
     Deviation {
-        distance: fs.t0 - fr.t0,
+        distance: fs.t0,
         uncertainty: lod,
         significant: false,
         radius: r,
-        n_ref: fr.n,
+        n_ref,
         n_scan: fs.n,
         direction: Vector3::zeros(),
-        spread: [fr.sigma, fs.sigma],
+        spread: [0.0, fs.sigma],
         reason: Reason::Ok,
     }
     .finish(n)

@@ -59,24 +59,37 @@ fn residual(p: &Local, coef: &Vector6<f64>, scale: f64) -> f64 {
     p[2] - basis(p, scale).dot(coef)
 }
 
-/// Fits `pts` (at least one); `scale` (the cylinder radius) conditions the system. Points
-/// whose residual exceeds `max(trim, 3 × the first fit's residual SD)` are dropped and the
-/// fit repeated once (outliers, the far side of a thin wall).
-pub fn fit(pts: &[Local], scale: f64, trim: f64) -> Option<AxisFit> {
-    let first = fit_once(pts, scale)?;
-    let limit = trim.max(3.0 * first.1);
-    let kept: Vec<Local> = pts
-        .iter()
+/// Points whose residual from `model` is within `max(trim, 3 × 1.4826 × median |residual|)`.
+fn inliers(pts: &[Local], trim: f64, model: impl Fn(&Local) -> f64) -> Vec<Local> {
+    let mut abs: Vec<f64> = pts.iter().map(|p| (p[2] - model(p)).abs()).collect();
+    let mid = abs.len() / 2;
+    let mad = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let limit = trim.max(3.0 * 1.4826 * mad);
+    pts.iter()
         .copied()
-        .filter(|p| residual(p, &first.0, scale).abs() <= limit)
-        .collect();
-    if kept.len() == pts.len() || kept.is_empty() {
-        return Some(first.2);
-    }
-    Some(fit_once(&kept, scale)?.2)
+        .filter(|p| (p[2] - model(p)).abs() <= limit)
+        .collect()
 }
 
-fn fit_once(pts: &[Local], scale: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
+/// Fits `pts` (at least one); `scale` (the cylinder radius) conditions the system. Robustly:
+/// points far from the median value are dropped first (outlier clusters), then points far
+/// from the first fit, each time beyond `max(trim, 3 × 1.4826 × median |residual|)`.
+/// The residual variance used for the standard error is at least `floor²` (the scan noise:
+/// a fit through few points must not claim more precision than the scanner has).
+pub fn fit(pts: &[Local], scale: f64, trim: f64, floor: f64) -> Option<AxisFit> {
+    if pts.is_empty() {
+        return None;
+    }
+    let mut values: Vec<f64> = pts.iter().map(|p| p[2]).collect();
+    let mid = values.len() / 2;
+    let median = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let kept = inliers(pts, trim, |_| median);
+    let first = fit_once(&kept, scale, floor)?;
+    let kept = inliers(&kept, trim, |p| p[2] - residual(p, &first.0, scale));
+    Some(fit_once(&kept, scale, floor)?.2)
+}
+
+fn fit_once(pts: &[Local], scale: f64, floor: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
     if pts.is_empty() {
         return None;
     }
@@ -98,7 +111,7 @@ fn fit_once(pts: &[Local], scale: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
         sigma,
         AxisFit {
             t0: coef[0],
-            se: (var * inv00).sqrt(),
+            se: (var.max(floor * floor) * inv00).sqrt(),
             sigma,
             n: pts.len(),
         },
@@ -117,13 +130,13 @@ mod tests {
                 [u, v, 0.2 + 0.1 * u - 0.3 * v + 2.0 * u * u - u * v + 0.5 * v * v]
             })
             .collect();
-        let f = fit(&pts, 0.4, 0.01).unwrap();
+        let f = fit(&pts, 0.4, 0.01, 0.0).unwrap();
         assert!((f.t0 - 0.2).abs() < 1e-12, "{f:?}");
         assert!(f.sigma < 1e-12);
         // Few points: a plane, then a constant.
-        let f = fit(&pts[..5], 0.4, 0.01).unwrap();
+        let f = fit(&pts[..5], 0.4, 0.01, 0.0).unwrap();
         assert_eq!(f.n, 5);
-        let f = fit(&pts[..2], 0.4, 0.01).unwrap();
+        let f = fit(&pts[..2], 0.4, 0.01, 0.0).unwrap();
         assert!((f.t0 - (pts[0][2] + pts[1][2]) / 2.0).abs() < 1e-12);
     }
 }
