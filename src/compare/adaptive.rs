@@ -215,7 +215,7 @@ fn at(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, cfg: &CompareConfig) -
         [d.dot(&e1), d.dot(&e2), prep.scan_pair[m.index]]
     };
     // The fit must keep at least FIT_MIN points after trimming, else the next radius.
-    let (r, n_ref, n_scan, fs) = loop {
+    let (r, n_ref, _, fs) = loop {
         let r = prep.radii[k];
         let (n_ref, n_scan) = (count(&refs, r), count(&scans, r));
         let last = k + 1 == prep.radii.len();
