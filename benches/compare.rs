@@ -7,7 +7,9 @@ use polishbot::compare::{compare, CompareConfig, Method};
 use polishbot::synth::{synth, SynthConfig};
 
 fn bench(c: &mut Criterion) {
-    let _ = rayon::ThreadPoolBuilder::new().num_threads(2).build_global();
+    let _ = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build_global();
     let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/");
     let cfg = SynthConfig {
         seed: 11,
@@ -25,7 +27,10 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
     for count in [20_000usize, 100_000] {
         let stride = case.reference.len() / count;
-        let idx: Vec<usize> = (0..case.reference.len()).step_by(stride).take(count).collect();
+        let idx: Vec<usize> = (0..case.reference.len())
+            .step_by(stride)
+            .take(count)
+            .collect();
         let core = case.reference.select(&idx);
         for method in [Method::Classic, Method::Adaptive] {
             let cfg = CompareConfig {

@@ -60,7 +60,13 @@ fn classic_equals_py4dgeo() {
     };
     let case = aligned_case(5, 60_000, 45_000);
     // Holes in the scan give empty and one-point cylinders: NaN distances and NaN LoD.
-    let holes: Vec<Point3<f64>> = case.reference.points.iter().step_by(9_000).copied().collect();
+    let holes: Vec<Point3<f64>> = case
+        .reference
+        .points
+        .iter()
+        .step_by(9_000)
+        .copied()
+        .collect();
     let scan = PointCloud::from_points(
         case.scan
             .points
@@ -77,10 +83,22 @@ fn classic_equals_py4dgeo() {
         *p += normals[i] * if i % 100 == 0 { 0.7 } else { -2.5 };
     }
     let dir = common::tempdir();
-    write_f64(&dir.path().join("ref"), case.reference.points.iter().map(|p| [p.x, p.y, p.z]));
-    write_f64(&dir.path().join("scan"), scan.points.iter().map(|p| [p.x, p.y, p.z]));
-    write_f64(&dir.path().join("core"), core.points.iter().map(|p| [p.x, p.y, p.z]));
-    write_f64(&dir.path().join("normals"), normals.iter().map(|n| [n.x, n.y, n.z]));
+    write_f64(
+        &dir.path().join("ref"),
+        case.reference.points.iter().map(|p| [p.x, p.y, p.z]),
+    );
+    write_f64(
+        &dir.path().join("scan"),
+        scan.points.iter().map(|p| [p.x, p.y, p.z]),
+    );
+    write_f64(
+        &dir.path().join("core"),
+        core.points.iter().map(|p| [p.x, p.y, p.z]),
+    );
+    write_f64(
+        &dir.path().join("normals"),
+        normals.iter().map(|n| [n.x, n.y, n.z]),
+    );
     for (radius, max_distance, reg) in [(0.5, 1.0, 0.01), (0.3, 0.2, 0.0), (0.25, 1.3, 0.003)] {
         let cfg = CompareConfig {
             method: Method::Classic,
@@ -92,7 +110,12 @@ fn classic_equals_py4dgeo() {
         };
         let ours = compare(&core, &case.reference, &scan, &cfg).unwrap();
         let d = dir.path().to_str().unwrap();
-        let args = [d, &radius.to_string(), &max_distance.to_string(), &reg.to_string()];
+        let args = [
+            d,
+            &radius.to_string(),
+            &max_distance.to_string(),
+            &reg.to_string(),
+        ];
         common::run_python(&python, PY4DGEO, &args);
         let theirs = read_f64(&dir.path().join("out"));
         assert_eq!(theirs.len(), 4 * core.len());
@@ -112,8 +135,14 @@ fn classic_equals_py4dgeo() {
                 assert!((v.uncertainty - t[1]).abs() <= 1e-6, "{ctx}");
             }
         }
-        eprintln!("r {radius} L {max_distance}: {} core points, {nan_d} NaN distances, {nan_lod} NaN LoD", core.len());
-        assert!(nan_d > 0 && nan_lod > nan_d, "the case must exercise the NaN paths");
+        eprintln!(
+            "r {radius} L {max_distance}: {} core points, {nan_d} NaN distances, {nan_lod} NaN LoD",
+            core.len()
+        );
+        assert!(
+            nan_d > 0 && nan_lod > nan_d,
+            "the case must exercise the NaN paths"
+        );
     }
 }
 
@@ -147,8 +176,16 @@ fn score(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Sco
         .iter()
         .map(|v| v.significant && v.distance.abs() > tol)
         .collect();
-    let both = is_true.iter().zip(&detected).filter(|(a, b)| **a && **b).count();
-    let either = is_true.iter().zip(&detected).filter(|(a, b)| **a || **b).count();
+    let both = is_true
+        .iter()
+        .zip(&detected)
+        .filter(|(a, b)| **a && **b)
+        .count();
+    let either = is_true
+        .iter()
+        .zip(&detected)
+        .filter(|(a, b)| **a || **b)
+        .count();
     let errs: Vec<f64> = (0..truth.len())
         .filter(|&i| is_true[i])
         .map(|i| dev.values[i].distance - truth[i])
@@ -223,15 +260,31 @@ fn scores() -> Vec<(u64, Score, Score)> {
 #[test]
 fn adaptive_finds_the_planted_defects_and_beats_classic() {
     for (seed, ours, classic) in scores() {
-        assert!(ours.iou > classic.iou + 0.3, "seed {seed}: adaptive must beat classic on IoU");
-        assert!(ours.rms < classic.rms, "seed {seed}: adaptive must beat classic on RMS");
+        assert!(
+            ours.iou > classic.iou + 0.3,
+            "seed {seed}: adaptive must beat classic on IoU"
+        );
+        assert!(
+            ours.rms < classic.rms,
+            "seed {seed}: adaptive must beat classic on RMS"
+        );
         assert!(ours.iou >= 0.75, "seed {seed}: IoU {}", ours.iou);
         assert!(ours.rms <= 0.02, "seed {seed}: RMS {}", ours.rms);
-        assert_eq!(ours.false_regions, 0, "seed {seed}: regions truth does not have");
-        assert!(classic.false_regions > 0, "seed {seed}: the case must have sharp-edge traps");
+        assert_eq!(
+            ours.false_regions, 0,
+            "seed {seed}: regions truth does not have"
+        );
+        assert!(
+            classic.false_regions > 0,
+            "seed {seed}: the case must have sharp-edge traps"
+        );
+        assert!(ours.regions > 0, "seed {seed}: no region at all");
         for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.1) {
             let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
-            assert!(peak.signum() == h.signum(), "seed {seed}: peak {peak} for height {h}");
+            assert!(
+                peak.signum() == h.signum(),
+                "seed {seed}: peak {peak} for height {h}"
+            );
         }
     }
 }
@@ -247,7 +300,123 @@ fn acceptance_targets() {
         assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
         for (h, peak) in &ours.peaks {
             let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
-            assert!((peak - h).abs() <= 0.1 * h.abs(), "seed {seed}: peak {peak} for height {h}");
+            assert!(
+                (peak - h).abs() <= 0.1 * h.abs(),
+                "seed {seed}: peak {peak} for height {h}"
+            );
         }
     }
+}
+
+#[test]
+fn inspect_writes_the_design_files() {
+    let dir = common::tempdir();
+    let case = dir.path().join("case");
+    let out = dir.path().join("out");
+    let data = common::shared_data("femoral_dm.stl");
+    let status = common::polishbot()
+        .args([
+            "synth",
+            "--mesh",
+            data.to_str().unwrap(),
+            "--units",
+            "m",
+            "--seed",
+            "4",
+        ])
+        .args([
+            "--reference-points",
+            "120000",
+            "--scan-points",
+            "90000",
+            "--out",
+        ])
+        .arg(&case)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let run = common::polishbot()
+        .arg("inspect")
+        .arg("--reference")
+        .arg(case.join("reference.ply"))
+        .arg("--scan")
+        .arg(case.join("scan.ply"))
+        .arg("--pose")
+        .arg(case.join("truth.json"))
+        .args(["--tolerance", "0.05", "--method", "adaptive", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("verdict:"), "{stdout}");
+    let csv = std::fs::read_to_string(out.join("deviations.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "x,y,z,nx,ny,nz,distance,uncertainty,significant,radius,n_ref,n_scan,region"
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 100_000);
+    let ply = std::fs::read(out.join("deviations.ply")).unwrap();
+    let head = String::from_utf8_lossy(&ply[..600]);
+    for field in [
+        "distance",
+        "uncertainty",
+        "significant",
+        "radius",
+        "n_ref",
+        "n_scan",
+        "region",
+    ] {
+        assert!(
+            head.contains(&format!("property float {field}\n")),
+            "{head}"
+        );
+    }
+    let ply_cloud =
+        polishbot::cloud::load_cloud(&out.join("deviations.ply"), None, Some(Units::Mm)).unwrap();
+    assert_eq!(ply_cloud.len(), rows.len());
+    let regions: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("regions.json")).unwrap()).unwrap();
+    let list = regions["regions"].as_array().unwrap();
+    // Every region id in the CSV is a region of regions.json with that many points.
+    for r in list {
+        let id = r["id"].as_f64().unwrap();
+        let n = rows.iter().filter(|row| row[12] == id).count();
+        assert_eq!(n as u64, r["points"].as_u64().unwrap());
+        assert_eq!(
+            r["repairable"].as_bool().unwrap(),
+            r["peak"].as_f64().unwrap() > 0.0
+        );
+    }
+    // The truth pose went into registration.json.
+    let reg: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("registration.json")).unwrap())
+            .unwrap();
+    let truth = polishbot::synth::Truth::load(&case.join("truth.json")).unwrap();
+    assert_eq!(
+        reg["scan_to_reference"][1][3].as_f64().unwrap(),
+        truth.scan_to_reference[1][3]
+    );
+    // Bad input: one line naming the file.
+    let bad = common::polishbot()
+        .args(["inspect", "--reference", "/nonexistent.ply", "--scan"])
+        .arg(case.join("scan.ply"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("/nonexistent.ply") && err.trim().lines().count() == 1,
+        "{err}"
+    );
 }

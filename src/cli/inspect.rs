@@ -76,8 +76,8 @@ fn read_pose(path: &Path) -> Result<nalgebra::Isometry3<f64>> {
     struct Pose {
         scan_to_reference: [[f64; 4]; 4],
     }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
     let pose: Pose = serde_json::from_str(&text)
         .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))?;
     transform::isometry_from_rows(&pose.scan_to_reference)
@@ -106,7 +106,11 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
     let spin = crate::progress::spinner("load");
-    let samples = if cfg.reference_points == 0 { 400_000 } else { cfg.reference_points };
+    let samples = if cfg.reference_points == 0 {
+        400_000
+    } else {
+        cfg.reference_points
+    };
     let reference = load_reference(&args.reference, &args.input, samples)?;
     let mut scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
     spin.finish_and_clear();
@@ -139,8 +143,14 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let core = match &args.core {
         Some(path) => {
             let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
-            compare::core_points(&c, &CoreConfig { selection: compare::CoreSelection::All, ..cfg.core.clone() })
-                .with_context(|| format!("{}", path.display()))?
+            compare::core_points(
+                &c,
+                &CoreConfig {
+                    selection: compare::CoreSelection::All,
+                    ..cfg.core.clone()
+                },
+            )
+            .with_context(|| format!("{}", path.display()))?
         }
         None => compare::core_points(&reference, &cfg.core)?,
     };
@@ -148,7 +158,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let found = regions::find_regions(&dev, &cfg.regions);
     let table = compare::to_cloud(&dev, &found.labels);
     cloud::write_csv(&args.out.join("deviations.csv"), &table)?;
-    cloud::write_ply(&args.out.join("deviations.ply"), &table, None, PlyPrecision::F64)?;
+    cloud::write_ply(
+        &args.out.join("deviations.ply"),
+        &table,
+        None,
+        PlyPrecision::F64,
+    )?;
     let text = serde_json::to_string_pretty(&found)?;
     let path = args.out.join("regions.json");
     std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
@@ -166,9 +181,16 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
         found.tolerance,
         seconds
     );
-    println!("{:>6} {:>10} {:>10} {:>11} {:>7}  kind", "region", "peak mm", "area mm2", "volume mm3", "points");
+    println!(
+        "{:>6} {:>10} {:>10} {:>11} {:>7}  kind",
+        "region", "peak mm", "area mm2", "volume mm3", "points"
+    );
     for r in &found.regions {
-        let kind = if r.repairable { "excess (repairable)" } else { "pit (not repairable)" };
+        let kind = if r.repairable {
+            "excess (repairable)"
+        } else {
+            "pit (not repairable)"
+        };
         println!(
             "{:>6} {:>10.4} {:>10.3} {:>11.5} {:>7}  {kind}",
             r.id, r.peak, r.area, r.volume, r.points

@@ -114,7 +114,7 @@ impl Neighbours {
     pub fn within_unsorted(&self, q: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
         let q = [q.x, q.y, q.z];
         let r2 = radius * radius;
-        if self.is_empty() || !(r2 >= 0.0) {
+        if self.is_empty() || r2.is_nan() || r2 < 0.0 {
             return Vec::new();
         }
         let mut found = self.raw_within(&q, r2);
@@ -134,7 +134,7 @@ impl Neighbours {
     }
 
     fn within2(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
-        if self.is_empty() || !(r2 >= 0.0) {
+        if self.is_empty() || r2.is_nan() || r2 < 0.0 {
             return Vec::new();
         }
         let mut found = self.raw_within(q, r2);

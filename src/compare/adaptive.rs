@@ -182,10 +182,17 @@ fn at(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, cfg: &CompareConfig) -
     let r_max = *prep.radii.last().expect("radii");
     let agrees = |i: usize| prep.ref_normals[i].dot(n) >= prep.cos_limit;
     let refs = by_rho(
-        members(&c.ref_index, &c.reference.points, p, n, r_max, cfg.max_distance)
-            .into_iter()
-            .filter(|m| agrees(m.index))
-            .collect(),
+        members(
+            &c.ref_index,
+            &c.reference.points,
+            p,
+            n,
+            r_max,
+            cfg.max_distance,
+        )
+        .into_iter()
+        .filter(|m| agrees(m.index))
+        .collect(),
     );
     let scans = by_rho(
         members(&c.scan_index, &c.scan.points, p, n, r_max, cfg.max_distance)
@@ -227,9 +234,7 @@ fn at(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, cfg: &CompareConfig) -
         }
         let pairs: Vec<Local> = scans[..n_scan].iter().map(local).collect();
         match fit(&pairs, r, 4.0 * prep.noise, prep.noise) {
-            Some(fs) if fs.n >= FIT_MIN || last => {
-                break (r, n_ref, n_scan, fs)
-            }
+            Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, n_scan, fs),
             _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
             _ => k += 1,
         }

@@ -61,7 +61,7 @@ pub fn core_points(reference: &PointCloud, cfg: &CoreConfig) -> Result<PointClou
     };
     if let Some(i) = normals
         .iter()
-        .position(|n| !((n.norm() - 1.0).abs() < 1e-3))
+        .position(|n| (n.norm() - 1.0).abs().is_nan() || (n.norm() - 1.0).abs() >= 1e-3)
     {
         bail!("reference normal {i} is not a unit vector");
     }

@@ -127,7 +127,11 @@ mod tests {
         let pts: Vec<Local> = (0..40)
             .map(|i| {
                 let (u, v) = ((i % 7) as f64 * 0.1 - 0.3, (i / 7) as f64 * 0.1 - 0.25);
-                [u, v, 0.2 + 0.1 * u - 0.3 * v + 2.0 * u * u - u * v + 0.5 * v * v]
+                [
+                    u,
+                    v,
+                    0.2 + 0.1 * u - 0.3 * v + 2.0 * u * u - u * v + 0.5 * v * v,
+                ]
             })
             .collect();
         let f = fit(&pts, 0.4, 0.01, 0.0).unwrap();

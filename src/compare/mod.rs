@@ -233,7 +233,10 @@ pub fn compare(
                 Some(r) => r,
                 None => radius_for_count(&clouds, 20.0),
             };
-            ensure!(radius > 0.0 && radius.is_finite(), "radius must be positive");
+            ensure!(
+                radius > 0.0 && radius.is_finite(),
+                "radius must be positive"
+            );
             let values = run(core, normals, |p, n| {
                 classic::at(&clouds, p, n, radius, cfg)
             });

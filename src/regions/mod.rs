@@ -105,11 +105,17 @@ fn shares(points: &[Point3<f64>]) -> (Vec<f64>, f64) {
         .map(|p| {
             let nb = index.knn(p, 9);
             let d1 = nb.get(1).map_or(f64::NAN, |n| n.dist2.sqrt());
-            let a = nb.last().map_or(0.0, |n| std::f64::consts::PI * n.dist2 / 8.0);
+            let a = nb
+                .last()
+                .map_or(0.0, |n| std::f64::consts::PI * n.dist2 / 8.0);
             (a, d1)
         })
         .collect();
-    let mut d: Vec<f64> = found.iter().map(|f| f.1).filter(|d| d.is_finite()).collect();
+    let mut d: Vec<f64> = found
+        .iter()
+        .map(|f| f.1)
+        .filter(|d| d.is_finite())
+        .collect();
     d.sort_by(f64::total_cmp);
     let spacing = d.get(d.len() / 2).copied().unwrap_or(0.0);
     (found.into_iter().map(|f| f.0).collect(), spacing)
@@ -138,9 +144,9 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
         }
     }
     let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
-    for a in 0..errors.len() {
+    for (a, &core) in errors.iter().enumerate() {
         let root = find(&mut parent, a);
-        groups.entry(root).or_default().push(errors[a]);
+        groups.entry(root).or_default().push(core);
     }
     let mut regions: Vec<(Region, Vec<usize>)> = groups
         .into_values()
@@ -173,8 +179,15 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
 
 fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) -> Region {
     let n = members.len() as f64;
-    let centroid = members.iter().map(|&i| dev.points[i].coords).sum::<Vector3<f64>>() / n;
-    let normal = members.iter().map(|&i| dev.normals[i]).sum::<Vector3<f64>>();
+    let centroid = members
+        .iter()
+        .map(|&i| dev.points[i].coords)
+        .sum::<Vector3<f64>>()
+        / n;
+    let normal = members
+        .iter()
+        .map(|&i| dev.normals[i])
+        .sum::<Vector3<f64>>();
     let normal = normal.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
     let d = |i: usize| dev.values[i].distance;
     let peak = members
