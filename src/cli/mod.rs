@@ -9,6 +9,7 @@ use crate::cloud::{Format, Units};
 mod arm;
 mod demo;
 mod info;
+mod inspect;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
@@ -46,7 +47,7 @@ pub enum Command {
     /// Register a scan onto a reference: DIR/registration.json.
     Register(NotYet),
     /// Whole metrology chain: registration, deviations, regions, report.
-    Inspect(NotYet),
+    Inspect(Box<inspect::InspectArgs>),
     /// Plan grinding passes and the joint trajectory from an inspection.
     Plan(NotYet),
     /// Stream a plan to the arm (serial port or simulated arm).
@@ -90,7 +91,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Merge(_) => not_yet("merge"),
         Command::Filter(_) => not_yet("filter"),
         Command::Register(_) => not_yet("register"),
-        Command::Inspect(_) => not_yet("inspect"),
+        Command::Inspect(args) => inspect::run(*args, config),
         Command::Plan(_) => not_yet("plan"),
         Command::Run(_) => not_yet("run"),
         Command::Arm(args) => arm::run(args, config),

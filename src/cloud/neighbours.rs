@@ -108,10 +108,21 @@ impl Neighbours {
         self.within2(&[q.x, q.y, q.z], radius * radius)
     }
 
-    fn within2(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
-        if self.is_empty() || !(r2 >= 0.0) {
+    /// Every point within `radius` of `q` (inclusive), in the tree's order (cheaper than
+    /// [`Neighbours::within`] when the caller does not need the distance order; still
+    /// deterministic for a given index).
+    pub fn within_unsorted(&self, q: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
+        let q = [q.x, q.y, q.z];
+        let r2 = radius * radius;
+        if self.is_empty() || r2.is_nan() || r2 < 0.0 {
             return Vec::new();
         }
+        let mut found = self.raw_within(&q, r2);
+        found.retain(|n| n.dist2 <= r2);
+        found
+    }
+
+    fn raw_within(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
         // Widen kiddo's bound a hair so our own (re-computed) distances decide the boundary.
         let raw = self
             .tree
@@ -119,7 +130,14 @@ impl Neighbours {
             .within::<SquaredEuclidean<f64>>(r2 * (1.0 + 1e-12) + f64::MIN_POSITIVE)
             .unsorted()
             .execute();
-        let mut found = self.measured(q, raw.iter().map(|r| r.item));
+        self.measured(q, raw.iter().map(|r| r.item))
+    }
+
+    fn within2(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
+        if self.is_empty() || r2.is_nan() || r2 < 0.0 {
+            return Vec::new();
+        }
+        let mut found = self.raw_within(q, r2);
         found.retain(|n| n.dist2 <= r2);
         ordered(found)
     }
@@ -164,6 +182,11 @@ mod tests {
             let r = 1.5;
             let inside: Vec<_> = all.iter().copied().filter(|n| n.dist2 <= r * r).collect();
             assert_eq!(index.within(q, r), inside);
+            let mut loose = index.within_unsorted(q, r);
+            loose.sort_by_key(|n| n.index);
+            let mut inside_by_index = inside.clone();
+            inside_by_index.sort_by_key(|n| n.index);
+            assert_eq!(loose, inside_by_index);
             let capped = index.knn_within(q, 4, r);
             assert_eq!(capped, inside[..inside.len().min(4)].to_vec());
         }
