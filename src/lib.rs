@@ -3,4 +3,5 @@
 //! config struct.
 pub mod cli;
 pub mod cloud;
+pub mod preprocess;
 pub mod synth;
