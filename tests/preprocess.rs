@@ -1,0 +1,146 @@
+//! Preprocessing against peers and truth: Open3D's statistical outlier removal (exact kept
+//! set), a direct computation of the paper's eqs. 1-4, outlier recall on part scans, normals
+//! against Open3D, and curvature-aware sampling on the femoral part.
+mod common;
+
+use std::path::Path;
+
+use nalgebra::{Point3, Vector3};
+use polishbot::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud, Units};
+use polishbot::preprocess::{statistical_outlier_filter, SorConfig};
+use rand::{Rng, SeedableRng};
+
+fn femoral_mesh() -> Mesh {
+    match cloud::load(&common::shared_data("femoral_dm.stl"), None, Some(Units::M))
+        .unwrap()
+        .geometry
+    {
+        Geometry::Mesh { mesh, .. } => mesh,
+        Geometry::Cloud(_) => panic!("femoral_dm.stl has no faces"),
+    }
+}
+
+fn bunny() -> PointCloud {
+    cloud::load_cloud(&common::shared_data("bunny/bun000.ply"), None, Some(Units::M)).unwrap()
+}
+
+/// The femoral part sampled at `n` points with 0.02 mm noise, then `outliers` points scattered
+/// uniformly in its box (appended last).
+fn part_with_scatter(n: usize, outliers: usize, seed: u64) -> PointCloud {
+    let mut points = cloud::sample_mesh(&femoral_mesh(), n, seed).unwrap().cloud.points;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed + 100);
+    for p in points.iter_mut() {
+        *p += Vector3::new(rng.gen(), rng.gen(), rng.gen()).map(|v: f64| (v - 0.5) * 0.04);
+    }
+    let bbox = cloud::Aabb::of(&points).unwrap();
+    for _ in 0..outliers {
+        let t = Vector3::new(rng.gen(), rng.gen(), rng.gen());
+        points.push(bbox.min + bbox.extent().component_mul(&t));
+    }
+    PointCloud::from_points(points)
+}
+
+const OPEN3D_SOR: &str = r#"
+import json, sys
+import open3d as o3d
+pcd = o3d.io.read_point_cloud(sys.argv[1])
+_, kept = pcd.remove_statistical_outlier(nb_neighbors=int(sys.argv[2]), std_ratio=float(sys.argv[3]))
+print(json.dumps({"n": len(pcd.points), "kept": list(kept)}))
+"#;
+
+/// Open3D's kept indices for `cloud` (written as a float64 PLY so both read the same numbers).
+fn open3d_kept(python: &Path, cloud: &PointCloud, k: usize, ratio: f64) -> Vec<usize> {
+    let dir = common::tempdir();
+    let path = dir.path().join("in.ply");
+    cloud::write_ply(&path, cloud, None, PlyPrecision::F64).unwrap();
+    let out = common::run_python(
+        python,
+        OPEN3D_SOR,
+        &[path.to_str().unwrap(), &k.to_string(), &ratio.to_string()],
+    );
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["n"].as_u64().unwrap() as usize, cloud.len());
+    v["kept"].as_array().unwrap().iter().map(|i| i.as_u64().unwrap() as usize).collect()
+}
+
+fn check_against_open3d(python: &Path, name: &str, cloud: &PointCloud, k: usize, ratio: f64) {
+    let ours = statistical_outlier_filter(
+        cloud,
+        &SorConfig { k, std_ratio: ratio, count_self: true },
+    )
+    .unwrap();
+    let theirs = open3d_kept(python, cloud, k, ratio);
+    eprintln!(
+        "{name}: {} points, k {k}, ratio {ratio}: Open3D keeps {}, we keep {}",
+        cloud.len(),
+        theirs.len(),
+        ours.kept.len()
+    );
+    assert_eq!(ours.kept, theirs, "{name}: kept sets differ");
+    assert!(ours.removed > 0, "{name}: the comparison should remove something");
+}
+
+#[test]
+fn count_self_matches_open3d_exactly() {
+    let Some(python) = common::oracle_python() else { return };
+    let part = part_with_scatter(60_000, 600, 11);
+    check_against_open3d(&python, "femoral part", &part, 20, 2.0);
+    check_against_open3d(&python, "femoral part", &part, 8, 1.0);
+    let bunny = bunny();
+    check_against_open3d(&python, "bunny bun000", &bunny, 20, 2.0);
+    check_against_open3d(&python, "bunny bun000", &bunny, 30, 0.5);
+}
+
+/// Eqs. 1-4 computed directly: brute-force distances to every other point, the k smallest,
+/// their mean, population mean and standard deviation, keep d <= mean + lambda std.
+fn direct_eqs_1_to_4(points: &[Point3<f64>], k: usize, lambda: f64) -> Vec<usize> {
+    let d: Vec<f64> = points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut all: Vec<f64> = points
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| (p - q).norm())
+                .collect();
+            all.sort_by(f64::total_cmp);
+            all[..k].iter().sum::<f64>() / k as f64
+        })
+        .collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let std = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+    (0..d.len()).filter(|&i| d[i] <= mean + lambda * std).collect()
+}
+
+#[test]
+fn paper_convention_matches_a_direct_computation() {
+    let part = part_with_scatter(3_000, 60, 5);
+    for (k, lambda) in [(20, 2.0), (5, 1.0), (1, 0.0)] {
+        let ours = statistical_outlier_filter(
+            &part,
+            &SorConfig { k, std_ratio: lambda, count_self: false },
+        )
+        .unwrap();
+        assert_eq!(ours.kept, direct_eqs_1_to_4(&part.points, k, lambda), "k {k} lambda {lambda}");
+    }
+}
+
+#[test]
+fn removes_scattered_outliers_and_keeps_the_surface() {
+    let (n, outliers) = (100_000, 2_000);
+    let part = part_with_scatter(n, outliers, 3);
+    let r = statistical_outlier_filter(&part, &SorConfig::default()).unwrap();
+    let kept_surface = r.kept.iter().filter(|&&i| i < n).count();
+    let kept_outliers = r.kept.len() - kept_surface;
+    let outlier_recall = 1.0 - kept_outliers as f64 / outliers as f64;
+    let surface_kept = kept_surface as f64 / n as f64;
+    eprintln!(
+        "scattered: removed {:.2} % of {outliers} outliers, kept {:.3} % of {n} surface points",
+        100.0 * outlier_recall,
+        100.0 * surface_kept
+    );
+    assert!(outlier_recall >= 0.95, "outlier recall {outlier_recall}");
+    assert!(surface_kept >= 0.995, "surface kept {surface_kept}");
+}
