@@ -4,4 +4,5 @@
 pub mod cli;
 pub mod cloud;
 pub mod preprocess;
+pub mod progress;
 pub mod synth;

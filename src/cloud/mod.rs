@@ -13,6 +13,7 @@ mod ply;
 mod sample;
 mod stl;
 mod text;
+pub mod transform;
 mod types;
 mod xyz;
 
