@@ -6,8 +6,9 @@ mod common;
 use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud, Units};
+use polishbot::cloud::{self, Geometry, Mesh, Neighbours, PlyPrecision, PointCloud, Units};
 use polishbot::preprocess::{statistical_outlier_filter, SorConfig};
+use polishbot::synth::{synth, SynthCase, SynthConfig};
 use rand::{Rng, SeedableRng};
 
 fn femoral_mesh() -> Mesh {
@@ -21,13 +22,21 @@ fn femoral_mesh() -> Mesh {
 }
 
 fn bunny() -> PointCloud {
-    cloud::load_cloud(&common::shared_data("bunny/bun000.ply"), None, Some(Units::M)).unwrap()
+    cloud::load_cloud(
+        &common::shared_data("bunny/bun000.ply"),
+        None,
+        Some(Units::M),
+    )
+    .unwrap()
 }
 
 /// The femoral part sampled at `n` points with 0.02 mm noise, then `outliers` points scattered
 /// uniformly in its box (appended last).
 fn part_with_scatter(n: usize, outliers: usize, seed: u64) -> PointCloud {
-    let mut points = cloud::sample_mesh(&femoral_mesh(), n, seed).unwrap().cloud.points;
+    let mut points = cloud::sample_mesh(&femoral_mesh(), n, seed)
+        .unwrap()
+        .cloud
+        .points;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed + 100);
     for p in points.iter_mut() {
         *p += Vector3::new(rng.gen(), rng.gen(), rng.gen()).map(|v: f64| (v - 0.5) * 0.04);
@@ -38,6 +47,19 @@ fn part_with_scatter(n: usize, outliers: usize, seed: u64) -> PointCloud {
         points.push(bbox.min + bbox.extent().component_mul(&t));
     }
     PointCloud::from_points(points)
+}
+
+/// `polishbot synth`'s default case (seed 1) with a small reference (only the scan is used).
+fn synth_case() -> SynthCase {
+    synth(&SynthConfig {
+        reference_points: 20_000,
+        ..SynthConfig::default()
+    })
+    .unwrap()
+}
+
+fn synth_scan() -> PointCloud {
+    synth_case().scan
 }
 
 const OPEN3D_SOR: &str = r#"
@@ -60,13 +82,22 @@ fn open3d_kept(python: &Path, cloud: &PointCloud, k: usize, ratio: f64) -> Vec<u
     );
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     assert_eq!(v["n"].as_u64().unwrap() as usize, cloud.len());
-    v["kept"].as_array().unwrap().iter().map(|i| i.as_u64().unwrap() as usize).collect()
+    v["kept"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|i| i.as_u64().unwrap() as usize)
+        .collect()
 }
 
 fn check_against_open3d(python: &Path, name: &str, cloud: &PointCloud, k: usize, ratio: f64) {
     let ours = statistical_outlier_filter(
         cloud,
-        &SorConfig { k, std_ratio: ratio, count_self: true },
+        &SorConfig {
+            k,
+            std_ratio: ratio,
+            count_self: true,
+        },
     )
     .unwrap();
     let theirs = open3d_kept(python, cloud, k, ratio);
@@ -77,15 +108,20 @@ fn check_against_open3d(python: &Path, name: &str, cloud: &PointCloud, k: usize,
         ours.kept.len()
     );
     assert_eq!(ours.kept, theirs, "{name}: kept sets differ");
-    assert!(ours.removed > 0, "{name}: the comparison should remove something");
+    assert!(
+        ours.removed > 0,
+        "{name}: the comparison should remove something"
+    );
 }
 
 #[test]
 fn count_self_matches_open3d_exactly() {
-    let Some(python) = common::oracle_python() else { return };
-    let part = part_with_scatter(60_000, 600, 11);
-    check_against_open3d(&python, "femoral part", &part, 20, 2.0);
-    check_against_open3d(&python, "femoral part", &part, 8, 1.0);
+    let Some(python) = common::oracle_python() else {
+        return;
+    };
+    let scan = synth_scan();
+    check_against_open3d(&python, "synth scan", &scan, 20, 2.0);
+    check_against_open3d(&python, "synth scan", &scan, 8, 1.0);
     let bunny = bunny();
     check_against_open3d(&python, "bunny bun000", &bunny, 20, 2.0);
     check_against_open3d(&python, "bunny bun000", &bunny, 30, 0.5);
@@ -111,7 +147,9 @@ fn direct_eqs_1_to_4(points: &[Point3<f64>], k: usize, lambda: f64) -> Vec<usize
     let n = d.len() as f64;
     let mean = d.iter().sum::<f64>() / n;
     let std = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
-    (0..d.len()).filter(|&i| d[i] <= mean + lambda * std).collect()
+    (0..d.len())
+        .filter(|&i| d[i] <= mean + lambda * std)
+        .collect()
 }
 
 #[test]
@@ -120,27 +158,80 @@ fn paper_convention_matches_a_direct_computation() {
     for (k, lambda) in [(20, 2.0), (5, 1.0), (1, 0.0)] {
         let ours = statistical_outlier_filter(
             &part,
-            &SorConfig { k, std_ratio: lambda, count_self: false },
+            &SorConfig {
+                k,
+                std_ratio: lambda,
+                count_self: false,
+            },
         )
         .unwrap();
-        assert_eq!(ours.kept, direct_eqs_1_to_4(&part.points, k, lambda), "k {k} lambda {lambda}");
+        assert_eq!(
+            ours.kept,
+            direct_eqs_1_to_4(&part.points, k, lambda),
+            "k {k} lambda {lambda}"
+        );
     }
 }
 
+/// Share of `indices` that `kept` (ascending) does not contain.
+fn removed_share(kept: &[usize], indices: &[usize]) -> f64 {
+    let gone = indices
+        .iter()
+        .filter(|i| kept.binary_search(i).is_err())
+        .count();
+    gone as f64 / indices.len() as f64
+}
+
+/// Synth's scattered outliers are thrown 2-15 mm from a seed point along a jittered normal;
+/// some land back near another part of the surface (75 of 1515 within 1 mm for seed 1),
+/// where no statistical filter can tell them from surface points. The recall target is
+/// therefore scored on those that really are at least 2 mm from every surface point; the raw
+/// share over all of them is printed as well, with the clustered ("reflection") outliers.
 #[test]
-fn removes_scattered_outliers_and_keeps_the_surface() {
-    let (n, outliers) = (100_000, 2_000);
-    let part = part_with_scatter(n, outliers, 3);
-    let r = statistical_outlier_filter(&part, &SorConfig::default()).unwrap();
-    let kept_surface = r.kept.iter().filter(|&&i| i < n).count();
-    let kept_outliers = r.kept.len() - kept_surface;
-    let outlier_recall = 1.0 - kept_outliers as f64 / outliers as f64;
-    let surface_kept = kept_surface as f64 / n as f64;
-    eprintln!(
-        "scattered: removed {:.2} % of {outliers} outliers, kept {:.3} % of {n} surface points",
-        100.0 * outlier_recall,
-        100.0 * surface_kept
-    );
-    assert!(outlier_recall >= 0.95, "outlier recall {outlier_recall}");
-    assert!(surface_kept >= 0.995, "surface kept {surface_kept}");
+fn synth_scan_outliers_are_removed_and_the_surface_kept() {
+    let case = synth_case();
+    let truth = &case.truth.outliers;
+    let scan = &case.scan;
+    let is_outlier = |i: &usize| truth.scattered.contains(i) || truth.clustered.contains(i);
+    let surface: Vec<usize> = (0..scan.len()).filter(|i| !is_outlier(i)).collect();
+    let surface_index =
+        Neighbours::new(&surface.iter().map(|&i| scan.points[i]).collect::<Vec<_>>());
+    let off_surface = |i: &&usize| surface_index.nearest(&scan.points[**i]).unwrap().dist2 >= 4.0;
+    let far: Vec<usize> = truth
+        .scattered
+        .iter()
+        .filter(off_surface)
+        .copied()
+        .collect();
+    for (lambda, assert) in [(2.0, true), (1.0, false)] {
+        let cfg = SorConfig {
+            std_ratio: lambda,
+            ..SorConfig::default()
+        };
+        let r = statistical_outlier_filter(scan, &cfg).unwrap();
+        let far_removed = removed_share(&r.kept, &far);
+        let surface_kept = 1.0 - removed_share(&r.kept, &surface);
+        eprintln!(
+            "synth seed 1, {} points, k 20, ratio {lambda}: removed {:.2} % of the {} scattered \
+             outliers >= 2 mm off the surface ({:.2} % of all {}), {:.2} % of {} clustered \
+             ones ({} clusters); kept {:.3} % of {} surface points",
+            scan.len(),
+            100.0 * far_removed,
+            far.len(),
+            100.0 * removed_share(&r.kept, &truth.scattered),
+            truth.scattered.len(),
+            100.0 * removed_share(&r.kept, &truth.clustered),
+            truth.clustered.len(),
+            truth.clusters,
+            100.0 * surface_kept,
+            surface.len()
+        );
+        if assert {
+            assert!(
+                far_removed >= 0.95,
+                "scattered outliers removed: {far_removed}"
+            );
+            assert!(surface_kept >= 0.995, "surface points kept: {surface_kept}");
+        }
+    }
 }
