@@ -2,6 +2,10 @@
 //!
 //! [`preprocess`] chains the steps for `polishbot filter` and `inspect`; each step also has its
 //! own front function.
+mod normals;
 mod sor;
+mod voxel;
 
+pub use normals::{estimate_normals, pca_normal, NormalConfig, NormalEstimate, Orientation};
 pub use sor::{mean_distances, statistical_outlier_filter, SorConfig, SorResult};
+pub use voxel::{mean_spacing, voxel_downsample};
