@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand};
 use crate::cloud::{Format, Units};
 
 mod demo;
+mod filter;
 mod info;
 mod synth;
 
@@ -41,7 +42,7 @@ pub enum Command {
     /// Merge turntable range views into one cloud.
     Merge(NotYet),
     /// Statistical outlier filter and down-sampling.
-    Filter(NotYet),
+    Filter(filter::FilterArgs),
     /// Register a scan onto a reference: DIR/registration.json.
     Register(NotYet),
     /// Whole metrology chain: registration, deviations, regions, report.
@@ -87,7 +88,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(args) => info::run(args, config),
         Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
-        Command::Filter(_) => not_yet("filter"),
+        Command::Filter(args) => filter::run(args, config),
         Command::Register(_) => not_yet("register"),
         Command::Inspect(_) => not_yet("inspect"),
         Command::Plan(_) => not_yet("plan"),
