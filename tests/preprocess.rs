@@ -7,7 +7,10 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 use polishbot::cloud::{self, Geometry, Mesh, Neighbours, PlyPrecision, PointCloud, Units};
-use polishbot::preprocess::{statistical_outlier_filter, SorConfig};
+use polishbot::preprocess::{
+    curvature_sample, estimate_normals, statistical_outlier_filter, CurvatureSampleConfig,
+    NormalConfig, Orientation, SorConfig,
+};
 use polishbot::synth::{synth, SynthCase, SynthConfig};
 use rand::{Rng, SeedableRng};
 
@@ -233,5 +236,156 @@ fn synth_scan_outliers_are_removed_and_the_surface_kept() {
             );
             assert!(surface_kept >= 0.995, "surface points kept: {surface_kept}");
         }
+    }
+}
+
+#[test]
+fn curvature_sampling_favours_the_feature_region_of_the_femoral_part() {
+    let cloud = cloud::sample_mesh(&femoral_mesh(), 100_000, 9)
+        .unwrap()
+        .cloud;
+    let cfg = CurvatureSampleConfig {
+        target: 10_000,
+        ..CurvatureSampleConfig::default()
+    };
+    let s = curvature_sample(&cloud, &cfg).unwrap();
+    let input_share = s.feature_points as f64 / cloud.len() as f64;
+    let kept_feature = s.indices.iter().filter(|&&i| s.feature[i]).count();
+    let kept_share = kept_feature as f64 / s.indices.len() as f64;
+    let mut angles = s.mean_angle_deg.clone();
+    angles.sort_by(f64::total_cmp);
+    let pct = |q: f64| angles[((angles.len() - 1) as f64 * q) as usize];
+    eprintln!(
+        "femoral_dm, 100k samples -> {} (J {}, threshold {} deg): feature region {:.1} % of \
+         the input, {:.1} % of the sample; mean normal angle p50 {:.2} p90 {:.2} p99 {:.2} deg",
+        s.indices.len(),
+        cfg.uniform_ratio,
+        cfg.feature_angle_deg,
+        100.0 * input_share,
+        100.0 * kept_share,
+        pct(0.5),
+        pct(0.9),
+        pct(0.99)
+    );
+    assert_eq!(s.indices.len(), 10_000);
+    assert_eq!(kept_feature, s.kept_feature);
+    assert!(kept_share > input_share, "{kept_share} <= {input_share}");
+}
+
+const OPEN3D_NORMALS: &str = r#"
+import sys
+import numpy as np
+import open3d as o3d
+pcd = o3d.io.read_point_cloud(sys.argv[1])
+pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=int(sys.argv[2])))
+np.savetxt(sys.stdout, np.asarray(pcd.normals), fmt="%.17g")
+"#;
+
+#[test]
+fn pca_normals_match_open3d_up_to_sign() {
+    let Some(python) = common::oracle_python() else {
+        return;
+    };
+    let mut cloud = part_with_scatter(20_000, 0, 21);
+    cloud.normals = None;
+    let dir = common::tempdir();
+    let path = dir.path().join("in.ply");
+    cloud::write_ply(&path, &cloud, None, PlyPrecision::F64).unwrap();
+    let out = common::run_python(&python, OPEN3D_NORMALS, &[path.to_str().unwrap(), "20"]);
+    let theirs: Vec<Vector3<f64>> = out
+        .lines()
+        .map(|l| {
+            let v: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            Vector3::new(v[0], v[1], v[2])
+        })
+        .collect();
+    let cfg = NormalConfig {
+        k: 20,
+        orientation: Orientation::Unoriented,
+        ..NormalConfig::default()
+    };
+    let ours = estimate_normals(&cloud, &cfg).unwrap();
+    let worst = ours
+        .normals
+        .iter()
+        .zip(&theirs)
+        .map(|(a, b)| a.dot(b).abs())
+        .fold(1.0, f64::min);
+    eprintln!(
+        "normals vs Open3D on {} points: smallest |cos| {worst}",
+        cloud.len()
+    );
+    assert_eq!(theirs.len(), cloud.len());
+    assert!(worst > 1.0 - 1e-9, "smallest |cos| {worst}");
+}
+
+#[test]
+fn filter_command_writes_the_cloud_and_one_summary_line() {
+    let dir = common::tempdir();
+    let input = dir.path().join("scan.ply");
+    let output = dir.path().join("clean.ply");
+    let scan = part_with_scatter(20_000, 400, 4);
+    cloud::write_ply(&input, &scan, None, PlyPrecision::F64).unwrap();
+    let run = |extra: &[&str]| {
+        let mut cmd = common::polishbot();
+        cmd.arg("filter")
+            .arg(&input)
+            .arg("-o")
+            .arg(&output)
+            .args(extra);
+        cmd.output().unwrap()
+    };
+    let out = run(&["--k", "20", "--std-ratio", "2.0"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let line = String::from_utf8(out.stdout).unwrap();
+    let expected = statistical_outlier_filter(&scan, &SorConfig::default()).unwrap();
+    assert_eq!(line.lines().count(), 1);
+    assert!(
+        line.contains(&format!("removed {}", expected.removed)),
+        "{line}"
+    );
+    let written = cloud::load_cloud(&output, None, Some(Units::Mm)).unwrap();
+    assert_eq!(written.points, expected.apply(&scan).points);
+
+    let out = run(&[
+        "--voxel",
+        "1",
+        "--curvature-sample",
+        "2000",
+        "--feature-angle",
+        "5",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        cloud::load_cloud(&output, None, Some(Units::Mm))
+            .unwrap()
+            .len(),
+        2000
+    );
+
+    for (args, says) in [
+        (&["--k", "0"][..], "k must be at least 1"),
+        (&["--k", "20400"][..], "needs more points"),
+        (&["--std-ratio", "-1"][..], "std ratio must be"),
+        (&["--voxel", "0"][..], "voxel must be"),
+        (
+            &["--curvature-sample", "100", "--uniform-ratio", "2"][..],
+            "uniform ratio",
+        ),
+    ] {
+        let out = run(args);
+        let err = String::from_utf8(out.stderr).unwrap();
+        assert!(
+            !out.status.success() && err.lines().count() == 1 && err.contains(says),
+            "{args:?}: {err}"
+        );
     }
 }
