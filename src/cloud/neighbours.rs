@@ -6,7 +6,7 @@
 //! lowest indices are taken.
 use std::num::NonZeroUsize;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use kiddo::{Eytzinger, ImmutableKdTree, QueryScratch, SquaredEuclidean};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
@@ -17,6 +17,14 @@ pub struct Neighbour {
     pub index: usize,
     /// Squared Euclidean distance (mm²).
     pub dist2: f64,
+}
+
+/// Per-worker reusable state of [`Neighbours::knn_dist2_into`].
+#[derive(Default)]
+pub struct KnnScratch {
+    stack: QueryScratch<Eytzinger, f64, 3>,
+    previous: Option<([f64; 3], f64)>,
+    k: usize,
 }
 
 /// A k-d tree over points, for k-nearest, radius and nearest-one queries.
@@ -119,13 +127,17 @@ impl Neighbours {
         I: Fn() -> S + Sync + Send,
         F: Fn(&mut S, usize) -> R + Sync + Send,
     {
-        let mut pairs: Vec<(usize, R)> = self
-            .spatial_order()
-            .into_par_iter()
-            .map_init(init, |s, i| (i, f(s, i)))
-            .collect();
-        pairs.par_sort_unstable_by_key(|p| p.0);
-        pairs.into_iter().map(|p| p.1).collect()
+        let order = self.spatial_order();
+        let values: Vec<R> = order.par_iter().map_init(init, |s, &i| f(s, i)).collect();
+        let mut slots: Vec<Option<R>> = values.into_iter().map(Some).collect();
+        let mut position = vec![0; order.len()];
+        for (j, &i) in order.iter().enumerate() {
+            position[i] = j;
+        }
+        position
+            .iter()
+            .map(|&j| slots[j].take().expect("a permutation"))
+            .collect()
     }
 
     /// The indexed point `i`.
@@ -135,20 +147,41 @@ impl Neighbours {
 
     /// Squared distances to the `k` nearest points, ascending, into `out` (cleared first). The
     /// fast path for statistics that need distances only (no tie resolution is needed: the
-    /// k smallest distances are the same whichever tied point is taken).
-    pub fn knn_dist2_into(&self, q: &Point3<f64>, k: usize, out: &mut Vec<f64>) {
+    /// k smallest distances are the same whichever tied point is taken). `scratch` carries
+    /// the previous query of the same worker: its k-th distance plus the step between the
+    /// two queries bounds this query's search (triangle inequality), which is exact and saves
+    /// much of the search when queries come in [`spatial_order`](Self::spatial_order).
+    pub fn knn_dist2_into(
+        &self,
+        q: &Point3<f64>,
+        k: usize,
+        scratch: &mut KnnScratch,
+        out: &mut Vec<f64>,
+    ) {
         out.clear();
         let Some(want) = NonZeroUsize::new(k.min(self.len())) else {
             return;
         };
         let q = [q.x, q.y, q.z];
+        let bound = match scratch.previous {
+            Some((p, kth2)) if scratch.k == want.get() => {
+                let r = kth2.sqrt() + dist2(&p, &q).sqrt();
+                // Slack for rounding: a bound a little too wide costs nothing.
+                r * r * (1.0 + 1e-9) + f64::MIN_POSITIVE
+            }
+            _ => f64::INFINITY,
+        };
         let raw = self
             .tree
             .query(&q)
             .nearest_n::<SquaredEuclidean<f64>>(want)
+            .within(bound)
+            .with_scratch(&mut scratch.stack)
             .execute();
         out.extend(raw.iter().map(|r| dist2(&q, &self.points[r.item as usize])));
         out.sort_unstable_by(f64::total_cmp);
+        scratch.k = want.get();
+        scratch.previous = out.last().map(|&d| (q, d));
     }
 
     /// Every point within `radius` of `q` (inclusive), nearest first.

@@ -84,8 +84,8 @@ pub fn mean_distances(cloud: &PointCloud, k: usize, count_self: bool) -> Vec<f64
     let index = Neighbours::new(&cloud.points);
     let query = if count_self { k } else { k + 1 };
     let skip = usize::from(!count_self);
-    index.par_map_points(Vec::new, |buf, i| {
-        index.knn_dist2_into(&index.point(i), query, buf);
+    index.par_map_points(Default::default, |(scratch, buf), i| {
+        index.knn_dist2_into(&index.point(i), query, scratch, buf);
         // Ascending order, summed first to last, as Open3D does (bit-exact means).
         let sum = buf[skip..].iter().fold(0.0, |s, d2| s + d2.sqrt());
         sum / (buf.len() - skip) as f64

@@ -70,8 +70,8 @@ pub fn mean_spacing(cloud: &PointCloud) -> f64 {
         return 0.0;
     }
     let index = Neighbours::new(&cloud.points);
-    let nearest = index.par_map_points(Vec::new, |buf, i| {
-        index.knn_dist2_into(&cloud.points[i], 2, buf);
+    let nearest = index.par_map_points(Default::default, |(scratch, buf), i| {
+        index.knn_dist2_into(&cloud.points[i], 2, scratch, buf);
         buf[1].sqrt()
     });
     nearest.iter().sum::<f64>() / cloud.len() as f64
