@@ -68,7 +68,7 @@ pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
             cfg.k
         );
     }
-    if !(cfg.std_ratio >= 0.0) || !cfg.std_ratio.is_finite() {
+    if !cfg.std_ratio.is_finite() || cfg.std_ratio < 0.0 {
         bail!(
             "outlier filter: std ratio must be a finite number >= 0 (got {})",
             cfg.std_ratio
