@@ -6,6 +6,7 @@ pub mod cli;
 pub mod cloud;
 pub mod compare;
 pub mod plan;
+pub mod preprocess;
 pub mod progress;
 pub mod regions;
 pub mod report;

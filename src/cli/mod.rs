@@ -8,6 +8,7 @@ use crate::cloud::{Format, Units};
 
 mod arm;
 mod demo;
+mod filter;
 mod info;
 mod inspect;
 mod synth;
@@ -43,7 +44,7 @@ pub enum Command {
     /// Merge turntable range views into one cloud.
     Merge(NotYet),
     /// Statistical outlier filter and down-sampling.
-    Filter(NotYet),
+    Filter(filter::FilterArgs),
     /// Register a scan onto a reference: DIR/registration.json.
     Register(NotYet),
     /// Whole metrology chain: registration, deviations, regions, report.
@@ -89,7 +90,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(args) => info::run(args, config),
         Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
-        Command::Filter(_) => not_yet("filter"),
+        Command::Filter(args) => filter::run(args, config),
         Command::Register(_) => not_yet("register"),
         Command::Inspect(args) => inspect::run(*args, config),
         Command::Plan(_) => not_yet("plan"),
