@@ -10,7 +10,7 @@ use rand_chacha::ChaCha8Rng;
 use super::defects::{Defect, DefectKind};
 use super::truth::OutlierTruth;
 use super::{gauss, SynthConfig};
-use crate::cloud::{sample_mesh, Mesh, PointCloud};
+use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
 
 /// A uniform grid of points for "anything within r?" queries.
 struct Grid {
@@ -174,7 +174,8 @@ pub fn place_defects(
     Ok(defects)
 }
 
-/// Appends outliers to `points` (half scattered 2-15 mm off the surface, half in clusters of
+/// Appends outliers to `points` (half scattered 2-15 mm off the surface and at least 2 mm from
+/// every surface point, half in clusters of
 /// 15-40 points 1-5 mm off it) and returns their indices.
 pub fn add_outliers(
     points: &mut Vec<Point3<f64>>,
@@ -195,12 +196,21 @@ pub fn add_outliers(
     };
     let mut extra = Vec::with_capacity(total);
     let scattered = total / 2;
-    for _ in 0..scattered {
+    // A scattered outlier must lie at least 2 mm from every surface point (a point closer
+    // than that is indistinguishable from surface noise and would not be an outlier).
+    let surface_index = Neighbours::new(&points[..]);
+    let mut tries = 0usize;
+    while truth.scattered.len() < scattered && tries < 100 * scattered.max(1) {
+        tries += 1;
         let (p, n) = pick(rng);
         let jitter = Vector3::new(gauss(rng), gauss(rng), gauss(rng)) * 0.6;
         let dir = (n + jitter).normalize();
+        let q = p + dir * rng.gen_range(2.0..15.0);
+        if surface_index.nearest(&q).is_some_and(|nb| nb.dist2 < 4.0) {
+            continue;
+        }
         truth.scattered.push(n_surface + extra.len());
-        extra.push(p + dir * rng.gen_range(2.0..15.0));
+        extra.push(q);
     }
     let mut cluster_rng = ChaCha8Rng::seed_from_u64(rng.gen());
     while extra.len() < total {
