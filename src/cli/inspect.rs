@@ -11,7 +11,7 @@ use serde_json::json;
 use super::GeometryInput;
 use crate::cloud::{self, transform, Geometry, PlyPrecision, PointCloud};
 use crate::compare::{self, CompareConfig, CoreConfig, Method};
-use crate::regions::{self, RegionConfig, Regions, Verdict};
+use crate::regions::{self, RegionConfig, Regions};
 
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -135,6 +135,10 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
             "fine": null,
         }),
     )?;
+    let report_summary = vec![(
+        "registration".to_string(),
+        format!("pose from {}", pose_file.display()),
+    )];
     cfg.compare.registration_error = args
         .registration_error
         .or(inlier_rmse)
@@ -167,6 +171,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let text = serde_json::to_string_pretty(&found)?;
     let path = args.out.join("regions.json");
     std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+    super::inspect_report::write(&args.out, &dev, &found, report_summary.clone())?;
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
     Ok(())
 }
@@ -196,10 +201,6 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
             r.id, r.peak, r.area, r.volume, r.points
         );
     }
-    let verdict = match found.verdict {
-        Verdict::WithinTolerance => "within tolerance",
-        Verdict::Repairable => "repairable",
-        Verdict::Reject => "reject",
-    };
+    let verdict = super::inspect_report::verdict_text(found.verdict);
     println!("verdict: {verdict} ({} regions)", found.regions.len());
 }

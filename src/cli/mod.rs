@@ -11,6 +11,7 @@ mod demo;
 mod filter;
 mod info;
 mod inspect;
+mod inspect_report;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
