@@ -6,6 +6,7 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::cloud::{Format, Units};
 
+mod arm;
 mod demo;
 mod info;
 mod synth;
@@ -51,7 +52,7 @@ pub enum Command {
     /// Stream a plan to the arm (serial port or simulated arm).
     Run(NotYet),
     /// Direct arm commands: ping, read, move, torque.
-    Arm(NotYet),
+    Arm(arm::ArmArgs),
     /// Calibration routines: servos, workcell, verify.
     Calibrate(NotYet),
     /// Write a synthetic reference, a defective moved scan and the truth.
@@ -92,7 +93,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Inspect(_) => not_yet("inspect"),
         Command::Plan(_) => not_yet("plan"),
         Command::Run(_) => not_yet("run"),
-        Command::Arm(_) => not_yet("arm"),
+        Command::Arm(args) => arm::run(args, config),
         Command::Calibrate(_) => not_yet("calibrate"),
         Command::Demo(args) => demo::run(args, config),
     }
