@@ -37,6 +37,9 @@ pub enum PlanError {
     /// Targets the arm cannot reach, when the configuration demands full reach.
     #[error("{} unreachable target(s): {}", .0.len(), list(.0))]
     Unreachable(Vec<UnreachablePoint>),
+    /// The servo command stream cannot be built or does not match the samples.
+    #[error("servo frames: {0}")]
+    Frames(String),
     /// A setting is out of range.
     #[error("config: {0}")]
     Config(String),

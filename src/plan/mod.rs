@@ -6,12 +6,16 @@
 //! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
 pub mod check;
 pub mod error;
+pub mod execute;
 pub mod feed;
+pub mod file;
+pub mod frames;
 pub mod inspection;
 pub mod order;
 pub mod program;
 pub mod raster;
 pub mod report;
+pub mod ros;
 pub mod surface;
 pub mod trajectory;
 pub mod validate;
@@ -245,7 +249,6 @@ pub fn plan(
             .map(|i| inspection.points[i])
             .collect();
         let strokes = raster::raster(region, &members, &surface, &geometry);
-        let before = reachability.unreachable.len();
         runs.extend(program::walk(
             &strokes,
             robot,
@@ -258,18 +261,17 @@ pub fn plan(
         ));
         let total: usize = strokes.iter().map(|s| s.points.len()).sum();
         let layers = raster::layer_offsets(region.peak, &geometry).len();
-        counts.insert(region.id, (layers, total, before));
+        counts.insert(region.id, (layers, total));
     }
     let mut prog = program::assemble(
         runs,
         robot,
         workcell,
         config,
-        reach,
         &mut reachability.unreachable,
     )?;
     for region in &inspection.regions {
-        let (layers, total, _) = counts.get(&region.id).copied().unwrap_or((0, 0, 0));
+        let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability
             .unreachable
             .iter()
@@ -310,12 +312,16 @@ pub fn plan(
         &mut prog.trajectory,
         JointTrajectory::starting_at(&config.home, config.trajectory.period),
     );
-    let samples = (0..traj.len())
+    let samples: Vec<Sample> = (0..traj.len())
         .map(|i| Sample {
             t: i as f64 * traj.period,
             q: traj.sample(i).to_vec(),
         })
         .collect();
+    let map = frames::servo_map(robot)?;
+    let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
+    let stream = frames::encode(&qs, &map, hold, traj.period)?;
     Ok(Plan {
         format: "polishbot-plan".into(),
         version: 1,
@@ -329,7 +335,7 @@ pub fn plan(
         passes: prog.passes,
         segments: prog.segments,
         samples,
-        frames: Vec::new(),
+        frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
         reachability,
         metrics,
     })

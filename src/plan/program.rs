@@ -304,7 +304,6 @@ pub(crate) fn assemble(
     robot: &Robot,
     wc: &Workcell,
     cfg: &PlanConfig,
-    reach: f64,
     unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Program, PlanError> {
     let limits = Limits::from_joints(&robot.joints);
