@@ -196,3 +196,223 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
     // every left-out point says why
     assert!(p.reachability.unreachable.iter().all(|u| !u.reason.is_empty()));
 }
+
+/// A plan of a small case (one depth layer per region) for the streaming tests, saved.
+fn small_plan(dir: &Path) -> (Plan, PathBuf) {
+    let insp = dir.join("inspection");
+    synthetic_inspection(&insp, 11, 6);
+    let inspection = Inspection::load(&insp).expect("load inspection");
+    let (robot, wc) = dofbot();
+    let cfg = PlanConfig {
+        depth_step_mm: 1.0,
+        ..PlanConfig::default()
+    };
+    let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
+    assert!(p.passes.len() > 2, "the case must have reachable passes");
+    let path = dir.join("plan.json");
+    p.save(&path).expect("save");
+    (p, path)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+#[test]
+fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
+    use polishbot::bus::{Bus, BusConfig, Journal, SimArm, SimOptions};
+    let tmp = common::tempdir();
+    let (_, path) = small_plan(tmp.path());
+    let (robot, _) = dofbot();
+    let p = Plan::load(&path).expect("load");
+    let checked = p.check(&robot, &Default::default()).expect("re-check");
+    let mut cfg = BusConfig::default();
+    cfg.servo_map = polishbot::plan::frames::servo_map(&robot).expect("map");
+    let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).expect("sim");
+    let journal = Journal::append(&tmp.path().join("journal.jsonl")).expect("journal");
+    let mut bus = Bus::connect(arm.transport(), cfg, journal).expect("connect");
+    let report = polishbot::plan::execute::execute(&mut bus, &checked, p.period, 0, &Default::default())
+        .expect("run");
+    let moves: Vec<_> = arm.received().into_iter().filter(|f| f.func == 0x1D).collect();
+    assert_eq!(moves.len(), checked.frames.len());
+    for (got, want) in moves.iter().zip(&checked.frames) {
+        assert_eq!(got.payload, want[4..want.len() - 1], "payload differs");
+    }
+    let gaps: Vec<f64> = moves.windows(2).map(|w| w[1].t - w[0].t).collect();
+    let m = median(gaps);
+    assert!((m - p.period).abs() <= 0.002, "median gap {m}");
+    assert_eq!(report.final_raw, *checked.raw.last().unwrap());
+    assert_eq!(arm.positions(), *checked.raw.last().unwrap());
+    println!("sim: {} frames, median gap {m:.4} s, {} read-backs", moves.len(), report.readbacks);
+}
+
+#[test]
+fn cli_plan_then_run_against_the_mock_board() {
+    let Some(py) = common::oracle_python() else { return };
+    let tmp = common::tempdir();
+    let insp = tmp.path().join("inspection");
+    synthetic_inspection(&insp, 11, 6);
+    let cfg = tmp.path().join("plan.toml");
+    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+    let plan_path = tmp.path().join("plan.json");
+    let yaml = tmp.path().join("traj.yaml");
+    let out = common::polishbot()
+        .args(["plan", "--config"])
+        .arg(&cfg)
+        .arg("--inspection")
+        .arg(&insp)
+        .arg("-o")
+        .arg(&plan_path)
+        .arg("--export-ros")
+        .arg(&yaml)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    let p = Plan::load(&plan_path).unwrap();
+    let text = std::fs::read_to_string(&yaml).unwrap();
+    assert!(text.contains("joint_names: [\"arm_joint1\", \"arm_joint2\", \"arm_joint3\", \"arm_joint4\", \"arm_joint5\"]"));
+    assert_eq!(text.matches("  - positions:").count(), p.samples.len());
+
+    let mock = common::Mock::start(&py, &[]);
+    let journal = tmp.path().join("journal.jsonl");
+    let out = common::polishbot()
+        .args(["run", "--plan"])
+        .arg(&plan_path)
+        .args(["--port", &mock.path, "--journal"])
+        .arg(&journal)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    let logged: Vec<serde_json::Value> = mock
+        .frames_logged()
+        .into_iter()
+        .filter(|l| l["func"] == "0x1D")
+        .collect();
+    let frames: Vec<&str> = logged.iter().map(|l| l["frame"].as_str().unwrap()).collect();
+    assert_eq!(frames.len(), p.frames.len());
+    assert!(frames.iter().zip(&p.frames).all(|(a, b)| *a == b), "frames differ");
+    let gaps: Vec<f64> = logged
+        .windows(2)
+        .map(|w| w[1]["t"].as_f64().unwrap() - w[0]["t"].as_f64().unwrap())
+        .collect();
+    let m = median(gaps);
+    println!("mock: {} frames, median gap {:.4} s", frames.len(), m);
+    assert!((m - p.period).abs() <= 0.002, "median gap {m}");
+    let (robot, _) = dofbot();
+    let checked = p.check(&robot, &Default::default()).unwrap();
+    let state = mock.finish();
+    let pos: Vec<u16> = state["positions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap() as u16)
+        .collect();
+    assert_eq!(pos, checked.raw.last().unwrap().to_vec(), "final pose");
+}
+
+#[test]
+fn run_refuses_a_tampered_plan_before_sending_anything() {
+    let tmp = common::tempdir();
+    let (p, path) = small_plan(tmp.path());
+    let (robot, _) = dofbot();
+    let refuse = |bad: &Plan, why: &str| {
+        let f = tmp.path().join("bad.json");
+        bad.save(&f).unwrap();
+        let out = common::polishbot()
+            .args(["run", "--sim", "--plan"])
+            .arg(&f)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("refused"), "{why}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
+        assert!(!tmp.path().join("journal.jsonl").exists(), "{why}: nothing may be sent");
+    };
+    // a frame byte changed
+    let mut bad = p.clone();
+    let k = bad.frames.len() / 2;
+    bad.frames[k] = bad.frames[k - 1].clone();
+    refuse(&bad, "frame");
+    // a sample moved so that its frame is consistent but the jerk is not
+    let mut bad = p.clone();
+    bad.samples[k].q[1] += 0.01;
+    let qs: Vec<Vec<f64>> = bad.samples.iter().map(|s| s.q.clone()).collect();
+    let map = polishbot::plan::frames::servo_map(&robot).unwrap();
+    bad.frames = polishbot::plan::frames::encode(&qs, &map, 90.0, bad.period)
+        .unwrap()
+        .iter()
+        .map(|f| polishbot::plan::frames::to_hex(f))
+        .collect();
+    assert!(matches!(bad.check(&robot, &Default::default()), Err(PlanError::Invalid(_))));
+    refuse(&bad, "jerk");
+    // a joint beyond its limit
+    let mut bad = p.clone();
+    bad.samples[k].q[2] = 1.6;
+    refuse(&bad, "limit");
+    // the untouched plan passes, and a dry run sends nothing
+    let out = common::polishbot()
+        .args(["run", "--sim", "--dry-run", "--plan"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!tmp.path().join("journal.jsonl").exists());
+}
+
+#[test]
+fn unreachable_regions_are_reported_point_by_point() {
+    let tmp = common::tempdir();
+    synthetic_inspection(tmp.path(), 11, 6);
+    let inspection = Inspection::load(tmp.path()).unwrap();
+    let (robot, mut wc) = dofbot();
+    wc.robot_from_reference[(1, 3)] += 1.0; // the part 1 m farther away
+    let p = plan(&inspection, &robot, &wc, &PlanConfig::default()).unwrap();
+    assert!(p.passes.is_empty());
+    let total: usize = p.reachability.regions.iter().map(|r| r.path_points).sum();
+    assert!(total > 0);
+    assert_eq!(p.reachability.unreachable.len(), total, "every point listed");
+    assert!(p.reachability.unreachable.iter().all(|u| u.reason.starts_with("out of reach")));
+    for r in p.reachability.regions.iter().filter(|r| r.repairable) {
+        assert_eq!(r.unreachable_share, 1.0);
+        assert_eq!(r.coverage_of_all, 0.0);
+    }
+    let strict = PlanConfig {
+        require_full_reach: true,
+        ..PlanConfig::default()
+    };
+    let err = plan(&inspection, &robot, &wc, &strict).unwrap_err();
+    assert!(matches!(err, PlanError::Unreachable(ref v) if v.len() == total));
+    assert!(err.to_string().contains("out of reach"));
+}
+
+#[test]
+fn bad_inspection_files_are_refused_with_file_and_place() {
+    let tmp = common::tempdir();
+    synthetic_inspection(tmp.path(), 11, 2);
+    let csv = tmp.path().join("deviations.csv");
+    let good = std::fs::read_to_string(&csv).unwrap();
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    lines[5] = lines[5].replacen(',', ",x", 1);
+    std::fs::write(&csv, lines.join("\n")).unwrap();
+    let e = Inspection::load(tmp.path()).unwrap_err().to_string();
+    assert!(e.contains("deviations.csv") && e.contains("line 6"), "{e}");
+    std::fs::write(&csv, &good).unwrap();
+    let regions = tmp.path().join("regions.json");
+    let text = std::fs::read_to_string(&regions).unwrap();
+    std::fs::write(&regions, text.replacen("\"points\"", "\"pts\"", 1)).unwrap();
+    let e = Inspection::load(tmp.path()).unwrap_err().to_string();
+    assert!(e.contains("regions.json") && e.contains("line 1"), "{e}");
+    std::fs::write(&regions, text.replacen("\"points\":", "\"points\":1+", 1)).unwrap();
+    assert!(Inspection::load(tmp.path()).is_err());
+    let out = common::polishbot()
+        .args(["plan", "--inspection"])
+        .arg(tmp.path().join("missing"))
+        .args(["-o", "/dev/null"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("regions.json"), "{err}");
+}

@@ -9,6 +9,8 @@ use crate::cloud::{Format, Units};
 mod arm;
 mod demo;
 mod info;
+mod plan;
+mod run;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
@@ -48,9 +50,9 @@ pub enum Command {
     /// Whole metrology chain: registration, deviations, regions, report.
     Inspect(NotYet),
     /// Plan grinding passes and the joint trajectory from an inspection.
-    Plan(NotYet),
+    Plan(plan::PlanArgs),
     /// Stream a plan to the arm (serial port or simulated arm).
-    Run(NotYet),
+    Run(run::RunArgs),
     /// Direct arm commands: ping, read, move, torque.
     Arm(arm::ArmArgs),
     /// Calibration routines: servos, workcell, verify.
@@ -91,8 +93,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Filter(_) => not_yet("filter"),
         Command::Register(_) => not_yet("register"),
         Command::Inspect(_) => not_yet("inspect"),
-        Command::Plan(_) => not_yet("plan"),
-        Command::Run(_) => not_yet("run"),
+        Command::Plan(args) => plan::run(args, config),
+        Command::Run(args) => run::run(args, config),
         Command::Arm(args) => arm::run(args, config),
         Command::Calibrate(_) => not_yet("calibrate"),
         Command::Demo(args) => demo::run(args, config),
