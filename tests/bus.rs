@@ -5,7 +5,7 @@ mod common;
 
 use common::Mock;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use polishbot::bus::{

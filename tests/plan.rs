@@ -49,7 +49,9 @@ fn synthetic_inspection(dir: &Path, seed: u64, defects: usize) -> polishbot::syn
     let share = area / case.reference.len() as f64;
     let normals = case.reference.normals.as_ref().expect("normals");
     let truth = case.truth;
-    let mut csv = String::from("x,y,z,nx,ny,nz,distance,uncertainty,significant,radius,n_ref,n_scan,region\n");
+    let mut csv = String::from(
+        "x,y,z,nx,ny,nz,distance,uncertainty,significant,radius,n_ref,n_scan,region\n",
+    );
     let mut groups: Vec<Vec<(usize, f64)>> = vec![Vec::new(); truth.defects.len()];
     for (i, (p, n)) in case.reference.points.iter().zip(normals).enumerate() {
         let d = truth.deviation_at(p, n);
@@ -81,15 +83,17 @@ fn synthetic_inspection(dir: &Path, seed: u64, defects: usize) -> polishbot::syn
     let mut regions = Vec::new();
     for (k, g) in groups.iter().enumerate().filter(|(_, g)| !g.is_empty()) {
         let count = g.len() as f64;
-        let c = g
-            .iter()
-            .fold(Vector3::zeros(), |s, (i, _)| s + case.reference.points[*i].coords)
-            / count;
+        let c = g.iter().fold(Vector3::zeros(), |s, (i, _)| {
+            s + case.reference.points[*i].coords
+        }) / count;
         let n = g
             .iter()
             .fold(Vector3::zeros(), |s, (i, _)| s + normals[*i])
             .normalize();
-        let peak = g.iter().map(|x| x.1).fold(0.0, |a: f64, b| if b.abs() > a.abs() { b } else { a });
+        let peak = g
+            .iter()
+            .map(|x| x.1)
+            .fold(0.0, |a: f64, b| if b.abs() > a.abs() { b } else { a });
         regions.push(serde_json::json!({
             "id": k, "centroid": [c.x, c.y, c.z], "normal": [n.x, n.y, n.z],
             "area": share * count, "peak": peak,
@@ -124,7 +128,11 @@ fn worst_derivative_ratio(plan: &Plan, robot: &Robot) -> f64 {
                 .max(jk.abs() / spec.jerk);
         }
         for v in &q {
-            assert!(*v >= spec.lower - 1e-9 && *v <= spec.upper + 1e-9, "{} out of limits", spec.name);
+            assert!(
+                *v >= spec.lower - 1e-9 && *v <= spec.upper + 1e-9,
+                "{} out of limits",
+                spec.name
+            );
         }
     }
     worst
@@ -142,12 +150,23 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
     let (robot, wc) = dofbot();
     let cfg = PlanConfig::default();
     let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
-    println!("defects: {:?}", truth.defects.iter().map(|d| (d.kind, d.height, d.width)).collect::<Vec<_>>());
+    println!(
+        "defects: {:?}",
+        truth
+            .defects
+            .iter()
+            .map(|d| (d.kind, d.height, d.width))
+            .collect::<Vec<_>>()
+    );
     println!("metrics: {:#?}", p.metrics);
     for r in &p.reachability.regions {
         println!("region {r:?}");
     }
-    println!("unreachable: {} (first: {:?})", p.reachability.unreachable.len(), p.reachability.unreachable.first());
+    println!(
+        "unreachable: {} (first: {:?})",
+        p.reachability.unreachable.len(),
+        p.reachability.unreachable.first()
+    );
     assert!(!p.passes.is_empty(), "something must be ground");
 
     // limits by finite differences, within 1 %
@@ -164,10 +183,14 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
         let sampled = &tips[seg.first_sample..=seg.last_sample];
         for pt in &pass.points {
             let tip = Vector3::from(pt.tip_m);
-            assert!((robot.fk(&pt.q).position - tip).norm() < 1e-9, "IK of a path point");
+            assert!(
+                (robot.fk(&pt.q).position - tip).norm() < 1e-9,
+                "IK of a path point"
+            );
             worst_path = worst_path.max(polyline_distance(&tip, sampled));
         }
-        let planned: Vec<Vector3<f64>> = pass.points.iter().map(|x| Vector3::from(x.tip_m)).collect();
+        let planned: Vec<Vector3<f64>> =
+            pass.points.iter().map(|x| Vector3::from(x.tip_m)).collect();
         for t in sampled {
             worst_path = worst_path.max(polyline_distance(t, &planned));
         }
@@ -183,18 +206,38 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
     assert!(worst_path * 1e3 <= 0.1);
     assert!(!feeds.is_empty());
     for f in &feeds {
-        assert!((f - cfg.feed_mm_s).abs() <= 0.1 * cfg.feed_mm_s, "feed {f} mm/s");
+        assert!(
+            (f - cfg.feed_mm_s).abs() <= 0.1 * cfg.feed_mm_s,
+            "feed {f} mm/s"
+        );
     }
 
     // coverage of the reachable part of every planned region
-    for r in p.reachability.regions.iter().filter(|r| r.repairable && r.layers > 0) {
+    for r in p
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.repairable && r.layers > 0)
+    {
         if r.reachable_points > 0 {
-            assert!(r.coverage_of_reachable >= 0.95, "region {} coverage {}", r.id, r.coverage_of_reachable);
+            assert!(
+                r.coverage_of_reachable >= 0.95,
+                "region {} coverage {}",
+                r.id,
+                r.coverage_of_reachable
+            );
         }
-        assert!((r.unreachable_share - (1.0 - r.reachable_points as f64 / r.points as f64)).abs() < 1e-12);
+        assert!(
+            (r.unreachable_share - (1.0 - r.reachable_points as f64 / r.points as f64)).abs()
+                < 1e-12
+        );
     }
     // every left-out point says why
-    assert!(p.reachability.unreachable.iter().all(|u| !u.reason.is_empty()));
+    assert!(p
+        .reachability
+        .unreachable
+        .iter()
+        .all(|u| !u.reason.is_empty()));
 }
 
 /// A plan of a small case (one depth layer per region) for the streaming tests, saved.
@@ -227,14 +270,21 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     let (robot, _) = dofbot();
     let p = Plan::load(&path).expect("load");
     let checked = p.check(&robot, &Default::default()).expect("re-check");
-    let mut cfg = BusConfig::default();
-    cfg.servo_map = polishbot::plan::frames::servo_map(&robot).expect("map");
+    let cfg = BusConfig {
+        servo_map: polishbot::plan::frames::servo_map(&robot).expect("map"),
+        ..BusConfig::default()
+    };
     let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).expect("sim");
     let journal = Journal::append(&tmp.path().join("journal.jsonl")).expect("journal");
     let mut bus = Bus::connect(arm.transport(), cfg, journal).expect("connect");
-    let report = polishbot::plan::execute::execute(&mut bus, &checked, p.period, 0, &Default::default())
-        .expect("run");
-    let moves: Vec<_> = arm.received().into_iter().filter(|f| f.func == 0x1D).collect();
+    let report =
+        polishbot::plan::execute::execute(&mut bus, &checked, p.period, 0, &Default::default())
+            .expect("run");
+    let moves: Vec<_> = arm
+        .received()
+        .into_iter()
+        .filter(|f| f.func == 0x1D)
+        .collect();
     assert_eq!(moves.len(), checked.frames.len());
     for (got, want) in moves.iter().zip(&checked.frames) {
         assert_eq!(got.payload, want[4..want.len() - 1], "payload differs");
@@ -244,12 +294,18 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     assert!((m - p.period).abs() <= 0.002, "median gap {m}");
     assert_eq!(report.final_raw, *checked.raw.last().unwrap());
     assert_eq!(arm.positions(), *checked.raw.last().unwrap());
-    println!("sim: {} frames, median gap {m:.4} s, {} read-backs", moves.len(), report.readbacks);
+    println!(
+        "sim: {} frames, median gap {m:.4} s, {} read-backs",
+        moves.len(),
+        report.readbacks
+    );
 }
 
 #[test]
 fn cli_plan_then_run_against_the_mock_board() {
-    let Some(py) = common::oracle_python() else { return };
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
     let tmp = common::tempdir();
     let insp = tmp.path().join("inspection");
     synthetic_inspection(&insp, 11, 6);
@@ -268,7 +324,11 @@ fn cli_plan_then_run_against_the_mock_board() {
         .arg(&yaml)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let p = Plan::load(&plan_path).unwrap();
     let text = std::fs::read_to_string(&yaml).unwrap();
@@ -284,16 +344,26 @@ fn cli_plan_then_run_against_the_mock_board() {
         .arg(&journal)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let logged: Vec<serde_json::Value> = mock
         .frames_logged()
         .into_iter()
         .filter(|l| l["func"] == "0x1D")
         .collect();
-    let frames: Vec<&str> = logged.iter().map(|l| l["frame"].as_str().unwrap()).collect();
+    let frames: Vec<&str> = logged
+        .iter()
+        .map(|l| l["frame"].as_str().unwrap())
+        .collect();
     assert_eq!(frames.len(), p.frames.len());
-    assert!(frames.iter().zip(&p.frames).all(|(a, b)| *a == b), "frames differ");
+    assert!(
+        frames.iter().zip(&p.frames).all(|(a, b)| *a == b),
+        "frames differ"
+    );
     let gaps: Vec<f64> = logged
         .windows(2)
         .map(|w| w[1]["t"].as_f64().unwrap() - w[0]["t"].as_f64().unwrap())
@@ -327,9 +397,15 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && err.contains("refused"), "{why}: {err}");
+        assert!(
+            !out.status.success() && err.contains("refused"),
+            "{why}: {err}"
+        );
         assert_eq!(err.trim().lines().count(), 1, "one line: {err}");
-        assert!(!tmp.path().join("journal.jsonl").exists(), "{why}: nothing may be sent");
+        assert!(
+            !tmp.path().join("journal.jsonl").exists(),
+            "{why}: nothing may be sent"
+        );
     };
     // a frame byte changed
     let mut bad = p.clone();
@@ -346,7 +422,10 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
         .iter()
         .map(|f| polishbot::plan::frames::to_hex(f))
         .collect();
-    assert!(matches!(bad.check(&robot, &Default::default()), Err(PlanError::Invalid(_))));
+    assert!(matches!(
+        bad.check(&robot, &Default::default()),
+        Err(PlanError::Invalid(_))
+    ));
     refuse(&bad, "jerk");
     // a joint beyond its limit
     let mut bad = p.clone();
@@ -358,7 +437,11 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
         .arg(&path)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     assert!(!tmp.path().join("journal.jsonl").exists());
 }
 
@@ -373,8 +456,16 @@ fn unreachable_regions_are_reported_point_by_point() {
     assert!(p.passes.is_empty());
     let total: usize = p.reachability.regions.iter().map(|r| r.path_points).sum();
     assert!(total > 0);
-    assert_eq!(p.reachability.unreachable.len(), total, "every point listed");
-    assert!(p.reachability.unreachable.iter().all(|u| u.reason.starts_with("out of reach")));
+    assert_eq!(
+        p.reachability.unreachable.len(),
+        total,
+        "every point listed"
+    );
+    assert!(p
+        .reachability
+        .unreachable
+        .iter()
+        .all(|u| u.reason.starts_with("out of reach")));
     for r in p.reachability.regions.iter().filter(|r| r.repairable) {
         assert_eq!(r.unreachable_share, 1.0);
         assert_eq!(r.coverage_of_all, 0.0);
@@ -414,5 +505,8 @@ fn bad_inspection_files_are_refused_with_file_and_place() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("regions.json"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("regions.json"),
+        "{err}"
+    );
 }

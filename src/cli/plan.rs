@@ -54,7 +54,12 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
     }
     let m = &plan.metrics;
-    let planned: Vec<_> = plan.reachability.regions.iter().filter(|r| r.layers > 0).collect();
+    let planned: Vec<_> = plan
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.layers > 0)
+        .collect();
     println!(
         "plan: {} -> {}: {} region(s) planned, {} passes, {} path points, {} samples, predicted duration {:.2} s",
         args.inspection.display(),

@@ -4,7 +4,9 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use serde::Deserialize;
 
-use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SerialTransport, SimArm, SimOptions, Transport};
+use crate::bus::{
+    self, Bus, BusConfig, Journal, ResumePoint, SerialTransport, SimArm, SimOptions, Transport,
+};
 use crate::plan::execute::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
 use crate::plan::{frames, Plan, ValidationConfig};
@@ -83,10 +85,26 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let _ = bus::install_ctrlc(stop.clone());
     if let Some(port) = &args.port {
         let link = SerialTransport::open(port)?;
-        stream(Bus::connect(link, bus_cfg, journal)?, &checked, &plan, from, &cfg.run, stop, &journal_path)
+        stream(
+            Bus::connect(link, bus_cfg, journal)?,
+            &checked,
+            &plan,
+            from,
+            &cfg.run,
+            stop,
+            &journal_path,
+        )
     } else if args.sim {
         let arm = SimArm::new(&cfg.sim, &bus_cfg.servo_map)?;
-        stream(Bus::connect(arm.transport(), bus_cfg, journal)?, &checked, &plan, from, &cfg.run, stop, &journal_path)
+        stream(
+            Bus::connect(arm.transport(), bus_cfg, journal)?,
+            &checked,
+            &plan,
+            from,
+            &cfg.run,
+            stop,
+            &journal_path,
+        )
     } else {
         anyhow::bail!("run: give --port DEV or --sim (or --dry-run)")
     }

@@ -109,7 +109,7 @@ impl Neighbours {
     }
 
     fn within2(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
-        if self.is_empty() || !(r2 >= 0.0) {
+        if self.is_empty() || r2.is_nan() || r2 < 0.0 {
             return Vec::new();
         }
         // Widen kiddo's bound a hair so our own (re-computed) distances decide the boundary.

@@ -64,13 +64,19 @@ pub fn execute<T: Transport>(
             plan.frames.len()
         )));
     }
-    bus.verify(from as u64, plan.raw[from]).map_err(|e| match e {
-        BusError::ReadBackMismatch { servo, expected, got, .. } => BusError::Refused(format!(
-            "the arm is not at the plan's frame {from}: servo {servo} reads {got}, the plan \
+    bus.verify(from as u64, plan.raw[from])
+        .map_err(|e| match e {
+            BusError::ReadBackMismatch {
+                servo,
+                expected,
+                got,
+                ..
+            } => BusError::Refused(format!(
+                "the arm is not at the plan's frame {from}: servo {servo} reads {got}, the plan \
              has {expected}; move it there first (polishbot arm move)"
-        )),
-        other => other,
-    })?;
+            )),
+            other => other,
+        })?;
     let mut report = RunReport {
         first: from,
         sent: 0,
@@ -90,7 +96,7 @@ pub fn execute<T: Transport>(
         let pose = Pose::new(plan.raw[k]).map_err(|e| BusError::Refused(e.to_string()))?;
         bus.send_motion(k as u64, pose, plan.time_ms)?;
         report.sent += 1;
-        if (k - from + 1) % every == 0 && k + 1 < plan.frames.len() {
+        if (k - from + 1).is_multiple_of(every) && k + 1 < plan.frames.len() {
             let i = next_servo % SERVO_COUNT;
             next_servo += 1;
             let lag = if k > 0 {
@@ -100,12 +106,15 @@ pub fn execute<T: Transport>(
             };
             let id = ServoId::ALL[i];
             let want = plan.raw[k][i];
-            let got = bus.verify_servo(k as u64, id, want, config.readback_tolerance_counts + lag)?;
+            let got =
+                bus.verify_servo(k as u64, id, want, config.readback_tolerance_counts + lag)?;
             report.readbacks += 1;
             report.worst_readback_counts = report.worst_readback_counts.max(got.abs_diff(want));
         }
     }
-    bus.sleep(Duration::from_secs_f64(period + config.settle_ms.max(0.0) / 1000.0));
+    bus.sleep(Duration::from_secs_f64(
+        period + config.settle_ms.max(0.0) / 1000.0,
+    ));
     let last = plan.frames.len() - 1;
     let state = bus.verify(last as u64, plan.raw[last])?;
     report.final_raw = state.raw;

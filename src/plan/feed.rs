@@ -67,10 +67,15 @@ impl JointSpline {
     /// first derivative is quadratic per interval, the second linear, the third constant).
     pub fn derivative_bounds(&self) -> [Vec<f64>; 3] {
         let dof = self.q.first().map_or(0, Vec::len);
-        let mut out = [vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]];
+        let (mut b1, mut b2, mut b3) = (vec![0.0; dof], vec![0.0; dof], vec![0.0; dof]);
         for i in 0..self.s.len().saturating_sub(1) {
             let h = self.s[i + 1] - self.s[i];
-            for j in 0..dof {
+            for (j, ((o1, o2), o3)) in b1
+                .iter_mut()
+                .zip(b2.iter_mut())
+                .zip(b3.iter_mut())
+                .enumerate()
+            {
                 let (m0, m1) = (self.m[i][j], self.m[i + 1][j]);
                 let slope = (self.q[i + 1][j] - self.q[i][j]) / h;
                 // q'(x) at x = s - s_i: slope - m0 (h - x)^2 / (2h) + m1 x^2 / (2h) - (m1 - m0) h / 6
@@ -85,12 +90,12 @@ impl JointSpline {
                         best = best.max(d1(x).abs());
                     }
                 }
-                out[0][j] = f64::max(out[0][j], best);
-                out[1][j] = out[1][j].max(m0.abs()).max(m1.abs());
-                out[2][j] = f64::max(out[2][j], ((m1 - m0) / h).abs());
+                *o1 = f64::max(*o1, best);
+                *o2 = f64::max(*o2, m0.abs().max(m1.abs()));
+                *o3 = f64::max(*o3, ((m1 - m0) / h).abs());
             }
         }
-        out
+        [b1, b2, b3]
     }
 }
 
@@ -225,7 +230,9 @@ mod tests {
 
     #[test]
     fn natural_spline_reproduces_a_cubic_free_line_and_interpolates() {
-        let s: Vec<f64> = (0..7).map(|i| f64::from(i) * 0.5 + 0.1 * f64::from(i % 2)).collect();
+        let s: Vec<f64> = (0..7)
+            .map(|i| f64::from(i) * 0.5 + 0.1 * f64::from(i % 2))
+            .collect();
         let q: Vec<Vec<f64>> = s.iter().map(|x| vec![2.0 * x + 1.0, x.sin()]).collect();
         let sp = JointSpline::new(s.clone(), q.clone());
         let mut out = [0.0; 2];
@@ -234,7 +241,10 @@ mod tests {
             assert!((out[0] - y[0]).abs() < 1e-12 && (out[1] - y[1]).abs() < 1e-12);
         }
         sp.eval(1.234, &mut out);
-        assert!((out[0] - (2.0 * 1.234 + 1.0)).abs() < 1e-12, "a line stays a line");
+        assert!(
+            (out[0] - (2.0 * 1.234 + 1.0)).abs() < 1e-12,
+            "a line stays a line"
+        );
         assert!((out[1] - 1.234f64.sin()).abs() < 1e-2);
         let [d1, d2, d3] = sp.derivative_bounds();
         assert!((d1[0] - 2.0).abs() < 1e-12 && d2[0] < 1e-12 && d3[0] < 1e-12);

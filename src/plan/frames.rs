@@ -115,8 +115,8 @@ pub fn encode(
         .iter()
         .enumerate()
         .map(|(i, q)| {
-            let raw = raw_pose(map, hold_deg, q)
-                .map_err(|e| frame_err(format!("sample {i}: {e}")))?;
+            let raw =
+                raw_pose(map, hold_deg, q).map_err(|e| frame_err(format!("sample {i}: {e}")))?;
             let pose = Pose::new(raw).map_err(|e| frame_err(format!("sample {i}: {e}")))?;
             let mut buf = [0u8; 32];
             let n = Command::MoveAll { pose, time_ms }

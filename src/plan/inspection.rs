@@ -68,9 +68,8 @@ impl Inspection {
     pub fn load(dir: &Path) -> Result<Inspection, PlanError> {
         let rfile = dir.join("regions.json");
         let text = read(&rfile)?;
-        let parsed: RegionsFile = serde_json::from_str(&text).map_err(|e| {
-            PlanError::input(&rfile, format!("line {}", e.line()), e.to_string())
-        })?;
+        let parsed: RegionsFile = serde_json::from_str(&text)
+            .map_err(|e| PlanError::input(&rfile, format!("line {}", e.line()), e.to_string()))?;
         let points = read_deviations(&dir.join("deviations.csv"))?;
         let inspection = Inspection {
             dir: dir.to_path_buf(),
@@ -93,13 +92,19 @@ impl Inspection {
         for (i, r) in self.regions.iter().enumerate() {
             let place = format!("regions[{i}] (id {})", r.id);
             let finite = r.centroid.iter().chain(&r.normal).all(|v| v.is_finite())
-                && [r.area, r.peak, r.mean, r.volume].iter().all(|v| v.is_finite());
+                && [r.area, r.peak, r.mean, r.volume]
+                    .iter()
+                    .all(|v| v.is_finite());
             if !finite {
                 return Err(PlanError::input(rfile, place, "values must be finite"));
             }
             let n = Vector3::from(r.normal).norm();
             if (n - 1.0).abs() > 1e-3 {
-                return Err(PlanError::input(rfile, place, format!("normal has norm {n}")));
+                return Err(PlanError::input(
+                    rfile,
+                    place,
+                    format!("normal has norm {n}"),
+                ));
             }
             if self.regions[..i].iter().any(|o| o.id == r.id) {
                 return Err(PlanError::input(rfile, place, "id repeats"));

@@ -138,7 +138,11 @@ impl PlanConfig {
             return Err(PlanError::Config("joint_margin must be <= 1".into()));
         }
         if self.home.len() != robot.dof() {
-            let msg = format!("home has {} joints, the arm {}", self.home.len(), robot.dof());
+            let msg = format!(
+                "home has {} joints, the arm {}",
+                self.home.len(),
+                robot.dof()
+            );
             return Err(PlanError::Config(msg));
         }
         if let Some(i) = robot.limit_violation(&self.home, 0.0) {
@@ -263,13 +267,7 @@ pub fn plan(
         let layers = raster::layer_offsets(region.peak, &geometry).len();
         counts.insert(region.id, (layers, total));
     }
-    let mut prog = program::assemble(
-        runs,
-        robot,
-        workcell,
-        config,
-        &mut reachability.unreachable,
-    )?;
+    let mut prog = program::assemble(runs, robot, workcell, config, &mut reachability.unreachable)?;
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability

@@ -208,8 +208,14 @@ fn stroke_axis(targets: &[IkTarget], spread_deg: f64) -> Option<Vector3<f64>> {
         .then_some(mean)
 }
 
+/// Joint angles and the tool axis used for one point, or why it is unreachable.
+type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
+
 fn max_step(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
 }
 
 /// IK of one stroke's targets, chained from `prev`: joint angles and the tool axis used, or
@@ -222,10 +228,10 @@ fn solve_stroke(
     robot: &Robot,
     cfg: &PlanConfig,
     prev: &mut Vec<f64>,
-) -> Vec<Result<(Vec<f64>, Vector3<f64>), String>> {
+) -> Vec<Solved> {
     let start = prev.clone();
     let mut tilts = Vec::new();
-    let first: Vec<Result<(Vec<f64>, Vector3<f64>), String>> = targets
+    let first: Vec<Solved> = targets
         .iter()
         .map(|t| match robot.ik(t, prev, &cfg.ik) {
             Ok(sol) => {
@@ -261,8 +267,8 @@ fn solve_stroke(
         };
         let (n, requested) = in_plane(robot, q0, &t.axis);
         let axis = requested * tilt.cos() + n.cross(&requested) * tilt.sin();
-        let within = crate::robot::angle_between(&t.axis, &axis).to_degrees()
-            <= cfg.ik.max_axis_miss_deg;
+        let within =
+            crate::robot::angle_between(&t.axis, &axis).to_degrees() <= cfg.ik.max_axis_miss_deg;
         let tilted = IkTarget { axis, ..*t };
         match robot.ik(&tilted, &again, &exact) {
             Ok(sol) if within => {
@@ -317,7 +323,10 @@ pub(crate) fn assemble(
     };
     for run in runs {
         let first = &run[0].points[0];
-        let last = run.last().and_then(|p| p.points.last()).expect("runs hold points");
+        let last = run
+            .last()
+            .and_then(|p| p.points.last())
+            .expect("runs hold points");
         let lifted = |p: &PlannedPoint| -> Result<Vec<f64>, String> {
             let up = wc.direction_from_reference(&Vector3::from(p.normal));
             let mut why = String::new();
@@ -417,7 +426,13 @@ impl Program {
             .fold(0.0, f64::max);
         if gap > 1e-12 {
             let limits = Limits::from_joints(&robot.joints);
-            self.rest_move(start, SegmentKind::Reorient, Some(piece.region), &limits, cfg)?;
+            self.rest_move(
+                start,
+                SegmentKind::Reorient,
+                Some(piece.region),
+                &limits,
+                cfg,
+            )?;
         }
         let spline = JointSpline::new(s, q);
         let wanted = PathLimits {

@@ -153,9 +153,9 @@ fn raster_lines(
         .map(|p| Vector2::new((p.position - c).dot(&a), (p.position - c).dot(&b)))
         .collect();
     let mean = uv.iter().sum::<Vector2<f64>>() / uv.len().max(1) as f64;
-    let cov = uv
-        .iter()
-        .fold(Matrix2::zeros(), |m, p| m + (p - mean) * (p - mean).transpose());
+    let cov = uv.iter().fold(Matrix2::zeros(), |m, p| {
+        m + (p - mean) * (p - mean).transpose()
+    });
     let eig = cov.symmetric_eigen();
     let k = if eig.eigenvalues[0] >= eig.eigenvalues[1] {
         0
@@ -187,7 +187,9 @@ fn raster_lines(
     let v0 = vc - 0.5 * (count - 1) as f64 * g.stepover;
     let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); count];
     for (u, v) in &coords {
-        let i = ((v - v0) / g.stepover).round().clamp(0.0, (count - 1) as f64) as usize;
+        let i = ((v - v0) / g.stepover)
+            .round()
+            .clamp(0.0, (count - 1) as f64) as usize;
         range[i] = (range[i].0.min(*u), range[i].1.max(*u));
     }
     range

@@ -54,6 +54,8 @@ impl<'a> Surface<'a> {
 
     /// Distance (mm) from `q` to the nearest core point.
     pub fn gap(&self, q: &Point3<f64>) -> f64 {
-        self.index.nearest(q).map_or(f64::INFINITY, |n| n.dist2.sqrt())
+        self.index
+            .nearest(q)
+            .map_or(f64::INFINITY, |n| n.dist2.sqrt())
     }
 }

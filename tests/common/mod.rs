@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests: data paths, the oracle Python, the binary.
 #![allow(dead_code)]
-use std::path::{Path, PathBuf};
 use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 /// A file under the planners' read-only data folder (`../shared/data`).
