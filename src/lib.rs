@@ -4,8 +4,11 @@
 pub mod bus;
 pub mod cli;
 pub mod cloud;
+pub mod compare;
 pub mod plan;
+pub mod preprocess;
 pub mod progress;
+pub mod regions;
 pub mod report;
 pub mod robot;
 pub mod synth;

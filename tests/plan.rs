@@ -510,3 +510,75 @@ fn bad_inspection_files_are_refused_with_file_and_place() {
         "{err}"
     );
 }
+
+#[test]
+fn plan_from_the_inspect_command_of_a_synth_case() {
+    let tmp = common::tempdir();
+    let case = tmp.path().join("case");
+    let run = |args: &[&str]| {
+        let out = common::polishbot().args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let mesh = s(&common::shared_data("femoral_dm.stl"));
+    let contact = s(&common::shared_data("femoral_dm_contact.stl"));
+    run(&[
+        "synth",
+        "--out",
+        &s(&case),
+        "--mesh",
+        &mesh,
+        "--surface",
+        &contact,
+        "--units",
+        "m",
+        "--seed",
+        "11",
+        "--reference-points",
+        "100000",
+        "--scan-points",
+        "100000",
+    ]);
+    let insp = tmp.path().join("insp");
+    run(&[
+        "inspect",
+        "--reference",
+        &s(&case.join("reference.ply")),
+        "--scan",
+        &s(&case.join("scan.ply")),
+        "--pose",
+        &s(&case.join("truth.json")),
+        "-o",
+        &s(&insp),
+    ]);
+    let plan_path = tmp.path().join("plan.json");
+    println!(
+        "{}",
+        run(&["plan", "--inspection", &s(&insp), "-o", &s(&plan_path)])
+    );
+    let p = Plan::load(&plan_path).unwrap();
+    let (robot, _) = dofbot();
+    p.check(&robot, &Default::default())
+        .expect("the written plan passes the re-check");
+    assert!(worst_derivative_ratio(&p, &robot) <= 1.01);
+    let m = &p.metrics;
+    assert!(m.sample_to_path_max_mm <= 0.1 && m.path_to_samples_max_mm <= 0.1);
+    assert!(
+        m.cruise_feed_min_mm_s >= 0.9 * m.feed_mm_s && m.cruise_feed_max_mm_s <= 1.1 * m.feed_mm_s,
+        "{m:?}"
+    );
+    assert!(!p.passes.is_empty());
+    for r in p
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.layers > 0 && r.reachable_points > 0)
+    {
+        assert!(r.coverage_of_reachable >= 0.95, "{r:?}");
+    }
+}

@@ -8,7 +8,9 @@ use crate::cloud::{Format, Units};
 
 mod arm;
 mod demo;
+mod filter;
 mod info;
+mod inspect;
 mod plan;
 mod run;
 mod synth;
@@ -44,11 +46,11 @@ pub enum Command {
     /// Merge turntable range views into one cloud.
     Merge(NotYet),
     /// Statistical outlier filter and down-sampling.
-    Filter(NotYet),
+    Filter(filter::FilterArgs),
     /// Register a scan onto a reference: DIR/registration.json.
     Register(NotYet),
     /// Whole metrology chain: registration, deviations, regions, report.
-    Inspect(NotYet),
+    Inspect(Box<inspect::InspectArgs>),
     /// Plan grinding passes and the joint trajectory from an inspection.
     Plan(plan::PlanArgs),
     /// Stream a plan to the arm (serial port or simulated arm).
@@ -90,9 +92,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(args) => info::run(args, config),
         Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
-        Command::Filter(_) => not_yet("filter"),
+        Command::Filter(args) => filter::run(args, config),
         Command::Register(_) => not_yet("register"),
-        Command::Inspect(_) => not_yet("inspect"),
+        Command::Inspect(args) => inspect::run(*args, config),
         Command::Plan(args) => plan::run(args, config),
         Command::Run(args) => run::run(args, config),
         Command::Arm(args) => arm::run(args, config),

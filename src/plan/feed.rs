@@ -214,12 +214,13 @@ pub fn sample_stroke(
         samples.push(q);
         speeds.push(v[0]);
     }
-    // cruise: at the stroke's top speed (a whole-period duration may leave it a little under
-    // the limit)
+    // cruise: at the stroke's top speed when that is the planned speed (a whole-period
+    // duration may leave it a little under); strokes too short to reach it have none
     let top = speeds.iter().copied().fold(0.0, f64::max);
+    let reached = top >= 0.95 * limits.velocity;
     let cruise = speeds
         .iter()
-        .map(|v| top > 0.0 && (v - top).abs() <= 1e-6 * top)
+        .map(|v| reached && (v - top).abs() <= 1e-6 * top)
         .collect();
     Ok((samples, cruise))
 }
