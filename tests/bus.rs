@@ -3,9 +3,9 @@
 //! the journal, and the range guarantee of the public API.
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use common::Mock;
+
+use std::path::Path;
 use std::time::Duration;
 
 use polishbot::bus::{
@@ -13,72 +13,6 @@ use polishbot::bus::{
     ServoMap, SimArm, SimOptions, JOINT_COUNT,
 };
 use proptest::prelude::*;
-
-/// The mock board running on a pty, stopped (SIGTERM, by pid) when dropped.
-struct Mock {
-    child: Child,
-    path: String,
-    state: PathBuf,
-    log: PathBuf,
-    _dir: tempfile::TempDir,
-}
-
-impl Mock {
-    fn start(python: &Path, args: &[&str]) -> Mock {
-        let dir = common::tempdir();
-        let state = dir.path().join("state.json");
-        let log = dir.path().join("mock.jsonl");
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("mocks/dofbot_mock.py");
-        let mut child = Command::new(python)
-            .arg(script)
-            .arg("--state")
-            .arg(&state)
-            .arg("--log")
-            .arg(&log)
-            .args(args)
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("start mock");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .expect("mock path");
-        let path = line.trim().to_string();
-        assert!(path.starts_with("/dev/"), "mock printed {path:?}");
-        Mock {
-            child,
-            path,
-            state,
-            log,
-            _dir: dir,
-        }
-    }
-
-    /// Stops the mock and returns its final state file.
-    fn finish(mut self) -> serde_json::Value {
-        let _ = Command::new("kill")
-            .arg("-TERM")
-            .arg(self.child.id().to_string())
-            .status();
-        let _ = self.child.wait();
-        let text = std::fs::read_to_string(&self.state).expect("mock state");
-        serde_json::from_str(&text).expect("mock state json")
-    }
-
-    fn frames_logged(&self) -> Vec<serde_json::Value> {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        text.lines()
-            .map(|l| serde_json::from_str(l).unwrap())
-            .collect()
-    }
-}
-
-impl Drop for Mock {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 fn raw_array(v: &serde_json::Value) -> [u16; 6] {
     let a: Vec<u16> = v

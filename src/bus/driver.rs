@@ -335,6 +335,31 @@ impl<T: Transport> Bus<T> {
         self.config.servo_map.state_from_raw(raw)
     }
 
+    /// Reads servo `id` back during motion `index` and checks it against `expected` within
+    /// `tolerance` counts; journals a stop line on a mismatch or a failed read.
+    pub fn verify_servo(
+        &mut self,
+        index: u64,
+        id: ServoId,
+        expected: u16,
+        tolerance: u16,
+    ) -> Result<u16, BusError> {
+        let got = self.read_raw(id).inspect_err(|e| {
+            let _ = self.log_error(e, Some(index), EntryKind::Stop);
+        })?;
+        if got.abs_diff(expected) > tolerance {
+            let e = BusError::ReadBackMismatch {
+                servo: id.get(),
+                expected,
+                got,
+                tolerance,
+            };
+            self.log_error(&e, Some(index), EntryKind::Stop)?;
+            return Err(e);
+        }
+        Ok(got)
+    }
+
     /// Moves to joints `q` (rad) and gripper angle (deg) in `time` (default: the fastest the
     /// joint velocity limits allow, at least 0.2 s), waits, reads back and verifies. Refused
     /// before anything moves if a target is outside a limit or `time` is too short.

@@ -12,6 +12,8 @@ mod filter;
 mod info;
 mod inspect;
 mod inspect_report;
+mod plan;
+mod run;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
@@ -51,9 +53,9 @@ pub enum Command {
     /// Whole metrology chain: registration, deviations, regions, report.
     Inspect(Box<inspect::InspectArgs>),
     /// Plan grinding passes and the joint trajectory from an inspection.
-    Plan(NotYet),
+    Plan(plan::PlanArgs),
     /// Stream a plan to the arm (serial port or simulated arm).
-    Run(NotYet),
+    Run(run::RunArgs),
     /// Direct arm commands: ping, read, move, torque.
     Arm(arm::ArmArgs),
     /// Calibration routines: servos, workcell, verify.
@@ -94,8 +96,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Filter(args) => filter::run(args, config),
         Command::Register(_) => not_yet("register"),
         Command::Inspect(args) => inspect::run(*args, config),
-        Command::Plan(_) => not_yet("plan"),
-        Command::Run(_) => not_yet("run"),
+        Command::Plan(args) => plan::run(args, config),
+        Command::Run(args) => run::run(args, config),
         Command::Arm(args) => arm::run(args, config),
         Command::Calibrate(_) => not_yet("calibrate"),
         Command::Demo(args) => demo::run(args, config),

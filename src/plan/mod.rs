@@ -1,7 +1,340 @@
-//! Planning: from tool poses to a validated, time-optimal joint trajectory sampled at the bus
-//! period. (Grinding passes from regions.json come with issue 7's planner half.)
+//! Planning: grinding passes over the repairable regions of an inspection, tool poses in the
+//! robot frame, IK along every pass (split where the arm cannot reach or follow), one
+//! continuous time-optimal joint trajectory sampled at the bus period, validated before any
+//! motion, and the reachability report. Method: docs/ALGORITHMS.md, "Grinding planner".
+//!
+//! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
+pub mod check;
+pub mod error;
+pub mod execute;
+pub mod feed;
+pub mod file;
+pub mod frames;
+pub mod inspection;
+pub mod order;
+pub mod program;
+pub mod raster;
+pub mod report;
+pub mod ros;
+pub mod surface;
 pub mod trajectory;
 pub mod validate;
 
+use nalgebra::Point3;
+use serde::{Deserialize, Serialize};
+
+pub use error::PlanError;
+pub use inspection::{Inspection, RegionInfo, SurfacePoint};
+pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
+pub use raster::{RasterGeometry, StrokeKind};
+pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
+
+use crate::robot::{IkConfig, Robot, Workcell};
+
+/// Settings of the grinding planner. Lengths on the part in millimetres.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlanConfig {
+    /// Distance between raster lines as a share of the tool (ball) radius (0.8).
+    pub stepover: f64,
+    /// Radius of the tool footprint on the surface as a share of the tool radius (0.5): the
+    /// width a pass grinds, used to place the lines and to measure coverage.
+    pub footprint: f64,
+    /// Spacing of contact points along a pass, mm (0.5).
+    pub spacing_mm: f64,
+    /// Depth removed per layer, mm (0.1): a region of peak h gets ceil(h / step) layers.
+    pub depth_step_mm: f64,
+    /// Material left above nominal after the last layer, mm (0.0).
+    pub allowance_mm: f64,
+    /// Extra distance of the ball from the contact along the normal, mm (0.0; the ball's
+    /// radius from tool.toml is always added).
+    pub contact_offset_mm: f64,
+    /// Feed speed of the tool tip along passes, mm/s (5.0).
+    pub feed_mm_s: f64,
+    /// Path acceleration at the ends of a stroke, m/s^2 (0.05).
+    pub path_acceleration: f64,
+    /// Path jerk at the ends of a stroke, m/s^3 (1.0).
+    pub path_jerk: f64,
+    /// Share of each joint limit strokes may use (0.9); rest-to-rest moves use the full limit.
+    pub joint_margin: f64,
+    /// Approach and retract height along the normal, mm (5.0; halved up to twice when the
+    /// arm cannot reach it).
+    pub retract_mm: f64,
+    /// Largest joint change between neighbouring contact points, rad (0.05): larger jumps
+    /// (an IK branch change) split the stroke.
+    pub max_joint_step: f64,
+    /// Largest angle between a stroke's mean surface normal and any of its points' normals for
+    /// the stroke to be ground with one fixed tool axis, degrees (20). The achieved axis is
+    /// always checked against each point's own normal (`ik.max_axis_miss_deg`).
+    pub axis_spread_deg: f64,
+    /// Joint angles the program starts and ends at, rad ([0, 0, 0, 0, 0]: every servo at 90
+    /// degrees).
+    pub home: Vec<f64>,
+    /// Fail when any planned contact point is unreachable (false: report and splice around).
+    pub require_full_reach: bool,
+    /// Largest accepted distance between the modelled tool tip and the planned path, mm (0.1).
+    pub max_path_error_mm: f64,
+    /// Inverse kinematics (default: IkConfig's defaults with `limit_margin` 0.01 rad, so the
+    /// splines between IK solutions stay inside the joint limits).
+    pub ik: IkConfig,
+    /// Sampling of the trajectory (the bus period).
+    pub trajectory: TrajectoryConfig,
+    /// Validation tolerances.
+    pub validation: ValidationConfig,
+}
+
+impl Default for PlanConfig {
+    fn default() -> Self {
+        PlanConfig {
+            stepover: 0.8,
+            footprint: 0.5,
+            spacing_mm: 0.5,
+            depth_step_mm: 0.1,
+            allowance_mm: 0.0,
+            contact_offset_mm: 0.0,
+            feed_mm_s: 5.0,
+            path_acceleration: 0.05,
+            path_jerk: 1.0,
+            joint_margin: 0.9,
+            retract_mm: 5.0,
+            max_joint_step: 0.05,
+            axis_spread_deg: 20.0,
+            home: vec![0.0; 5],
+            require_full_reach: false,
+            max_path_error_mm: 0.1,
+            ik: IkConfig {
+                limit_margin: 0.01,
+                ..IkConfig::default()
+            },
+            trajectory: TrajectoryConfig::default(),
+            validation: ValidationConfig::default(),
+        }
+    }
+}
+
+impl PlanConfig {
+    fn check(&self, robot: &Robot) -> Result<(), PlanError> {
+        let positive = [
+            ("stepover", self.stepover),
+            ("footprint", self.footprint),
+            ("spacing_mm", self.spacing_mm),
+            ("depth_step_mm", self.depth_step_mm),
+            ("feed_mm_s", self.feed_mm_s),
+            ("path_acceleration", self.path_acceleration),
+            ("path_jerk", self.path_jerk),
+            ("joint_margin", self.joint_margin),
+            ("retract_mm", self.retract_mm),
+            ("max_joint_step", self.max_joint_step),
+            ("max_path_error_mm", self.max_path_error_mm),
+        ];
+        for (name, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(PlanError::Config(format!("{name} must be > 0 (got {v})")));
+            }
+        }
+        if self.joint_margin > 1.0 {
+            return Err(PlanError::Config("joint_margin must be <= 1".into()));
+        }
+        if self.home.len() != robot.dof() {
+            let msg = format!(
+                "home has {} joints, the arm {}",
+                self.home.len(),
+                robot.dof()
+            );
+            return Err(PlanError::Config(msg));
+        }
+        if let Some(i) = robot.limit_violation(&self.home, 0.0) {
+            let msg = format!("home is outside the limits of {}", robot.joints[i].name);
+            return Err(PlanError::Config(msg));
+        }
+        if (self.trajectory.period - robot.servos.period).abs() > 1e-12 {
+            let msg = format!(
+                "trajectory.period {} differs from the bus period {} of servos.toml",
+                self.trajectory.period, robot.servos.period
+            );
+            return Err(PlanError::Config(msg));
+        }
+        Ok(())
+    }
+
+    /// The raster geometry for a tool of radius `radius_mm`.
+    pub fn geometry(&self, radius_mm: f64) -> RasterGeometry {
+        RasterGeometry {
+            stepover: self.stepover * radius_mm,
+            footprint: self.footprint * radius_mm,
+            spacing: self.spacing_mm,
+            depth_step: self.depth_step_mm,
+            allowance: self.allowance_mm,
+        }
+    }
+}
+
+/// One joint-trajectory sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// Time, s (index x period).
+    pub t: f64,
+    /// Joint angles, rad, URDF order.
+    pub q: Vec<f64>,
+}
+
+/// A grinding plan: the contents of plan.json (docs/FORMATS.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// "polishbot-plan".
+    pub format: String,
+    /// Format version (1).
+    pub version: u32,
+    /// The inspection folder planned from.
+    pub inspection: String,
+    /// Bus period, s: one sample and one frame per period.
+    pub period: f64,
+    /// URDF joint names, the order of every `q`.
+    pub joint_names: Vec<String>,
+    /// Tool (ball) radius, mm.
+    pub tool_radius_mm: f64,
+    /// The raster geometry used, mm.
+    pub stepover_mm: f64,
+    /// Footprint radius used for coverage, mm.
+    pub footprint_mm: f64,
+    /// Predicted duration of the motion, s.
+    pub predicted_duration_s: f64,
+    /// Reachable pieces of the passes with their tool poses and joint solutions.
+    pub passes: Vec<PlannedPass>,
+    /// What each stretch of samples does.
+    pub segments: Vec<Segment>,
+    /// The joint trajectory at the bus period.
+    pub samples: Vec<Sample>,
+    /// The servo command stream: one 0x1D frame per sample after the first (hex).
+    pub frames: Vec<String>,
+    /// Reach and coverage per region, every point left out and why.
+    pub reachability: Reachability,
+    /// Measured quality of the plan.
+    pub metrics: Metrics,
+}
+
+/// Plans grinding for every repairable region of `inspection` and validates the result.
+pub fn plan(
+    inspection: &Inspection,
+    robot: &Robot,
+    workcell: &Workcell,
+    config: &PlanConfig,
+) -> Result<Plan, PlanError> {
+    config.check(robot)?;
+    let radius_mm = robot.tool.radius * 1e3;
+    let reach = radius_mm + config.contact_offset_mm;
+    let geometry = config.geometry(radius_mm);
+    let surface = surface::Surface::new(&inspection.points);
+
+    // visiting order: from the home tool tip over the region centroids (robot frame, mm)
+    let planned: Vec<&RegionInfo> = inspection
+        .regions
+        .iter()
+        .filter(|r| r.repairable && !raster::layer_offsets(r.peak, &geometry).is_empty())
+        .collect();
+    let centroids: Vec<Point3<f64>> = planned
+        .iter()
+        .map(|r| workcell.point_from_reference_mm(&r.centroid.into()) * 1e3)
+        .collect();
+    let start = Point3::from(robot.fk(&config.home).position * 1e3);
+    let visit = order::order(&start, &centroids);
+
+    let mut reachability = Reachability::default();
+    let mut runs = Vec::new();
+    let mut prev = config.home.clone();
+    let mut counts = std::collections::HashMap::new();
+    for &k in &visit {
+        let region = planned[k];
+        let members: Vec<SurfacePoint> = inspection
+            .region_points(region.id)
+            .into_iter()
+            .map(|i| inspection.points[i])
+            .collect();
+        let strokes = raster::raster(region, &members, &surface, &geometry);
+        runs.extend(program::walk(
+            &strokes,
+            robot,
+            workcell,
+            config,
+            reach,
+            &mut prev,
+            &mut reachability.unreachable,
+            &mut reachability.jumps,
+        ));
+        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
+        let layers = raster::layer_offsets(region.peak, &geometry).len();
+        counts.insert(region.id, (layers, total));
+    }
+    let mut prog = program::assemble(runs, robot, workcell, config, &mut reachability.unreachable)?;
+    for region in &inspection.regions {
+        let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
+        let left_out = reachability
+            .unreachable
+            .iter()
+            .filter(|u| u.region == region.id)
+            .count();
+        reachability.regions.push(check::region_report(
+            region,
+            inspection,
+            &prog.passes,
+            layers,
+            total,
+            left_out,
+            robot,
+            workcell,
+            config,
+            reach,
+            geometry.footprint,
+        ));
+    }
+    if config.require_full_reach && !reachability.unreachable.is_empty() {
+        return Err(PlanError::Unreachable(reachability.unreachable));
+    }
+    let metrics = check::measure(&prog, robot, config);
+    let violations = validate(&prog.trajectory, robot, &config.validation);
+    if !violations.is_empty() {
+        return Err(PlanError::Invalid(violations));
+    }
+    let worst = metrics
+        .sample_to_path_max_mm
+        .max(metrics.path_to_samples_max_mm);
+    if worst > config.max_path_error_mm {
+        return Err(PlanError::Config(format!(
+            "modelled tool tip strays {worst:.3} mm from the planned path (max_path_error_mm {})",
+            config.max_path_error_mm
+        )));
+    }
+    let traj = std::mem::replace(
+        &mut prog.trajectory,
+        JointTrajectory::starting_at(&config.home, config.trajectory.period),
+    );
+    let samples: Vec<Sample> = (0..traj.len())
+        .map(|i| Sample {
+            t: i as f64 * traj.period,
+            q: traj.sample(i).to_vec(),
+        })
+        .collect();
+    let map = frames::servo_map(robot)?;
+    let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
+    let stream = frames::encode(&qs, &map, hold, traj.period)?;
+    Ok(Plan {
+        format: "polishbot-plan".into(),
+        version: 1,
+        inspection: inspection.dir.display().to_string(),
+        period: traj.period,
+        joint_names: robot.joints.iter().map(|j| j.name.clone()).collect(),
+        tool_radius_mm: radius_mm,
+        stepover_mm: geometry.stepover,
+        footprint_mm: geometry.footprint,
+        predicted_duration_s: traj.duration(),
+        passes: prog.passes,
+        segments: prog.segments,
+        samples,
+        frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
+        reachability,
+        metrics,
+    })
+}

@@ -132,18 +132,27 @@ impl Move {
 
     /// Joint positions at time `t` (clamped to [0, duration]).
     pub fn position_at(&self, t: f64, out: &mut [f64]) {
+        self.state_at(t, out, &mut vec![0.0; self.dof]);
+    }
+
+    /// Joint positions and velocities at time `t` (clamped to [0, duration]).
+    pub fn state_at(&self, t: f64, position: &mut [f64], velocity: &mut [f64]) {
         let mut pos = rsruckig::prelude::DataArrayOrVec::<f64, 0>::new(Some(self.dof), 0.0);
+        let mut vel = rsruckig::prelude::DataArrayOrVec::<f64, 0>::new(Some(self.dof), 0.0);
         let t = t.clamp(0.0, self.duration());
         self.trajectory.at_time(
             t,
             &mut Some(&mut pos),
-            &mut None,
+            &mut Some(&mut vel),
             &mut None,
             &mut None,
             &mut None,
         );
-        for (o, p) in out.iter_mut().zip(pos.iter()) {
+        for (o, p) in position.iter_mut().zip(pos.iter()) {
             *o = *p;
+        }
+        for (o, v) in velocity.iter_mut().zip(vel.iter()) {
+            *o = *v;
         }
     }
 }

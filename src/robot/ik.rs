@@ -23,6 +23,9 @@ pub struct IkConfig {
     /// plane (up to `max_axis_miss_deg` in all) to the nearest reachable axis (true): a
     /// ball-nosed burr grinds the same spot at any axis within that cone.
     pub axis_search: bool,
+    /// Keep every joint this far inside its limits, radians (0.0). The planner sets a small
+    /// margin so that interpolation between IK solutions cannot overshoot a limit.
+    pub limit_margin: f64,
 }
 
 impl Default for IkConfig {
@@ -31,6 +34,7 @@ impl Default for IkConfig {
             max_axis_miss_deg: 45.0,
             verify_tolerance: 1e-9,
             axis_search: true,
+            limit_margin: 0.0,
         }
     }
 }
@@ -383,7 +387,8 @@ impl Robot {
                 } else {
                     *v
                 };
-                match fit_limits(wrapped, previous[i], j.lower, j.upper) {
+                let m = config.limit_margin;
+                match fit_limits(wrapped, previous[i], j.lower + m, j.upper - m) {
                     Some(fit) => q.push(fit),
                     None => {
                         q.push(wrapped);
@@ -461,7 +466,7 @@ impl Robot {
                 max: config.max_axis_miss_deg,
             });
         }
-        if let Some(i) = self.limit_violation(&q, 0.0) {
+        if let Some(i) = self.limit_violation(&q, -config.limit_margin) {
             let j = &self.joints[i];
             return Err(Unreachable::JointLimit {
                 joint: j.name.clone(),

@@ -1,7 +1,8 @@
 //! Helpers shared by the integration tests: data paths, the oracle Python, the binary.
 #![allow(dead_code)]
+use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Child, Command, Stdio};
 
 /// A file under the planners' read-only data folder (`../shared/data`).
 pub fn shared_data(rel: &str) -> PathBuf {
@@ -59,4 +60,73 @@ pub fn polishbot() -> Command {
 /// A fresh temporary directory.
 pub fn tempdir() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")
+}
+
+/// The mock board running on a pty, stopped (SIGTERM, by pid) when dropped.
+pub struct Mock {
+    child: Child,
+    /// The pty device the mock serves.
+    pub path: String,
+    state: PathBuf,
+    log: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Mock {
+    /// Starts the mock with extra arguments; waits for its device path.
+    pub fn start(python: &Path, args: &[&str]) -> Mock {
+        let dir = tempdir();
+        let state = dir.path().join("state.json");
+        let log = dir.path().join("mock.jsonl");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("mocks/dofbot_mock.py");
+        let mut child = Command::new(python)
+            .arg(script)
+            .arg("--state")
+            .arg(&state)
+            .arg("--log")
+            .arg(&log)
+            .args(args)
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("start mock");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .expect("mock path");
+        let path = line.trim().to_string();
+        assert!(path.starts_with("/dev/"), "mock printed {path:?}");
+        Mock {
+            child,
+            path,
+            state,
+            log,
+            _dir: dir,
+        }
+    }
+
+    /// Stops the mock and returns its final state file.
+    pub fn finish(mut self) -> serde_json::Value {
+        let _ = Command::new("kill")
+            .arg("-TERM")
+            .arg(self.child.id().to_string())
+            .status();
+        let _ = self.child.wait();
+        let text = std::fs::read_to_string(&self.state).expect("mock state");
+        serde_json::from_str(&text).expect("mock state json")
+    }
+
+    /// Every line of the mock's frame log.
+    pub fn frames_logged(&self) -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        text.lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    }
+}
+
+impl Drop for Mock {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }

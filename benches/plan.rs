@@ -1,0 +1,88 @@
+//! Grinding planner speed: a whole plan (raster, IK along every stroke with splits, constant-
+//! feed strokes, transits, metrics, coverage, validation, frames) of about 5,000 path points.
+use std::path::Path;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nalgebra::{Point3, Vector3};
+use polishbot::plan::{plan, Inspection, PlanConfig, RegionInfo, SurfacePoint};
+use polishbot::robot::{Robot, Workcell};
+
+fn calib(n: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("calibration")
+        .join(n)
+}
+
+/// A flat patch of the part (reference frame, facing -y like the distal surface the default
+/// workcell presents to the arm) with one round bump of 0.95 mm, 24 mm across: 10 depth layers
+/// of 11 raster lines.
+fn inspection() -> Inspection {
+    let centre = Point3::new(5.0, -35.0, -25.0);
+    let mut points = Vec::new();
+    for i in 0..=80 {
+        for k in 0..=80 {
+            let p = centre + Vector3::new(-20.0 + 0.5 * i as f64, 0.0, -20.0 + 0.5 * k as f64);
+            let r = (p - centre).norm();
+            let inside = r <= 12.0;
+            points.push(SurfacePoint {
+                position: p,
+                normal: -Vector3::y(),
+                distance: if inside {
+                    0.95 * (1.0 - (r / 12.0).powi(2)) + 0.06
+                } else {
+                    0.0
+                },
+                region: if inside { 0 } else { -1 },
+            });
+        }
+    }
+    let members: Vec<&SurfacePoint> = points.iter().filter(|p| p.region == 0).collect();
+    let region = RegionInfo {
+        id: 0,
+        centroid: [centre.x, centre.y, centre.z],
+        normal: [0.0, -1.0, 0.0],
+        area: members.len() as f64 * 0.25,
+        peak: 1.01,
+        mean: 0.5,
+        volume: 100.0,
+        points: members.len(),
+        repairable: true,
+    };
+    Inspection {
+        dir: "bench".into(),
+        tolerance: Some(0.05),
+        regions: vec![region],
+        points,
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let robot = Robot::load(
+        &calib("dofbot.urdf"),
+        &calib("tool.toml"),
+        &calib("servos.toml"),
+    )
+    .expect("calibration");
+    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
+    let insp = inspection();
+    let cfg = PlanConfig::default();
+    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let r = &p.reachability.regions[0];
+    println!(
+        "plan: {} path points ({} left out), {} passes, {} samples, {:.1} s predicted",
+        r.path_points,
+        r.unreachable_path_points,
+        p.passes.len(),
+        p.samples.len(),
+        p.predicted_duration_s
+    );
+    let mut group = c.benchmark_group("plan");
+    group.sample_size(10);
+    group.bench_function("plan_5000_path_points", |b| {
+        b.iter(|| plan(&insp, &robot, &wc, &cfg).expect("plan"))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

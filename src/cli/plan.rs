@@ -1,0 +1,100 @@
+//! `polishbot plan --inspection DIR [--workcell FILE] -o plan.json [--export-ros traj.yaml]`.
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use serde::Deserialize;
+
+use crate::plan::{self, ros, Inspection, PlanConfig};
+use crate::robot::{self, RobotConfig};
+
+/// Arguments of `plan`.
+#[derive(Debug, Args)]
+pub struct PlanArgs {
+    /// Inspection folder holding deviations.csv and regions.json.
+    #[arg(long, value_name = "DIR")]
+    pub inspection: PathBuf,
+    /// Workcell file (part placement in the robot frame) [default: calibration/workcell.toml].
+    #[arg(long, value_name = "FILE")]
+    pub workcell: Option<PathBuf>,
+    /// Output plan file.
+    #[arg(short = 'o', long = "out", value_name = "FILE")]
+    pub out: PathBuf,
+    /// Also write the joint trajectory as a ROS trajectory_msgs/JointTrajectory (YAML).
+    #[arg(long, value_name = "FILE")]
+    pub export_ros: Option<PathBuf>,
+    /// Fail when any planned contact point is unreachable.
+    #[arg(long)]
+    pub require_full_reach: bool,
+}
+
+/// `--config` TOML of `plan` and `run`: `[robot]` (RobotConfig: urdf, tool, servos, workcell,
+/// ik) and `[plan]` (PlanConfig).
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlanFileConfig {
+    /// Robot description and calibration files.
+    pub robot: RobotConfig,
+    /// Planner settings.
+    pub plan: PlanConfig,
+}
+
+/// Runs `plan`.
+pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
+    let mut cfg: PlanFileConfig = super::load_config(config)?;
+    if let Some(w) = args.workcell {
+        cfg.robot.workcell = w;
+    }
+    cfg.plan.require_full_reach |= args.require_full_reach;
+    let (robot, workcell) = robot::load(&cfg.robot)?;
+    let inspection = Inspection::load(&args.inspection)?;
+    let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
+    plan.save(&args.out)?;
+    if let Some(yaml) = &args.export_ros {
+        std::fs::write(yaml, ros::joint_trajectory_yaml(&plan, "base_link"))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
+    }
+    let m = &plan.metrics;
+    let planned: Vec<_> = plan
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.layers > 0)
+        .collect();
+    println!(
+        "plan: {} -> {}: {} region(s) planned, {} passes, {} path points, {} samples, predicted duration {:.2} s",
+        args.inspection.display(),
+        args.out.display(),
+        planned.len(),
+        plan.passes.len(),
+        m.path_points,
+        m.samples,
+        m.predicted_duration_s
+    );
+    println!(
+        "plan: servo resolution alone moves the tool tip up to {:.3} mm (mean {:.3} mm); modelled tip within {:.4} mm of the path; cruise feed {:.2}..{:.2} mm/s (set {:.2})",
+        m.resolution_error_max_mm,
+        m.resolution_error_mean_mm,
+        m.sample_to_path_max_mm.max(m.path_to_samples_max_mm),
+        m.cruise_feed_min_mm_s,
+        m.cruise_feed_max_mm_s,
+        m.feed_mm_s
+    );
+    for r in &planned {
+        println!(
+            "plan: region {}: {} layer(s), {:.0}% of its area unreachable, {:.1}% of the reachable part covered, {} of {} path points left out",
+            r.id,
+            r.layers,
+            100.0 * r.unreachable_share,
+            100.0 * r.coverage_of_reachable,
+            r.unreachable_path_points,
+            r.path_points
+        );
+    }
+    if let Some(u) = plan.reachability.unreachable.first() {
+        println!(
+            "plan: {} unreachable path point(s) left out (listed in plan.json), e.g. {u}",
+            plan.reachability.unreachable.len()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,191 @@
+//! The planner's input: an inspection folder's `regions.json` and `deviations.csv`
+//! (file contracts in DESIGN.md and docs/FORMATS.md), read and cross-checked.
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Point3, Vector3};
+use serde::Deserialize;
+
+use super::error::PlanError;
+
+/// One defect region of `regions.json` (reference frame, millimetres).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct RegionInfo {
+    /// Region id: the `region` column of deviations.csv.
+    pub id: i64,
+    /// Mean position of its points, mm.
+    pub centroid: [f64; 3],
+    /// Mean outward normal (unit).
+    pub normal: [f64; 3],
+    /// Surface area, mm^2.
+    pub area: f64,
+    /// Signed distance of largest magnitude, mm (+ = material in excess).
+    pub peak: f64,
+    /// Mean signed distance, mm.
+    pub mean: f64,
+    /// Volume beyond the tolerance, mm^3.
+    pub volume: f64,
+    /// Number of points (rows of deviations.csv with this region id).
+    pub points: usize,
+    /// Material in excess that grinding can remove.
+    pub repairable: bool,
+}
+
+#[derive(Deserialize)]
+struct RegionsFile {
+    #[serde(default)]
+    tolerance: Option<f64>,
+    regions: Vec<RegionInfo>,
+}
+
+/// One core point of `deviations.csv`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfacePoint {
+    /// Position on the reference surface, mm.
+    pub position: Point3<f64>,
+    /// Outward unit normal.
+    pub normal: Vector3<f64>,
+    /// Signed distance along the normal, mm (+ = material in excess); NaN where the
+    /// comparison had too few points.
+    pub distance: f64,
+    /// Region id, -1 for none.
+    pub region: i64,
+}
+
+/// An inspection folder read for planning.
+#[derive(Debug, Clone)]
+pub struct Inspection {
+    /// The folder.
+    pub dir: PathBuf,
+    /// Tolerance the regions were found with, mm (if regions.json says).
+    pub tolerance: Option<f64>,
+    /// Every region.
+    pub regions: Vec<RegionInfo>,
+    /// Every core point.
+    pub points: Vec<SurfacePoint>,
+}
+
+impl Inspection {
+    /// Reads `dir/regions.json` and `dir/deviations.csv` and checks that they agree.
+    pub fn load(dir: &Path) -> Result<Inspection, PlanError> {
+        let rfile = dir.join("regions.json");
+        let text = read(&rfile)?;
+        let parsed: RegionsFile = serde_json::from_str(&text)
+            .map_err(|e| PlanError::input(&rfile, format!("line {}", e.line()), e.to_string()))?;
+        let points = read_deviations(&dir.join("deviations.csv"))?;
+        let inspection = Inspection {
+            dir: dir.to_path_buf(),
+            tolerance: parsed.tolerance,
+            regions: parsed.regions,
+            points,
+        };
+        inspection.check(&rfile)?;
+        Ok(inspection)
+    }
+
+    /// Points of region `id`, as indices into `points`.
+    pub fn region_points(&self, id: i64) -> Vec<usize> {
+        (0..self.points.len())
+            .filter(|&i| self.points[i].region == id)
+            .collect()
+    }
+
+    fn check(&self, rfile: &Path) -> Result<(), PlanError> {
+        for (i, r) in self.regions.iter().enumerate() {
+            let place = format!("regions[{i}] (id {})", r.id);
+            let finite = r.centroid.iter().chain(&r.normal).all(|v| v.is_finite())
+                && [r.area, r.peak, r.mean, r.volume]
+                    .iter()
+                    .all(|v| v.is_finite());
+            if !finite {
+                return Err(PlanError::input(rfile, place, "values must be finite"));
+            }
+            let n = Vector3::from(r.normal).norm();
+            if (n - 1.0).abs() > 1e-3 {
+                return Err(PlanError::input(
+                    rfile,
+                    place,
+                    format!("normal has norm {n}"),
+                ));
+            }
+            if self.regions[..i].iter().any(|o| o.id == r.id) {
+                return Err(PlanError::input(rfile, place, "id repeats"));
+            }
+            let rows = self.points.iter().filter(|p| p.region == r.id).count();
+            if rows != r.points {
+                let msg = format!(
+                    "{} points, but deviations.csv has {rows} rows with region {}",
+                    r.points, r.id
+                );
+                return Err(PlanError::input(rfile, place, msg));
+            }
+        }
+        Ok(())
+    }
+}
+
+fn read(file: &Path) -> Result<String, PlanError> {
+    std::fs::read_to_string(file).map_err(|e| PlanError::input(file, "file", e.to_string()))
+}
+
+/// Reads deviations.csv: a header naming the columns (any order, extra columns ignored), then
+/// one row per core point; x,y,z,nx,ny,nz,distance,region are required.
+fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, PlanError> {
+    let text = read(file)?;
+    let mut lines = text.lines().enumerate();
+    let header = lines
+        .next()
+        .ok_or_else(|| PlanError::input(file, "line 1", "empty file"))?
+        .1;
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let need = ["x", "y", "z", "nx", "ny", "nz", "distance", "region"];
+    let mut col = [0usize; 8];
+    for (k, n) in need.iter().enumerate() {
+        col[k] = names.iter().position(|h| h == n).ok_or_else(|| {
+            PlanError::input(file, "line 1", format!("header has no column `{n}`"))
+        })?;
+    }
+    let mut out = Vec::new();
+    for (i, line) in lines {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let place = || format!("line {}", i + 1);
+        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if cells.len() != names.len() {
+            let msg = format!("{} values, header has {}", cells.len(), names.len());
+            return Err(PlanError::input(file, place(), msg));
+        }
+        let mut v = [0.0; 8];
+        for (k, c) in col.iter().enumerate() {
+            v[k] = cells[*c].parse::<f64>().map_err(|_| {
+                let msg = format!("column {}: not a number: {:?}", need[k], cells[*c]);
+                PlanError::input(file, place(), msg)
+            })?;
+            // distance is NaN where the comparison found too few points (DESIGN.md)
+            let allowed_nan = need[k] == "distance" && v[k].is_nan();
+            if !(v[k].is_finite() || allowed_nan) {
+                let msg = format!("column {}: not finite", need[k]);
+                return Err(PlanError::input(file, place(), msg));
+            }
+        }
+        let normal = Vector3::new(v[3], v[4], v[5]);
+        let norm = normal.norm();
+        if (norm - 1.0).abs() > 1e-3 {
+            let msg = format!("normal has norm {norm}");
+            return Err(PlanError::input(file, place(), msg));
+        }
+        if v[7].fract() != 0.0 {
+            return Err(PlanError::input(file, place(), "region must be an integer"));
+        }
+        out.push(SurfacePoint {
+            position: Point3::new(v[0], v[1], v[2]),
+            normal: normal / norm,
+            distance: v[6],
+            region: v[7] as i64,
+        });
+    }
+    if out.is_empty() {
+        return Err(PlanError::input(file, "file", "no rows"));
+    }
+    Ok(out)
+}

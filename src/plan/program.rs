@@ -1,0 +1,474 @@
+//! From strokes to one continuous joint program: IK along every stroke (split where the arm
+//! cannot reach or follow), then transit, approach, grinding and retract moves spliced into a
+//! single trajectory sampled at the bus period.
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
+use super::raster::{PathPoint, Stroke, StrokeKind};
+use super::report::UnreachablePoint;
+use super::trajectory::{JointTrajectory, Limits, Move};
+use super::{PlanConfig, PlanError};
+use crate::robot::{IkTarget, Robot, Workcell};
+
+/// A contact point with its tool pose and joint solution.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlannedPoint {
+    /// Surface point, reference frame, mm.
+    pub surface_mm: [f64; 3],
+    /// Outward surface normal, reference frame.
+    pub normal: [f64; 3],
+    /// Layer height above nominal, mm.
+    pub offset_mm: f64,
+    /// Tool tip (ball centre), robot frame, m.
+    pub tip_m: [f64; 3],
+    /// Requested tool axis (shank to tip, against the normal), robot frame.
+    pub axis: [f64; 3],
+    /// Joint angles, rad.
+    pub q: Vec<f64>,
+}
+
+/// A reachable piece of a stroke, ground at constant feed from rest to rest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PlannedPass {
+    /// Region id.
+    pub region: i64,
+    /// Depth layer.
+    pub layer: usize,
+    /// Pass or link.
+    pub kind: StrokeKind,
+    /// Cruise speed planned, mm/s (the feed unless the joints need less).
+    pub feed_mm_s: f64,
+    /// The points.
+    pub points: Vec<PlannedPoint>,
+}
+
+/// What a stretch of samples does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SegmentKind {
+    /// Rest-to-rest move between home and approach / retract points.
+    Transit,
+    /// Down the normal onto the first contact point.
+    Approach,
+    /// Along a pass at constant feed.
+    Grind,
+    /// Up the normal off the last contact point.
+    Retract,
+    /// At rest between strokes: down one depth step, or a change of tool tilt.
+    Reorient,
+}
+
+/// A stretch of the sampled trajectory.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Segment {
+    /// What it does.
+    pub kind: SegmentKind,
+    /// Region, for all but transits.
+    pub region: Option<i64>,
+    /// Index into `passes`, for grinding.
+    pub pass: Option<usize>,
+    /// First sample (the previous segment's last one, at rest).
+    pub first_sample: usize,
+    /// Last sample.
+    pub last_sample: usize,
+}
+
+/// The assembled program.
+#[derive(Debug, Clone)]
+pub struct Program {
+    /// Joint samples at the bus period.
+    pub trajectory: JointTrajectory,
+    /// Segments in order.
+    pub segments: Vec<Segment>,
+    /// Reachable pieces of the strokes.
+    pub passes: Vec<PlannedPass>,
+    /// Per sample: at cruise speed inside a grinding segment.
+    pub cruise: Vec<bool>,
+    /// Strokes the joints slowed below the feed.
+    pub slowed: usize,
+}
+
+/// A run: pieces ground one after another without lifting the tool.
+type Run = Vec<PlannedPass>;
+
+/// Tool tip (m) and axis in the robot frame for a contact point, `lift` mm above the contact
+/// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it.
+fn tool_target(p: &PathPoint, reach: f64, lift: f64, wc: &Workcell) -> IkTarget {
+    let tip_mm = p.surface + p.normal * (p.offset + reach + lift);
+    IkTarget {
+        position: wc.point_from_reference_mm(&tip_mm).coords,
+        axis: -wc.direction_from_reference(&p.normal),
+        roll: None,
+    }
+}
+
+fn arr(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+/// Solves every stroke of one region in order from `prev`; splits into runs where a point is
+/// unreachable or the joints would jump more than `max_joint_step`. Returns the runs; records
+/// the points left out in `unreachable` and counts jumps.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn walk(
+    strokes: &[Stroke],
+    robot: &Robot,
+    wc: &Workcell,
+    cfg: &PlanConfig,
+    reach: f64,
+    prev: &mut Vec<f64>,
+    unreachable: &mut Vec<UnreachablePoint>,
+    jumps: &mut usize,
+) -> Vec<Run> {
+    let mut runs = Vec::new();
+    let mut run: Run = Vec::new();
+    let mut last_q: Option<Vec<f64>> = None;
+    for (si, stroke) in strokes.iter().enumerate() {
+        let mut targets: Vec<IkTarget> = stroke
+            .points
+            .iter()
+            .map(|p| tool_target(p, reach, 0.0, wc))
+            .collect();
+        let normals: Vec<Vector3<f64>> = targets.iter().map(|t| -t.axis).collect();
+        if let Some(axis) = stroke_axis(&targets, cfg.axis_spread_deg) {
+            targets.iter_mut().for_each(|t| t.axis = axis);
+        }
+        let mut solved = solve_stroke(&targets, robot, cfg, prev);
+        for (sol, n) in solved.iter_mut().zip(&normals) {
+            let Ok((q, _)) = sol else { continue };
+            let miss = crate::robot::angle_between(&robot.fk(q).axis, &-n).to_degrees();
+            if miss > cfg.ik.max_axis_miss_deg {
+                *sol = Err(format!(
+                    "tool axis {miss:.2} deg from the surface normal (accepted up to {:.2} deg)",
+                    cfg.ik.max_axis_miss_deg
+                ));
+            }
+        }
+        let mut piece = PlannedPass {
+            region: stroke.region,
+            layer: stroke.layer,
+            kind: stroke.kind,
+            feed_mm_s: cfg.feed_mm_s,
+            points: Vec::new(),
+        };
+        for (pi, ((p, target), sol)) in stroke.points.iter().zip(&targets).zip(solved).enumerate() {
+            let (q, axis) = match sol {
+                Ok(found) => found,
+                Err(reason) => {
+                    unreachable.push(UnreachablePoint {
+                        region: stroke.region,
+                        layer: stroke.layer,
+                        stroke: si,
+                        point: pi,
+                        surface_mm: [p.surface.x, p.surface.y, p.surface.z],
+                        tip_m: arr(&target.position),
+                        reason,
+                    });
+                    close(&mut piece, &mut run, &mut runs, true);
+                    last_q = None;
+                    continue;
+                }
+            };
+            // within a stroke neighbours must be close; at a stroke's first point (a rest
+            // point, reoriented in place about the ball centre) four times that
+            let allowed = cfg.max_joint_step * if pi == 0 { 4.0 } else { 1.0 };
+            let step = last_q.as_ref().map_or(0.0, |l| max_step(l, &q));
+            if step > allowed {
+                *jumps += 1;
+                close(&mut piece, &mut run, &mut runs, true);
+            }
+            last_q = Some(q.clone());
+            piece.points.push(PlannedPoint {
+                surface_mm: [p.surface.x, p.surface.y, p.surface.z],
+                normal: arr(&p.normal),
+                offset_mm: p.offset,
+                tip_m: arr(&target.position),
+                axis: arr(&axis),
+                q,
+            });
+        }
+        close(&mut piece, &mut run, &mut runs, false);
+    }
+    if !run.is_empty() {
+        runs.push(run);
+    }
+    runs
+}
+
+/// One tool axis for a whole stroke: the mean of its points' axes, when none is more than
+/// `spread_deg` from it (a ball burr grinds the same spot at any axis in its cone, and a fixed
+/// axis keeps the wrist still along the stroke instead of following the surface's noise).
+fn stroke_axis(targets: &[IkTarget], spread_deg: f64) -> Option<Vector3<f64>> {
+    let sum: Vector3<f64> = targets.iter().map(|t| t.axis.normalize()).sum();
+    let mean = sum.try_normalize(1e-9)?;
+    targets
+        .iter()
+        .all(|t| crate::robot::angle_between(&t.axis, &mean).to_degrees() <= spread_deg)
+        .then_some(mean)
+}
+
+/// Joint angles and the tool axis used for one point, or why it is unreachable.
+type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
+
+fn max_step(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+/// IK of one stroke's targets, chained from `prev`: joint angles and the tool axis used, or
+/// why a point is unreachable. Where the IK had to tilt the tool (axis search), the points'
+/// own smallest tilts differ from point to point and make the joints jitter; the stroke is
+/// then solved again with one tilt for all its points (the largest, kept within the cone)
+/// when every point reachable before stays reachable.
+fn solve_stroke(
+    targets: &[IkTarget],
+    robot: &Robot,
+    cfg: &PlanConfig,
+    prev: &mut Vec<f64>,
+) -> Vec<Solved> {
+    let start = prev.clone();
+    let mut tilts = Vec::new();
+    let first: Vec<Solved> = targets
+        .iter()
+        .map(|t| match robot.ik(t, prev, &cfg.ik) {
+            Ok(sol) => {
+                prev.clone_from(&sol.q);
+                let (plane_normal, requested) = in_plane(robot, &sol.q, &t.axis);
+                let achieved = robot.fk(&sol.q).axis;
+                let tilt = requested
+                    .cross(&achieved)
+                    .dot(&plane_normal)
+                    .atan2(requested.dot(&achieved));
+                tilts.push(tilt);
+                Ok((sol.q, t.axis.normalize()))
+            }
+            Err(e) => Err(e.to_string()),
+        })
+        .collect();
+    let Some(&tilt) = tilts.iter().max_by(|a, b| a.abs().total_cmp(&b.abs())) else {
+        return first;
+    };
+    if tilt.abs() < 1e-9 || !robot.has_closed_form() {
+        return first;
+    }
+    let exact = crate::robot::IkConfig {
+        axis_search: false,
+        ..cfg.ik.clone()
+    };
+    let mut again = start;
+    let mut out = Vec::with_capacity(targets.len());
+    for (t, f) in targets.iter().zip(&first) {
+        let Ok((q0, _)) = f else {
+            out.push(f.clone());
+            continue;
+        };
+        let (n, requested) = in_plane(robot, q0, &t.axis);
+        let axis = requested * tilt.cos() + n.cross(&requested) * tilt.sin();
+        let within =
+            crate::robot::angle_between(&t.axis, &axis).to_degrees() <= cfg.ik.max_axis_miss_deg;
+        let tilted = IkTarget { axis, ..*t };
+        match robot.ik(&tilted, &again, &exact) {
+            Ok(sol) if within => {
+                again.clone_from(&sol.q);
+                out.push(Ok((sol.q, axis)));
+            }
+            _ => return first,
+        }
+    }
+    prev.clone_from(&again);
+    out
+}
+
+/// The arm plane's normal at `q` (joint 2's axis) and `axis` projected into the plane (unit).
+fn in_plane(robot: &Robot, q: &[f64], axis: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let (_, axes) = robot.joint_frames(q);
+    let n = axes[1].normalize();
+    let a = axis.normalize();
+    ((n), (a - n * a.dot(&n)).normalize())
+}
+
+/// Ends `piece` (adds it to `run` when it has points); with `end_run` also ends the run.
+fn close(piece: &mut PlannedPass, run: &mut Run, runs: &mut Vec<Run>, end_run: bool) {
+    if !piece.points.is_empty() {
+        let next = PlannedPass {
+            points: Vec::new(),
+            ..piece.clone()
+        };
+        run.push(std::mem::replace(piece, next));
+    }
+    if end_run && !run.is_empty() {
+        runs.push(std::mem::take(run));
+    }
+}
+
+/// Splices runs into one program from `home` back to `home`.
+pub(crate) fn assemble(
+    runs: Vec<Run>,
+    robot: &Robot,
+    wc: &Workcell,
+    cfg: &PlanConfig,
+    unreachable: &mut Vec<UnreachablePoint>,
+) -> Result<Program, PlanError> {
+    let limits = Limits::from_joints(&robot.joints);
+    let tc = &cfg.trajectory;
+    let mut prog = Program {
+        trajectory: JointTrajectory::starting_at(&cfg.home, tc.period),
+        segments: Vec::new(),
+        passes: Vec::new(),
+        cruise: vec![false],
+        slowed: 0,
+    };
+    for run in runs {
+        let first = &run[0].points[0];
+        let last = run
+            .last()
+            .and_then(|p| p.points.last())
+            .expect("runs hold points");
+        let lifted = |p: &PlannedPoint| -> Result<Vec<f64>, String> {
+            let up = wc.direction_from_reference(&Vector3::from(p.normal));
+            let mut why = String::new();
+            for k in 0..3 {
+                let lift = cfg.retract_mm / f64::from(1 << k) * 1e-3;
+                let target = IkTarget {
+                    position: Vector3::from(p.tip_m) + up * lift,
+                    axis: Vector3::from(p.axis),
+                    roll: None,
+                };
+                match robot.ik(&target, &p.q, &cfg.ik) {
+                    Ok(sol) => return Ok(sol.q),
+                    Err(e) => why = e.to_string(),
+                }
+            }
+            Err(why)
+        };
+        let (above_first, above_last) = match (lifted(first), lifted(last)) {
+            (Ok(a), Ok(b)) => (a, b),
+            (Err(e), _) | (_, Err(e)) => {
+                for (pi, p) in run.iter().flat_map(|piece| piece.points.iter().enumerate()) {
+                    unreachable.push(UnreachablePoint {
+                        region: run[0].region,
+                        layer: run[0].layer,
+                        stroke: usize::MAX,
+                        point: pi,
+                        surface_mm: p.surface_mm,
+                        tip_m: p.tip_m,
+                        reason: format!("no approach or retract pose: {e}"),
+                    });
+                }
+                continue;
+            }
+        };
+        let region = Some(run[0].region);
+        prog.rest_move(&above_first, SegmentKind::Transit, None, &limits, cfg)?;
+        prog.rest_move(&first.q, SegmentKind::Approach, region, &limits, cfg)?;
+        for piece in run {
+            prog.grind(piece, robot, cfg)?;
+        }
+        prog.rest_move(&above_last, SegmentKind::Retract, region, &limits, cfg)?;
+    }
+    prog.rest_move(&cfg.home, SegmentKind::Transit, None, &limits, cfg)?;
+    Ok(prog)
+}
+
+impl Program {
+    fn rest_move(
+        &mut self,
+        to: &[f64],
+        kind: SegmentKind,
+        region: Option<i64>,
+        limits: &Limits,
+        cfg: &PlanConfig,
+    ) -> Result<(), PlanError> {
+        let from = self.trajectory.last().to_vec();
+        let mv = Move::new(&from, to, limits, &cfg.trajectory).map_err(|source| {
+            PlanError::Trajectory {
+                context: format!("{kind:?} move"),
+                source,
+            }
+        })?;
+        let first = self.trajectory.len() - 1;
+        let added = self.trajectory.append_move(&mv);
+        self.cruise.extend(std::iter::repeat_n(false, added));
+        self.segments.push(Segment {
+            kind,
+            region,
+            pass: None,
+            first_sample: first,
+            last_sample: first + added,
+        });
+        Ok(())
+    }
+
+    fn grind(
+        &mut self,
+        mut piece: PlannedPass,
+        robot: &Robot,
+        cfg: &PlanConfig,
+    ) -> Result<(), PlanError> {
+        let mut s = vec![0.0];
+        let mut q = vec![piece.points[0].q.clone()];
+        for w in piece.points.windows(2) {
+            let d = (Vector3::from(w[1].tip_m) - Vector3::from(w[0].tip_m)).norm();
+            if d > 1e-9 {
+                s.push(s.last().copied().unwrap_or(0.0) + d);
+                q.push(w[1].q.clone());
+            }
+        }
+        // a new depth layer starts one depth step below, or the tool tilt changes: at rest
+        let start = &piece.points[0].q;
+        let gap = start
+            .iter()
+            .zip(self.trajectory.last())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        if gap > 1e-12 {
+            let limits = Limits::from_joints(&robot.joints);
+            self.rest_move(
+                start,
+                SegmentKind::Reorient,
+                Some(piece.region),
+                &limits,
+                cfg,
+            )?;
+        }
+        let spline = JointSpline::new(s, q);
+        let wanted = PathLimits {
+            velocity: cfg.feed_mm_s * 1e-3,
+            acceleration: cfg.path_acceleration,
+            jerk: cfg.path_jerk,
+        };
+        let lim = path_limits(&spline, &robot.joints, wanted, cfg.joint_margin);
+        if lim.velocity < wanted.velocity * (1.0 - 1e-9) {
+            self.slowed += 1;
+        }
+        piece.feed_mm_s = lim.velocity * 1e3;
+        let first = self.trajectory.len() - 1;
+        let mut added = 0;
+        if spline.length() > 0.0 {
+            let (samples, cruise) =
+                sample_stroke(&spline, &lim, &cfg.trajectory).map_err(|source| {
+                    PlanError::Trajectory {
+                        context: format!("grinding stroke in region {}", piece.region),
+                        source,
+                    }
+                })?;
+            added = samples.len();
+            for sample in &samples {
+                self.trajectory.push(sample);
+            }
+            self.cruise.extend(cruise);
+        }
+        self.segments.push(Segment {
+            kind: SegmentKind::Grind,
+            region: Some(piece.region),
+            pass: Some(self.passes.len()),
+            first_sample: first,
+            last_sample: first + added,
+        });
+        self.passes.push(piece);
+        Ok(())
+    }
+}

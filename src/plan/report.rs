@@ -1,0 +1,106 @@
+//! What the planner reports besides the motion: unreachable targets (each with the reason),
+//! per-region reach and coverage, and the plan's measured quality.
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+/// A planned contact point the arm cannot reach or follow; it is left out of the motion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct UnreachablePoint {
+    /// Region id.
+    pub region: i64,
+    /// Depth layer.
+    pub layer: usize,
+    /// Stroke index within the region's strokes.
+    pub stroke: usize,
+    /// Point index within the stroke.
+    pub point: usize,
+    /// Surface point, reference frame, mm.
+    pub surface_mm: [f64; 3],
+    /// Requested tool tip, robot frame, m.
+    pub tip_m: [f64; 3],
+    /// Why.
+    pub reason: String,
+}
+
+impl fmt::Display for UnreachablePoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let [x, y, z] = self.surface_mm;
+        write!(
+            f,
+            "region {} layer {} stroke {} point {} at ({x:.2}, {y:.2}, {z:.2}) mm: {}",
+            self.region, self.layer, self.stroke, self.point, self.reason
+        )
+    }
+}
+
+/// Reach and coverage of one region.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RegionReport {
+    /// Region id.
+    pub id: i64,
+    /// Whether regions.json marks it repairable (only those are planned).
+    pub repairable: bool,
+    /// Peak distance, mm.
+    pub peak_mm: f64,
+    /// Area, mm^2.
+    pub area_mm2: f64,
+    /// Depth layers planned.
+    pub layers: usize,
+    /// Planned contact points (all layers).
+    pub path_points: usize,
+    /// Of those, unreachable or not followable (left out).
+    pub unreachable_path_points: usize,
+    /// Core points of the region (deviations.csv rows).
+    pub points: usize,
+    /// Core points where the tool can be placed (tip on the normal, axis within the cone).
+    pub reachable_points: usize,
+    /// Share of the region's area the arm cannot reach (1 - reachable / points).
+    pub unreachable_share: f64,
+    /// Share of the reachable core points within the tool footprint of a planned stroke.
+    pub coverage_of_reachable: f64,
+    /// Share of all core points within the tool footprint of a planned stroke.
+    pub coverage_of_all: f64,
+}
+
+/// The reachability report of plan.json.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Reachability {
+    /// Per region, in regions.json order.
+    pub regions: Vec<RegionReport>,
+    /// Every planned contact point left out, with the reason.
+    pub unreachable: Vec<UnreachablePoint>,
+    /// Places where a stroke was split because consecutive IK solutions jumped.
+    pub jumps: usize,
+}
+
+/// Quality of the plan, measured on the sampled trajectory through the robot model.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Time of the last sample, s.
+    pub predicted_duration_s: f64,
+    /// Contact points in the motion.
+    pub path_points: usize,
+    /// Joint samples.
+    pub samples: usize,
+    /// Worst tool-tip error from servo resolution (half a raw count per servo) over all
+    /// samples, mm.
+    pub resolution_error_max_mm: f64,
+    /// Mean of the same, mm.
+    pub resolution_error_mean_mm: f64,
+    /// Largest distance from a grinding sample's modelled tool tip (FK) to the planned path, mm.
+    pub sample_to_path_max_mm: f64,
+    /// Largest distance from a planned path point to the modelled tool-tip path (FK of the
+    /// samples), mm.
+    pub path_to_samples_max_mm: f64,
+    /// The feed asked for, mm/s.
+    pub feed_mm_s: f64,
+    /// Slowest modelled tool-tip speed over cruise samples of grinding strokes, mm/s.
+    pub cruise_feed_min_mm_s: f64,
+    /// Fastest modelled tool-tip speed over cruise samples, mm/s.
+    pub cruise_feed_max_mm_s: f64,
+    /// Strokes whose cruise speed the joint limits held below the feed.
+    pub slowed_strokes: usize,
+    /// Share of grinding time spent at cruise speed.
+    pub cruise_share: f64,
+}
