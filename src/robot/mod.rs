@@ -23,7 +23,8 @@ pub use resolution::resolution_error;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
-    /// The URDF (default `calibration/dofbot.urdf`).
+    /// The URDF (default `calibration/dofbot.urdf`; every default path is looked up under the
+    /// working directory first, then in the source tree, see [`default_calibration`]).
     pub urdf: PathBuf,
     /// The tool file (default `calibration/tool.toml`).
     pub tool: PathBuf,
@@ -35,13 +36,28 @@ pub struct RobotConfig {
     pub ik: IkConfig,
 }
 
+/// `calibration/NAME` under the working directory when it exists there, else the cell
+/// calibration shipped in the source tree this binary was built from.
+pub fn default_calibration(name: &str) -> PathBuf {
+    let local = PathBuf::from("calibration").join(name);
+    if local.exists() {
+        return local;
+    }
+    let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("calibration").join(name);
+    if shipped.exists() {
+        shipped
+    } else {
+        local
+    }
+}
+
 impl Default for RobotConfig {
     fn default() -> Self {
         RobotConfig {
-            urdf: "calibration/dofbot.urdf".into(),
-            tool: "calibration/tool.toml".into(),
-            servos: "calibration/servos.toml".into(),
-            workcell: "calibration/workcell.toml".into(),
+            urdf: default_calibration("dofbot.urdf"),
+            tool: default_calibration("tool.toml"),
+            servos: default_calibration("servos.toml"),
+            workcell: default_calibration("workcell.toml"),
             ik: IkConfig::default(),
         }
     }
