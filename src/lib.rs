@@ -3,4 +3,5 @@
 //! config struct.
 pub mod cli;
 pub mod cloud;
+pub mod register;
 pub mod synth;
