@@ -3,5 +3,6 @@
 //! config struct.
 pub mod cli;
 pub mod cloud;
+pub mod progress;
 pub mod register;
 pub mod synth;

@@ -6,6 +6,7 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::cloud::{Format, Units};
 
+mod demo;
 mod info;
 mod synth;
 
@@ -54,9 +55,9 @@ pub enum Command {
     /// Calibration routines: servos, workcell, verify.
     Calibrate(NotYet),
     /// Write a synthetic reference, a defective moved scan and the truth.
-    Synth(synth::SynthArgs),
+    Synth(Box<synth::SynthArgs>),
     /// The whole chain on a built-in part against the simulated arm.
-    Demo(NotYet),
+    Demo(demo::DemoArgs),
 }
 
 /// Arguments of a command whose issue has not landed yet.
@@ -84,7 +85,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     let config = cli.config.as_deref();
     match cli.command {
         Command::Info(args) => info::run(args, config),
-        Command::Synth(args) => synth::run(args, config),
+        Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
         Command::Filter(_) => not_yet("filter"),
         Command::Register(_) => not_yet("register"),
@@ -93,7 +94,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(_) => not_yet("run"),
         Command::Arm(_) => not_yet("arm"),
         Command::Calibrate(_) => not_yet("calibrate"),
-        Command::Demo(_) => not_yet("demo"),
+        Command::Demo(args) => demo::run(args, config),
     }
 }
 

@@ -1,11 +1,102 @@
 //! `polishbot synth`: writes reference.ply, scan.ply and truth.json.
+use std::path::PathBuf;
+
 use clap::Args;
 
-/// Arguments of `synth`.
-#[derive(Debug, Args)]
-pub struct SynthArgs {}
+use crate::cloud::Units;
+use crate::synth::{synth, SynthConfig};
 
-/// Writes the synthetic case.
-pub fn run(_args: SynthArgs, _config: Option<&std::path::Path>) -> anyhow::Result<()> {
-    anyhow::bail!("synth: not implemented yet")
+/// Arguments of `synth` (they override the `--config` file's values).
+#[derive(Debug, Args)]
+pub struct SynthArgs {
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Use this mesh instead of the parametric femoral component.
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Articular surface of --mesh where defects go (same frame).
+    #[arg(long, requires = "mesh")]
+    pub surface: Option<PathBuf>,
+    /// Unit of --mesh and --surface.
+    #[arg(long, value_enum)]
+    pub units: Option<Units>,
+    /// Random seed [default: 1].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Number of defects [default: 6].
+    #[arg(long)]
+    pub defects: Option<usize>,
+    /// Noise standard deviation per coordinate, mm [default: 0.015].
+    #[arg(long)]
+    pub noise: Option<f64>,
+    /// Outlier share of scan points [default: 0.01].
+    #[arg(long)]
+    pub outliers: Option<f64>,
+    /// Points in reference.ply [default: 400000].
+    #[arg(long)]
+    pub reference_points: Option<usize>,
+    /// Surface points in scan.ply [default: 300000].
+    #[arg(long)]
+    pub scan_points: Option<usize>,
+    /// Defect |height| range in mm, "min,max" [default: 0.04,0.5].
+    #[arg(long, value_parser = parse_range)]
+    pub height_range: Option<[f64; 2]>,
+    /// Defect width (FWHM) range in mm, "min,max" [default: 0.4,3].
+    #[arg(long, value_parser = parse_range)]
+    pub width_range: Option<[f64; 2]>,
+    /// Largest translation of the scan's random pose, mm [default: 60].
+    #[arg(long)]
+    pub max_translation: Option<f64>,
+}
+
+fn parse_range(s: &str) -> Result<[f64; 2], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match v.as_slice() {
+        [a, b] if a <= b => Ok([*a, *b]),
+        _ => Err("expected \"min,max\" with min <= max".into()),
+    }
+}
+
+/// Builds the config from file and flags, makes the case and writes it.
+pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<()> {
+    let mut cfg: SynthConfig = super::load_config(config)?;
+    macro_rules! set {
+        ($($field:ident),*) => {$(if let Some(v) = args.$field { cfg.$field = v; })*};
+    }
+    set!(
+        seed,
+        defects,
+        noise,
+        outliers,
+        reference_points,
+        scan_points,
+        height_range,
+        width_range,
+        max_translation
+    );
+    if args.mesh.is_some() {
+        cfg.mesh = args.mesh;
+        cfg.surface = args.surface;
+    }
+    if args.units.is_some() {
+        cfg.units = args.units;
+    }
+    let case = synth(&cfg)?;
+    case.write(&args.out)?;
+    let t = &case.truth;
+    println!(
+        "synth: {} -> {}: reference {} points, scan {} points ({} outliers), {} defects, seed {}",
+        t.source,
+        args.out.display(),
+        t.reference_points,
+        t.scan_points,
+        t.outliers.scattered.len() + t.outliers.clustered.len(),
+        t.defects.len(),
+        t.seed
+    );
+    Ok(())
 }

@@ -90,6 +90,8 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 /// a file whose bounding box is under 1 unit across is refused with a hint (it looks like
 /// metres); otherwise millimetres are assumed and `units_assumed` says so.
 pub fn load(path: &Path, format: Option<Format>, units: Option<Units>) -> Result<Loaded> {
+    let spinner = crate::progress::spinner(&format!("reading {}", path.display()));
+    let bytes = read_bytes(path)?;
     let format = match format.or_else(|| Format::from_path(path)) {
         Some(f) => f,
         None => bail!(
@@ -97,9 +99,9 @@ pub fn load(path: &Path, format: Option<Format>, units: Option<Units>) -> Result
             path.display()
         ),
     };
-    let bytes = read_bytes(path)?;
-    let mut geometry =
-        super::parse(&bytes, format).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    let parsed = super::parse(&bytes, format);
+    spinner.finish_and_clear();
+    let mut geometry = parsed.map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     if geometry.points().is_empty() {
         bail!("{}: file: no points", path.display());
     }

@@ -5,6 +5,7 @@
 mod columns;
 mod error;
 mod io;
+mod neighbours;
 mod obj;
 mod off;
 mod pcd;
@@ -12,11 +13,13 @@ mod ply;
 mod sample;
 mod stl;
 mod text;
+pub mod transform;
 mod types;
 mod xyz;
 
 pub use error::{ParseError, Place};
 pub use io::{load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units};
+pub use neighbours::{Neighbour, Neighbours};
 pub use ply::{write_ply_bytes, PlyPrecision};
 pub use sample::{sample_mesh, MeshSample};
 pub use types::{Aabb, Geometry, Mesh, PointCloud, ScalarField};

@@ -159,7 +159,11 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
             for _ in 0..n {
                 row.clear();
                 for f in &fields {
-                    let raw = cur.take(f.size * f.count, &f.name)?;
+                    let len = f
+                        .size
+                        .checked_mul(f.count)
+                        .ok_or_else(|| ParseError::new(data_place, "field too large"))?;
+                    let raw = cur.take(len, &f.name)?;
                     if f.count == 1 {
                         row.push(decode(raw, f.kind));
                     }

@@ -455,24 +455,13 @@ fn read_binary(
             let total = stride
                 .checked_mul(el.count)
                 .ok_or_else(|| ParseError::new(Place::Byte(cur.pos), "element too large"))?;
-            let start = cur.pos;
             let body = cur.take(
                 total,
                 &format!("{} {} records of {} bytes", el.count, el.name, stride),
             )?;
             if ei == vi {
-                reserve(sink, layout, el.count);
-                for rec in body.chunks_exact(stride.max(1)).take(el.count) {
-                    values.clear();
-                    let mut off = 0;
-                    for s in &types {
-                        values.push(s.decode(&rec[off..], big));
-                        off += s.size();
-                    }
-                    sink.vertex(layout, &values);
-                }
+                read_fixed_vertices(body, &types, el.count, big, layout, sink);
             }
-            let _ = start;
             continue;
         }
         if ei == vi {
@@ -510,6 +499,46 @@ fn read_binary(
         }
     }
     Ok(())
+}
+
+/// Decodes fixed-size vertex records, reading only the columns in use.
+fn read_fixed_vertices(
+    body: &[u8],
+    types: &[Scalar],
+    count: usize,
+    big: bool,
+    layout: &VertexLayout,
+    sink: &mut Sink,
+) {
+    let offsets: Vec<usize> = types
+        .iter()
+        .scan(0, |off, s| {
+            let here = *off;
+            *off += s.size();
+            Some(here)
+        })
+        .collect();
+    let stride: usize = types.iter().map(|s| s.size()).sum();
+    let column = |i: usize| (offsets[i], types[i]);
+    let xyz = layout.xyz.map(column);
+    let normal = layout.normal.map(|n| n.map(column));
+    let fields: Vec<(usize, Scalar)> = layout.fields.iter().map(|(i, _)| column(*i)).collect();
+    reserve(sink, layout, count);
+    let get = |rec: &[u8], (off, s): (usize, Scalar)| s.decode(&rec[off..off + s.size()], big);
+    for rec in body.chunks_exact(stride.max(1)).take(count) {
+        sink.cloud.points.push(Point3::new(
+            get(rec, xyz[0]),
+            get(rec, xyz[1]),
+            get(rec, xyz[2]),
+        ));
+        if let Some(n) = normal {
+            sink.normals
+                .push(Vector3::new(get(rec, n[0]), get(rec, n[1]), get(rec, n[2])));
+        }
+        for (f, &col) in sink.cloud.fields.iter_mut().zip(&fields) {
+            f.values.push(get(rec, col));
+        }
+    }
 }
 
 fn reserve(sink: &mut Sink, layout: &VertexLayout, n: usize) {

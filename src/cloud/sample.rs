@@ -26,7 +26,7 @@ pub fn sample_mesh(mesh: &Mesh, n: usize, seed: u64) -> anyhow::Result<MeshSampl
         cumulative.push(total);
         normals.push(normal);
     }
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         anyhow::bail!("mesh has zero surface area: nothing to sample");
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);

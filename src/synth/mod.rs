@@ -1,1 +1,228 @@
-//! Synthetic parts with known defects, pose and outliers, for accuracy tests.
+//! Synthetic cases with known answers: a reference cloud, a scan of the same part with planted
+//! defects, noise and outliers moved by a random rigid transform, and the truth.
+//!
+//! Same config and seed, same files. Front: [`synth`]; files: [`SynthCase::write`].
+mod defects;
+mod femoral;
+mod placement;
+mod profile;
+mod truth;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+pub use defects::{deviation_at, Defect, DefectKind};
+pub use femoral::{build as build_femoral, FemoralPart, FemoralShape};
+pub use truth::{OutlierTruth, Truth};
+
+use crate::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud, Units};
+
+/// Settings of a synthetic case. Every field has a documented default.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct SynthConfig {
+    /// Seed of every random choice (default 1).
+    pub seed: u64,
+    /// A mesh to use instead of the parametric part (default none).
+    pub mesh: Option<PathBuf>,
+    /// The articular surface of `mesh` on which defects are planted (default: the whole mesh
+    /// away from sharp edges).
+    pub surface: Option<PathBuf>,
+    /// Unit of `mesh` and `surface` (default: refuse files that look like metres).
+    pub units: Option<Units>,
+    /// Shape of the parametric part.
+    pub shape: FemoralShape,
+    /// Points in reference.ply (default 400,000).
+    pub reference_points: usize,
+    /// Surface points in scan.ply before outliers (default 300,000).
+    pub scan_points: usize,
+    /// Number of defects (default 6).
+    pub defects: usize,
+    /// Range of |height| of defects, mm (default 0.04..0.5).
+    pub height_range: [f64; 2],
+    /// Range of widths (FWHM) of defects, mm (default 0.4..3).
+    pub width_range: [f64; 2],
+    /// Share of pits among defects (default 0.25); the rest are bumps and ridges.
+    pub pit_share: f64,
+    /// Share of ridges among defects (default 0.25).
+    pub ridge_share: f64,
+    /// Standard deviation of Gaussian noise on each scan coordinate, mm (default 0.015).
+    pub noise: f64,
+    /// Outliers as a share of scan points, half scattered and half clustered (default 0.01).
+    pub outliers: f64,
+    /// Largest translation of the random scan pose, mm (default 60).
+    pub max_translation: f64,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        SynthConfig {
+            seed: 1,
+            mesh: None,
+            surface: None,
+            units: None,
+            shape: FemoralShape::default(),
+            reference_points: 400_000,
+            scan_points: 300_000,
+            defects: 6,
+            height_range: [0.04, 0.5],
+            width_range: [0.4, 3.0],
+            pit_share: 0.25,
+            ridge_share: 0.25,
+            noise: 0.015,
+            outliers: 0.01,
+            max_translation: 60.0,
+        }
+    }
+}
+
+/// A generated case.
+#[derive(Debug, Clone)]
+pub struct SynthCase {
+    /// Dense reference samples with outward normals (reference frame).
+    pub reference: PointCloud,
+    /// The scan: defective, noisy surface points then outliers, in the scan frame.
+    pub scan: PointCloud,
+    /// The part's mesh (reference frame).
+    pub mesh: Mesh,
+    /// What was planted.
+    pub truth: Truth,
+}
+
+impl SynthCase {
+    /// Writes reference.ply, scan.ply and truth.json into `dir` (created if missing).
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        cloud::write_ply(
+            &dir.join("reference.ply"),
+            &self.reference,
+            None,
+            PlyPrecision::F64,
+        )?;
+        cloud::write_ply(&dir.join("scan.ply"), &self.scan, None, PlyPrecision::F64)?;
+        self.truth.save(&dir.join("truth.json"))
+    }
+}
+
+/// The part geometry: mesh and the candidate surface for defects.
+struct Part {
+    mesh: Mesh,
+    source: String,
+    /// Surface on which defect centres may lie (None: the whole part).
+    articular: Option<Mesh>,
+}
+
+fn load_part(cfg: &SynthConfig) -> Result<Part> {
+    let Some(path) = &cfg.mesh else {
+        let part = build_femoral(&cfg.shape);
+        let faces = part
+            .mesh
+            .faces
+            .iter()
+            .zip(&part.articular)
+            .filter(|(_, a)| **a)
+            .map(|(f, _)| *f)
+            .collect();
+        let articular = Mesh {
+            vertices: part.mesh.vertices.clone(),
+            faces,
+        };
+        return Ok(Part {
+            mesh: part.mesh,
+            source: "parametric femoral component".into(),
+            articular: Some(articular),
+        });
+    };
+    let load_mesh = |p: &Path| -> Result<Mesh> {
+        match cloud::load(p, None, cfg.units)?.geometry {
+            Geometry::Mesh { mesh, .. } => Ok(mesh),
+            Geometry::Cloud(_) => {
+                anyhow::bail!("{}: has no faces; synth needs a mesh", p.display())
+            }
+        }
+    };
+    let mut mesh = load_mesh(path)?;
+    placement::orient_outward(&mut mesh);
+    let articular = cfg.surface.as_deref().map(load_mesh).transpose()?;
+    Ok(Part {
+        mesh,
+        source: path.display().to_string(),
+        articular,
+    })
+}
+
+/// A uniformly random rotation and a translation of random direction and length up to `max`.
+fn random_pose(rng: &mut ChaCha8Rng, max: f64) -> Isometry3<f64> {
+    let q = nalgebra::Quaternion::new(gauss(rng), gauss(rng), gauss(rng), gauss(rng));
+    let dir = Vector3::new(gauss(rng), gauss(rng), gauss(rng)).normalize();
+    let t = dir * max * rng.gen::<f64>();
+    Isometry3::from_parts(Translation3::from(t), UnitQuaternion::from_quaternion(q))
+}
+
+/// A standard normal sample (Box-Muller).
+pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
+    let u1: f64 = rng.gen::<f64>().max(f64::MIN_POSITIVE);
+    let u2: f64 = rng.gen();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// Makes a case.
+pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
+    anyhow::ensure!(
+        cfg.reference_points > 0 && cfg.scan_points > 0,
+        "point counts must be positive"
+    );
+    anyhow::ensure!(
+        (0.0..0.5).contains(&cfg.outliers),
+        "outlier share must be in [0, 0.5)"
+    );
+    anyhow::ensure!(
+        cfg.noise >= 0.0 && cfg.noise.is_finite(),
+        "noise must be a finite non-negative number"
+    );
+    let part = load_part(cfg)?;
+    let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
+    let defects = placement::place_defects(&part.mesh, part.articular.as_ref(), cfg, &mut rng)?;
+
+    let reference = cloud::sample_mesh(&part.mesh, cfg.reference_points, rng.gen())?.cloud;
+    let sample = cloud::sample_mesh(&part.mesh, cfg.scan_points, rng.gen())?.cloud;
+    let normals = sample.normals.as_ref().expect("sampled normals");
+    let mut points: Vec<Point3<f64>> = sample
+        .points
+        .iter()
+        .zip(normals)
+        .map(|(p, n)| {
+            let noise = Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * cfg.noise;
+            p + n * deviation_at(&defects, p, n) + noise
+        })
+        .collect();
+    let outliers = placement::add_outliers(&mut points, &sample, cfg.outliers, &mut rng);
+
+    let move_scan = random_pose(&mut rng, cfg.max_translation);
+    let mut scan = PointCloud::from_points(points);
+    scan.transform(&move_scan);
+    let mut truth = Truth {
+        source: part.source,
+        seed: cfg.seed,
+        units: "mm".into(),
+        scan_to_reference: [[0.0; 4]; 4],
+        noise_mm: cfg.noise,
+        reference_points: reference.len(),
+        scan_points: scan.len(),
+        outliers,
+        defects,
+    };
+    truth.set_pose(&move_scan.inverse());
+    Ok(SynthCase {
+        reference,
+        scan,
+        mesh: part.mesh,
+        truth,
+    })
+}
