@@ -65,7 +65,12 @@ pub fn compute_fpfh(
     let tree = Tree::new(points);
     let neighbours: Vec<Vec<(usize, f64)>> = points
         .par_iter()
-        .map(|p| tree.knn_within(p, max_nn, radius))
+        .map(|p| {
+            tree.knn_within(p, max_nn, radius)
+                .into_iter()
+                .map(|n| (n.index, n.dist2))
+                .collect()
+        })
         .collect();
     let spfh: Vec<Fpfh> = (0..points.len())
         .into_par_iter()

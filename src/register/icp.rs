@@ -76,7 +76,8 @@ fn residuals(
     src.par_iter()
         .filter_map(|s| {
             let q = pose * s;
-            let (j, d2) = tree.nearest(&q);
+            let nb = tree.nearest(&q)?;
+            let (j, d2) = (nb.index, nb.dist2);
             (d2 <= max_d2).then(|| (q, j, normals[j].dot(&(q - target[j])), d2))
         })
         .collect()

@@ -49,9 +49,10 @@ pub struct RegisterConfig {
     pub inlier_threshold: Option<f64>,
     /// Smallest clique (default 3).
     pub min_clique: usize,
-    /// Cap on maximal cliques enumerated (default 200,000).
+    /// Cap on maximal cliques enumerated (default 100,000; each start vertex gets at least
+    /// an equal share, and no more than max(share, 64)).
     pub max_cliques: usize,
-    /// Time budget of the clique search in seconds (default 5).
+    /// Time budget of the clique search in seconds (default 2).
     pub clique_time_budget: f64,
     /// Cliques kept after node-guided selection (default 200).
     pub top_k: usize,
@@ -86,8 +87,8 @@ impl Default for RegisterConfig {
             compat_min_score: 0.6,
             inlier_threshold: None,
             min_clique: 3,
-            max_cliques: 200_000,
-            clique_time_budget: 5.0,
+            max_cliques: 100_000,
+            clique_time_budget: 2.0,
             top_k: 200,
             rank_candidates: 5,
             icp_max_points: 100_000,
@@ -308,7 +309,7 @@ pub fn register_with_progress(
         max_cliques: cfg.max_cliques,
         time_budget: Duration::from_secs_f64(cfg.clique_time_budget),
         top_k: cfg.top_k,
-        max_graph_work: 2_000_000_000,
+        max_graph_work: 30_000_000,
         hypotheses_out: cfg.rank_candidates.max(1),
     };
     coarse.compat_sigma = params.compat_sigma;

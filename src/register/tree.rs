@@ -1,67 +1,12 @@
-//! Interim neighbour search and preparation helpers (private to `register`).
+//! Interim preparation helpers (private to `register`).
 //!
-//! TODO(pre): replace by `cloud::neighbours` and `preprocess::{voxel_downsample,
-//! estimate_normals, mean_spacing}` once the preprocessing stage lands on main.
+//! TODO(pre): replace by `preprocess::{voxel_downsample, estimate_normals, mean_spacing}` once
+//! the preprocessing stage lands on main.
 use std::collections::HashMap;
-use std::num::NonZeroUsize;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+pub(crate) use crate::cloud::Neighbours as Tree;
 use nalgebra::{Matrix3, Point3, Vector3};
 use rayon::prelude::*;
-
-/// A 3-D kd-tree over a slice of points (items are indices into that slice).
-pub(crate) struct Tree {
-    tree: ImmutableKdTree<f64, 3>,
-    len: usize,
-}
-
-impl Tree {
-    /// Builds the tree (points must be finite).
-    pub fn new(points: &[Point3<f64>]) -> Tree {
-        let coords: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
-        let tree = ImmutableKdTree::new_from_slice(&coords).expect("finite points");
-        Tree {
-            tree,
-            len: points.len(),
-        }
-    }
-
-    /// Nearest point: (index, squared distance).
-    pub fn nearest(&self, q: &Point3<f64>) -> (usize, f64) {
-        let r = self
-            .tree
-            .query(&[q.x, q.y, q.z])
-            .nearest_one::<SquaredEuclidean<f64>>()
-            .execute();
-        (r.item as usize, r.distance)
-    }
-
-    /// Up to `k` nearest points within `radius` (Euclidean), sorted by distance:
-    /// (index, squared distance). This is Open3D's "hybrid" search.
-    pub fn knn_within(&self, q: &Point3<f64>, k: usize, radius: f64) -> Vec<(usize, f64)> {
-        let k = NonZeroUsize::new(k.min(self.len).max(1)).expect("k > 0");
-        self.tree
-            .query(&[q.x, q.y, q.z])
-            .nearest_n::<SquaredEuclidean<f64>>(k)
-            .within(radius * radius)
-            .execute()
-            .into_iter()
-            .map(|r| (r.item as usize, r.distance))
-            .collect()
-    }
-
-    /// The `k` nearest points, sorted: (index, squared distance).
-    pub fn knn(&self, q: &Point3<f64>, k: usize) -> Vec<(usize, f64)> {
-        let k = NonZeroUsize::new(k.min(self.len).max(1)).expect("k > 0");
-        self.tree
-            .query(&[q.x, q.y, q.z])
-            .nearest_n::<SquaredEuclidean<f64>>(k)
-            .execute()
-            .into_iter()
-            .map(|r| (r.item as usize, r.distance))
-            .collect()
-    }
-}
 
 /// Mean nearest-neighbour spacing, estimated on up to 20,000 evenly strided points.
 pub(crate) fn mean_spacing(points: &[Point3<f64>], tree: &Tree) -> f64 {
@@ -69,7 +14,7 @@ pub(crate) fn mean_spacing(points: &[Point3<f64>], tree: &Tree) -> f64 {
     let d: Vec<f64> = points
         .par_iter()
         .step_by(stride)
-        .map(|p| tree.knn(p, 2).get(1).map_or(0.0, |r| r.1.sqrt()))
+        .map(|p| tree.knn(p, 2).get(1).map_or(0.0, |r| r.dist2.sqrt()))
         .collect();
     d.iter().sum::<f64>() / d.len().max(1) as f64
 }
@@ -124,11 +69,11 @@ pub(crate) fn pca_normals(
             let mut n = if nb.len() < 3 {
                 Vector3::z()
             } else {
-                let m = nb.iter().fold(Vector3::zeros(), |a, &(j, _)| a + points[j].coords)
+                let m = nb.iter().fold(Vector3::zeros(), |a, n| a + points[n.index].coords)
                     / nb.len() as f64;
                 let mut c = Matrix3::zeros();
-                for &(j, _) in &nb {
-                    let d = points[j].coords - m;
+                for n in &nb {
+                    let d = points[n.index].coords - m;
                     c += d * d.transpose();
                 }
                 let e = c.symmetric_eigen();

@@ -73,10 +73,29 @@ struct Budget {
     limits: CliqueLimits,
     found: AtomicUsize,
     stopped: AtomicBool,
+    /// Set when some start vertex hit `per_vertex`.
+    capped: AtomicBool,
+    /// Cap on the cliques of one start vertex, so that one dense neighbourhood cannot take
+    /// the whole budget.
+    per_vertex: usize,
 }
 
 impl Budget {
-    fn exhausted(&self) -> bool {
+    fn new(limits: CliqueLimits, vertices: usize) -> Budget {
+        Budget {
+            limits,
+            found: AtomicUsize::new(0),
+            stopped: AtomicBool::new(false),
+            capped: AtomicBool::new(false),
+            per_vertex: (limits.max_cliques / vertices.max(1)).max(64),
+        }
+    }
+
+    fn exhausted(&self, local: usize) -> bool {
+        if local >= self.per_vertex {
+            self.capped.store(true, Ordering::Relaxed);
+            return true;
+        }
         if self.stopped.load(Ordering::Relaxed) {
             return true;
         }
@@ -127,13 +146,13 @@ fn degeneracy_positions(g: &Graph) -> Vec<usize> {
 }
 
 /// Enumerates the maximal cliques containing `v` as their earliest vertex in the order,
-/// calling `report` with each (global indices).
+/// calling `report` with each (global indices) and its weight (sum of edge weights).
 fn cliques_from(
     g: &Graph,
     pos: &[usize],
     v: usize,
     budget: &Budget,
-    report: &mut dyn FnMut(&[u32]),
+    report: &mut dyn FnMut(&[u32], f64),
 ) {
     let nb: Vec<u32> = g.adj[v].iter().map(|e| e.0).collect();
     let d = nb.len();
@@ -143,10 +162,19 @@ fn cliques_from(
     let local_adj: Vec<Bits> = nb
         .iter()
         .map(|&u| {
+            // Merge-intersect the sorted lists N(u) and N(v).
             let mut b = Bits::new(d);
-            for &(w, _) in &g.adj[u as usize] {
-                if let Ok(k) = nb.binary_search(&w) {
-                    b.set(k);
+            let row = &g.adj[u as usize];
+            let (mut i, mut k) = (0, 0);
+            while i < row.len() && k < d {
+                match row[i].0.cmp(&nb[k]) {
+                    std::cmp::Ordering::Less => i += 1,
+                    std::cmp::Ordering::Greater => k += 1,
+                    std::cmp::Ordering::Equal => {
+                        b.set(k);
+                        i += 1;
+                        k += 1;
+                    }
                 }
             }
             b
@@ -161,31 +189,56 @@ fn cliques_from(
         }
     }
     let mut r = vec![v as u32];
-    let mut local = |clique: &[usize], r: &mut Vec<u32>| {
+    let mut local = |clique: &[usize], r: &mut Vec<u32>, w: f64| {
         r.truncate(1);
         r.extend(clique.iter().map(|&k| nb[k]));
-        report(r);
+        report(r, w);
+    };
+    // Weight an edge (v or a local node, local node): looked up in the global lists.
+    let weight_to = |a: Option<usize>, b: usize| {
+        let ga = a.map_or(v, |k| nb[k] as usize);
+        g.weight(ga, nb[b] as usize).unwrap_or(0.0) as f64
     };
     let mut stack = Vec::new();
-    bron_kerbosch(&local_adj, &mut stack, p, x, budget, &mut local, &mut r);
+    let ctx = Ctx {
+        adj: &local_adj,
+        budget,
+        weight: &weight_to,
+        local_found: std::cell::Cell::new(0),
+    };
+    bron_kerbosch(&ctx, &mut stack, 0.0, p, x, &mut local, &mut r);
 }
 
+/// What the recursion needs besides its sets.
+struct Ctx<'a> {
+    adj: &'a [Bits],
+    budget: &'a Budget,
+    /// Edge weight between the start vertex (None) or a local node and a local node.
+    weight: &'a dyn Fn(Option<usize>, usize) -> f64,
+    /// Cliques reported from this start vertex.
+    local_found: std::cell::Cell<usize>,
+}
+
+/// Bron–Kerbosch with Tomita pivoting on local bit sets; `r` holds the clique so far (without
+/// the start vertex) and `w` its edge-weight sum.
 fn bron_kerbosch(
-    adj: &[Bits],
+    ctx: &Ctx,
     r: &mut Vec<usize>,
+    w: f64,
     mut p: Bits,
     mut x: Bits,
-    budget: &Budget,
-    report: &mut dyn FnMut(&[usize], &mut Vec<u32>),
+    report: &mut dyn FnMut(&[usize], &mut Vec<u32>, f64),
     scratch: &mut Vec<u32>,
 ) {
-    if budget.exhausted() {
+    let (adj, budget) = (ctx.adj, ctx.budget);
+    if budget.exhausted(ctx.local_found.get()) {
         return;
     }
     if p.is_empty() {
         if x.is_empty() && r.len() + 1 >= budget.limits.min_size {
             budget.found.fetch_add(1, Ordering::Relaxed);
-            report(r, scratch);
+            ctx.local_found.set(ctx.local_found.get() + 1);
+            report(r, scratch, w);
         }
         return;
     }
@@ -198,39 +251,32 @@ fn bron_kerbosch(
         .max_by_key(|&u| p.and_count(&adj[u]))
         .expect("P is not empty");
     let candidates: Vec<usize> = p.and_not(&adj[pivot]).iter().collect();
-    for w in candidates {
-        r.push(w);
-        bron_kerbosch(
-            adj,
-            r,
-            p.and(&adj[w]),
-            x.and(&adj[w]),
-            budget,
-            report,
-            scratch,
-        );
+    for c in candidates {
+        let added = (ctx.weight)(None, c) + r.iter().map(|&k| (ctx.weight)(Some(k), c)).sum::<f64>();
+        r.push(c);
+        bron_kerbosch(ctx, r, w + added, p.and(&adj[c]), x.and(&adj[c]), report, scratch);
         r.pop();
-        p.clear(w);
-        x.set(w);
+        p.clear(c);
+        x.set(c);
     }
 }
 
 /// Every maximal clique of at least `min_size` nodes (sorted node lists), unbounded: for tests
 /// and small graphs.
 pub fn maximal_cliques(g: &Graph, min_size: usize) -> Vec<Vec<u32>> {
-    let budget = Budget {
-        limits: CliqueLimits {
+    let mut budget = Budget::new(
+        CliqueLimits {
             min_size,
             max_cliques: usize::MAX,
             deadline: None,
         },
-        found: AtomicUsize::new(0),
-        stopped: AtomicBool::new(false),
-    };
+        g.len(),
+    );
+    budget.per_vertex = usize::MAX;
     let pos = degeneracy_positions(g);
     let mut out = Vec::new();
     for v in 0..g.len() {
-        cliques_from(g, &pos, v, &budget, &mut |c| {
+        cliques_from(g, &pos, v, &budget, &mut |c, _| {
             let mut c = c.to_vec();
             c.sort_unstable();
             out.push(c);
@@ -251,6 +297,7 @@ pub struct Selection {
 }
 
 /// Weight of a clique: the sum of its edge weights.
+#[cfg(test)]
 fn clique_weight(g: &Graph, c: &[u32]) -> f64 {
     let mut s = 0.0;
     for (a, &i) in c.iter().enumerate() {
@@ -276,8 +323,10 @@ impl NodeBest {
             store: Vec::new(),
         }
     }
-    fn offer(&mut self, clique: Vec<u32>, w: f64) {
+    fn offer(&mut self, clique: &[u32], w: f64) {
         if clique.iter().any(|&v| w > self.weight[v as usize]) {
+            let mut clique = clique.to_vec();
+            clique.sort_unstable();
             let id = self.store.len() as u32;
             for &v in &clique {
                 if w > self.weight[v as usize] {
@@ -292,8 +341,8 @@ impl NodeBest {
         for v in 0..self.weight.len() {
             let id = other.index[v];
             if id != u32::MAX && other.weight[v] > self.weight[v] {
-                let (c, w) = other.store[id as usize].clone();
-                self.offer(c, w);
+                let (c, w) = &other.store[id as usize];
+                self.offer(c, *w);
             }
         }
         self
@@ -305,21 +354,14 @@ impl NodeBest {
 /// `top_k` heaviest.
 pub fn node_guided(g: &Graph, limits: CliqueLimits, top_k: usize) -> Selection {
     let n = g.len();
-    let budget = Budget {
-        limits,
-        found: AtomicUsize::new(0),
-        stopped: AtomicBool::new(false),
-    };
+    let budget = Budget::new(limits, n);
     let pos = degeneracy_positions(g);
     let best = (0..n)
         .into_par_iter()
         .fold(
             || NodeBest::new(n),
             |mut acc, v| {
-                cliques_from(g, &pos, v, &budget, &mut |c| {
-                    let mut c = c.to_vec();
-                    c.sort_unstable();
-                    let w = clique_weight(g, &c);
+                cliques_from(g, &pos, v, &budget, &mut |c, w| {
                     acc.offer(c, w);
                 });
                 acc
@@ -337,7 +379,7 @@ pub fn node_guided(g: &Graph, limits: CliqueLimits, top_k: usize) -> Selection {
     Selection {
         cliques,
         found: budget.found.load(Ordering::Relaxed),
-        truncated: budget.stopped.load(Ordering::Relaxed),
+        truncated: budget.stopped.load(Ordering::Relaxed) || budget.capped.load(Ordering::Relaxed),
     }
 }
 

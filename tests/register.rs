@@ -1,0 +1,128 @@
+//! Registration against known answers: synth truth, the bunny scans' published poses, the
+//! femoral contact surface, and Open3D's FPFH.
+mod common;
+
+use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use polishbot::cloud::transform::{isometry_from_rows, pose_difference};
+use polishbot::cloud::{self, Geometry, Mesh, PointCloud, Units};
+use polishbot::register::{register, RegisterConfig, RegisterError};
+use polishbot::synth::{synth, SynthConfig};
+
+fn mesh(rel: &str) -> Mesh {
+    match cloud::load(&common::shared_data(rel), None, Some(Units::M))
+        .unwrap()
+        .geometry
+    {
+        Geometry::Mesh { mesh, .. } => mesh,
+        Geometry::Cloud(_) => panic!("{rel} has no faces"),
+    }
+}
+
+/// Runs registration on one synth case; returns (coarse, fine) errors as (deg, mm).
+fn synth_case(cfg: &SynthConfig) -> ((f64, f64), (f64, f64)) {
+    let case = synth(cfg).unwrap();
+    let truth = case.truth.pose().unwrap();
+    let reg = register(&case.scan, &case.reference, &RegisterConfig::default())
+        .unwrap_or_else(|e| panic!("seed {}: {e}", cfg.seed));
+    let coarse = isometry_from_rows(&reg.coarse.scan_to_reference).unwrap();
+    let (c, f) = (pose_difference(&coarse, &truth), pose_difference(&reg.pose, &truth));
+    eprintln!(
+        "seed {} {}: coarse {:.4} deg {:.4} mm, fine {:.6} deg {:.6} mm; corr {} inl {:.3} cliques {} hyps {} chosen {} fit {:.4} it {} times {:?}",
+        cfg.seed, case.truth.source, c.0, c.1, f.0, f.1, reg.coarse.correspondences,
+        reg.coarse.inlier_ratio, reg.coarse.mac.cliques_found, reg.coarse.mac.hypotheses,
+        reg.coarse.chosen, reg.fitness, reg.fine.map_or(0, |x| x.iterations), reg.times
+    );
+    (c, f)
+}
+
+#[test]
+fn twenty_synth_cases_within_a_hundredth_of_a_degree_and_millimetre() {
+    let dm = common::shared_data("femoral_dm.stl");
+    let contact = common::shared_data("femoral_dm_contact.stl");
+    let mut worst_coarse = (0.0f64, 0.0f64);
+    let mut worst_fine = (0.0f64, 0.0f64);
+    for seed in 0..20u64 {
+        let mut cfg = SynthConfig {
+            seed: 100 + seed,
+            ..SynthConfig::default()
+        };
+        if seed % 2 == 1 {
+            cfg.mesh = Some(dm.clone());
+            cfg.surface = Some(contact.clone());
+            cfg.units = Some(Units::M);
+        }
+        let (c, f) = synth_case(&cfg);
+        worst_coarse = (worst_coarse.0.max(c.0), worst_coarse.1.max(c.1));
+        worst_fine = (worst_fine.0.max(f.0), worst_fine.1.max(f.1));
+    }
+    eprintln!("worst coarse {worst_coarse:?}, worst fine {worst_fine:?}");
+    assert!(worst_coarse.0 < 2.0, "coarse rotation error {worst_coarse:?}");
+    assert!(worst_fine.0 < 0.01 && worst_fine.1 < 0.01, "fine error {worst_fine:?}");
+}
+
+/// Reads one `bmesh` line of bun.conf as the pose mapping that scan into the common frame
+/// (p' = p R + t with R from the quaternion, i.e. R^T p + t in column form), in mm.
+fn bunny_pose(name: &str) -> Isometry3<f64> {
+    let conf = std::fs::read_to_string(common::shared_data("bunny/bun.conf")).unwrap();
+    let line = conf
+        .lines()
+        .find(|l| l.starts_with("bmesh") && l.contains(name))
+        .unwrap();
+    let v: Vec<f64> = line.split_whitespace().skip(2).map(|t| t.parse().unwrap()).collect();
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5]));
+    Isometry3::from_parts(
+        Translation3::new(v[0] * 1000.0, v[1] * 1000.0, v[2] * 1000.0),
+        q.inverse(),
+    )
+}
+
+#[test]
+fn bunny_045_onto_000_within_a_degree_and_a_millimetre() {
+    let load = |n: &str| {
+        cloud::load_cloud(&common::shared_data(&format!("bunny/{n}")), None, Some(Units::M))
+            .unwrap()
+    };
+    let (scan, reference) = (load("bun045.ply"), load("bun000.ply"));
+    // Both map into the common frame; bun000's pose is the identity.
+    let truth = bunny_pose("bun000.ply").inverse() * bunny_pose("bun045.ply");
+    let reg = register(&scan, &reference, &RegisterConfig::default()).unwrap();
+    let (deg, mm) = pose_difference(&reg.pose, &truth);
+    let coarse = isometry_from_rows(&reg.coarse.scan_to_reference).unwrap();
+    eprintln!("{:?}", reg.coarse);
+    eprintln!("bunny: coarse {:?} fine {deg:.4} deg {mm:.4} mm fitness {:.3} times {:?}",
+        pose_difference(&coarse, &truth), reg.fitness, reg.times);
+    assert!(deg < 1.0 && mm < 1.0, "{deg} deg {mm} mm");
+}
+
+#[test]
+fn contact_surface_onto_full_mesh_after_a_random_move() {
+    let full = cloud::sample_mesh(&mesh("femoral_dm.stl"), 400_000, 1).unwrap().cloud;
+    let mut part = cloud::sample_mesh(&mesh("femoral_dm_contact.stl"), 200_000, 2).unwrap().cloud;
+    part.normals = None;
+    let moved = Isometry3::new(Vector3::new(31.0, -17.0, 42.0), Vector3::new(1.9, -0.7, 2.4));
+    part.transform(&moved);
+    let reg = register(&part, &full, &RegisterConfig::default()).unwrap();
+    let (deg, mm) = pose_difference(&reg.pose, &moved.inverse());
+    eprintln!("contact: {deg:.5} deg {mm:.5} mm, fitness {:.3} times {:?}", reg.fitness, reg.times);
+    assert!(deg < 0.05 && mm < 0.05, "{deg} deg {mm} mm");
+}
+
+#[test]
+fn unrelated_clouds_fail_honestly() {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let full = cloud::sample_mesh(&mesh("femoral_dm.stl"), 100_000, 1).unwrap().cloud;
+    // A scan of random blobs: nothing in it matches the part.
+    let blob = PointCloud::from_points(
+        (0..50_000)
+            .map(|_| Point3::new(rng.gen_range(0.0..80.0), rng.gen_range(0.0..80.0), rng.gen_range(0.0..80.0)))
+            .collect(),
+    );
+    match register(&blob, &full, &RegisterConfig::default()) {
+        Err(RegisterError::Failed { reason, diagnostics }) => {
+            eprintln!("failed as expected: {reason}; fitness {}", diagnostics.fitness)
+        }
+        Err(e) => panic!("wrong error {e}"),
+        Ok(r) => panic!("a pose for unrelated clouds: fitness {}", r.fitness),
+    }
+}
