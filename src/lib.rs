@@ -5,4 +5,5 @@ pub mod cli;
 pub mod cloud;
 pub mod progress;
 pub mod register;
+pub mod report;
 pub mod synth;

@@ -564,3 +564,59 @@ mod mutation {
         }
     }
 }
+
+/// Turntable views, moved by their true view_to_first, lie on the part moved by
+/// first_from_reference (median distance at the noise level), and each view sees only part of it.
+#[test]
+fn turntable_views_are_consistent_with_their_truth() {
+    use polishbot::cloud::transform::isometry_from_rows;
+    use polishbot::synth::TurntableConfig;
+    let cfg = SynthConfig {
+        turntable: Some(TurntableConfig {
+            views: 8,
+            points_per_view: 20_000,
+            ..TurntableConfig::default()
+        }),
+        defects: 0,
+        ..small_config(5)
+    };
+    let case = synth(&cfg).unwrap();
+    let (views, truth) = case.turntable.as_ref().unwrap();
+    assert_eq!(views.len(), 8);
+    let first_from_ref = isometry_from_rows(&truth.first_from_reference).unwrap();
+    let mut surface = cloud::sample_mesh(&case.mesh, 300_000, 4).unwrap().cloud;
+    surface.transform(&first_from_ref);
+    let index = polishbot::cloud::Neighbours::new(&surface.points);
+    let normals = surface.normals.clone().unwrap();
+    let mut coarse = cloud::sample_mesh(&case.mesh, 5_000, 6).unwrap().cloud;
+    coarse.transform(&first_from_ref);
+    let coarse_index = polishbot::cloud::Neighbours::new(&coarse.points);
+    let mut seen = vec![false; coarse.len()];
+    for (view, t) in views.iter().zip(&truth.views) {
+        assert!((t.true_deg - t.nominal_deg).abs() <= 3.0 + 1e-9);
+        let pose = isometry_from_rows(&t.view_to_first).unwrap();
+        let mut d: Vec<f64> = view
+            .points
+            .iter()
+            .map(|p| {
+                let q = pose * p;
+                let n = index.knn(&q, 1)[0];
+                seen[coarse_index.knn(&q, 1)[0].index] = true;
+                // Distance to the surface's tangent plane at the nearest sample.
+                (q - surface.points[n.index]).dot(&normals[n.index]).abs()
+            })
+            .collect();
+        d.sort_by(f64::total_cmp);
+        assert!(
+            d[d.len() / 2] < 0.02,
+            "{}: median distance {}",
+            t.file,
+            d[d.len() / 2]
+        );
+    }
+    let coverage = seen.iter().filter(|s| **s).count() as f64 / seen.len() as f64;
+    assert!(
+        coverage > 0.7,
+        "views together touch {coverage:.2} of the surface samples"
+    );
+}

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use clap::Args;
 
 use crate::cloud::Units;
-use crate::synth::{synth, SynthConfig};
+use crate::synth::{synth, SynthConfig, TurntableConfig};
 
 /// Arguments of `synth` (they override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -48,6 +48,18 @@ pub struct SynthArgs {
     /// Largest translation of the scan's random pose, mm [default: 60].
     #[arg(long)]
     pub max_translation: Option<f64>,
+    /// Also write this many turntable range views (view_000.ply.., turntable.json).
+    #[arg(long)]
+    pub views: Option<usize>,
+    /// Nominal turntable step between views, degrees [default: 360 / views].
+    #[arg(long, requires = "views")]
+    pub step: Option<f64>,
+    /// Largest error of a view's true angle against its nominal one, degrees [default: 3].
+    #[arg(long, requires = "views")]
+    pub angle_error: Option<f64>,
+    /// Points per turntable view [default: 100000].
+    #[arg(long, requires = "views")]
+    pub view_points: Option<usize>,
 }
 
 fn parse_range(s: &str) -> Result<[f64; 2], String> {
@@ -84,6 +96,13 @@ pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<
     }
     if args.units.is_some() {
         cfg.units = args.units;
+    }
+    if let Some(views) = args.views {
+        let t = cfg.turntable.get_or_insert_with(TurntableConfig::default);
+        t.views = views;
+        t.step_deg = args.step.or(t.step_deg);
+        t.angle_error_deg = args.angle_error.unwrap_or(t.angle_error_deg);
+        t.points_per_view = args.view_points.unwrap_or(t.points_per_view);
     }
     let case = synth(&cfg)?;
     case.write(&args.out)?;

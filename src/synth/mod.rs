@@ -7,6 +7,7 @@ mod femoral;
 mod placement;
 mod profile;
 mod truth;
+mod turntable;
 
 use std::path::{Path, PathBuf};
 
@@ -19,6 +20,7 @@ use serde::{Deserialize, Serialize};
 pub use defects::{deviation_at, Defect, DefectKind};
 pub use femoral::{build as build_femoral, FemoralPart, FemoralShape};
 pub use truth::{OutlierTruth, Truth};
+pub use turntable::{TurntableConfig, TurntableTruth, ViewTruth};
 
 use crate::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud, Units};
 
@@ -57,6 +59,8 @@ pub struct SynthConfig {
     pub outliers: f64,
     /// Largest translation of the random scan pose, mm (default 60).
     pub max_translation: f64,
+    /// Also make turntable range views of the defective part (default none).
+    pub turntable: Option<TurntableConfig>,
 }
 
 impl Default for SynthConfig {
@@ -77,6 +81,7 @@ impl Default for SynthConfig {
             noise: 0.015,
             outliers: 0.01,
             max_translation: 60.0,
+            turntable: None,
         }
     }
 }
@@ -92,6 +97,8 @@ pub struct SynthCase {
     pub mesh: Mesh,
     /// What was planted.
     pub truth: Truth,
+    /// Turntable views (table frame) and their truth, when asked for.
+    pub turntable: Option<(Vec<PointCloud>, TurntableTruth)>,
 }
 
 impl SynthCase {
@@ -106,6 +113,12 @@ impl SynthCase {
             PlyPrecision::F64,
         )?;
         cloud::write_ply(&dir.join("scan.ply"), &self.scan, None, PlyPrecision::F64)?;
+        if let Some((views, truth)) = &self.turntable {
+            for (view, t) in views.iter().zip(&truth.views) {
+                cloud::write_ply(&dir.join(&t.file), view, None, PlyPrecision::F64)?;
+            }
+            truth.save(&dir.join("turntable.json"))?;
+        }
         self.truth.save(&dir.join("truth.json"))
     }
 }
@@ -204,6 +217,12 @@ pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
         .collect();
     let outliers = placement::add_outliers(&mut points, &sample, cfg.outliers, &mut rng);
 
+    let turntable = match &cfg.turntable {
+        Some(t) => Some(turntable::turntable_views(
+            &part.mesh, &defects, t, cfg.noise, &mut rng,
+        )?),
+        None => None,
+    };
     let move_scan = random_pose(&mut rng, cfg.max_translation);
     let mut scan = PointCloud::from_points(points);
     scan.transform(&move_scan);
@@ -224,5 +243,6 @@ pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
         scan,
         mesh: part.mesh,
         truth,
+        turntable,
     })
 }

@@ -1,0 +1,66 @@
+//! The report page: plain HTML with inline CSS, figures referenced by relative file names.
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use super::ReportInput;
+
+/// A table for the report.
+#[derive(Debug, Clone, Default)]
+pub struct Table {
+    /// Heading above the table.
+    pub title: String,
+    /// Column names.
+    pub header: Vec<String>,
+    /// Rows of cells.
+    pub rows: Vec<Vec<String>>,
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// Writes the page.
+pub fn write(path: &Path, input: &ReportInput, figures: &[PathBuf]) -> Result<()> {
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{t}</title>\n<style>\
+body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;margin:8px 0 24px}}\
+td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}} th{{background:#eee}}\
+td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px solid #ddd;margin:8px 0}}\
+</style></head><body>\n<h1>{t}</h1>\n",
+        t = escape(&input.title)
+    );
+    s += "<table>\n";
+    for (k, v) in &input.summary {
+        let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", escape(k), escape(v));
+    }
+    s += "</table>\n";
+    for f in figures {
+        let name = f.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let _ = writeln!(s, "<div><img src=\"{0}\" alt=\"{0}\"></div>", escape(name));
+    }
+    for t in &input.tables {
+        let _ = writeln!(s, "<h2>{}</h2>\n<table>", escape(&t.title));
+        s += "<tr>";
+        for h in &t.header {
+            let _ = write!(s, "<th>{}</th>", escape(h));
+        }
+        s += "</tr>\n";
+        for row in &t.rows {
+            s += "<tr>";
+            for c in row {
+                let _ = write!(s, "<td>{}</td>", escape(c));
+            }
+            s += "</tr>\n";
+        }
+        s += "</table>\n";
+    }
+    s += "</body></html>\n";
+    std::fs::write(path, s).with_context(|| format!("{}: cannot write", path.display()))
+}

@@ -1,0 +1,211 @@
+//! Turntable range views of a synthetic part: the part turns about the table axis by each
+//! view's true angle (nominal angle plus an unknown error), a fixed scanner sees the points
+//! that face it and are not hidden behind others, with noise on each coordinate.
+use std::collections::HashMap;
+
+use anyhow::Result;
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::defects::{deviation_at, Defect};
+use super::gauss;
+use crate::cloud::{sample_mesh, transform::isometry_to_rows, Mesh, PointCloud};
+
+/// Settings of the turntable views.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TurntableConfig {
+    /// Number of views (default 12).
+    pub views: usize,
+    /// Nominal step between views in degrees (default 360 / views).
+    pub step_deg: Option<f64>,
+    /// Largest error of a true angle against its nominal angle, degrees (default 3).
+    pub angle_error_deg: f64,
+    /// Table axis direction in the table frame (default +z).
+    pub axis: [f64; 3],
+    /// A point on the table axis, table frame, mm (default 4, -3, 0: the part sits off-centre).
+    pub centre: [f64; 3],
+    /// Direction from the part towards the scanner (default 0, -1, 0.35).
+    pub scanner_direction: [f64; 3],
+    /// Points per view after visibility (default 100,000).
+    pub points_per_view: usize,
+    /// Image-plane cell of the visibility test, mm (default 0.3).
+    pub occlusion_cell: f64,
+}
+
+impl Default for TurntableConfig {
+    fn default() -> Self {
+        TurntableConfig {
+            views: 12,
+            step_deg: None,
+            angle_error_deg: 3.0,
+            axis: [0.0, 0.0, 1.0],
+            centre: [4.0, -3.0, 0.0],
+            scanner_direction: [0.0, -1.0, 0.35],
+            points_per_view: 100_000,
+            occlusion_cell: 0.3,
+        }
+    }
+}
+
+/// The truth of one view.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewTruth {
+    /// File name of the view.
+    pub file: String,
+    /// Nominal turntable angle, degrees.
+    pub nominal_deg: f64,
+    /// True turntable angle, degrees.
+    pub true_deg: f64,
+    /// Maps this view's points into the first view's frame (4x4 rows).
+    pub view_to_first: [[f64; 4]; 4],
+}
+
+/// The truth of a turntable set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TurntableTruth {
+    /// Table axis (unit) in the table (= every view's) frame.
+    pub axis: [f64; 3],
+    /// A point on the axis, table frame.
+    pub centre: [f64; 3],
+    /// Maps reference-frame points into the first view's frame (4x4 rows).
+    pub first_from_reference: [[f64; 4]; 4],
+    /// Per view.
+    pub views: Vec<ViewTruth>,
+}
+
+/// Rotation by `deg` about the table axis.
+fn table_rotation(axis: &Unit<Vector3<f64>>, centre: &Point3<f64>, deg: f64) -> Isometry3<f64> {
+    let c = Translation3::from(centre.coords);
+    c * Isometry3::from_parts(
+        Translation3::identity(),
+        UnitQuaternion::from_axis_angle(axis, deg.to_radians()),
+    ) * c.inverse()
+}
+
+/// Makes the views of `mesh` (reference frame = table frame at angle 0) with `defects`.
+pub fn turntable_views(
+    mesh: &Mesh,
+    defects: &[Defect],
+    cfg: &TurntableConfig,
+    noise: f64,
+    rng: &mut ChaCha8Rng,
+) -> Result<(Vec<PointCloud>, TurntableTruth)> {
+    anyhow::ensure!(cfg.views >= 2, "a turntable set needs at least 2 views");
+    let axis = Unit::new_normalize(Vector3::from(cfg.axis));
+    let centre = Point3::from(cfg.centre);
+    let towards_scanner = Vector3::from(cfg.scanner_direction).normalize();
+    let step = cfg.step_deg.unwrap_or(360.0 / cfg.views as f64);
+    let dense = sample_mesh(mesh, cfg.points_per_view * 3, rng.gen())?.cloud;
+    let normals = dense.normals.as_ref().expect("sampled normals");
+    let surface: Vec<Point3<f64>> = dense
+        .points
+        .iter()
+        .zip(normals)
+        .map(|(p, n)| p + n * deviation_at(defects, p, n))
+        .collect();
+    let mut views = Vec::with_capacity(cfg.views);
+    let mut truth_views = Vec::with_capacity(cfg.views);
+    let mut first: Option<Isometry3<f64>> = None;
+    for i in 0..cfg.views {
+        let nominal = i as f64 * step;
+        let true_deg = nominal + rng.gen_range(-1.0..=1.0) * cfg.angle_error_deg;
+        let table = table_rotation(&axis, &centre, true_deg);
+        let points: Vec<Point3<f64>> = surface.iter().map(|p| table * p).collect();
+        let facing: Vec<Vector3<f64>> = normals.iter().map(|n| table.rotation * n).collect();
+        let visible = visible_points(&points, &facing, &towards_scanner, cfg.occlusion_cell);
+        let mut keep: Vec<usize> = visible;
+        // Thin to the requested count with a seeded shuffle prefix.
+        if keep.len() > cfg.points_per_view {
+            for k in 0..cfg.points_per_view {
+                let j = rng.gen_range(k..keep.len());
+                keep.swap(k, j);
+            }
+            keep.truncate(cfg.points_per_view);
+            keep.sort_unstable();
+        }
+        let view_points = keep
+            .iter()
+            .map(|&k| points[k] + Vector3::new(gauss(rng), gauss(rng), gauss(rng)) * noise)
+            .collect();
+        views.push(PointCloud::from_points(view_points));
+        let first_table = *first.get_or_insert(table);
+        truth_views.push(ViewTruth {
+            file: format!("view_{i:03}.ply"),
+            nominal_deg: nominal,
+            true_deg,
+            view_to_first: isometry_to_rows(&(first_table * table.inverse())),
+        });
+    }
+    let truth = TurntableTruth {
+        axis: axis.into_inner().into(),
+        centre: cfg.centre,
+        first_from_reference: isometry_to_rows(&first.expect("at least two views")),
+        views: truth_views,
+    };
+    Ok((views, truth))
+}
+
+/// Indices of points that face the scanner (normal within 80 degrees of it) and are nearest
+/// to it in their neighbourhood of the image plane (orthographic z-buffer, 3x3 cells).
+fn visible_points(
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    towards: &Vector3<f64>,
+    cell: f64,
+) -> Vec<usize> {
+    let u = towards
+        .cross(&Vector3::z())
+        .try_normalize(1e-9)
+        .unwrap_or_else(|| towards.cross(&Vector3::x()).normalize());
+    let v = towards.cross(&u);
+    let key = |p: &Point3<f64>| {
+        (
+            (p.coords.dot(&u) / cell).floor() as i64,
+            (p.coords.dot(&v) / cell).floor() as i64,
+        )
+    };
+    // Height towards the scanner: larger is nearer.
+    let mut nearest: HashMap<(i64, i64), f64> = HashMap::new();
+    for p in points {
+        let h = p.coords.dot(towards);
+        let e = nearest.entry(key(p)).or_insert(f64::MIN);
+        *e = e.max(h);
+    }
+    let min_cos = 10f64.to_radians().sin();
+    (0..points.len())
+        .filter(|&i| {
+            let cos = normals[i].dot(towards);
+            if cos < min_cos {
+                return false;
+            }
+            // The surface itself rises across the 3x3 cells by up to this much.
+            let tolerance = 2.2 * cell * (1.0 - cos * cos).sqrt() / cos + 0.1;
+            let (a, b) = key(&points[i]);
+            let h = points[i].coords.dot(towards);
+            let front = (-1..=1)
+                .flat_map(|da| (-1..=1).map(move |db| (a + da, b + db)))
+                .filter_map(|k| nearest.get(&k))
+                .fold(f64::MIN, |m, &x| m.max(x));
+            h >= front - tolerance
+        })
+        .collect()
+}
+
+impl TurntableTruth {
+    /// Writes turntable.json.
+    pub fn save(&self, path: &std::path::Path) -> Result<()> {
+        std::fs::write(path, serde_json::to_string_pretty(self)?)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+    }
+
+    /// Reads turntable.json.
+    pub fn load(path: &std::path::Path) -> Result<TurntableTruth> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        serde_json::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
+    }
+}
