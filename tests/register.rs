@@ -126,3 +126,49 @@ fn unrelated_clouds_fail_honestly() {
         Ok(r) => panic!("a pose for unrelated clouds: fitness {}", r.fitness),
     }
 }
+
+#[test]
+fn fpfh_matches_open3d() {
+    let Some(python) = common::oracle_python() else {
+        return;
+    };
+    let dir = common::tempdir();
+    let sample = cloud::sample_mesh(&mesh("femoral_dm.stl"), 6_000, 5).unwrap().cloud;
+    let path = dir.path().join("pts.ply");
+    cloud::write_ply(&path, &sample, None, cloud::PlyPrecision::F64).unwrap();
+    let radius = 4.0;
+    let ours = polishbot::register::fpfh::compute_fpfh(
+        &sample.points,
+        sample.normals.as_ref().unwrap(),
+        radius,
+        100,
+    );
+    let script = r#"
+import sys, numpy as np, open3d as o3d
+pc = o3d.io.read_point_cloud(sys.argv[1])
+assert pc.has_normals()
+f = o3d.pipelines.registration.compute_fpfh_feature(
+    pc, o3d.geometry.KDTreeSearchParamHybrid(radius=float(sys.argv[2]), max_nn=100))
+np.savetxt(sys.stdout, np.asarray(f.data).T, fmt="%.17g")
+"#;
+    let out = common::run_python(&python, script, &[path.to_str().unwrap(), &radius.to_string()]);
+    let theirs: Vec<Vec<f64>> = out
+        .lines()
+        .map(|l| l.split_whitespace().map(|t| t.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(theirs.len(), ours.len());
+    let mut rel: Vec<f64> = ours
+        .iter()
+        .zip(&theirs)
+        .map(|(a, b)| {
+            let diff: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+            let norm: f64 = b.iter().map(|y| y * y).sum::<f64>().sqrt();
+            diff / norm.max(1e-12)
+        })
+        .collect();
+    rel.sort_by(f64::total_cmp);
+    let p99 = rel[rel.len() * 99 / 100];
+    let median = rel[rel.len() / 2];
+    eprintln!("FPFH vs Open3D: median {median:.2e}, p99 {p99:.2e}, max {:.2e}", rel.last().unwrap());
+    assert!(median < 1e-6 && p99 < 1e-3, "median {median:.2e} p99 {p99:.2e}");
+}

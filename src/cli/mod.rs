@@ -8,6 +8,7 @@ use crate::cloud::{Format, Units};
 
 mod demo;
 mod info;
+mod register;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
@@ -43,7 +44,7 @@ pub enum Command {
     /// Statistical outlier filter and down-sampling.
     Filter(NotYet),
     /// Register a scan onto a reference: DIR/registration.json.
-    Register(NotYet),
+    Register(register::RegisterArgs),
     /// Whole metrology chain: registration, deviations, regions, report.
     Inspect(NotYet),
     /// Plan grinding passes and the joint trajectory from an inspection.
@@ -88,7 +89,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
         Command::Filter(_) => not_yet("filter"),
-        Command::Register(_) => not_yet("register"),
+        Command::Register(args) => register::run(args, config),
         Command::Inspect(_) => not_yet("inspect"),
         Command::Plan(_) => not_yet("plan"),
         Command::Run(_) => not_yet("run"),
