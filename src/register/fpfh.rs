@@ -62,14 +62,28 @@ pub fn compute_fpfh(
     radius: f64,
     max_nn: usize,
 ) -> Vec<Fpfh> {
+    let all: Vec<usize> = (0..points.len()).collect();
+    compute_fpfh_at(points, normals, radius, max_nn, &all)
+}
+
+/// FPFH of the points at `at` (indices), computed over the whole cloud (the SPFH of every
+/// point is needed by its neighbours).
+pub fn compute_fpfh_at(
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    radius: f64,
+    max_nn: usize,
+    at: &[usize],
+) -> Vec<Fpfh> {
     let tree = Tree::new(points);
+    // Sorted radius search truncated to max_nn: the same set as a k-nearest search within the
+    // radius, cheaper when most neighbourhoods hold fewer than max_nn points.
     let neighbours: Vec<Vec<(usize, f64)>> = points
         .par_iter()
         .map(|p| {
-            tree.knn_within(p, max_nn, radius)
-                .into_iter()
-                .map(|n| (n.index, n.dist2))
-                .collect()
+            let mut nb = tree.within(p, radius);
+            nb.truncate(max_nn);
+            nb.into_iter().map(|n| (n.index, n.dist2)).collect()
         })
         .collect();
     let spfh: Vec<Fpfh> = (0..points.len())
@@ -90,9 +104,8 @@ pub fn compute_fpfh(
             h
         })
         .collect();
-    (0..points.len())
-        .into_par_iter()
-        .map(|i| {
+    at.par_iter()
+        .map(|&i| {
             let mut h = [0.0; FPFH_BINS];
             let nb = &neighbours[i];
             if nb.len() > 1 {

@@ -83,6 +83,26 @@ fn residuals(
         .collect()
 }
 
+/// Share of `src` points (under `pose`) with a target point within `distance`, and the RMS
+/// distance of those pairs.
+pub(crate) fn fitness(
+    src: &[Point3<f64>],
+    tree: &Tree,
+    pose: &Isometry3<f64>,
+    distance: f64,
+) -> (f64, f64) {
+    let d2max = distance * distance;
+    let (n, sum) = src
+        .par_iter()
+        .filter_map(|s| tree.nearest(&(pose * s)).filter(|nb| nb.dist2 <= d2max))
+        .map(|nb| (1usize, nb.dist2))
+        .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (
+        n as f64 / src.len().max(1) as f64,
+        (sum / n.max(1) as f64).sqrt(),
+    )
+}
+
 fn median_abs(values: impl Iterator<Item = f64>) -> f64 {
     let mut v: Vec<f64> = values.map(f64::abs).collect();
     if v.is_empty() {

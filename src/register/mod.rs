@@ -37,6 +37,9 @@ pub struct RegisterConfig {
     pub feature_radius: Option<f64>,
     /// Neighbour cap of the FPFH search (Open3D tutorial: 100).
     pub feature_max_nn: usize,
+    /// Most scan points that get a descriptor (evenly strided over the voxel cloud; the
+    /// reference is described everywhere; default 8,000).
+    pub max_keypoints: usize,
     /// Keep only mutual nearest feature matches (default true).
     pub mutual: bool,
     /// Cap on correspondences, smallest feature distance first (default 3000).
@@ -68,6 +71,9 @@ pub struct RegisterConfig {
     pub icp_relative_tolerance: f64,
     /// Fixed Geman–McClure scale of the fine ICP; default adaptive (3 × robust sigma).
     pub icp_kernel_scale: Option<f64>,
+    /// Distance within which a scan point counts as fitting the reference in the reported
+    /// fitness and inlier RMSE (default 3 x the reference's mean spacing).
+    pub fitness_distance: Option<f64>,
     /// Below this final fitness the registration fails (default 0.2).
     pub min_fitness: f64,
     /// Below this many inlying correspondences the coarse stage fails (default 8).
@@ -81,6 +87,7 @@ impl Default for RegisterConfig {
             normal_radius: None,
             feature_radius: None,
             feature_max_nn: 100,
+            max_keypoints: 8_000,
             mutual: true,
             max_correspondences: 3000,
             compat_sigma: None,
@@ -96,6 +103,7 @@ impl Default for RegisterConfig {
             icp_max_iterations: 100,
             icp_relative_tolerance: 1e-9,
             icp_kernel_scale: None,
+            fitness_distance: None,
             min_fitness: 0.2,
             min_inliers: 8,
         }
@@ -134,6 +142,8 @@ pub struct Coarse {
     pub inlier_threshold: f64,
     /// Down-sampled scan points.
     pub scan_points: usize,
+    /// Scan points described by FPFH (keypoints).
+    pub scan_keypoints: usize,
     /// Down-sampled reference points.
     pub reference_points: usize,
     /// Putative correspondences.
@@ -174,11 +184,13 @@ pub struct Times {
 pub struct Registration {
     /// Maps scan points into the reference frame: 4x4 row-major.
     pub scan_to_reference: [[f64; 4]; 4],
-    /// Final fitness: fraction of (used) scan points with a reference point within the fine
-    /// ICP distance.
+    /// Final fitness: fraction of the scan points used by the fine ICP that have a reference
+    /// point within `fitness_distance`.
     pub fitness: f64,
     /// RMS point-to-point distance of those pairs (mm).
     pub inlier_rmse: f64,
+    /// Distance of the fitness test (mm).
+    pub fitness_distance: f64,
     /// Coarse stage diagnostics.
     pub coarse: Coarse,
     /// Fine ICP diagnostics.
@@ -251,8 +263,8 @@ pub fn register_with_progress(
     let t = Instant::now();
     let scan_tree = Tree::new(&scan.points);
     let ref_tree = Tree::new(&reference.points);
-    let mr = tree::mean_spacing(&scan.points, &scan_tree)
-        .max(tree::mean_spacing(&reference.points, &ref_tree));
+    let mr_ref = tree::mean_spacing(&reference.points, &ref_tree);
+    let mr = tree::mean_spacing(&scan.points, &scan_tree).max(mr_ref);
     let voxel = cfg.voxel.unwrap_or(5.0 * mr);
     if !(voxel > 0.0) {
         return Err(RegisterError::Input(
@@ -284,8 +296,11 @@ pub fn register_with_progress(
 
     progress("FPFH features");
     let t = Instant::now();
+    let stride = s_pts.len().div_ceil(cfg.max_keypoints.max(1));
+    let keypoints: Vec<usize> = (0..s_pts.len()).step_by(stride).collect();
+    coarse.scan_keypoints = keypoints.len();
     let (s_f, r_f) = rayon::join(
-        || fpfh::compute_fpfh(&s_pts, &s_nrm, feature_radius, cfg.feature_max_nn),
+        || fpfh::compute_fpfh_at(&s_pts, &s_nrm, feature_radius, cfg.feature_max_nn, &keypoints),
         || fpfh::compute_fpfh(&r_pts, &r_nrm, feature_radius, cfg.feature_max_nn),
     );
     times.fpfh = t.elapsed().as_secs_f64();
@@ -295,7 +310,7 @@ pub fn register_with_progress(
     let corr =
         correspondences::match_features(&s_f, &r_f, cfg.mutual, cfg.max_correspondences);
     coarse.correspondences = corr.len();
-    let src: Vec<Point3<f64>> = corr.iter().map(|c| s_pts[c.scan]).collect();
+    let src: Vec<Point3<f64>> = corr.iter().map(|c| s_pts[keypoints[c.scan]]).collect();
     let dst: Vec<Point3<f64>> = corr.iter().map(|c| r_pts[c.reference]).collect();
     times.correspondences = t.elapsed().as_secs_f64();
 
@@ -357,6 +372,7 @@ pub fn register_with_progress(
         scan_to_reference: row_major(&Isometry3::identity()),
         fitness: 0.0,
         inlier_rmse: 0.0,
+        fitness_distance: cfg.fitness_distance.unwrap_or(3.0 * mr_ref),
         coarse,
         fine: None,
         fine_max_distance,
@@ -414,15 +430,19 @@ pub fn register_with_progress(
     out.times.icp = t.elapsed().as_secs_f64();
     out.fine_points = src_fine.len();
     out.fine = Some(fine);
-    out.fitness = fine.fitness;
-    out.inlier_rmse = fine.inlier_rmse;
+    (out.fitness, out.inlier_rmse) = icp::fitness(
+        &src_fine,
+        &ref_tree,
+        &fine.pose,
+        out.fitness_distance,
+    );
     out.pose = fine.pose;
     out.scan_to_reference = row_major(&fine.pose);
     out.times.total = start.elapsed().as_secs_f64();
-    if fine.fitness < cfg.min_fitness {
+    if out.fitness < cfg.min_fitness {
         let reason = format!(
-            "final fitness {:.3} is below {:.3}",
-            fine.fitness, cfg.min_fitness
+            "final fitness {:.3} (scan points within {:.3} mm of the reference) is below {:.3}",
+            out.fitness, out.fitness_distance, cfg.min_fitness
         );
         return fail(out, reason);
     }
