@@ -98,12 +98,8 @@ mod tests {
         };
         let a: Vec<Fpfh> = (0..300).map(|_| f()).collect();
         let b: Vec<Fpfh> = (0..400).map(|_| f()).collect();
-        let dist = |x: &Fpfh, y: &Fpfh| {
-            x.iter()
-                .zip(y)
-                .map(|(p, q)| (p - q) * (p - q))
-                .sum::<f64>()
-        };
+        let dist =
+            |x: &Fpfh, y: &Fpfh| x.iter().zip(y).map(|(p, q)| (p - q) * (p - q)).sum::<f64>();
         let brute = |q: &Fpfh, set: &[Fpfh]| {
             (0..set.len())
                 .min_by(|&i, &j| dist(q, &set[i]).total_cmp(&dist(q, &set[j])))
@@ -120,6 +116,8 @@ mod tests {
         }
         let capped = match_features(&a, &b, false, 10);
         assert_eq!(capped.len(), 10);
-        assert!(capped.windows(2).all(|w| w[0].feature_distance <= w[1].feature_distance));
+        assert!(capped
+            .windows(2)
+            .all(|w| w[0].feature_distance <= w[1].feature_distance));
     }
 }

@@ -161,7 +161,10 @@ mod tests {
                 assert!((fa[k] - fb[k]).abs() < 1e-6 * (1.0 + fa[k].abs()));
             }
             let total: f64 = fa.iter().sum();
-            assert!(total == 0.0 || (total - 600.0).abs() < 1e-6, "three histograms of 200");
+            assert!(
+                total == 0.0 || (total - 600.0).abs() < 1e-6,
+                "three histograms of 200"
+            );
         }
     }
 }

@@ -182,7 +182,10 @@ pub(crate) fn icp(
         let Some(x) = step.a.cholesky().map(|c| c.solve(&(-step.b))) else {
             break;
         };
-        let delta = Isometry3::new(Vector3::new(x[3], x[4], x[5]), Vector3::new(x[0], x[1], x[2]));
+        let delta = Isometry3::new(
+            Vector3::new(x[3], x[4], x[5]),
+            Vector3::new(x[0], x[1], x[2]),
+        );
         pose = delta * pose;
         if x.norm() < 1e-13 {
             result.pose = pose;
@@ -215,8 +218,13 @@ mod tests {
         let target: Vec<Point3<f64>> = (0..40_000).map(|_| sphere(&mut rng)).collect();
         let tree = Tree::new(&target);
         let normals = super::super::tree::pca_normals(&target, &tree, 1.0, 30);
-        let truth = Isometry3::new(Vector3::new(0.3, -0.2, 0.25), Vector3::new(0.01, -0.02, 0.015));
-        let mut src: Vec<Point3<f64>> = (0..8_000).map(|_| truth.inverse() * sphere(&mut rng)).collect();
+        let truth = Isometry3::new(
+            Vector3::new(0.3, -0.2, 0.25),
+            Vector3::new(0.01, -0.02, 0.015),
+        );
+        let mut src: Vec<Point3<f64>> = (0..8_000)
+            .map(|_| truth.inverse() * sphere(&mut rng))
+            .collect();
         for p in src.iter_mut().take(400) {
             *p += Vector3::new(0.0, 0.0, 1.5); // a "defect" patch of outliers
         }

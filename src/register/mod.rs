@@ -300,15 +300,22 @@ pub fn register_with_progress(
     let keypoints: Vec<usize> = (0..s_pts.len()).step_by(stride).collect();
     coarse.scan_keypoints = keypoints.len();
     let (s_f, r_f) = rayon::join(
-        || fpfh::compute_fpfh_at(&s_pts, &s_nrm, feature_radius, cfg.feature_max_nn, &keypoints),
+        || {
+            fpfh::compute_fpfh_at(
+                &s_pts,
+                &s_nrm,
+                feature_radius,
+                cfg.feature_max_nn,
+                &keypoints,
+            )
+        },
         || fpfh::compute_fpfh(&r_pts, &r_nrm, feature_radius, cfg.feature_max_nn),
     );
     times.fpfh = t.elapsed().as_secs_f64();
 
     progress("feature matching");
     let t = Instant::now();
-    let corr =
-        correspondences::match_features(&s_f, &r_f, cfg.mutual, cfg.max_correspondences);
+    let corr = correspondences::match_features(&s_f, &r_f, cfg.mutual, cfg.max_correspondences);
     coarse.correspondences = corr.len();
     let src: Vec<Point3<f64>> = corr.iter().map(|c| s_pts[keypoints[c.scan]]).collect();
     let dst: Vec<Point3<f64>> = corr.iter().map(|c| r_pts[c.reference]).collect();
@@ -388,7 +395,10 @@ pub fn register_with_progress(
         })
     };
     let Some(chosen) = chosen else {
-        return fail(out, "no pose hypothesis (no consistent correspondences)".into());
+        return fail(
+            out,
+            "no pose hypothesis (no consistent correspondences)".into(),
+        );
     };
     let h = hyps[chosen];
     out.coarse.chosen = chosen;
@@ -430,12 +440,8 @@ pub fn register_with_progress(
     out.times.icp = t.elapsed().as_secs_f64();
     out.fine_points = src_fine.len();
     out.fine = Some(fine);
-    (out.fitness, out.inlier_rmse) = icp::fitness(
-        &src_fine,
-        &ref_tree,
-        &fine.pose,
-        out.fitness_distance,
-    );
+    (out.fitness, out.inlier_rmse) =
+        icp::fitness(&src_fine, &ref_tree, &fine.pose, out.fitness_distance);
     out.pose = fine.pose;
     out.scan_to_reference = row_major(&fine.pose);
     out.times.total = start.elapsed().as_secs_f64();

@@ -69,7 +69,9 @@ pub(crate) fn pca_normals(
             let mut n = if nb.len() < 3 {
                 Vector3::z()
             } else {
-                let m = nb.iter().fold(Vector3::zeros(), |a, n| a + points[n.index].coords)
+                let m = nb
+                    .iter()
+                    .fold(Vector3::zeros(), |a, n| a + points[n.index].coords)
                     / nb.len() as f64;
                 let mut c = Matrix3::zeros();
                 for n in &nb {

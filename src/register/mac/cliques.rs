@@ -252,9 +252,18 @@ fn bron_kerbosch(
         .expect("P is not empty");
     let candidates: Vec<usize> = p.and_not(&adj[pivot]).iter().collect();
     for c in candidates {
-        let added = (ctx.weight)(None, c) + r.iter().map(|&k| (ctx.weight)(Some(k), c)).sum::<f64>();
+        let added =
+            (ctx.weight)(None, c) + r.iter().map(|&k| (ctx.weight)(Some(k), c)).sum::<f64>();
         r.push(c);
-        bron_kerbosch(ctx, r, w + added, p.and(&adj[c]), x.and(&adj[c]), report, scratch);
+        bron_kerbosch(
+            ctx,
+            r,
+            w + added,
+            p.and(&adj[c]),
+            x.and(&adj[c]),
+            report,
+            scratch,
+        );
         r.pop();
         p.clear(c);
         x.set(c);
@@ -368,11 +377,18 @@ pub fn node_guided(g: &Graph, limits: CliqueLimits, top_k: usize) -> Selection {
             },
         )
         .reduce(|| NodeBest::new(n), NodeBest::merge);
-    let mut ids: Vec<u32> = best.index.iter().copied().filter(|&i| i != u32::MAX).collect();
+    let mut ids: Vec<u32> = best
+        .index
+        .iter()
+        .copied()
+        .filter(|&i| i != u32::MAX)
+        .collect();
     ids.sort_unstable();
     ids.dedup();
-    let mut cliques: Vec<(Vec<u32>, f64)> =
-        ids.iter().map(|&i| best.store[i as usize].clone()).collect();
+    let mut cliques: Vec<(Vec<u32>, f64)> = ids
+        .iter()
+        .map(|&i| best.store[i as usize].clone())
+        .collect();
     cliques.sort_by(|a, b| b.1.total_cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
     cliques.dedup_by(|a, b| a.0 == b.0);
     cliques.truncate(top_k);
@@ -409,9 +425,8 @@ mod tests {
         let n = g.len();
         let linked = |a: usize, b: usize| g.weight(a, b).is_some();
         let is_clique = |m: u32| {
-            (0..n).all(|a| {
-                m & (1 << a) == 0 || (a + 1..n).all(|b| m & (1 << b) == 0 || linked(a, b))
-            })
+            (0..n)
+                .all(|a| m & (1 << a) == 0 || (a + 1..n).all(|b| m & (1 << b) == 0 || linked(a, b)))
         };
         let mut out = Vec::new();
         for m in 1u32..(1 << n) {

@@ -75,11 +75,7 @@ pub struct MacStats {
 
 /// Runs MAC on correspondences `src[i] <-> dst[i]` (ordered best first, so thinning keeps a
 /// prefix). Returns distinct refined hypotheses, best score first.
-pub fn mac(
-    src: &[Point3<f64>],
-    dst: &[Point3<f64>],
-    p: &MacParams,
-) -> (Vec<Hypothesis>, MacStats) {
+pub fn mac(src: &[Point3<f64>], dst: &[Point3<f64>], p: &MacParams) -> (Vec<Hypothesis>, MacStats) {
     let mut stats = MacStats::default();
     let t0 = Instant::now();
     let mut n = src.len();

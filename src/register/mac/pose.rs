@@ -79,7 +79,11 @@ pub fn refine(
     let mut current = *pose;
     let mut last_inliers: Vec<bool> = Vec::new();
     for _ in 0..iterations {
-        let errs: Vec<f64> = src.iter().zip(dst).map(|(s, d)| (current * s - d).norm()).collect();
+        let errs: Vec<f64> = src
+            .iter()
+            .zip(dst)
+            .map(|(s, d)| (current * s - d).norm())
+            .collect();
         let inl: Vec<bool> = errs.iter().map(|&e| e < tau).collect();
         if inl == last_inliers {
             break;
@@ -121,7 +125,13 @@ mod tests {
                 ),
             );
             let src: Vec<Point3<f64>> = (0..10)
-                .map(|_| Point3::new(rng.gen_range(-30.0..30.0), rng.gen_range(-30.0..30.0), rng.gen_range(-30.0..30.0)))
+                .map(|_| {
+                    Point3::new(
+                        rng.gen_range(-30.0..30.0),
+                        rng.gen_range(-30.0..30.0),
+                        rng.gen_range(-30.0..30.0),
+                    )
+                })
                 .collect();
             let dst: Vec<Point3<f64>> = src.iter().map(|p| truth * p).collect();
             let w: Vec<f64> = (0..10).map(|_| rng.gen_range(0.5..2.0)).collect();
@@ -146,13 +156,19 @@ mod tests {
         dst[4] = Point3::new(-40.0, 7.0, 0.0);
         let got = weighted_svd(&src, &dst, &[1.0, 1.0, 1.0, 1.0, 0.0]).unwrap();
         assert!((got.inverse() * truth).translation.vector.norm() < 1e-12);
-        let start = Isometry3::new(Vector3::new(0.1, -0.1, 0.05), Vector3::new(0.02, 0.0, -0.03))
-            * truth;
+        let start = Isometry3::new(
+            Vector3::new(0.1, -0.1, 0.05),
+            Vector3::new(0.02, 0.0, -0.03),
+        ) * truth;
         let refined = refine(&start, &src, &dst, 1.0, 10);
         let diff = refined.inverse() * truth;
         assert!(diff.translation.vector.norm() < 1e-9 && diff.rotation.angle() < 1e-9);
         assert_eq!(mae_score(&refined, &src, &dst, 1e-6).1, 4);
-        let line = [Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.0, 0.0), Point3::new(2.0, 0.0, 0.0)];
+        let line = [
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(2.0, 0.0, 0.0),
+        ];
         assert!(weighted_svd(&line, &line, &[1.0; 3]).is_none());
     }
 }
