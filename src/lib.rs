@@ -1,9 +1,15 @@
 //! polishbot: scan-versus-reference metrology of knee-prosthesis parts and a DOFBOT grinding
 //! controller. The stages follow `DESIGN.md` top to bottom; each has one front function and one
 //! config struct.
+pub mod bus;
 pub mod cli;
 pub mod cloud;
+pub mod compare;
+pub mod plan;
+pub mod preprocess;
 pub mod progress;
+pub mod regions;
 pub mod register;
 pub mod report;
+pub mod robot;
 pub mod synth;

@@ -6,8 +6,11 @@ use clap::{Args, Parser, Subcommand};
 
 use crate::cloud::{Format, Units};
 
+mod arm;
 mod demo;
+mod filter;
 mod info;
+mod inspect;
 mod register;
 mod synth;
 
@@ -42,17 +45,17 @@ pub enum Command {
     /// Merge turntable range views into one cloud.
     Merge(NotYet),
     /// Statistical outlier filter and down-sampling.
-    Filter(NotYet),
+    Filter(filter::FilterArgs),
     /// Register a scan onto a reference: DIR/registration.json.
     Register(register::RegisterArgs),
     /// Whole metrology chain: registration, deviations, regions, report.
-    Inspect(NotYet),
+    Inspect(Box<inspect::InspectArgs>),
     /// Plan grinding passes and the joint trajectory from an inspection.
     Plan(NotYet),
     /// Stream a plan to the arm (serial port or simulated arm).
     Run(NotYet),
     /// Direct arm commands: ping, read, move, torque.
-    Arm(NotYet),
+    Arm(arm::ArmArgs),
     /// Calibration routines: servos, workcell, verify.
     Calibrate(NotYet),
     /// Write a synthetic reference, a defective moved scan and the truth.
@@ -88,12 +91,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(args) => info::run(args, config),
         Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
-        Command::Filter(_) => not_yet("filter"),
+        Command::Filter(args) => filter::run(args, config),
         Command::Register(args) => register::run(args, config),
-        Command::Inspect(_) => not_yet("inspect"),
+        Command::Inspect(args) => inspect::run(*args, config),
         Command::Plan(_) => not_yet("plan"),
         Command::Run(_) => not_yet("run"),
-        Command::Arm(_) => not_yet("arm"),
+        Command::Arm(args) => arm::run(args, config),
         Command::Calibrate(_) => not_yet("calibrate"),
         Command::Demo(args) => demo::run(args, config),
     }

@@ -19,7 +19,7 @@ mod xyz;
 
 pub use error::{ParseError, Place};
 pub use io::{load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units};
-pub use neighbours::{Neighbour, Neighbours};
+pub use neighbours::{KnnScratch, Neighbour, Neighbours};
 pub use ply::{write_ply_bytes, PlyPrecision};
 pub use sample::{sample_mesh, MeshSample};
 pub use types::{Aabb, Geometry, Mesh, PointCloud, ScalarField};

@@ -6,8 +6,9 @@
 //! lowest indices are taken.
 use std::num::NonZeroUsize;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use kiddo::{Eytzinger, ImmutableKdTree, QueryScratch, SquaredEuclidean};
 use nalgebra::Point3;
+use rayon::prelude::*;
 
 /// One neighbour: its index in the indexed points and its squared distance to the query.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -16,6 +17,14 @@ pub struct Neighbour {
     pub index: usize,
     /// Squared Euclidean distance (mm²).
     pub dist2: f64,
+}
+
+/// Per-worker reusable state of [`Neighbours::knn_dist2_into`].
+#[derive(Default)]
+pub struct KnnScratch {
+    stack: QueryScratch<Eytzinger, f64, 3>,
+    previous: Option<([f64; 3], f64)>,
+    k: usize,
 }
 
 /// A k-d tree over points, for k-nearest, radius and nearest-one queries.
@@ -103,13 +112,96 @@ impl Neighbours {
         found
     }
 
+    /// Point indices in the tree's leaf order: neighbouring points come close together, so
+    /// queries issued in this order reuse the cache (several times faster on shuffled clouds).
+    pub fn spatial_order(&self) -> Vec<usize> {
+        self.tree.iter().map(|(i, _)| i as usize).collect()
+    }
+
+    /// `f(scratch, i)` for every indexed point `i`, in parallel (rayon), visited in
+    /// [`spatial_order`](Self::spatial_order) for speed; results come back in index order.
+    /// `init` makes each worker's scratch.
+    pub fn par_map_points<R, S, I, F>(&self, init: I, f: F) -> Vec<R>
+    where
+        R: Send,
+        I: Fn() -> S + Sync + Send,
+        F: Fn(&mut S, usize) -> R + Sync + Send,
+    {
+        let order = self.spatial_order();
+        let values: Vec<R> = order.par_iter().map_init(init, |s, &i| f(s, i)).collect();
+        let mut slots: Vec<Option<R>> = values.into_iter().map(Some).collect();
+        let mut position = vec![0; order.len()];
+        for (j, &i) in order.iter().enumerate() {
+            position[i] = j;
+        }
+        position
+            .iter()
+            .map(|&j| slots[j].take().expect("a permutation"))
+            .collect()
+    }
+
+    /// The indexed point `i`.
+    pub fn point(&self, i: usize) -> Point3<f64> {
+        Point3::from(self.points[i])
+    }
+
+    /// Squared distances to the `k` nearest points, ascending, into `out` (cleared first). The
+    /// fast path for statistics that need distances only (no tie resolution is needed: the
+    /// k smallest distances are the same whichever tied point is taken). `scratch` carries
+    /// the previous query of the same worker: its k-th distance plus the step between the
+    /// two queries bounds this query's search (triangle inequality), which is exact and saves
+    /// much of the search when queries come in [`spatial_order`](Self::spatial_order).
+    pub fn knn_dist2_into(
+        &self,
+        q: &Point3<f64>,
+        k: usize,
+        scratch: &mut KnnScratch,
+        out: &mut Vec<f64>,
+    ) {
+        out.clear();
+        let Some(want) = NonZeroUsize::new(k.min(self.len())) else {
+            return;
+        };
+        let q = [q.x, q.y, q.z];
+        let bound = match scratch.previous {
+            Some((p, kth2)) if scratch.k == want.get() => {
+                let r = kth2.sqrt() + dist2(&p, &q).sqrt();
+                // Slack for rounding: a bound a little too wide costs nothing.
+                r * r * (1.0 + 1e-9) + f64::MIN_POSITIVE
+            }
+            _ => f64::INFINITY,
+        };
+        let raw = self
+            .tree
+            .query(&q)
+            .nearest_n::<SquaredEuclidean<f64>>(want)
+            .within(bound)
+            .with_scratch(&mut scratch.stack)
+            .execute();
+        out.extend(raw.iter().map(|r| dist2(&q, &self.points[r.item as usize])));
+        out.sort_unstable_by(f64::total_cmp);
+        scratch.k = want.get();
+        scratch.previous = out.last().map(|&d| (q, d));
+    }
+
     /// Every point within `radius` of `q` (inclusive), nearest first.
     pub fn within(&self, q: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
         self.within2(&[q.x, q.y, q.z], radius * radius)
     }
 
+    /// Every point within `radius` of `q` (inclusive), in the tree's order (cheaper than
+    /// [`Neighbours::within`] when the caller does not need the distance order; still
+    /// deterministic for a given index).
+    pub fn within_unsorted(&self, q: &Point3<f64>, radius: f64) -> Vec<Neighbour> {
+        self.within_raw(&[q.x, q.y, q.z], radius * radius)
+    }
+
     fn within2(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
-        if self.is_empty() || !(r2 >= 0.0) {
+        ordered(self.within_raw(q, r2))
+    }
+
+    fn within_raw(&self, q: &[f64; 3], r2: f64) -> Vec<Neighbour> {
+        if self.is_empty() || r2.is_nan() || r2 < 0.0 {
             return Vec::new();
         }
         // Widen kiddo's bound a hair so our own (re-computed) distances decide the boundary.
@@ -121,7 +213,7 @@ impl Neighbours {
             .execute();
         let mut found = self.measured(q, raw.iter().map(|r| r.item));
         found.retain(|n| n.dist2 <= r2);
-        ordered(found)
+        found
     }
 
     /// The nearest point to `q` (lowest index on a tie); None when the index is empty.
@@ -168,6 +260,9 @@ mod tests {
             assert_eq!(capped, inside[..inside.len().min(4)].to_vec());
         }
         assert_eq!(index.nearest(&Point3::new(0.1, 0.0, 0.0)).unwrap().index, 0);
+        let mut order = index.spatial_order();
+        order.sort_unstable();
+        assert_eq!(order, (0..points.len()).collect::<Vec<_>>());
     }
 
     #[test]

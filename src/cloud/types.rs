@@ -202,6 +202,22 @@ impl Mesh {
         }
     }
 
+    /// Flips every face when the mesh's signed volume is negative (inward winding), so that
+    /// facet normals point outward on a closed mesh.
+    pub fn orient_outward(&mut self) {
+        let volume: f64 = self
+            .faces
+            .iter()
+            .map(|f| {
+                let [a, b, c] = f.map(|v| self.vertices[v as usize].coords);
+                a.dot(&b.cross(&c)) / 6.0
+            })
+            .sum();
+        if volume < 0.0 {
+            self.faces.iter_mut().for_each(|f| f.swap(1, 2));
+        }
+    }
+
     /// Multiplies positions by `factor`.
     pub fn scale(&mut self, factor: f64) {
         if factor != 1.0 {

@@ -161,7 +161,7 @@ fn load_part(cfg: &SynthConfig) -> Result<Part> {
         }
     };
     let mut mesh = load_mesh(path)?;
-    placement::orient_outward(&mut mesh);
+    mesh.orient_outward();
     let articular = cfg.surface.as_deref().map(load_mesh).transpose()?;
     Ok(Part {
         mesh,

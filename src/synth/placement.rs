@@ -12,21 +12,6 @@ use super::truth::OutlierTruth;
 use super::{gauss, SynthConfig};
 use crate::cloud::{sample_mesh, Mesh, PointCloud};
 
-/// Flips every face when the mesh's signed volume is negative (inward winding).
-pub fn orient_outward(mesh: &mut Mesh) {
-    let volume: f64 = mesh
-        .faces
-        .iter()
-        .map(|f| {
-            let [a, b, c] = f.map(|v| mesh.vertices[v as usize].coords);
-            a.dot(&b.cross(&c)) / 6.0
-        })
-        .sum();
-    if volume < 0.0 {
-        mesh.faces.iter_mut().for_each(|f| f.swap(1, 2));
-    }
-}
-
 /// A uniform grid of points for "anything within r?" queries.
 struct Grid {
     cell: f64,

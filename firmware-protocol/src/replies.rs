@@ -1,0 +1,255 @@
+//! Typed board-to-host replies, parsed from frames the [`crate::Decoder`] completed.
+//!
+//! Every reply is `FF FB LEN TYPE payload CHK`. Payloads:
+//!
+//! ```text
+//! TYPE  payload                  reply to            meaning
+//! 0x0A  echo(u8) pos(u16)        0x30+id (read)      raw position; echo = 0x30+id
+//! 0x0A  pos(u16)                 0x30+id (read)      the same without the echo byte
+//! 0x38  id(u8) status(u8)        0x38 (ping)         status 0xDA alive, 0x00 no answer
+//! 0x33  state(u8)                0x1B                mid-offset state: 0 not found, 1 ok, 2 failed
+//! 0x01  version(u8)              0x01                hardware version
+//! 0x22  count(u8)                -                   action count
+//! ```
+//!
+//! DOFBOT.md gives TYPE 0x0A with "payload pos(u16), echoed 0x30+id": this crate reads the
+//! echo as a leading payload byte (and also accepts the 2-byte form, with no servo known).
+//! DOFBOT.md gives only the ping status byte (0xDA / 0x00); its frame (TYPE 0x38, id then
+//! status) is this project's reading, shared with the mock and the simulator.
+//! A raw position of 0 or outside the servo's range is a failed read; that judgement is the
+//! driver's (see [`crate::ServoScale::check_raw`]), the reply carries the raw value as sent.
+use core::fmt;
+
+use crate::frame::{Direction, EncodeError, Frame};
+use crate::servo::ServoId;
+
+/// TYPE of a position reply.
+pub const TYPE_POSITION: u8 = 0x0A;
+/// TYPE of a ping reply.
+pub const TYPE_PING: u8 = 0x38;
+/// TYPE of a mid-offset state reply.
+pub const TYPE_OFFSET_STATE: u8 = 0x33;
+/// TYPE of a version reply.
+pub const TYPE_VERSION: u8 = 0x01;
+/// TYPE of an action-count reply.
+pub const TYPE_ACTION_COUNT: u8 = 0x22;
+/// Ping status byte of a servo that answered.
+pub const PING_ALIVE: u8 = 0xDA;
+
+/// Result of storing a mid offset (reply 0x33).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OffsetState {
+    /// 0: no servo found.
+    NotFound,
+    /// 1: stored.
+    Ok,
+    /// 2: storing failed.
+    Failed,
+}
+
+/// A board reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reply {
+    /// Raw position of a servo (TYPE 0x0A).
+    Position {
+        /// The servo, when the reply carries the 0x30+id echo.
+        servo: Option<ServoId>,
+        /// Raw position as sent by the board (0 = failed read).
+        raw: u16,
+    },
+    /// Ping answer (TYPE 0x38).
+    Ping {
+        /// Bus id pinged.
+        id: u8,
+        /// True when the status byte is 0xDA.
+        alive: bool,
+    },
+    /// Mid-offset state (TYPE 0x33).
+    OffsetState(OffsetState),
+    /// Hardware version (TYPE 0x01).
+    Version(u8),
+    /// Action count (TYPE 0x22).
+    ActionCount(u8),
+}
+
+/// A well-framed reply whose content is not understood.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ReplyError {
+    /// TYPE not in the table above.
+    UnknownType {
+        /// TYPE byte.
+        kind: u8,
+    },
+    /// Payload length wrong for the TYPE.
+    BadPayload {
+        /// TYPE byte.
+        kind: u8,
+        /// Payload length received.
+        len: usize,
+    },
+    /// A byte value the reply does not define.
+    BadValue {
+        /// TYPE byte.
+        kind: u8,
+        /// The value.
+        value: u8,
+    },
+}
+
+impl fmt::Display for ReplyError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ReplyError::UnknownType { kind } => write!(f, "unknown reply type 0x{kind:02X}"),
+            ReplyError::BadPayload { kind, len } => {
+                write!(f, "reply type 0x{kind:02X}: wrong payload length {len}")
+            }
+            ReplyError::BadValue { kind, value } => {
+                write!(f, "reply type 0x{kind:02X}: undefined value 0x{value:02X}")
+            }
+        }
+    }
+}
+
+impl Reply {
+    /// Parses a decoded board frame.
+    pub fn parse(frame: &Frame) -> Result<Reply, ReplyError> {
+        let kind = frame.kind();
+        let p = frame.payload();
+        let bad = || ReplyError::BadPayload { kind, len: p.len() };
+        match (kind, p.len()) {
+            (TYPE_POSITION, 3) => {
+                let servo = p[0]
+                    .checked_sub(crate::commands::FUNC_READ_BASE)
+                    .and_then(|id| ServoId::new(id).ok())
+                    .ok_or(ReplyError::BadValue { kind, value: p[0] })?;
+                Ok(Reply::Position {
+                    servo: Some(servo),
+                    raw: u16::from_be_bytes([p[1], p[2]]),
+                })
+            }
+            (TYPE_POSITION, 2) => Ok(Reply::Position {
+                servo: None,
+                raw: u16::from_be_bytes([p[0], p[1]]),
+            }),
+            (TYPE_PING, 2) => Ok(Reply::Ping {
+                id: p[0],
+                alive: p[1] == PING_ALIVE,
+            }),
+            (TYPE_OFFSET_STATE, 1) => Ok(Reply::OffsetState(match p[0] {
+                0 => OffsetState::NotFound,
+                1 => OffsetState::Ok,
+                2 => OffsetState::Failed,
+                value => return Err(ReplyError::BadValue { kind, value }),
+            })),
+            (TYPE_VERSION, 1) => Ok(Reply::Version(p[0])),
+            (TYPE_ACTION_COUNT, 1) => Ok(Reply::ActionCount(p[0])),
+            (
+                TYPE_POSITION | TYPE_PING | TYPE_OFFSET_STATE | TYPE_VERSION | TYPE_ACTION_COUNT,
+                _,
+            ) => Err(bad()),
+            _ => Err(ReplyError::UnknownType { kind }),
+        }
+    }
+
+    /// The frame a board sends for this reply (used by simulators).
+    pub fn to_frame(&self) -> Frame {
+        let built = match *self {
+            Reply::Position {
+                servo: Some(id),
+                raw,
+            } => {
+                let [hi, lo] = raw.to_be_bytes();
+                Frame::new(
+                    TYPE_POSITION,
+                    &[crate::commands::FUNC_READ_BASE + id.get(), hi, lo],
+                )
+            }
+            Reply::Position { servo: None, raw } => Frame::new(TYPE_POSITION, &raw.to_be_bytes()),
+            Reply::Ping { id, alive } => {
+                Frame::new(TYPE_PING, &[id, if alive { PING_ALIVE } else { 0 }])
+            }
+            Reply::OffsetState(s) => Frame::new(
+                TYPE_OFFSET_STATE,
+                &[match s {
+                    OffsetState::NotFound => 0,
+                    OffsetState::Ok => 1,
+                    OffsetState::Failed => 2,
+                }],
+            ),
+            Reply::Version(v) => Frame::new(TYPE_VERSION, &[v]),
+            Reply::ActionCount(n) => Frame::new(TYPE_ACTION_COUNT, &[n]),
+        };
+        built.expect("reply payloads are short")
+    }
+
+    /// Encodes the whole reply frame (`FF FB ...`) into `buf`.
+    pub fn encode(&self, buf: &mut [u8]) -> Result<usize, EncodeError> {
+        self.to_frame().encode(Direction::ToHost, buf)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Decoder;
+
+    #[test]
+    fn replies_round_trip() {
+        let s2 = ServoId::new(2).unwrap();
+        let all = [
+            Reply::Position {
+                servo: Some(s2),
+                raw: 2345,
+            },
+            Reply::Position {
+                servo: None,
+                raw: 0,
+            },
+            Reply::Ping { id: 3, alive: true },
+            Reply::Ping {
+                id: 4,
+                alive: false,
+            },
+            Reply::OffsetState(OffsetState::Failed),
+            Reply::Version(3),
+            Reply::ActionCount(9),
+        ];
+        for r in all {
+            let mut buf = [0u8; 16];
+            let n = r.encode(&mut buf).unwrap();
+            let mut dec = Decoder::replies();
+            let got: std::vec::Vec<_> = dec.feed(&buf[..n]).collect();
+            assert_eq!(got.len(), 1);
+            assert_eq!(Reply::parse(&got[0].unwrap()), Ok(r));
+        }
+    }
+
+    #[test]
+    fn position_reply_layout() {
+        let r = Reply::Position {
+            servo: ServoId::new(1).ok(),
+            raw: 2000,
+        };
+        let mut buf = [0u8; 16];
+        let n = r.encode(&mut buf).unwrap();
+        // FF FB, LEN 6, TYPE 0A, echo 31, 07 D0, CHK = 06+0A+31+07+D0 = 0x118 -> 0x18
+        assert_eq!(&buf[..n], &[0xFF, 0xFB, 0x06, 0x0A, 0x31, 0x07, 0xD0, 0x18]);
+    }
+
+    #[test]
+    fn unknown_and_short_replies_are_errors() {
+        let f = Frame::new(0x77, &[1]).unwrap();
+        assert_eq!(
+            Reply::parse(&f),
+            Err(ReplyError::UnknownType { kind: 0x77 })
+        );
+        let f = Frame::new(TYPE_POSITION, &[1]).unwrap();
+        assert_eq!(
+            Reply::parse(&f),
+            Err(ReplyError::BadPayload {
+                kind: TYPE_POSITION,
+                len: 1
+            })
+        );
+    }
+}

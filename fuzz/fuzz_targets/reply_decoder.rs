@@ -1,0 +1,8 @@
+//! cargo-fuzz target for the reply decoder: `cargo +nightly fuzz run reply_decoder`.
+//! The body is shared with the stable smoke-fuzz test in dofbot-protocol.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    dofbot_protocol::check::reply_decoder_invariants(data);
+});

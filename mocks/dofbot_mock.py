@@ -1,0 +1,390 @@
+#!/usr/bin/env python3
+"""Mock Yahboom DOFBOT board on a pseudo-terminal (or on a given serial port, via pyserial).
+
+Creates a pty, prints the device path of its slave side on the first line of stdout, and then
+behaves like the board of shared/DOFBOT.md: parses `FF FC LEN FUNC payload CHK` frames, moves
+six simulated servos at a bounded speed to each commanded raw target over the commanded time,
+answers reads (TYPE 0x0A, payload 0x30+id, pos), pings (TYPE 0x38, id, 0xDA), version (0x01)
+and offset state (0x33), and logs every frame it got to a JSONL file.
+
+The servo model and fault counters mirror src/bus/model.rs line for line, so the Rust
+in-process simulator (`--sim`) and this mock behave alike. Timing: 10 bit times per byte at
+the baud rate, a reply latency (default 3 ms, Yahboom's), moves that last the commanded time or
+longer when the speed bound requires.
+
+Faults: --corrupt-every K, --drop-every K, --delay-ms D, --fail-read-servo S,
+--fail-read-every K, --disconnect-after N, --stall-servo S, --absent-servo S.
+The state file (--state) holds the servo positions and targets, rewritten after every frame
+and at exit (SIGTERM, SIGINT or an injected disconnect).
+"""
+import argparse
+import heapq
+import json
+import os
+import select
+import signal
+import sys
+import time
+import tty
+
+SERVO_COUNT = 6
+# DOFBOT.md raw ranges per servo (1..6).
+RAW_RANGE = [(900, 3100), (900, 3100), (900, 3100), (900, 3100), (380, 3700), (900, 3100)]
+BUS_RAW = (96, 4000)
+HOME = [2000, 2000, 2000, 2000, 1487, 2000]  # joint zero (servo 90 deg), gripper 90 deg
+VERSION = 1
+PING_ALIVE = 0xDA
+MAX_LEN = 0x20
+
+
+def checksum(body):
+    return sum(body) & 0xFF
+
+
+def frame(mark, kind, payload):
+    body = bytes([len(payload) + 3, kind]) + bytes(payload)
+    return bytes([0xFF, mark]) + body + bytes([checksum(body)])
+
+
+def round_raw(x):
+    import math
+    return int(math.floor(x + 0.5))
+
+
+class Decoder:
+    """Streaming decoder of host frames; mirrors dofbot_protocol::Decoder."""
+
+    def __init__(self, mark=0xFC):
+        self.mark = mark
+        self.buf = bytearray()
+
+    def feed(self, data):
+        out = []
+        for b in data:
+            self.buf.append(b)
+            while True:
+                ev = self._poll()
+                if ev is None:
+                    break
+                out.append(ev)
+        return out
+
+    def _poll(self):
+        buf = self.buf
+        while True:
+            i = buf.find(0xFF)
+            if i < 0:
+                del buf[:]
+                return None
+            del buf[:i]
+            if len(buf) < 2:
+                return None
+            if buf[1] != self.mark:
+                del buf[:1]
+                continue
+            if len(buf) < 3:
+                return None
+            n = buf[2]
+            if n < 3 or n > MAX_LEN:
+                del buf[:1]
+                return ("error", "bad length 0x%02X" % n)
+            total = n + 2
+            if len(buf) < total:
+                return None
+            body = bytes(buf[2:total - 1])
+            if checksum(body) != buf[total - 1]:
+                del buf[:1]
+                return ("error", "bad checksum")
+            kind, payload = buf[3], bytes(buf[4:total - 1])
+            raw = bytes(buf[:total])
+            del buf[:total]
+            return ("frame", kind, payload, raw)
+
+
+class Servo:
+    """One servo's motion; mirrors model.rs ServoModel."""
+
+    def __init__(self, raw):
+        self.start, self.target, self.t0, self.dur = float(raw), float(raw), 0.0, 0.0
+
+    def position(self, t):
+        if self.dur <= 0.0 or t >= self.t0 + self.dur:
+            return self.target
+        if t <= self.t0:
+            return self.start
+        return self.start + (self.target - self.start) * (t - self.t0) / self.dur
+
+    def command(self, target, time_ms, t, max_speed):
+        p = self.position(t)
+        dur = max(time_ms / 1000.0, abs(target - p) / max_speed)
+        self.start, self.target, self.t0, self.dur = p, float(target), t, dur
+
+
+def in_range(servo_id, raw):
+    lo, hi = RAW_RANGE[servo_id - 1]
+    return lo <= raw <= hi
+
+
+class Board:
+    """The simulated board; mirrors model.rs Board."""
+
+    def __init__(self, home, args):
+        self.servos = [Servo(r) for r in home]
+        self.torque = True
+        self.a = args
+        self.frames = 0
+        self.replies = 0
+        self.reads = 0
+        self.disconnected = False
+
+    def parse(self, f, p):
+        """Returns (name, action) or None when the frame is not a valid command."""
+        u16 = lambda i: (p[i] << 8) | p[i + 1]
+        if 0x11 <= f <= 0x16 and len(p) == 4:
+            sid = f - 0x10
+            return ("move_servo", [(sid, u16(0))], u16(2)) if in_range(sid, u16(0)) else None
+        if f == 0x1D and len(p) == 14:
+            moves = [(i + 1, u16(2 * i)) for i in range(SERVO_COUNT)]
+            return ("move_all", moves, u16(12)) if all(in_range(s, r) for s, r in moves) else None
+        if f == 0x19 and len(p) == 5:
+            sid, raw = p[0], u16(1)
+            ok = 1 <= sid <= 250 and (in_range(sid, raw) if sid <= SERVO_COUNT else BUS_RAW[0] <= raw <= BUS_RAW[1])
+            return ("move_any", [(sid, raw)], u16(3)) if ok else None
+        if f == 0x17 and len(p) == 4:
+            raw = u16(0)
+            ok = all(in_range(s, raw) for s in range(1, SERVO_COUNT + 1))
+            return ("move_every", [(s, raw) for s in range(1, SERVO_COUNT + 1)], u16(2)) if ok else None
+        if 0x31 <= f <= 0x36 and len(p) == 0:
+            return ("read_position", f - 0x30)
+        if f == 0x38 and len(p) == 1 and 1 <= p[0] <= 250:
+            return ("ping", p[0])
+        if f == 0x1A and len(p) == 1 and p[0] in (0, 1):
+            return ("torque", p[0] == 1)
+        if f == 0x1B and len(p) == 0:
+            return ("read_offset_state",)
+        if f == 0x01 and len(p) == 0:
+            return ("version",)
+        if f in (0x18, 0x1C, 0x06) and len(p) == 1:
+            return ({0x18: "set_id", 0x1C: "store_mid_offset", 0x06: "buzzer"}[f],)
+        if f == 0x02 and len(p) == 3:
+            return ("rgb",)
+        if f == 0x05 and p == b"\x01":
+            return ("reset",)
+        return None
+
+    def handle(self, f, p, t):
+        """Handles a frame that arrived at t; returns (name, reply bytes, delay) ."""
+        if self.disconnected:
+            return "ignored", None, 0.0
+        self.frames += 1
+        cmd = self.parse(f, p)
+        reply = self.execute(cmd, t) if cmd else None
+        name = cmd[0] if cmd else "invalid"
+        if self.a.disconnect_after is not None and self.frames >= self.a.disconnect_after:
+            self.disconnected = True
+            return name, None, 0.0
+        if reply is None:
+            return name, None, 0.0
+        out = self.send(*reply)
+        return (name,) + (out if out else (None, 0.0))
+
+    def execute(self, cmd, t):
+        name = cmd[0]
+        if name.startswith("move_"):
+            for sid, raw in cmd[1]:
+                self.move_servo(sid, raw, cmd[2], t)
+        elif name == "read_position":
+            return self.read(cmd[1], t)
+        elif name == "ping":
+            sid = cmd[1]
+            alive = 1 <= sid <= SERVO_COUNT and self.a.absent_servo != sid
+            return (0x38, [sid, PING_ALIVE if alive else 0])
+        elif name == "torque":
+            if not cmd[1]:
+                for i, s in enumerate(self.servos):
+                    self.servos[i] = Servo(s.position(t))
+            self.torque = cmd[1]
+        elif name == "read_offset_state":
+            return (0x33, [1])
+        elif name == "version":
+            return (0x01, [VERSION])
+        return None
+
+    def move_servo(self, sid, raw, time_ms, t):
+        if not self.torque or not 1 <= sid <= SERVO_COUNT or self.a.stall_servo == sid:
+            return
+        self.servos[sid - 1].command(raw, time_ms, t, self.a.max_speed)
+
+    def read(self, sid, t):
+        if self.a.absent_servo == sid:
+            return None
+        self.reads += 1
+        k = self.a.fail_read_every
+        fail = self.a.fail_read_servo == sid or (k > 0 and self.reads % k == 0)
+        raw = 0 if fail else round_raw(self.servos[sid - 1].position(t))
+        return (0x0A, [0x30 + sid, raw >> 8, raw & 0xFF])
+
+    def send(self, kind, payload):
+        self.replies += 1
+        hit = lambda k: k > 0 and self.replies % k == 0
+        if hit(self.a.drop_every):
+            return None
+        b = bytearray(frame(0xFB, kind, payload))
+        if hit(self.a.corrupt_every):
+            b[-1] ^= 0xFF
+        delay = (self.a.reply_latency_ms + self.a.delay_ms) / 1000.0 + len(b) * 10.0 / self.a.baud
+        return bytes(b), delay
+
+    def positions(self, t):
+        return [round_raw(s.position(t)) for s in self.servos]
+
+    def targets(self):
+        return [round_raw(s.target) for s in self.servos]
+
+
+class PtyLink:
+    """The master side of a new pseudo-terminal; the slave's path is what clients open."""
+
+    def __init__(self):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # no echo, no line discipline before the client configures it
+        self.path = os.ttyname(self.slave)
+
+    def fileno(self):
+        return self.master
+
+    def read(self):
+        return os.read(self.master, 4096)
+
+    def write(self, data):
+        os.write(self.master, data)
+
+    def close(self):
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class SerialLink:
+    """An existing port (e.g. one side of a socat pair), opened with pyserial at 115200 8N1."""
+
+    def __init__(self, path, baud):
+        import serial
+        self.port = serial.Serial(path, int(baud), bytesize=8, parity="N", stopbits=1, timeout=0)
+        self.port.reset_input_buffer()
+        self.path = path
+
+    def fileno(self):
+        return self.port.fileno()
+
+    def read(self):
+        return self.port.read(4096)
+
+    def write(self, data):
+        self.port.write(data)
+
+    def close(self):
+        self.port.close()
+
+
+def parse_args(argv):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--port", help="open this existing port with pyserial instead of creating a pty")
+    ap.add_argument("--log", help="JSONL file: one line per frame received")
+    ap.add_argument("--state", help="JSON file with the servo state, rewritten after every frame")
+    ap.add_argument("--initial", help="raw positions r1,..,r6 at start (default: joint zero, gripper 90)")
+    ap.add_argument("--baud", type=float, default=115200.0)
+    ap.add_argument("--reply-latency-ms", type=float, default=3.0)
+    ap.add_argument("--max-speed", type=float, default=3000.0, help="raw counts per second")
+    ap.add_argument("--corrupt-every", type=int, default=0)
+    ap.add_argument("--drop-every", type=int, default=0)
+    ap.add_argument("--delay-ms", type=float, default=0.0)
+    ap.add_argument("--fail-read-servo", type=int)
+    ap.add_argument("--fail-read-every", type=int, default=0)
+    ap.add_argument("--disconnect-after", type=int)
+    ap.add_argument("--stall-servo", type=int)
+    ap.add_argument("--absent-servo", type=int)
+    return ap.parse_args(argv)
+
+
+def main(argv):
+    args = parse_args(argv)
+    home = [int(v) for v in args.initial.split(",")] if args.initial else HOME
+    if len(home) != SERVO_COUNT:
+        sys.exit("--initial: need 6 raw values")
+    board = Board(home, args)
+    link = SerialLink(args.port, args.baud) if args.port else PtyLink()
+    log = open(args.log, "a", buffering=1) if args.log else None
+    t0 = time.monotonic()
+    clock = lambda: time.monotonic() - t0
+
+    def write_state():
+        if not args.state:
+            return
+        t = clock()
+        state = {"t": t, "positions": board.positions(t), "targets": board.targets(),
+                 "torque": board.torque, "frames": board.frames, "disconnected": board.disconnected}
+        tmp = args.state + ".tmp"
+        with open(tmp, "w") as f:
+            json.dump(state, f)
+        os.replace(tmp, args.state)
+
+    def stop(*_):
+        raise SystemExit(0)
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    write_state()
+    print(link.path, flush=True)
+
+    decoder = Decoder()
+    outbox = []  # heap of (due, seq, bytes)
+    seq = 0
+    line_free = 0.0
+    byte_time = 10.0 / args.baud
+    try:
+        while not board.disconnected:
+            now = clock()
+            while outbox and outbox[0][0] <= now:
+                link.write(heapq.heappop(outbox)[2])
+            wait = max(0.0, outbox[0][0] - now) if outbox else 0.5
+            ready, _, _ = select.select([link], [], [], wait)
+            if not ready:
+                continue
+            data = link.read()
+            now = clock()
+            start = max(now, line_free)
+            line_free = start + len(data) * byte_time
+            pos = 0
+            for b in data:
+                pos += 1
+                for ev in decoder.feed(bytes([b])):
+                    t = start + pos * byte_time
+                    if ev[0] == "error":
+                        if log:
+                            log.write(json.dumps({"t": t, "error": ev[1]}) + "\n")
+                        continue
+                    _, kind, payload, raw = ev
+                    name, reply, delay = board.handle(kind, payload, t)
+                    if log:
+                        log.write(json.dumps({"t": t, "frame": raw.hex(" ").upper(),
+                                              "func": "0x%02X" % kind, "cmd": name}) + "\n")
+                    if reply is not None:
+                        heapq.heappush(outbox, (t + delay, seq, reply))
+                        seq += 1
+                    write_state()
+                    if board.disconnected:
+                        break
+                if board.disconnected:
+                    break
+    finally:
+        write_state()
+        link.close()
+        if log:
+            log.close()
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,194 @@
+//! `journal.jsonl`: one JSON object per line for every frame sent, every reply received,
+//! every error and each verified pose, flushed line by line so that a crash or a lost port
+//! leaves a consistent file. Format: `docs/FORMATS.md`. [`ResumePoint`] reads one back.
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+
+use super::error::BusError;
+
+/// Kind of a journal line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EntryKind {
+    /// The bus was opened on a port.
+    Open,
+    /// A frame was written (after the write succeeded).
+    Tx,
+    /// A frame (or, for bad frames, the error) was received.
+    Rx,
+    /// An error, transient (retried) or final.
+    Error,
+    /// A read-back confirmed a motion.
+    Verified,
+    /// Motion stopped (operator, fault); nothing more was sent.
+    Stop,
+}
+
+/// One line of the journal.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Entry {
+    /// Line number in this run, from 0.
+    pub seq: u64,
+    /// Seconds since the bus was opened (the transport's clock).
+    pub t: f64,
+    /// Wall-clock time, ms since the Unix epoch.
+    pub unix_ms: u64,
+    /// What happened.
+    pub kind: EntryKind,
+    /// Frame bytes as uppercase hex pairs separated by spaces (tx, rx).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<String>,
+    /// Command or reply name (tx, rx).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// Motion index of a motion frame (tx, error while sending one, verified, stop).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<u64>,
+    /// Error code (`BusError::code`) of an error or stop line.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub code: Option<String>,
+    /// One-line message (error, stop) or port description (open).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub message: Option<String>,
+    /// Raw positions of servos 1..6 (verified).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub raw: Option<Vec<u16>>,
+}
+
+impl Entry {
+    /// An entry of `kind` with every optional field empty (seq, t and time set by the
+    /// journal).
+    pub fn new(kind: EntryKind) -> Entry {
+        Entry {
+            seq: 0,
+            t: 0.0,
+            unix_ms: 0,
+            kind,
+            frame: None,
+            name: None,
+            motion: None,
+            code: None,
+            message: None,
+            raw: None,
+        }
+    }
+}
+
+/// Hex form of frame bytes used in the journal: `FF FC 07 11 ...`.
+pub fn hex(bytes: &[u8]) -> String {
+    let parts: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
+    parts.join(" ")
+}
+
+/// Appends entries to a journal file (or discards them when there is none).
+pub struct Journal {
+    file: Option<(File, PathBuf)>,
+    seq: u64,
+}
+
+impl Journal {
+    /// No journal.
+    pub fn none() -> Journal {
+        Journal { file: None, seq: 0 }
+    }
+
+    /// Appends to `path` (created if missing; a resumed run continues the same file).
+    pub fn append(path: &Path) -> Result<Journal, BusError> {
+        let file = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .map_err(|e| journal_err(path, e))?;
+        Ok(Journal {
+            file: Some((file, path.to_path_buf())),
+            seq: 0,
+        })
+    }
+
+    /// Writes one entry stamped with `t` (s), flushed at once.
+    pub fn write(&mut self, mut entry: Entry, t: f64) -> Result<(), BusError> {
+        let Some((file, path)) = self.file.as_mut() else {
+            return Ok(());
+        };
+        entry.seq = self.seq;
+        entry.t = t;
+        entry.unix_ms = SystemTime::now()
+            .duration_since(UNIX_EPOCH)
+            .map(|d| d.as_millis() as u64)
+            .unwrap_or(0);
+        self.seq += 1;
+        let mut line = serde_json::to_string(&entry).map_err(|e| journal_err(path, e))?;
+        line.push('\n');
+        file.write_all(line.as_bytes())
+            .and_then(|_| file.flush())
+            .map_err(|e| journal_err(path, e))
+    }
+}
+
+fn journal_err(path: &Path, e: impl std::fmt::Display) -> BusError {
+    BusError::Journal {
+        path: path.display().to_string(),
+        detail: e.to_string(),
+    }
+}
+
+/// Where a run stood according to its journal.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ResumePoint {
+    /// Highest motion index whose frame was written.
+    pub last_sent: Option<u64>,
+    /// Highest motion index confirmed by a read-back.
+    pub last_verified: Option<u64>,
+    /// Code and message of the last error or stop line, if any.
+    pub last_error: Option<(String, String)>,
+    /// Lines read.
+    pub lines: usize,
+}
+
+impl ResumePoint {
+    /// Reads a journal. A last line cut short by a crash is ignored; any other unreadable
+    /// line is an error naming the file and the line.
+    pub fn from_journal(path: &Path) -> Result<ResumePoint, BusError> {
+        let file = File::open(path).map_err(|e| journal_err(path, e))?;
+        let lines: Vec<String> = BufReader::new(file)
+            .lines()
+            .collect::<Result<_, _>>()
+            .map_err(|e| journal_err(path, e))?;
+        let mut rp = ResumePoint::default();
+        for (i, line) in lines.iter().enumerate() {
+            if line.trim().is_empty() {
+                continue;
+            }
+            let entry: Entry = match serde_json::from_str(line) {
+                Ok(e) => e,
+                Err(_) if i + 1 == lines.len() => break,
+                Err(e) => {
+                    return Err(journal_err(path, format!("line {}: {e}", i + 1)));
+                }
+            };
+            rp.lines += 1;
+            match entry.kind {
+                EntryKind::Tx => rp.last_sent = rp.last_sent.max(entry.motion),
+                EntryKind::Verified => rp.last_verified = rp.last_verified.max(entry.motion),
+                EntryKind::Error | EntryKind::Stop => {
+                    rp.last_error = Some((
+                        entry.code.unwrap_or_default(),
+                        entry.message.unwrap_or_default(),
+                    ))
+                }
+                EntryKind::Open | EntryKind::Rx => {}
+            }
+        }
+        Ok(rp)
+    }
+
+    /// First motion index to send when resuming: the last one written (re-sent, since motion
+    /// frames carry absolute targets and the interrupted one may not have arrived), or 0.
+    pub fn resume_from(&self) -> u64 {
+        self.last_sent.unwrap_or(0)
+    }
+}

@@ -1,0 +1,40 @@
+//! The DOFBOT bus: a [`Transport`] (serial port, the Python mock on a pseudo-terminal, or
+//! the in-process [`SimArm`]), the [`Bus`] driver over it, the servo map and the journal.
+//! Frames come only from `dofbot-protocol`'s validated commands.
+//!
+//! ```no_run
+//! use polishbot::bus::{Bus, BusConfig, Journal, SimArm, SimOptions};
+//! let config = BusConfig::default();
+//! let arm = SimArm::new(&SimOptions::default(), &config.servo_map).unwrap();
+//! let mut bus = Bus::connect(arm.transport(), config, Journal::none()).unwrap();
+//! let state = bus.move_joints(&[0.1, 0.2, -0.3, 0.0, 0.5], 90.0, None).unwrap();
+//! ```
+pub mod config;
+pub mod driver;
+pub mod error;
+pub mod journal;
+pub mod model;
+pub mod serial;
+pub mod sim;
+pub mod transport;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+pub use config::{
+    BusConfig, GripperCalib, JointCalib, JointState, ScaleCalib, ServoMap, JOINT_COUNT,
+};
+pub use driver::Bus;
+pub use error::BusError;
+pub use journal::{Entry, EntryKind, Journal, ResumePoint};
+pub use model::{Faults, SimTiming};
+pub use serial::SerialTransport;
+pub use sim::{SimArm, SimOptions, SimTransport};
+pub use transport::Transport;
+
+/// Sets `flag` on Ctrl-C (SIGINT) so the bus sends no further motion frames. Call once per
+/// process.
+pub fn install_ctrlc(flag: Arc<AtomicBool>) -> Result<(), BusError> {
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .map_err(|e| BusError::Refused(format!("cannot install the Ctrl-C handler: {e}")))
+}

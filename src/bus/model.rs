@@ -1,0 +1,300 @@
+//! The simulated board: six servos moving at bounded speed, replies with the board's latency,
+//! and fault injection. `mocks/dofbot_mock.py` mirrors this model line for line, so the
+//! in-process simulator and the pseudo-terminal mock behave alike.
+//!
+//! Servo model: a move to `target` in `time_ms` starting at time `t` from the current position
+//! `p` lasts `max(time_ms/1000, |target - p| / max_speed)` seconds, linear in between; a
+//! read returns the position at the read's arrival, rounded to the nearest count. Torque off
+//! freezes every servo where it is and ignores moves; a stalled servo ignores moves.
+use serde::{Deserialize, Serialize};
+
+use dofbot_protocol::frame::Frame;
+use dofbot_protocol::servo::{ServoId, SERVO_COUNT};
+use dofbot_protocol::{Command, OffsetState, Reply};
+
+/// Board timing.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SimTiming {
+    /// Line speed, baud (10 bit times per byte, 8N1). Default 115200.
+    pub baud: f64,
+    /// Time from a read request's last byte to the reply's first byte, ms. Default 3
+    /// (Yahboom's library waits about 3 ms).
+    pub reply_latency_ms: f64,
+    /// Servo speed bound, raw counts per second. Default 3000 (about 250 deg/s at 12.2
+    /// counts per degree, DOFBOT.md's no-load speed).
+    pub max_speed_counts_s: f64,
+}
+
+impl Default for SimTiming {
+    fn default() -> Self {
+        SimTiming {
+            baud: 115_200.0,
+            reply_latency_ms: 3.0,
+            max_speed_counts_s: 3000.0,
+        }
+    }
+}
+
+impl SimTiming {
+    /// Seconds one byte takes on the line.
+    pub fn byte_time(&self) -> f64 {
+        10.0 / self.baud
+    }
+}
+
+/// Faults to inject; all off by default. Counters are 1-based: `every = 3` hits the 3rd, 6th ...
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Faults {
+    /// Corrupt the checksum of every k-th reply (0 = never).
+    pub corrupt_every: u32,
+    /// Drop every k-th reply (0 = never).
+    pub drop_every: u32,
+    /// Extra delay on every reply, ms.
+    pub delay_ms: f64,
+    /// Reads of this servo return raw 0.
+    pub fail_read_servo: Option<u8>,
+    /// Every k-th read (any servo) returns raw 0 (0 = never).
+    pub fail_read_every: u32,
+    /// Drop the link after this many frames.
+    pub disconnect_after: Option<u64>,
+    /// This servo ignores moves (stalled).
+    pub stall_servo: Option<u8>,
+    /// This servo is absent: its ping says no answer, its reads get no reply.
+    pub absent_servo: Option<u8>,
+}
+
+/// One servo's motion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoModel {
+    start: f64,
+    target: f64,
+    t0: f64,
+    dur: f64,
+}
+
+impl ServoModel {
+    /// A servo at rest at `raw`.
+    pub fn at(raw: f64) -> ServoModel {
+        ServoModel {
+            start: raw,
+            target: raw,
+            t0: 0.0,
+            dur: 0.0,
+        }
+    }
+
+    /// Position (raw counts, not rounded) at time `t` seconds.
+    pub fn position(&self, t: f64) -> f64 {
+        if self.dur <= 0.0 || t >= self.t0 + self.dur {
+            self.target
+        } else if t <= self.t0 {
+            self.start
+        } else {
+            self.start + (self.target - self.start) * (t - self.t0) / self.dur
+        }
+    }
+
+    /// Starts a move to `target` at time `t` lasting `time_ms` or longer if the speed bound
+    /// requires.
+    pub fn command(&mut self, target: u16, time_ms: u16, t: f64, max_speed: f64) {
+        let p = self.position(t);
+        let target = target as f64;
+        let dur = (time_ms as f64 / 1000.0).max((target - p).abs() / max_speed);
+        *self = ServoModel {
+            start: p,
+            target,
+            t0: t,
+            dur,
+        };
+    }
+
+    /// The current move's target.
+    pub fn target(&self) -> f64 {
+        self.target
+    }
+}
+
+/// Rounds a non-negative raw position to the nearest count (as the Python mock does).
+pub fn round_raw(x: f64) -> u16 {
+    (x + 0.5).floor() as u16
+}
+
+/// A reply leaving the board: bytes and the delay after the request's last byte.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outgoing {
+    /// The whole reply frame.
+    pub bytes: Vec<u8>,
+    /// Seconds after the request's last byte when the reply's last byte has arrived.
+    pub delay: f64,
+}
+
+/// The simulated board.
+#[derive(Debug, Clone)]
+pub struct Board {
+    servos: [ServoModel; SERVO_COUNT],
+    torque: bool,
+    timing: SimTiming,
+    faults: Faults,
+    frames: u64,
+    replies: u64,
+    reads: u64,
+    disconnected: bool,
+}
+
+/// Hardware version the simulated board reports.
+pub const SIM_VERSION: u8 = 1;
+
+impl Board {
+    /// A board whose servos rest at `home` raw positions, torque on.
+    pub fn new(home: [u16; SERVO_COUNT], timing: SimTiming, faults: Faults) -> Board {
+        Board {
+            servos: home.map(|r| ServoModel::at(r as f64)),
+            torque: true,
+            timing,
+            faults,
+            frames: 0,
+            replies: 0,
+            reads: 0,
+            disconnected: false,
+        }
+    }
+
+    /// Handles a frame whose last byte arrived at time `t` (s); returns the reply, if any.
+    pub fn handle(&mut self, frame: &Frame, t: f64) -> Option<Outgoing> {
+        if self.disconnected {
+            return None;
+        }
+        self.frames += 1;
+        let reply = match Command::parse(frame) {
+            Ok(cmd) => self.execute(cmd, t),
+            Err(_) => None,
+        };
+        if self
+            .faults
+            .disconnect_after
+            .is_some_and(|n| self.frames >= n)
+        {
+            self.disconnected = true;
+            return None;
+        }
+        self.send(reply?)
+    }
+
+    fn execute(&mut self, cmd: Command, t: f64) -> Option<Reply> {
+        match cmd {
+            Command::MoveServo { target, time_ms } => {
+                self.move_servo(target.id().get(), target.raw(), time_ms, t)
+            }
+            Command::MoveAll { pose, time_ms } => {
+                for (i, raw) in pose.raw().iter().enumerate() {
+                    self.move_servo(i as u8 + 1, *raw, time_ms, t);
+                }
+            }
+            Command::MoveAny { target, time_ms } => {
+                self.move_servo(target.id().get(), target.raw(), time_ms, t)
+            }
+            Command::MoveEvery { raw, time_ms } => {
+                for id in 1..=SERVO_COUNT as u8 {
+                    self.move_servo(id, raw.get(), time_ms, t);
+                }
+            }
+            Command::ReadPosition(id) => return self.read(id, t),
+            Command::Ping(id) => {
+                let id = id.get();
+                let alive =
+                    (1..=SERVO_COUNT as u8).contains(&id) && self.faults.absent_servo != Some(id);
+                return Some(Reply::Ping { id, alive });
+            }
+            Command::Torque(on) => {
+                if !on {
+                    for s in &mut self.servos {
+                        *s = ServoModel::at(s.position(t));
+                    }
+                }
+                self.torque = on;
+            }
+            Command::ReadOffsetState => return Some(Reply::OffsetState(OffsetState::Ok)),
+            Command::Version => return Some(Reply::Version(SIM_VERSION)),
+            _ => {}
+        }
+        None
+    }
+
+    fn move_servo(&mut self, id: u8, raw: u16, time_ms: u16, t: f64) {
+        let idx = id as usize;
+        if !self.torque || !(1..=SERVO_COUNT).contains(&idx) || self.faults.stall_servo == Some(id)
+        {
+            return;
+        }
+        let speed = self.timing.max_speed_counts_s;
+        self.servos[idx - 1].command(raw, time_ms, t, speed);
+    }
+
+    fn read(&mut self, id: ServoId, t: f64) -> Option<Reply> {
+        if self.faults.absent_servo == Some(id.get()) {
+            return None;
+        }
+        self.reads += 1;
+        let k = self.faults.fail_read_every;
+        let fail = self.faults.fail_read_servo == Some(id.get())
+            || (k > 0 && self.reads.is_multiple_of(k as u64));
+        let raw = if fail {
+            0
+        } else {
+            round_raw(self.servos[id.index()].position(t))
+        };
+        Some(Reply::Position {
+            servo: Some(id),
+            raw,
+        })
+    }
+
+    fn send(&mut self, reply: Reply) -> Option<Outgoing> {
+        self.replies += 1;
+        let hit = |k: u32| k > 0 && self.replies.is_multiple_of(k as u64);
+        if hit(self.faults.drop_every) {
+            return None;
+        }
+        let mut buf = [0u8; dofbot_protocol::frame::MAX_FRAME];
+        let n = reply.encode(&mut buf).expect("reply fits");
+        let mut bytes = buf[..n].to_vec();
+        if hit(self.faults.corrupt_every) {
+            bytes[n - 1] ^= 0xFF;
+        }
+        let delay = (self.timing.reply_latency_ms + self.faults.delay_ms) / 1000.0
+            + n as f64 * self.timing.byte_time();
+        Some(Outgoing { bytes, delay })
+    }
+
+    /// Raw positions (rounded) at time `t`.
+    pub fn positions(&self, t: f64) -> [u16; SERVO_COUNT] {
+        self.servos.map(|s| round_raw(s.position(t)))
+    }
+
+    /// Current move targets.
+    pub fn targets(&self) -> [u16; SERVO_COUNT] {
+        self.servos.map(|s| round_raw(s.target()))
+    }
+
+    /// Frames received so far (valid framing; commands that did not parse included).
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// True once the injected disconnect happened.
+    pub fn disconnected(&self) -> bool {
+        self.disconnected
+    }
+
+    /// Torque state.
+    pub fn torque(&self) -> bool {
+        self.torque
+    }
+
+    /// Line timing.
+    pub fn timing(&self) -> &SimTiming {
+        &self.timing
+    }
+}

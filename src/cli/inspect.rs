@@ -1,0 +1,205 @@
+//! `polishbot inspect`: load -> filter -> register -> compare -> regions; writes
+//! registration.json, deviations.csv, deviations.ply and regions.json (docs/FORMATS.md).
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use serde::{Deserialize, Serialize};
+use serde_json::json;
+
+use super::GeometryInput;
+use crate::cloud::{self, transform, Geometry, PlyPrecision, PointCloud};
+use crate::compare::{self, CompareConfig, CoreConfig, Method};
+use crate::regions::{self, RegionConfig, Regions, Verdict};
+
+/// Arguments of `inspect` (they override the `--config` file's values).
+#[derive(Debug, Args)]
+pub struct InspectArgs {
+    /// Reference: a mesh (sampled area-uniformly with facet normals) or a cloud with normals.
+    #[arg(long)]
+    pub reference: PathBuf,
+    /// Scan point cloud.
+    #[arg(long)]
+    pub scan: PathBuf,
+    /// Output folder.
+    #[arg(short = 'o', long = "out")]
+    pub out: PathBuf,
+    /// Tolerance on |distance|, mm [default: 0.05].
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// M3C2 variant [default: adaptive].
+    #[arg(long, value_enum)]
+    pub method: Option<Method>,
+    /// Registration error for the level of detection, mm [default: the ICP inlier RMSE].
+    #[arg(long)]
+    pub registration_error: Option<f64>,
+    /// Skip registration: take scan_to_reference from this JSON file (registration.json or
+    /// a synth truth.json).
+    #[arg(long)]
+    pub pose: Option<PathBuf>,
+    /// Core points: a cloud file with outward normals, instead of a sample of the reference.
+    #[arg(long)]
+    pub core: Option<PathBuf>,
+    #[command(flatten)]
+    /// Units and format of the inputs.
+    pub input: GeometryInput,
+}
+
+/// Settings of `inspect` (TOML `--config`), one section per stage.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default)]
+pub struct InspectConfig {
+    /// Points sampled on a mesh reference (default 400,000 when 0).
+    pub reference_points: usize,
+    /// Core points.
+    pub core: CoreConfig,
+    /// Comparison.
+    pub compare: CompareConfig,
+    /// Regions.
+    pub regions: RegionConfig,
+}
+
+fn load_reference(path: &Path, input: &GeometryInput, samples: usize) -> Result<PointCloud> {
+    match cloud::load(path, input.format, input.units)?.geometry {
+        Geometry::Mesh { mesh, .. } => compare::mesh_reference(&mesh, samples, 1),
+        Geometry::Cloud(c) if c.normals.is_some() => Ok(c),
+        Geometry::Cloud(_) => anyhow::bail!(
+            "{}: a reference cloud needs outward normals (or give the mesh)",
+            path.display()
+        ),
+    }
+}
+
+fn read_pose(path: &Path) -> Result<nalgebra::Isometry3<f64>> {
+    #[derive(Deserialize)]
+    struct Pose {
+        scan_to_reference: [[f64; 4]; 4],
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let pose: Pose = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))?;
+    transform::isometry_from_rows(&pose.scan_to_reference)
+        .with_context(|| format!("{}: scan_to_reference", path.display()))
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)?;
+    std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Runs the chain and prints the summary table.
+pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
+    let mut cfg: InspectConfig = super::load_config(config)?;
+    if let Some(t) = args.tolerance {
+        cfg.regions.tolerance = t;
+    }
+    if let Some(m) = args.method {
+        cfg.compare.method = m;
+    }
+    anyhow::ensure!(
+        cfg.regions.tolerance.is_finite() && cfg.regions.tolerance >= 0.0,
+        "--tolerance must be a non-negative number"
+    );
+    let start = Instant::now();
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    let spin = crate::progress::spinner("load");
+    let samples = if cfg.reference_points == 0 {
+        400_000
+    } else {
+        cfg.reference_points
+    };
+    let reference = load_reference(&args.reference, &args.input, samples)?;
+    let mut scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
+    spin.finish_and_clear();
+    // TODO(preprocess): statistical outlier filter of the scan (preprocess::sor) once it lands;
+    // until then the comparison's robust fits carry the outliers.
+    // TODO(register): run register::register(scan, reference) when it lands and write its
+    // registration.json; until then the pose must be given with --pose.
+    let Some(pose_file) = &args.pose else {
+        anyhow::bail!("registration is not available yet: give the pose with --pose FILE");
+    };
+    let pose = read_pose(pose_file)?;
+    scan.transform(&pose);
+    let inlier_rmse: Option<f64> = None;
+    write_json(
+        &args.out.join("registration.json"),
+        &json!({
+            "scan_to_reference": transform::isometry_to_rows(&pose),
+            "source": pose_file.display().to_string(),
+            "fitness": null,
+            "inlier_rmse": inlier_rmse,
+            "coarse": null,
+            "fine": null,
+        }),
+    )?;
+    cfg.compare.registration_error = args
+        .registration_error
+        .or(inlier_rmse)
+        .unwrap_or(cfg.compare.registration_error);
+
+    let core = match &args.core {
+        Some(path) => {
+            let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
+            compare::core_points(
+                &c,
+                &CoreConfig {
+                    selection: compare::CoreSelection::All,
+                    ..cfg.core.clone()
+                },
+            )
+            .with_context(|| format!("{}", path.display()))?
+        }
+        None => compare::core_points(&reference, &cfg.core)?,
+    };
+    let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
+    let found = regions::find_regions(&dev, &cfg.regions);
+    let table = compare::to_cloud(&dev, &found.labels);
+    cloud::write_csv(&args.out.join("deviations.csv"), &table)?;
+    cloud::write_ply(
+        &args.out.join("deviations.ply"),
+        &table,
+        None,
+        PlyPrecision::F64,
+    )?;
+    let text = serde_json::to_string_pretty(&found)?;
+    let path = args.out.join("regions.json");
+    std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+    print_summary(&dev, &found, start.elapsed().as_secs_f64());
+    Ok(())
+}
+
+fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
+    let valid = dev.values.iter().filter(|v| v.distance.is_finite()).count();
+    println!(
+        "inspect: {} core points ({} with a distance), method {:?}, tolerance {} mm, {:.2} s",
+        dev.values.len(),
+        valid,
+        dev.method,
+        found.tolerance,
+        seconds
+    );
+    println!(
+        "{:>6} {:>10} {:>10} {:>11} {:>7}  kind",
+        "region", "peak mm", "area mm2", "volume mm3", "points"
+    );
+    for r in &found.regions {
+        let kind = if r.repairable {
+            "excess (repairable)"
+        } else {
+            "pit (not repairable)"
+        };
+        println!(
+            "{:>6} {:>10.4} {:>10.3} {:>11.5} {:>7}  {kind}",
+            r.id, r.peak, r.area, r.volume, r.points
+        );
+    }
+    let verdict = match found.verdict {
+        Verdict::WithinTolerance => "within tolerance",
+        Verdict::Repairable => "repairable",
+        Verdict::Reject => "reject",
+    };
+    println!("verdict: {verdict} ({} regions)", found.regions.len());
+}

@@ -1,0 +1,146 @@
+//! Least-squares height fields t(u, v) over a cylinder's points, in the core point's tangent
+//! frame: a full quadric (6 terms) when there are at least 10 points, a plane (3) from 4, a
+//! constant below. The value at the axis, t(0, 0), is where the surface crosses the normal
+//! line through the core point; its standard error comes from the fit's residuals.
+use nalgebra::{Matrix6, Vector6};
+
+/// A point in the tangent frame: (u, v) across the axis, t along it (mm).
+pub type Local = [f64; 3];
+
+/// What a fit says about the surface at the axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisFit {
+    /// t(0, 0), mm.
+    pub t0: f64,
+    /// Standard error of t0, mm (NaN with no residual degrees of freedom).
+    pub se: f64,
+    /// Residual standard deviation, mm.
+    pub sigma: f64,
+    /// Points used.
+    pub n: usize,
+}
+
+fn terms(count: usize) -> usize {
+    match count {
+        0..=3 => 1,
+        4..=9 => 3,
+        _ => 6,
+    }
+}
+
+fn basis(p: &Local, scale: f64) -> Vector6<f64> {
+    let (u, v) = (p[0] / scale, p[1] / scale);
+    Vector6::new(1.0, u, v, u * u, u * v, v * v)
+}
+
+/// Solves the normal equations over `pts` with `k` terms; None when singular.
+fn solve(pts: &[Local], k: usize, scale: f64) -> Option<(Vector6<f64>, f64)> {
+    let mut a = Matrix6::<f64>::zeros();
+    let mut b = Vector6::<f64>::zeros();
+    for p in pts {
+        let x = basis(p, scale);
+        for i in 0..k {
+            for j in 0..k {
+                a[(i, j)] += x[i] * x[j];
+            }
+            b[i] += x[i] * p[2];
+        }
+    }
+    for i in k..6 {
+        a[(i, i)] = 1.0;
+    }
+    let chol = a.cholesky()?;
+    let coef = chol.solve(&b);
+    let inv00 = chol.solve(&Vector6::new(1.0, 0.0, 0.0, 0.0, 0.0, 0.0))[0];
+    Some((coef, inv00))
+}
+
+fn residual(p: &Local, coef: &Vector6<f64>, scale: f64) -> f64 {
+    p[2] - basis(p, scale).dot(coef)
+}
+
+/// Points whose residual from `model` is within `max(trim, 3 × 1.4826 × median |residual|)`.
+fn inliers(pts: &[Local], trim: f64, model: impl Fn(&Local) -> f64) -> Vec<Local> {
+    let mut abs: Vec<f64> = pts.iter().map(|p| (p[2] - model(p)).abs()).collect();
+    let mid = abs.len() / 2;
+    let mad = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let limit = trim.max(3.0 * 1.4826 * mad);
+    pts.iter()
+        .copied()
+        .filter(|p| (p[2] - model(p)).abs() <= limit)
+        .collect()
+}
+
+/// Fits `pts` (at least one); `scale` (the cylinder radius) conditions the system. Robustly:
+/// points far from the median value are dropped first (outlier clusters), then points far
+/// from the first fit, each time beyond `max(trim, 3 × 1.4826 × median |residual|)`.
+/// The residual variance used for the standard error is at least `floor²` (the scan noise:
+/// a fit through few points must not claim more precision than the scanner has).
+pub fn fit(pts: &[Local], scale: f64, trim: f64, floor: f64) -> Option<AxisFit> {
+    if pts.is_empty() {
+        return None;
+    }
+    let mut values: Vec<f64> = pts.iter().map(|p| p[2]).collect();
+    let mid = values.len() / 2;
+    let median = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
+    let kept = inliers(pts, trim, |_| median);
+    let first = fit_once(&kept, scale, floor)?;
+    let kept = inliers(&kept, trim, |p| p[2] - residual(p, &first.0, scale));
+    Some(fit_once(&kept, scale, floor)?.2)
+}
+
+fn fit_once(pts: &[Local], scale: f64, floor: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
+    if pts.is_empty() {
+        return None;
+    }
+    let mut k = terms(pts.len());
+    let (coef, inv00) = loop {
+        match solve(pts, k, scale) {
+            Some(s) => break s,
+            None if k == 6 => k = 3,
+            None if k == 3 => k = 1,
+            None => return None,
+        }
+    };
+    let rss: f64 = pts.iter().map(|p| residual(p, &coef, scale).powi(2)).sum();
+    let dof = pts.len() as f64 - k as f64;
+    let var = rss / dof;
+    let sigma = var.sqrt();
+    Some((
+        coef,
+        sigma,
+        AxisFit {
+            t0: coef[0],
+            se: (var.max(floor * floor) * inv00).sqrt(),
+            sigma,
+            n: pts.len(),
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recovers_a_quadric_at_the_axis() {
+        let pts: Vec<Local> = (0..40)
+            .map(|i| {
+                let (u, v) = ((i % 7) as f64 * 0.1 - 0.3, (i / 7) as f64 * 0.1 - 0.25);
+                [
+                    u,
+                    v,
+                    0.2 + 0.1 * u - 0.3 * v + 2.0 * u * u - u * v + 0.5 * v * v,
+                ]
+            })
+            .collect();
+        let f = fit(&pts, 0.4, 0.01, 0.0).unwrap();
+        assert!((f.t0 - 0.2).abs() < 1e-12, "{f:?}");
+        assert!(f.sigma < 1e-12);
+        // Few points: a plane, then a constant.
+        let f = fit(&pts[..5], 0.4, 0.01, 0.0).unwrap();
+        assert_eq!(f.n, 5);
+        let f = fit(&pts[..2], 0.4, 0.01, 0.0).unwrap();
+        assert!((f.t0 - (pts[0][2] + pts[1][2]) / 2.0).abs() < 1e-12);
+    }
+}

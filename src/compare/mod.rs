@@ -1,0 +1,320 @@
+//! Scan-versus-reference deviations at core points: classic M3C2 (Lague et al. 2013, the
+//! py4dgeo 1.2 semantics) and the adaptive M3C2 whose cylinder radius follows the local RWME
+//! similarity (the default). Distances are signed along the outward normal: + is material in
+//! excess. Formulas and choices: docs/ALGORITHMS.md.
+//!
+//! Front: [`compare`]; core points and their normals: [`core_points`].
+mod adaptive;
+mod classic;
+mod core;
+mod cylinder;
+mod fit;
+
+use anyhow::{ensure, Result};
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+pub use self::core::{core_points, mesh_reference, CoreConfig, CoreSelection};
+use crate::cloud::{Neighbours, PointCloud};
+
+/// Which M3C2 variant to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Cylinder radius chosen per core point from the RWME similarity; quadric point pairs.
+    #[default]
+    Adaptive,
+    /// One fixed cylinder radius; difference of the cylinder means (py4dgeo's M3C2).
+    Classic,
+}
+
+/// Settings of [`compare`].
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CompareConfig {
+    /// Variant (default adaptive).
+    pub method: Method,
+    /// Classic cylinder radius d, mm (default: none = the radius that holds about 20 scan
+    /// points at the scan's median density).
+    pub radius: Option<f64>,
+    /// Half-length L of the cylinder along the normal, mm (py4dgeo's `max_distance`; a value
+    /// below the radius means the radius, as in py4dgeo). Default 1.0.
+    pub max_distance: f64,
+    /// Registration error added to the level of detection, mm (default 0; `inspect` puts the
+    /// ICP inlier RMSE here unless given).
+    pub registration_error: f64,
+    /// Fewest points each cloud must have in a cylinder; fewer gives NaN with a reason
+    /// (default 3; 1 reproduces py4dgeo, which only fails on empty cylinders).
+    pub min_points: usize,
+    /// Settings of the adaptive variant.
+    pub adaptive: AdaptiveConfig,
+}
+
+impl Default for CompareConfig {
+    fn default() -> Self {
+        CompareConfig {
+            method: Method::Adaptive,
+            radius: None,
+            max_distance: 1.0,
+            registration_error: 0.0,
+            min_points: 3,
+            adaptive: AdaptiveConfig::default(),
+        }
+    }
+}
+
+/// Settings of the adaptive (RWME) variant.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct AdaptiveConfig {
+    /// Candidate radii, ascending, mm (default: none = four radii from r0 to 2.83 r0 in steps
+    /// of sqrt 2, r0 holding about 12 scan points at the scan's median density).
+    pub radii: Vec<f64>,
+    /// RWME regulariser lambda (default 0.43, the paper's value).
+    pub lambda: f64,
+    /// Weight scale h of w = exp(-d/h), mm (default 0.05, the default tolerance).
+    pub h: f64,
+    /// A radius is kept while its similarity, relative to a perfect match at the noise
+    /// level, is at least this (default 0.5).
+    pub similarity: f64,
+    /// Reference points whose normal is more than this many degrees off the core point's are
+    /// another surface (across a sharp edge) and are left out, with the scan points nearest
+    /// to them (default 35).
+    pub max_normal_angle: f64,
+    /// Scan noise (one standard deviation along the normal), mm (default: none = estimated
+    /// from the data).
+    pub noise: Option<f64>,
+}
+
+impl Default for AdaptiveConfig {
+    fn default() -> Self {
+        AdaptiveConfig {
+            radii: Vec::new(),
+            lambda: 0.43,
+            h: 0.05,
+            similarity: 0.5,
+            max_normal_angle: 35.0,
+            noise: None,
+        }
+    }
+}
+
+/// Why a core point has no distance.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reason {
+    /// A distance was computed.
+    Ok,
+    /// Fewer than `min_points` reference points in the cylinder.
+    FewReference,
+    /// Fewer than `min_points` scan points in the cylinder.
+    FewScan,
+}
+
+impl Reason {
+    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points.
+    pub fn code(self) -> u8 {
+        match self {
+            Reason::Ok => 0,
+            Reason::FewReference => 1,
+            Reason::FewScan => 2,
+        }
+    }
+}
+
+/// The result at one core point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Deviation {
+    /// Signed distance along the outward normal, mm (+ = material in excess); NaN when
+    /// `reason` is not Ok.
+    pub distance: f64,
+    /// Level of detection at 95 %, mm (NaN when it cannot be computed).
+    pub uncertainty: f64,
+    /// |distance| > uncertainty.
+    pub significant: bool,
+    /// Cylinder radius used, mm.
+    pub radius: f64,
+    /// Reference points used.
+    pub n_ref: usize,
+    /// Scan points used.
+    pub n_scan: usize,
+    /// Unit vector from the reference surface point to its paired scan surface point (zero
+    /// when the distance is zero or NaN).
+    pub direction: Vector3<f64>,
+    /// Spread (standard deviation along the normal) of the reference and scan points, mm.
+    pub spread: [f64; 2],
+    /// Why the distance is NaN, if it is.
+    pub reason: Reason,
+}
+
+impl Deviation {
+    /// A NaN result for `reason`.
+    fn missing(reason: Reason, radius: f64, n_ref: usize, n_scan: usize) -> Deviation {
+        Deviation {
+            distance: f64::NAN,
+            uncertainty: f64::NAN,
+            significant: false,
+            radius,
+            n_ref,
+            n_scan,
+            direction: Vector3::zeros(),
+            spread: [f64::NAN; 2],
+            reason,
+        }
+    }
+
+    /// Fills `significant` and `direction` from `distance` and `uncertainty`.
+    fn finish(mut self, normal: &Vector3<f64>) -> Deviation {
+        self.significant = self.distance.abs() > self.uncertainty;
+        if self.distance != 0.0 && self.distance.is_finite() {
+            self.direction = normal * self.distance.signum();
+        }
+        self
+    }
+}
+
+/// Deviations at every core point.
+#[derive(Debug, Clone)]
+pub struct Deviations {
+    /// Core points (reference frame).
+    pub points: Vec<Point3<f64>>,
+    /// Their outward unit normals.
+    pub normals: Vec<Vector3<f64>>,
+    /// One result per core point.
+    pub values: Vec<Deviation>,
+    /// Variant used.
+    pub method: Method,
+    /// Scan noise used by the adaptive variant (mm; NaN for classic).
+    pub noise: f64,
+    /// Candidate radii (adaptive) or the one radius (classic), mm.
+    pub radii: Vec<f64>,
+}
+
+/// Data every variant reads: the two clouds and their indexes.
+pub(crate) struct Clouds<'a> {
+    pub reference: &'a PointCloud,
+    pub scan: &'a PointCloud,
+    pub ref_index: Neighbours,
+    pub scan_index: Neighbours,
+}
+
+/// Compares `scan` with `reference` at the core points `core` (points with outward unit
+/// normals, reference frame; see [`core_points`]). The scan must already be registered.
+pub fn compare(
+    core: &PointCloud,
+    reference: &PointCloud,
+    scan: &PointCloud,
+    cfg: &CompareConfig,
+) -> Result<Deviations> {
+    let normals = core
+        .normals
+        .as_ref()
+        .ok_or_else(|| anyhow::anyhow!("core points have no normals"))?;
+    ensure!(!reference.is_empty(), "reference has no points");
+    ensure!(!scan.is_empty(), "scan has no points");
+    ensure!(
+        cfg.max_distance.is_finite() && cfg.max_distance >= 0.0,
+        "max_distance must be a finite non-negative number"
+    );
+    ensure!(
+        cfg.registration_error.is_finite() && cfg.registration_error >= 0.0,
+        "registration_error must be a finite non-negative number"
+    );
+    let clouds = Clouds {
+        reference,
+        scan,
+        ref_index: Neighbours::new(&reference.points),
+        scan_index: Neighbours::new(&scan.points),
+    };
+    let (values, noise, radii) = match cfg.method {
+        Method::Classic => {
+            let radius = match cfg.radius {
+                Some(r) => r,
+                None => radius_for_count(&clouds, 20.0),
+            };
+            ensure!(
+                radius > 0.0 && radius.is_finite(),
+                "radius must be positive"
+            );
+            let values = run(core, normals, |p, n| {
+                classic::at(&clouds, p, n, radius, cfg)
+            });
+            (values, f64::NAN, vec![radius])
+        }
+        Method::Adaptive => adaptive::run(&clouds, core, normals, cfg)?,
+    };
+    Ok(Deviations {
+        points: core.points.clone(),
+        normals: normals.clone(),
+        values,
+        method: cfg.method,
+        noise,
+        radii,
+    })
+}
+
+/// Runs `f` at every core point in parallel, in order, with a progress bar.
+fn run<F>(core: &PointCloud, normals: &[Vector3<f64>], f: F) -> Vec<Deviation>
+where
+    F: Fn(&Point3<f64>, &Vector3<f64>) -> Deviation + Sync,
+{
+    let bar = crate::progress::bar(core.len() as u64, "compare");
+    let out = core
+        .points
+        .par_iter()
+        .zip(normals.par_iter())
+        .chunks(1024)
+        .flat_map_iter(|chunk| {
+            let done: Vec<Deviation> = chunk.into_iter().map(|(p, n)| f(p, n)).collect();
+            bar.inc(done.len() as u64);
+            done
+        })
+        .collect();
+    bar.finish_and_clear();
+    out
+}
+
+/// The scan's median surface density (points per mm²), from the 12th-neighbour distance of
+/// up to 1,000 evenly spread scan points.
+pub(crate) fn scan_density(clouds: &Clouds) -> f64 {
+    let n = clouds.scan.len();
+    let step = (n / 1000).max(1);
+    let mut densities: Vec<f64> = (0..n)
+        .step_by(step)
+        .filter_map(|i| {
+            let found = clouds.scan_index.knn(&clouds.scan.points[i], 13);
+            let d2 = found.last()?.dist2;
+            (found.len() == 13 && d2 > 0.0).then(|| 12.0 / (std::f64::consts::PI * d2))
+        })
+        .collect();
+    if densities.is_empty() {
+        return 1.0;
+    }
+    densities.sort_by(f64::total_cmp);
+    densities[densities.len() / 2]
+}
+
+/// The radius of a disc that holds `count` scan points at the median density.
+pub(crate) fn radius_for_count(clouds: &Clouds, count: f64) -> f64 {
+    (count / (std::f64::consts::PI * scan_density(clouds))).sqrt()
+}
+
+/// The deviations as a cloud with the columns of deviations.csv/.ply (DESIGN.md):
+/// x,y,z,nx,ny,nz,distance,uncertainty,significant,radius,n_ref,n_scan,region.
+pub fn to_cloud(dev: &Deviations, region: &[i64]) -> PointCloud {
+    let mut cloud = PointCloud {
+        points: dev.points.clone(),
+        normals: Some(dev.normals.clone()),
+        fields: Vec::new(),
+    };
+    let col = |f: &dyn Fn(&Deviation) -> f64| dev.values.iter().map(f).collect::<Vec<f64>>();
+    cloud.set_field("distance", col(&|d| d.distance));
+    cloud.set_field("uncertainty", col(&|d| d.uncertainty));
+    cloud.set_field("significant", col(&|d| d.significant as u8 as f64));
+    cloud.set_field("radius", col(&|d| d.radius));
+    cloud.set_field("n_ref", col(&|d| d.n_ref as f64));
+    cloud.set_field("n_scan", col(&|d| d.n_scan as f64));
+    cloud.set_field("region", region.iter().map(|&r| r as f64).collect());
+    cloud
+}

@@ -1,0 +1,15 @@
+//! Preprocessing: statistical outlier filter, voxel and curvature-aware down-sampling, normals.
+//!
+//! [`preprocess`] chains the steps for `polishbot filter` and `inspect`; each step also has its
+//! own front function.
+mod curvature;
+mod normals;
+mod pipeline;
+mod sor;
+mod voxel;
+
+pub use curvature::{curvature_sample, CurvatureSample, CurvatureSampleConfig};
+pub use normals::{estimate_normals, pca_normal, NormalConfig, NormalEstimate, Orientation};
+pub use pipeline::{preprocess, PreprocessConfig, Preprocessed};
+pub use sor::{mean_distances, statistical_outlier_filter, SorConfig, SorResult};
+pub use voxel::{mean_spacing, voxel_downsample};

@@ -1,0 +1,114 @@
+//! Voxel down-sampling (one centroid per occupied voxel) and the cloud resolution.
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use crate::cloud::{Aabb, Neighbours, PointCloud};
+
+/// Replaces the points of each occupied voxel (edge `voxel_mm`) by their centroid; normals are
+/// averaged and renormalised (the first point's normal when they cancel), scalar fields
+/// averaged. The grid is Open3D's: voxel (i, j, l) spans
+/// `min + voxel * ((i, j, l) - 1/2)` to `+ voxel`, `min` being the bounding-box corner.
+/// Output is ordered by voxel (x index, then y, then z). A voxel that is not a positive
+/// finite number returns the cloud unchanged (the stage front [`super::preprocess`] refuses it).
+pub fn voxel_downsample(cloud: &PointCloud, voxel_mm: f64) -> PointCloud {
+    let Some(bbox) = Aabb::of(&cloud.points) else {
+        return cloud.clone();
+    };
+    if !(voxel_mm > 0.0 && voxel_mm.is_finite()) {
+        return cloud.clone();
+    }
+    let origin = bbox.min - Vector3::repeat(voxel_mm / 2.0);
+    let mut keyed: Vec<([i64; 3], usize)> = cloud
+        .points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            (
+                ((p - origin) / voxel_mm).map(|c| c.floor() as i64).into(),
+                i,
+            )
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    let runs: Vec<&[([i64; 3], usize)]> = keyed.chunk_by(|a, b| a.0 == b.0).collect();
+    let mean = |run: &[([i64; 3], usize)], values: &[f64]| {
+        run.iter().map(|e| values[e.1]).sum::<f64>() / run.len() as f64
+    };
+    PointCloud {
+        points: runs
+            .iter()
+            .map(|run| {
+                let sum = run
+                    .iter()
+                    .fold(Vector3::zeros(), |s, e| s + cloud.points[e.1].coords);
+                Point3::from(sum / run.len() as f64)
+            })
+            .collect(),
+        normals: cloud.normals.as_ref().map(|normals| {
+            runs.iter()
+                .map(|run| {
+                    let sum = run.iter().fold(Vector3::zeros(), |s, e| s + normals[e.1]);
+                    sum.try_normalize(1e-12).unwrap_or(normals[run[0].1])
+                })
+                .collect()
+        }),
+        fields: cloud
+            .fields
+            .iter()
+            .map(|f| crate::cloud::ScalarField {
+                name: f.name.clone(),
+                values: runs.iter().map(|run| mean(run, &f.values)).collect(),
+            })
+            .collect(),
+    }
+}
+
+/// Mean distance from each point to its nearest other point (the cloud resolution "mr", mm);
+/// 0 for fewer than two points.
+pub fn mean_spacing(cloud: &PointCloud) -> f64 {
+    if cloud.len() < 2 {
+        return 0.0;
+    }
+    let index = Neighbours::new(&cloud.points);
+    let nearest = index.par_map_points(Default::default, |(scratch, buf), i| {
+        index.knn_dist2_into(&cloud.points[i], 2, scratch, buf);
+        buf[1].sqrt()
+    });
+    nearest.iter().sum::<f64>() / cloud.len() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centroids_normals_and_fields_per_voxel() {
+        let mut cloud = PointCloud::from_points(vec![
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.4, 0.0, 0.0),
+            Point3::new(2.0, 0.0, 0.0),
+            Point3::new(0.2, 0.3, 0.0),
+        ]);
+        cloud.normals = Some(vec![Vector3::x(), Vector3::y(), Vector3::z(), Vector3::x()]);
+        cloud.set_field("intensity", vec![1.0, 2.0, 3.0, 3.0]);
+        let down = voxel_downsample(&cloud, 1.0);
+        assert_eq!(down.len(), 2);
+        assert!((down.points[0] - Point3::new(0.2, 0.1, 0.0)).norm() < 1e-12);
+        assert_eq!(down.points[1], Point3::new(2.0, 0.0, 0.0));
+        let n0 = down.normals.as_ref().unwrap()[0];
+        assert!((n0 - Vector3::new(2.0, 1.0, 0.0).normalize()).norm() < 1e-12);
+        assert_eq!(down.field("intensity").unwrap(), &[2.0, 3.0]);
+        assert_eq!(voxel_downsample(&cloud, 0.0), cloud);
+    }
+
+    #[test]
+    fn spacing_of_a_grid() {
+        let cloud = PointCloud::from_points(
+            (0..100)
+                .map(|i| Point3::new((i % 10) as f64 * 0.5, (i / 10) as f64 * 0.5, 0.0))
+                .collect(),
+        );
+        assert_eq!(mean_spacing(&cloud), 0.5);
+        assert_eq!(mean_spacing(&PointCloud::default()), 0.0);
+    }
+}

@@ -1,0 +1,212 @@
+//! Defect regions: significant core points beyond the tolerance (error points), clustered.
+//!
+//! Error points of the same sign closer than `gap_factor` × the core-point spacing are
+//! connected; each connected set of at least `min_points` is a region. Area is the sum of the
+//! points' area shares (π d8² / 8, d8 the distance to the 8th nearest core point); volume
+//! above tolerance is Σ share × (|distance| - tolerance). Material in excess (distance > 0)
+//! can be ground away: repairable; pits cannot.
+//!
+//! Front: [`find_regions`].
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::cloud::Neighbours;
+use crate::compare::Deviations;
+
+/// Settings of [`find_regions`].
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default)]
+pub struct RegionConfig {
+    /// Tolerance on |distance|, mm (default 0.05).
+    pub tolerance: f64,
+    /// Error points closer than this many core-point spacings are connected (default 2.5).
+    pub gap_factor: f64,
+    /// Fewest error points in a region; smaller clusters are dropped as noise (default 3).
+    pub min_points: usize,
+}
+
+impl Default for RegionConfig {
+    fn default() -> Self {
+        RegionConfig {
+            tolerance: 0.05,
+            gap_factor: 2.5,
+            min_points: 3,
+        }
+    }
+}
+
+/// One defect region (regions.json).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Region {
+    /// Index in the list (the `region` column of deviations.csv).
+    pub id: usize,
+    /// Mean position of its error points, mm.
+    pub centroid: [f64; 3],
+    /// Mean outward normal (unit).
+    pub normal: [f64; 3],
+    /// Surface area, mm².
+    pub area: f64,
+    /// Signed distance of largest magnitude, mm.
+    pub peak: f64,
+    /// Mean signed distance, mm.
+    pub mean: f64,
+    /// Volume beyond the tolerance, mm³.
+    pub volume: f64,
+    /// Number of error points.
+    pub points: usize,
+    /// Material in excess (grinding can fix it); false for pits.
+    pub repairable: bool,
+}
+
+/// What the regions mean for the part.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Verdict {
+    /// No region.
+    WithinTolerance,
+    /// Every region is material in excess.
+    Repairable,
+    /// At least one pit.
+    Reject,
+}
+
+/// The regions of a comparison.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Regions {
+    /// Tolerance used, mm.
+    pub tolerance: f64,
+    /// Median core-point spacing, mm.
+    pub spacing: f64,
+    /// Connection distance, mm.
+    pub gap: f64,
+    /// Overall verdict.
+    pub verdict: Verdict,
+    /// The regions, largest volume first.
+    pub regions: Vec<Region>,
+    /// Region id per core point (-1 = none).
+    #[serde(skip)]
+    pub labels: Vec<i64>,
+}
+
+fn find(parent: &mut [usize], mut i: usize) -> usize {
+    while parent[i] != i {
+        parent[i] = parent[parent[i]];
+        i = parent[i];
+    }
+    i
+}
+
+/// Area share of each core point and the median spacing (nearest-neighbour distance).
+fn shares(points: &[Point3<f64>]) -> (Vec<f64>, f64) {
+    let index = Neighbours::new(points);
+    let found: Vec<(f64, f64)> = points
+        .par_iter()
+        .map(|p| {
+            let nb = index.knn(p, 9);
+            let d1 = nb.get(1).map_or(f64::NAN, |n| n.dist2.sqrt());
+            let a = nb
+                .last()
+                .map_or(0.0, |n| std::f64::consts::PI * n.dist2 / 8.0);
+            (a, d1)
+        })
+        .collect();
+    let mut d: Vec<f64> = found
+        .iter()
+        .map(|f| f.1)
+        .filter(|d| d.is_finite())
+        .collect();
+    d.sort_by(f64::total_cmp);
+    let spacing = d.get(d.len() / 2).copied().unwrap_or(0.0);
+    (found.into_iter().map(|f| f.0).collect(), spacing)
+}
+
+/// Clusters the error points of `dev` into regions.
+pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
+    let (share, spacing) = shares(&dev.points);
+    let gap = cfg.gap_factor * spacing;
+    let errors: Vec<usize> = (0..dev.values.len())
+        .filter(|&i| {
+            let v = &dev.values[i];
+            v.significant && v.distance.abs() > cfg.tolerance
+        })
+        .collect();
+    let pts: Vec<Point3<f64>> = errors.iter().map(|&i| dev.points[i]).collect();
+    let index = Neighbours::new(&pts);
+    let mut parent: Vec<usize> = (0..errors.len()).collect();
+    for (a, p) in pts.iter().enumerate() {
+        let sign = dev.values[errors[a]].distance > 0.0;
+        for nb in index.within_unsorted(p, gap) {
+            if (dev.values[errors[nb.index]].distance > 0.0) == sign {
+                let (ra, rb) = (find(&mut parent, a), find(&mut parent, nb.index));
+                parent[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut groups: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for (a, &core) in errors.iter().enumerate() {
+        let root = find(&mut parent, a);
+        groups.entry(root).or_default().push(core);
+    }
+    let mut regions: Vec<(Region, Vec<usize>)> = groups
+        .into_values()
+        .filter(|g| g.len() >= cfg.min_points)
+        .map(|g| (describe(dev, &g, &share, cfg.tolerance), g))
+        .collect();
+    regions.sort_by(|a, b| b.0.volume.total_cmp(&a.0.volume));
+    let mut labels = vec![-1i64; dev.points.len()];
+    for (id, (region, members)) in regions.iter_mut().enumerate() {
+        region.id = id;
+        members.iter().for_each(|&i| labels[i] = id as i64);
+    }
+    let regions: Vec<Region> = regions.into_iter().map(|r| r.0).collect();
+    let verdict = if regions.is_empty() {
+        Verdict::WithinTolerance
+    } else if regions.iter().all(|r| r.repairable) {
+        Verdict::Repairable
+    } else {
+        Verdict::Reject
+    };
+    Regions {
+        tolerance: cfg.tolerance,
+        spacing,
+        gap,
+        verdict,
+        regions,
+        labels,
+    }
+}
+
+fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) -> Region {
+    let n = members.len() as f64;
+    let centroid = members
+        .iter()
+        .map(|&i| dev.points[i].coords)
+        .sum::<Vector3<f64>>()
+        / n;
+    let normal = members
+        .iter()
+        .map(|&i| dev.normals[i])
+        .sum::<Vector3<f64>>();
+    let normal = normal.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
+    let d = |i: usize| dev.values[i].distance;
+    let peak = members
+        .iter()
+        .map(|&i| d(i))
+        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
+        .unwrap_or(0.0);
+    Region {
+        id: 0,
+        centroid: centroid.into(),
+        normal: normal.into(),
+        area: members.iter().map(|&i| share[i]).sum(),
+        peak,
+        mean: members.iter().map(|&i| d(i)).sum::<f64>() / n,
+        volume: members
+            .iter()
+            .map(|&i| share[i] * (d(i).abs() - tolerance))
+            .sum(),
+        points: members.len(),
+        repairable: peak > 0.0,
+    }
+}

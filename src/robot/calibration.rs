@@ -1,0 +1,272 @@
+//! The calibration files of a cell: `tool.toml`, `servos.toml`, `workcell.toml`
+//! (formats documented in the files under `calibration/`).
+use std::path::Path;
+
+use nalgebra::{Matrix4, Point3, Vector3};
+use serde::Deserialize;
+
+use super::error::{read_toml, RobotError};
+
+/// `tool.toml`: the grinding tool on the wrist-roll flange.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tool {
+    /// Name of the fixed URDF joint whose origin is set to `tip_offset`.
+    pub joint: String,
+    /// Tool tip (ball centre) in the flange frame, metres.
+    pub tip_offset: [f64; 3],
+    /// Tool axis in the flange frame (unit vector from shank to tip).
+    pub axis: [f64; 3],
+    /// Radius of the burr, metres.
+    pub radius: f64,
+}
+
+impl Tool {
+    /// Loads and checks `tool.toml`.
+    pub fn load(file: &Path) -> Result<Self, RobotError> {
+        let tool: Tool = read_toml(file)?;
+        let n = Vector3::from(tool.axis).norm();
+        if (n - 1.0).abs() > 1e-9 {
+            return Err(RobotError::bad(
+                file,
+                "axis",
+                format!("must be a unit vector (norm {n})"),
+            ));
+        }
+        if !(tool.radius > 0.0 && tool.radius < 0.05) {
+            return Err(RobotError::bad(file, "radius", "must be in (0, 0.05) m"));
+        }
+        if tool
+            .tip_offset
+            .iter()
+            .any(|v| !v.is_finite() || v.abs() > 0.5)
+        {
+            return Err(RobotError::bad(
+                file,
+                "tip_offset",
+                "must be finite and under 0.5 m",
+            ));
+        }
+        Ok(tool)
+    }
+}
+
+/// One bus servo of `servos.toml`.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Servo {
+    /// Bus id (1..6 on the DOFBOT).
+    pub id: u8,
+    /// URDF joint this servo drives; `None` for the gripper.
+    #[serde(default)]
+    pub joint: Option<String>,
+    /// Servo degrees at joint zero.
+    #[serde(default = "default_zero_offset")]
+    pub zero_offset_deg: f64,
+    /// +1 or -1: sign of servo degrees per joint degree.
+    #[serde(default = "default_direction")]
+    pub direction: i8,
+    /// Servo degree range `[min, max]`.
+    pub degree_range: [f64; 2],
+    /// Raw counts at the ends of `degree_range` (before any inversion), read by the bus side.
+    pub raw_range: [u16; 2],
+    /// True when raw counts run opposite to servo degrees (Yahboom's servos 2, 3, 4).
+    #[serde(default)]
+    pub raw_inverted: bool,
+    /// Raw counts the servo accepts; a read-back outside is a failed read.
+    pub raw_accepted: [u16; 2],
+    /// Optional narrower joint limits `[lower, upper]`, radians.
+    #[serde(default)]
+    pub joint_limits: Option<[f64; 2]>,
+    /// Joint velocity limit, rad/s (joint servos only).
+    #[serde(default)]
+    pub velocity: Option<f64>,
+    /// Joint acceleration limit, rad/s^2 (joint servos only).
+    #[serde(default)]
+    pub acceleration: Option<f64>,
+    /// Joint jerk limit, rad/s^3 (joint servos only).
+    #[serde(default)]
+    pub jerk: Option<f64>,
+    /// Servo degrees a servo without a joint (the gripper) is held at.
+    #[serde(default)]
+    pub hold_deg: Option<f64>,
+}
+
+fn default_zero_offset() -> f64 {
+    90.0
+}
+
+fn default_direction() -> i8 {
+    1
+}
+
+impl Servo {
+    /// Servo degrees for joint angle `q` (radians): `zero_offset_deg + direction * q_deg`.
+    pub fn servo_deg(&self, q: f64) -> f64 {
+        self.zero_offset_deg + f64::from(self.direction) * q.to_degrees()
+    }
+
+    /// Joint angle (radians) for servo degrees `deg`: the inverse of [`Servo::servo_deg`].
+    pub fn joint_from_deg(&self, deg: f64) -> f64 {
+        ((deg - self.zero_offset_deg) * f64::from(self.direction)).to_radians()
+    }
+
+    /// Raw counts per servo degree (about 12.2 on the DOFBOT).
+    pub fn counts_per_degree(&self) -> f64 {
+        let raw = f64::from(self.raw_range[1]) - f64::from(self.raw_range[0]);
+        raw.abs() / (self.degree_range[1] - self.degree_range[0])
+    }
+
+    /// The joint range the servo's degree range allows, `[lower, upper]` radians.
+    pub fn joint_range(&self) -> [f64; 2] {
+        let a = self.joint_from_deg(self.degree_range[0]);
+        let b = self.joint_from_deg(self.degree_range[1]);
+        [a.min(b), a.max(b)]
+    }
+}
+
+/// `servos.toml`: the bus period and every servo.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Servos {
+    /// Bus period, seconds (one six-servo frame per period).
+    pub period: f64,
+    /// The servos, in any order.
+    #[serde(rename = "servo")]
+    pub servos: Vec<Servo>,
+}
+
+impl Servos {
+    /// Loads and checks `servos.toml`.
+    pub fn load(file: &Path) -> Result<Self, RobotError> {
+        let s: Servos = read_toml(file)?;
+        if !(s.period > 0.0 && s.period <= 1.0) {
+            return Err(RobotError::bad(file, "period", "must be in (0, 1] s"));
+        }
+        for (i, servo) in s.servos.iter().enumerate() {
+            let key = |k: &str| format!("servo[{i}].{k}");
+            if s.servos[..i].iter().any(|o| o.id == servo.id) {
+                return Err(RobotError::bad(
+                    file,
+                    key("id"),
+                    format!("id {} repeats", servo.id),
+                ));
+            }
+            if servo.direction != 1 && servo.direction != -1 {
+                return Err(RobotError::bad(file, key("direction"), "must be 1 or -1"));
+            }
+            if !less(servo.degree_range[0], servo.degree_range[1]) {
+                return Err(RobotError::bad(
+                    file,
+                    key("degree_range"),
+                    "must be [min, max]",
+                ));
+            }
+            let [lo, hi] = servo.raw_accepted;
+            if servo.raw_range.iter().any(|r| *r < lo || *r > hi) || lo >= hi {
+                let msg = "raw_range must lie inside raw_accepted [min, max]";
+                return Err(RobotError::bad(file, key("raw_range"), msg));
+            }
+            if servo.raw_range[0] == servo.raw_range[1] {
+                return Err(RobotError::bad(file, key("raw_range"), "ends must differ"));
+            }
+            if servo.joint.is_some() {
+                for (name, v) in [
+                    ("velocity", servo.velocity),
+                    ("acceleration", servo.acceleration),
+                    ("jerk", servo.jerk),
+                ] {
+                    match v {
+                        Some(v) if v > 0.0 && v.is_finite() => {}
+                        _ => return Err(RobotError::bad(file, key(name), "must be set and > 0")),
+                    }
+                }
+                if let Some([a, b]) = servo.joint_limits {
+                    if !less(a, b) {
+                        return Err(RobotError::bad(
+                            file,
+                            key("joint_limits"),
+                            "must be [lower, upper]",
+                        ));
+                    }
+                }
+            } else {
+                match servo.hold_deg {
+                    Some(d) if d >= servo.degree_range[0] && d <= servo.degree_range[1] => {}
+                    _ => {
+                        let msg = "a servo without a joint needs hold_deg inside degree_range";
+                        return Err(RobotError::bad(file, key("hold_deg"), msg));
+                    }
+                }
+            }
+        }
+        Ok(s)
+    }
+
+    /// The servo driving URDF joint `joint`.
+    pub fn for_joint(&self, joint: &str) -> Option<&Servo> {
+        self.servos
+            .iter()
+            .find(|s| s.joint.as_deref() == Some(joint))
+    }
+}
+
+/// `workcell.toml`: where the part's reference frame sits in the robot base frame.
+///
+/// Units: the reference (CAD) frame of the point clouds is in millimetres, the robot in metres.
+/// `robot_from_reference` is a rigid transform in metres: it maps a reference-frame point
+/// expressed in metres (millimetres / 1000) to the robot base frame. Use
+/// [`Workcell::point_from_reference_mm`] and [`Workcell::direction_from_reference`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Workcell {
+    /// The 4x4 rigid transform, metres.
+    pub robot_from_reference: Matrix4<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WorkcellFile {
+    robot_from_reference: [[f64; 4]; 4],
+}
+
+impl Workcell {
+    /// Loads and checks `workcell.toml` (rows of the matrix, last row `[0, 0, 0, 1]`).
+    pub fn load(file: &Path) -> Result<Self, RobotError> {
+        let raw: WorkcellFile = read_toml(file)?;
+        let rows = raw.robot_from_reference;
+        let m = Matrix4::from_fn(|r, c| rows[r][c]);
+        let key = "robot_from_reference";
+        if m.iter().any(|v| !v.is_finite()) {
+            return Err(RobotError::bad(file, key, "values must be finite"));
+        }
+        if (m.fixed_slice::<1, 4>(3, 0) - nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0)).norm()
+            > 1e-12
+        {
+            return Err(RobotError::bad(file, key, "last row must be [0, 0, 0, 1]"));
+        }
+        let r = m.fixed_slice::<3, 3>(0, 0);
+        let err = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
+        if err > 1e-6 || r.determinant() < 0.0 {
+            let msg = format!("upper-left 3x3 must be a rotation (|R^T R - I| = {err:.2e})");
+            return Err(RobotError::bad(file, key, msg));
+        }
+        Ok(Workcell {
+            robot_from_reference: m,
+        })
+    }
+
+    /// A reference-frame point given in millimetres, in the robot base frame (metres).
+    pub fn point_from_reference_mm(&self, p_mm: &Point3<f64>) -> Point3<f64> {
+        self.robot_from_reference.transform_point(&(p_mm * 1e-3))
+    }
+
+    /// A reference-frame direction (unitless), in the robot base frame.
+    pub fn direction_from_reference(&self, d: &Vector3<f64>) -> Vector3<f64> {
+        self.robot_from_reference.fixed_slice::<3, 3>(0, 0) * d
+    }
+}
+
+/// `a < b`, false when either is NaN.
+pub(crate) fn less(a: f64, b: f64) -> bool {
+    matches!(a.partial_cmp(&b), Some(std::cmp::Ordering::Less))
+}

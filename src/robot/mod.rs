@@ -1,0 +1,55 @@
+//! The robot: the DOFBOT's URDF chain (k), the calibration files of the cell (tool, servos,
+//! workcell), forward kinematics, inverse kinematics (closed form for the DOFBOT, k's Jacobian
+//! solver otherwise) and the tool-tip error that servo resolution causes.
+//!
+//! Front function: [`load`] with a [`RobotConfig`].
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+pub mod calibration;
+pub mod error;
+pub mod ik;
+pub mod model;
+pub mod resolution;
+
+pub use calibration::{Servo, Servos, Tool, Workcell};
+pub use error::RobotError;
+pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
+pub use model::{JointSpec, Robot, ToolPose};
+pub use resolution::resolution_error;
+
+/// Where the robot description and the cell's calibration files are, and the IK settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RobotConfig {
+    /// The URDF (default `calibration/dofbot.urdf`).
+    pub urdf: PathBuf,
+    /// The tool file (default `calibration/tool.toml`).
+    pub tool: PathBuf,
+    /// The servo file (default `calibration/servos.toml`).
+    pub servos: PathBuf,
+    /// The workcell file (default `calibration/workcell.toml`).
+    pub workcell: PathBuf,
+    /// Inverse-kinematics settings.
+    pub ik: IkConfig,
+}
+
+impl Default for RobotConfig {
+    fn default() -> Self {
+        RobotConfig {
+            urdf: "calibration/dofbot.urdf".into(),
+            tool: "calibration/tool.toml".into(),
+            servos: "calibration/servos.toml".into(),
+            workcell: "calibration/workcell.toml".into(),
+            ik: IkConfig::default(),
+        }
+    }
+}
+
+/// Loads the robot model (URDF + tool + servos) and the workcell named by `config`.
+pub fn load(config: &RobotConfig) -> Result<(Robot, Workcell), RobotError> {
+    let robot = Robot::load(&config.urdf, &config.tool, &config.servos)?;
+    let workcell = Workcell::load(&config.workcell)?;
+    Ok((robot, workcell))
+}

@@ -1,0 +1,557 @@
+//! The DOFBOT bus end to end: the arm CLI and the driver against the Python mock board on a
+//! pseudo-terminal (faults injected), the in-process simulator against the mock, resume from
+//! the journal, and the range guarantee of the public API.
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use polishbot::bus::{
+    Bus, BusConfig, BusError, Entry, EntryKind, Faults, Journal, ResumePoint, SerialTransport,
+    ServoMap, SimArm, SimOptions, JOINT_COUNT,
+};
+use proptest::prelude::*;
+
+/// The mock board running on a pty, stopped (SIGTERM, by pid) when dropped.
+struct Mock {
+    child: Child,
+    path: String,
+    state: PathBuf,
+    log: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Mock {
+    fn start(python: &Path, args: &[&str]) -> Mock {
+        let dir = common::tempdir();
+        let state = dir.path().join("state.json");
+        let log = dir.path().join("mock.jsonl");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("mocks/dofbot_mock.py");
+        let mut child = Command::new(python)
+            .arg(script)
+            .arg("--state")
+            .arg(&state)
+            .arg("--log")
+            .arg(&log)
+            .args(args)
+            .stdout(Stdio::piped())
+            .spawn()
+            .expect("start mock");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .expect("mock path");
+        let path = line.trim().to_string();
+        assert!(path.starts_with("/dev/"), "mock printed {path:?}");
+        Mock {
+            child,
+            path,
+            state,
+            log,
+            _dir: dir,
+        }
+    }
+
+    /// Stops the mock and returns its final state file.
+    fn finish(mut self) -> serde_json::Value {
+        let _ = Command::new("kill")
+            .arg("-TERM")
+            .arg(self.child.id().to_string())
+            .status();
+        let _ = self.child.wait();
+        let text = std::fs::read_to_string(&self.state).expect("mock state");
+        serde_json::from_str(&text).expect("mock state json")
+    }
+
+    fn frames_logged(&self) -> Vec<serde_json::Value> {
+        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
+        text.lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect()
+    }
+}
+
+impl Drop for Mock {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn raw_array(v: &serde_json::Value) -> [u16; 6] {
+    let a: Vec<u16> = v
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_u64().unwrap() as u16)
+        .collect();
+    a.try_into().unwrap()
+}
+
+/// Every journal line parses, seq counts up by one per run and time never goes back.
+fn read_journal(path: &Path) -> Vec<Entry> {
+    let text = std::fs::read_to_string(path).expect("journal");
+    let entries: Vec<Entry> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            serde_json::from_str(l).unwrap_or_else(|e| panic!("journal line {}: {e}: {l}", i + 1))
+        })
+        .collect();
+    assert!(text.ends_with('\n'), "journal ends mid-line");
+    for w in entries.windows(2) {
+        if w[1].kind != EntryKind::Open {
+            assert_eq!(w[1].seq, w[0].seq + 1);
+            assert!(w[1].t >= w[0].t);
+        }
+    }
+    entries
+}
+
+const Q: [f64; JOINT_COUNT] = [0.5, -0.3, 0.2, 0.1, 1.0];
+
+#[test]
+fn cli_move_then_read_over_pty_returns_the_commanded_joints() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let mock = Mock::start(&py, &[]);
+    let dir = common::tempdir();
+    let journal = dir.path().join("journal.jsonl");
+    let joints = Q.map(|q| q.to_string()).join(",");
+    let out = common::polishbot()
+        .args([
+            "arm",
+            "move",
+            "--port",
+            &mock.path,
+            "--joints",
+            &joints,
+            "--gripper",
+            "30",
+            "--time",
+            "1.2",
+        ])
+        .arg("--journal")
+        .arg(&journal)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = common::polishbot()
+        .args(["arm", "read", "--port", &mock.path])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let map = ServoMap::default();
+    let want = map.pose_raw(&Q, 30.0).unwrap();
+    let got = raw_array(&read["raw"]);
+    for i in 0..6 {
+        assert!(
+            got[i].abs_diff(want[i]) <= 1,
+            "servo {}: {} vs {}",
+            i + 1,
+            got[i],
+            want[i]
+        );
+    }
+    for (i, q) in Q.iter().enumerate() {
+        let per_count = 1.0
+            / map.joints[i]
+                .scale
+                .to_scale(i as u8 + 1)
+                .unwrap()
+                .counts_per_deg();
+        let got_q = read["joints"][i].as_f64().unwrap();
+        assert!(
+            (got_q - q).abs() <= per_count.to_radians(),
+            "joint {}: {got_q} vs {q}",
+            i + 1
+        );
+    }
+    // The journal holds the 0x1D frame exactly as the mock logged it.
+    let entries = read_journal(&journal);
+    let tx = entries
+        .iter()
+        .find(|e| e.motion == Some(0))
+        .expect("motion frame journalled");
+    let logged = mock.frames_logged();
+    assert!(logged
+        .iter()
+        .any(|l| l["frame"].as_str() == tx.frame.as_deref()));
+    assert!(entries.iter().any(|e| e.kind == EntryKind::Verified));
+    let state = mock.finish();
+    assert_eq!(raw_array(&state["positions"]), got);
+}
+
+/// Runs `arm move` against a mock with `fault` flags; returns (stderr, journal entries).
+fn cli_fault(py: &Path, fault: &[&str]) -> (String, Vec<Entry>) {
+    let mock = Mock::start(py, fault);
+    let dir = common::tempdir();
+    let journal = dir.path().join("journal.jsonl");
+    let out = common::polishbot()
+        .args([
+            "arm",
+            "move",
+            "--port",
+            &mock.path,
+            "--joints",
+            "0.2,0.1,0,0,0",
+            "--gripper",
+            "90",
+        ])
+        .arg("--journal")
+        .arg(&journal)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(!out.status.success(), "fault {fault:?} went undetected");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "not one line: {stderr}"
+    );
+    (stderr, read_journal(&journal))
+}
+
+#[test]
+fn every_injected_fault_is_a_typed_one_line_error_and_the_journal_stays_consistent() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let cases: [(&[&str], &str, &str); 7] = [
+        (&["--corrupt-every", "1"], "bad checksum", "bad_checksum"),
+        (&["--drop-every", "1"], "timeout", "timeout"),
+        (&["--delay-ms", "200"], "timeout", "timeout"),
+        (
+            &["--fail-read-servo", "3"],
+            "read failure: servo 3",
+            "read_failure",
+        ),
+        (&["--disconnect-after", "9"], "port lost", "port_lost"),
+        (
+            &["--stall-servo", "2"],
+            "read-back mismatch: servo 2",
+            "read_back_mismatch",
+        ),
+        (
+            &["--absent-servo", "4"],
+            "servo 4 not answering",
+            "not_answering",
+        ),
+    ];
+    for (flags, message, code) in cases {
+        let (stderr, journal) = cli_fault(&py, flags);
+        assert!(
+            stderr.starts_with("polishbot: ") && stderr.contains(message),
+            "{flags:?}: {stderr}"
+        );
+        assert!(
+            journal.iter().any(|e| e.code.as_deref() == Some(code)),
+            "{flags:?}: no {code} line in the journal"
+        );
+        // No motion is journalled as verified after a fault, and the read-back faults stop motion.
+        assert!(
+            journal.iter().all(|e| e.kind != EntryKind::Verified),
+            "{flags:?}"
+        );
+    }
+}
+
+#[test]
+fn intermittent_faults_are_retried_and_journalled() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let mock = Mock::start(
+        &py,
+        &[
+            "--fail-read-every",
+            "4",
+            "--corrupt-every",
+            "5",
+            "--drop-every",
+            "7",
+        ],
+    );
+    let dir = common::tempdir();
+    let journal = dir.path().join("journal.jsonl");
+    let link = SerialTransport::open(&mock.path).unwrap();
+    let mut bus = Bus::connect(
+        link,
+        BusConfig::default(),
+        Journal::append(&journal).unwrap(),
+    )
+    .unwrap();
+    let state = bus.move_joints(&Q, 45.0, None).unwrap();
+    assert_eq!(state.raw, ServoMap::default().pose_raw(&Q, 45.0).unwrap());
+    drop(bus);
+    let entries = read_journal(&journal);
+    for code in ["read_failure", "bad_checksum", "timeout"] {
+        assert!(
+            entries.iter().any(|e| e.code.as_deref() == Some(code)),
+            "no retried {code}"
+        );
+    }
+}
+
+/// A sequence of motion frames: joint poses along a wave, 80 ms each.
+fn plan() -> Vec<[u16; 6]> {
+    let map = ServoMap::default();
+    (0..12)
+        .map(|k| {
+            let s = k as f64 / 11.0;
+            let q = [
+                0.8 * s,
+                -0.5 * s,
+                0.6 * (s * 3.0).sin(),
+                0.3 - 0.6 * s,
+                2.0 * s,
+            ];
+            map.pose_raw(&q, 20.0 + 100.0 * s).unwrap()
+        })
+        .collect()
+}
+
+fn send_from(bus: &mut Bus<SerialTransport>, from: u64) -> Result<(), BusError> {
+    for (i, raw) in plan().iter().enumerate().skip(from as usize) {
+        bus.send_motion(i as u64, dofbot_protocol::Pose::new(*raw).unwrap(), 80)?;
+    }
+    Ok(())
+}
+
+#[test]
+fn resume_after_disconnect_reaches_the_uninterrupted_final_pose() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let dir = common::tempdir();
+    let cfg = BusConfig {
+        frame_gap_ms: 20.0,
+        ..BusConfig::default()
+    };
+
+    let whole = Mock::start(&py, &[]);
+    let mut bus = Bus::connect(
+        SerialTransport::open(&whole.path).unwrap(),
+        cfg.clone(),
+        Journal::none(),
+    )
+    .unwrap();
+    send_from(&mut bus, 0).unwrap();
+    bus.sleep(Duration::from_millis(800));
+    drop(bus);
+    let uninterrupted = whole.finish();
+
+    // 6 pings at connect, then the link dies after the 7th motion frame arrives.
+    let journal = dir.path().join("journal.jsonl");
+    let broken = Mock::start(&py, &["--disconnect-after", "13"]);
+    let mut bus = Bus::connect(
+        SerialTransport::open(&broken.path).unwrap(),
+        cfg.clone(),
+        Journal::append(&journal).unwrap(),
+    )
+    .unwrap();
+    let err = send_from(&mut bus, 0).unwrap_err();
+    assert_eq!(err.code(), "port_lost", "{err}");
+    drop(bus);
+    std::thread::sleep(Duration::from_millis(300));
+    let at_break = broken.finish();
+    assert_eq!(at_break["disconnected"], true);
+
+    let rp = ResumePoint::from_journal(&journal).unwrap();
+    assert!(rp.last_sent.is_some() && rp.resume_from() < plan().len() as u64 - 1);
+    assert_eq!(
+        rp.last_error.as_ref().map(|e| e.0.as_str()),
+        Some("port_lost")
+    );
+
+    // The arm stays where it stopped: the next mock starts from the broken one's positions.
+    let initial = raw_array(&at_break["positions"])
+        .map(|r| r.to_string())
+        .join(",");
+    let resumed = Mock::start(&py, &["--initial", &initial]);
+    let mut bus = Bus::connect(
+        SerialTransport::open(&resumed.path).unwrap(),
+        cfg,
+        Journal::append(&journal).unwrap(),
+    )
+    .unwrap();
+    send_from(&mut bus, rp.resume_from()).unwrap();
+    bus.sleep(Duration::from_millis(800));
+    drop(bus);
+    let after = resumed.finish();
+    assert_eq!(
+        raw_array(&after["positions"]),
+        raw_array(&uninterrupted["positions"])
+    );
+    assert_eq!(raw_array(&after["positions"]), *plan().last().unwrap());
+    let rp = ResumePoint::from_journal(&journal).unwrap();
+    assert_eq!(rp.last_sent, Some(plan().len() as u64 - 1));
+}
+
+#[test]
+fn sim_and_mock_agree_on_moves_and_reads() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let mock = Mock::start(&py, &[]);
+    let mut real = Bus::connect(
+        SerialTransport::open(&mock.path).unwrap(),
+        BusConfig::default(),
+        Journal::none(),
+    )
+    .unwrap();
+    let cfg = BusConfig::default();
+    let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).unwrap();
+    let mut sim = Bus::connect(arm.transport(), cfg, Journal::none()).unwrap();
+    assert_eq!(real.read_joints().unwrap(), sim.read_joints().unwrap());
+    assert_eq!(real.version().unwrap(), sim.version().unwrap());
+    for q in [Q, [-0.7, 0.4, -1.2, 1.5, -1.5], [0.0; 5]] {
+        let a = real.move_joints(&q, 10.0, None).unwrap();
+        let b = sim.move_joints(&q, 10.0, None).unwrap();
+        assert_eq!(a, b);
+    }
+    assert_eq!(
+        arm.positions(),
+        mock.finish()["positions"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_u64().unwrap() as u16)
+            .collect::<Vec<_>>()
+            .as_slice()
+    );
+}
+
+#[test]
+fn sim_faults_match_the_mock_error_kinds() {
+    let cases: [(Faults, &str); 6] = [
+        (
+            Faults {
+                corrupt_every: 1,
+                ..Faults::default()
+            },
+            "bad_checksum",
+        ),
+        (
+            Faults {
+                drop_every: 1,
+                ..Faults::default()
+            },
+            "timeout",
+        ),
+        (
+            Faults {
+                fail_read_servo: Some(3),
+                ..Faults::default()
+            },
+            "read_failure",
+        ),
+        (
+            Faults {
+                disconnect_after: Some(9),
+                ..Faults::default()
+            },
+            "port_lost",
+        ),
+        (
+            Faults {
+                stall_servo: Some(2),
+                ..Faults::default()
+            },
+            "read_back_mismatch",
+        ),
+        (
+            Faults {
+                absent_servo: Some(4),
+                ..Faults::default()
+            },
+            "not_answering",
+        ),
+    ];
+    for (faults, code) in cases {
+        let cfg = BusConfig::default();
+        let arm = SimArm::new(
+            &SimOptions {
+                faults: faults.clone(),
+                ..SimOptions::default()
+            },
+            &cfg.servo_map,
+        )
+        .unwrap();
+        let err = Bus::connect(arm.transport(), cfg, Journal::none())
+            .and_then(|mut b| b.move_joints(&Q, 90.0, None))
+            .unwrap_err();
+        assert_eq!(err.code(), code, "{faults:?}: {err}");
+    }
+}
+
+#[test]
+fn stop_flag_sends_no_further_motion() {
+    let cfg = BusConfig::default();
+    let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).unwrap();
+    let dir = common::tempdir();
+    let journal = dir.path().join("journal.jsonl");
+    let mut bus = Bus::connect(arm.transport(), cfg, Journal::append(&journal).unwrap()).unwrap();
+    let frames = plan();
+    bus.send_motion(0, dofbot_protocol::Pose::new(frames[0]).unwrap(), 80)
+        .unwrap();
+    bus.stop_flag()
+        .store(true, std::sync::atomic::Ordering::SeqCst);
+    let err = bus
+        .send_motion(1, dofbot_protocol::Pose::new(frames[1]).unwrap(), 80)
+        .unwrap_err();
+    assert_eq!(err, BusError::Stopped);
+    let motions = arm.received().iter().filter(|f| f.func == 0x1D).count();
+    assert_eq!(motions, 1);
+    let rp = ResumePoint::from_journal(&journal).unwrap();
+    assert_eq!((rp.last_sent, rp.resume_from()), (Some(0), 0));
+    assert_eq!(rp.last_error.unwrap().0, "stopped");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// Random joint targets, many outside the limits: whatever the public API accepts puts
+    /// only in-range raws on the wire, and they decode to joints inside the limits.
+    #[test]
+    fn no_frame_outside_raw_ranges_or_joint_limits(
+        q in prop::array::uniform5(-4.0f64..4.0),
+        gripper in -20.0f64..200.0,
+        time in prop::option::of(0.01f64..3.0),
+    ) {
+        let cfg = BusConfig { ping_at_connect: false, ..BusConfig::default() };
+        let map = cfg.servo_map.clone();
+        let arm = SimArm::new(&SimOptions::default(), &map).unwrap();
+        let mut bus = Bus::connect(arm.transport(), cfg, Journal::none()).unwrap();
+        let within = q.iter().zip(&map.joints).all(|(v, j)| *v >= j.lower_rad && *v <= j.upper_rad)
+            && (0.0..=180.0).contains(&gripper);
+        let result = bus.move_joints(&q, gripper, time.map(Duration::from_secs_f64));
+        if !within {
+            prop_assert!(matches!(result, Err(BusError::Refused(_))));
+        }
+        for f in arm.received().iter().filter(|f| f.func == 0x1D) {
+            let frame = dofbot_protocol::Frame::new(f.func, &f.payload).unwrap();
+            let Ok(dofbot_protocol::Command::MoveAll { pose, .. }) = dofbot_protocol::Command::parse(&frame) else {
+                panic!("a 0x1D frame that does not parse");
+            };
+            let state = map.state_from_raw(pose.raw()).unwrap();
+            for (i, j) in map.joints.iter().enumerate() {
+                let half_count = (0.5 / j.scale.to_scale(i as u8 + 1).unwrap().counts_per_deg()).to_radians();
+                prop_assert!(state.joints[i] >= j.lower_rad - half_count && state.joints[i] <= j.upper_rad + half_count);
+            }
+            prop_assert!(within);
+        }
+    }
+}

@@ -1,0 +1,576 @@
+//! Robot model, IK and time-optimal trajectories: IK against FK through k, Ruckig against the
+//! official ruckig (PyPI), validation and servo-resolution error.
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{UnitQuaternion, Vector3};
+use polishbot::plan::{
+    validate, JointTrajectory, LimitKind, Limits, Move, TrajectoryConfig, ValidationConfig,
+};
+use polishbot::robot::{
+    angle_between, resolution_error, IkConfig, IkTarget, Robot, Unreachable, Workcell,
+};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+fn calib(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("calibration")
+        .join(name)
+}
+
+fn dofbot() -> Robot {
+    Robot::load(
+        &calib("dofbot.urdf"),
+        &calib("tool.toml"),
+        &calib("servos.toml"),
+    )
+    .expect("load calibration")
+}
+
+fn random_q(robot: &Robot, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    robot
+        .joints
+        .iter()
+        .map(|j| rng.gen_range(j.lower..=j.upper))
+        .collect()
+}
+
+#[test]
+fn ik_round_trip_on_10000_random_reachable_poses() {
+    let robot = dofbot();
+    assert!(
+        robot.has_closed_form(),
+        "the DOFBOT URDF must take the closed-form IK"
+    );
+    let config = IkConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let (mut worst_p, mut worst_a) = (0.0f64, 0.0f64);
+    for case in 0..10_000 {
+        let q = random_q(&robot, &mut rng);
+        let pose = robot.fk(&q);
+        let previous = random_q(&robot, &mut rng);
+        let target = IkTarget {
+            position: pose.position,
+            axis: pose.axis,
+            roll: None,
+        };
+        let sol = robot
+            .ik(&target, &previous, &config)
+            .unwrap_or_else(|e| panic!("case {case} q {q:?}: {e}"));
+        let back = robot.fk(&sol.q);
+        worst_p = worst_p.max((back.position - pose.position).norm());
+        worst_a = worst_a.max(angle_between(&back.axis, &pose.axis));
+        assert_eq!(
+            sol.q[4], previous[4],
+            "free roll keeps the previous wrist roll"
+        );
+        assert!(robot.limit_violation(&sol.q, 0.0).is_none());
+    }
+    println!("FK(IK) worst: {worst_p:.3e} m, {worst_a:.3e} rad");
+    assert!(
+        worst_p <= 1e-9 && worst_a <= 1e-9,
+        "worst {worst_p:e} m {worst_a:e} rad"
+    );
+}
+
+#[test]
+fn ik_picks_the_branch_nearest_the_previous_pose() {
+    let robot = dofbot();
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    for _ in 0..2_000 {
+        let q = random_q(&robot, &mut rng);
+        let pose = robot.fk(&q);
+        let target = IkTarget {
+            position: pose.position,
+            axis: pose.axis,
+            roll: Some(q[4]),
+        };
+        let sol = robot
+            .ik(&target, &q, &IkConfig::default())
+            .expect("reachable");
+        let d: f64 = sol
+            .q
+            .iter()
+            .zip(&q)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            d < 1e-6,
+            "starting at the answer must return it: {q:?} -> {:?}",
+            sol.q
+        );
+    }
+}
+
+#[test]
+fn off_plane_axis_is_projected_and_the_miss_reported() {
+    let robot = dofbot();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for _ in 0..2_000 {
+        let q = random_q(&robot, &mut rng);
+        let pose = robot.fk(&q);
+        let radial = Vector3::new(pose.position.x, pose.position.y, 0.0);
+        if radial.norm() < 1e-3 {
+            continue;
+        }
+        let normal = radial.cross(&Vector3::z()).normalize();
+        let tilt = rng.gen_range(-40f64..40.0).to_radians();
+        let axis = UnitQuaternion::from_axis_angle(
+            &nalgebra::Unit::new_normalize(pose.axis.cross(&normal)),
+            tilt,
+        ) * pose.axis;
+        let target = IkTarget {
+            position: pose.position,
+            axis,
+            roll: None,
+        };
+        let sol = robot
+            .ik(&target, &q, &IkConfig::default())
+            .expect("within the accepted miss");
+        assert!(
+            (sol.axis_miss - tilt.abs()).abs() < 1e-9,
+            "miss {} vs tilt {}",
+            sol.axis_miss,
+            tilt.abs()
+        );
+        let back = robot.fk(&sol.q);
+        assert!((back.position - pose.position).norm() < 1e-9);
+        assert!(
+            angle_between(&back.axis, &pose.axis) < 1e-9,
+            "the projection of the tilted axis is the original"
+        );
+    }
+}
+
+#[test]
+fn unreachable_poses_say_why() {
+    let robot = dofbot();
+    let home = vec![0.0; 5];
+    let config = IkConfig::default();
+    let far = IkTarget {
+        position: Vector3::new(0.0, 0.6, 0.1),
+        axis: Vector3::y(),
+        roll: None,
+    };
+    assert!(matches!(
+        robot.ik(&far, &home, &config),
+        Err(Unreachable::OutOfReach { .. })
+    ));
+
+    let q = [0.2, 0.5, 0.6, 0.3, 0.0];
+    let pose = robot.fk(&q);
+    let radial = Vector3::new(pose.position.x, pose.position.y, 0.0).normalize();
+    let side = radial.cross(&Vector3::z());
+    let axis = (pose.axis.normalize() * 0.5 + side * (60f64.to_radians().tan() * 0.5)).normalize();
+    match robot.ik(
+        &IkTarget {
+            position: pose.position,
+            axis,
+            roll: None,
+        },
+        &home,
+        &config,
+    ) {
+        Err(Unreachable::AxisOffPlane { degrees, .. }) => {
+            assert!((degrees - 60.0).abs() < 1e-6, "{degrees}")
+        }
+        other => panic!("expected AxisOffPlane, got {other:?}"),
+    }
+
+    // narrow joint 3 to a sliver: a pose made with joint 3 far outside it cannot be reached
+    let dir = common::tempdir();
+    let servos = std::fs::read_to_string(calib("servos.toml")).unwrap();
+    std::fs::write(dir.path().join("servos.toml"), narrow_joint3(&servos)).unwrap();
+    let narrow = Robot::load(
+        &calib("dofbot.urdf"),
+        &calib("tool.toml"),
+        &dir.path().join("servos.toml"),
+    )
+    .unwrap();
+    let pose = robot.fk(&[0.1, 0.3, 1.2, 0.4, 0.0]);
+    let target = IkTarget {
+        position: pose.position,
+        axis: pose.axis,
+        roll: None,
+    };
+    let exact = IkConfig {
+        axis_search: false,
+        ..IkConfig::default()
+    };
+    match narrow.ik(&target, &home, &exact) {
+        Err(Unreachable::JointLimit { joint, .. }) => {
+            assert!(joint.starts_with("arm_joint"), "{joint}")
+        }
+        other => panic!("expected JointLimit, got {other:?}"),
+    }
+}
+
+#[test]
+fn axis_search_tilts_the_tool_in_the_arm_plane_only_as_far_as_needed() {
+    let robot = dofbot();
+    let exact = IkConfig {
+        axis_search: false,
+        ..IkConfig::default()
+    };
+    let search = IkConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(31);
+    let (mut found, mut tried) = (0, 0);
+    while tried < 300 {
+        // a reachable pose, then its axis turned in the arm plane by 10..40 degrees
+        let q = random_q(&robot, &mut rng);
+        let pose = robot.fk(&q);
+        let radial = Vector3::new(pose.position.x, pose.position.y, 0.0);
+        if radial.norm() < 1e-3 {
+            continue;
+        }
+        let normal = nalgebra::Unit::new_normalize(radial.cross(&Vector3::z()));
+        let turn =
+            rng.gen_range(10f64..40.0).to_radians() * if rng.gen_bool(0.5) { 1.0 } else { -1.0 };
+        let axis = UnitQuaternion::from_axis_angle(&normal, turn) * pose.axis;
+        let target = IkTarget {
+            position: pose.position,
+            axis,
+            roll: None,
+        };
+        if robot.ik(&target, &q, &exact).is_ok() {
+            continue;
+        }
+        tried += 1;
+        let sol = robot
+            .ik(&target, &q, &search)
+            .expect("the original axis is within the cone");
+        let back = robot.fk(&sol.q);
+        assert!((back.position - pose.position).norm() < 1e-9);
+        // never worse than the known-feasible original axis (bisection to 1/128 degree)
+        assert!(
+            sol.axis_miss <= turn.abs() + 1f64.to_radians() / 100.0,
+            "{} > {}",
+            sol.axis_miss,
+            turn.abs()
+        );
+        assert!((angle_between(&back.axis, &axis) - sol.axis_miss).abs() < 1e-9);
+        // and the achieved axis stays in the arm plane
+        assert!(back.axis.dot(&normal).abs() < 1e-9);
+        found += 1;
+    }
+    assert_eq!(found, tried);
+}
+
+/// servos.toml with joint 3's joint_limits narrowed to [-0.1, 0.1].
+fn narrow_joint3(text: &str) -> String {
+    let mut out = String::new();
+    let mut in3 = false;
+    for line in text.lines() {
+        if line == "joint = \"arm_joint3\"" {
+            in3 = true;
+        }
+        if in3 && line.starts_with("joint_limits") {
+            out.push_str("joint_limits = [-0.1, 0.1]\n");
+            in3 = false;
+            continue;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+#[test]
+fn other_urdfs_fall_back_to_k_jacobian_ik() {
+    // Yahboom's own rounding (1.5708) leaves the pitch axes 3.7 urad from parallel: no closed form.
+    let text = std::fs::read_to_string(calib("dofbot.urdf"))
+        .unwrap()
+        .replace("1.5707963267948966", "1.5708");
+    let description = urdf_rs::read_from_string(&text).unwrap();
+    let tool = polishbot::robot::Tool::load(&calib("tool.toml")).unwrap();
+    let servos = polishbot::robot::Servos::load(&calib("servos.toml")).unwrap();
+    let robot = Robot::from_parts(
+        description,
+        Path::new("yahboom.urdf"),
+        tool,
+        servos,
+        &calib("servos.toml"),
+    )
+    .unwrap();
+    assert!(!robot.has_closed_form());
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut solved = 0;
+    for _ in 0..50 {
+        let q = random_q(&robot, &mut rng);
+        let start: Vec<f64> = q.iter().map(|v| v + rng.gen_range(-0.05..0.05)).collect();
+        let pose = robot.fk(&q);
+        let target = IkTarget {
+            position: pose.position,
+            axis: pose.axis,
+            roll: None,
+        };
+        if let Ok(sol) = robot.ik(&target, &start, &IkConfig::default()) {
+            assert!((robot.fk(&sol.q).position - pose.position).norm() <= 1e-9);
+            solved += 1;
+        }
+    }
+    assert!(
+        solved >= 40,
+        "Jacobian fallback solved only {solved} of 50 nearby poses"
+    );
+}
+
+#[test]
+fn calibration_errors_name_file_and_key() {
+    // the shipped files load, and the workcell maps reference millimetres to robot metres
+    let (_, cell) = polishbot::robot::load(&polishbot::robot::RobotConfig {
+        urdf: calib("dofbot.urdf"),
+        tool: calib("tool.toml"),
+        servos: calib("servos.toml"),
+        workcell: calib("workcell.toml"),
+        ..Default::default()
+    })
+    .unwrap();
+    let origin = cell.point_from_reference_mm(&nalgebra::Point3::origin());
+    let moved = cell.point_from_reference_mm(&nalgebra::Point3::new(0.0, 0.0, 1000.0));
+    assert!(
+        ((moved - origin).norm() - 1.0).abs() < 1e-12,
+        "1000 mm must map to 1 m"
+    );
+    let dir = common::tempdir();
+    let tool = dir.path().join("tool.toml");
+    std::fs::write(
+        &tool,
+        "joint = \"tool_joint\"\ntip_offset = [0, 0, 0.02]\naxis = [0, 0, 1]\nradius = -1\n",
+    )
+    .unwrap();
+    let err = polishbot::robot::Tool::load(&tool).unwrap_err().to_string();
+    println!("{err}");
+    assert!(err.contains("tool.toml") && err.contains("radius"), "{err}");
+
+    let servos = dir.path().join("servos.toml");
+    let text = std::fs::read_to_string(calib("servos.toml"))
+        .unwrap()
+        .replacen("velocity = 1.0", "velocity = \"fast\"", 1);
+    std::fs::write(&servos, text).unwrap();
+    let err = polishbot::robot::Servos::load(&servos)
+        .unwrap_err()
+        .to_string();
+    println!("{err}");
+    assert!(
+        err.contains("servos.toml") && err.contains("velocity"),
+        "{err}"
+    );
+
+    let work = dir.path().join("workcell.toml");
+    std::fs::write(
+        &work,
+        "robot_from_reference = [[2,0,0,0],[0,1,0,0],[0,0,1,0],[0,0,0,1]]\n",
+    )
+    .unwrap();
+    let err = Workcell::load(&work).unwrap_err().to_string();
+    println!("{err}");
+    assert!(
+        err.contains("workcell.toml") && err.contains("robot_from_reference"),
+        "{err}"
+    );
+}
+
+#[derive(serde::Serialize)]
+struct Case {
+    from: Vec<f64>,
+    to: Vec<f64>,
+    v: Vec<f64>,
+    a: Vec<f64>,
+    j: Vec<f64>,
+}
+
+const RUCKIG_ORACLE: &str = r#"
+import json, sys
+from ruckig import InputParameter, Ruckig, Trajectory, Result, DurationDiscretization, Synchronization
+cases = json.load(open(sys.argv[1]))
+period = float(sys.argv[2])
+out = []
+for c in cases:
+    row = []
+    for discrete in (False, True):
+        n = len(c["from"])
+        otg = Ruckig(n, period)
+        inp = InputParameter(n)
+        inp.current_position = c["from"]
+        inp.target_position = c["to"]
+        inp.max_velocity = c["v"]
+        inp.max_acceleration = c["a"]
+        inp.max_jerk = c["j"]
+        inp.synchronization = Synchronization.Time
+        if discrete:
+            inp.duration_discretization = DurationDiscretization.Discrete
+        traj = Trajectory(n)
+        res = otg.calculate(inp, traj)
+        assert res in (Result.Working, Result.Finished), res
+        row.append(traj.duration)
+    out.append(row)
+print(json.dumps(out))
+"#;
+
+#[test]
+fn move_durations_equal_official_ruckig() {
+    let Some(python) = common::oracle_python() else {
+        return;
+    };
+    let robot = dofbot();
+    let mut rng = ChaCha8Rng::seed_from_u64(19);
+    let cases: Vec<Case> = (0..400)
+        .map(|i| {
+            let scale = |x: f64, rng: &mut ChaCha8Rng| x * rng.gen_range(0.2..2.0);
+            let from = random_q(&robot, &mut rng);
+            // every tenth case moves a single joint by a tiny amount (short, jerk-limited moves)
+            let to = if i % 10 == 0 {
+                let mut t = from.clone();
+                t[i % 5] += 1e-3;
+                t
+            } else {
+                random_q(&robot, &mut rng)
+            };
+            Case {
+                v: robot
+                    .joints
+                    .iter()
+                    .map(|j| scale(j.velocity, &mut rng))
+                    .collect(),
+                a: robot
+                    .joints
+                    .iter()
+                    .map(|j| scale(j.acceleration, &mut rng))
+                    .collect(),
+                j: robot
+                    .joints
+                    .iter()
+                    .map(|j| scale(j.jerk, &mut rng))
+                    .collect(),
+                from,
+                to,
+            }
+        })
+        .collect();
+    let dir = common::tempdir();
+    let file = dir.path().join("cases.json");
+    std::fs::write(&file, serde_json::to_string(&cases).unwrap()).unwrap();
+    let period = 0.02;
+    let out = common::run_python(
+        &python,
+        RUCKIG_ORACLE,
+        &[file.to_str().unwrap(), &period.to_string()],
+    );
+    let oracle: Vec<[f64; 2]> = serde_json::from_str(out.trim()).unwrap();
+    let mut worst = 0.0f64;
+    for (case, expect) in cases.iter().zip(&oracle) {
+        let limits = Limits {
+            velocity: case.v.clone(),
+            acceleration: case.a.clone(),
+            jerk: case.j.clone(),
+        };
+        for (k, discrete) in [false, true].into_iter().enumerate() {
+            let config = TrajectoryConfig {
+                period,
+                discrete_duration: discrete,
+            };
+            let mv = Move::new(&case.from, &case.to, &limits, &config).unwrap();
+            worst = worst.max((mv.duration() - expect[k]).abs());
+        }
+    }
+    println!(
+        "worst duration difference to official ruckig: {worst:.3e} s over {} cases x 2",
+        cases.len()
+    );
+    assert!(worst <= 1e-9, "worst {worst:e} s");
+}
+
+#[test]
+fn sampled_moves_stay_within_every_limit_and_violations_are_found() {
+    let robot = dofbot();
+    let limits = Limits::from_joints(&robot.joints);
+    let config = TrajectoryConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    let waypoints: Vec<Vec<f64>> = (0..20).map(|_| random_q(&robot, &mut rng)).collect();
+    let mut traj = JointTrajectory::starting_at(&waypoints[0], config.period);
+    traj.append_moves(&waypoints[1..], &limits, &config)
+        .unwrap();
+    let violations = validate(&traj, &robot, &ValidationConfig::default());
+    assert!(violations.is_empty(), "{}", violations[0]);
+    // the moves are time-optimal: some joint reaches near its velocity limit
+    let h = traj.period;
+    let vmax = (1..traj.len())
+        .flat_map(|i| (0..5).map(move |j| (i, j)))
+        .map(|(i, j)| ((traj.sample(i)[j] - traj.sample(i - 1)[j]) / h).abs())
+        .fold(0.0, f64::max);
+    assert!(vmax > 0.95 * limits.velocity[0], "peak {vmax}");
+    assert!((traj.last().iter().zip(waypoints.last().unwrap())).all(|(a, b)| (a - b).abs() < 1e-12));
+    // twice as fast (every other sample) breaks the limits, and validation says where
+    let fast = JointTrajectory {
+        period: h,
+        dof: 5,
+        positions: (0..traj.len())
+            .step_by(2)
+            .flat_map(|i| traj.sample(i).to_vec())
+            .collect(),
+    };
+    let bad = validate(&fast, &robot, &ValidationConfig::default());
+    assert!(bad.iter().any(|v| v.kind == LimitKind::Velocity));
+    assert!(bad.iter().any(|v| v.kind == LimitKind::Jerk));
+    // a position outside the limits is found too
+    let mut out = traj.clone();
+    out.positions[2] = 2.0;
+    assert!(validate(&out, &robot, &ValidationConfig::default())
+        .iter()
+        .any(|v| v.kind == LimitKind::AboveUpper));
+}
+
+#[test]
+fn servo_resolution_error_bounds_the_quantised_tip() {
+    let robot = dofbot();
+    let mut rng = ChaCha8Rng::seed_from_u64(29);
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for _ in 0..200 {
+        let q = random_q(&robot, &mut rng);
+        let bound = resolution_error(&robot, &q);
+        (lo, hi) = (lo.min(bound), hi.max(bound));
+        let tip = robot.fk(&q).position;
+        let half: Vec<f64> = robot
+            .joints
+            .iter()
+            .map(|j| {
+                let s = robot
+                    .servos
+                    .servos
+                    .iter()
+                    .find(|s| s.id == j.servo_id)
+                    .unwrap();
+                (0.5 / s.counts_per_degree()).to_radians()
+            })
+            .collect();
+        let mut corner_max = 0.0f64;
+        for mask in 0..32u32 {
+            let qq: Vec<f64> = q
+                .iter()
+                .enumerate()
+                .map(|(i, v)| {
+                    v + if mask >> i & 1 == 1 {
+                        half[i]
+                    } else {
+                        -half[i]
+                    }
+                })
+                .collect();
+            corner_max = corner_max.max((robot.fk(&qq).position - tip).norm());
+        }
+        // linear bound: corner max <= sum |J_i| d_i <= sqrt(5) * corner max (to first order)
+        assert!(corner_max <= bound * 1.001, "{corner_max} > {bound}");
+        assert!(
+            bound <= 5f64.sqrt() * corner_max * 1.001,
+            "{bound} vs {corner_max}"
+        );
+    }
+    println!(
+        "servo-resolution tip error bound over random poses: {:.3}..{:.3} mm",
+        lo * 1e3,
+        hi * 1e3
+    );
+}
