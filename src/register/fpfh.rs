@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::tree::Tree;
+use crate::cloud::Neighbours as Tree;
 
 /// Number of histogram bins of one feature.
 pub const FPFH_BINS: usize = 33;

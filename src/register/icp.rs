@@ -4,7 +4,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::tree::Tree;
+use crate::cloud::Neighbours as Tree;
 
 /// Settings of one ICP run (lengths in mm).
 #[derive(Debug, Clone, Copy)]
@@ -217,7 +217,12 @@ mod tests {
         };
         let target: Vec<Point3<f64>> = (0..40_000).map(|_| sphere(&mut rng)).collect();
         let tree = Tree::new(&target);
-        let normals = super::super::tree::pca_normals(&target, &tree, 1.0, 30);
+        let normals = crate::preprocess::estimate_normals(
+            &crate::cloud::PointCloud::from_points(target.clone()),
+            &crate::preprocess::NormalConfig::default(),
+        )
+        .unwrap()
+        .normals;
         let truth = Isometry3::new(
             Vector3::new(0.3, -0.2, 0.25),
             Vector3::new(0.01, -0.02, 0.015),

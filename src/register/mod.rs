@@ -12,17 +12,18 @@ pub mod correspondences;
 pub mod fpfh;
 pub mod icp;
 pub mod mac;
-mod tree;
 
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::PointCloud;
+use crate::cloud::{Neighbours, PointCloud};
+use crate::preprocess::{
+    estimate_normals, mean_spacing, voxel_downsample, NormalConfig, Orientation,
+};
 use icp::{IcpParams, IcpResult};
 use mac::{MacParams, MacStats};
-use tree::Tree;
 
 /// Settings of the registration stage. Lengths in mm; `None` lengths derive from the cloud
 /// resolution `mr` (mean nearest-neighbour spacing, the larger of the two clouds').
@@ -261,12 +262,10 @@ pub fn register_with_progress(
 
     progress("down-sampling and normals");
     let t = Instant::now();
-    let scan_tree = Tree::new(&scan.points);
-    let ref_tree = Tree::new(&reference.points);
-    let mr_ref = tree::mean_spacing(&reference.points, &ref_tree);
-    let mr = tree::mean_spacing(&scan.points, &scan_tree).max(mr_ref);
+    let mr_ref = mean_spacing(reference);
+    let mr = mean_spacing(scan).max(mr_ref);
     let voxel = cfg.voxel.unwrap_or(5.0 * mr);
-    if !(voxel > 0.0) {
+    if voxel.is_nan() || voxel <= 0.0 {
         return Err(RegisterError::Input(
             "cloud resolution is zero (all points coincide)".into(),
         ));
@@ -274,18 +273,32 @@ pub fn register_with_progress(
     let normal_radius = cfg.normal_radius.unwrap_or(2.0 * voxel);
     let feature_radius = cfg.feature_radius.unwrap_or(5.0 * voxel);
     let use_input_normals = scan.normals.is_some() && reference.normals.is_some();
-    let down = |c: &PointCloud| {
-        let (pts, nrm) = tree::voxel_downsample(
-            &c.points,
-            c.normals.as_deref().filter(|_| use_input_normals),
-            voxel,
-        );
-        let t = Tree::new(&pts);
-        let nrm = nrm.unwrap_or_else(|| tree::pca_normals(&pts, &t, normal_radius, 30));
-        (pts, nrm, t)
+    let down = |c: &PointCloud| -> Result<PointCloud, RegisterError> {
+        let d = voxel_downsample(c, voxel);
+        let normals = match d.normals {
+            Some(n) if use_input_normals => n,
+            _ => {
+                let ncfg = NormalConfig {
+                    k: 30,
+                    radius: Some(normal_radius),
+                    orientation: Orientation::Outward,
+                    ..NormalConfig::default()
+                };
+                estimate_normals(&PointCloud::from_points(d.points.clone()), &ncfg)
+                    .map_err(|e| RegisterError::Input(e.to_string()))?
+                    .normals
+            }
+        };
+        Ok(PointCloud {
+            normals: Some(normals),
+            ..d
+        })
     };
-    let (s_pts, s_nrm, _s_tree) = down(scan);
-    let (r_pts, r_nrm, r_tree) = down(reference);
+    let (s_down, r_down) = (down(scan)?, down(reference)?);
+    let (s_pts, r_pts) = (s_down.points, r_down.points);
+    let s_nrm = s_down.normals.unwrap_or_default();
+    let r_nrm = r_down.normals.unwrap_or_default();
+    let r_tree = Neighbours::new(&r_pts);
     coarse.resolution = mr;
     coarse.voxel = voxel;
     coarse.normal_radius = normal_radius;
@@ -419,9 +432,18 @@ pub fn register_with_progress(
     let t = Instant::now();
     let stride = scan.len().div_ceil(cfg.icp_max_points.max(1));
     let src_fine: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
+    let ref_tree = Neighbours::new(&reference.points);
     let ref_normals: Vec<Vector3<f64>> = match &reference.normals {
         Some(n) => n.clone(),
-        None => tree::pca_normals(&reference.points, &ref_tree, f64::INFINITY, 20),
+        None => {
+            let ncfg = NormalConfig {
+                orientation: Orientation::Unoriented,
+                ..NormalConfig::default()
+            };
+            estimate_normals(&PointCloud::from_points(reference.points.clone()), &ncfg)
+                .map_err(|e| RegisterError::Input(e.to_string()))?
+                .normals
+        }
     };
     let fine = icp::icp(
         &src_fine,

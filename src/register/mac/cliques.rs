@@ -209,6 +209,9 @@ fn cliques_from(
     bron_kerbosch(&ctx, &mut stack, 0.0, p, x, &mut local, &mut r);
 }
 
+/// Receives a clique found in a neighbourhood: local members, scratch, weight.
+type LocalReport<'a> = dyn FnMut(&[usize], &mut Vec<u32>, f64) + 'a;
+
 /// What the recursion needs besides its sets.
 struct Ctx<'a> {
     adj: &'a [Bits],
@@ -227,7 +230,7 @@ fn bron_kerbosch(
     w: f64,
     mut p: Bits,
     mut x: Bits,
-    report: &mut dyn FnMut(&[usize], &mut Vec<u32>, f64),
+    report: &mut LocalReport,
     scratch: &mut Vec<u32>,
 ) {
     let (adj, budget) = (ctx.adj, ctx.budget);

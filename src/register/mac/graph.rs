@@ -107,6 +107,7 @@ mod tests {
     use rand::{Rng, SeedableRng};
 
     #[test]
+    #[allow(clippy::needless_range_loop)]
     fn second_order_equals_dense_product() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let n = 40;

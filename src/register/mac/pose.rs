@@ -11,7 +11,7 @@ pub fn weighted_svd(
     weights: &[f64],
 ) -> Option<Isometry3<f64>> {
     let wsum: f64 = weights.iter().sum();
-    if weights.iter().filter(|&&w| w > 0.0).count() < 3 || !(wsum > 0.0) {
+    if weights.iter().filter(|&&w| w > 0.0).count() < 3 || wsum.is_nan() || wsum <= 0.0 {
         return None;
     }
     let mut cs = Vector3::zeros();
