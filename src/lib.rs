@@ -9,6 +9,7 @@ pub mod plan;
 pub mod preprocess;
 pub mod progress;
 pub mod regions;
+pub mod register;
 pub mod report;
 pub mod robot;
 pub mod synth;

@@ -61,7 +61,10 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
             registration_error: None,
             pose: None,
             core: None,
-            input: GeometryInput { units: Some(crate::cloud::Units::Mm), format: None },
+            input: GeometryInput {
+                units: Some(crate::cloud::Units::Mm),
+                format: None,
+            },
         },
         None,
     )?;
@@ -79,17 +82,30 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     )?;
     step("run: stream the plan to the simulated arm");
     run_cmd::run(
-        run_cmd::RunArgs { plan: plan_file.clone(), port: None, sim: true, dry_run: false, resume: None, journal: Some(out.join("journal.jsonl")) },
+        run_cmd::RunArgs {
+            plan: plan_file.clone(),
+            port: None,
+            sim: true,
+            dry_run: false,
+            resume: None,
+            journal: Some(out.join("journal.jsonl")),
+        },
         None,
     )?;
     summary(&out, &inspection, &plan_file, &case.truth)?;
-    println!("demo: done in {:.1} s; everything is in {}", start.elapsed().as_secs_f64(), out.display());
+    println!(
+        "demo: done in {:.1} s; everything is in {}",
+        start.elapsed().as_secs_f64(),
+        out.display()
+    );
     Ok(())
 }
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    serde_json::from_str(&text).map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
 }
 
 /// Scores the run against the truth and prints it.
@@ -104,7 +120,12 @@ fn summary(out: &Path, inspection: &Path, plan_file: &Path, truth: &Truth) -> Re
     let plan = Plan::load(plan_file)?;
     println!("== summary ({})", out.display());
     println!("registration error against truth: {deg:.4} deg, {mm:.4} mm");
-    println!("defects planted: {}; regions found: {} (verdict {:?})", truth.defects.len(), regions.regions.len(), regions.verdict);
+    println!(
+        "defects planted: {}; regions found: {} (verdict {:?})",
+        truth.defects.len(),
+        regions.regions.len(),
+        regions.verdict
+    );
     let mut found_all_repairable = true;
     for d in &truth.defects {
         let centre = Point3::from(d.centre);
@@ -112,7 +133,10 @@ fn summary(out: &Path, inspection: &Path, plan_file: &Path, truth: &Truth) -> Re
         let hit = regions
             .regions
             .iter()
-            .filter(|r| (Point3::from(r.centroid) - centre).norm() <= reach && r.peak.signum() == d.height.signum())
+            .filter(|r| {
+                (Point3::from(r.centroid) - centre).norm() <= reach
+                    && r.peak.signum() == d.height.signum()
+            })
             .map(|r| r.id.to_string())
             .collect::<Vec<_>>();
         let repairable = d.kind != DefectKind::Pit && d.height > regions.tolerance;
@@ -123,10 +147,17 @@ fn summary(out: &Path, inspection: &Path, plan_file: &Path, truth: &Truth) -> Re
             d.kind,
             d.height,
             d.width,
-            if hit.is_empty() { "NOT FOUND".to_string() } else { format!("found as region {}", hit.join(", ")) }
+            if hit.is_empty() {
+                "NOT FOUND".to_string()
+            } else {
+                format!("found as region {}", hit.join(", "))
+            }
         );
     }
-    println!("every planted repairable defect found: {}", if found_all_repairable { "yes" } else { "NO" });
+    println!(
+        "every planted repairable defect found: {}",
+        if found_all_repairable { "yes" } else { "NO" }
+    );
     let reach = &plan.reachability;
     println!(
         "plan: {} passes, {} frames, predicted duration {:.1} s; unreachable contact points {}",

@@ -13,6 +13,7 @@ mod info;
 mod inspect;
 mod inspect_report;
 mod plan;
+mod register;
 mod run;
 mod synth;
 
@@ -49,7 +50,7 @@ pub enum Command {
     /// Statistical outlier filter and down-sampling.
     Filter(filter::FilterArgs),
     /// Register a scan onto a reference: DIR/registration.json.
-    Register(NotYet),
+    Register(register::RegisterArgs),
     /// Whole metrology chain: registration, deviations, regions, report.
     Inspect(Box<inspect::InspectArgs>),
     /// Plan grinding passes and the joint trajectory from an inspection.
@@ -94,7 +95,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Synth(args) => synth::run(*args, config),
         Command::Merge(_) => not_yet("merge"),
         Command::Filter(args) => filter::run(args, config),
-        Command::Register(_) => not_yet("register"),
+        Command::Register(args) => register::run(args, config),
         Command::Inspect(args) => inspect::run(*args, config),
         Command::Plan(args) => plan::run(args, config),
         Command::Run(args) => run::run(args, config),

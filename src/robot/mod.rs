@@ -43,7 +43,9 @@ pub fn default_calibration(name: &str) -> PathBuf {
     if local.exists() {
         return local;
     }
-    let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("calibration").join(name);
+    let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("calibration")
+        .join(name);
     if shipped.exists() {
         shipped
     } else {

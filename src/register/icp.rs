@@ -1,0 +1,255 @@
+//! Point-to-plane ICP with a robust (Geman–McClure) kernel: defects and outliers are
+//! down-weighted instead of pulling the pose.
+use nalgebra::{Isometry3, Matrix6, Point3, Vector3, Vector6};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::cloud::Neighbours as Tree;
+
+/// Settings of one ICP run (lengths in mm).
+#[derive(Debug, Clone, Copy)]
+pub struct IcpParams {
+    /// Pairs farther apart than this are ignored (and count against fitness).
+    pub max_distance: f64,
+    /// Iteration cap.
+    pub max_iterations: usize,
+    /// Converged when fitness and inlier RMSE both change by less than this, relatively.
+    pub relative_tolerance: f64,
+    /// Geman–McClure scale `k` (weight `(k² / (k² + r²))²`); None: `3 × 1.4826 × median |r|`
+    /// each iteration (a robust noise estimate), never below `min_kernel_scale`.
+    pub kernel_scale: Option<f64>,
+    /// Floor of the adaptive kernel scale.
+    pub min_kernel_scale: f64,
+}
+
+/// Result of an ICP run.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct IcpResult {
+    /// Final scan-to-reference pose.
+    #[serde(skip)]
+    pub pose: Isometry3<f64>,
+    /// Iterations run.
+    pub iterations: usize,
+    /// True when the tolerance was met before the iteration cap.
+    pub converged: bool,
+    /// Fraction of source points with a target point within `max_distance` (final pose).
+    pub fitness: f64,
+    /// RMS point-to-point distance of those pairs (mm).
+    pub inlier_rmse: f64,
+    /// RMS point-to-plane residual of those pairs (mm).
+    pub plane_rmse: f64,
+    /// Kernel scale of the last iteration (mm).
+    pub kernel_scale: f64,
+}
+
+/// One linearisation: normal equations plus the statistics at the current pose.
+#[derive(Default)]
+struct Step {
+    a: Matrix6<f64>,
+    b: Vector6<f64>,
+    pairs: usize,
+    sum_d2: f64,
+    sum_r2: f64,
+}
+
+impl Step {
+    fn add(mut self, o: Step) -> Step {
+        self.a += o.a;
+        self.b += o.b;
+        self.pairs += o.pairs;
+        self.sum_d2 += o.sum_d2;
+        self.sum_r2 += o.sum_r2;
+        self
+    }
+}
+
+/// Matches every source point under `pose`: (point in target frame, target index) for pairs
+/// within the distance, with the point-to-plane residual.
+fn residuals(
+    src: &[Point3<f64>],
+    target: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    tree: &Tree,
+    pose: &Isometry3<f64>,
+    max_d2: f64,
+) -> Vec<(Point3<f64>, usize, f64, f64)> {
+    src.par_iter()
+        .filter_map(|s| {
+            let q = pose * s;
+            let nb = tree.nearest(&q)?;
+            let (j, d2) = (nb.index, nb.dist2);
+            (d2 <= max_d2).then(|| (q, j, normals[j].dot(&(q - target[j])), d2))
+        })
+        .collect()
+}
+
+/// Share of `src` points (under `pose`) with a target point within `distance`, and the RMS
+/// distance of those pairs.
+pub(crate) fn fitness(
+    src: &[Point3<f64>],
+    tree: &Tree,
+    pose: &Isometry3<f64>,
+    distance: f64,
+) -> (f64, f64) {
+    let d2max = distance * distance;
+    let (n, sum) = src
+        .par_iter()
+        .filter_map(|s| tree.nearest(&(pose * s)).filter(|nb| nb.dist2 <= d2max))
+        .map(|nb| (1usize, nb.dist2))
+        .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (
+        n as f64 / src.len().max(1) as f64,
+        (sum / n.max(1) as f64).sqrt(),
+    )
+}
+
+fn median_abs(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.map(f64::abs).collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Aligns `src` to the target surface (points, unit normals, their tree) from `init`.
+pub(crate) fn icp(
+    src: &[Point3<f64>],
+    target: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    tree: &Tree,
+    init: &Isometry3<f64>,
+    p: &IcpParams,
+) -> IcpResult {
+    let max_d2 = p.max_distance * p.max_distance;
+    let n = src.len().max(1) as f64;
+    let mut pose = *init;
+    let mut last: Option<(f64, f64)> = None;
+    let mut result = IcpResult {
+        pose,
+        iterations: 0,
+        converged: false,
+        fitness: 0.0,
+        inlier_rmse: 0.0,
+        plane_rmse: 0.0,
+        kernel_scale: 0.0,
+    };
+    for it in 0..=p.max_iterations {
+        let pairs = residuals(src, target, normals, tree, &pose, max_d2);
+        let k = p.kernel_scale.unwrap_or_else(|| {
+            (3.0 * 1.4826 * median_abs(pairs.iter().map(|e| e.2))).max(p.min_kernel_scale)
+        });
+        let k2 = k * k;
+        let step = pairs
+            .par_iter()
+            .fold(Step::default, |mut s, &(q, j, r, d2)| {
+                let nj = normals[j];
+                let jac = Vector6::new(0.0, 0.0, 0.0, nj.x, nj.y, nj.z);
+                let c = q.coords.cross(&nj);
+                let jac = Vector6::new(c.x, c.y, c.z, jac[3], jac[4], jac[5]);
+                let w = (k2 / (k2 + r * r)).powi(2);
+                s.a += jac * jac.transpose() * w;
+                s.b += jac * (w * r);
+                s.pairs += 1;
+                s.sum_d2 += d2;
+                s.sum_r2 += r * r;
+                s
+            })
+            .reduce(Step::default, Step::add);
+        let fitness = step.pairs as f64 / n;
+        let pairs_f = step.pairs.max(1) as f64;
+        let rmse = (step.sum_d2 / pairs_f).sqrt();
+        result = IcpResult {
+            pose,
+            iterations: it,
+            converged: false,
+            fitness,
+            inlier_rmse: rmse,
+            plane_rmse: (step.sum_r2 / pairs_f).sqrt(),
+            kernel_scale: k,
+        };
+        if let Some((f0, r0)) = last {
+            let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(1e-300);
+            if rel(fitness, f0) < p.relative_tolerance && rel(rmse, r0) < p.relative_tolerance {
+                result.converged = true;
+                break;
+            }
+        }
+        if it == p.max_iterations || step.pairs < 6 {
+            break;
+        }
+        last = Some((fitness, rmse));
+        let Some(x) = step.a.cholesky().map(|c| c.solve(&(-step.b))) else {
+            break;
+        };
+        let delta = Isometry3::new(
+            Vector3::new(x[3], x[4], x[5]),
+            Vector3::new(x[0], x[1], x[2]),
+        );
+        pose = delta * pose;
+        if x.norm() < 1e-13 {
+            result.pose = pose;
+            result.converged = true;
+            break;
+        }
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn recovers_a_small_move_on_a_sphere_with_outliers() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
+        let sphere = |rng: &mut rand_chacha::ChaCha8Rng| {
+            let v = Vector3::new(
+                rng.gen_range(-1.0..1.0),
+                rng.gen_range(-1.0..1.0),
+                rng.gen_range(-1.0..1.0f64),
+            )
+            .normalize();
+            // An ellipsoid-ish bumpy surface so that no rotation is unconstrained.
+            let r = 20.0 + 2.0 * (3.0 * v.x).sin() + 1.5 * (2.0 * v.y).cos();
+            Point3::from(v * r)
+        };
+        let target: Vec<Point3<f64>> = (0..40_000).map(|_| sphere(&mut rng)).collect();
+        let tree = Tree::new(&target);
+        let normals = crate::preprocess::estimate_normals(
+            &crate::cloud::PointCloud::from_points(target.clone()),
+            &crate::preprocess::NormalConfig::default(),
+        )
+        .unwrap()
+        .normals;
+        let truth = Isometry3::new(
+            Vector3::new(0.3, -0.2, 0.25),
+            Vector3::new(0.01, -0.02, 0.015),
+        );
+        let mut src: Vec<Point3<f64>> = (0..8_000)
+            .map(|_| truth.inverse() * sphere(&mut rng))
+            .collect();
+        for p in src.iter_mut().take(400) {
+            *p += Vector3::new(0.0, 0.0, 1.5); // a "defect" patch of outliers
+        }
+        let r = icp(
+            &src,
+            &target,
+            &normals,
+            &tree,
+            &Isometry3::identity(),
+            &IcpParams {
+                max_distance: 3.0,
+                max_iterations: 60,
+                relative_tolerance: 1e-9,
+                kernel_scale: None,
+                min_kernel_scale: 0.01,
+            },
+        );
+        let err = r.pose.inverse() * truth;
+        assert!(err.translation.vector.norm() < 0.01, "{:?}", err);
+        assert!(err.rotation.angle().to_degrees() < 0.02);
+        assert!(r.fitness > 0.9);
+    }
+}
