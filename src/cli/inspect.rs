@@ -11,7 +11,9 @@ use serde_json::json;
 use super::GeometryInput;
 use crate::cloud::{self, transform, Geometry, PlyPrecision, PointCloud};
 use crate::compare::{self, CompareConfig, CoreConfig, Method};
+use crate::preprocess::{self, SorConfig};
 use crate::regions::{self, RegionConfig, Regions};
+use crate::register::RegisterConfig;
 
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -58,6 +60,10 @@ pub struct InspectConfig {
     pub compare: CompareConfig,
     /// Regions.
     pub regions: RegionConfig,
+    /// Statistical outlier filter of the scan.
+    pub filter: SorConfig,
+    /// Registration (skipped when --pose is given).
+    pub register: RegisterConfig,
 }
 
 fn load_reference(path: &Path, input: &GeometryInput, samples: usize) -> Result<PointCloud> {
@@ -112,33 +118,65 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         cfg.reference_points
     };
     let reference = load_reference(&args.reference, &args.input, samples)?;
-    let mut scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
+    let scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
     spin.finish_and_clear();
-    // TODO(preprocess): statistical outlier filter of the scan (preprocess::sor) once it lands;
-    // until then the comparison's robust fits carry the outliers.
-    // TODO(register): run register::register(scan, reference) when it lands and write its
-    // registration.json; until then the pose must be given with --pose.
-    let Some(pose_file) = &args.pose else {
-        anyhow::bail!("registration is not available yet: give the pose with --pose FILE");
+    // Statistical outlier filter of the scan, then registration (unless the pose is given).
+    let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
+        .with_context(|| format!("{}", args.scan.display()))?;
+    let mut scan = sor.apply(&scan);
+    let reg_file = args.out.join("registration.json");
+    let (pose, inlier_rmse, reg_line) = match &args.pose {
+        Some(pose_file) => {
+            let pose = read_pose(pose_file)?;
+            write_json(
+                &reg_file,
+                &json!({
+                    "status": "given",
+                    "scan_to_reference": transform::isometry_to_rows(&pose),
+                    "source": pose_file.display().to_string(),
+                    "fitness": null,
+                    "inlier_rmse": null,
+                    "coarse": null,
+                    "fine": null,
+                }),
+            )?;
+            (pose, None, format!("pose given in {}", pose_file.display()))
+        }
+        None => {
+            let reg = super::register::register_and_record(
+                &scan,
+                &reference,
+                &cfg.register,
+                &reg_file,
+                &args.scan,
+                &args.reference,
+            )?;
+            let line = format!(
+                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, {:.2} s",
+                reg.fitness,
+                reg.inlier_rmse,
+                reg.fine.map_or(f64::NAN, |f| f.plane_rmse),
+                reg.times.total
+            );
+            // The registration error of the level of detection is the fine ICP's
+            // point-to-plane RMS residual: the point-to-point inlier RMSE is dominated by the
+            // reference's sampling spacing, not by how well the surfaces agree.
+            let reg_error = reg.fine.map_or(reg.inlier_rmse, |f| f.plane_rmse);
+            (reg.pose, Some(reg_error), line)
+        }
     };
-    let pose = read_pose(pose_file)?;
     scan.transform(&pose);
-    let inlier_rmse: Option<f64> = None;
-    write_json(
-        &args.out.join("registration.json"),
-        &json!({
-            "scan_to_reference": transform::isometry_to_rows(&pose),
-            "source": pose_file.display().to_string(),
-            "fitness": null,
-            "inlier_rmse": inlier_rmse,
-            "coarse": null,
-            "fine": null,
-        }),
-    )?;
-    let report_summary = vec![(
-        "registration".to_string(),
-        format!("pose from {}", pose_file.display()),
-    )];
+    let report_summary = vec![
+        ("registration".to_string(), reg_line),
+        (
+            "outlier filter".to_string(),
+            format!(
+                "{} of {} scan points removed",
+                sor.removed,
+                sor.removed + sor.kept.len()
+            ),
+        ),
+    ];
     cfg.compare.registration_error = args
         .registration_error
         .or(inlier_rmse)

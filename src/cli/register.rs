@@ -7,7 +7,9 @@ use serde_json::{json, Value};
 
 use super::GeometryInput;
 use crate::cloud::{self, Geometry, PointCloud};
-use crate::register::{register_with_progress, RegisterConfig, RegisterError, PROGRESS_STEPS};
+use crate::register::{
+    register_with_progress, RegisterConfig, RegisterError, Registration, PROGRESS_STEPS,
+};
 
 /// Arguments of `register` (flags override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -64,8 +66,31 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
     let out = args.out.join("registration.json");
+    let reg = register_and_record(&scan, &reference, &cfg, &out, &args.scan, &args.reference)?;
+    println!(
+        "register: fitness {:.4}, inlier RMSE {:.4} mm, {} ICP iterations, {:.2} s -> {}",
+        reg.fitness,
+        reg.inlier_rmse,
+        reg.fine.map_or(0, |f| f.iterations),
+        reg.times.total,
+        out.display()
+    );
+    Ok(())
+}
+
+/// Registers `scan` onto `reference` with a progress bar and records the outcome in `out`
+/// (registration.json, `"status"` ok or failed with the diagnostics); a failure is also the
+/// returned one-line error.
+pub fn register_and_record(
+    scan: &PointCloud,
+    reference: &PointCloud,
+    cfg: &RegisterConfig,
+    out: &Path,
+    scan_path: &Path,
+    reference_path: &Path,
+) -> Result<Registration> {
     let bar = crate::progress::bar(PROGRESS_STEPS, "register");
-    let result = register_with_progress(&scan, &reference, &cfg, &|step| {
+    let result = register_with_progress(scan, reference, cfg, &|step| {
         bar.set_message(step.to_string());
         bar.inc(1);
     });
@@ -74,28 +99,20 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
         let mut v = serde_json::to_value(reg)?;
         v["status"] = json!(status);
         v["reason"] = json!(reason);
-        v["scan"] = json!(args.scan.display().to_string());
-        v["reference"] = json!(args.reference.display().to_string());
+        v["scan"] = json!(scan_path.display().to_string());
+        v["reference"] = json!(reference_path.display().to_string());
         Ok(v)
     };
     match result {
         Ok(reg) => {
-            write_json(&out, &with_status(&reg, "ok", None)?)?;
-            println!(
-                "register: fitness {:.4}, inlier RMSE {:.4} mm, {} ICP iterations, {:.2} s -> {}",
-                reg.fitness,
-                reg.inlier_rmse,
-                reg.fine.map_or(0, |f| f.iterations),
-                reg.times.total,
-                out.display()
-            );
-            Ok(())
+            write_json(out, &with_status(&reg, "ok", None)?)?;
+            Ok(reg)
         }
         Err(RegisterError::Failed {
             reason,
             diagnostics,
         }) => {
-            write_json(&out, &with_status(&*diagnostics, "failed", Some(&reason))?)?;
+            write_json(out, &with_status(&*diagnostics, "failed", Some(&reason))?)?;
             anyhow::bail!(
                 "registration failed: {reason} (correspondences {}, inlier ratio {:.3}, cliques {}, hypotheses {}, fitness {:.3}; diagnostics in {})",
                 diagnostics.coarse.correspondences,

@@ -185,8 +185,17 @@ pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
+/// Decides whether a defect may sit at a surface point (reference frame, outward normal,
+/// footprint radius in mm), e.g. only where the arm can reach.
+pub type SiteFilter = dyn Fn(&Point3<f64>, &Vector3<f64>, f64) -> bool + Sync;
+
 /// Makes a case.
 pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
+    synth_at(cfg, &|_, _, _| true)
+}
+
+/// Makes a case whose defects sit only where `accept` allows.
+pub fn synth_at(cfg: &SynthConfig, accept: &SiteFilter) -> Result<SynthCase> {
     anyhow::ensure!(
         cfg.reference_points > 0 && cfg.scan_points > 0,
         "point counts must be positive"
@@ -201,7 +210,8 @@ pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
     );
     let part = load_part(cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
-    let defects = placement::place_defects(&part.mesh, part.articular.as_ref(), cfg, &mut rng)?;
+    let defects =
+        placement::place_defects(&part.mesh, part.articular.as_ref(), cfg, accept, &mut rng)?;
 
     let reference = cloud::sample_mesh(&part.mesh, cfg.reference_points, rng.gen())?.cloud;
     let sample = cloud::sample_mesh(&part.mesh, cfg.scan_points, rng.gen())?.cloud;

@@ -9,7 +9,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::defects::{Defect, DefectKind};
 use super::truth::OutlierTruth;
-use super::{gauss, SynthConfig};
+use super::{gauss, SiteFilter, SynthConfig};
 use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
 
 /// A uniform grid of points for "anything within r?" queries.
@@ -86,6 +86,7 @@ pub fn place_defects(
     mesh: &Mesh,
     articular: Option<&Mesh>,
     cfg: &SynthConfig,
+    accept: &SiteFilter,
     rng: &mut ChaCha8Rng,
 ) -> Result<Vec<Defect>> {
     if cfg.defects == 0 {
@@ -164,7 +165,7 @@ pub fn place_defects(
             (Point3::from(o.centre) - p).norm()
                 > 2.0 * (width + o.width) + (length + o.length) / 2.0 + 1.0
         };
-        if defects.iter().all(clear) {
+        if defects.iter().all(clear) && accept(p, n, width + length / 2.0) {
             defects.push(d);
         }
     }
