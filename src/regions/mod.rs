@@ -76,7 +76,7 @@ pub enum Verdict {
 pub struct Regions {
     /// Tolerance used, mm.
     pub tolerance: f64,
-    /// Median core-point spacing, mm.
+    /// Core-point spacing (square root of the median area per core point), mm.
     pub spacing: f64,
     /// Connection distance, mm.
     pub gap: f64,
@@ -97,28 +97,25 @@ fn find(parent: &mut [usize], mut i: usize) -> usize {
     i
 }
 
-/// Area share of each core point and the median spacing (nearest-neighbour distance).
+/// Area share of each core point (pi r9^2 / 8, r9 the distance to the 8th neighbour) and the
+/// core-point spacing: the square root of the median area share. (The median nearest-neighbour
+/// distance of randomly placed core points is about half of that, and connecting within a few
+/// of those sits at the percolation threshold: one defect fell apart into several regions.)
 fn shares(points: &[Point3<f64>]) -> (Vec<f64>, f64) {
     let index = Neighbours::new(points);
-    let found: Vec<(f64, f64)> = points
+    let share: Vec<f64> = points
         .par_iter()
         .map(|p| {
-            let nb = index.knn(p, 9);
-            let d1 = nb.get(1).map_or(f64::NAN, |n| n.dist2.sqrt());
-            let a = nb
+            index
+                .knn(p, 9)
                 .last()
-                .map_or(0.0, |n| std::f64::consts::PI * n.dist2 / 8.0);
-            (a, d1)
+                .map_or(0.0, |n| std::f64::consts::PI * n.dist2 / 8.0)
         })
         .collect();
-    let mut d: Vec<f64> = found
-        .iter()
-        .map(|f| f.1)
-        .filter(|d| d.is_finite())
-        .collect();
-    d.sort_by(f64::total_cmp);
-    let spacing = d.get(d.len() / 2).copied().unwrap_or(0.0);
-    (found.into_iter().map(|f| f.0).collect(), spacing)
+    let mut sorted: Vec<f64> = share.iter().copied().filter(|a| *a > 0.0).collect();
+    sorted.sort_by(f64::total_cmp);
+    let spacing = sorted.get(sorted.len() / 2).map_or(0.0, |a| a.sqrt());
+    (share, spacing)
 }
 
 /// Clusters the error points of `dev` into regions.

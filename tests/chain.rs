@@ -1,0 +1,53 @@
+//! The whole chain as the README's main job runs it: `polishbot demo`.
+mod common;
+
+use common::{polishbot, tempdir};
+
+#[test]
+fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
+    let dir = tempdir();
+    let out = dir.path().join("demo");
+    let run = polishbot()
+        .args(["demo", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "demo failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        stdout.contains("every planted repairable defect found: yes"),
+        "{stdout}"
+    );
+    // Registration within a hundredth of a degree and millimetre of the truth.
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("registration error against truth"))
+        .expect("registration line");
+    let nums: Vec<f64> = line
+        .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    assert!(
+        nums.len() >= 2 && nums[0] < 0.01 && nums[1] < 0.01,
+        "{line}"
+    );
+    for f in [
+        "truth.json",
+        "inspection/report.html",
+        "inspection/regions.json",
+        "plan.json",
+        "journal.jsonl",
+        "trajectory.yaml",
+    ] {
+        assert!(out.join(f).exists(), "{f} missing");
+    }
+    // The simulated arm received every planned frame.
+    let plan: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("plan.json")).unwrap()).unwrap();
+    let frames = plan["frames"].as_array().unwrap().len();
+    assert!(frames > 100, "plan has {frames} frames");
+    assert!(stdout.contains(&format!("({frames} frames)")), "{stdout}");
+}
