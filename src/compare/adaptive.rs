@@ -26,7 +26,8 @@ struct Prepared<'a> {
     clouds: &'a Clouds<'a>,
     ref_normals: &'a [Vector3<f64>],
     /// Signed one-sided distance from each reference point to the scan along its normal.
-    delta: Vec<f64>,
+    /// RWME terms of each reference point: w = exp(-|δ|/h) and w·|δ| (NaN when δ is).
+    weighted: Vec<[f64; 2]>,
     /// Nearest reference point of each scan point (`FAR` when none is within the reach of a
     /// cylinder around a reference point: looked up when needed).
     scan_nearest_ref: Vec<u32>,
@@ -103,10 +104,17 @@ pub fn run(
         })
         .collect();
     let (scan_nearest_ref, scan_pair) = super::scatter(&order, nearest).into_iter().unzip();
+    let weighted = delta
+        .par_iter()
+        .map(|d| {
+            let w = (-d.abs() / a.h).exp();
+            [w, w * d.abs()]
+        })
+        .collect();
     let prep = Prepared {
         clouds,
         ref_normals,
-        delta,
+        weighted,
         scan_nearest_ref,
         scan_pair,
         radii: radii.to_vec(),
@@ -180,28 +188,21 @@ fn tangent_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     (e1, n.cross(&e1))
 }
 
-/// Sorts members by distance from the axis (ties by index).
-fn by_rho(m: &mut [Member]) {
-    m.sort_unstable_by(|a, b| a.rho2.total_cmp(&b.rho2).then(a.index.cmp(&b.index)));
-}
-
 /// Similarity s(r) of the reference members within `r` (see the module doc).
 fn similarity(prep: &Prepared, refs: &[Member], r: f64, h: f64, lambda: f64) -> f64 {
-    let inside = || {
-        refs.iter()
-            .take_while(|m| m.rho2 <= r * r)
-            .map(|m| prep.delta[m.index].abs())
-            .filter(|d| d.is_finite())
-    };
-    let m = inside().count() as f64;
+    let (mut m, mut sw, mut swd) = (0.0, 0.0, 0.0);
+    for mb in refs.iter().filter(|mb| mb.rho2 <= r * r) {
+        let [w, wd] = prep.weighted[mb.index];
+        if !w.is_nan() {
+            m += 1.0;
+            sw += w;
+            swd += wd;
+        }
+    }
     if m == 0.0 {
         return 0.0;
     }
     let share = std::f64::consts::PI * r * r / m;
-    let (sw, swd) = inside().fold((0.0, 0.0), |(sw, swd), d| {
-        let w = (-d / h).exp();
-        (sw + w, swd + w * d)
-    });
     let rwme = sw * share / (lambda + swd * share);
     let d0 = prep.noise * (2.0 / std::f64::consts::PI).sqrt();
     let w0 = (-d0 / h).exp();
@@ -231,7 +232,6 @@ fn at(
     scans.clear();
     c.ref_grid.cylinder(p, n, r_max, cfg.max_distance, refs);
     refs.retain(|m| agrees(m.index));
-    by_rho(refs);
     c.scan_grid.cylinder(p, n, r_max, cfg.max_distance, scans);
     let mut pair = |m: &Member| -> Option<f64> {
         let y = &c.scan.points[m.index];
@@ -252,21 +252,20 @@ fn at(
         }
         None => false,
     });
-    by_rho(scans);
     let (refs, scans) = (&refs[..], &scans[..]);
-    let count = |ms: &[Member], r: f64| ms.iter().take_while(|m| m.rho2 <= r * r).count();
+    let count = |ms: &[Member], r: f64| ms.iter().filter(|m| m.rho2 <= r * r).count();
     let min = cfg.min_points.max(1);
     // Grow through the radii while every one so far is similar (stay at the smallest when
     // it is not); then further only as far as needed to hold min_points each.
     let mut k = 0;
     for (j, &r) in prep.radii.iter().enumerate() {
-        if similarity(prep, &refs, r, a.h, a.lambda) < a.similarity {
+        if similarity(prep, refs, r, a.h, a.lambda) < a.similarity {
             break;
         }
         k = j;
     }
     while k + 1 < prep.radii.len()
-        && (count(&refs, prep.radii[k]) < min || count(&scans, prep.radii[k]) < min)
+        && (count(refs, prep.radii[k]) < min || count(scans, prep.radii[k]) < min)
     {
         k += 1;
     }
@@ -278,7 +277,7 @@ fn at(
     // The fit must keep at least FIT_MIN points after trimming, else the next radius.
     let (r, n_ref, _, fs) = loop {
         let r = prep.radii[k];
-        let (n_ref, n_scan) = (count(&refs, r), count(&scans, r));
+        let (n_ref, n_scan) = (count(refs, r), count(scans, r));
         let last = k + 1 == prep.radii.len();
         if n_ref < min {
             return Deviation::missing(Reason::FewReference, r, n_ref, n_scan);
@@ -287,7 +286,7 @@ fn at(
             return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
         }
         pairs.clear();
-        pairs.extend(scans[..n_scan].iter().map(local));
+        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
         match fit(pairs, r, 4.0 * prep.noise, prep.noise) {
             Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, n_scan, fs),
             _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),

@@ -2,13 +2,14 @@
 //! M3C2 cylinder (py4dgeo 1.2's semantics, see [`Grid::cylinder`]) and the k nearest points
 //! (exact, ties to the lowest index, like `cloud::Neighbours::knn`).
 //!
-//! Points are stored sorted by cell in a dense x-fastest array, so one row of cells along x
-//! is one contiguous slice: a query walks rows, prunes cells that cannot touch the cylinder,
-//! and never allocates (the caller owns the output buffers).
+//! Space is cut into rows along x of square cross-section (edge `cell`); the points are stored
+//! row by row, sorted by x within a row, so the points of a row between two x values are one
+//! contiguous slice found by two binary searches. A query walks the rows near it, takes the
+//! x interval a row can contribute, and never allocates (the caller owns the output buffers).
 use nalgebra::{Point3, Vector3};
 
-/// Most cells of the dense array (the cell grows when the box would need more).
-const MAX_CELLS: f64 = 16.0e6;
+/// Most rows (the cell grows when the box would need more: an empty row costs four bytes).
+const MAX_ROWS: f64 = 4.0e6;
 
 /// A point inside a cylinder.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -21,17 +22,31 @@ pub struct Member {
     pub rho2: f64,
 }
 
-/// Points bucketed into cubic cells.
+/// Points bucketed into rows along x.
 pub struct Grid {
     cell: f64,
     origin: [f64; 3],
+    /// Cells along each axis (along x only for the spatial order).
     dims: [isize; 3],
-    /// Start of each cell's points in `pts` (one more entry than cells).
-    starts: Vec<u32>,
-    /// Coordinates, sorted by cell.
+    /// Start of each row's points in `pts` (row y + dims[1]·z; one more entry than rows).
+    rows: Vec<u32>,
+    /// x of each stored point (sorted within a row).
+    xs: Vec<f64>,
+    /// Coordinates, row by row.
     pts: Vec<[f64; 3]>,
     /// Original index of each sorted point.
     ids: Vec<u32>,
+}
+
+/// ⌊x⌋ as an integer (saturating), without a libm call.
+#[inline]
+fn ifloor(x: f64) -> isize {
+    let f = x as isize;
+    if (f as f64) > x {
+        f.saturating_sub(1)
+    } else {
+        f
+    }
 }
 
 /// Squared distance in FLANN's summation order (as `cloud::neighbours::dist2`).
@@ -42,8 +57,8 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 }
 
 impl Grid {
-    /// Buckets `points` (finite coordinates) into cells of edge `cell` (mm; enlarged when the
-    /// bounding box would need more than 16 million cells).
+    /// Buckets `points` (finite coordinates) into rows of cross-section `cell` × `cell` (mm;
+    /// enlarged when the bounding box would need more than four million rows).
     pub fn new(points: &[Point3<f64>], cell: f64) -> Grid {
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         for p in points {
@@ -55,61 +70,75 @@ impl Grid {
         if points.is_empty() {
             (lo, hi) = ([0.0; 3], [0.0; 3]);
         }
-        let extent: Vec<f64> = (0..3).map(|a| hi[a] - lo[a]).collect();
-        let volume: f64 = extent.iter().map(|e| e + cell).product();
-        let cell = if volume / cell.powi(3) > MAX_CELLS {
-            (volume / MAX_CELLS).cbrt()
+        let extent = [0, 1, 2].map(|a| hi[a] - lo[a]);
+        let area = (extent[1] + cell) * (extent[2] + cell);
+        let cell = if area / (cell * cell) > MAX_ROWS {
+            (area / MAX_ROWS).sqrt()
         } else {
             cell
         };
-        let dims = [0, 1, 2].map(|a| (extent[a] / cell).floor() as isize + 1);
+        let dims = [0, 1, 2].map(|a| ifloor(extent[a] / cell) + 1);
         let mut grid = Grid {
             cell,
             origin: lo,
             dims,
-            starts: Vec::new(),
+            rows: Vec::new(),
+            xs: Vec::new(),
             pts: Vec::new(),
             ids: Vec::new(),
         };
-        let cells = (dims[0] * dims[1] * dims[2]) as usize;
+        let nrows = (dims[1] * dims[2]) as usize;
         let keys: Vec<u32> = points
             .iter()
             .map(|p| {
-                let c = [0, 1, 2].map(|a| grid.coord(p[a], a).clamp(0, dims[a] - 1));
-                grid.key(c) as u32
+                let y = grid.coord(p.y, 1).clamp(0, dims[1] - 1);
+                let z = grid.coord(p.z, 2).clamp(0, dims[2] - 1);
+                (y + dims[1] * z) as u32
             })
             .collect();
-        let mut starts = vec![0u32; cells + 1];
+        let mut rows = vec![0u32; nrows + 1];
         for &k in &keys {
-            starts[k as usize + 1] += 1;
+            rows[k as usize + 1] += 1;
         }
-        for i in 0..cells {
-            starts[i + 1] += starts[i];
+        for i in 0..nrows {
+            rows[i + 1] += rows[i];
         }
-        let mut next = starts.clone();
-        let mut pts = vec![[0.0; 3]; points.len()];
-        let mut ids = vec![0u32; points.len()];
-        for (i, (&k, p)) in keys.iter().zip(points).enumerate() {
-            let slot = next[k as usize] as usize;
+        let mut next = rows.clone();
+        let mut order = vec![0u32; points.len()];
+        for (i, &k) in keys.iter().enumerate() {
+            order[next[k as usize] as usize] = i as u32;
             next[k as usize] += 1;
-            pts[slot] = [p.x, p.y, p.z];
-            ids[slot] = i as u32;
         }
-        grid.starts = starts;
-        grid.pts = pts;
-        grid.ids = ids;
+        for w in rows.windows(2) {
+            order[w[0] as usize..w[1] as usize]
+                .sort_unstable_by(|&a, &b| points[a as usize].x.total_cmp(&points[b as usize].x));
+        }
+        grid.pts = order
+            .iter()
+            .map(|&i| {
+                let p = &points[i as usize];
+                [p.x, p.y, p.z]
+            })
+            .collect();
+        grid.xs = grid.pts.iter().map(|p| p[0]).collect();
+        grid.ids = order;
+        grid.rows = rows;
         grid
     }
 
     /// Cell index of coordinate `x` along axis `a` (unclamped).
     #[inline]
     fn coord(&self, x: f64, a: usize) -> isize {
-        ((x - self.origin[a]) / self.cell).floor() as isize
+        ifloor((x - self.origin[a]) / self.cell)
     }
 
+    /// Stored-point range of row (y, z) (in range) with x in [x0, x1].
     #[inline]
-    fn key(&self, c: [isize; 3]) -> usize {
-        (c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2])) as usize
+    fn row(&self, y: isize, z: isize, x0: f64, x1: f64) -> std::ops::Range<usize> {
+        let r = (y + self.dims[1] * z) as usize;
+        let (a, b) = (self.rows[r] as usize, self.rows[r + 1] as usize);
+        let xs = &self.xs[a..b];
+        a + xs.partition_point(|&x| x < x0)..a + xs.partition_point(|&x| x <= x1)
     }
 
     /// Indices of `points` in the Morton (Z-curve) order of their cells: queries made in this
@@ -137,14 +166,6 @@ impl Grid {
         keyed.into_iter().map(|(_, i)| i).collect()
     }
 
-    /// Sorted-point range of the cells x0..=x1 of row (y, z) (all in range).
-    #[inline]
-    fn row(&self, x0: isize, x1: isize, y: isize, z: isize) -> std::ops::Range<usize> {
-        let a = self.key([x0, y, z]);
-        let b = self.key([x1, y, z]);
-        self.starts[a] as usize..self.starts[b + 1] as usize
-    }
-
     /// Appends to `out` the points inside the M3C2 cylinder of radius `radius` around the axis
     /// through `core` along the unit vector `axis`, with py4dgeo 1.2's semantics: the cylinder
     /// extends L = max(max_distance, radius) both ways and is cut into N = ceil(L / radius)
@@ -161,7 +182,7 @@ impl Grid {
         max_distance: f64,
         out: &mut Vec<Member>,
     ) {
-        if self.pts.is_empty() || !(radius > 0.0) {
+        if self.pts.is_empty() || radius.is_nan() || radius <= 0.0 {
             return;
         }
         let (length, slabs) = if max_distance > radius {
@@ -177,27 +198,57 @@ impl Grid {
         // Loose bounds for the cheap pre-test (exact tests follow per slab).
         let slack = 1e-9 * (length + radius) + 1e-12;
         let (reach_t, reach_r) = (length + slack, radius + slack);
-        let hd = self.cell * 0.5 * 3f64.sqrt();
+        // Points of a row are within this of the line through the row's centre.
+        let hd = self.cell * std::f64::consts::FRAC_1_SQRT_2 + slack;
         let c = [core.x, core.y, core.z];
-        let mut lo = [0isize; 3];
-        let mut hi = [0isize; 3];
+        // The cylinder's bounding box: rows (y, z) and an x range.
+        let (mut lo, mut hi) = ([0isize; 3], [0isize; 3]);
+        let ext = [0, 1, 2].map(|a| {
+            length * axis[a].abs() + radius * (1.0 - axis[a] * axis[a]).max(0.0).sqrt() + slack
+        });
         for a in 0..3 {
-            let ext = length * axis[a].abs() + radius * (1.0 - axis[a] * axis[a]).max(0.0).sqrt();
-            lo[a] = self.coord(c[a] - ext - slack, a).max(0);
-            hi[a] = self.coord(c[a] + ext + slack, a).min(self.dims[a] - 1);
+            lo[a] = self.coord(c[a] - ext[a], a).max(0);
+            hi[a] = self.coord(c[a] + ext[a], a).min(self.dims[a] - 1);
             if lo[a] > hi[a] {
                 return;
             }
         }
+        let (box0, box1) = (c[0] - ext[0], c[0] + ext[0]);
+        // A row of cells along x can hold a member only where its centre line is within
+        // (reach + half the cell's face diagonal) of the axis, and of the core along it: an
+        // interval of x.
         let (ct, cr) = (reach_t + hd, reach_r + hd);
-        let keep_cell = |x: isize, y: isize, z: isize| {
-            let v = Vector3::new(
-                self.origin[0] + (x as f64 + 0.5) * self.cell - c[0],
-                self.origin[1] + (y as f64 + 0.5) * self.cell - c[1],
-                self.origin[2] + (z as f64 + 0.5) * self.cell - c[2],
-            );
-            let t = v.dot(axis);
-            t.abs() <= ct && v.norm_squared() - t * t <= cr * cr
+        let row_span = |y: isize, z: isize| -> Option<(f64, f64)> {
+            let a = self.origin[1] + (y as f64 + 0.5) * self.cell - c[1];
+            let b = self.origin[2] + (z as f64 + 0.5) * self.cell - c[2];
+            // With u the centre's x offset from the core: t = n0 u + k and
+            // perp² = (1 - n0²) u² - 2 n0 k u + a² + b² - k².
+            let (n0, k) = (axis[0], axis[1] * a + axis[2] * b);
+            let (mut u0, mut u1) = (f64::NEG_INFINITY, f64::INFINITY);
+            let qa = 1.0 - n0 * n0;
+            let qb = -2.0 * n0 * k;
+            let qc = a * a + b * b - k * k - cr * cr;
+            if qa > 1e-12 {
+                let disc = qb * qb - 4.0 * qa * qc;
+                if disc < 0.0 {
+                    return None;
+                }
+                let root = disc.sqrt();
+                (u0, u1) = ((-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa));
+            } else if qc > 0.0 {
+                return None;
+            }
+            if n0.abs() > 1e-12 {
+                let (e0, e1) = ((-ct - k) / n0, (ct - k) / n0);
+                u0 = u0.max(e0.min(e1));
+                u1 = u1.min(e0.max(e1));
+            } else if k.abs() > ct {
+                return None;
+            }
+            // Slack for rounding in the interval ends.
+            let pad = 1e-9 * self.cell;
+            let (x0, x1) = ((c[0] + u0 - pad).max(box0), (c[0] + u1 + pad).min(box1));
+            (x0 <= x1).then_some((x0, x1))
         };
         let mut visit = |range: std::ops::Range<usize>| {
             for s in range {
@@ -208,9 +259,12 @@ impl Grid {
                     continue;
                 }
                 // Slabs whose interval can hold t0.
-                let k = ((t0 + length) / (2.0 * half)).floor() as isize;
+                let k = ifloor((t0 + length) / (2.0 * half));
                 for i in (k - 1).max(0)..=(k + 1).min(nslabs - 1) {
                     let offset = (2.0 * i as f64 + 1.0 - slabs) / slabs * length;
+                    if (t0 - offset).abs() > half + slack {
+                        continue;
+                    }
                     let mid = core + axis * offset;
                     let m = [mid.x, mid.y, mid.z];
                     if dist2(&m, p) > ball2 {
@@ -231,17 +285,8 @@ impl Grid {
         };
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
-                let mut run: Option<isize> = None;
-                for x in lo[0]..=hi[0] + 1 {
-                    let keep = x <= hi[0] && keep_cell(x, y, z);
-                    match (keep, run) {
-                        (true, None) => run = Some(x),
-                        (false, Some(x0)) => {
-                            visit(self.row(x0, x - 1, y, z));
-                            run = None;
-                        }
-                        _ => {}
-                    }
+                if let Some((x0, x1)) = row_span(y, z) {
+                    visit(self.row(y, z, x0, x1));
                 }
             }
         }
@@ -256,7 +301,6 @@ impl Grid {
         }
         let qa = [q.x, q.y, q.z];
         let max2 = max_radius * max_radius;
-        let c = [0, 1, 2].map(|a| self.coord(qa[a], a));
         let consider = |range: std::ops::Range<usize>, out: &mut Vec<(f64, u32)>| {
             for s in range {
                 let d2 = dist2(&qa, &self.pts[s]);
@@ -275,42 +319,28 @@ impl Grid {
                 out.insert(at, item);
             }
         };
-        let mut s = 0isize;
+        // Search the cube of half-width r around q, doubling r until the k-th distance is
+        // inside it (every closer point has then been seen).
+        let mut r = 0.5 * self.cell;
         loop {
-            // Cells at Chebyshev distance s from c, clipped to the grid.
-            let (z0, z1) = ((c[2] - s).max(0), (c[2] + s).min(self.dims[2] - 1));
-            let (y0, y1) = ((c[1] - s).max(0), (c[1] + s).min(self.dims[1] - 1));
-            let (x0, x1) = ((c[0] - s).max(0), (c[0] + s).min(self.dims[0] - 1));
-            for z in z0..=z1 {
-                for y in y0..=y1 {
-                    if x0 > x1 {
-                        continue;
-                    }
-                    if (z - c[2]).abs() == s || (y - c[1]).abs() == s {
-                        consider(self.row(x0, x1, y, z), out);
-                    } else {
-                        for x in [c[0] - s, c[0] + s] {
-                            if (0..self.dims[0]).contains(&x) {
-                                consider(self.row(x, x, y, z), out);
-                            }
-                        }
-                    }
+            let r_use = r.min(max_radius);
+            out.clear();
+            let (z0, z1) = (self.coord(qa[2] - r_use, 2), self.coord(qa[2] + r_use, 2));
+            let (y0, y1) = (self.coord(qa[1] - r_use, 1), self.coord(qa[1] + r_use, 1));
+            for z in z0.max(0)..=z1.min(self.dims[2] - 1) {
+                for y in y0.max(0)..=y1.min(self.dims[1] - 1) {
+                    consider(self.row(y, z, qa[0] - r_use, qa[0] + r_use), out);
                 }
             }
-            // Every point closer than `safe` has been seen.
-            let mut safe = f64::INFINITY;
-            let mut whole = true;
-            for a in 0..3 {
-                let lo = self.origin[a] + (c[a] - s) as f64 * self.cell;
-                let hi = self.origin[a] + (c[a] + s + 1) as f64 * self.cell;
-                safe = safe.min(qa[a] - lo).min(hi - qa[a]);
-                whole &= c[a] - s <= 0 && c[a] + s >= self.dims[a] - 1;
-            }
-            let done = out.len() == k && out[k - 1].0 <= safe * safe;
-            if done || whole || safe >= max_radius {
+            let whole = (0..3).all(|a| {
+                qa[a] - r_use <= self.origin[a]
+                    && qa[a] + r_use >= self.origin[a] + self.dims[a] as f64 * self.cell
+            });
+            let done = out.len() == k && out[k - 1].0 <= r_use * r_use;
+            if done || whole || r_use >= max_radius {
                 return;
             }
-            s += 1;
+            r *= 2.0;
         }
     }
 }
@@ -328,8 +358,16 @@ mod tests {
             .map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 4.0)
             .collect();
         let core = Point3::new(2.0, 2.0, 2.0);
-        let axis = Vector3::new(1.0, 2.0, 2.0).normalize();
-        for cell in [0.1, 0.35, 2.0] {
+        let axes = [
+            Vector3::new(1.0, 2.0, 2.0).normalize(),
+            Vector3::x(),
+            -Vector3::z(),
+            Vector3::new(0.0, 1.0, -1e-13).normalize(),
+        ];
+        for (cell, axis) in [0.1, 0.35, 2.0]
+            .into_iter()
+            .flat_map(|c| axes.map(|a| (c, a)))
+        {
             let grid = Grid::new(&points, cell);
             for (r, l) in [(0.3, 1.0), (0.5, 0.2), (0.4, 1.9), (0.2, 3.0)] {
                 let mut found = Vec::new();

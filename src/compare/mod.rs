@@ -223,8 +223,10 @@ pub fn compare(
         "registration_error must be a finite non-negative number"
     );
     // The scan's density sets the default radii; the grids' cell is the smallest radius.
-    let density = scan_density(&Grid::new(&scan.points, provisional_cell(scan)), scan);
-    let radius_for = |count: f64| (count / (std::f64::consts::PI * density)).sqrt();
+    let radius_for = |count: f64| {
+        let grid = Grid::new(&scan.points, provisional_cell(scan));
+        (count / (std::f64::consts::PI * scan_density(&grid, scan))).sqrt()
+    };
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
             let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
@@ -235,15 +237,24 @@ pub fn compare(
             (radius, Vec::new())
         }
         Method::Adaptive => {
-            let radii = adaptive::radii(&cfg.adaptive, radius_for(12.0))?;
+            let r0 = match cfg.adaptive.radii.is_empty() {
+                true => radius_for(12.0),
+                false => f64::NAN,
+            };
+            let radii = adaptive::radii(&cfg.adaptive, r0)?;
             (radii[0], radii)
         }
     };
+    let cell = classic_radius;
+    let (ref_grid, scan_grid) = rayon::join(
+        || Grid::new(&reference.points, cell),
+        || Grid::new(&scan.points, cell),
+    );
     let clouds = Clouds {
         reference,
         scan,
-        ref_grid: Grid::new(&reference.points, classic_radius),
-        scan_grid: Grid::new(&scan.points, classic_radius),
+        ref_grid,
+        scan_grid,
     };
     let (values, noise, radii) = match cfg.method {
         Method::Classic => {
