@@ -321,7 +321,8 @@ impl Grid {
         };
         // Search the cube of half-width r around q, doubling r until the k-th distance is
         // inside it (every closer point has then been seen).
-        let mut r = 0.5 * self.cell;
+        // A nearest point is usually well inside a cell, eight of them about a cell away.
+        let mut r = if k == 1 { 0.5 } else { 1.0 } * self.cell;
         loop {
             let r_use = r.min(max_radius);
             out.clear();
