@@ -13,9 +13,9 @@ use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::cylinder::{members, Member};
 use super::fit::{fit, Local};
-use super::{radius_for_count, Clouds, CompareConfig, Deviation, Reason};
+use super::grid::Member;
+use super::{AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
 use crate::cloud::PointCloud;
 
 /// Fewest scan points a fit may keep before the radius grows.
@@ -26,8 +26,10 @@ struct Prepared<'a> {
     clouds: &'a Clouds<'a>,
     ref_normals: &'a [Vector3<f64>],
     /// Signed one-sided distance from each reference point to the scan along its normal.
-    delta: Vec<f64>,
-    /// Nearest reference point of each scan point.
+    /// RWME terms of each reference point: w = exp(-|δ|/h) and w·|δ| (NaN when δ is).
+    weighted: Vec<[f64; 2]>,
+    /// Nearest reference point of each scan point (`FAR` when none is within the reach of a
+    /// cylinder around a reference point: looked up when needed).
     scan_nearest_ref: Vec<u32>,
     /// Point-pair distance of each scan point: along its nearest reference point's normal,
     /// from that point's tangent plane.
@@ -37,14 +39,42 @@ struct Prepared<'a> {
     cos_limit: f64,
 }
 
-/// Runs the adaptive variant at every core point; returns the results, the noise used and
-/// the candidate radii.
+/// No reference point within a cylinder's reach (see [`Prepared::scan_nearest_ref`]).
+const FAR: u32 = u32::MAX;
+
+/// The candidate radii: the configured ones, or r0·√2^k for k = 0..4 with `r0` the radius
+/// that holds about 12 scan points.
+pub fn radii(a: &AdaptiveConfig, r0: f64) -> Result<Vec<f64>> {
+    let radii = if a.radii.is_empty() {
+        (0..4).map(|k| r0 * 2f64.sqrt().powi(k)).collect()
+    } else {
+        a.radii.clone()
+    };
+    ensure!(
+        !radii.is_empty() && radii.windows(2).all(|w| w[0] < w[1]) && radii[0] > 0.0,
+        "adaptive radii must be positive and ascending"
+    );
+    Ok(radii)
+}
+
+/// Per-chunk scratch buffers of [`at`].
+#[derive(Default)]
+pub struct Scratch {
+    refs: Vec<Member>,
+    scans: Vec<Member>,
+    pairs: Vec<Local>,
+    knn: Vec<(f64, u32)>,
+}
+
+/// Runs the adaptive variant at every core point with the candidate `radii`; returns the
+/// results and the noise used.
 pub fn run(
     clouds: &Clouds,
     core: &PointCloud,
     normals: &[Vector3<f64>],
+    radii: &[f64],
     cfg: &CompareConfig,
-) -> Result<(Vec<Deviation>, f64, Vec<f64>)> {
+) -> Result<(Vec<Deviation>, f64)> {
     let a = &cfg.adaptive;
     let ref_normals = clouds.reference.normals.as_deref().ok_or_else(|| {
         anyhow::anyhow!("the adaptive method needs reference normals (give a mesh or normals)")
@@ -53,58 +83,70 @@ pub fn run(
         a.lambda > 0.0 && a.h > 0.0,
         "adaptive lambda and h must be positive"
     );
-    let radii = if a.radii.is_empty() {
-        let r0 = radius_for_count(clouds, 12.0);
-        (0..4).map(|k| r0 * 2f64.sqrt().powi(k)).collect()
-    } else {
-        a.radii.clone()
-    };
-    ensure!(
-        radii.windows(2).all(|w| w[0] < w[1]) && radii[0] > 0.0,
-        "adaptive radii must be positive and ascending"
-    );
-    let delta = one_sided_distances(clouds, ref_normals);
+    // A scan point inside a cylinder around a reference point is within `reach` of it.
+    let r_max = *radii.last().expect("radii");
+    let reach = r_max.hypot(cfg.max_distance.max(r_max)) * (1.0 + 1e-9);
+    let delta = one_sided_distances(clouds, ref_normals, reach);
     let noise = match a.noise {
         Some(s) => s,
         None => robust_sd(&delta),
     };
-    let (scan_nearest_ref, scan_pair): (Vec<u32>, Vec<f64>) = clouds
-        .scan
-        .points
+    let order = clouds.scan_grid.spatial_order(&clouds.scan.points);
+    let nearest: Vec<(u32, f64)> = order
         .par_iter()
-        .map(|y| {
-            let i = clouds.ref_index.nearest(y).map_or(0, |n| n.index);
-            let x = clouds.reference.points[i];
-            (i as u32, ref_normals[i].dot(&(y - x)))
+        .map_init(Vec::new, |found, &j| {
+            let y = &clouds.scan.points[j];
+            clouds.ref_grid.knn(y, 1, reach, found);
+            match found.first() {
+                Some(&(_, i)) => (i, pair_distance(clouds, ref_normals, i, y)),
+                None => (FAR, f64::NAN),
+            }
         })
-        .unzip();
+        .collect();
+    let (scan_nearest_ref, scan_pair) = super::scatter(&order, nearest).into_iter().unzip();
+    let weighted = delta
+        .par_iter()
+        .map(|d| {
+            let w = (-d.abs() / a.h).exp();
+            [w, w * d.abs()]
+        })
+        .collect();
     let prep = Prepared {
         clouds,
         ref_normals,
-        delta,
+        weighted,
         scan_nearest_ref,
         scan_pair,
-        radii: radii.clone(),
+        radii: radii.to_vec(),
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
     };
-    let values = super::run(core, normals, |p, n| at(&prep, p, n, cfg));
-    Ok((values, noise, radii))
+    let values = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
+        at(&prep, p, n, cfg, s)
+    });
+    Ok((values, noise))
 }
 
-/// δ_i for every reference point: along its normal, to the scan point (of its 8 nearest)
-/// closest to its normal line.
-fn one_sided_distances(clouds: &Clouds, ref_normals: &[Vector3<f64>]) -> Vec<f64> {
+/// Distance of scan point `y` from the tangent plane of reference point `i`, along its normal.
+fn pair_distance(clouds: &Clouds, ref_normals: &[Vector3<f64>], i: u32, y: &Point3<f64>) -> f64 {
+    let i = i as usize;
+    ref_normals[i].dot(&(y - clouds.reference.points[i]))
+}
+
+/// δ_i for every reference point: along its normal, to the scan point (of its 8 nearest
+/// within `reach`) closest to its normal line; NaN when no scan point is within `reach`
+/// (unscanned surface: left out of the similarity and of the noise estimate).
+fn one_sided_distances(clouds: &Clouds, ref_normals: &[Vector3<f64>], reach: f64) -> Vec<f64> {
     let scan = &clouds.scan.points;
-    clouds
-        .reference
-        .points
+    let order = clouds.ref_grid.spatial_order(&clouds.reference.points);
+    let delta = order
         .par_iter()
-        .zip(ref_normals.par_iter())
-        .map(|(x, n)| {
+        .map_init(Vec::new, |found, &i| {
+            let (x, n) = (&clouds.reference.points[i], &ref_normals[i]);
             let mut best = (f64::INFINITY, f64::NAN);
-            for nb in clouds.scan_index.knn(x, 8) {
-                let d = scan[nb.index] - x;
+            clouds.scan_grid.knn(x, 8, reach, found);
+            for &(_, j) in found.iter() {
+                let d = scan[j as usize] - x;
                 let t = d.dot(n);
                 let across = d.norm_squared() - t * t;
                 if across < best.0 {
@@ -113,7 +155,8 @@ fn one_sided_distances(clouds: &Clouds, ref_normals: &[Vector3<f64>]) -> Vec<f64
             }
             best.1
         })
-        .collect()
+        .collect();
+    super::scatter(&order, delta)
 }
 
 /// 1.4826 × median |δ| over up to 20,000 evenly spread values (the noise along the normal
@@ -145,29 +188,21 @@ fn tangent_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     (e1, n.cross(&e1))
 }
 
-/// Members sorted by distance from the axis.
-fn by_rho(mut m: Vec<Member>) -> Vec<Member> {
-    m.sort_by(|a, b| a.rho2.total_cmp(&b.rho2).then(a.index.cmp(&b.index)));
-    m
-}
-
 /// Similarity s(r) of the reference members within `r` (see the module doc).
 fn similarity(prep: &Prepared, refs: &[Member], r: f64, h: f64, lambda: f64) -> f64 {
-    let inside: Vec<f64> = refs
-        .iter()
-        .take_while(|m| m.rho2 <= r * r)
-        .map(|m| prep.delta[m.index].abs())
-        .filter(|d| d.is_finite())
-        .collect();
-    if inside.is_empty() {
+    let (mut m, mut sw, mut swd) = (0.0, 0.0, 0.0);
+    for mb in refs.iter().filter(|mb| mb.rho2 <= r * r) {
+        let [w, wd] = prep.weighted[mb.index];
+        if !w.is_nan() {
+            m += 1.0;
+            sw += w;
+            swd += wd;
+        }
+    }
+    if m == 0.0 {
         return 0.0;
     }
-    let m = inside.len() as f64;
     let share = std::f64::consts::PI * r * r / m;
-    let (sw, swd) = inside.iter().fold((0.0, 0.0), |(sw, swd), d| {
-        let w = (-d / h).exp();
-        (sw + w, swd + w * d)
-    });
     let rwme = sw * share / (lambda + swd * share);
     let d0 = prep.noise * (2.0 / std::f64::consts::PI).sqrt();
     let w0 = (-d0 / h).exp();
@@ -176,55 +211,73 @@ fn similarity(prep: &Prepared, refs: &[Member], r: f64, h: f64, lambda: f64) -> 
 }
 
 /// The adaptive result at core point `p` with outward unit normal `n`.
-fn at(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, cfg: &CompareConfig) -> Deviation {
+fn at(
+    prep: &Prepared,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    cfg: &CompareConfig,
+    scratch: &mut Scratch,
+) -> Deviation {
     let a = &cfg.adaptive;
     let c = prep.clouds;
     let r_max = *prep.radii.last().expect("radii");
     let agrees = |i: usize| prep.ref_normals[i].dot(n) >= prep.cos_limit;
-    let refs = by_rho(
-        members(
-            &c.ref_index,
-            &c.reference.points,
-            p,
-            n,
-            r_max,
-            cfg.max_distance,
-        )
-        .into_iter()
-        .filter(|m| agrees(m.index))
-        .collect(),
-    );
-    let scans = by_rho(
-        members(&c.scan_index, &c.scan.points, p, n, r_max, cfg.max_distance)
-            .into_iter()
-            .filter(|m| agrees(prep.scan_nearest_ref[m.index] as usize))
-            .collect(),
-    );
-    let count = |ms: &[Member], r: f64| ms.iter().take_while(|m| m.rho2 <= r * r).count();
+    let Scratch {
+        refs,
+        scans,
+        pairs,
+        knn,
+    } = scratch;
+    refs.clear();
+    scans.clear();
+    c.ref_grid.cylinder(p, n, r_max, cfg.max_distance, refs);
+    refs.retain(|m| agrees(m.index));
+    c.scan_grid.cylinder(p, n, r_max, cfg.max_distance, scans);
+    let mut pair = |m: &Member| -> Option<f64> {
+        let y = &c.scan.points[m.index];
+        match prep.scan_nearest_ref[m.index] {
+            FAR => {
+                c.ref_grid.knn(y, 1, f64::INFINITY, knn);
+                let i = knn.first()?.1;
+                agrees(i as usize).then(|| pair_distance(c, prep.ref_normals, i, y))
+            }
+            i => agrees(i as usize).then(|| prep.scan_pair[m.index]),
+        }
+    };
+    // Keep scan points whose nearest reference point is kept; t carries the pair distance.
+    scans.retain_mut(|m| match pair(m) {
+        Some(z) => {
+            m.t = z;
+            true
+        }
+        None => false,
+    });
+    let (refs, scans) = (&refs[..], &scans[..]);
+    let count = |ms: &[Member], r: f64| ms.iter().filter(|m| m.rho2 <= r * r).count();
     let min = cfg.min_points.max(1);
     // Grow through the radii while every one so far is similar (stay at the smallest when
     // it is not); then further only as far as needed to hold min_points each.
     let mut k = 0;
     for (j, &r) in prep.radii.iter().enumerate() {
-        if similarity(prep, &refs, r, a.h, a.lambda) < a.similarity {
+        if similarity(prep, refs, r, a.h, a.lambda) < a.similarity {
             break;
         }
         k = j;
     }
     while k + 1 < prep.radii.len()
-        && (count(&refs, prep.radii[k]) < min || count(&scans, prep.radii[k]) < min)
+        && (count(refs, prep.radii[k]) < min || count(scans, prep.radii[k]) < min)
     {
         k += 1;
     }
     let (e1, e2) = tangent_frame(n);
     let local = |m: &Member| -> Local {
         let d = c.scan.points[m.index] - p;
-        [d.dot(&e1), d.dot(&e2), prep.scan_pair[m.index]]
+        [d.dot(&e1), d.dot(&e2), m.t]
     };
     // The fit must keep at least FIT_MIN points after trimming, else the next radius.
     let (r, n_ref, _, fs) = loop {
         let r = prep.radii[k];
-        let (n_ref, n_scan) = (count(&refs, r), count(&scans, r));
+        let (n_ref, n_scan) = (count(refs, r), count(scans, r));
         let last = k + 1 == prep.radii.len();
         if n_ref < min {
             return Deviation::missing(Reason::FewReference, r, n_ref, n_scan);
@@ -232,8 +285,9 @@ fn at(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, cfg: &CompareConfig) -
         if n_scan < min {
             return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
         }
-        let pairs: Vec<Local> = scans[..n_scan].iter().map(local).collect();
-        match fit(&pairs, r, 4.0 * prep.noise, prep.noise) {
+        pairs.clear();
+        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
+        match fit(pairs, r, 4.0 * prep.noise, prep.noise) {
             Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, n_scan, fs),
             _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
             _ => k += 1,

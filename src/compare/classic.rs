@@ -3,29 +3,35 @@
 //! LoD95 = 1.96 (sqrt(s1²/n1 + s2²/n2) + reg) with sample standard deviations (n - 1).
 use nalgebra::{Point3, Vector3};
 
-use super::cylinder::members;
+use super::grid::Member;
 use super::{Clouds, CompareConfig, Deviation, Reason};
 
 /// Mean and sample variance (n - 1; NaN below two values, as py4dgeo) of the axial offsets.
-fn mean_var(members: &[super::cylinder::Member]) -> (f64, f64) {
+fn mean_var(members: &[Member]) -> (f64, f64) {
     let n = members.len() as f64;
     let mean = members.iter().map(|m| m.t).sum::<f64>() / n;
     let ss: f64 = members.iter().map(|m| (m.t - mean) * (m.t - mean)).sum();
     (mean, ss / (n - 1.0))
 }
 
-/// The classic M3C2 result at core point `p` with outward unit normal `n`.
+/// The classic M3C2 result at core point `p` with outward unit normal `n`; `buf` is scratch.
 pub fn at(
     clouds: &Clouds,
     p: &Point3<f64>,
     n: &Vector3<f64>,
     radius: f64,
     cfg: &CompareConfig,
+    buf: &mut [Vec<Member>; 2],
 ) -> Deviation {
-    let r = &clouds.reference.points;
-    let s = &clouds.scan.points;
-    let ref_in = members(&clouds.ref_index, r, p, n, radius, cfg.max_distance);
-    let scan_in = members(&clouds.scan_index, s, p, n, radius, cfg.max_distance);
+    let [ref_in, scan_in] = buf;
+    ref_in.clear();
+    scan_in.clear();
+    clouds
+        .ref_grid
+        .cylinder(p, n, radius, cfg.max_distance, ref_in);
+    clouds
+        .scan_grid
+        .cylinder(p, n, radius, cfg.max_distance, scan_in);
     let (n1, n2) = (ref_in.len(), scan_in.len());
     let min = cfg.min_points.max(1);
     if n1 < min {
@@ -34,8 +40,8 @@ pub fn at(
     if n2 < min {
         return Deviation::missing(Reason::FewScan, radius, n1, n2);
     }
-    let (m1, v1) = mean_var(&ref_in);
-    let (m2, v2) = mean_var(&scan_in);
+    let (m1, v1) = mean_var(ref_in);
+    let (m2, v2) = mean_var(scan_in);
     let lod = 1.96 * ((v1 / n1 as f64 + v2 / n2 as f64).sqrt() + cfg.registration_error);
     Deviation {
         distance: m2 - m1,

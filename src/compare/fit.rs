@@ -40,10 +40,16 @@ fn solve(pts: &[Local], k: usize, scale: f64) -> Option<(Vector6<f64>, f64)> {
     for p in pts {
         let x = basis(p, scale);
         for i in 0..k {
-            for j in 0..k {
+            for j in i..k {
                 a[(i, j)] += x[i] * x[j];
             }
             b[i] += x[i] * p[2];
+        }
+    }
+    // The lower triangle mirrors the upper (the same products, summed in the same order).
+    for i in 0..k {
+        for j in 0..i {
+            a[(i, j)] = a[(j, i)];
         }
     }
     for i in k..6 {

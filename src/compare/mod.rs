@@ -7,8 +7,8 @@
 mod adaptive;
 mod classic;
 mod core;
-mod cylinder;
 mod fit;
+mod grid;
 
 use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
@@ -16,7 +16,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use self::core::{core_points, mesh_reference, CoreConfig, CoreSelection};
-use crate::cloud::{Neighbours, PointCloud};
+use self::grid::Grid;
+use crate::cloud::PointCloud;
 
 /// Which M3C2 variant to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
@@ -191,12 +192,12 @@ pub struct Deviations {
     pub radii: Vec<f64>,
 }
 
-/// Data every variant reads: the two clouds and their indexes.
+/// Data every variant reads: the two clouds and their grids.
 pub(crate) struct Clouds<'a> {
     pub reference: &'a PointCloud,
     pub scan: &'a PointCloud,
-    pub ref_index: Neighbours,
-    pub scan_index: Neighbours,
+    pub ref_grid: Grid,
+    pub scan_grid: Grid,
 }
 
 /// Compares `scan` with `reference` at the core points `core` (points with outward unit
@@ -221,28 +222,51 @@ pub fn compare(
         cfg.registration_error.is_finite() && cfg.registration_error >= 0.0,
         "registration_error must be a finite non-negative number"
     );
-    let clouds = Clouds {
-        reference,
-        scan,
-        ref_index: Neighbours::new(&reference.points),
-        scan_index: Neighbours::new(&scan.points),
+    // The scan's density sets the default radii; the grids' cell is the smallest radius.
+    let radius_for = |count: f64| {
+        let grid = Grid::new(&scan.points, provisional_cell(scan));
+        (count / (std::f64::consts::PI * scan_density(&grid, scan))).sqrt()
     };
-    let (values, noise, radii) = match cfg.method {
+    let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
-            let radius = match cfg.radius {
-                Some(r) => r,
-                None => radius_for_count(&clouds, 20.0),
-            };
+            let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
             ensure!(
                 radius > 0.0 && radius.is_finite(),
                 "radius must be positive"
             );
-            let values = run(core, normals, |p, n| {
-                classic::at(&clouds, p, n, radius, cfg)
-            });
-            (values, f64::NAN, vec![radius])
+            (radius, Vec::new())
         }
-        Method::Adaptive => adaptive::run(&clouds, core, normals, cfg)?,
+        Method::Adaptive => {
+            let r0 = match cfg.adaptive.radii.is_empty() {
+                true => radius_for(12.0),
+                false => f64::NAN,
+            };
+            let radii = adaptive::radii(&cfg.adaptive, r0)?;
+            (radii[0], radii)
+        }
+    };
+    let cell = classic_radius;
+    let (ref_grid, scan_grid) = rayon::join(
+        || Grid::new(&reference.points, cell),
+        || Grid::new(&scan.points, cell),
+    );
+    let clouds = Clouds {
+        reference,
+        scan,
+        ref_grid,
+        scan_grid,
+    };
+    let (values, noise, radii) = match cfg.method {
+        Method::Classic => {
+            let values = run(&clouds.ref_grid, core, normals, |buf, p, n| {
+                classic::at(&clouds, p, n, classic_radius, cfg, buf)
+            });
+            (values, f64::NAN, vec![classic_radius])
+        }
+        Method::Adaptive => {
+            let (values, noise) = adaptive::run(&clouds, core, normals, &adaptive_radii, cfg)?;
+            (values, noise, adaptive_radii)
+        }
     };
     Ok(Deviations {
         points: core.points.clone(),
@@ -254,37 +278,70 @@ pub fn compare(
     })
 }
 
-/// Runs `f` at every core point in parallel, in order, with a progress bar.
-fn run<F>(core: &PointCloud, normals: &[Vector3<f64>], f: F) -> Vec<Deviation>
+/// Runs `f` at every core point in parallel, with a progress bar; `f` gets a scratch value
+/// (one per chunk of core points) to reuse. Core points are visited in the grid's spatial
+/// order (cache-friendly); the results come back in the core points' order.
+fn run<S, F>(grid: &Grid, core: &PointCloud, normals: &[Vector3<f64>], f: F) -> Vec<Deviation>
 where
-    F: Fn(&Point3<f64>, &Vector3<f64>) -> Deviation + Sync,
+    S: Default,
+    F: Fn(&mut S, &Point3<f64>, &Vector3<f64>) -> Deviation + Sync,
 {
     let bar = crate::progress::bar(core.len() as u64, "compare");
-    let out = core
-        .points
-        .par_iter()
-        .zip(normals.par_iter())
-        .chunks(1024)
+    let order = grid.spatial_order(&core.points);
+    let done: Vec<Deviation> = order
+        .par_chunks(512)
         .flat_map_iter(|chunk| {
-            let done: Vec<Deviation> = chunk.into_iter().map(|(p, n)| f(p, n)).collect();
+            let mut scratch = S::default();
+            let done: Vec<Deviation> = chunk
+                .iter()
+                .map(|&i| f(&mut scratch, &core.points[i], &normals[i]))
+                .collect();
             bar.inc(done.len() as u64);
             done
         })
         .collect();
     bar.finish_and_clear();
-    out
+    scatter(&order, done)
+}
+
+/// `values[k]` belongs to item `order[k]`: the values in item order.
+pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
+    let mut out: Vec<Option<T>> = vec![None; values.len()];
+    for (&i, v) in order.iter().zip(values) {
+        out[i] = Some(v);
+    }
+    out.into_iter()
+        .map(|v| v.expect("order is a permutation"))
+        .collect()
+}
+
+/// A first grid cell for the density estimate: about four points per cell if the points
+/// covered the bounding box's faces.
+fn provisional_cell(cloud: &PointCloud) -> f64 {
+    let Some(bbox) = crate::cloud::Aabb::of(&cloud.points) else {
+        return 1.0;
+    };
+    let e = bbox.extent();
+    let area = 2.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
+    let cell = (4.0 * area / cloud.len() as f64).sqrt();
+    if cell > 0.0 && cell.is_finite() {
+        cell
+    } else {
+        1.0
+    }
 }
 
 /// The scan's median surface density (points per mm²), from the 12th-neighbour distance of
 /// up to 1,000 evenly spread scan points.
-pub(crate) fn scan_density(clouds: &Clouds) -> f64 {
-    let n = clouds.scan.len();
+fn scan_density(grid: &Grid, scan: &PointCloud) -> f64 {
+    let n = scan.len();
     let step = (n / 1000).max(1);
+    let mut found = Vec::new();
     let mut densities: Vec<f64> = (0..n)
         .step_by(step)
         .filter_map(|i| {
-            let found = clouds.scan_index.knn(&clouds.scan.points[i], 13);
-            let d2 = found.last()?.dist2;
+            grid.knn(&scan.points[i], 13, f64::INFINITY, &mut found);
+            let d2 = found.last()?.0;
             (found.len() == 13 && d2 > 0.0).then(|| 12.0 / (std::f64::consts::PI * d2))
         })
         .collect();
@@ -293,11 +350,6 @@ pub(crate) fn scan_density(clouds: &Clouds) -> f64 {
     }
     densities.sort_by(f64::total_cmp);
     densities[densities.len() / 2]
-}
-
-/// The radius of a disc that holds `count` scan points at the median density.
-pub(crate) fn radius_for_count(clouds: &Clouds, count: f64) -> f64 {
-    (count / (std::f64::consts::PI * scan_density(clouds))).sqrt()
 }
 
 /// The deviations as a cloud with the columns of deviations.csv/.ply (DESIGN.md):

@@ -1,0 +1,422 @@
+//! A uniform grid over a point cloud for the comparison's two queries: the points inside an
+//! M3C2 cylinder (py4dgeo 1.2's semantics, see [`Grid::cylinder`]) and the k nearest points
+//! (exact, ties to the lowest index, like `cloud::Neighbours::knn`).
+//!
+//! Space is cut into rows along x of square cross-section (edge `cell`); the points are stored
+//! row by row, sorted by x within a row, so the points of a row between two x values are one
+//! contiguous slice found by two binary searches. A query walks the rows near it, takes the
+//! x interval a row can contribute, and never allocates (the caller owns the output buffers).
+use nalgebra::{Point3, Vector3};
+
+/// Most rows (the cell grows when the box would need more: an empty row costs four bytes).
+const MAX_ROWS: f64 = 4.0e6;
+
+/// A point inside a cylinder.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Member {
+    /// Index into the searched cloud.
+    pub index: usize,
+    /// Signed offset along the axis from the core point, mm.
+    pub t: f64,
+    /// Squared distance from the axis, mm².
+    pub rho2: f64,
+}
+
+/// Points bucketed into rows along x.
+pub struct Grid {
+    cell: f64,
+    origin: [f64; 3],
+    /// Cells along each axis (along x only for the spatial order).
+    dims: [isize; 3],
+    /// Start of each row's points in `pts` (row y + dims[1]·z; one more entry than rows).
+    rows: Vec<u32>,
+    /// x of each stored point (sorted within a row).
+    xs: Vec<f64>,
+    /// Coordinates, row by row.
+    pts: Vec<[f64; 3]>,
+    /// Original index of each sorted point.
+    ids: Vec<u32>,
+}
+
+/// ⌊x⌋ as an integer (saturating), without a libm call.
+#[inline]
+fn ifloor(x: f64) -> isize {
+    let f = x as isize;
+    if (f as f64) > x {
+        f.saturating_sub(1)
+    } else {
+        f
+    }
+}
+
+/// Squared distance in FLANN's summation order (as `cloud::neighbours::dist2`).
+#[inline]
+fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    dx * dx + dy * dy + dz * dz
+}
+
+impl Grid {
+    /// Buckets `points` (finite coordinates) into rows of cross-section `cell` × `cell` (mm;
+    /// enlarged when the bounding box would need more than four million rows).
+    pub fn new(points: &[Point3<f64>], cell: f64) -> Grid {
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in points {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        if points.is_empty() {
+            (lo, hi) = ([0.0; 3], [0.0; 3]);
+        }
+        let extent = [0, 1, 2].map(|a| hi[a] - lo[a]);
+        let area = (extent[1] + cell) * (extent[2] + cell);
+        let cell = if area / (cell * cell) > MAX_ROWS {
+            (area / MAX_ROWS).sqrt()
+        } else {
+            cell
+        };
+        let dims = [0, 1, 2].map(|a| ifloor(extent[a] / cell) + 1);
+        let mut grid = Grid {
+            cell,
+            origin: lo,
+            dims,
+            rows: Vec::new(),
+            xs: Vec::new(),
+            pts: Vec::new(),
+            ids: Vec::new(),
+        };
+        let nrows = (dims[1] * dims[2]) as usize;
+        let keys: Vec<u32> = points
+            .iter()
+            .map(|p| {
+                let y = grid.coord(p.y, 1).clamp(0, dims[1] - 1);
+                let z = grid.coord(p.z, 2).clamp(0, dims[2] - 1);
+                (y + dims[1] * z) as u32
+            })
+            .collect();
+        let mut rows = vec![0u32; nrows + 1];
+        for &k in &keys {
+            rows[k as usize + 1] += 1;
+        }
+        for i in 0..nrows {
+            rows[i + 1] += rows[i];
+        }
+        let mut next = rows.clone();
+        let mut order = vec![0u32; points.len()];
+        for (i, &k) in keys.iter().enumerate() {
+            order[next[k as usize] as usize] = i as u32;
+            next[k as usize] += 1;
+        }
+        for w in rows.windows(2) {
+            order[w[0] as usize..w[1] as usize]
+                .sort_unstable_by(|&a, &b| points[a as usize].x.total_cmp(&points[b as usize].x));
+        }
+        grid.pts = order
+            .iter()
+            .map(|&i| {
+                let p = &points[i as usize];
+                [p.x, p.y, p.z]
+            })
+            .collect();
+        grid.xs = grid.pts.iter().map(|p| p[0]).collect();
+        grid.ids = order;
+        grid.rows = rows;
+        grid
+    }
+
+    /// Cell index of coordinate `x` along axis `a` (unclamped).
+    #[inline]
+    fn coord(&self, x: f64, a: usize) -> isize {
+        ifloor((x - self.origin[a]) / self.cell)
+    }
+
+    /// Stored-point range of row (y, z) (in range) with x in [x0, x1].
+    #[inline]
+    fn row(&self, y: isize, z: isize, x0: f64, x1: f64) -> std::ops::Range<usize> {
+        let r = (y + self.dims[1] * z) as usize;
+        let (a, b) = (self.rows[r] as usize, self.rows[r + 1] as usize);
+        let xs = &self.xs[a..b];
+        a + xs.partition_point(|&x| x < x0)..a + xs.partition_point(|&x| x <= x1)
+    }
+
+    /// Indices of `points` in the Morton (Z-curve) order of their cells: queries made in this
+    /// order touch memory that the previous query touched (several times faster than the
+    /// random order of a sampled cloud).
+    pub fn spatial_order(&self, points: &[Point3<f64>]) -> Vec<usize> {
+        let spread = |mut v: u64| {
+            // Bits of v (21 used) moved to every third position.
+            v &= 0x1f_ffff;
+            v = (v | v << 32) & 0x1f00000000ffff;
+            v = (v | v << 16) & 0x1f0000ff0000ff;
+            v = (v | v << 8) & 0x100f00f00f00f00f;
+            v = (v | v << 4) & 0x10c30c30c30c30c3;
+            (v | v << 2) & 0x1249249249249249
+        };
+        let mut keyed: Vec<(u64, usize)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let c = [0, 1, 2].map(|a| self.coord(p[a], a).clamp(0, self.dims[a] - 1) as u64);
+                (spread(c[0]) | spread(c[1]) << 1 | spread(c[2]) << 2, i)
+            })
+            .collect();
+        keyed.sort_unstable();
+        keyed.into_iter().map(|(_, i)| i).collect()
+    }
+
+    /// Appends to `out` the points inside the M3C2 cylinder of radius `radius` around the axis
+    /// through `core` along the unit vector `axis`, with py4dgeo 1.2's semantics: the cylinder
+    /// extends L = max(max_distance, radius) both ways and is cut into N = ceil(L / radius)
+    /// slabs (N = 1 when max_distance <= radius), each of which py4dgeo searches with a ball
+    /// of radius sqrt(r² + (L/N)²) around its midpoint; a point belongs when it is in that
+    /// ball, its squared distance to the axis is <= r² and its distance along the axis from
+    /// the slab's midpoint is < L/N. Offsets and distances are computed from the slab
+    /// midpoint exactly as py4dgeo does, so membership matches it bit for bit.
+    pub fn cylinder(
+        &self,
+        core: &Point3<f64>,
+        axis: &Vector3<f64>,
+        radius: f64,
+        max_distance: f64,
+        out: &mut Vec<Member>,
+    ) {
+        if self.pts.is_empty() || radius.is_nan() || radius <= 0.0 {
+            return;
+        }
+        let (length, slabs) = if max_distance > radius {
+            (max_distance, (max_distance / radius).ceil())
+        } else {
+            (radius, 1.0)
+        };
+        let half = length / slabs;
+        let ball = (radius * radius + half * half).sqrt();
+        let ball2 = ball * ball;
+        let r2 = radius * radius;
+        let nslabs = slabs as isize;
+        // Loose bounds for the cheap pre-test (exact tests follow per slab).
+        let slack = 1e-9 * (length + radius) + 1e-12;
+        let (reach_t, reach_r) = (length + slack, radius + slack);
+        // Points of a row are within this of the line through the row's centre.
+        let hd = self.cell * std::f64::consts::FRAC_1_SQRT_2 + slack;
+        let c = [core.x, core.y, core.z];
+        // The cylinder's bounding box: rows (y, z) and an x range.
+        let (mut lo, mut hi) = ([0isize; 3], [0isize; 3]);
+        let ext = [0, 1, 2].map(|a| {
+            length * axis[a].abs() + radius * (1.0 - axis[a] * axis[a]).max(0.0).sqrt() + slack
+        });
+        for a in 0..3 {
+            lo[a] = self.coord(c[a] - ext[a], a).max(0);
+            hi[a] = self.coord(c[a] + ext[a], a).min(self.dims[a] - 1);
+            if lo[a] > hi[a] {
+                return;
+            }
+        }
+        let (box0, box1) = (c[0] - ext[0], c[0] + ext[0]);
+        // A row of cells along x can hold a member only where its centre line is within
+        // (reach + half the cell's face diagonal) of the axis, and of the core along it: an
+        // interval of x.
+        let (ct, cr) = (reach_t + hd, reach_r + hd);
+        let row_span = |y: isize, z: isize| -> Option<(f64, f64)> {
+            let a = self.origin[1] + (y as f64 + 0.5) * self.cell - c[1];
+            let b = self.origin[2] + (z as f64 + 0.5) * self.cell - c[2];
+            // With u the centre's x offset from the core: t = n0 u + k and
+            // perp² = (1 - n0²) u² - 2 n0 k u + a² + b² - k².
+            let (n0, k) = (axis[0], axis[1] * a + axis[2] * b);
+            let (mut u0, mut u1) = (f64::NEG_INFINITY, f64::INFINITY);
+            let qa = 1.0 - n0 * n0;
+            let qb = -2.0 * n0 * k;
+            let qc = a * a + b * b - k * k - cr * cr;
+            if qa > 1e-12 {
+                let disc = qb * qb - 4.0 * qa * qc;
+                if disc < 0.0 {
+                    return None;
+                }
+                let root = disc.sqrt();
+                (u0, u1) = ((-qb - root) / (2.0 * qa), (-qb + root) / (2.0 * qa));
+            } else if qc > 0.0 {
+                return None;
+            }
+            if n0.abs() > 1e-12 {
+                let (e0, e1) = ((-ct - k) / n0, (ct - k) / n0);
+                u0 = u0.max(e0.min(e1));
+                u1 = u1.min(e0.max(e1));
+            } else if k.abs() > ct {
+                return None;
+            }
+            // Slack for rounding in the interval ends.
+            let pad = 1e-9 * self.cell;
+            let (x0, x1) = ((c[0] + u0 - pad).max(box0), (c[0] + u1 + pad).min(box1));
+            (x0 <= x1).then_some((x0, x1))
+        };
+        let mut visit = |range: std::ops::Range<usize>| {
+            for s in range {
+                let p = &self.pts[s];
+                let d = Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                let t0 = d.dot(axis);
+                if t0.abs() > reach_t || d.norm_squared() - t0 * t0 > reach_r * reach_r {
+                    continue;
+                }
+                // Slabs whose interval can hold t0.
+                let k = ifloor((t0 + length) / (2.0 * half));
+                for i in (k - 1).max(0)..=(k + 1).min(nslabs - 1) {
+                    let offset = (2.0 * i as f64 + 1.0 - slabs) / slabs * length;
+                    if (t0 - offset).abs() > half + slack {
+                        continue;
+                    }
+                    let mid = core + axis * offset;
+                    let m = [mid.x, mid.y, mid.z];
+                    if dist2(&m, p) > ball2 {
+                        continue;
+                    }
+                    let d = Point3::from(*p) - mid;
+                    let along = d.dot(axis);
+                    let rho2 = (d - axis * along).norm_squared();
+                    if rho2 <= r2 && along.abs() < half {
+                        out.push(Member {
+                            index: self.ids[s] as usize,
+                            t: along + offset,
+                            rho2,
+                        });
+                    }
+                }
+            }
+        };
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                if let Some((x0, x1)) = row_span(y, z) {
+                    visit(self.row(y, z, x0, x1));
+                }
+            }
+        }
+    }
+
+    /// The `k` nearest points to `q` within `max_radius` (inclusive; infinity for no limit),
+    /// into `out` as (squared distance, index), nearest first, ties to the lowest index.
+    pub fn knn(&self, q: &Point3<f64>, k: usize, max_radius: f64, out: &mut Vec<(f64, u32)>) {
+        out.clear();
+        if k == 0 || self.pts.is_empty() {
+            return;
+        }
+        let qa = [q.x, q.y, q.z];
+        let max2 = max_radius * max_radius;
+        let consider = |range: std::ops::Range<usize>, out: &mut Vec<(f64, u32)>| {
+            for s in range {
+                let d2 = dist2(&qa, &self.pts[s]);
+                if d2 > max2 {
+                    continue;
+                }
+                let item = (d2, self.ids[s]);
+                if out.len() == k {
+                    let last = out[k - 1];
+                    if (item.0, item.1) >= (last.0, last.1) {
+                        continue;
+                    }
+                    out.pop();
+                }
+                let at = out.partition_point(|e| (e.0, e.1) < (item.0, item.1));
+                out.insert(at, item);
+            }
+        };
+        // Search the cube of half-width r around q, doubling r until the k-th distance is
+        // inside it (every closer point has then been seen).
+        // A nearest point is usually well inside a cell, eight of them about a cell away.
+        let mut r = if k == 1 { 0.5 } else { 1.0 } * self.cell;
+        loop {
+            let r_use = r.min(max_radius);
+            out.clear();
+            let (z0, z1) = (self.coord(qa[2] - r_use, 2), self.coord(qa[2] + r_use, 2));
+            let (y0, y1) = (self.coord(qa[1] - r_use, 1), self.coord(qa[1] + r_use, 1));
+            for z in z0.max(0)..=z1.min(self.dims[2] - 1) {
+                for y in y0.max(0)..=y1.min(self.dims[1] - 1) {
+                    consider(self.row(y, z, qa[0] - r_use, qa[0] + r_use), out);
+                }
+            }
+            let whole = (0..3).all(|a| {
+                qa[a] - r_use <= self.origin[a]
+                    && qa[a] + r_use >= self.origin[a] + self.dims[a] as f64 * self.cell
+            });
+            let done = out.len() == k && out[k - 1].0 <= r_use * r_use;
+            if done || whole || r_use >= max_radius {
+                return;
+            }
+            r *= 2.0;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::Neighbours;
+    use rand::{Rng, SeedableRng};
+
+    #[test]
+    fn cylinder_matches_a_brute_force_cylinder() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let points: Vec<Point3<f64>> = (0..5000)
+            .map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 4.0)
+            .collect();
+        let core = Point3::new(2.0, 2.0, 2.0);
+        let axes = [
+            Vector3::new(1.0, 2.0, 2.0).normalize(),
+            Vector3::x(),
+            -Vector3::z(),
+            Vector3::new(0.0, 1.0, -1e-13).normalize(),
+        ];
+        for (cell, axis) in [0.1, 0.35, 2.0]
+            .into_iter()
+            .flat_map(|c| axes.map(|a| (c, a)))
+        {
+            let grid = Grid::new(&points, cell);
+            for (r, l) in [(0.3, 1.0), (0.5, 0.2), (0.4, 1.9), (0.2, 3.0)] {
+                let mut found = Vec::new();
+                grid.cylinder(&core, &axis, r, l, &mut found);
+                let mut got: Vec<usize> = found.iter().map(|m| m.index).collect();
+                got.sort();
+                let len = if l > r { l } else { r };
+                let want: Vec<usize> = (0..points.len())
+                    .filter(|&i| {
+                        let d = points[i] - core;
+                        let t = d.dot(&axis);
+                        (d - axis * t).norm() <= r && t.abs() < len
+                    })
+                    .collect();
+                assert_eq!(got, want, "cell {cell} r {r} l {l}");
+                for m in &found {
+                    let d = points[m.index] - core;
+                    assert!((m.t - d.dot(&axis)).abs() < 1e-12);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn knn_matches_the_kd_tree() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        // A grid (exact ties) plus random points, and queries inside and far outside.
+        let mut points: Vec<Point3<f64>> = (0..343)
+            .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64))
+            .collect();
+        points.extend((0..700).map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 7.0));
+        let index = Neighbours::new(&points);
+        let grid = Grid::new(&points, 0.6);
+        let mut out = Vec::new();
+        let far = [Point3::new(30.0, -4.0, 2.0), Point3::new(3.5, 3.5, 90.0)];
+        for q in points.iter().step_by(7).chain(&far) {
+            for k in [1, 8, 27] {
+                grid.knn(q, k, f64::INFINITY, &mut out);
+                let want: Vec<(f64, u32)> = index
+                    .knn(q, k)
+                    .iter()
+                    .map(|n| (n.dist2, n.index as u32))
+                    .collect();
+                assert_eq!(out, want, "q {q} k {k}");
+                grid.knn(q, k, 1.1, &mut out);
+                let capped: Vec<_> = want.into_iter().filter(|w| w.0 <= 1.1 * 1.1).collect();
+                assert_eq!(out, capped, "q {q} k {k} capped");
+            }
+        }
+    }
+}
