@@ -13,6 +13,7 @@ pub mod fpfh;
 pub mod icp;
 pub mod mac;
 
+use crate::cloud::transform::isometry_to_rows;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Point3, Vector3};
@@ -223,12 +224,6 @@ pub enum RegisterError {
     },
 }
 
-/// A 4x4 row-major matrix of an isometry.
-pub fn row_major(iso: &Isometry3<f64>) -> [[f64; 4]; 4] {
-    let m = iso.to_homogeneous();
-    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
-}
-
 /// Registers `scan` onto `reference`: see the module documentation.
 pub fn register(
     scan: &PointCloud,
@@ -389,7 +384,7 @@ pub fn register_with_progress(
 
     let fine_max_distance = cfg.icp_max_distance.unwrap_or(2.0 * voxel);
     let mut out = Registration {
-        scan_to_reference: row_major(&Isometry3::identity()),
+        scan_to_reference: isometry_to_rows(&Isometry3::identity()),
         fitness: 0.0,
         inlier_rmse: 0.0,
         fitness_distance: cfg.fitness_distance.unwrap_or(3.0 * mr_ref),
@@ -417,7 +412,7 @@ pub fn register_with_progress(
     out.coarse.chosen = chosen;
     out.coarse.chosen_score = h.score;
     out.coarse.inlier_ratio = h.inliers as f64 / corr.len().max(1) as f64;
-    out.coarse.scan_to_reference = row_major(&h.pose);
+    out.coarse.scan_to_reference = isometry_to_rows(&h.pose);
     if h.inliers < cfg.min_inliers {
         return fail(
             out,
@@ -465,7 +460,7 @@ pub fn register_with_progress(
     (out.fitness, out.inlier_rmse) =
         icp::fitness(&src_fine, &ref_tree, &fine.pose, out.fitness_distance);
     out.pose = fine.pose;
-    out.scan_to_reference = row_major(&fine.pose);
+    out.scan_to_reference = isometry_to_rows(&fine.pose);
     out.times.total = start.elapsed().as_secs_f64();
     if out.fitness < cfg.min_fitness {
         let reason = format!(
