@@ -93,6 +93,28 @@ fn synthetic_turntable_poses_match_truth() {
         (off - ta * off.dot(&ta)).norm() < 0.05,
         "centre {ec} off the axis"
     );
+    // The merged cloud lies on the true surface: median point-to-plane distance to the
+    // reference (moved into the first view's frame by the synth truth).
+    let reference = polishbot::cloud::load_cloud(&d.join("reference.ply"), None, None).unwrap();
+    let first = isometry_from_rows(&rows(&truth["first_from_reference"])).expect("pose");
+    let ref_pts: Vec<_> = reference.points.iter().map(|p| first * p).collect();
+    let ref_nrm = reference.normals.as_ref().expect("reference normals");
+    let tree = polishbot::cloud::Neighbours::new(&ref_pts);
+    let cloud = polishbot::cloud::load_cloud(&merged, None, None).unwrap();
+    let mut dist: Vec<f64> = cloud
+        .points
+        .iter()
+        .step_by(10)
+        .map(|p| {
+            let nb = tree.nearest(p).expect("neighbour");
+            (first * ref_nrm[nb.index])
+                .dot(&(p - ref_pts[nb.index]))
+                .abs()
+        })
+        .collect();
+    dist.sort_by(f64::total_cmp);
+    let median = dist[dist.len() / 2];
+    assert!(median < 0.02, "merged cloud median distance {median} mm");
     // A saved axis is accepted back (the report is a calibration file).
     let out = merge(&[
         &files[0],
