@@ -24,7 +24,19 @@ fn merge(args: &[&str]) -> std::process::Output {
 }
 
 #[test]
-fn synthetic_turntable_poses_match_truth() {
+fn synthetic_turntable_12_views_match_truth() {
+    synthetic_turntable(12, "30", "7");
+}
+
+#[test]
+fn synthetic_turntable_36_views_match_truth() {
+    synthetic_turntable(36, "10", "3");
+}
+
+/// Synth `views` views `step` degrees apart (true angles off by up to 3 degrees), merge them
+/// and compare poses, axis and merged surface with the synth truth.
+fn synthetic_turntable(n: usize, step: &str, seed: &str) {
+    let views_arg = n.to_string();
     let dir = common::tempdir();
     let d = dir.path();
     let out = common::polishbot()
@@ -32,13 +44,13 @@ fn synthetic_turntable_poses_match_truth() {
         .arg(d)
         .args([
             "--views",
-            "12",
+            &views_arg,
             "--view-points",
             "30000",
             "--angle-error",
             "3",
             "--seed",
-            "7",
+            seed,
         ])
         .output()
         .expect("synth");
@@ -60,7 +72,7 @@ fn synthetic_turntable_poses_match_truth() {
     let merged = d.join("merged.ply");
     let mut args: Vec<&str> = files.iter().map(String::as_str).collect();
     let m = merged.display().to_string();
-    args.extend(["--step", "30", "-o", &m]);
+    args.extend(["--step", step, "-o", &m]);
     let out = merge(&args);
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();
     assert!(
@@ -75,7 +87,7 @@ fn synthetic_turntable_poses_match_truth() {
     let report = read_json(&d.join("merged.json"));
     assert!(report["loop_closure"]["rotation_deg"].is_number());
     let views = report["views"].as_array().expect("views");
-    assert_eq!(views.len(), 12);
+    assert_eq!(views.len(), n);
     for (t, v) in tviews.iter().zip(views) {
         let a = isometry_from_rows(&rows(&t["view_to_first"])).expect("truth pose");
         let b = isometry_from_rows(&rows(&v["view_to_first"])).expect("merged pose");
