@@ -32,13 +32,13 @@ pub struct MergeConfig {
     pub axis: [f64; 3],
     /// A point on the table axis (default: the first view's centroid).
     pub centre: Option<[f64; 3]>,
-    /// Most points of a moving view used by the pairwise ICP (evenly strided; default 20,000).
+    /// Most points of a moving view used by the pairwise ICP (evenly strided; default 10,000).
     pub icp_max_points: usize,
     /// First ICP correspondence distance in multiples of the mean spacing mr (default 30).
     pub start_distance: f64,
     /// Final ICP correspondence distance and fitness distance, in mr (default 3).
     pub final_distance: f64,
-    /// Iteration cap of each ICP stage (default 60).
+    /// Iteration cap of each ICP stage (default 30).
     pub icp_max_iterations: usize,
     /// Least share of a view's points within the final distance of its neighbour for an
     /// alignment to count (default 0.3).
@@ -58,10 +58,10 @@ impl Default for MergeConfig {
         MergeConfig {
             axis: [0.0, 0.0, 1.0],
             centre: None,
-            icp_max_points: 20_000,
+            icp_max_points: 10_000,
             start_distance: 30.0,
             final_distance: 3.0,
-            icp_max_iterations: 60,
+            icp_max_iterations: 30,
             min_fitness: 0.3,
             skip_bad: false,
             voxel: None,
