@@ -1,6 +1,7 @@
 //! polishbot: scan-versus-reference metrology of knee-prosthesis parts and a DOFBOT grinding
 //! controller. The stages follow `DESIGN.md` top to bottom; each has one front function and one
 //! config struct.
+pub mod acquire;
 pub mod bus;
 pub mod cli;
 pub mod cloud;

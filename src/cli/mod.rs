@@ -12,6 +12,7 @@ mod filter;
 mod info;
 mod inspect;
 mod inspect_report;
+mod merge;
 mod plan;
 mod register;
 mod run;
@@ -46,7 +47,7 @@ pub enum Command {
     /// Print one JSON object describing a geometry file: points, faces, bbox_min, bbox_max, units.
     Info(info::InfoArgs),
     /// Merge turntable range views into one cloud.
-    Merge(NotYet),
+    Merge(Box<merge::MergeArgs>),
     /// Statistical outlier filter and down-sampling.
     Filter(filter::FilterArgs),
     /// Register a scan onto a reference: DIR/registration.json.
@@ -93,7 +94,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(args) => info::run(args, config),
         Command::Synth(args) => synth::run(*args, config),
-        Command::Merge(_) => not_yet("merge"),
+        Command::Merge(args) => merge::run(*args, config),
         Command::Filter(args) => filter::run(args, config),
         Command::Register(args) => register::run(args, config),
         Command::Inspect(args) => inspect::run(*args, config),

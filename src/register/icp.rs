@@ -85,7 +85,7 @@ fn residuals(
 
 /// Share of `src` points (under `pose`) with a target point within `distance`, and the RMS
 /// distance of those pairs.
-pub(crate) fn fitness(
+pub fn fitness(
     src: &[Point3<f64>],
     tree: &Tree,
     pose: &Isometry3<f64>,
@@ -113,7 +113,7 @@ fn median_abs(values: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// Aligns `src` to the target surface (points, unit normals, their tree) from `init`.
-pub(crate) fn icp(
+pub fn icp(
     src: &[Point3<f64>],
     target: &[Point3<f64>],
     normals: &[Vector3<f64>],

@@ -1,0 +1,152 @@
+//! `polishbot merge SCAN... -o OUT`: joins turntable range views into one cloud (OUT, mm) and
+//! writes the poses, loop closure and axis estimate to OUT with the extension `.json`.
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use serde::Deserialize;
+use serde_json::json;
+
+use super::GeometryInput;
+use crate::acquire::{merge_views, MergeConfig};
+use crate::cloud::{self, PlyPrecision};
+
+/// Arguments of `merge` (flags override the `--config` file's values).
+#[derive(Debug, Args)]
+pub struct MergeArgs {
+    /// The views, in turntable order.
+    #[arg(required = true)]
+    pub scans: Vec<PathBuf>,
+    /// Output cloud (PLY, mm); the report goes beside it as .json.
+    #[arg(short = 'o', long = "out")]
+    pub out: PathBuf,
+    /// Nominal angle of each view in degrees, "a1,a2,...".
+    #[arg(
+        long,
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        conflicts_with = "step"
+    )]
+    pub angles: Option<Vec<f64>>,
+    /// Nominal step between views in degrees (view i at i * step) [default: 360 / views].
+    #[arg(long, allow_hyphen_values = true)]
+    pub step: Option<f64>,
+    /// Table axis "x,y,z" in the views' frame [default: 0,0,1 or the calibration file's].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, num_args = 1)]
+    pub axis: Option<Vec<f64>>,
+    /// A point "x,y,z" on the table axis, mm [default: first view's centroid or calibration].
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true, num_args = 1)]
+    pub centre: Option<Vec<f64>>,
+    /// A saved axis: JSON with `axis` and `centre` (e.g. an earlier merge report).
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// Leave out views that cannot be aligned (named in the output) instead of failing.
+    #[arg(long)]
+    pub skip_bad: bool,
+    /// Statistical outlier filter on the joined cloud.
+    #[arg(long)]
+    pub sor: bool,
+    /// Voxel of the joined cloud, mm [default: first view's mean spacing].
+    #[arg(long)]
+    pub voxel: Option<f64>,
+    /// Units and format of the views.
+    #[command(flatten)]
+    pub input: GeometryInput,
+}
+
+/// The part of a calibration file `merge` reads.
+#[derive(Deserialize)]
+struct Calibration {
+    axis: [f64; 3],
+    centre: [f64; 3],
+}
+
+fn triple(v: &[f64], what: &str) -> Result<[f64; 3]> {
+    match v {
+        [x, y, z] => Ok([*x, *y, *z]),
+        _ => bail!(
+            "--{what}: expected 3 comma-separated numbers, got {}",
+            v.len()
+        ),
+    }
+}
+
+fn read_calibration(path: &Path) -> Result<Calibration> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: not a calibration", path.display()))
+}
+
+/// Merges the views and writes the cloud and the report.
+pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
+    let mut cfg: MergeConfig = super::load_config(config)?;
+    if let Some(path) = &args.calibration {
+        let c = read_calibration(path)?;
+        cfg.axis = c.axis;
+        cfg.centre = Some(c.centre);
+    }
+    if let Some(a) = &args.axis {
+        cfg.axis = triple(a, "axis")?;
+    }
+    if let Some(c) = &args.centre {
+        cfg.centre = Some(triple(c, "centre")?);
+    }
+    cfg.skip_bad |= args.skip_bad;
+    cfg.sor |= args.sor;
+    cfg.voxel = args.voxel.or(cfg.voxel);
+    let n = args.scans.len();
+    let angles = match &args.angles {
+        Some(a) if a.len() != n => bail!("--angles has {} values for {n} views", a.len()),
+        Some(a) => a.clone(),
+        None => {
+            let step = args.step.unwrap_or(360.0 / n as f64);
+            (0..n).map(|i| i as f64 * step).collect()
+        }
+    };
+    let views = args
+        .scans
+        .iter()
+        .map(|p| cloud::load_cloud(p, args.input.format, args.input.units))
+        .collect::<Result<Vec<_>>>()?;
+    let names: Vec<String> = args.scans.iter().map(|p| p.display().to_string()).collect();
+    let merged = merge_views(&views, &names, &angles, &cfg)?;
+    cloud::write_ply(&args.out, &merged.cloud, None, PlyPrecision::F64)?;
+    let report_path = args.out.with_extension("json");
+    let axis = merged.axis.clone();
+    let report = json!({
+        "units": "mm",
+        "cloud": args.out.display().to_string(),
+        "points": merged.cloud.len(),
+        "axis": axis.as_ref().map(|a| a.axis),
+        "centre": axis.as_ref().map(|a| a.centre),
+        "axis_estimate": axis,
+        "loop_closure": merged.loop_closure.map(|[r, t]| json!({"rotation_deg": r, "translation_mm": t})),
+        "skipped": merged.skipped,
+        "voxel": merged.voxel,
+        "joined_points": merged.joined_points,
+        "views": merged.views,
+    });
+    std::fs::write(&report_path, serde_json::to_string_pretty(&report)? + "\n")
+        .with_context(|| format!("{}: cannot write", report_path.display()))?;
+    let closure = merged
+        .loop_closure
+        .map_or("no full turn".to_string(), |[r, t]| {
+            format!("loop closure {r:.4} deg {t:.4} mm")
+        });
+    let axis_text = axis.map_or("axis not estimated".to_string(), |a| {
+        format!(
+            "axis ({:.4}, {:.4}, {:.4}) through ({:.3}, {:.3}, {:.3}) mm",
+            a.axis[0], a.axis[1], a.axis[2], a.centre[0], a.centre[1], a.centre[2]
+        )
+    });
+    println!(
+        "merge: {} of {n} views, {} points, {closure}, {axis_text} -> {}",
+        merged.views.len(),
+        merged.cloud.len(),
+        args.out.display()
+    );
+    for s in &merged.skipped {
+        println!("merge: skipped {s} (could not be aligned)");
+    }
+    Ok(())
+}

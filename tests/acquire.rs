@@ -1,0 +1,239 @@
+//! Acquisition: `polishbot merge` against the synthetic turntable truth and the real bunny.
+mod common;
+
+use std::path::Path;
+
+use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
+use polishbot::cloud::transform::{isometry_from_rows, pose_difference};
+use serde_json::Value;
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("json")).expect("parse")
+}
+
+fn rows(v: &Value) -> [[f64; 4]; 4] {
+    serde_json::from_value(v.clone()).expect("4x4 rows")
+}
+
+fn merge(args: &[&str]) -> std::process::Output {
+    common::polishbot()
+        .arg("merge")
+        .args(args)
+        .output()
+        .expect("run polishbot")
+}
+
+#[test]
+fn synthetic_turntable_12_views_match_truth() {
+    synthetic_turntable(12, "30", "7");
+}
+
+#[test]
+fn synthetic_turntable_36_views_match_truth() {
+    synthetic_turntable(36, "10", "3");
+}
+
+/// Synth `views` views `step` degrees apart (true angles off by up to 3 degrees), merge them
+/// and compare poses, axis and merged surface with the synth truth.
+fn synthetic_turntable(n: usize, step: &str, seed: &str) {
+    let views_arg = n.to_string();
+    let dir = common::tempdir();
+    let d = dir.path();
+    let out = common::polishbot()
+        .args(["synth", "--out"])
+        .arg(d)
+        .args([
+            "--views",
+            &views_arg,
+            "--view-points",
+            "30000",
+            "--angle-error",
+            "3",
+            "--seed",
+            seed,
+        ])
+        .output()
+        .expect("synth");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let truth = read_json(&d.join("turntable.json"));
+    let tviews = truth["views"].as_array().expect("views");
+    let files: Vec<String> = tviews
+        .iter()
+        .map(|v| {
+            d.join(v["file"].as_str().expect("file"))
+                .display()
+                .to_string()
+        })
+        .collect();
+    let merged = d.join("merged.ply");
+    let mut args: Vec<&str> = files.iter().map(String::as_str).collect();
+    let m = merged.display().to_string();
+    args.extend(["--step", step, "-o", &m]);
+    let out = merge(&args);
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("loop closure") && stdout.contains("axis ("),
+        "{stdout}"
+    );
+    let report = read_json(&d.join("merged.json"));
+    assert!(report["loop_closure"]["rotation_deg"].is_number());
+    let views = report["views"].as_array().expect("views");
+    assert_eq!(views.len(), n);
+    for (t, v) in tviews.iter().zip(views) {
+        let a = isometry_from_rows(&rows(&t["view_to_first"])).expect("truth pose");
+        let b = isometry_from_rows(&rows(&v["view_to_first"])).expect("merged pose");
+        let (dr, dt) = pose_difference(&a, &b);
+        assert!(dr < 0.02 && dt < 0.02, "{}: {dr} deg {dt} mm", t["file"]);
+    }
+    // Axis: same direction as the truth, and the estimated centre lies on the true axis.
+    let ta = Vector3::from(serde_json::from_value::<[f64; 3]>(truth["axis"].clone()).unwrap());
+    let tc = Vector3::from(serde_json::from_value::<[f64; 3]>(truth["centre"].clone()).unwrap());
+    let ea = Vector3::from(serde_json::from_value::<[f64; 3]>(report["axis"].clone()).unwrap());
+    let ec = Vector3::from(serde_json::from_value::<[f64; 3]>(report["centre"].clone()).unwrap());
+    assert!(ea.angle(&ta).to_degrees() < 0.02, "axis {ea} vs {ta}");
+    let off = ec - tc;
+    assert!(
+        (off - ta * off.dot(&ta)).norm() < 0.05,
+        "centre {ec} off the axis"
+    );
+    // The merged cloud lies on the true surface: median point-to-plane distance to the
+    // reference (moved into the first view's frame by the synth truth).
+    let reference = polishbot::cloud::load_cloud(&d.join("reference.ply"), None, None).unwrap();
+    let first = isometry_from_rows(&rows(&truth["first_from_reference"])).expect("pose");
+    let ref_pts: Vec<_> = reference.points.iter().map(|p| first * p).collect();
+    let ref_nrm = reference.normals.as_ref().expect("reference normals");
+    let tree = polishbot::cloud::Neighbours::new(&ref_pts);
+    let cloud = polishbot::cloud::load_cloud(&merged, None, None).unwrap();
+    let mut dist: Vec<f64> = cloud
+        .points
+        .iter()
+        .step_by(10)
+        .map(|p| {
+            let nb = tree.nearest(p).expect("neighbour");
+            (first * ref_nrm[nb.index])
+                .dot(&(p - ref_pts[nb.index]))
+                .abs()
+        })
+        .collect();
+    dist.sort_by(f64::total_cmp);
+    let median = dist[dist.len() / 2];
+    assert!(median < 0.02, "merged cloud median distance {median} mm");
+    // A saved axis is accepted back (the report is a calibration file).
+    let out = merge(&[
+        &files[0],
+        &files[1],
+        "--step",
+        "30",
+        "--calibration",
+        &d.join("merged.json").display().to_string(),
+        "-o",
+        &d.join("pair.ply").display().to_string(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// bun.conf: `bmesh FILE tx ty tz qi qj qk qr`, applied as p' = p R + t (metres).
+fn bunny_truth(name: &str) -> Isometry3<f64> {
+    let conf = std::fs::read_to_string(common::shared_data("bunny/bun.conf")).expect("bun.conf");
+    let line = conf
+        .lines()
+        .find(|l| l.starts_with("bmesh") && l.contains(name))
+        .expect("bmesh line");
+    let v: Vec<f64> = line
+        .split_whitespace()
+        .skip(2)
+        .map(|s| s.parse().unwrap())
+        .collect();
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5]));
+    let r: Matrix3<f64> = q.to_rotation_matrix().into_inner().transpose();
+    Isometry3::from_parts(
+        Translation3::new(v[0] * 1e3, v[1] * 1e3, v[2] * 1e3),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
+#[test]
+fn bunny_045_onto_000() {
+    let dir = common::tempdir();
+    let b0 = common::shared_data("bunny/bun000.ply")
+        .display()
+        .to_string();
+    let b45 = common::shared_data("bunny/bun045.ply")
+        .display()
+        .to_string();
+    let out_ply = dir.path().join("bun.ply").display().to_string();
+    let out = merge(&[
+        &b0, &b45, "--angles", "0,45", "--axis", "0,-1,0", "--units", "m", "-o", &out_ply,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = read_json(&dir.path().join("bun.json"));
+    let got = isometry_from_rows(&rows(&report["views"][1]["view_to_first"])).expect("pose");
+    let (dr, dt) = pose_difference(&bunny_truth("bun045.ply"), &got);
+    assert!(dr < 1.0 && dt < 1.0, "bun045: {dr} deg {dt} mm");
+}
+
+#[test]
+fn a_view_that_cannot_be_aligned_is_named_or_skipped() {
+    let dir = common::tempdir();
+    let b0 = common::shared_data("bunny/bun000.ply")
+        .display()
+        .to_string();
+    let b45 = common::shared_data("bunny/bun045.ply")
+        .display()
+        .to_string();
+    // A plane far from the bunny: nothing of it overlaps.
+    let bad = dir.path().join("bad.xyz");
+    let mut text = String::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            text += &format!("{} {} 5.0\n", i as f64 * 0.002, j as f64 * 0.002);
+        }
+    }
+    std::fs::write(&bad, text).unwrap();
+    let bad = bad.display().to_string();
+    let out_ply = dir.path().join("m.ply").display().to_string();
+    let args = [
+        &b0, &bad, &b45, "--angles", "0,20,45", "--axis", "0,-1,0", "--units", "m", "-o", &out_ply,
+    ];
+    let out = merge(&args);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.xyz") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    let mut skip = args.to_vec();
+    skip.push("--skip-bad");
+    let out = merge(&skip);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("skipped"));
+    let report = read_json(&dir.path().join("m.json"));
+    assert_eq!(report["skipped"].as_array().unwrap().len(), 1);
+    let got = isometry_from_rows(&rows(&report["views"][1]["view_to_first"])).expect("pose");
+    let (dr, dt) = pose_difference(&bunny_truth("bun045.ply"), &got);
+    assert!(
+        dr < 1.0 && dt < 1.0,
+        "bun045 after a skipped view: {dr} deg {dt} mm"
+    );
+}
