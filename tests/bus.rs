@@ -55,37 +55,24 @@ fn cli_move_then_read_over_pty_returns_the_commanded_joints() {
     let dir = common::tempdir();
     let journal = dir.path().join("journal.jsonl");
     let joints = Q.map(|q| q.to_string()).join(",");
-    let out = common::polishbot()
-        .args([
-            "arm",
-            "move",
-            "--port",
-            &mock.path,
-            "--joints",
-            &joints,
-            "--gripper",
-            "30",
-            "--time",
-            "1.2",
-        ])
-        .arg("--journal")
-        .arg(&journal)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::succeed(
+        common::polishbot()
+            .args([
+                "arm",
+                "move",
+                "--port",
+                &mock.path,
+                "--joints",
+                &joints,
+                "--gripper",
+                "30",
+                "--time",
+                "1.2",
+            ])
+            .arg("--journal")
+            .arg(&journal),
     );
-    let out = common::polishbot()
-        .args(["arm", "read", "--port", &mock.path])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::succeed(common::polishbot().args(["arm", "read", "--port", &mock.path]));
     let read: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let map = ServoMap::default();
     let want = map.pose_raw(&Q, 30.0).unwrap();

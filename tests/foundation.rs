@@ -7,12 +7,7 @@ use polishbot::cloud::{self, Format, Geometry, PlyPrecision, PointCloud, ScalarF
 use polishbot::synth::{synth, SynthConfig, Truth};
 
 fn info_json(args: &[&str]) -> serde_json::Value {
-    let out = polishbot().arg("info").args(args).output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::succeed(polishbot().arg("info").args(args));
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
@@ -347,25 +342,17 @@ fn small_config(seed: u64) -> SynthConfig {
 fn synth_is_deterministic_and_writes_the_contract_files() {
     let (a, b) = (tempdir(), tempdir());
     for d in [&a, &b] {
-        let out = polishbot()
-            .args([
-                "synth",
-                "--out",
-                d.path().to_str().unwrap(),
-                "--seed",
-                "7",
-                "--reference-points",
-                "20000",
-                "--scan-points",
-                "20000",
-            ])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        common::succeed(polishbot().args([
+            "synth",
+            "--out",
+            d.path().to_str().unwrap(),
+            "--seed",
+            "7",
+            "--reference-points",
+            "20000",
+            "--scan-points",
+            "20000",
+        ]));
     }
     for f in ["reference.ply", "scan.ply", "truth.json"] {
         assert_eq!(

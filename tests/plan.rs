@@ -313,21 +313,16 @@ fn cli_plan_then_run_against_the_mock_board() {
     std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
     let plan_path = tmp.path().join("plan.json");
     let yaml = tmp.path().join("traj.yaml");
-    let out = common::polishbot()
-        .args(["plan", "--config"])
-        .arg(&cfg)
-        .arg("--inspection")
-        .arg(&insp)
-        .arg("-o")
-        .arg(&plan_path)
-        .arg("--export-ros")
-        .arg(&yaml)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::succeed(
+        common::polishbot()
+            .args(["plan", "--config"])
+            .arg(&cfg)
+            .arg("--inspection")
+            .arg(&insp)
+            .arg("-o")
+            .arg(&plan_path)
+            .arg("--export-ros")
+            .arg(&yaml),
     );
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let p = Plan::load(&plan_path).unwrap();
@@ -337,17 +332,12 @@ fn cli_plan_then_run_against_the_mock_board() {
 
     let mock = common::Mock::start(&py, &[]);
     let journal = tmp.path().join("journal.jsonl");
-    let out = common::polishbot()
-        .args(["run", "--plan"])
-        .arg(&plan_path)
-        .args(["--port", &mock.path, "--journal"])
-        .arg(&journal)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = common::succeed(
+        common::polishbot()
+            .args(["run", "--plan"])
+            .arg(&plan_path)
+            .args(["--port", &mock.path, "--journal"])
+            .arg(&journal),
     );
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let logged: Vec<serde_json::Value> = mock
@@ -432,15 +422,10 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
     bad.samples[k].q[2] = 1.6;
     refuse(&bad, "limit");
     // the untouched plan passes, and a dry run sends nothing
-    let out = common::polishbot()
-        .args(["run", "--sim", "--dry-run", "--plan"])
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::succeed(
+        common::polishbot()
+            .args(["run", "--sim", "--dry-run", "--plan"])
+            .arg(&path),
     );
     assert!(!tmp.path().join("journal.jsonl").exists());
 }

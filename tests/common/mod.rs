@@ -130,3 +130,14 @@ impl Drop for Mock {
         let _ = self.child.wait();
     }
 }
+
+/// Runs `cmd` and returns its output, failing the test with its stderr when it did not succeed.
+pub fn succeed(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().expect("start the command");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
