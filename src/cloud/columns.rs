@@ -22,29 +22,17 @@ impl Columns {
                 .iter()
                 .position(|n| alts.iter().any(|a| n.eq_ignore_ascii_case(a)))
         };
-        let (Some(x), Some(y), Some(z)) = (find(&["x"]), find(&["y"]), find(&["z"])) else {
+        let Some((xyz, normal)) = locate_xyz_normal(find) else {
             return fail(place, "columns must include x, y and z");
         };
-        let normal = match (
-            find(&["nx", "normal_x"]),
-            find(&["ny", "normal_y"]),
-            find(&["nz", "normal_z"]),
-        ) {
-            (Some(a), Some(b), Some(c)) => Some([a, b, c]),
-            _ => None,
-        };
-        let used: Vec<usize> = [x, y, z]
-            .into_iter()
-            .chain(normal.into_iter().flatten())
-            .collect();
         let fields = names
             .iter()
             .enumerate()
-            .filter(|(i, _)| !used.contains(i))
+            .filter(|(i, _)| !is_located(xyz, normal, *i))
             .map(|(i, n)| (i, n.clone()))
             .collect();
         Ok(Columns {
-            xyz: [x, y, z],
+            xyz,
             normal,
             fields,
             width: names.len(),
@@ -101,4 +89,28 @@ impl Columns {
             f.values.push(row[*i]);
         }
     }
+}
+
+/// Finds the x, y, z columns and, when all three are present, the normal columns (nx/normal_x,
+/// ...). `find` returns the index of the first column with one of the given names.
+pub(super) fn locate_xyz_normal(
+    find: impl Fn(&[&str]) -> Option<usize>,
+) -> Option<([usize; 3], Option<[usize; 3]>)> {
+    let (Some(x), Some(y), Some(z)) = (find(&["x"]), find(&["y"]), find(&["z"])) else {
+        return None;
+    };
+    let normal = match (
+        find(&["nx", "normal_x"]),
+        find(&["ny", "normal_y"]),
+        find(&["nz", "normal_z"]),
+    ) {
+        (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+        _ => None,
+    };
+    Some(([x, y, z], normal))
+}
+
+/// Whether column `i` is one that [`locate_xyz_normal`] assigned to the position or the normal.
+pub(super) fn is_located(xyz: [usize; 3], normal: Option<[usize; 3]>, i: usize) -> bool {
+    xyz.contains(&i) || normal.is_some_and(|n| n.contains(&i))
 }

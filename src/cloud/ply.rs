@@ -219,33 +219,23 @@ fn vertex_layout(el: &Element, line: usize) -> Result<VertexLayout, ParseError> 
             .iter()
             .position(|p| names.contains(&p.name.as_str()) && matches!(p.kind, Kind::Scalar(_)))
     };
-    let (Some(x), Some(y), Some(z)) = (find(&["x"]), find(&["y"]), find(&["z"])) else {
+    let Some((xyz, normal)) = super::columns::locate_xyz_normal(find) else {
         return fail(
             Place::Line(line),
             "vertex element lacks scalar x, y and z properties",
         );
     };
-    let normal = match (
-        find(&["nx", "normal_x"]),
-        find(&["ny", "normal_y"]),
-        find(&["nz", "normal_z"]),
-    ) {
-        (Some(a), Some(b), Some(c)) => Some([a, b, c]),
-        _ => None,
-    };
-    let used: Vec<usize> = [x, y, z]
-        .into_iter()
-        .chain(normal.into_iter().flatten())
-        .collect();
     let fields = el
         .props
         .iter()
         .enumerate()
-        .filter(|(i, p)| !used.contains(i) && matches!(p.kind, Kind::Scalar(_)))
+        .filter(|(i, p)| {
+            !super::columns::is_located(xyz, normal, *i) && matches!(p.kind, Kind::Scalar(_))
+        })
         .map(|(i, p)| (i, p.name.clone()))
         .collect();
     Ok(VertexLayout {
-        xyz: [x, y, z],
+        xyz,
         normal,
         fields,
     })
