@@ -7,28 +7,8 @@ use serde::Deserialize;
 
 use super::error::PlanError;
 
-/// One defect region of `regions.json` (reference frame, millimetres).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-pub struct RegionInfo {
-    /// Region id: the `region` column of deviations.csv.
-    pub id: i64,
-    /// Mean position of its points, mm.
-    pub centroid: [f64; 3],
-    /// Mean outward normal (unit).
-    pub normal: [f64; 3],
-    /// Surface area, mm^2.
-    pub area: f64,
-    /// Signed distance of largest magnitude, mm (+ = material in excess).
-    pub peak: f64,
-    /// Mean signed distance, mm.
-    pub mean: f64,
-    /// Volume beyond the tolerance, mm^3.
-    pub volume: f64,
-    /// Number of points (rows of deviations.csv with this region id).
-    pub points: usize,
-    /// Material in excess that grinding can remove.
-    pub repairable: bool,
-}
+/// One defect region of `regions.json`: the regions stage's own type (the file's contract).
+pub use crate::regions::Region as RegionInfo;
 
 #[derive(Deserialize)]
 struct RegionsFile {
@@ -83,9 +63,9 @@ impl Inspection {
     }
 
     /// Points of region `id`, as indices into `points`.
-    pub fn region_points(&self, id: i64) -> Vec<usize> {
+    pub fn region_points(&self, id: usize) -> Vec<usize> {
         (0..self.points.len())
-            .filter(|&i| self.points[i].region == id)
+            .filter(|&i| self.points[i].region == id as i64)
             .collect()
     }
 
@@ -110,7 +90,7 @@ impl Inspection {
             if self.regions[..i].iter().any(|o| o.id == r.id) {
                 return Err(PlanError::input(rfile, place, "id repeats"));
             }
-            let rows = self.points.iter().filter(|p| p.region == r.id).count();
+            let rows = self.region_points(r.id).len();
             if rows != r.points {
                 let msg = format!(
                     "{} points, but deviations.csv has {rows} rows with region {}",

@@ -32,7 +32,7 @@ pub struct PlannedPoint {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PlannedPass {
     /// Region id.
-    pub region: i64,
+    pub region: usize,
     /// Depth layer.
     pub layer: usize,
     /// Pass or link.
@@ -65,7 +65,7 @@ pub struct Segment {
     /// What it does.
     pub kind: SegmentKind,
     /// Region, for all but transits.
-    pub region: Option<i64>,
+    pub region: Option<usize>,
     /// Index into `passes`, for grinding.
     pub pass: Option<usize>,
     /// First sample (the previous segment's last one, at rest).
@@ -378,7 +378,7 @@ impl Program {
         &mut self,
         to: &[f64],
         kind: SegmentKind,
-        region: Option<i64>,
+        region: Option<usize>,
         limits: &Limits,
         cfg: &PlanConfig,
     ) -> Result<(), PlanError> {

@@ -31,7 +31,7 @@ pub struct PathPoint {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Stroke {
     /// Region id.
-    pub region: i64,
+    pub region: usize,
     /// Depth layer, 0 first (highest).
     pub layer: usize,
     /// Pass or link.

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct UnreachablePoint {
     /// Region id.
-    pub region: i64,
+    pub region: usize,
     /// Depth layer.
     pub layer: usize,
     /// Stroke index within the region's strokes.
@@ -38,7 +38,7 @@ impl fmt::Display for UnreachablePoint {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RegionReport {
     /// Region id.
-    pub id: i64,
+    pub id: usize,
     /// Whether regions.json marks it repairable (only those are planned).
     pub repairable: bool,
     /// Peak distance, mm.
