@@ -10,5 +10,8 @@ echo "== cargo clippy -D warnings"
 cargo clippy --workspace --all-targets --release -- -D warnings
 echo "== dofbot-protocol builds no_std"
 cargo build -q -p dofbot-protocol --no-default-features --release
+echo "== fuzz the reply decoder (cargo-fuzz, 30 s)"
+command -v cargo-fuzz >/dev/null 2>&1 || cargo install -q --locked cargo-fuzz
+(cd firmware-protocol && RUSTC_BOOTSTRAP=1 cargo fuzz run reply_decoder -- -max_total_time=30 -seed=1)
 echo "== cargo test (release, CI=${CI:-})"
 cargo test --workspace --release

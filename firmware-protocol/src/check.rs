@@ -1,6 +1,6 @@
 //! Invariants of the reply decoder over arbitrary input: the body of the cargo-fuzz target
-//! (`fuzz/fuzz_targets/reply_decoder.rs`) and of the stable smoke-fuzz test, so both check
-//! exactly the same thing.
+//! (`firmware-protocol/fuzz/fuzz_targets/reply_decoder.rs`) and of the stable smoke-fuzz
+//! test, so both check exactly the same thing.
 use crate::frame::{checksum, Decoder, Direction, FrameError, MAX_LEN, MIN_LEN};
 use crate::replies::Reply;
 
