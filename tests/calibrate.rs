@@ -143,7 +143,12 @@ fn pivot_targets(map: &ServoMap) -> Vec<[f64; 5]> {
     let truth = true_robot();
     PIVOT_WANTS
         .iter()
-        .map(|want| command_for(map, &touch_pose(&truth, Vector3::from(PIVOT), *want, &[0, 1, 2, 3])))
+        .map(|want| {
+            command_for(
+                map,
+                &touch_pose(&truth, Vector3::from(PIVOT), *want, &[0, 1, 2, 3]),
+            )
+        })
         .collect()
 }
 
@@ -235,7 +240,10 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
     let robot = robot_from(&shipped("tool.toml"), &servos_file);
     let map = frames::servo_map(&robot).unwrap();
     for (i, j) in map.joints.iter().enumerate() {
-        assert_eq!(j.zero_deg, zero[i].1, "run's servo map reads the new offsets");
+        assert_eq!(
+            j.zero_deg, zero[i].1,
+            "run's servo map reads the new offsets"
+        );
     }
     let mut bus = bus_for(&arm, &robot);
     let cell = Cell {
@@ -295,12 +303,20 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
         robot: &loaded,
         ..cell
     };
-    let report =
-        calibrate::verify(&mut bus, &cell, &calibrate::verify::DEFAULT_CHECK_POSES, None).unwrap();
+    let report = calibrate::verify(
+        &mut bus,
+        &cell,
+        &calibrate::verify::DEFAULT_CHECK_POSES,
+        None,
+    )
+    .unwrap();
     assert!(report.ok, "{report:?}");
     let per_count = 180.0 / 2200.0;
     for e in report.max_servo_error_deg {
-        assert!(e <= per_count * 1.01, "servo error {e} deg beyond the noise");
+        assert!(
+            e <= per_count * 1.01,
+            "servo error {e} deg beyond the noise"
+        );
     }
     let poses = fiducial_targets(&map, &fix);
     let report = calibrate::verify(&mut bus, &cell, &poses, Some((&fix, &w))).unwrap();
@@ -311,7 +327,12 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
     let last = poses.last().unwrap();
     for i in 0..5 {
         let want = 90.0 + last[i].to_degrees();
-        assert!((phys[i] - want).abs() < 0.25, "joint {}: {} vs {want}", i + 1, phys[i]);
+        assert!(
+            (phys[i] - want).abs() < 0.25,
+            "joint {}: {} vs {want}",
+            i + 1,
+            phys[i]
+        );
     }
 }
 
@@ -340,7 +361,10 @@ fn degenerate_input_is_refused_with_a_clear_message() {
     let mut few = fixture();
     few.fiducials.truncate(3);
     let e = calibrate::workcell::check_fixture(&few, &cfg).unwrap_err();
-    assert!(e.to_string().contains("3 fiducials, need at least 4"), "{e}");
+    assert!(
+        e.to_string().contains("3 fiducials, need at least 4"),
+        "{e}"
+    );
     // Collinear fiducials.
     let mut line = fixture();
     for (k, f) in line.fiducials.iter_mut().enumerate() {
@@ -691,20 +715,34 @@ fn jog_terminal_over_a_pty_steps_joints_shows_the_tip_and_records_touches() {
     pty.keys("]");
     pty.wait_for("jog: joint 2 | step 2.00 deg", 1);
     pty.keys("+");
-    let screen = pty.wait_for("q [deg] +0.00 +2.00 +0.00 +0.00 +0.00", 1);
-    // The tip moved off the straight-up pose (x = 0): shown in mm.
-    assert!(screen.contains("tip [mm]"), "{screen}");
+    let screen = pty.wait_for("| touches 0", 4);
+    // Joint 2 read back at +2 deg (within a count), the tip moved towards -y and down.
+    let last = screen.lines().rfind(|l| l.contains("| touches 0")).unwrap();
+    let field = |name: &str| -> Vec<f64> {
+        let rest = last.split(name).nth(1).unwrap();
+        let part = rest.split('|').next().unwrap();
+        part.split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect()
+    };
+    let q = field("q [deg]");
+    assert!((q[1] - 2.0).abs() < 0.1 && q[0].abs() < 0.1, "{last}");
+    let tip = field("tip [mm]");
+    assert!(tip[1] < -10.0 && tip[2] > 400.0, "{last}");
     pty.keys("t");
     pty.wait_for("touch 1 recorded (the pivot point (touch 1))", 1);
-    pty.keys("5+++ t");
+    pty.keys("5+++");
+    pty.wait_for("jog: joint 5 | step 2.00 deg", 4);
+    pty.keys(" ");
     let screen = pty.wait_for("touch 2 recorded", 1);
-    assert!(screen.contains("jog: joint 5"), "{screen}");
     // Keys are not echoed.
     assert!(!screen.contains("5+++"), "{screen}");
     pty.keys("q");
-    let screen = pty.wait_for("polishbot: calibrate tool: pivot: 2 touches, need at least 4", 1);
+    let screen = pty.wait_for(
+        "polishbot: calibrate tool: pivot: 2 touches, need at least 4",
+        1,
+    );
     let status = pty.child.wait().unwrap();
     assert!(!status.success(), "{screen}");
     assert!(!dir.path().join("tool.toml").exists());
 }
-

@@ -113,7 +113,9 @@ pub fn patch_servos(text: &str, file: &Path, zero: &[(u8, f64)]) -> Result<Strin
             let id_line = (s + 1..end).find(|&i| {
                 sets_key(&lines[i], "id")
                     && lines[i].split('=').nth(1).and_then(|v| {
-                        v.split('#').next().and_then(|v| v.trim().parse::<u8>().ok())
+                        v.split('#')
+                            .next()
+                            .and_then(|v| v.trim().parse::<u8>().ok())
                     }) == Some(id)
             });
             let Some(id_line) = id_line else { continue };
@@ -185,7 +187,11 @@ pub fn write_servos(input: &Path, out: &Path, zero: &[(u8, f64)]) -> Result<Serv
     write(out, &patch_servos(&text, input, zero)?)?;
     let servos = Servos::load(out)?;
     for &(id, deg) in zero {
-        let got = servos.servos.iter().find(|s| s.id == id).map(|s| s.zero_offset_deg);
+        let got = servos
+            .servos
+            .iter()
+            .find(|s| s.id == id)
+            .map(|s| s.zero_offset_deg);
         if got != Some(deg) {
             return Err(CalibError::file(
                 out,
@@ -202,7 +208,10 @@ pub fn write_tool(input: &Path, out: &Path, tip: [f64; 3]) -> Result<Tool, Calib
     write(out, &patch_tool(&text, input, tip)?)?;
     let tool = Tool::load(out)?;
     if tool.tip_offset != tip {
-        return Err(CalibError::file(out, "tip_offset does not read back as written"));
+        return Err(CalibError::file(
+            out,
+            "tip_offset does not read back as written",
+        ));
     }
     Ok(tool)
 }

@@ -115,7 +115,10 @@ pub struct JogTerminal<R: Read, W: Write> {
     output: W,
     joint: usize,
     step_deg: f64,
+    /// Commanded joints (set at the first touch from a read-back).
     q: Option<[f64; JOINT_COUNT]>,
+    /// Joints last read back (what the screen shows).
+    seen: [f64; JOINT_COUNT],
     touches: usize,
 }
 
@@ -153,6 +156,7 @@ impl<R: Read, W: Write> JogTerminal<R, W> {
             joint: 0,
             step_deg: step_deg.clamp(STEP_RANGE_DEG.0, STEP_RANGE_DEG.1),
             q: None,
+            seen: [0.0; JOINT_COUNT],
             touches: 0,
         }
     }
@@ -191,9 +195,13 @@ impl<R: Read, W: Write> JogTerminal<R, W> {
         }
     }
 
-    fn status(&mut self, cell: &Cell, q: &[f64; JOINT_COUNT]) -> Result<(), CalibError> {
-        let tip = cell.robot.fk(q).position * 1000.0;
-        let deg: Vec<String> = q.iter().map(|v| format!("{:+.2}", v.to_degrees())).collect();
+    fn status(&mut self, cell: &Cell) -> Result<(), CalibError> {
+        let q = self.seen;
+        let tip = cell.robot.fk(&q).position * 1000.0;
+        let deg: Vec<String> = q
+            .iter()
+            .map(|v| format!("{:+.2}", v.to_degrees()))
+            .collect();
         let line = format!(
             "jog: joint {} | step {:.2} deg | q [deg] {} | tip [mm] {:.1} {:.1} {:.1} | touches {}",
             self.joint + 1,
@@ -221,7 +229,8 @@ impl<R: Read, W: Write> JogTerminal<R, W> {
         match bus.move_joints(&q, cell.gripper_deg, None) {
             Ok(state) => {
                 self.q = Some(q);
-                self.status(cell, &state.joints)
+                self.seen = state.joints;
+                self.status(cell)
             }
             Err(e @ BusError::Refused(_)) => self.say(&format!("jog: not moved: {e}")),
             Err(e) => Err(e.into()),
@@ -237,22 +246,23 @@ impl<T: Transport, R: Read, W: Write> TouchSource<T> for JogTerminal<R, W> {
         label: &str,
     ) -> Result<Option<Touch>, CalibError> {
         if self.q.is_none() {
-            self.q = Some(bus.read_joints()?.joints);
+            self.seen = bus.read_joints()?.joints;
+            self.q = Some(self.seen);
         }
-        self.say(&format!("jog: move the tool tip onto {label}; keys: {JOG_KEYS}"))?;
-        let q = self.q.expect("set above");
-        self.status(cell, &q)?;
+        self.say(&format!(
+            "jog: move the tool tip onto {label}; keys: {JOG_KEYS}"
+        ))?;
+        self.status(cell)?;
         loop {
             match self.next_key()? {
                 Key::Select(j) => {
                     self.joint = j;
-                    self.status(cell, &q)?;
+                    self.status(cell)?;
                 }
                 Key::Step(sign) => self.step(bus, cell, sign)?,
                 Key::Scale(f) => {
                     self.step_deg = (self.step_deg * f).clamp(STEP_RANGE_DEG.0, STEP_RANGE_DEG.1);
-                    let q = self.q.expect("set above");
-                    self.status(cell, &q)?;
+                    self.status(cell)?;
                 }
                 Key::Touch => {
                     let t = record(bus, cell, label)?;

@@ -51,7 +51,11 @@ pub fn check_fixture(fixture: &Fixture, cfg: &CalibrationConfig) -> Result<(), C
         .iter()
         .map(|p| (p - centre) * (p - centre).transpose())
         .sum();
-    let mut sv: Vec<f64> = cov.symmetric_eigenvalues().iter().map(|v| v.max(0.0).sqrt()).collect();
+    let mut sv: Vec<f64> = cov
+        .symmetric_eigenvalues()
+        .iter()
+        .map(|v| v.max(0.0).sqrt())
+        .collect();
     sv.sort_by(|a, b| b.total_cmp(a));
     if sv[0] <= 0.0 || sv[1] < cfg.min_fiducial_spread * sv[0] {
         return Err(CalibError::Refused(format!(

@@ -103,7 +103,10 @@ fn input(out: &Path, name: &str, fallback: &Path) -> PathBuf {
 /// Runs `calibrate`.
 pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let cfg: CalibrateFileConfig = super::load_config(config)?;
-    let out = args.out.clone().unwrap_or_else(|| PathBuf::from("calibration"));
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("calibration"));
     let tool_in = input(&out, "tool.toml", &cfg.robot.tool);
     let servos_in = input(&out, "servos.toml", &cfg.robot.servos);
     let robot = Robot::load(&cfg.robot.urdf, &tool_in, &servos_in)?;
@@ -357,6 +360,9 @@ fn servos(
     } else {
         ""
     };
-    say(&format!("calibrate servos: wrote {}{stored}", file.display()));
+    say(&format!(
+        "calibrate servos: wrote {}{stored}",
+        file.display()
+    ));
     Ok(())
 }
