@@ -411,18 +411,31 @@ fn degenerate_input_is_refused_with_a_clear_message() {
     });
 }
 
-#[test]
-fn servo_reads_that_spread_are_refused_and_a_silent_servo_is_named() {
+/// The servo routine on a simulated arm held at the zero pose with the hidden offsets and
+/// `noise` counts of read noise.
+fn servo_run(
+    noise: u16,
+    store_mid: bool,
+) -> (
+    SimArm,
+    Result<calibrate::ServoOffsets, calibrate::CalibError>,
+) {
     let robot = robot_from(&shipped("tool.toml"), &shipped("servos.toml"));
     let map = frames::servo_map(&robot).unwrap();
     let options = SimOptions {
-        mechanics: mechanics(3),
+        mechanics: mechanics(noise),
         ..SimOptions::default()
     };
     let arm = SimArm::new(&options, &map).unwrap();
     let mut bus = bus_for(&arm, &robot);
     let cfg = CalibrationConfig::default();
-    let e = calibrate::servo_offsets(&mut bus, &map, &cfg, &mut || Ok(()), false).unwrap_err();
+    let r = calibrate::servo_offsets(&mut bus, &map, &cfg, &mut || Ok(()), store_mid);
+    (arm, r)
+}
+
+#[test]
+fn servo_reads_that_spread_are_refused_and_a_silent_servo_is_named() {
+    let e = servo_run(3, false).1.unwrap_err();
     assert!(e.to_string().contains("reads spread"), "{e}");
 
     // Through the CLI: a servo that does not answer.
@@ -448,23 +461,8 @@ fn servo_reads_that_spread_are_refused_and_a_silent_servo_is_named() {
 
 #[test]
 fn store_mid_sends_0x1c_per_joint_servo_and_checks_the_offset_state() {
-    let robot = robot_from(&shipped("tool.toml"), &shipped("servos.toml"));
-    let map = frames::servo_map(&robot).unwrap();
-    let options = SimOptions {
-        mechanics: mechanics(1),
-        ..SimOptions::default()
-    };
-    let arm = SimArm::new(&options, &map).unwrap();
-    let mut bus = bus_for(&arm, &robot);
-    let r = calibrate::servo_offsets(
-        &mut bus,
-        &map,
-        &CalibrationConfig::default(),
-        &mut || Ok(()),
-        true,
-    )
-    .unwrap();
-    assert!(r.stored_mid);
+    let (arm, r) = servo_run(1, true);
+    assert!(r.unwrap().stored_mid);
     let got = arm.received();
     let stores: Vec<u8> = got
         .iter()
@@ -475,25 +473,31 @@ fn store_mid_sends_0x1c_per_joint_servo_and_checks_the_offset_state() {
     assert_eq!(got.iter().filter(|f| f.func == 0x1B).count(), 5);
 }
 
-#[test]
-fn sim_and_mock_agree_with_hidden_mechanics() {
-    let Some(py) = common::oracle_python() else {
-        return;
-    };
+/// The mock with the hidden offsets, 1 count of read noise seeded `seed`, held at the zero pose.
+fn hidden_mock(py: &Path, seed: u64) -> common::Mock {
     let off: Vec<String> = OFFSETS.iter().map(|v| v.to_string()).collect();
-    let mock = common::Mock::start(
-        &py,
+    let seed = seed.to_string();
+    common::Mock::start(
+        py,
         &[
             "--mount-offset-deg",
             &off.join(","),
             "--read-noise-counts",
             "1",
             "--noise-seed",
-            "17",
+            &seed,
             "--start-physical-deg",
             "90,90,90,90,90,90",
         ],
-    );
+    )
+}
+
+#[test]
+fn sim_and_mock_agree_with_hidden_mechanics() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let mock = hidden_mock(&py, 17);
     let cfg = BusConfig::default();
     let mut real = Bus::connect(
         polishbot::bus::SerialTransport::open(&mock.path).unwrap(),
@@ -550,20 +554,7 @@ fn mock_chain_through_the_cli_recovers_the_planted_truth() {
     let Some(py) = common::oracle_python() else {
         return;
     };
-    let off: Vec<String> = OFFSETS.iter().map(|v| v.to_string()).collect();
-    let mock = common::Mock::start(
-        &py,
-        &[
-            "--mount-offset-deg",
-            &off.join(","),
-            "--read-noise-counts",
-            "1",
-            "--noise-seed",
-            "3",
-            "--start-physical-deg",
-            "90,90,90,90,90,90",
-        ],
-    );
+    let mock = hidden_mock(&py, 3);
     let dir = common::tempdir();
     let out = dir.path().join("cell");
     let log = cli(&mock.path, &out, &["servos", "--assume-pose"]);
@@ -594,16 +585,11 @@ fn mock_chain_through_the_cli_recovers_the_planted_truth() {
     std::fs::write(&fix_file, fixture_toml(&fix)).unwrap();
     let fid = dir.path().join("fiducials.txt");
     std::fs::write(&fid, targets_text(&fiducial_targets(&map, &fix))).unwrap();
+    let (fix_s, fid_s) = (fix_file.to_str().unwrap(), fid.to_str().unwrap());
     let log = cli(
         &mock.path,
         &out,
-        &[
-            "workcell",
-            "--fixture",
-            fix_file.to_str().unwrap(),
-            "--targets",
-            fid.to_str().unwrap(),
-        ],
+        &["workcell", "--fixture", fix_s, "--targets", fid_s],
     );
     assert!(log.contains("residual per fiducial"), "{log}");
     let w = Workcell::load(&out.join("workcell.toml")).unwrap();
@@ -615,13 +601,7 @@ fn mock_chain_through_the_cli_recovers_the_planted_truth() {
     let log = cli(
         &mock.path,
         &out,
-        &[
-            "verify",
-            "--targets",
-            fid.to_str().unwrap(),
-            "--fixture",
-            fix_file.to_str().unwrap(),
-        ],
+        &["verify", "--targets", fid_s, "--fixture", fix_s],
     );
     assert!(log.contains("worst tool tip"), "{log}");
     assert_eq!(log.matches("fiducial ").count(), 5, "{log}");
@@ -745,4 +725,32 @@ fn jog_terminal_over_a_pty_steps_joints_shows_the_tip_and_records_touches() {
     let status = pty.child.wait().unwrap();
     assert!(!status.success(), "{screen}");
     assert!(!dir.path().join("tool.toml").exists());
+}
+
+#[test]
+fn servos_waits_for_enter_on_a_terminal_then_writes_the_file() {
+    let dir = common::tempdir();
+    let config = dir.path().join("cfg.toml");
+    std::fs::write(
+        &config,
+        "[sim.mechanics]\nmount_offset_deg = [2.0, -3.0, 1.5, 4.0, -2.5, 0.0]\nstart_physical_deg = [90.0, 90.0, 90.0, 90.0, 90.0, 90.0]\n",
+    )
+    .unwrap();
+    let mut pty = Pty::spawn(
+        common::polishbot()
+            .args(["calibrate", "servos", "--sim", "--out"])
+            .arg(dir.path())
+            .arg("--config")
+            .arg(&config),
+    );
+    pty.wait_for("[Enter to go on, Esc to abort]", 1);
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(!dir.path().join("servos.toml").exists(), "waited for Enter");
+    pty.keys("\r");
+    pty.wait_for("calibrate servos: wrote", 1);
+    assert!(pty.child.wait().unwrap().success());
+    let servos = Servos::load(&dir.path().join("servos.toml")).unwrap();
+    for (s, d) in servos.servos.iter().zip([2.0, -3.0, 1.5, 4.0, -2.5]) {
+        assert!((s.zero_offset_deg - 90.0 - d).abs() < 0.1, "{s:?}");
+    }
 }

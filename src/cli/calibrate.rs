@@ -139,10 +139,14 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         }),
         Routine::Servos { .. } => None,
     };
-    let mut bus = args
-        .link
-        .connect(&format!("calibrate {name}"), bus_cfg, &cfg.sim)
-        .map_err(|e| anyhow::anyhow!("calibrate {name}: {}", super::one_line(&e)))?;
+    let prefix = format!("calibrate {name}");
+    let mut bus = args.link.connect(&prefix, bus_cfg, &cfg.sim).map_err(|e| {
+        let line = super::one_line(&e);
+        match line.starts_with(&prefix) {
+            true => anyhow::anyhow!(line),
+            false => anyhow::anyhow!("{prefix}: {line}"),
+        }
+    })?;
     let cell = Cell {
         robot: &robot,
         map: &map,
