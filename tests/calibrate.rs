@@ -754,3 +754,73 @@ fn servos_waits_for_enter_on_a_terminal_then_writes_the_file() {
         assert!((s.zero_offset_deg - 90.0 - d).abs() < 0.1, "{s:?}");
     }
 }
+
+#[test]
+fn bad_files_and_bad_fits_name_the_place() {
+    let dir = common::tempdir();
+    let t = dir.path().join("targets.txt");
+    std::fs::write(&t, "# ok\n0.1, 0.2 0.3,0.4 0.5\n\n0.1 0.2 0.3\n").unwrap();
+    let e = calibrate::load_targets(&t).unwrap_err().to_string();
+    assert!(
+        e.contains("targets.txt: line 4: need 5 joint angles (rad), got 3"),
+        "{e}"
+    );
+    std::fs::write(&t, "0.1 0.2 x 0.4 0.5\n").unwrap();
+    let e = calibrate::load_targets(&t).unwrap_err().to_string();
+    assert!(e.contains("line 1: invalid float literal"), "{e}");
+
+    // servos.toml without a zero_offset_deg line gets one after its id; an unknown id is named.
+    let text = "period = 0.02\n[[servo]]\nid = 2 # shoulder\njoint = \"a\"\n";
+    let out = files::patch_servos(text, &t, &[(2, 91.25)]).unwrap();
+    assert!(
+        out.contains("id = 2 # shoulder\nzero_offset_deg = 91.25\njoint"),
+        "{out}"
+    );
+    let e = files::patch_servos(text, &t, &[(4, 90.0)]).unwrap_err();
+    assert!(
+        e.to_string().contains("no [[servo]] table with id = 4"),
+        "{e}"
+    );
+
+    // A touch 6 mm off its fiducial: refused on the RMS, naming every fiducial's residual.
+    let fix = fixture();
+    let w = true_workcell();
+    let touches: Vec<calibrate::Touch> = fix
+        .fiducials
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let mut p = w.transform_point(&Point3::from(Vector3::from(f.position) * 1e-3));
+            if k == 2 {
+                p.z += 0.006;
+            }
+            calibrate::Touch {
+                label: f.name.clone(),
+                joints: [0.0; 5],
+                tip: [p.x, p.y, p.z],
+            }
+        })
+        .collect();
+    let cfg = CalibrationConfig::default();
+    let ok = calibrate::workcell::fit_workcell(&fix, touches[..].to_vec(), &cfg);
+    let e = ok.unwrap_err().to_string();
+    assert!(
+        e.contains("RMS residual") && e.contains("C ") && e.contains("E "),
+        "{e}"
+    );
+
+    // verify against a workcell that is 5 cm off: not ok.
+    let far = Workcell {
+        robot_from_reference: Matrix4::new_translation(&Vector3::new(0.05, 0.3, 0.1)),
+    };
+    cell_run(|bus, cell| {
+        let r = calibrate::verify(
+            bus,
+            cell,
+            &calibrate::verify::DEFAULT_CHECK_POSES,
+            Some((&fix, &far)),
+        )
+        .unwrap();
+        assert!(!r.ok && r.max_fiducial_error_mm.unwrap() > 10.0, "{r:?}");
+    });
+}
