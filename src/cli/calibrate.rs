@@ -147,6 +147,8 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
             false => anyhow::anyhow!("{prefix}: {line}"),
         }
     })?;
+    // Ctrl-C stops motion sending (in the jog terminal it is a key that aborts).
+    let _ = crate::bus::install_ctrlc(bus.stop_flag());
     let cell = Cell {
         robot: &robot,
         map: &map,
