@@ -88,7 +88,7 @@ fn num(v: f64) -> String {
     }
 }
 
-/// The value of `key = value` on a line, if the line sets `key`.
+/// True when `line` sets `key` (`key = value`).
 fn sets_key(line: &str, key: &str) -> bool {
     let t = line.trim_start();
     t.strip_prefix(key)

@@ -5,10 +5,10 @@
 //!    (servos.toml).
 //! 2. [`tool_tip`]: the tool tip touches one fixed point from several orientations; the pivot
 //!    least squares gives the tip in the flange frame (tool.toml).
-//! 3. [`workcell`]: the tool tip touches the fixture's fiducials; a rigid fit (no scale) of
+//! 3. [`workcell()`]: the tool tip touches the fixture's fiducials; a rigid fit (no scale) of
 //!    their reference-frame coordinates onto the touched positions gives
 //!    `robot_from_reference` (workcell.toml).
-//! 4. [`verify`]: moves through check poses, reads back, reports per-servo and tool-tip error.
+//! 4. [`verify()`]: moves through check poses, reads back, reports per-servo and tool-tip error.
 //!
 //! Touches come from a [`TouchSource`]: the interactive jog terminal ([`jog::JogTerminal`])
 //! or a list of joint targets ([`jog::Scripted`]). All settings: [`CalibrationConfig`].
