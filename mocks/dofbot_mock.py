@@ -14,6 +14,12 @@ longer when the speed bound requires.
 
 Faults: --corrupt-every K, --drop-every K, --delay-ms D, --fail-read-servo S,
 --fail-read-every K, --disconnect-after N, --stall-servo S, --absent-servo S.
+
+Hidden mechanics (model.rs `Mechanics`, for the calibration tests): --mount-offset-deg
+d1,..,d6 (servo i reads and moves to the raw of servo angle physical + d_i), --read-noise-counts
+N with --noise-seed S (every read adds a uniform integer in -N..N, splitmix64), and
+--start-physical-deg a1,..,a6 (the arm starts held by hand at these physical servo angles, 90 =
+joint zero, torque off). The state file then also holds `physical_deg`.
 The state file (--state) holds the servo positions and targets, rewritten after every frame
 and at exit (SIGTERM, SIGINT or an injected disconnect).
 """
@@ -35,6 +41,10 @@ HOME = [2000, 2000, 2000, 2000, 1487, 2000]  # joint zero (servo 90 deg), grippe
 VERSION = 1
 PING_ALIVE = 0xDA
 MAX_LEN = 0x20
+# DOFBOT.md scales per servo (1..6): (deg_max, raw_min, raw_max, inverted); ServoScale::DOFBOT.
+SCALE = [(180.0, 900, 3100, False), (180.0, 900, 3100, True), (180.0, 900, 3100, True),
+         (180.0, 900, 3100, True), (270.0, 380, 3700, False), (180.0, 900, 3100, False)]
+MASK64 = (1 << 64) - 1
 
 
 def checksum(body):
@@ -49,6 +59,29 @@ def frame(mark, kind, payload):
 def round_raw(x):
     import math
     return int(math.floor(x + 0.5))
+
+
+def splitmix64(state):
+    """One step of splitmix64; returns (new state, value). Mirrors model.rs splitmix64."""
+    state = (state + 0x9E3779B97F4A7C15) & MASK64
+    z = state
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & MASK64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & MASK64
+    return state, z ^ (z >> 31)
+
+
+def raw_at_deg(index, deg):
+    """Raw position (not rounded) of servo index (0-based) at servo angle deg; model.rs raw_at_deg."""
+    deg_max, lo, hi, inverted = SCALE[index]
+    a = deg_max - deg if inverted else deg
+    return lo + (hi - lo) * a / deg_max
+
+
+def deg_at_raw(index, raw):
+    """Servo angle of servo index at raw position raw; model.rs deg_at_raw."""
+    deg_max, lo, hi, inverted = SCALE[index]
+    a = (raw - lo) * deg_max / (hi - lo)
+    return deg_max - a if inverted else a
 
 
 class Decoder:
@@ -131,6 +164,11 @@ class Board:
     def __init__(self, home, args):
         self.servos = [Servo(r) for r in home]
         self.torque = True
+        if args.start_physical_deg is not None:
+            self.servos = [Servo(raw_at_deg(i, args.start_physical_deg[i] + args.mount_offset_deg[i]))
+                           for i in range(SERVO_COUNT)]
+            self.torque = False
+        self.noise_state = args.noise_seed
         self.a = args
         self.frames = 0
         self.replies = 0
@@ -221,8 +259,23 @@ class Board:
         self.reads += 1
         k = self.a.fail_read_every
         fail = self.a.fail_read_servo == sid or (k > 0 and self.reads % k == 0)
-        raw = 0 if fail else round_raw(self.servos[sid - 1].position(t))
+        if fail:
+            raw = 0
+        else:
+            noise = self.noise()
+            raw = max(0, round_raw(self.servos[sid - 1].position(t)) + noise)
         return (0x0A, [0x30 + sid, raw >> 8, raw & 0xFF])
+
+    def noise(self):
+        n = self.a.read_noise_counts
+        if n == 0:
+            return 0
+        self.noise_state, z = splitmix64(self.noise_state)
+        return z % (2 * n + 1) - n
+
+    def physical_deg(self, t):
+        return [deg_at_raw(i, s.position(t)) - self.a.mount_offset_deg[i]
+                for i, s in enumerate(self.servos)]
 
     def send(self, kind, payload):
         self.replies += 1
@@ -306,7 +359,17 @@ def parse_args(argv):
     ap.add_argument("--disconnect-after", type=int)
     ap.add_argument("--stall-servo", type=int)
     ap.add_argument("--absent-servo", type=int)
-    return ap.parse_args(argv)
+    six = lambda v: [float(x) for x in v.split(",")]
+    ap.add_argument("--mount-offset-deg", type=six, default=[0.0] * SERVO_COUNT)
+    ap.add_argument("--read-noise-counts", type=int, default=0)
+    ap.add_argument("--noise-seed", type=int, default=0)
+    ap.add_argument("--start-physical-deg", type=six)
+    args = ap.parse_args(argv)
+    for name in ("mount_offset_deg", "start_physical_deg"):
+        v = getattr(args, name)
+        if v is not None and len(v) != SERVO_COUNT:
+            ap.error("--%s: need 6 values" % name.replace("_", "-"))
+    return args
 
 
 def main(argv):
@@ -325,7 +388,8 @@ def main(argv):
             return
         t = clock()
         state = {"t": t, "positions": board.positions(t), "targets": board.targets(),
-                 "torque": board.torque, "frames": board.frames, "disconnected": board.disconnected}
+                 "torque": board.torque, "frames": board.frames, "disconnected": board.disconnected,
+                 "physical_deg": board.physical_deg(t)}
         tmp = args.state + ".tmp"
         with open(tmp, "w") as f:
             json.dump(state, f)

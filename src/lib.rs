@@ -3,6 +3,7 @@
 //! config struct.
 pub mod acquire;
 pub mod bus;
+pub mod calibrate;
 pub mod cli;
 pub mod cloud;
 pub mod compare;

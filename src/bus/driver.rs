@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use dofbot_protocol::frame::MAX_FRAME;
 use dofbot_protocol::servo::{ServoId, ServoScale, SERVO_COUNT};
-use dofbot_protocol::{BusId, Command, Decoder, Pose, Reply};
+use dofbot_protocol::{BusId, Command, Decoder, OffsetState, Pose, Reply};
 
 use super::config::{BusConfig, JointState, JOINT_COUNT};
 use super::error::BusError;
@@ -236,6 +236,21 @@ impl<T: Transport> Bus<T> {
     pub fn version(&mut self) -> Result<u8, BusError> {
         self.request(Command::Version, |r, _| match *r {
             Reply::Version(v) => Some(Ok(v)),
+            _ => None,
+        })
+    }
+
+    /// Stores servo `id`'s current position as its mid position (0x1C); check the result
+    /// with [`Bus::offset_state`].
+    pub fn store_mid_offset(&mut self, id: ServoId) -> Result<(), BusError> {
+        let bus_id = BusId::new(id.get()).map_err(|e| BusError::Refused(e.to_string()))?;
+        self.write_frame(&Command::StoreMidOffset(Some(bus_id)), None)
+    }
+
+    /// The board's mid-offset state (0x1B) after a [`Bus::store_mid_offset`].
+    pub fn offset_state(&mut self) -> Result<OffsetState, BusError> {
+        self.request(Command::ReadOffsetState, |r, _| match *r {
+            Reply::OffsetState(s) => Some(Ok(s)),
             _ => None,
         })
     }

@@ -27,7 +27,7 @@ pub use config::{
 pub use driver::Bus;
 pub use error::BusError;
 pub use journal::{Entry, EntryKind, Journal, ResumePoint};
-pub use model::{Faults, SimTiming};
+pub use model::{Faults, Mechanics, SimTiming};
 pub use serial::SerialTransport;
 pub use sim::{SimArm, SimOptions, SimTransport};
 pub use transport::Transport;

@@ -6,6 +6,11 @@
 //! `p` lasts `max(time_ms/1000, |target - p| / max_speed)` seconds, linear in between; a
 //! read returns the position at the read's arrival, rounded to the nearest count. Torque off
 //! freezes every servo where it is and ignores moves; a stalled servo ignores moves.
+//!
+//! Hidden mechanics ([`Mechanics`], all off by default) give the calibration routines a truth
+//! to find: a servo mounted `mount_offset_deg` off reads (and moves to) the raw position of
+//! servo angle `physical + offset`, so the physical joint differs from the commanded one; reads
+//! add seeded integer noise; and the arm can start held by hand at a physical pose, torque off.
 use serde::{Deserialize, Serialize};
 
 use dofbot_protocol::frame::Frame;
@@ -63,6 +68,51 @@ pub struct Faults {
     pub stall_servo: Option<u8>,
     /// This servo is absent: its ping says no answer, its reads get no reply.
     pub absent_servo: Option<u8>,
+}
+
+/// The physical truth of the simulated arm that the host does not know (for calibration tests).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Mechanics {
+    /// Per-servo mounting offset, degrees (servos 1..6): the servo reads and moves to the raw
+    /// position of servo angle `physical + offset`. Default 0.
+    pub mount_offset_deg: [f64; SERVO_COUNT],
+    /// Read-back noise, counts: every read adds a uniform integer in `-n..=n`. Default 0.
+    pub read_noise_counts: u16,
+    /// Seed of the noise generator (splitmix64). Default 0.
+    pub noise_seed: u64,
+    /// Start with the arm held by hand at these physical servo angles (degrees, 90 = joint
+    /// zero), torque off. Default none (home pose, torque on).
+    pub start_physical_deg: Option<[f64; SERVO_COUNT]>,
+}
+
+/// One step of splitmix64 (Steele, Lea, Flood 2014): the noise generator the mock mirrors.
+pub fn splitmix64(state: &mut u64) -> u64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Raw position (not rounded) of servo `index` (0-based) at servo angle `deg`, DOFBOT.md's
+/// scales, not clamped.
+pub fn raw_at_deg(index: usize, deg: f64) -> f64 {
+    let s = ServoId::ALL[index].scale();
+    let a = if s.inverted { s.deg_max - deg } else { deg };
+    s.raw_min as f64 + (s.raw_max - s.raw_min) as f64 * a / s.deg_max
+}
+
+/// Servo angle of servo `index` (0-based) at raw position `raw` (the inverse of
+/// [`raw_at_deg`]).
+pub fn deg_at_raw(index: usize, raw: f64) -> f64 {
+    let s = ServoId::ALL[index].scale();
+    let a = (raw - s.raw_min as f64) * s.deg_max / (s.raw_max - s.raw_min) as f64;
+    if s.inverted {
+        s.deg_max - a
+    } else {
+        a
+    }
 }
 
 /// One servo's motion.
@@ -137,6 +187,8 @@ pub struct Board {
     torque: bool,
     timing: SimTiming,
     faults: Faults,
+    mechanics: Mechanics,
+    noise_state: u64,
     frames: u64,
     replies: u64,
     reads: u64,
@@ -147,13 +199,29 @@ pub struct Board {
 pub const SIM_VERSION: u8 = 1;
 
 impl Board {
-    /// A board whose servos rest at `home` raw positions, torque on.
-    pub fn new(home: [u16; SERVO_COUNT], timing: SimTiming, faults: Faults) -> Board {
+    /// A board whose servos rest at `home` raw positions, torque on; or, when `mechanics`
+    /// gives a start pose, held by hand there (raw of `physical + offset`), torque off.
+    pub fn new(
+        home: [u16; SERVO_COUNT],
+        timing: SimTiming,
+        faults: Faults,
+        mechanics: Mechanics,
+    ) -> Board {
+        let mut servos = home.map(|r| ServoModel::at(r as f64));
+        let mut torque = true;
+        if let Some(start) = mechanics.start_physical_deg {
+            for (i, s) in servos.iter_mut().enumerate() {
+                *s = ServoModel::at(raw_at_deg(i, start[i] + mechanics.mount_offset_deg[i]));
+            }
+            torque = false;
+        }
         Board {
-            servos: home.map(|r| ServoModel::at(r as f64)),
-            torque: true,
+            servos,
+            torque,
             timing,
             faults,
+            noise_state: mechanics.noise_seed,
+            mechanics,
             frames: 0,
             replies: 0,
             reads: 0,
@@ -243,11 +311,29 @@ impl Board {
         let raw = if fail {
             0
         } else {
-            round_raw(self.servos[id.index()].position(t))
+            let noise = self.noise();
+            (round_raw(self.servos[id.index()].position(t)) as i64 + noise).max(0) as u16
         };
         Some(Reply::Position {
             servo: Some(id),
             raw,
+        })
+    }
+
+    /// The next read's noise, counts (the generator advances only when noise is on).
+    fn noise(&mut self) -> i64 {
+        let n = self.mechanics.read_noise_counts as u64;
+        if n == 0 {
+            return 0;
+        }
+        (splitmix64(&mut self.noise_state) % (2 * n + 1)) as i64 - n as i64
+    }
+
+    /// Physical servo angles at time `t`, degrees (90 = joint zero): the servo angle of each
+    /// raw position minus its mounting offset.
+    pub fn physical_deg(&self, t: f64) -> [f64; SERVO_COUNT] {
+        std::array::from_fn(|i| {
+            deg_at_raw(i, self.servos[i].position(t)) - self.mechanics.mount_offset_deg[i]
         })
     }
 

@@ -11,7 +11,7 @@ use dofbot_protocol::Decoder;
 
 use super::config::ServoMap;
 use super::error::BusError;
-use super::model::{Board, Faults, SimTiming};
+use super::model::{Board, Faults, Mechanics, SimTiming};
 use super::transport::{RealClock, Transport};
 
 /// Settings of the simulated arm.
@@ -27,6 +27,8 @@ pub struct SimOptions {
     pub timing: SimTiming,
     /// Injected faults.
     pub faults: Faults,
+    /// Hidden mechanics (mounting offsets, read noise, a start pose held by hand).
+    pub mechanics: Mechanics,
 }
 
 impl Default for SimOptions {
@@ -36,6 +38,7 @@ impl Default for SimOptions {
             home_gripper_deg: 90.0,
             timing: SimTiming::default(),
             faults: Faults::default(),
+            mechanics: Mechanics::default(),
         }
     }
 }
@@ -78,7 +81,12 @@ impl SimArm {
     /// A simulated arm resting at `home` raw positions.
     pub fn with_home(options: &SimOptions, home: [u16; SERVO_COUNT]) -> SimArm {
         let inner = Inner {
-            board: Board::new(home, options.timing.clone(), options.faults.clone()),
+            board: Board::new(
+                home,
+                options.timing.clone(),
+                options.faults.clone(),
+                options.mechanics.clone(),
+            ),
             clock: Duration::ZERO,
             decoder: Decoder::commands(),
             link_free_at: 0.0,
@@ -111,6 +119,13 @@ impl SimArm {
     pub fn positions(&self) -> [u16; SERVO_COUNT] {
         let t = self.now().as_secs_f64();
         self.lock().board.positions(t)
+    }
+
+    /// Physical servo angles now, degrees (90 = joint zero): what the hidden mounting offsets
+    /// make of the raw positions.
+    pub fn physical_deg(&self) -> [f64; SERVO_COUNT] {
+        let t = self.now().as_secs_f64();
+        self.lock().board.physical_deg(t)
     }
 
     /// Where the servos are heading (equal to [`SimArm::positions`] once moves are over).

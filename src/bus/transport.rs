@@ -20,6 +20,28 @@ pub trait Transport: Send {
     fn describe(&self) -> String;
 }
 
+/// A boxed transport is a transport (the CLI picks the back-end at run time).
+impl<T: Transport + ?Sized> Transport for Box<T> {
+    fn write(&mut self, bytes: &[u8]) -> Result<(), BusError> {
+        (**self).write(bytes)
+    }
+    fn read(&mut self, buf: &mut [u8], timeout: Duration) -> Result<usize, BusError> {
+        (**self).read(buf, timeout)
+    }
+    fn clear_input(&mut self) -> Result<(), BusError> {
+        (**self).clear_input()
+    }
+    fn now(&self) -> Duration {
+        (**self).now()
+    }
+    fn sleep(&mut self, d: Duration) {
+        (**self).sleep(d)
+    }
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+}
+
 /// Wall-clock time since a start instant.
 #[derive(Debug, Clone, Copy)]
 pub struct RealClock {

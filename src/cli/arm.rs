@@ -17,6 +17,14 @@ pub struct ArmArgs {
     /// What to do.
     #[command(subcommand)]
     pub action: ArmAction,
+    /// Which arm, and the journal.
+    #[command(flatten)]
+    pub link: LinkArgs,
+}
+
+/// How a command reaches the arm (shared by `arm` and `calibrate`).
+#[derive(Debug, Args)]
+pub struct LinkArgs {
     /// Serial device of the board (or the mock's pseudo-terminal), e.g. /dev/ttyUSB0.
     #[arg(long, global = true, value_name = "DEV")]
     pub port: Option<String>,
@@ -26,6 +34,30 @@ pub struct ArmArgs {
     /// Append every frame sent and reply received to this journal (JSON lines).
     #[arg(long, global = true, value_name = "FILE")]
     pub journal: Option<PathBuf>,
+}
+
+impl LinkArgs {
+    /// Opens the bus on the port or on a simulated arm (`sim` settings), journalling to
+    /// `--journal` if given. `command` names the command in the "give --port or --sim" error.
+    pub fn connect(
+        &self,
+        command: &str,
+        config: BusConfig,
+        sim: &SimOptions,
+    ) -> anyhow::Result<Bus<Box<dyn Transport>>> {
+        let journal = match &self.journal {
+            Some(p) => Journal::append(p)?,
+            None => Journal::none(),
+        };
+        let link: Box<dyn Transport> = if let Some(port) = &self.port {
+            Box::new(SerialTransport::open(port)?)
+        } else if self.sim {
+            Box::new(SimArm::new(sim, &config.servo_map)?.transport())
+        } else {
+            anyhow::bail!("{command}: give --port DEV or --sim")
+        };
+        Ok(Bus::connect(link, config, journal)?)
+    }
 }
 
 /// The arm actions.
@@ -74,27 +106,12 @@ pub struct ArmConfig {
 /// Runs `polishbot arm`.
 pub fn run(args: ArmArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let cfg: ArmConfig = super::load_config(config)?;
-    let journal = match &args.journal {
-        Some(p) => Journal::append(p)?,
-        None => Journal::none(),
-    };
     let mut bus_cfg = cfg.bus;
     // `arm ping` reports every servo itself instead of failing at the first silent one.
     if matches!(args.action, ArmAction::Ping) {
         bus_cfg.ping_at_connect = false;
     }
-    if let Some(port) = &args.port {
-        let link = SerialTransport::open(port)?;
-        act(Bus::connect(link, bus_cfg, journal)?, &args.action)
-    } else if args.sim {
-        let arm = SimArm::new(&cfg.sim, &bus_cfg.servo_map)?;
-        act(
-            Bus::connect(arm.transport(), bus_cfg, journal)?,
-            &args.action,
-        )
-    } else {
-        anyhow::bail!("arm: give --port DEV or --sim")
-    }
+    act(args.link.connect("arm", bus_cfg, &cfg.sim)?, &args.action)
 }
 
 fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> {

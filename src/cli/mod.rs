@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand};
 use crate::cloud::{Format, Units};
 
 mod arm;
+mod calibrate;
 mod demo;
 mod filter;
 mod info;
@@ -60,20 +61,12 @@ pub enum Command {
     Run(run::RunArgs),
     /// Direct arm commands: ping, read, move, torque.
     Arm(arm::ArmArgs),
-    /// Calibration routines: servos, workcell, verify.
-    Calibrate(NotYet),
+    /// Calibration routines: servos, tool, workcell, verify.
+    Calibrate(calibrate::CalibrateArgs),
     /// Write a synthetic reference, a defective moved scan and the truth.
     Synth(Box<synth::SynthArgs>),
     /// The whole chain on a built-in part against the simulated arm.
     Demo(demo::DemoArgs),
-}
-
-/// Arguments of a command whose issue has not landed yet.
-#[derive(Debug, Args)]
-pub struct NotYet {
-    /// Arguments (accepted and ignored until the command exists).
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
-    pub args: Vec<String>,
 }
 
 /// Parses the command line, runs the command and maps errors to a one-line message and exit 1.
@@ -101,13 +94,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Plan(args) => plan::run(args, config),
         Command::Run(args) => run::run(args, config),
         Command::Arm(args) => arm::run(args, config),
-        Command::Calibrate(_) => not_yet("calibrate"),
+        Command::Calibrate(args) => calibrate::run(args, config),
         Command::Demo(args) => demo::run(args, config),
     }
-}
-
-fn not_yet(name: &str) -> anyhow::Result<()> {
-    anyhow::bail!("{name}: not implemented yet")
 }
 
 /// Joins an error chain into one line: "outer: inner: root".

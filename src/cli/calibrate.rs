@@ -1,0 +1,374 @@
+//! `polishbot calibrate (servos | tool | workcell | verify) (--port DEV | --sim) [--out DIR]`:
+//! the calibration routines of docs/CALIBRATION.md. Each reads the cell's files from `--out`
+//! where they exist there (so servos -> tool -> workcell -> verify chain in one folder), else
+//! from `[robot]`, and writes its own file into `--out`.
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand};
+use serde::Deserialize;
+
+use super::arm::LinkArgs;
+use crate::bus::{Bus, BusConfig, SimOptions, Transport};
+use crate::calibrate::jog::{Cell, RawTerminal};
+use crate::calibrate::verify::DEFAULT_CHECK_POSES;
+use crate::calibrate::{
+    self, files, load_targets, CalibError, CalibrationConfig, Fixture, JogTerminal, Scripted,
+    TouchSource,
+};
+use crate::plan::frames;
+use crate::robot::{Robot, RobotConfig, Workcell};
+
+/// Arguments of `calibrate`.
+#[derive(Debug, Args)]
+pub struct CalibrateArgs {
+    /// The routine.
+    #[command(subcommand)]
+    pub routine: Routine,
+    /// Which arm, and the journal.
+    #[command(flatten)]
+    pub link: LinkArgs,
+    /// Folder the calibration files are written to, and read from where present
+    /// [default: calibration].
+    #[arg(long, global = true, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+}
+
+/// The routines, in the order a new cell runs them.
+#[derive(Debug, Subcommand)]
+pub enum Routine {
+    /// Servo zero offsets: torque off, hold the arm in the zero pose, confirm -> servos.toml.
+    Servos {
+        /// Do not wait for a confirmation: the arm already is in the zero pose.
+        #[arg(long)]
+        assume_pose: bool,
+        /// Also store the zero pose as each joint servo's mid position (0x1C) and check the
+        /// board's offset state (0x1B).
+        #[arg(long)]
+        store_mid: bool,
+    },
+    /// Tool tip by the pivot method: touch one fixed point from >= 4 orientations -> tool.toml.
+    Tool {
+        /// Joint targets to touch from (one pose per line, 5 angles in rad) instead of jogging.
+        #[arg(long, value_name = "FILE")]
+        targets: Option<PathBuf>,
+    },
+    /// Workcell: touch the fixture's fiducials -> workcell.toml (robot_from_reference).
+    Workcell {
+        /// Fixture file: [[fiducial]] name, position (mm, part reference frame).
+        #[arg(long, value_name = "FILE")]
+        fixture: PathBuf,
+        /// Joint targets, one per fiducial in the fixture's order, instead of jogging.
+        #[arg(long, value_name = "FILE")]
+        targets: Option<PathBuf>,
+    },
+    /// Move through check poses, read back, report per-servo and tool-tip error.
+    Verify {
+        /// Check poses (one per line, 5 angles in rad) [default: five built-in poses].
+        #[arg(long, value_name = "FILE")]
+        targets: Option<PathBuf>,
+        /// Also compare each pose's tool tip with this fixture's fiducial (one pose per
+        /// fiducial) placed by workcell.toml.
+        #[arg(long, value_name = "FILE", requires = "targets")]
+        fixture: Option<PathBuf>,
+    },
+}
+
+/// `--config` TOML of `calibrate`: `[robot]` (files), `[bus]` (timing; the servo map always
+/// comes from servos.toml), `[sim]` (the simulated arm, with its hidden `[sim.mechanics]`) and
+/// `[calibrate]` (CalibrationConfig).
+#[derive(Debug, Default, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibrateFileConfig {
+    /// Robot description and calibration files.
+    pub robot: RobotConfig,
+    /// Bus driver settings.
+    pub bus: BusConfig,
+    /// Simulated arm settings.
+    pub sim: SimOptions,
+    /// Routine settings.
+    pub calibrate: CalibrationConfig,
+}
+
+/// `DIR/name` when it exists, else `fallback`.
+fn input(out: &Path, name: &str, fallback: &Path) -> PathBuf {
+    let p = out.join(name);
+    if p.exists() {
+        p
+    } else {
+        fallback.to_path_buf()
+    }
+}
+
+/// Runs `calibrate`.
+pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
+    let cfg: CalibrateFileConfig = super::load_config(config)?;
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("calibration"));
+    let tool_in = input(&out, "tool.toml", &cfg.robot.tool);
+    let servos_in = input(&out, "servos.toml", &cfg.robot.servos);
+    let robot = Robot::load(&cfg.robot.urdf, &tool_in, &servos_in)?;
+    let mut bus_cfg = cfg.bus.clone();
+    bus_cfg.servo_map = frames::servo_map(&robot)?;
+    let gripper_deg = frames::gripper(&robot)?.hold_deg.unwrap_or(90.0);
+    let map = bus_cfg.servo_map.clone();
+    let name = routine_name(&args.routine);
+    // Checks that need no arm come first: nothing moves on bad input.
+    let fixture = match &args.routine {
+        Routine::Workcell { fixture, .. } => {
+            let f = Fixture::load(fixture)?;
+            calibrate::workcell::check_fixture(&f, &cfg.calibrate)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", fixture.display()))?;
+            Some(f)
+        }
+        Routine::Verify {
+            fixture: Some(fixture),
+            ..
+        } => Some(Fixture::load(fixture)?),
+        _ => None,
+    };
+    let targets = match &args.routine {
+        Routine::Tool { targets } | Routine::Workcell { targets, .. } => {
+            targets.as_deref().map(load_targets).transpose()?
+        }
+        Routine::Verify { targets, .. } => Some(match targets {
+            Some(t) => load_targets(t)?,
+            None => DEFAULT_CHECK_POSES.to_vec(),
+        }),
+        Routine::Servos { .. } => None,
+    };
+    let prefix = format!("calibrate {name}");
+    let mut bus = args.link.connect(&prefix, bus_cfg, &cfg.sim).map_err(|e| {
+        let line = super::one_line(&e);
+        match line.starts_with(&prefix) {
+            true => anyhow::anyhow!(line),
+            false => anyhow::anyhow!("{prefix}: {line}"),
+        }
+    })?;
+    // Ctrl-C stops motion sending (in the jog terminal it is a key that aborts).
+    let _ = crate::bus::install_ctrlc(bus.stop_flag());
+    let cell = Cell {
+        robot: &robot,
+        map: &map,
+        gripper_deg,
+        cfg: &cfg.calibrate,
+    };
+    let ctx = Ctx {
+        out: &out,
+        tool_in: &tool_in,
+        servos_in: &servos_in,
+        workcell_in: input(&out, "workcell.toml", &cfg.robot.workcell),
+    };
+    routine(&mut bus, &cell, &args.routine, fixture, targets, &ctx)
+        .map_err(|e| anyhow::anyhow!("calibrate {name}: {e}"))
+}
+
+fn routine_name(r: &Routine) -> &'static str {
+    match r {
+        Routine::Servos { .. } => "servos",
+        Routine::Tool { .. } => "tool",
+        Routine::Workcell { .. } => "workcell",
+        Routine::Verify { .. } => "verify",
+    }
+}
+
+/// Where a routine reads and writes its files.
+struct Ctx<'a> {
+    out: &'a Path,
+    tool_in: &'a Path,
+    servos_in: &'a Path,
+    workcell_in: PathBuf,
+}
+
+/// The touch source: the script, or the jog terminal on standard input and output.
+fn source<T: Transport>(
+    targets: Option<Vec<[f64; 5]>>,
+    cfg: &CalibrationConfig,
+) -> Box<dyn TouchSource<T>> {
+    match targets {
+        Some(t) => Box::new(Scripted::new(t)),
+        None => Box::new(JogTerminal::new(
+            std::io::stdin(),
+            std::io::stdout(),
+            cfg.jog_step_deg,
+        )),
+    }
+}
+
+fn routine(
+    bus: &mut Bus<Box<dyn Transport>>,
+    cell: &Cell,
+    which: &Routine,
+    fixture: Option<Fixture>,
+    targets: Option<Vec<[f64; 5]>>,
+    ctx: &Ctx,
+) -> Result<(), CalibError> {
+    // Raw keys only while a routine may read them (restored on return, also on errors).
+    let interactive = match which {
+        Routine::Servos { assume_pose, .. } => !assume_pose,
+        Routine::Tool { .. } | Routine::Workcell { .. } => targets.is_none(),
+        Routine::Verify { .. } => false,
+    };
+    let _raw = interactive.then(RawTerminal::enable).flatten();
+    match which {
+        Routine::Servos {
+            assume_pose,
+            store_mid,
+        } => servos(bus, cell, *assume_pose, *store_mid, ctx),
+        Routine::Tool { .. } => {
+            let mut src = source(targets, cell.cfg);
+            let fit = calibrate::tool_tip(bus, cell, src.as_mut())?;
+            let file = ctx.out.join("tool.toml");
+            files::write_tool(ctx.tool_in, &file, fit.tip_offset)?;
+            let t = fit.tip_offset.map(|v| v * 1000.0);
+            say(&format!(
+                "calibrate tool: {} touches, orientation spread {:.1} deg; residual per touch [mm]: {}; RMS {:.3} mm",
+                fit.touches.len(),
+                fit.spread_deg,
+                calibrate::pivot::list_mm(&fit.residuals_mm),
+                fit.rms_mm
+            ));
+            say(&format!(
+                "calibrate tool: tip_offset [mm] {:.3} {:.3} {:.3} (flange frame; {:.3} mm off the wrist-roll axis), pivot [mm] {:.2} {:.2} {:.2}; wrote {}",
+                t[0],
+                t[1],
+                t[2],
+                t[0].hypot(t[1]),
+                fit.pivot[0] * 1000.0,
+                fit.pivot[1] * 1000.0,
+                fit.pivot[2] * 1000.0,
+                file.display()
+            ));
+            Ok(())
+        }
+        Routine::Workcell { fixture: path, .. } => {
+            let fixture = fixture.expect("loaded in run");
+            let mut src = source(targets, cell.cfg);
+            let fit = calibrate::workcell(bus, cell, &fixture, src.as_mut())?;
+            let per: Vec<String> = fixture
+                .fiducials
+                .iter()
+                .zip(&fit.residuals_mm)
+                .map(|(f, r)| format!("{} {r:.3}", f.name))
+                .collect();
+            let file = ctx.out.join("workcell.toml");
+            let header = format!(
+                "Written by `polishbot calibrate workcell` from {} touched fiducials of {}.\n\
+                 Residual per fiducial [mm]: {}; RMS {:.3} mm.",
+                fixture.fiducials.len(),
+                path.display(),
+                per.join(", "),
+                fit.rms_mm
+            );
+            files::write_workcell(&file, &fit.robot_from_reference, &header)?;
+            say(&format!(
+                "calibrate workcell: residual per fiducial [mm]: {}; RMS {:.3} mm; wrote {}",
+                per.join(", "),
+                fit.rms_mm,
+                file.display()
+            ));
+            Ok(())
+        }
+        Routine::Verify { .. } => {
+            let poses = targets.expect("set in run");
+            let workcell = match &fixture {
+                Some(_) => Some(Workcell::load(&ctx.workcell_in)?),
+                None => None,
+            };
+            let pair = fixture.as_ref().zip(workcell.as_ref());
+            let r = calibrate::verify(bus, cell, &poses, pair)?;
+            for (k, p) in r.poses.iter().enumerate() {
+                let e: Vec<String> = p
+                    .servo_error_deg
+                    .iter()
+                    .map(|v| format!("{v:+.3}"))
+                    .collect();
+                let fid = match (&p.fiducial, p.fiducial_error_mm) {
+                    (Some(n), Some(e)) => format!(", fiducial {n} {e:.3} mm"),
+                    _ => String::new(),
+                };
+                say(&format!(
+                    "calibrate verify: pose {}: servo error [deg] {}; tool tip {:.3} mm{fid}",
+                    k + 1,
+                    e.join(" "),
+                    p.tip_error_mm
+                ));
+            }
+            let fid = r
+                .max_fiducial_error_mm
+                .map(|e| format!(", fiducials {e:.3} mm"))
+                .unwrap_or_default();
+            let worst: Vec<String> = r
+                .max_servo_error_deg
+                .iter()
+                .map(|v| format!("{v:.3}"))
+                .collect();
+            say(&format!(
+                "calibrate verify: worst servo error [deg] {}; worst tool tip {:.3} mm{fid}",
+                worst.join(" "),
+                r.max_tip_error_mm
+            ));
+            if r.ok {
+                Ok(())
+            } else {
+                Err(CalibError::Refused(format!(
+                    "tool-tip error above {} mm (tip {:.3} mm{fid})",
+                    cell.cfg.max_verify_tip_error_mm, r.max_tip_error_mm
+                )))
+            }
+        }
+    }
+}
+
+fn say(line: &str) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}
+
+fn servos(
+    bus: &mut Bus<Box<dyn Transport>>,
+    cell: &Cell,
+    assume_pose: bool,
+    store_mid: bool,
+    ctx: &Ctx,
+) -> Result<(), CalibError> {
+    let mut confirm = || -> Result<(), CalibError> {
+        let text = "calibrate servos: torque is off. Move the arm by hand into the zero pose \
+                    (every joint straight up, the wrist roll at its zero) and hold it still.";
+        if assume_pose {
+            say(&format!("{text} --assume-pose: reading now."));
+            return Ok(());
+        }
+        JogTerminal::new(std::io::stdin(), std::io::stdout(), 1.0).confirm(text)
+    };
+    let r = calibrate::servo_offsets(bus, cell.map, cell.cfg, &mut confirm, store_mid)?;
+    let zero: Vec<(u8, f64)> = r.servos.iter().map(|s| (s.id, s.zero_offset_deg)).collect();
+    let file = ctx.out.join("servos.toml");
+    files::write_servos(ctx.servos_in, &file, &zero)?;
+    for s in &r.servos {
+        say(&format!(
+            "calibrate servos: servo {} ({}): raw {:.2} (spread {} counts over {} reads) -> zero_offset_deg {:.3} (was {:.3}, change {:+.3})",
+            s.id,
+            s.joint,
+            s.raw_mean,
+            s.spread_counts,
+            r.reads,
+            s.zero_offset_deg,
+            s.previous_deg,
+            s.zero_offset_deg - s.previous_deg
+        ));
+    }
+    let stored = if r.stored_mid {
+        "; mid positions stored on the servos (offset state ok)"
+    } else {
+        ""
+    };
+    say(&format!(
+        "calibrate servos: wrote {}{stored}",
+        file.display()
+    ));
+    Ok(())
+}
