@@ -476,3 +476,49 @@ proptest! {
         }
     }
 }
+
+/// `arm` takes its servo map from servos.toml (as `run` and `calibrate` do): a calibrated zero
+/// offset of servo 1 moves the raw target and is taken back out of the read.
+#[test]
+fn arm_commands_use_the_calibrated_servo_offsets() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let mock = Mock::start(&py, &[]);
+    let dir = common::tempdir();
+    let shipped = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/servos.toml"),
+    )
+    .unwrap();
+    let servos = dir.path().join("servos.toml");
+    std::fs::write(
+        &servos,
+        shipped.replacen("zero_offset_deg = 90.0", "zero_offset_deg = 95.0", 1),
+    )
+    .unwrap();
+    let config = dir.path().join("arm.toml");
+    std::fs::write(
+        &config,
+        format!("[robot]\nservos = {:?}\n", servos.display().to_string()),
+    )
+    .unwrap();
+    let arm = |args: &[&str], calibrated: bool| {
+        let mut cmd = common::polishbot();
+        cmd.arg("arm").args(args).args(["--port", &mock.path]);
+        if calibrated {
+            cmd.arg("--config").arg(&config);
+        }
+        let out = common::succeed(&mut cmd);
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap_or_default()
+    };
+    arm(&["move", "--joints", "0,0,0,0,0", "--time", "0.3"], true);
+    // Servo 1 at 95 servo degrees: raw 900 + 2200 * 95 / 180.
+    let calibrated = arm(&["read"], true);
+    let raw = raw_array(&calibrated["raw"]);
+    assert!(raw[0].abs_diff(2061) <= 1, "servo 1 raw {}", raw[0]);
+    assert!(calibrated["joints"][0].as_f64().unwrap().abs() < 0.002);
+    // The shipped map (zero at 90) sees the same servo 5 degrees round.
+    let nominal = arm(&["read"], false);
+    let q1 = nominal["joints"][0].as_f64().unwrap();
+    assert!((q1 - 5f64.to_radians()).abs() < 0.002, "joint 1 {q1}");
+}

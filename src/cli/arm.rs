@@ -8,8 +8,11 @@ use serde::Deserialize;
 use serde_json::json;
 
 use crate::bus::{
-    self, Bus, BusConfig, Journal, SerialTransport, SimArm, SimOptions, Transport, JOINT_COUNT,
+    self, Bus, BusConfig, Journal, SerialTransport, ServoMap, SimArm, SimOptions, Transport,
+    JOINT_COUNT,
 };
+use crate::plan::frames;
+use crate::robot::{Robot, RobotConfig};
 
 /// Arguments of `polishbot arm`.
 #[derive(Debug, Args)]
@@ -49,15 +52,34 @@ impl LinkArgs {
             Some(p) => Journal::append(p)?,
             None => Journal::none(),
         };
-        let link: Box<dyn Transport> = if let Some(port) = &self.port {
-            Box::new(SerialTransport::open(port)?)
-        } else if self.sim {
-            Box::new(SimArm::new(sim, &config.servo_map)?.transport())
-        } else {
-            anyhow::bail!("{command}: give --port DEV or --sim")
-        };
+        let link = open_link(
+            self.port.as_deref(),
+            self.sim,
+            sim,
+            &config.servo_map,
+            command,
+        )?;
         Ok(Bus::connect(link, config, journal)?)
     }
+}
+
+/// The transport of a command that reaches the arm: the serial `port`, or with `sim` a
+/// simulated arm (`options`, homed through `map`). `command` names the command in the
+/// "give --port or --sim" error.
+pub fn open_link(
+    port: Option<&str>,
+    sim: bool,
+    options: &SimOptions,
+    map: &ServoMap,
+    command: &str,
+) -> anyhow::Result<Box<dyn Transport>> {
+    Ok(if let Some(port) = port {
+        Box::new(SerialTransport::open(port)?)
+    } else if sim {
+        Box::new(SimArm::new(options, map)?.transport())
+    } else {
+        anyhow::bail!("{command}: give --port DEV or --sim")
+    })
 }
 
 /// The arm actions.
@@ -93,11 +115,14 @@ pub enum ArmAction {
     },
 }
 
-/// `--config` TOML of `arm`: a `[bus]` table (BusConfig) and a `[sim]` table (SimOptions).
+/// `--config` TOML of `arm`: `[robot]` (the calibration files: the servo map always comes from
+/// servos.toml, as for `run`), `[bus]` (driver timing) and `[sim]` (SimOptions).
 #[derive(Debug, Default, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ArmConfig {
-    /// Driver settings and servo map.
+    /// Robot description and calibration files.
+    pub robot: RobotConfig,
+    /// Driver settings.
     pub bus: BusConfig,
     /// Simulated arm settings (with `--sim`).
     pub sim: SimOptions,
@@ -106,7 +131,9 @@ pub struct ArmConfig {
 /// Runs `polishbot arm`.
 pub fn run(args: ArmArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let cfg: ArmConfig = super::load_config(config)?;
+    let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
     let mut bus_cfg = cfg.bus;
+    bus_cfg.servo_map = frames::servo_map(&robot)?;
     // `arm ping` reports every servo itself instead of failing at the first silent one.
     if matches!(args.action, ArmAction::Ping) {
         bus_cfg.ping_at_connect = false;

@@ -4,9 +4,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use serde::Deserialize;
 
-use crate::bus::{
-    self, Bus, BusConfig, Journal, ResumePoint, SerialTransport, SimArm, SimOptions, Transport,
-};
+use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transport};
 use crate::plan::execute::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
 use crate::plan::{frames, Plan, ValidationConfig};
@@ -83,31 +81,22 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     bus_cfg.servo_map = frames::servo_map(&robot)?;
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
-    if let Some(port) = &args.port {
-        let link = SerialTransport::open(port)?;
-        stream(
-            Bus::connect(link, bus_cfg, journal)?,
-            &checked,
-            &plan,
-            from,
-            &cfg.run,
-            stop,
-            &journal_path,
-        )
-    } else if args.sim {
-        let arm = SimArm::new(&cfg.sim, &bus_cfg.servo_map)?;
-        stream(
-            Bus::connect(arm.transport(), bus_cfg, journal)?,
-            &checked,
-            &plan,
-            from,
-            &cfg.run,
-            stop,
-            &journal_path,
-        )
-    } else {
-        anyhow::bail!("run: give --port DEV or --sim (or --dry-run)")
-    }
+    let link = super::arm::open_link(
+        args.port.as_deref(),
+        args.sim,
+        &cfg.sim,
+        &bus_cfg.servo_map,
+        "run",
+    )?;
+    stream(
+        Bus::connect(link, bus_cfg, journal)?,
+        &checked,
+        &plan,
+        from,
+        &cfg.run,
+        stop,
+        &journal_path,
+    )
 }
 
 fn stream<T: Transport>(
