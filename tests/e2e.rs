@@ -224,25 +224,36 @@ fn regions_match_the_planted_defects_and_registration_the_true_pose() {
     }
 }
 
-#[test]
-fn the_mock_receives_every_planned_frame_and_ends_at_the_final_pose() {
-    let Some(py) = common::oracle_python() else {
-        return;
-    };
+/// The mock ended where the plan ends: every servo there and commanded there.
+fn assert_at_final_pose(state: &Value, c: &Case) {
+    assert_eq!(raw_list(&state["positions"])[..6], c.final_raw[..]);
+    assert_eq!(raw_list(&state["targets"])[..6], c.final_raw[..]);
+}
+
+/// A whole run against a mock started with `flags`: it must succeed, the mock must receive
+/// exactly the plan's frames and end at its final pose. Returns the journal's error codes.
+fn whole_run(py: &Path, flags: &[&str]) -> Vec<String> {
     let c = case();
-    let journal = common::tempdir();
-    let journal = journal.path().join("journal.jsonl");
-    let mock = Mock::start(&py, &[]);
+    let tmp = common::tempdir();
+    let journal = tmp.path().join("journal.jsonl");
+    let mock = Mock::start(py, flags);
     let out = succeed(&mut run_on(&mock, &["--journal", path_arg(&journal)]));
     println!("{}", String::from_utf8_lossy(&out.stdout));
     assert_eq!(
         motion_frames(&mock),
         c.frames,
-        "frames received differ from the plan's"
+        "{flags:?}: frames received differ from the plan's"
     );
-    let state = mock.finish();
-    assert_eq!(raw_list(&state["positions"])[..6], c.final_raw[..]);
-    assert_eq!(raw_list(&state["targets"])[..6], c.final_raw[..]);
+    assert_at_final_pose(&mock.finish(), c);
+    journal_codes(&journal)
+}
+
+#[test]
+fn the_mock_receives_every_planned_frame_and_ends_at_the_final_pose() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    whole_run(&py, &[]);
 }
 
 #[test]
@@ -250,26 +261,13 @@ fn dropped_and_corrupt_replies_are_retried_and_the_run_completes() {
     let Some(py) = common::oracle_python() else {
         return;
     };
-    let c = case();
-    let tmp = common::tempdir();
-    let journal = tmp.path().join("journal.jsonl");
-    let mock = Mock::start(&py, &["--drop-every", "7", "--corrupt-every", "5"]);
-    let out = succeed(&mut run_on(&mock, &["--journal", path_arg(&journal)]));
-    println!("{}", String::from_utf8_lossy(&out.stdout));
-    let codes = journal_codes(&journal);
+    let codes = whole_run(&py, &["--drop-every", "7", "--corrupt-every", "5"]);
     for code in ["timeout", "bad_checksum"] {
         assert!(
             codes.iter().any(|k| k == code),
             "no {code} in the journal: {codes:?}"
         );
     }
-    assert_eq!(
-        motion_frames(&mock),
-        c.frames,
-        "frames received differ from the plan's"
-    );
-    let state = mock.finish();
-    assert_eq!(raw_list(&state["positions"])[..6], c.final_raw[..]);
 }
 
 #[test]
@@ -333,7 +331,5 @@ fn a_run_cut_off_mid_way_resumes_from_its_journal_to_the_same_final_pose() {
         String::from_utf8_lossy(&dry.stdout).contains(&format!("from frame {from}")),
         "the dry run names the resume frame"
     );
-    let state = resumed.finish();
-    assert_eq!(raw_list(&state["positions"])[..6], c.final_raw[..]);
-    assert_eq!(raw_list(&state["targets"])[..6], c.final_raw[..]);
+    assert_at_final_pose(&resumed.finish(), c);
 }
