@@ -141,7 +141,8 @@ def m3c2_rows(m3c2_exe, case):
         diff = float(np.max(np.abs(a[both] - b[both])))
         rows.append((f"classic M3C2, {count // 1000}k core points (r 0.6, L 1.0 mm)", t_ours,
                      "py4dgeo 1.2", t_peer,
-                     f"max |distance difference| {diff:.1e} mm over {int(both.sum())} points; "
+                     f"largest absolute distance difference {diff:.1e} mm over {int(both.sum())} "
+                     f"points; "
                      f"NaN mismatches {nan_mismatch}"))
     return rows
 
