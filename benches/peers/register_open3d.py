@@ -8,6 +8,7 @@ Usage: register_open3d.py REFERENCE SCAN VOXEL [TRUTH_JSON]
   file, or estimated like the tutorial when it has none.
 Prints one JSON object: times per step (s), the pose (scan_to_reference, row-major), fitness,
 inlier RMSE and, with TRUTH_JSON, the rotation (deg) and translation (mm) errors.
+`register` is what benches/peers/run.py calls.
 """
 import json
 import sys
@@ -20,13 +21,15 @@ reg = o3d.pipelines.registration
 
 
 def pose_error(a, b):
+    """Rotation (deg) and translation (mm) between two 4x4 poses."""
+    a, b = np.asarray(a), np.asarray(b)
     d = np.linalg.inv(a) @ b
     angle = np.degrees(np.arccos(np.clip((np.trace(d[:3, :3]) - 1) / 2, -1, 1)))
     return float(angle), float(np.linalg.norm(a[:3, 3] - b[:3, 3]))
 
 
-def main():
-    ref_path, scan_path, voxel = sys.argv[1], sys.argv[2], float(sys.argv[3])
+def register(ref_path, scan_path, voxel, truth_path=None):
+    """Runs the pipeline; returns the dict main prints (loading is not timed)."""
     target = o3d.io.read_point_cloud(ref_path)
     source = o3d.io.read_point_cloud(scan_path)
     times = {}
@@ -71,11 +74,16 @@ def main():
         "scan_points_down": len(src_down.points),
         "reference_points_down": len(tgt_down.points),
     }
-    if len(sys.argv) > 4:
-        truth = np.array(json.load(open(sys.argv[4]))["scan_to_reference"])
+    if truth_path:
+        truth = np.array(json.load(open(truth_path))["scan_to_reference"])
         out["coarse_error_deg_mm"] = pose_error(ransac.transformation, truth)
         out["error_deg_mm"] = pose_error(icp.transformation, truth)
-    print(json.dumps(out))
+    return out
+
+
+def main():
+    truth = sys.argv[4] if len(sys.argv) > 4 else None
+    print(json.dumps(register(sys.argv[1], sys.argv[2], float(sys.argv[3]), truth)))
 
 
 if __name__ == "__main__":

@@ -35,9 +35,10 @@ pub fn draw(
     let err = |e: String| anyhow!("{}: drawing failed: {e}", path.display());
     root.fill(&WHITE).map_err(|e| err(format!("{e:?}")))?;
     let caption = format!(
-        "signed deviation, mm ({} points, {} without a value)",
+        "signed deviation, mm ({} points, {} without a value; the end bins hold |d| > {:.3})",
         distances.len() - nan,
-        nan
+        nan,
+        range
     );
     let mut chart = ChartBuilder::on(&root)
         .caption(caption, (font::FAMILY, 18))
@@ -50,7 +51,8 @@ pub fn draw(
         .configure_mesh()
         .x_desc("deviation (mm), + = material in excess")
         .y_desc("points (log scale)")
-        .label_style((font::FAMILY, 12))
+        .y_label_formatter(&|v| format!("{v:.0}"))
+        .label_style((font::FAMILY, 14))
         .draw()
         .map_err(|e| err(format!("{e:?}")))?;
     let width = 2.0 * range / bins as f64;

@@ -75,10 +75,10 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
         .map(|(lo, hi)| (hi[0] - lo[0]) * (hi[1] - lo[1]))
         .sum::<f64>()
         * 2.0;
-    let splat = ((area_guess / n).sqrt() * px_per_mm * 1.4)
+    let splat = ((area_guess / n).sqrt() * px_per_mm * 2.0)
         .ceil()
         .clamp(2.0, 8.0) as i64;
-    let title = TextStyle::from((font::FAMILY, 18).into_font()).color(&BLACK);
+    let title = TextStyle::from((font::FAMILY, 24).into_font()).color(&BLACK);
     for (k, (view, (right, up))) in views.iter().zip(&frames).enumerate() {
         let (lo, hi) = boxes[k];
         let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
@@ -108,6 +108,7 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
                 }
             }
         }
+        fill_holes(&mut colour, &mut depth, size);
         let x0 = k as i32 * panel as i32;
         for (idx, c) in colour.iter().enumerate() {
             if let Some(c) = c {
@@ -122,6 +123,43 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
     colour_bar(&root, 3 * panel as i32, range, input.tolerance).map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
+}
+
+/// Closes the pinholes a random sample leaves between splats: an empty pixel with at least 5
+/// of its 8 neighbours covered takes the colour of the nearest (front-most) of them. Three passes;
+/// the outline stays (a pixel outside a straight edge has 3 covered neighbours).
+fn fill_holes(colour: &mut [Option<RGBColor>], depth: &mut [f64], size: usize) {
+    for _ in 0..3 {
+        let (before, depth_before) = (colour.to_vec(), depth.to_vec());
+        for y in 1..size.saturating_sub(1) {
+            for x in 1..size - 1 {
+                let i = y * size + x;
+                if before[i].is_some() {
+                    continue;
+                }
+                let covered = [
+                    i - size - 1,
+                    i - size,
+                    i - size + 1,
+                    i - 1,
+                    i + 1,
+                    i + size - 1,
+                    i + size,
+                    i + size + 1,
+                ]
+                .into_iter()
+                .filter_map(|j| before[j].map(|c| (depth_before[j], c)));
+                let (n, front) = covered.fold((0, None), |(n, best), (d, c)| {
+                    let nearer = best.is_none_or(|(bd, _)| d > bd);
+                    (n + 1, if nearer { Some((d, c)) } else { best })
+                });
+                if let (true, Some((d, c))) = (n >= 5, front) {
+                    colour[i] = Some(c);
+                    depth[i] = d;
+                }
+            }
+        }
+    }
 }
 
 /// A vertical colour bar from -range (bottom) to +range (top), tolerance lines marked.
@@ -146,15 +184,15 @@ fn colour_bar<DB: DrawingBackend>(
         [(bar_x, top), (bar_x + 24, bottom)],
         BLACK.stroke_width(1),
     ))?;
-    let label = TextStyle::from((font::FAMILY, 13).into_font()).color(&BLACK);
+    let label = TextStyle::from((font::FAMILY, 16).into_font()).color(&BLACK);
     for v in [-range, -range / 2.0, 0.0, range / 2.0, range] {
         root.draw(&PathElement::new(
             vec![(bar_x + 24, to_y(v)), (bar_x + 30, to_y(v))],
             BLACK,
         ))?;
-        root.draw_text(&format!("{v:+.3}"), &label, (bar_x + 33, to_y(v) - 7))?;
+        root.draw_text(&format!("{v:+.3}"), &label, (bar_x + 33, to_y(v) - 9))?;
     }
-    let tol = TextStyle::from((font::FAMILY, 12).into_font()).color(&BLACK);
+    let tol = TextStyle::from((font::FAMILY, 15).into_font()).color(&BLACK);
     for v in [-tolerance, tolerance] {
         if v.abs() < range {
             root.draw(&PathElement::new(
