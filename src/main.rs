@@ -1,4 +1,10 @@
 //! The `polishbot` command line: wires the pipeline stages and files together.
 fn main() -> std::process::ExitCode {
+    // A closed pipe on stdout (`polishbot plan ... | head -1`) ends the process quietly, as
+    // for other command-line tools, instead of a panic inside println!.
+    // SAFETY: called once at start-up, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     polishbot::cli::main()
 }
