@@ -32,51 +32,69 @@ pub(super) struct Chain {
 
 /// A view prepared as an ICP target and as a source.
 struct Prepared {
+    /// Target points: the view thinned to at most `icp_target_points` (evenly strided).
+    target: Vec<Point3<f64>>,
     tree: Neighbours,
+    /// Unoriented PCA normals of `target`.
     normals: Vec<Vector3<f64>>,
+    /// Source points (evenly strided, at most `icp_max_points`).
     sample: Vec<Point3<f64>>,
+    /// Mean spacing of the target points.
     spacing: f64,
 }
 
-fn prepare(view: &PointCloud, max_points: usize) -> Result<Prepared> {
+fn strided(points: &[Point3<f64>], max_points: usize) -> Vec<Point3<f64>> {
+    let stride = points.len().div_ceil(max_points.max(1)).max(1);
+    points.iter().step_by(stride).copied().collect()
+}
+
+fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> {
     let ncfg = NormalConfig {
         orientation: Orientation::Unoriented,
         ..NormalConfig::default()
     };
-    let normals = estimate_normals(&PointCloud::from_points(view.points.clone()), &ncfg)?.normals;
-    let stride = view.len().div_ceil(max_points.max(1));
+    let target = strided(&view.points, cfg.icp_target_points);
+    let target_cloud = PointCloud::from_points(target.clone());
+    let normals = estimate_normals(&target_cloud, &ncfg)?.normals;
     Ok(Prepared {
-        tree: Neighbours::new(&view.points),
+        tree: Neighbours::new(&target),
+        target,
         normals,
-        sample: view.points.iter().step_by(stride).copied().collect(),
-        spacing: mean_spacing(view),
+        sample: strided(&view.points, cfg.icp_max_points),
+        spacing: mean_spacing(&target_cloud),
     })
 }
 
-/// Aligns `src` onto `dst` from `init`: ICP at the start distance, then the final distance.
-/// Returns the pose and its fitness at the final distance.
+/// Aligns `src` onto `dst` from `init`: ICP at the start distance, a middle distance and the
+/// final distance; the first two stages use every 4th and every 2nd sample point (they only
+/// pull the pose in). Returns the pose and its fitness at the final distance.
 fn pair_icp(
     src: &Prepared,
     dst: &Prepared,
-    dst_points: &[Point3<f64>],
     init: &Isometry3<f64>,
     cfg: &MergeConfig,
 ) -> (Isometry3<f64>, f64) {
     let mr = src.spacing.max(dst.spacing);
     let mut pose = *init;
-    for d in [
-        cfg.start_distance,
-        0.5 * (cfg.start_distance + cfg.final_distance),
-        cfg.final_distance,
+    let coarse: Vec<Point3<f64>> = src.sample.iter().step_by(4).copied().collect();
+    let middle: Vec<Point3<f64>> = src.sample.iter().step_by(2).copied().collect();
+    for (d, sample, tolerance) in [
+        (cfg.start_distance, &coarse, 1e-6),
+        (
+            0.5 * (cfg.start_distance + cfg.final_distance),
+            &middle,
+            1e-6,
+        ),
+        (cfg.final_distance, &src.sample, 1e-9),
     ] {
         let p = IcpParams {
             max_distance: d * mr,
             max_iterations: cfg.icp_max_iterations,
-            relative_tolerance: 1e-9,
+            relative_tolerance: tolerance,
             kernel_scale: None,
             min_kernel_scale: 1e-3 * mr,
         };
-        pose = icp(&src.sample, dst_points, &dst.normals, &dst.tree, &pose, &p).pose;
+        pose = icp(sample, &dst.target, &dst.normals, &dst.tree, &pose, &p).pose;
     }
     let (f, _) = fitness(&src.sample, &dst.tree, &pose, cfg.final_distance * mr);
     (pose, f)
@@ -90,12 +108,12 @@ fn align_pair(
     init: &Isometry3<f64>,
     cfg: &MergeConfig,
 ) -> Option<(Isometry3<f64>, f64, bool)> {
-    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &views[d].points, init, cfg);
+    let (pose, f) = pair_icp(&prepared[s], &prepared[d], init, cfg);
     if f >= cfg.min_fitness {
         return Some((pose, f, false));
     }
     let reg = register(&views[s], &views[d], &RegisterConfig::default()).ok()?;
-    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &views[d].points, &reg.pose, cfg);
+    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &reg.pose, cfg);
     (f >= cfg.min_fitness).then_some((pose, f, true))
 }
 
@@ -136,7 +154,7 @@ pub(super) fn align_chain(
     let prepared: Vec<Prepared> = views
         .iter()
         .zip(names)
-        .map(|(v, n)| prepare(v, cfg.icp_max_points).map_err(|e| anyhow::anyhow!("{n}: {e}")))
+        .map(|(v, n)| prepare(v, cfg).map_err(|e| anyhow::anyhow!("{n}: {e}")))
         .collect::<Result<_>>()?;
     let mut poses = vec![ChainPose {
         index: 0,

@@ -34,6 +34,9 @@ pub struct MergeConfig {
     pub centre: Option<[f64; 3]>,
     /// Most points of a moving view used by the pairwise ICP (evenly strided; default 10,000).
     pub icp_max_points: usize,
+    /// Most points of a view used as the ICP target, with PCA normals (evenly strided;
+    /// default 30,000).
+    pub icp_target_points: usize,
     /// First ICP correspondence distance in multiples of the mean spacing mr (default 30).
     pub start_distance: f64,
     /// Final ICP correspondence distance and fitness distance, in mr (default 3).
@@ -59,6 +62,7 @@ impl Default for MergeConfig {
             axis: [0.0, 0.0, 1.0],
             centre: None,
             icp_max_points: 10_000,
+            icp_target_points: 30_000,
             start_distance: 30.0,
             final_distance: 3.0,
             icp_max_iterations: 30,
