@@ -31,7 +31,7 @@ pub(super) struct Chain {
 }
 
 /// A view prepared as an ICP target and as a source.
-struct Prepared {
+pub(super) struct Prepared {
     /// Target points: the view thinned to at most `icp_target_points` (evenly strided).
     target: Vec<Point3<f64>>,
     tree: Neighbours,
@@ -48,7 +48,8 @@ fn strided(points: &[Point3<f64>], max_points: usize) -> Vec<Point3<f64>> {
     points.iter().step_by(stride).copied().collect()
 }
 
-fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> {
+/// Prepares one view as ICP target and source.
+pub(super) fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> {
     let ncfg = NormalConfig {
         orientation: Orientation::Unoriented,
         ..NormalConfig::default()
@@ -100,6 +101,19 @@ fn pair_icp(
     (pose, f)
 }
 
+/// Coarse registration (`register()`: FPFH + MAC + ICP) of view `s` onto view `d`, refined by
+/// the merge ICP; None when it does not fit.
+pub(super) fn coarse_pair(
+    views: &[PointCloud],
+    prepared: &[Prepared],
+    (s, d): (usize, usize),
+    cfg: &MergeConfig,
+) -> Option<(Isometry3<f64>, f64)> {
+    let reg = register(&views[s], &views[d], &RegisterConfig::default()).ok()?;
+    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &reg.pose, cfg);
+    (f >= cfg.min_fitness).then_some((pose, f))
+}
+
 /// Pairwise alignment: ICP from `init`, coarse registration when that does not fit.
 fn align_pair(
     views: &[PointCloud],
@@ -112,9 +126,7 @@ fn align_pair(
     if f >= cfg.min_fitness {
         return Some((pose, f, false));
     }
-    let reg = register(&views[s], &views[d], &RegisterConfig::default()).ok()?;
-    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &reg.pose, cfg);
-    (f >= cfg.min_fitness).then_some((pose, f, true))
+    coarse_pair(views, prepared, (s, d), cfg).map(|(pose, f)| (pose, f, true))
 }
 
 /// True when the views make a full turn: the next step after the last view reaches 360.
@@ -146,16 +158,12 @@ fn distribute(poses: &mut [ChainPose], e: &Isometry3<f64>) {
 /// Chains pairwise alignments from the nominal poses and closes the loop on a full turn.
 pub(super) fn align_chain(
     views: &[PointCloud],
+    prepared: &[Prepared],
     names: &[String],
     angles: &[f64],
     nominal: &[Isometry3<f64>],
     cfg: &MergeConfig,
 ) -> Result<Chain> {
-    let prepared: Vec<Prepared> = views
-        .iter()
-        .zip(names)
-        .map(|(v, n)| prepare(v, cfg).map_err(|e| anyhow::anyhow!("{n}: {e}")))
-        .collect::<Result<_>>()?;
     let mut poses = vec![ChainPose {
         index: 0,
         pose: Isometry3::identity(),
@@ -167,7 +175,7 @@ pub(super) fn align_chain(
         let prev = poses.last().expect("first view");
         let j = prev.index;
         let init = nominal[j].inverse() * nominal[i];
-        match align_pair(views, &prepared, (i, j), &init, cfg) {
+        match align_pair(views, prepared, (i, j), &init, cfg) {
             Some((rel, f, coarse)) => {
                 let pose = prev.pose * rel;
                 poses.push(ChainPose {
@@ -191,13 +199,19 @@ pub(super) fn align_chain(
     let mut loop_closure = None;
     let last_pose = poses.last().expect("first view");
     let (l, last) = (last_pose.index, last_pose.pose);
-    if full_turn(angles) && poses.len() >= 3 {
+    // Only a loop whose last view was kept closes; a closure error of half a step or more is
+    // a wrong match, not drift.
+    let half_step =
+        0.5 * (angles[angles.len() - 1] - angles[0]).abs() / (angles.len().max(2) - 1) as f64;
+    if full_turn(angles) && poses.len() >= 3 && l == views.len() - 1 {
         // The chained pose is a closer start than the nominal one.
-        if let Some((rel, _, _)) = align_pair(views, &prepared, (l, 0), &last, cfg) {
+        if let Some((rel, _, _)) = align_pair(views, prepared, (l, 0), &last, cfg) {
             // last -> first measured directly versus through the chain.
             let e = rel * last.inverse();
-            loop_closure = Some([e.rotation.angle().to_degrees(), e.translation.vector.norm()]);
-            distribute(&mut poses, &e);
+            if e.rotation.angle().to_degrees() < half_step {
+                loop_closure = Some([e.rotation.angle().to_degrees(), e.translation.vector.norm()]);
+                distribute(&mut poses, &e);
+            }
         }
     }
     Ok(Chain {
