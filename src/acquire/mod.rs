@@ -1,6 +1,7 @@
 //! Acquisition: merges turntable range views into one complete cloud.
 //!
 //! ```text
+//! no axis given: axis from the first neighbouring pair register() aligns
 //! nominal start poses (rotation by -angle about the table axis through the centre)
 //!   ─ pairwise robust point-to-plane ICP view i -> view i-1 from the nominal relative pose
 //!     (coarse-to-fine distances; register()'s FPFH+MAC when ICP does not fit)
