@@ -25,21 +25,36 @@ fn merge(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn synthetic_turntable_12_views_match_truth() {
-    synthetic_turntable(12, "30", "7");
+    synthetic_turntable(12, "30", "7", None);
 }
 
 #[test]
 fn synthetic_turntable_36_views_match_truth() {
-    synthetic_turntable(36, "10", "3");
+    synthetic_turntable(36, "10", "3", None);
 }
 
-/// Synth `views` views `step` degrees apart (true angles off by up to 3 degrees), merge them
-/// and compare poses, axis and merged surface with the synth truth.
-fn synthetic_turntable(n: usize, step: &str, seed: &str) {
+/// The table axis tilted 20 degrees from +z towards the scanner (and no --axis given): merge
+/// finds it itself.
+#[test]
+fn synthetic_turntable_tilted_axis_is_estimated() {
+    let a = 20f64.to_radians();
+    synthetic_turntable(12, "30", "5", Some([0.0, -a.sin(), a.cos()]));
+}
+
+/// Synth `views` views `step` degrees apart (true angles off by up to 3 degrees) about the
+/// table `axis` (default +z), merge them without an axis and compare poses, axis and merged
+/// surface with the synth truth.
+fn synthetic_turntable(n: usize, step: &str, seed: &str, axis: Option<[f64; 3]>) {
     let views_arg = n.to_string();
     let dir = common::tempdir();
     let d = dir.path();
-    let out = common::polishbot()
+    let mut synth = common::polishbot();
+    if let Some(a) = axis {
+        let cfg = d.join("synth.toml");
+        std::fs::write(&cfg, format!("[turntable]\naxis = {a:?}\n")).unwrap();
+        synth.arg("--config").arg(cfg);
+    }
+    let out = synth
         .args(["synth", "--out"])
         .arg(d)
         .args([
@@ -100,6 +115,16 @@ fn synthetic_turntable(n: usize, step: &str, seed: &str) {
     let ea = Vector3::from(serde_json::from_value::<[f64; 3]>(report["axis"].clone()).unwrap());
     let ec = Vector3::from(serde_json::from_value::<[f64; 3]>(report["centre"].clone()).unwrap());
     assert!(ea.angle(&ta).to_degrees() < 0.02, "axis {ea} vs {ta}");
+    if let Some(a) = axis {
+        assert!(
+            ta.angle(&Vector3::from(a)).to_degrees() < 1e-9,
+            "synth axis {ta}"
+        );
+    }
+    // The start axis from one pair (no --axis given) is near the truth too.
+    let sa = serde_json::from_value::<[f64; 3]>(report["axis_seed"]["axis"].clone()).unwrap();
+    let sa = Vector3::from(sa);
+    assert!(sa.angle(&ta).to_degrees() < 0.5, "start axis {sa} vs {ta}");
     let off = ec - tc;
     assert!(
         (off - ta * off.dot(&ta)).norm() < 0.05,
@@ -175,18 +200,20 @@ fn bunny_045_onto_000() {
         .display()
         .to_string();
     let out_ply = dir.path().join("bun.ply").display().to_string();
-    let out = merge(&[
-        &b0, &b45, "--angles", "0,45", "--axis", "0,-1,0", "--units", "m", "-o", &out_ply,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report = read_json(&dir.path().join("bun.json"));
-    let got = isometry_from_rows(&rows(&report["views"][1]["view_to_first"])).expect("pose");
-    let (dr, dt) = pose_difference(&bunny_truth("bun045.ply"), &got);
-    assert!(dr < 1.0 && dt < 1.0, "bun045: {dr} deg {dt} mm");
+    // With the nominal axis, and without (the axis then comes from the pair itself).
+    for axis in [&["--axis", "0,-1,0"][..], &[]] {
+        let rest = ["--angles", "0,45", "--units", "m", "-o", &out_ply];
+        let out = merge(&[&[b0.as_str(), b45.as_str()][..], axis, &rest].concat());
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let report = read_json(&dir.path().join("bun.json"));
+        let got = isometry_from_rows(&rows(&report["views"][1]["view_to_first"])).expect("pose");
+        let (dr, dt) = pose_difference(&bunny_truth("bun045.ply"), &got);
+        assert!(dr < 1.0 && dt < 1.0, "bun045 {axis:?}: {dr} deg {dt} mm");
+    }
 }
 
 #[test]

@@ -31,55 +31,87 @@ pub(super) struct Chain {
 }
 
 /// A view prepared as an ICP target and as a source.
-struct Prepared {
+pub(super) struct Prepared {
+    /// Target points: the view thinned to at most `icp_target_points` (evenly strided).
+    target: Vec<Point3<f64>>,
     tree: Neighbours,
+    /// Unoriented PCA normals of `target`.
     normals: Vec<Vector3<f64>>,
+    /// Source points (evenly strided, at most `icp_max_points`).
     sample: Vec<Point3<f64>>,
+    /// Mean spacing of the target points.
     spacing: f64,
 }
 
-fn prepare(view: &PointCloud, max_points: usize) -> Result<Prepared> {
+fn strided(points: &[Point3<f64>], max_points: usize) -> Vec<Point3<f64>> {
+    let stride = points.len().div_ceil(max_points.max(1)).max(1);
+    points.iter().step_by(stride).copied().collect()
+}
+
+/// Prepares one view as ICP target and source.
+pub(super) fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> {
     let ncfg = NormalConfig {
         orientation: Orientation::Unoriented,
         ..NormalConfig::default()
     };
-    let normals = estimate_normals(&PointCloud::from_points(view.points.clone()), &ncfg)?.normals;
-    let stride = view.len().div_ceil(max_points.max(1));
+    let target = strided(&view.points, cfg.icp_target_points);
+    let target_cloud = PointCloud::from_points(target.clone());
+    let normals = estimate_normals(&target_cloud, &ncfg)?.normals;
     Ok(Prepared {
-        tree: Neighbours::new(&view.points),
+        tree: Neighbours::new(&target),
+        target,
         normals,
-        sample: view.points.iter().step_by(stride).copied().collect(),
-        spacing: mean_spacing(view),
+        sample: strided(&view.points, cfg.icp_max_points),
+        spacing: mean_spacing(&target_cloud),
     })
 }
 
-/// Aligns `src` onto `dst` from `init`: ICP at the start distance, then the final distance.
-/// Returns the pose and its fitness at the final distance.
+/// Aligns `src` onto `dst` from `init`: ICP at the start distance, a middle distance and the
+/// final distance; the first two stages use every 4th and every 2nd sample point (they only
+/// pull the pose in). Returns the pose and its fitness at the final distance.
 fn pair_icp(
     src: &Prepared,
     dst: &Prepared,
-    dst_points: &[Point3<f64>],
     init: &Isometry3<f64>,
     cfg: &MergeConfig,
 ) -> (Isometry3<f64>, f64) {
     let mr = src.spacing.max(dst.spacing);
     let mut pose = *init;
-    for d in [
-        cfg.start_distance,
-        0.5 * (cfg.start_distance + cfg.final_distance),
-        cfg.final_distance,
+    let coarse: Vec<Point3<f64>> = src.sample.iter().step_by(4).copied().collect();
+    let middle: Vec<Point3<f64>> = src.sample.iter().step_by(2).copied().collect();
+    for (d, sample, tolerance) in [
+        (cfg.start_distance, &coarse, 1e-6),
+        (
+            0.5 * (cfg.start_distance + cfg.final_distance),
+            &middle,
+            1e-6,
+        ),
+        (cfg.final_distance, &src.sample, 1e-9),
     ] {
         let p = IcpParams {
             max_distance: d * mr,
             max_iterations: cfg.icp_max_iterations,
-            relative_tolerance: 1e-9,
+            relative_tolerance: tolerance,
             kernel_scale: None,
             min_kernel_scale: 1e-3 * mr,
         };
-        pose = icp(&src.sample, dst_points, &dst.normals, &dst.tree, &pose, &p).pose;
+        pose = icp(sample, &dst.target, &dst.normals, &dst.tree, &pose, &p).pose;
     }
     let (f, _) = fitness(&src.sample, &dst.tree, &pose, cfg.final_distance * mr);
     (pose, f)
+}
+
+/// Coarse registration (`register()`: FPFH + MAC + ICP) of view `s` onto view `d`, refined by
+/// the merge ICP; None when it does not fit.
+pub(super) fn coarse_pair(
+    views: &[PointCloud],
+    prepared: &[Prepared],
+    (s, d): (usize, usize),
+    cfg: &MergeConfig,
+) -> Option<(Isometry3<f64>, f64)> {
+    let reg = register(&views[s], &views[d], &RegisterConfig::default()).ok()?;
+    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &reg.pose, cfg);
+    (f >= cfg.min_fitness).then_some((pose, f))
 }
 
 /// Pairwise alignment: ICP from `init`, coarse registration when that does not fit.
@@ -90,13 +122,11 @@ fn align_pair(
     init: &Isometry3<f64>,
     cfg: &MergeConfig,
 ) -> Option<(Isometry3<f64>, f64, bool)> {
-    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &views[d].points, init, cfg);
+    let (pose, f) = pair_icp(&prepared[s], &prepared[d], init, cfg);
     if f >= cfg.min_fitness {
         return Some((pose, f, false));
     }
-    let reg = register(&views[s], &views[d], &RegisterConfig::default()).ok()?;
-    let (pose, f) = pair_icp(&prepared[s], &prepared[d], &views[d].points, &reg.pose, cfg);
-    (f >= cfg.min_fitness).then_some((pose, f, true))
+    coarse_pair(views, prepared, (s, d), cfg).map(|(pose, f)| (pose, f, true))
 }
 
 /// True when the views make a full turn: the next step after the last view reaches 360.
@@ -128,16 +158,12 @@ fn distribute(poses: &mut [ChainPose], e: &Isometry3<f64>) {
 /// Chains pairwise alignments from the nominal poses and closes the loop on a full turn.
 pub(super) fn align_chain(
     views: &[PointCloud],
+    prepared: &[Prepared],
     names: &[String],
     angles: &[f64],
     nominal: &[Isometry3<f64>],
     cfg: &MergeConfig,
 ) -> Result<Chain> {
-    let prepared: Vec<Prepared> = views
-        .iter()
-        .zip(names)
-        .map(|(v, n)| prepare(v, cfg.icp_max_points).map_err(|e| anyhow::anyhow!("{n}: {e}")))
-        .collect::<Result<_>>()?;
     let mut poses = vec![ChainPose {
         index: 0,
         pose: Isometry3::identity(),
@@ -149,7 +175,7 @@ pub(super) fn align_chain(
         let prev = poses.last().expect("first view");
         let j = prev.index;
         let init = nominal[j].inverse() * nominal[i];
-        match align_pair(views, &prepared, (i, j), &init, cfg) {
+        match align_pair(views, prepared, (i, j), &init, cfg) {
             Some((rel, f, coarse)) => {
                 let pose = prev.pose * rel;
                 poses.push(ChainPose {
@@ -173,13 +199,19 @@ pub(super) fn align_chain(
     let mut loop_closure = None;
     let last_pose = poses.last().expect("first view");
     let (l, last) = (last_pose.index, last_pose.pose);
-    if full_turn(angles) && poses.len() >= 3 {
+    // Only a loop whose last view was kept closes; a closure error of half a step or more is
+    // a wrong match, not drift.
+    let half_step =
+        0.5 * (angles[angles.len() - 1] - angles[0]).abs() / (angles.len().max(2) - 1) as f64;
+    if full_turn(angles) && poses.len() >= 3 && l == views.len() - 1 {
         // The chained pose is a closer start than the nominal one.
-        if let Some((rel, _, _)) = align_pair(views, &prepared, (l, 0), &last, cfg) {
+        if let Some((rel, _, _)) = align_pair(views, prepared, (l, 0), &last, cfg) {
             // last -> first measured directly versus through the chain.
             let e = rel * last.inverse();
-            loop_closure = Some([e.rotation.angle().to_degrees(), e.translation.vector.norm()]);
-            distribute(&mut poses, &e);
+            if e.rotation.angle().to_degrees() < half_step {
+                loop_closure = Some([e.rotation.angle().to_degrees(), e.translation.vector.norm()]);
+                distribute(&mut poses, &e);
+            }
         }
     }
     Ok(Chain {

@@ -1,6 +1,7 @@
 //! Acquisition: merges turntable range views into one complete cloud.
 //!
 //! ```text
+//! no axis given: axis from the first neighbouring pair register() aligns
 //! nominal start poses (rotation by -angle about the table axis through the centre)
 //!   ─ pairwise robust point-to-plane ICP view i -> view i-1 from the nominal relative pose
 //!     (coarse-to-fine distances; register()'s FPFH+MAC when ICP does not fit)
@@ -27,13 +28,18 @@ pub use axis::{estimate_axis, AxisEstimate};
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MergeConfig {
-    /// Table axis direction in the views' frame (default +z). The table turns the part by
-    /// +angle about it, so view i's start pose is the rotation by -(angle_i - angle_0).
-    pub axis: [f64; 3],
-    /// A point on the table axis (default: the first view's centroid).
+    /// Table axis direction in the views' frame. The table turns the part by +angle about
+    /// it, so view i's start pose is the rotation by -(angle_i - angle_0). Default none: the
+    /// axis is estimated from the first neighbouring pair that registers.
+    pub axis: Option<[f64; 3]>,
+    /// A point on the table axis (default: the estimated axis' point at the height of the
+    /// first view's centroid, or that centroid when the axis is given).
     pub centre: Option<[f64; 3]>,
     /// Most points of a moving view used by the pairwise ICP (evenly strided; default 10,000).
     pub icp_max_points: usize,
+    /// Most points of a view used as the ICP target, with PCA normals (evenly strided;
+    /// default 30,000).
+    pub icp_target_points: usize,
     /// First ICP correspondence distance in multiples of the mean spacing mr (default 30).
     pub start_distance: f64,
     /// Final ICP correspondence distance and fitness distance, in mr (default 3).
@@ -56,9 +62,10 @@ pub struct MergeConfig {
 impl Default for MergeConfig {
     fn default() -> Self {
         MergeConfig {
-            axis: [0.0, 0.0, 1.0],
+            axis: None,
             centre: None,
             icp_max_points: 10_000,
+            icp_target_points: 30_000,
             start_distance: 30.0,
             final_distance: 3.0,
             icp_max_iterations: 30,
@@ -106,10 +113,13 @@ pub struct Merged {
     /// Views skipped because they could not be aligned (`skip_bad`).
     pub skipped: Vec<String>,
     /// Loop-closure error before distribution (rotation deg, translation mm); None when the
-    /// views do not make a full turn.
+    /// views do not make a full turn, the last view was skipped, or the direct match is half a
+    /// step or more off the chain (a wrong match, not drift).
     pub loop_closure: Option<[f64; 2]>,
     /// Estimated table axis and centre (first view's frame); None with fewer than 2 views.
     pub axis: Option<AxisEstimate>,
+    /// The start axis when none was given: estimated from one neighbouring pair.
+    pub axis_seed: Option<AxisSeed>,
     /// Voxel of the joining, mm.
     pub voxel: f64,
     /// Points before thinning.
@@ -123,6 +133,61 @@ pub fn table_rotation(axis: &Unit<Vector3<f64>>, centre: &Point3<f64>, deg: f64)
         Translation3::identity(),
         UnitQuaternion::from_axis_angle(axis, deg.to_radians()),
     ) * c.inverse()
+}
+
+/// The table axis estimated from one neighbouring pair when none is given.
+#[derive(Debug, Clone, Serialize)]
+pub struct AxisSeed {
+    /// The pair (moving view, fixed view) it came from.
+    pub pair: [String; 2],
+    /// Unit axis, signed so that the table turns by +angle about it.
+    pub axis: [f64; 3],
+    /// Its point at the height of the first view's centroid, mm.
+    pub centre: [f64; 3],
+    /// Measured turn of the pair, degrees (nominal step for comparison in `nominal_deg`).
+    pub turn_deg: f64,
+    /// Nominal step of the pair, degrees.
+    pub nominal_deg: f64,
+}
+
+/// Estimates the table axis when none is given: the first neighbouring pair (view i onto view
+/// i-1) that `register()` (FPFH + MAC + ICP) aligns gives a relative rotation; its rotation
+/// axis, signed by the nominal step, is the axis, and its fixed line through the height of
+/// the first view's centroid gives the centre.
+fn seed_axis(
+    views: &[PointCloud],
+    prepared: &[chain::Prepared],
+    names: &[String],
+    angles: &[f64],
+    centroid: &Point3<f64>,
+    cfg: &MergeConfig,
+) -> Result<AxisSeed> {
+    for i in 1..views.len() {
+        let step = angles[i] - angles[i - 1];
+        let Some((rel, _)) = chain::coarse_pair(views, prepared, (i, i - 1), cfg) else {
+            continue;
+        };
+        let turn = rel.rotation.angle();
+        if step == 0.0 || turn < 1f64.to_radians() {
+            continue;
+        }
+        // rel is the rotation by -step about the axis.
+        let axis = Unit::new_normalize(-rel.rotation.scaled_axis() * step.signum());
+        let Some(est) = estimate_axis(&[rel], &axis, centroid) else {
+            continue;
+        };
+        return Ok(AxisSeed {
+            pair: [names[i].clone(), names[i - 1].clone()],
+            axis: axis.into_inner().into(),
+            centre: est.centre,
+            turn_deg: turn.to_degrees() * step.signum(),
+            nominal_deg: step,
+        });
+    }
+    bail!(
+        "cannot estimate the table axis: no neighbouring pair of views registers with a turn \
+         of more than 1 degree; give --axis or --calibration"
+    )
 }
 
 /// Merges `views` (with `names` for messages and nominal `angles` in degrees).
@@ -143,23 +208,40 @@ pub fn merge_views(
             bail!("{n}: {} points; at least 10 are needed", v.len());
         }
     }
-    let axis_v = Vector3::from(cfg.axis);
-    if axis_v.norm().is_nan() || axis_v.norm() <= 1e-12 {
-        bail!("table axis {:?} has no direction", cfg.axis);
-    }
-    let axis = Unit::new_normalize(axis_v);
-    let centre = match cfg.centre {
-        Some(c) => Point3::from(c),
+    let prepared: Vec<chain::Prepared> = views
+        .iter()
+        .zip(names)
+        .map(|(v, n)| chain::prepare(v, cfg).map_err(|e| anyhow::anyhow!("{n}: {e}")))
+        .collect::<Result<_>>()?;
+    let centroid = {
+        let v = &views[0];
+        Point3::from(v.points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / v.len() as f64)
+    };
+    let (axis, centre, axis_seed) = match cfg.axis {
+        Some(a) => {
+            let axis_v = Vector3::from(a);
+            if axis_v.norm().is_nan() || axis_v.norm() <= 1e-12 {
+                bail!("table axis {a:?} has no direction");
+            }
+            let centre = cfg.centre.map_or(centroid, Point3::from);
+            (Unit::new_normalize(axis_v), centre, None)
+        }
+        None if views.len() < 2 => (Vector3::z_axis(), centroid, None),
         None => {
-            let v = &views[0];
-            Point3::from(v.points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / v.len() as f64)
+            let seed = seed_axis(views, &prepared, names, angles, &centroid, cfg)?;
+            let centre = cfg.centre.map_or(Point3::from(seed.centre), Point3::from);
+            (
+                Unit::new_normalize(Vector3::from(seed.axis)),
+                centre,
+                Some(seed),
+            )
         }
     };
     let nominal: Vec<Isometry3<f64>> = angles
         .iter()
         .map(|a| table_rotation(&axis, &centre, -(a - angles[0])))
         .collect();
-    let chained = chain::align_chain(views, names, angles, &nominal, cfg)?;
+    let chained = chain::align_chain(views, &prepared, names, angles, &nominal, cfg)?;
     let mut out_views = Vec::new();
     let kept: Vec<usize> = chained.poses.iter().map(|p| p.index).collect();
     let poses: Vec<Isometry3<f64>> = chained.poses.iter().map(|p| p.pose).collect();
@@ -210,6 +292,7 @@ pub fn merge_views(
         skipped: chained.skipped,
         loop_closure: chained.loop_closure,
         axis: axis_est,
+        axis_seed,
         voxel,
         joined_points,
     })

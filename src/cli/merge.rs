@@ -31,10 +31,12 @@ pub struct MergeArgs {
     /// Nominal step between views in degrees (view i at i * step) [default: 360 / views].
     #[arg(long, allow_hyphen_values = true)]
     pub step: Option<f64>,
-    /// Table axis "x,y,z" in the views' frame [default: 0,0,1 or the calibration file's].
+    /// Table axis "x,y,z" in the views' frame [default: the calibration file's, else estimated
+    /// from the first neighbouring pair of views that registers].
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, num_args = 1)]
     pub axis: Option<Vec<f64>>,
-    /// A point "x,y,z" on the table axis, mm [default: first view's centroid or calibration].
+    /// A point "x,y,z" on the table axis, mm [default: the calibration file's, else the axis'
+    /// point at the height of the first view's centroid].
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, num_args = 1)]
     pub centre: Option<Vec<f64>>,
     /// A saved axis: JSON with `axis` and `centre` (e.g. an earlier merge report).
@@ -82,11 +84,11 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
     let mut cfg: MergeConfig = super::load_config(config)?;
     if let Some(path) = &args.calibration {
         let c = read_calibration(path)?;
-        cfg.axis = c.axis;
+        cfg.axis = Some(c.axis);
         cfg.centre = Some(c.centre);
     }
     if let Some(a) = &args.axis {
-        cfg.axis = triple(a, "axis")?;
+        cfg.axis = Some(triple(a, "axis")?);
     }
     if let Some(c) = &args.centre {
         cfg.centre = Some(triple(c, "centre")?);
@@ -120,6 +122,7 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
         "axis": axis.as_ref().map(|a| a.axis),
         "centre": axis.as_ref().map(|a| a.centre),
         "axis_estimate": axis,
+        "axis_seed": merged.axis_seed,
         "loop_closure": merged.loop_closure.map(|[r, t]| json!({"rotation_deg": r, "translation_mm": t})),
         "skipped": merged.skipped,
         "voxel": merged.voxel,
@@ -145,6 +148,13 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
         merged.cloud.len(),
         args.out.display()
     );
+    if let Some(s) = &merged.axis_seed {
+        println!(
+            "merge: no axis given; start axis ({:.4}, {:.4}, {:.4}) from {} onto {} \
+             (turn {:.3} deg, nominal {:.3})",
+            s.axis[0], s.axis[1], s.axis[2], s.pair[0], s.pair[1], s.turn_deg, s.nominal_deg
+        );
+    }
     for s in &merged.skipped {
         println!("merge: skipped {s} (could not be aligned)");
     }
