@@ -518,7 +518,7 @@ mod tests {
         let mut points: Vec<Point3<f64>> = (0..343)
             .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64) * 0.5)
             .collect();
-        points.extend_from_slice(&points[..40].to_vec());
+        points.extend_from_within(..40);
         points.extend((0..3000).map(|_| {
             let (u, v): (f64, f64) = (rng.gen(), rng.gen());
             Point3::new(
