@@ -296,6 +296,12 @@ impl Grid {
         R: Copy + Send,
         F: Fn(usize, &[(f64, u32)]) -> R + Sync,
     {
+        // A halo of nothing would leave every query to its own search.
+        let halo = if halo > 0.0 && halo.is_finite() {
+            halo
+        } else {
+            self.cell
+        };
         let planes = queries.dims[2].max(0) as usize;
         let stored: Vec<R> = (0..planes)
             .into_par_iter()
