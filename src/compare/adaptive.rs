@@ -91,19 +91,20 @@ pub fn run(
         Some(s) => s,
         None => robust_sd(&delta),
     };
-    let order = clouds.scan_grid.spatial_order(&clouds.scan.points);
-    let nearest: Vec<(u32, f64)> = order
-        .par_iter()
-        .map_init(Vec::new, |found, &j| {
-            let y = &clouds.scan.points[j];
-            clouds.ref_grid.knn(y, 1, reach, found);
-            match found.first() {
-                Some(&(_, i)) => (i, pair_distance(clouds, ref_normals, i, y)),
-                None => (FAR, f64::NAN),
-            }
-        })
-        .collect();
-    let (scan_nearest_ref, scan_pair) = super::scatter(&order, nearest).into_iter().unzip();
+    let halo = clouds.ref_grid.typical_kth(&clouds.scan.points, 1);
+    let nearest: Vec<(u32, f64)> =
+        clouds
+            .ref_grid
+            .knn_each(&clouds.scan_grid, 1, reach, halo, |j, found| {
+                match found.first() {
+                    Some(&(_, i)) => (
+                        i,
+                        pair_distance(clouds, ref_normals, i, &clouds.scan.points[j]),
+                    ),
+                    None => (FAR, f64::NAN),
+                }
+            });
+    let (scan_nearest_ref, scan_pair) = nearest.into_iter().unzip();
     let weighted = delta
         .par_iter()
         .map(|d| {
@@ -138,14 +139,13 @@ fn pair_distance(clouds: &Clouds, ref_normals: &[Vector3<f64>], i: u32, y: &Poin
 /// (unscanned surface: left out of the similarity and of the noise estimate).
 fn one_sided_distances(clouds: &Clouds, ref_normals: &[Vector3<f64>], reach: f64) -> Vec<f64> {
     let scan = &clouds.scan.points;
-    let order = clouds.ref_grid.spatial_order(&clouds.reference.points);
-    let delta = order
-        .par_iter()
-        .map_init(Vec::new, |found, &i| {
+    let halo = clouds.scan_grid.typical_kth(&clouds.reference.points, 8);
+    clouds
+        .scan_grid
+        .knn_each(&clouds.ref_grid, 8, reach, halo, |i, found| {
             let (x, n) = (&clouds.reference.points[i], &ref_normals[i]);
             let mut best = (f64::INFINITY, f64::NAN);
-            clouds.scan_grid.knn(x, 8, reach, found);
-            for &(_, j) in found.iter() {
+            for &(_, j) in found {
                 let d = scan[j as usize] - x;
                 let t = d.dot(n);
                 let across = d.norm_squared() - t * t;
@@ -155,8 +155,6 @@ fn one_sided_distances(clouds: &Clouds, ref_normals: &[Vector3<f64>], reach: f64
             }
             best.1
         })
-        .collect();
-    super::scatter(&order, delta)
 }
 
 /// 1.4826 × median |δ| over up to 20,000 evenly spread values (the noise along the normal

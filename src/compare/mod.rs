@@ -8,7 +8,7 @@ mod adaptive;
 mod classic;
 mod core;
 mod fit;
-mod grid;
+pub(crate) mod grid;
 
 use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
@@ -224,7 +224,7 @@ pub fn compare(
     );
     // The scan's density sets the default radii; the grids' cell is the smallest radius.
     let radius_for = |count: f64| {
-        let grid = Grid::new(&scan.points, provisional_cell(scan));
+        let grid = Grid::new(&scan.points, Grid::provisional_cell(&scan.points));
         (count / (std::f64::consts::PI * scan_density(&grid, scan))).sqrt()
     };
     let (classic_radius, adaptive_radii) = match cfg.method {
@@ -313,22 +313,6 @@ pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
     out.into_iter()
         .map(|v| v.expect("order is a permutation"))
         .collect()
-}
-
-/// A first grid cell for the density estimate: about four points per cell if the points
-/// covered the bounding box's faces.
-fn provisional_cell(cloud: &PointCloud) -> f64 {
-    let Some(bbox) = crate::cloud::Aabb::of(&cloud.points) else {
-        return 1.0;
-    };
-    let e = bbox.extent();
-    let area = 2.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
-    let cell = (4.0 * area / cloud.len() as f64).sqrt();
-    if cell > 0.0 && cell.is_finite() {
-        cell
-    } else {
-        1.0
-    }
 }
 
 /// The scan's median surface density (points per mm²), from the 12th-neighbour distance of

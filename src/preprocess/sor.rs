@@ -3,7 +3,8 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::{Neighbours, PointCloud};
+use crate::cloud::PointCloud;
+use crate::compare::grid::Grid;
 
 /// Settings of the statistical outlier filter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -81,14 +82,13 @@ pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
 /// the point is one of the k (Open3D); otherwise the k nearest other points (one zero-distance
 /// match, the point itself, is skipped; duplicates of it still count at distance 0).
 pub fn mean_distances(cloud: &PointCloud, k: usize, count_self: bool) -> Vec<f64> {
-    let index = Neighbours::new(&cloud.points);
     let query = if count_self { k } else { k + 1 };
     let skip = usize::from(!count_self);
-    index.par_map_points(Default::default, |(scratch, buf), i| {
-        index.knn_dist2_into(&index.point(i), query, scratch, buf);
+    let (grid, halo) = Grid::for_knn(&cloud.points, query);
+    grid.knn_each(&grid, query, f64::INFINITY, halo, |_, found| {
         // Ascending order, summed first to last, as Open3D does (bit-exact means).
-        let sum = buf[skip..].iter().fold(0.0, |s, d2| s + d2.sqrt());
-        sum / (buf.len() - skip) as f64
+        let sum = found[skip..].iter().fold(0.0, |s, e| s + e.0.sqrt());
+        sum / (found.len() - skip) as f64
     })
 }
 

@@ -8,6 +8,8 @@
 //! x interval a row can contribute, and never allocates (the caller owns the output buffers).
 use nalgebra::{Point3, Vector3};
 
+mod batch;
+
 /// Most rows (the cell grows when the box would need more: an empty row costs four bytes).
 const MAX_ROWS: f64 = 4.0e6;
 
@@ -25,13 +27,19 @@ pub struct Member {
 /// Points bucketed into rows along x.
 pub struct Grid {
     cell: f64,
+    /// Smallest coordinates of the points (the grid's corner).
     origin: [f64; 3],
+    /// Largest coordinates of the points.
+    hi: [f64; 3],
     /// Cells along each axis (along x only for the spatial order).
     dims: [isize; 3],
     /// Start of each row's points in `pts` (row y + dims[1]·z; one more entry than rows).
     rows: Vec<u32>,
     /// x of each stored point (sorted within a row).
     xs: Vec<f64>,
+    /// y and z of each stored point (the batched k-NN reads coordinates apart).
+    ys: Vec<f64>,
+    zs: Vec<f64>,
     /// Coordinates, row by row.
     pts: Vec<[f64; 3]>,
     /// Original index of each sorted point.
@@ -57,6 +65,22 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 }
 
 impl Grid {
+    /// A first cell for points of unknown density: about four points per cell if the points
+    /// covered the faces of their bounding box.
+    pub fn provisional_cell(points: &[Point3<f64>]) -> f64 {
+        let Some(bbox) = crate::cloud::Aabb::of(points) else {
+            return 1.0;
+        };
+        let e = bbox.extent();
+        let area = 2.0 * (e.x * e.y + e.y * e.z + e.z * e.x);
+        let cell = (4.0 * area / points.len() as f64).sqrt();
+        if cell > 0.0 && cell.is_finite() {
+            cell
+        } else {
+            1.0
+        }
+    }
+
     /// Buckets `points` (finite coordinates) into rows of cross-section `cell` × `cell` (mm;
     /// enlarged when the bounding box would need more than four million rows).
     pub fn new(points: &[Point3<f64>], cell: f64) -> Grid {
@@ -81,9 +105,12 @@ impl Grid {
         let mut grid = Grid {
             cell,
             origin: lo,
+            hi,
             dims,
             rows: Vec::new(),
             xs: Vec::new(),
+            ys: Vec::new(),
+            zs: Vec::new(),
             pts: Vec::new(),
             ids: Vec::new(),
         };
@@ -121,6 +148,8 @@ impl Grid {
             })
             .collect();
         grid.xs = grid.pts.iter().map(|p| p[0]).collect();
+        grid.ys = grid.pts.iter().map(|p| p[1]).collect();
+        grid.zs = grid.pts.iter().map(|p| p[2]).collect();
         grid.ids = order;
         grid.rows = rows;
         grid
@@ -295,6 +324,20 @@ impl Grid {
     /// The `k` nearest points to `q` within `max_radius` (inclusive; infinity for no limit),
     /// into `out` as (squared distance, index), nearest first, ties to the lowest index.
     pub fn knn(&self, q: &Point3<f64>, k: usize, max_radius: f64, out: &mut Vec<(f64, u32)>) {
+        // A nearest point is usually well inside a cell, eight of them about a cell away.
+        let start = if k == 1 { 0.5 } else { 1.0 } * self.cell;
+        self.knn_from(q, k, max_radius, start, out);
+    }
+
+    /// [`Grid::knn`] whose first search cube has half-width `start` (it doubles from there).
+    fn knn_from(
+        &self,
+        q: &Point3<f64>,
+        k: usize,
+        max_radius: f64,
+        start: f64,
+        out: &mut Vec<(f64, u32)>,
+    ) {
         out.clear();
         if k == 0 || self.pts.is_empty() {
             return;
@@ -321,8 +364,7 @@ impl Grid {
         };
         // Search the cube of half-width r around q, doubling r until the k-th distance is
         // inside it (every closer point has then been seen).
-        // A nearest point is usually well inside a cell, eight of them about a cell away.
-        let mut r = if k == 1 { 0.5 } else { 1.0 } * self.cell;
+        let mut r = start;
         loop {
             let r_use = r.min(max_radius);
             out.clear();
