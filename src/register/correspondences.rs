@@ -64,10 +64,19 @@ pub fn match_features(
         })
         .collect();
     let mut chosen = if mutual {
-        let backward = nearest_all(reference, scan);
+        // Only the reference descriptors some scan descriptor chose need their own nearest
+        // neighbour (a few thousand of tens of thousands): the same answer as querying all.
+        let mut chosen_refs: Vec<usize> = all.iter().map(|c| c.reference).collect();
+        chosen_refs.sort_unstable();
+        chosen_refs.dedup();
+        let queries: Vec<Fpfh> = chosen_refs.iter().map(|&r| reference[r]).collect();
+        let mut backward = vec![usize::MAX; reference.len()];
+        for (&r, &(s, _)) in chosen_refs.iter().zip(&nearest_all(&queries, scan)) {
+            backward[r] = s;
+        }
         let kept: Vec<Correspondence> = all
             .iter()
-            .filter(|c| backward[c.reference].0 == c.scan)
+            .filter(|c| backward[c.reference] == c.scan)
             .copied()
             .collect();
         if kept.len() >= MIN_MUTUAL.min(all.len()) {
