@@ -5,7 +5,6 @@
 use std::io::{Read, Write};
 
 use nalgebra::Vector3;
-use serde::Serialize;
 
 use super::read::{joints_of, read_mean};
 use super::{CalibError, CalibrationConfig};
@@ -26,7 +25,7 @@ pub struct Cell<'a> {
 }
 
 /// One recorded touch.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Touch {
     /// What was touched (`pivot 3`, a fiducial's name).
     pub label: String,
@@ -167,30 +166,33 @@ impl<R: Read, W: Write> JogTerminal<R, W> {
             .map_err(|e| CalibError::file(std::path::Path::new("terminal"), e))
     }
 
-    fn next_key(&mut self) -> Result<Key, CalibError> {
+    /// The next byte of input; `None` at its end.
+    fn read_byte(&mut self) -> Result<Option<u8>, CalibError> {
         let mut b = [0u8; 1];
         loop {
             match self.input.read(&mut b) {
-                Ok(0) => return Ok(Key::Abort),
-                Ok(_) => return Ok(key(b[0])),
+                Ok(0) => return Ok(None),
+                Ok(_) => return Ok(Some(b[0])),
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                 Err(e) => return Err(CalibError::file(std::path::Path::new("terminal"), e)),
             }
         }
     }
 
+    /// The next key; the end of input aborts.
+    fn next_key(&mut self) -> Result<Key, CalibError> {
+        Ok(self.read_byte()?.map_or(Key::Abort, key))
+    }
+
     /// Shows `text` and waits for Enter, t or space (Esc, Ctrl-C or end of input abort).
     pub fn confirm(&mut self, text: &str) -> Result<(), CalibError> {
         self.say(&format!("{text} [Enter to go on, Esc to abort]"))?;
-        let mut b = [0u8; 1];
         loop {
-            match self.input.read(&mut b) {
-                Ok(0) => return Err(CalibError::Aborted),
-                Ok(_) if matches!(b[0], b'\r' | b'\n' | b't' | b' ') => return Ok(()),
-                Ok(_) if matches!(key(b[0]), Key::Abort) => return Err(CalibError::Aborted),
-                Ok(_) => {}
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(CalibError::file(std::path::Path::new("terminal"), e)),
+            match self.read_byte()? {
+                None => return Err(CalibError::Aborted),
+                Some(b'\r' | b'\n' | b't' | b' ') => return Ok(()),
+                Some(b) if matches!(key(b), Key::Abort) => return Err(CalibError::Aborted),
+                Some(_) => {}
             }
         }
     }

@@ -4,7 +4,6 @@
 //! `[R_i, -I] [t; c] = -p_i` (SVD). Refused with too few touches or orientations too alike
 //! (then `t` and `c` cannot be told apart along the shared rotation axis).
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3};
-use serde::Serialize;
 
 use super::jog::{Cell, Touch, TouchSource};
 use super::{CalibError, CalibrationConfig};
@@ -15,7 +14,7 @@ use crate::robot::Robot;
 pub const MAX_TOUCHES: usize = 64;
 
 /// The result of the pivot calibration.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PivotFit {
     /// Tool tip in the flange frame, metres (tool.toml's `tip_offset`).
     pub tip_offset: [f64; 3],

@@ -3,14 +3,13 @@
 //! there becomes the servo's `zero_offset_deg` in servos.toml (servo degrees at joint zero).
 use dofbot_protocol::servo::ServoId;
 use dofbot_protocol::OffsetState;
-use serde::Serialize;
 
 use super::read::{at_fractional_raw, read_mean, MeanRead};
 use super::{CalibError, CalibrationConfig};
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
 
 /// One joint servo's result.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ServoOffset {
     /// Servo id (1..5).
     pub id: u8,
@@ -27,7 +26,7 @@ pub struct ServoOffset {
 }
 
 /// The result of [`servo_offsets`].
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct ServoOffsets {
     /// The five joint servos, in chain order.
     pub servos: Vec<ServoOffset>,

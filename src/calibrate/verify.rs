@@ -4,7 +4,6 @@
 //! the workcell, each pose touches a fiducial and its tip is also compared with where
 //! workcell.toml puts that fiducial.
 use nalgebra::Point3;
-use serde::Serialize;
 
 use super::jog::{record, Cell};
 use super::{CalibError, Fixture};
@@ -22,7 +21,7 @@ pub const DEFAULT_CHECK_POSES: [[f64; JOINT_COUNT]; 5] = [
 ];
 
 /// One check pose.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct PoseCheck {
     /// Commanded joints, rad.
     pub commanded: [f64; JOINT_COUNT],
@@ -39,7 +38,7 @@ pub struct PoseCheck {
 }
 
 /// The result of [`verify`].
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct VerifyReport {
     /// Every pose.
     pub poses: Vec<PoseCheck>,

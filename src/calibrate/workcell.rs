@@ -4,7 +4,6 @@
 //! with fewer than four fiducials or (nearly) collinear ones, and after the touches when the
 //! RMS residual exceeds the threshold.
 use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
-use serde::Serialize;
 
 use super::jog::{Cell, Touch, TouchSource};
 use super::pivot::rms;
@@ -13,10 +12,9 @@ use crate::bus::{Bus, Transport};
 use crate::register::mac::pose::weighted_svd;
 
 /// The result of the workcell calibration.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct WorkcellFit {
     /// Robot base frame from the reference frame, metres (workcell.toml).
-    #[serde(serialize_with = "rows")]
     pub robot_from_reference: Matrix4<f64>,
     /// Distance between each fiducial mapped by the fit and its touched tip, mm.
     pub residuals_mm: Vec<f64>,
@@ -24,11 +22,6 @@ pub struct WorkcellFit {
     pub rms_mm: f64,
     /// The touches, one per fiducial.
     pub touches: Vec<Touch>,
-}
-
-fn rows<S: serde::Serializer>(m: &Matrix4<f64>, s: S) -> Result<S::Ok, S::Error> {
-    let r: [[f64; 4]; 4] = std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]));
-    serde::Serialize::serialize(&r, s)
 }
 
 /// Checks that the fixture can give a rigid fit: at least `min_touches` fiducials, not

@@ -9,7 +9,7 @@ use clap::{Args, Subcommand};
 use serde::Deserialize;
 
 use super::arm::LinkArgs;
-use crate::bus::{Bus, BusConfig, SimOptions, Transport};
+use crate::bus::{Bus, BusConfig, SimOptions, Transport, JOINT_COUNT};
 use crate::calibrate::jog::{Cell, RawTerminal};
 use crate::calibrate::verify::DEFAULT_CHECK_POSES;
 use crate::calibrate::{
@@ -184,7 +184,7 @@ struct Ctx<'a> {
 
 /// The touch source: the script, or the jog terminal on standard input and output.
 fn source<T: Transport>(
-    targets: Option<Vec<[f64; 5]>>,
+    targets: Option<Vec<[f64; JOINT_COUNT]>>,
     cfg: &CalibrationConfig,
 ) -> Box<dyn TouchSource<T>> {
     match targets {
@@ -202,7 +202,7 @@ fn routine(
     cell: &Cell,
     which: &Routine,
     fixture: Option<Fixture>,
-    targets: Option<Vec<[f64; 5]>>,
+    targets: Option<Vec<[f64; JOINT_COUNT]>>,
     ctx: &Ctx,
 ) -> Result<(), CalibError> {
     // Raw keys only while a routine may read them (restored on return, also on errors).
