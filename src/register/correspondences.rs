@@ -1,9 +1,8 @@
-//! Putative correspondences: nearest neighbour in FPFH space (a 33-D kd-tree), optionally
-//! mutual, capped to the pairs of smallest feature distance.
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use rayon::prelude::*;
-
-use super::fpfh::{Fpfh, FPFH_BINS};
+//! Putative correspondences: nearest neighbour in FPFH space (an exact brute-force scan,
+//! [`super::feature_search`]), optionally mutual, capped to the pairs of smallest feature
+//! distance.
+use super::feature_search::PackedFeatures;
+use super::fpfh::Fpfh;
 
 /// A putative match between a scan point and a reference point (indices into the
 /// down-sampled clouds the features were computed on).
@@ -20,24 +19,13 @@ pub struct Correspondence {
 /// Fewest mutual matches accepted before falling back to one-way (scan to reference) matches.
 const MIN_MUTUAL: usize = 100;
 
-fn to_f32(f: &Fpfh) -> [f32; FPFH_BINS] {
-    f.map(|v| v as f32)
-}
-
-/// For each query descriptor, the index of the nearest descriptor in `into` and the distance.
+/// For each query descriptor, the index of the nearest descriptor in `into` (not empty) and
+/// the distance.
 fn nearest_all(query: &[Fpfh], into: &[Fpfh]) -> Vec<(usize, f64)> {
-    let coords: Vec<[f32; FPFH_BINS]> = into.iter().map(to_f32).collect();
-    let tree: ImmutableKdTree<f32, FPFH_BINS> =
-        ImmutableKdTree::new_from_slice(&coords).expect("finite features");
-    query
-        .par_iter()
-        .map(|q| {
-            let r = tree
-                .query(&to_f32(q))
-                .nearest_one::<SquaredEuclidean<f32>>()
-                .execute();
-            (r.item as usize, (r.distance as f64).sqrt())
-        })
+    PackedFeatures::new(into)
+        .nearest_all(query)
+        .into_iter()
+        .flatten()
         .collect()
 }
 
@@ -94,6 +82,7 @@ pub fn match_features(
 
 #[cfg(test)]
 mod tests {
+    use super::super::fpfh::FPFH_BINS;
     use super::*;
     use rand::{Rng, SeedableRng};
 

@@ -9,6 +9,7 @@
 //!   ─ robust point-to-plane ICP on the full clouds           => scan_to_reference
 //! ```
 pub mod correspondences;
+pub mod feature_search;
 pub mod fpfh;
 pub mod icp;
 pub mod mac;
