@@ -57,58 +57,33 @@ impl LaneBest {
     }
 }
 
-/// How the squared difference is accumulated: fused (FMA) or plain multiply-add.
-trait Accumulate {
-    fn add_square(acc: f32, diff: f32) -> f32;
-}
-
-/// A fused multiply-add (used only where the CPU has FMA).
-struct Fused;
-impl Accumulate for Fused {
-    #[inline(always)]
-    fn add_square(acc: f32, diff: f32) -> f32 {
-        diff.mul_add(diff, acc)
-    }
-}
-
-/// A plain multiply then add.
-struct Plain;
-impl Accumulate for Plain {
-    #[inline(always)]
-    fn add_square(acc: f32, diff: f32) -> f32 {
-        acc + diff * diff
-    }
-}
-
-/// Updates `best` of four queries over `chunks`, whose first descriptor has index `first`.
-#[inline(always)]
-fn scan<A: Accumulate>(
+/// Updates `best` of four queries over `chunks`, whose first descriptor has index `first`
+/// (portable code).
+fn scan_portable(
     queries: &[[f32; FPFH_BINS]; GROUP],
     chunks: &[Chunk],
     first: usize,
     best: &mut [LaneBest; GROUP],
 ) {
     for (c, chunk) in chunks.iter().enumerate() {
-        let mut acc = [[0.0f32; LANES]; GROUP];
-        for (d, lanes) in chunk.iter().enumerate() {
-            for (acc_q, q) in acc.iter_mut().zip(queries) {
-                for (a, r) in acc_q.iter_mut().zip(lanes) {
-                    *a = A::add_square(*a, r - q[d]);
-                }
-            }
-        }
-        let base = (first + c * LANES) as u32;
-        for (b, acc_q) in best.iter_mut().zip(&acc) {
+        for (q, b) in queries.iter().zip(best.iter_mut()) {
             for l in 0..LANES {
-                let closer = acc_q[l] < b.dist[l];
-                b.dist[l] = if closer { acc_q[l] } else { b.dist[l] };
-                b.index[l] = if closer { base + l as u32 } else { b.index[l] };
+                let dist = chunk
+                    .iter()
+                    .zip(q)
+                    .fold(0.0f32, |acc, (r, q)| acc + (r[l] - q) * (r[l] - q));
+                if dist < b.dist[l] {
+                    b.dist[l] = dist;
+                    b.index[l] = (first + c * LANES + l) as u32;
+                }
             }
         }
     }
 }
 
-/// [`scan`] compiled for AVX2 and FMA.
+/// [`scan_portable`] with AVX2 and FMA intrinsics: per chunk, eight independent FMA chains
+/// (four queries, even and odd dimensions), then a masked update of the lane bests. The sums
+/// differ from the portable ones only in rounding (FMA, and the even/odd split).
 ///
 /// # Safety
 /// The CPU must support AVX2 and FMA.
@@ -120,10 +95,53 @@ unsafe fn scan_avx2(
     first: usize,
     best: &mut [LaneBest; GROUP],
 ) {
-    scan::<Fused>(queries, chunks, first, best)
+    use std::arch::x86_64::*;
+    let lane_offsets = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    for (c, chunk) in chunks.iter().enumerate() {
+        let mut even = [_mm256_setzero_ps(); GROUP];
+        let mut odd = [_mm256_setzero_ps(); GROUP];
+        for d in (0..FPFH_BINS - 1).step_by(2) {
+            // SAFETY: chunk[d] and chunk[d + 1] are arrays of LANES = 8 f32.
+            let (r0, r1) = unsafe {
+                (
+                    _mm256_loadu_ps(chunk[d].as_ptr()),
+                    _mm256_loadu_ps(chunk[d + 1].as_ptr()),
+                )
+            };
+            for k in 0..GROUP {
+                let x0 = _mm256_sub_ps(r0, _mm256_set1_ps(queries[k][d]));
+                let x1 = _mm256_sub_ps(r1, _mm256_set1_ps(queries[k][d + 1]));
+                even[k] = _mm256_fmadd_ps(x0, x0, even[k]);
+                odd[k] = _mm256_fmadd_ps(x1, x1, odd[k]);
+            }
+        }
+        if FPFH_BINS % 2 == 1 {
+            let d = FPFH_BINS - 1;
+            // SAFETY: as above.
+            let r = unsafe { _mm256_loadu_ps(chunk[d].as_ptr()) };
+            for k in 0..GROUP {
+                let x = _mm256_sub_ps(r, _mm256_set1_ps(queries[k][d]));
+                even[k] = _mm256_fmadd_ps(x, x, even[k]);
+            }
+        }
+        let index = _mm256_add_epi32(_mm256_set1_epi32((first + c * LANES) as i32), lane_offsets);
+        for k in 0..GROUP {
+            let b = &mut best[k];
+            let dist = _mm256_add_ps(even[k], odd[k]);
+            // SAFETY: b.dist and b.index are arrays of 8 f32 / 8 u32 (32 bytes each).
+            unsafe {
+                let old = _mm256_loadu_ps(b.dist.as_ptr());
+                let closer = _mm256_cmp_ps::<_CMP_LT_OQ>(dist, old);
+                _mm256_storeu_ps(b.dist.as_mut_ptr(), _mm256_blendv_ps(old, dist, closer));
+                let old_index = _mm256_loadu_si256(b.index.as_ptr().cast());
+                let new_index = _mm256_blendv_epi8(old_index, index, _mm256_castps_si256(closer));
+                _mm256_storeu_si256(b.index.as_mut_ptr().cast(), new_index);
+            }
+        }
+    }
 }
 
-/// [`scan`] with the fastest copy this CPU runs.
+/// Updates `best` of four queries over `chunks` with the fastest copy this CPU runs.
 fn scan_best(
     queries: &[[f32; FPFH_BINS]; GROUP],
     chunks: &[Chunk],
@@ -131,13 +149,12 @@ fn scan_best(
     best: &mut [LaneBest; GROUP],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-    {
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: both features were just detected on this CPU.
         unsafe { scan_avx2(queries, chunks, first, best) };
         return;
     }
-    scan::<Plain>(queries, chunks, first, best)
+    scan_portable(queries, chunks, first, best)
 }
 
 fn to_f32(f: &Fpfh) -> [f32; FPFH_BINS] {
