@@ -76,7 +76,7 @@ fn residuals(
     src.par_iter()
         .filter_map(|s| {
             let q = pose * s;
-            let nb = tree.nearest(&q)?;
+            let nb = tree.nearest_one(&q)?;
             let (j, d2) = (nb.index, nb.dist2);
             (d2 <= max_d2).then(|| (q, j, normals[j].dot(&(q - target[j])), d2))
         })
@@ -94,7 +94,7 @@ pub fn fitness(
     let d2max = distance * distance;
     let (n, sum) = src
         .par_iter()
-        .filter_map(|s| tree.nearest(&(pose * s)).filter(|nb| nb.dist2 <= d2max))
+        .filter_map(|s| tree.nearest_one(&(pose * s)).filter(|nb| nb.dist2 <= d2max))
         .map(|nb| (1usize, nb.dist2))
         .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     (
@@ -112,7 +112,9 @@ fn median_abs(values: impl Iterator<Item = f64>) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// Aligns `src` to the target surface (points, unit normals, their tree) from `init`.
+/// Aligns `src` to the target surface (points, unit normals, their tree) from `init`. Give
+/// `src` in a spatially coherent order (a scanner's, or [`Tree::spatial_order`]): the
+/// nearest-neighbour searches then reuse the cache.
 pub fn icp(
     src: &[Point3<f64>],
     target: &[Point3<f64>],

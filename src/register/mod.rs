@@ -427,7 +427,13 @@ pub fn register_with_progress(
     progress("fine ICP");
     let t = Instant::now();
     let stride = scan.len().div_ceil(cfg.icp_max_points.max(1));
-    let src_fine: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
+    let strided: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
+    // Queries in spatial order reuse the cache (scans may come in any order).
+    let src_fine: Vec<Point3<f64>> = Neighbours::new(&strided)
+        .spatial_order()
+        .into_iter()
+        .map(|i| strided[i])
+        .collect();
     let ref_tree = Neighbours::new(&reference.points);
     let ref_normals: Vec<Vector3<f64>> = match &reference.normals {
         Some(n) => n.clone(),
