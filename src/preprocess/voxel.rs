@@ -2,7 +2,7 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use crate::cloud::{Aabb, Neighbours, PointCloud};
+use crate::cloud::{Aabb, PointCloud};
 
 /// Replaces the points of each occupied voxel (edge `voxel_mm`) by their centroid; normals are
 /// averaged and renormalised (the first point's normal when they cancel), scalar fields
@@ -69,11 +69,8 @@ pub fn mean_spacing(cloud: &PointCloud) -> f64 {
     if cloud.len() < 2 {
         return 0.0;
     }
-    let index = Neighbours::new(&cloud.points);
-    let nearest = index.par_map_points(Default::default, |(scratch, buf), i| {
-        index.knn_dist2_into(&cloud.points[i], 2, scratch, buf);
-        buf[1].sqrt()
-    });
+    // The outlier filter's batched k-NN with k = 1 other point: the same distances.
+    let nearest = super::sor::mean_distances(cloud, 1, false);
     nearest.iter().sum::<f64>() / cloud.len() as f64
 }
 

@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use crate::cloud::Neighbours as Tree;
+use crate::compare::grid::Grid;
 
 /// Number of histogram bins of one feature.
 pub const FPFH_BINS: usize = 33;
@@ -28,7 +28,9 @@ fn pair_features(
     let (mut a, mut b) = (n1, n2);
     let angle1 = n1.dot(&dp) / d;
     let angle2 = n2.dot(&dp) / d;
-    let f2 = if angle1.abs().acos() > angle2.abs().acos() {
+    // Open3D compares acos(|angle1|) > acos(|angle2|); acos decreases, so compare the
+    // cosines (two acos calls fewer per pair).
+    let f2 = if angle1.abs() < angle2.abs() {
         a = n2;
         b = n1;
         dp = -dp;
@@ -75,17 +77,13 @@ pub fn compute_fpfh_at(
     max_nn: usize,
     at: &[usize],
 ) -> Vec<Fpfh> {
-    let tree = Tree::new(points);
-    // Sorted radius search truncated to max_nn: the same set as a k-nearest search within the
-    // radius, cheaper when most neighbourhoods hold fewer than max_nn points.
-    let neighbours: Vec<Vec<(usize, f64)>> = points
-        .par_iter()
-        .map(|p| {
-            let mut nb = tree.within(p, radius);
-            nb.truncate(max_nn);
-            nb.into_iter().map(|n| (n.index, n.dist2)).collect()
-        })
-        .collect();
+    // Open3D's hybrid search: the max_nn nearest within the radius, nearest first, ties to
+    // the lowest index (the point itself comes first, at distance 0), batched on a grid.
+    let (grid, halo) = Grid::for_knn(points, max_nn);
+    let neighbours: Vec<Vec<(usize, f64)>> =
+        grid.knn_each(&grid, max_nn, radius, halo.min(radius), |_, found| {
+            found.iter().map(|&(d2, j)| (j as usize, d2)).collect()
+        });
     let spfh: Vec<Fpfh> = (0..points.len())
         .into_par_iter()
         .map(|i| {
@@ -114,8 +112,9 @@ pub fn compute_fpfh_at(
                     if d2 == 0.0 {
                         continue;
                     }
+                    let inv = 1.0 / d2;
                     for (b, hb) in h.iter_mut().enumerate() {
-                        let v = spfh[j][b] / d2;
+                        let v = spfh[j][b] * inv;
                         sum[b / 11] += v;
                         *hb += v;
                     }

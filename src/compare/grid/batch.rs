@@ -293,7 +293,7 @@ impl Grid {
         f: F,
     ) -> Vec<R>
     where
-        R: Copy + Send,
+        R: Send,
         F: Fn(usize, &[(f64, u32)]) -> R + Sync,
     {
         // A halo of nothing would leave every query to its own search.
@@ -327,7 +327,7 @@ impl Grid {
                 out
             })
             .collect();
-        let mut slots: Vec<Option<R>> = vec![None; stored.len()];
+        let mut slots: Vec<Option<R>> = stored.iter().map(|_| None).collect();
         for (&i, v) in queries.ids.iter().zip(stored) {
             slots[i as usize] = Some(v);
         }
