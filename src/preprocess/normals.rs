@@ -9,6 +9,7 @@ use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::{Neighbours, PointCloud};
+use crate::compare::grid::Grid;
 
 /// How the sign of each normal is chosen (PCA gives an axis, not a direction).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -160,21 +161,19 @@ pub fn estimate_normals(cloud: &PointCloud, cfg: &NormalConfig) -> Result<Normal
         }
         o => o,
     };
-    let index = Neighbours::new(&cloud.points);
     let radius = cfg.radius.unwrap_or(f64::INFINITY);
-    let pca: Vec<(Vector3<f64>, f64)> = index.par_map_points(
-        || (),
-        |_, i| {
-            let nb = index.knn_within(&cloud.points[i], cfg.k, radius);
+    // The k nearest within the radius (nearest first, ties to the lowest index), batched.
+    let (grid, halo) = Grid::for_knn(&cloud.points, cfg.k);
+    let pca: Vec<(Vector3<f64>, f64)> =
+        grid.knn_each(&grid, cfg.k, radius, halo.min(radius), |_, nb| {
             if nb.len() < 3 {
                 (Vector3::z(), 0.0)
             } else {
-                pca_normal(&cloud.points, nb.iter().map(|n| n.index))
+                pca_normal(&cloud.points, nb.iter().map(|&(_, j)| j as usize))
             }
-        },
-    );
+        });
     let (mut normals, curvature): (Vec<_>, Vec<_>) = pca.into_iter().unzip();
-    let orientation_note = orient(cloud, &index, &mut normals, orientation, cfg.propagate_k);
+    let orientation_note = orient(cloud, &mut normals, orientation, cfg.propagate_k);
     Ok(NormalEstimate {
         normals,
         curvature,
@@ -186,7 +185,6 @@ pub fn estimate_normals(cloud: &PointCloud, cfg: &NormalConfig) -> Result<Normal
 /// Applies `rule` (never `Auto`) in place; returns the note.
 fn orient(
     cloud: &PointCloud,
-    index: &Neighbours,
     normals: &mut [Vector3<f64>],
     rule: Orientation,
     propagate_k: usize,
@@ -215,7 +213,7 @@ fn orient(
             "agreeing with the input's normals".into()
         }
         Orientation::Propagate => {
-            let components = propagate(p, index, normals, propagate_k);
+            let components = propagate(p, &Neighbours::new(p), normals, propagate_k);
             format!(
                 "propagated over a {propagate_k}-NN graph (minimum spanning tree, cost 1-|n·n'|), \
                  {components} component(s), each seeded with nz >= 0 at its highest point"
