@@ -50,6 +50,9 @@ pub fn first_order(
     min_score: f64,
 ) -> Graph {
     let n = scan.len();
+    // exp(-d²/(2σ²)) >= min_score means d² <= -2σ² ln(min_score): that (widened a hair for
+    // rounding) skips the exponential on the pairs that are cut anyway.
+    let cut_d2 = -2.0 * sigma * sigma * min_score.ln() * (1.0 + 1e-9);
     let mut adj: Vec<Vec<(u32, f32)>> = (0..n)
         .into_par_iter()
         .map(|i| {
@@ -59,6 +62,9 @@ pub fn first_order(
                     continue;
                 }
                 let d = ((scan[i] - scan[j]).norm() - (reference[i] - reference[j]).norm()).abs();
+                if d * d > cut_d2 {
+                    continue;
+                }
                 let s = (-d * d / (2.0 * sigma * sigma)).exp();
                 if s >= min_score {
                     row.push((j as u32, s as f32));
