@@ -109,6 +109,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         "--tolerance must be a non-negative number"
     );
     let start = Instant::now();
+    let mut times = StageTimes::default();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
     let spin = crate::progress::spinner("load");
@@ -120,10 +121,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let reference = load_reference(&args.reference, &args.input, samples)?;
     let scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
     spin.finish_and_clear();
+    times.lap("load");
     // Statistical outlier filter of the scan, then registration (unless the pose is given).
     let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
         .with_context(|| format!("{}", args.scan.display()))?;
     let mut scan = sor.apply(&scan);
+    times.lap("filter");
     let reg_file = args.out.join("registration.json");
     let (pose, inlier_rmse, reg_line) = match &args.pose {
         Some(pose_file) => {
@@ -166,6 +169,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         }
     };
     scan.transform(&pose);
+    times.lap("register");
     let report_summary = vec![
         ("registration".to_string(), reg_line),
         (
@@ -196,8 +200,11 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         }
         None => compare::core_points(&reference, &cfg.core)?,
     };
+    times.lap("core points");
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
+    times.lap("compare");
     let found = regions::find_regions(&dev, &cfg.regions);
+    times.lap("regions");
     let table = compare::to_cloud(&dev, &found.labels);
     cloud::write_csv(&args.out.join("deviations.csv"), &table)?;
     cloud::write_ply(
@@ -209,9 +216,47 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let text = serde_json::to_string_pretty(&found)?;
     let path = args.out.join("regions.json");
     std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+    times.lap("files");
     super::inspect_report::write(&args.out, &dev, &found, report_summary.clone())?;
+    times.lap("report");
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
+    println!("times: {}", times.line());
     Ok(())
+}
+
+/// Wall time per stage of `inspect`, for the closing `times:` line.
+struct StageTimes {
+    last: Instant,
+    laps: Vec<(&'static str, f64)>,
+}
+
+impl Default for StageTimes {
+    fn default() -> Self {
+        StageTimes {
+            last: Instant::now(),
+            laps: Vec::new(),
+        }
+    }
+}
+
+impl StageTimes {
+    /// Ends the stage `name` now.
+    fn lap(&mut self, name: &'static str) {
+        let now = Instant::now();
+        self.laps
+            .push((name, now.duration_since(self.last).as_secs_f64()));
+        self.last = now;
+    }
+
+    /// "load 0.12 s, filter 0.30 s, ...".
+    fn line(&self) -> String {
+        let parts: Vec<String> = self
+            .laps
+            .iter()
+            .map(|(name, s)| format!("{name} {s:.2} s"))
+            .collect();
+        parts.join(", ")
+    }
 }
 
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
