@@ -3,9 +3,10 @@ use anyhow::{bail, Result};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::MergeConfig;
-use crate::cloud::{Neighbours, PointCloud};
+use crate::cloud::PointCloud;
+use crate::compare::grid::Grid;
 use crate::preprocess::{estimate_normals, mean_spacing, NormalConfig, Orientation};
-use crate::register::icp::{fitness, icp, IcpParams};
+use crate::register::icp::{fitness, icp, target_index, IcpParams};
 use crate::register::{register, RegisterConfig};
 
 /// A view the chain could align.
@@ -34,7 +35,7 @@ pub(super) struct Chain {
 pub(super) struct Prepared {
     /// Target points: the view thinned to at most `icp_target_points` (evenly strided).
     target: Vec<Point3<f64>>,
-    tree: Neighbours,
+    index: Grid,
     /// Unoriented PCA normals of `target`.
     normals: Vec<Vector3<f64>>,
     /// Source points (evenly strided, at most `icp_max_points`).
@@ -58,7 +59,7 @@ pub(super) fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> 
     let target_cloud = PointCloud::from_points(target.clone());
     let normals = estimate_normals(&target_cloud, &ncfg)?.normals;
     Ok(Prepared {
-        tree: Neighbours::new(&target),
+        index: target_index(&target),
         target,
         normals,
         sample: strided(&view.points, cfg.icp_max_points),
@@ -95,9 +96,9 @@ fn pair_icp(
             kernel_scale: None,
             min_kernel_scale: 1e-3 * mr,
         };
-        pose = icp(sample, &dst.target, &dst.normals, &dst.tree, &pose, &p).pose;
+        pose = icp(sample, &dst.target, &dst.normals, &dst.index, &pose, &p).pose;
     }
-    let (f, _) = fitness(&src.sample, &dst.tree, &pose, cfg.final_distance * mr);
+    let (f, _) = fitness(&src.sample, &dst.index, &pose, cfg.final_distance * mr);
     (pose, f)
 }
 

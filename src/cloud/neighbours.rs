@@ -220,33 +220,11 @@ impl Neighbours {
     pub fn nearest(&self, q: &Point3<f64>) -> Option<Neighbour> {
         self.knn(q, 1).into_iter().next()
     }
-
-    /// The nearest point to `q` by the tree's own nearest-one search, several times cheaper
-    /// than [`nearest`](Self::nearest): on an exact tie it returns whichever tied point the
-    /// search reaches first (deterministic for given points, but not always the lowest
-    /// index). The distance is recomputed like every other. None when the index is empty.
-    pub fn nearest_one(&self, q: &Point3<f64>) -> Option<Neighbour> {
-        if self.is_empty() {
-            return None;
-        }
-        let q = [q.x, q.y, q.z];
-        let found = self
-            .tree
-            .query(&q)
-            .nearest_one::<SquaredEuclidean<f64>>()
-            .execute();
-        let index = found.item as usize;
-        Some(Neighbour {
-            index,
-            dist2: dist2(&q, &self.points[index]),
-        })
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Vector3;
     use rand::{Rng, SeedableRng};
 
     fn brute(points: &[Point3<f64>], q: &Point3<f64>) -> Vec<Neighbour> {
@@ -282,10 +260,6 @@ mod tests {
             assert_eq!(capped, inside[..inside.len().min(4)].to_vec());
         }
         assert_eq!(index.nearest(&Point3::new(0.1, 0.0, 0.0)).unwrap().index, 0);
-        for q in points.iter().step_by(3) {
-            let q = q + Vector3::new(0.05, -0.02, 0.01);
-            assert_eq!(index.nearest_one(&q), index.nearest(&q));
-        }
         let mut order = index.spatial_order();
         order.sort_unstable();
         assert_eq!(order, (0..points.len()).collect::<Vec<_>>());
@@ -297,7 +271,6 @@ mod tests {
         assert!(empty.knn(&Point3::origin(), 3).is_empty());
         assert!(empty.within(&Point3::origin(), 1.0).is_empty());
         assert!(empty.nearest(&Point3::origin()).is_none());
-        assert!(empty.nearest_one(&Point3::origin()).is_none());
         let two = Neighbours::new(&[Point3::origin(), Point3::new(1.0, 0.0, 0.0)]);
         assert_eq!(two.knn(&Point3::origin(), 5).len(), 2);
     }

@@ -4,7 +4,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::cloud::Neighbours as Tree;
+use crate::compare::grid::Grid;
 
 /// Settings of one ICP run (lengths in mm).
 #[derive(Debug, Clone, Copy)]
@@ -63,22 +63,45 @@ impl Step {
     }
 }
 
+/// The index ICP searches a target surface's points with (a row grid: the searches of all
+/// source points run as one batch).
+pub fn target_index(points: &[Point3<f64>]) -> Grid {
+    Grid::new(points, Grid::provisional_cell(points))
+}
+
+/// The nearest indexed point (index, squared distance) of each source point under `pose`,
+/// when within `max_distance` (inclusive); ties to the lowest index. Also the moved points.
+fn nearest_each(
+    src: &[Point3<f64>],
+    index: &Grid,
+    pose: &Isometry3<f64>,
+    max_distance: f64,
+) -> (Vec<Point3<f64>>, Vec<Option<(usize, f64)>>) {
+    let moved: Vec<Point3<f64>> = src.par_iter().map(|s| pose * s).collect();
+    let queries = Grid::new(&moved, index.cell());
+    let found = index.knn_each(&queries, 1, max_distance, 0.5 * index.cell(), |_, nb| {
+        nb.first().map(|&(d2, j)| (j as usize, d2))
+    });
+    (moved, found)
+}
+
 /// Matches every source point under `pose`: (point in target frame, target index) for pairs
 /// within the distance, with the point-to-plane residual.
 fn residuals(
     src: &[Point3<f64>],
     target: &[Point3<f64>],
     normals: &[Vector3<f64>],
-    tree: &Tree,
+    index: &Grid,
     pose: &Isometry3<f64>,
-    max_d2: f64,
+    max_distance: f64,
 ) -> Vec<(Point3<f64>, usize, f64, f64)> {
-    src.par_iter()
-        .filter_map(|s| {
-            let q = pose * s;
-            let nb = tree.nearest_one(&q)?;
-            let (j, d2) = (nb.index, nb.dist2);
-            (d2 <= max_d2).then(|| (q, j, normals[j].dot(&(q - target[j])), d2))
+    let (moved, found) = nearest_each(src, index, pose, max_distance);
+    moved
+        .iter()
+        .zip(found)
+        .filter_map(|(q, nb)| {
+            let (j, d2) = nb?;
+            Some((*q, j, normals[j].dot(&(q - target[j])), d2))
         })
         .collect()
 }
@@ -87,16 +110,15 @@ fn residuals(
 /// distance of those pairs.
 pub fn fitness(
     src: &[Point3<f64>],
-    tree: &Tree,
+    index: &Grid,
     pose: &Isometry3<f64>,
     distance: f64,
 ) -> (f64, f64) {
-    let d2max = distance * distance;
-    let (n, sum) = src
-        .par_iter()
-        .filter_map(|s| tree.nearest_one(&(pose * s)).filter(|nb| nb.dist2 <= d2max))
-        .map(|nb| (1usize, nb.dist2))
-        .reduce(|| (0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let (_, found) = nearest_each(src, index, pose, distance);
+    let (n, sum) = found
+        .iter()
+        .flatten()
+        .fold((0usize, 0.0), |(n, s), &(_, d2)| (n + 1, s + d2));
     (
         n as f64 / src.len().max(1) as f64,
         (sum / n.max(1) as f64).sqrt(),
@@ -112,18 +134,16 @@ fn median_abs(values: impl Iterator<Item = f64>) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// Aligns `src` to the target surface (points, unit normals, their tree) from `init`. Give
-/// `src` in a spatially coherent order (a scanner's, or [`Tree::spatial_order`]): the
-/// nearest-neighbour searches then reuse the cache.
+/// Aligns `src` to the target surface (points, unit normals, their [`target_index`]) from
+/// `init`.
 pub fn icp(
     src: &[Point3<f64>],
     target: &[Point3<f64>],
     normals: &[Vector3<f64>],
-    tree: &Tree,
+    index: &Grid,
     init: &Isometry3<f64>,
     p: &IcpParams,
 ) -> IcpResult {
-    let max_d2 = p.max_distance * p.max_distance;
     let n = src.len().max(1) as f64;
     let mut pose = *init;
     let mut last: Option<(f64, f64)> = None;
@@ -137,7 +157,7 @@ pub fn icp(
         kernel_scale: 0.0,
     };
     for it in 0..=p.max_iterations {
-        let pairs = residuals(src, target, normals, tree, &pose, max_d2);
+        let pairs = residuals(src, target, normals, index, &pose, p.max_distance);
         let k = p.kernel_scale.unwrap_or_else(|| {
             (3.0 * 1.4826 * median_abs(pairs.iter().map(|e| e.2))).max(p.min_kernel_scale)
         });
@@ -218,7 +238,7 @@ mod tests {
             Point3::from(v * r)
         };
         let target: Vec<Point3<f64>> = (0..40_000).map(|_| sphere(&mut rng)).collect();
-        let tree = Tree::new(&target);
+        let index = target_index(&target);
         let normals = crate::preprocess::estimate_normals(
             &crate::cloud::PointCloud::from_points(target.clone()),
             &crate::preprocess::NormalConfig::default(),
@@ -239,7 +259,7 @@ mod tests {
             &src,
             &target,
             &normals,
-            &tree,
+            &index,
             &Isometry3::identity(),
             &IcpParams {
                 max_distance: 3.0,

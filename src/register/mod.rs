@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::{Neighbours, PointCloud};
+use crate::cloud::PointCloud;
 use crate::preprocess::{
     estimate_normals, mean_spacing, voxel_downsample, NormalConfig, Orientation,
 };
@@ -294,7 +294,7 @@ pub fn register_with_progress(
     let (s_pts, r_pts) = (s_down.points, r_down.points);
     let s_nrm = s_down.normals.unwrap_or_default();
     let r_nrm = r_down.normals.unwrap_or_default();
-    let r_tree = Neighbours::new(&r_pts);
+    let r_index = icp::target_index(&r_pts);
     coarse.resolution = mr;
     coarse.voxel = voxel;
     coarse.normal_radius = normal_radius;
@@ -360,7 +360,7 @@ pub fn register_with_progress(
     };
     let ranked: Vec<IcpResult> = hyps
         .iter()
-        .map(|h| icp::icp(&s_pts, &r_pts, &r_nrm, &r_tree, &h.pose, &short))
+        .map(|h| icp::icp(&s_pts, &r_pts, &r_nrm, &r_index, &h.pose, &short))
         .collect();
     coarse.candidates = hyps
         .iter()
@@ -427,14 +427,8 @@ pub fn register_with_progress(
     progress("fine ICP");
     let t = Instant::now();
     let stride = scan.len().div_ceil(cfg.icp_max_points.max(1));
-    let strided: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
-    // Queries in spatial order reuse the cache (scans may come in any order).
-    let src_fine: Vec<Point3<f64>> = Neighbours::new(&strided)
-        .spatial_order()
-        .into_iter()
-        .map(|i| strided[i])
-        .collect();
-    let ref_tree = Neighbours::new(&reference.points);
+    let src_fine: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
+    let ref_index = icp::target_index(&reference.points);
     let ref_normals: Vec<Vector3<f64>> = match &reference.normals {
         Some(n) => n.clone(),
         None => {
@@ -451,7 +445,7 @@ pub fn register_with_progress(
         &src_fine,
         &reference.points,
         &ref_normals,
-        &ref_tree,
+        &ref_index,
         &ranked[chosen].pose,
         &IcpParams {
             max_distance: fine_max_distance,
@@ -465,7 +459,7 @@ pub fn register_with_progress(
     out.fine_points = src_fine.len();
     out.fine = Some(fine);
     (out.fitness, out.inlier_rmse) =
-        icp::fitness(&src_fine, &ref_tree, &fine.pose, out.fitness_distance);
+        icp::fitness(&src_fine, &ref_index, &fine.pose, out.fitness_distance);
     out.pose = fine.pose;
     out.scan_to_reference = isometry_to_rows(&fine.pose);
     out.times.total = start.elapsed().as_secs_f64();

@@ -65,6 +65,11 @@ fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 }
 
 impl Grid {
+    /// Edge of the rows' square cross-section (mm).
+    pub fn cell(&self) -> f64 {
+        self.cell
+    }
+
     /// A first cell for points of unknown density: about four points per cell if the points
     /// covered the faces of their bounding box.
     pub fn provisional_cell(points: &[Point3<f64>]) -> f64 {
