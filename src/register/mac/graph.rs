@@ -53,14 +53,11 @@ pub fn first_order(
     // exp(-d²/(2σ²)) >= min_score means d² <= -2σ² ln(min_score): that (widened a hair for
     // rounding) skips the exponential on the pairs that are cut anyway.
     let cut_d2 = -2.0 * sigma * sigma * min_score.ln() * (1.0 + 1e-9);
-    let mut adj: Vec<Vec<(u32, f32)>> = (0..n)
+    let upper: Vec<Vec<(u32, f32)>> = (0..n)
         .into_par_iter()
         .map(|i| {
             let mut row = Vec::new();
-            for j in 0..n {
-                if j == i {
-                    continue;
-                }
+            for j in i + 1..n {
                 let d = ((scan[i] - scan[j]).norm() - (reference[i] - reference[j]).norm()).abs();
                 if d * d > cut_d2 {
                     continue;
@@ -73,18 +70,37 @@ pub fn first_order(
             row
         })
         .collect();
-    adj.shrink_to_fit();
-    Graph { adj }
+    Graph { adj: mirror(upper) }
+}
+
+/// Full adjacency lists from the upper triangle (`upper[i]`: neighbours `j > i`, sorted):
+/// the weights of both directions are the same number, so each edge is computed once.
+fn mirror(upper: Vec<Vec<(u32, f32)>>) -> Vec<Vec<(u32, f32)>> {
+    let mut lower: Vec<Vec<(u32, f32)>> = vec![Vec::new(); upper.len()];
+    for (i, row) in upper.iter().enumerate() {
+        for &(j, w) in row {
+            lower[j as usize].push((i as u32, w));
+        }
+    }
+    lower
+        .into_iter()
+        .zip(upper)
+        .map(|(mut row, up)| {
+            row.extend(up);
+            row
+        })
+        .collect()
 }
 
 /// Second-order graph: `W2_ij = W_ij * sum_k W_ik W_kj` over common neighbours `k`; edges
-/// without a common neighbour (W2 = 0) are dropped.
+/// without a common neighbour (W2 = 0) are dropped. Each edge is computed once (i < j).
 pub fn second_order(w: &Graph) -> Graph {
     let adj = (0..w.len())
         .into_par_iter()
         .map(|i| {
             let ri = &w.adj[i];
             ri.iter()
+                .filter(|e| e.0 as usize > i)
                 .filter_map(|&(j, wij)| {
                     let rj = &w.adj[j as usize];
                     let (mut a, mut b, mut s) = (0, 0, 0.0f32);
@@ -104,7 +120,7 @@ pub fn second_order(w: &Graph) -> Graph {
                 .collect()
         })
         .collect();
-    Graph { adj }
+    Graph { adj: mirror(adj) }
 }
 
 #[cfg(test)]
