@@ -107,18 +107,17 @@ pub fn compute_fpfh_at(
             let mut h = [0.0; FPFH_BINS];
             let nb = &neighbours[i];
             if nb.len() > 1 {
-                let mut sum = [0.0; 3];
                 for &(j, d2) in &nb[1..] {
                     if d2 == 0.0 {
                         continue;
                     }
                     let inv = 1.0 / d2;
-                    for (b, hb) in h.iter_mut().enumerate() {
-                        let v = spfh[j][b] * inv;
-                        sum[b / 11] += v;
-                        *hb += v;
+                    for (hb, sb) in h.iter_mut().zip(&spfh[j]) {
+                        *hb += sb * inv;
                     }
                 }
+                // Each 11-bin block's total (Open3D sums it along the way: the same terms).
+                let sum: [f64; 3] = std::array::from_fn(|k| h[11 * k..11 * (k + 1)].iter().sum());
                 let scale = sum.map(|s| if s != 0.0 { 100.0 / s } else { 0.0 });
                 for (b, hb) in h.iter_mut().enumerate() {
                     *hb = *hb * scale[b / 11] + spfh[i][b];
