@@ -157,7 +157,7 @@ struct Score {
     regions: usize,
 }
 
-fn score(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
+fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
     let truth: Vec<f64> = dev
         .points
         .iter()
@@ -167,8 +167,12 @@ fn score(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Sco
     if let Some(dump) = std::env::var_os("POLISHBOT_DUMP") {
         let mut cloud = polishbot::compare::to_cloud(dev, &regions.labels);
         cloud.set_field("truth", truth.clone());
-        let path = format!("{}-{:?}.csv", dump.to_string_lossy(), dev.method);
+        let dump = dump.to_string_lossy();
+        let path = format!("{dump}-{seed}-{:?}.csv", dev.method);
         polishbot::cloud::write_csv(Path::new(&path), &cloud).unwrap();
+        case.truth
+            .save(Path::new(&format!("{dump}-{seed}-truth.json")))
+            .unwrap();
     }
     let is_true: Vec<bool> = truth.iter().map(|t| t.abs() > tol).collect();
     let detected: Vec<bool> = dev
@@ -227,14 +231,23 @@ fn seeds() -> Vec<u64> {
     }
 }
 
+/// Scan points of the accuracy cases (POLISHBOT_SCAN_POINTS, default 300,000); the reference
+/// has 4/3 as many.
+fn scan_points() -> usize {
+    std::env::var("POLISHBOT_SCAN_POINTS").map_or(300_000, |s| s.parse().unwrap())
+}
+
 /// Scores of (adaptive, classic) on the femoral_dm cases, scan aligned by the true pose.
 fn scores() -> Vec<(u64, Score, Score)> {
     let tol = RegionConfig::default().tolerance;
     seeds()
         .into_iter()
         .map(|seed| {
-            let case = aligned_case(seed, 400_000, 300_000);
-            let idx: Vec<usize> = (0..case.reference.len()).step_by(4).collect();
+            let scan_points = scan_points();
+            let case = aligned_case(seed, scan_points / 3 * 4, scan_points);
+            // About 100,000 core points whatever the density.
+            let step = (case.reference.len() / 100_000).max(1);
+            let idx: Vec<usize> = (0..case.reference.len()).step_by(step).collect();
             let core = case.reference.select(&idx);
             let run = |method| {
                 let cfg = CompareConfig {
@@ -243,7 +256,7 @@ fn scores() -> Vec<(u64, Score, Score)> {
                 };
                 let dev = compare(&core, &case.reference, &case.scan, &cfg).unwrap();
                 let regions = find_regions(&dev, &RegionConfig::default());
-                score(&case, &dev, &regions, tol)
+                score(seed, &case, &dev, &regions, tol)
             };
             let (ours, classic) = (run(Method::Adaptive), run(Method::Classic));
             eprintln!("seed {seed} adaptive: {ours:?}");

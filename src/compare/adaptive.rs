@@ -35,6 +35,9 @@ struct Prepared<'a> {
     /// from that point's tangent plane.
     scan_pair: Vec<f64>,
     radii: Vec<f64>,
+    /// Radius around a core point whose reference points [`refine`] evaluates: the larger of
+    /// the smallest radius and the core-point spacing.
+    refine_radius: f64,
     noise: f64,
     cos_limit: f64,
 }
@@ -119,13 +122,68 @@ pub fn run(
         scan_nearest_ref,
         scan_pair,
         radii: radii.to_vec(),
+        refine_radius: radii[0].max(spacing(&core.points)),
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
     };
     let values = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
-        at(&prep, p, n, cfg, s)
+        refine(&prep, at(&prep, p, n, cfg, s), p, n, cfg)
     });
     Ok((values, noise))
+}
+
+/// Sets `dev.peak` of a significant core point beyond `refine_above` to the distance of
+/// largest magnitude, of the same sign, at it and at the reference points (whose normal agrees)
+/// within `refine_radius` around it whose fit describes the surface (residual SD at most
+/// `max_misfit` × noise): a defect narrower than the core spacing has its top between core
+/// points.
+fn refine(
+    prep: &Prepared,
+    mut dev: Deviation,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    cfg: &CompareConfig,
+) -> Deviation {
+    if !(dev.significant && dev.distance.abs() > cfg.adaptive.refine_above) {
+        return dev;
+    }
+    let mut scratch = Scratch::default();
+    let mut near = Vec::new();
+    let c = prep.clouds;
+    c.ref_grid
+        .cylinder(p, n, prep.refine_radius, cfg.max_distance, &mut near);
+    for m in &near {
+        let (x, nx) = (&c.reference.points[m.index], &prep.ref_normals[m.index]);
+        if nx.dot(n) < prep.cos_limit {
+            continue;
+        }
+        let d = at(prep, x, nx, cfg, &mut scratch);
+        if d.significant
+            && d.spread[1] <= cfg.adaptive.max_misfit * prep.noise
+            && d.distance * dev.peak > 0.0
+            && d.distance.abs() > dev.peak.abs()
+        {
+            dev.peak = d.distance;
+        }
+    }
+    dev
+}
+
+/// Core-point spacing: the square root of the median area share π d8² / 8 (d8 the distance to
+/// the 8th nearest core point) over up to 1,000 evenly spread core points (as in regions).
+fn spacing(points: &[Point3<f64>]) -> f64 {
+    if points.len() < 9 {
+        return 0.0;
+    }
+    let index = crate::cloud::Neighbours::new(points);
+    let mut shares: Vec<f64> = points
+        .iter()
+        .step_by((points.len() / 1000).max(1))
+        .filter_map(|p| index.knn(p, 9).last().map(|n| n.dist2))
+        .collect();
+    let mid = shares.len() / 2;
+    let (_, d2, _) = shares.select_nth_unstable_by(mid, f64::total_cmp);
+    (std::f64::consts::PI * *d2 / 8.0).sqrt()
 }
 
 /// Distance of scan point `y` from the tangent plane of reference point `i`, along its normal.
@@ -272,8 +330,13 @@ fn at(
         let d = c.scan.points[m.index] - p;
         [d.dot(&e1), d.dot(&e2), m.t]
     };
+    let mut fit_at = |r: f64| {
+        pairs.clear();
+        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
+        fit(pairs, r, 4.0 * prep.noise, prep.noise)
+    };
     // The fit must keep at least FIT_MIN points after trimming, else the next radius.
-    let (r, n_ref, _, fs) = loop {
+    let (mut r, mut n_ref, _, mut fs) = loop {
         let r = prep.radii[k];
         let (n_ref, n_scan) = (count(refs, r), count(scans, r));
         let last = k + 1 == prep.radii.len();
@@ -283,14 +346,30 @@ fn at(
         if n_scan < min {
             return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
         }
-        pairs.clear();
-        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
-        match fit(pairs, r, 4.0 * prep.noise, prep.noise) {
+        match fit_at(r) {
             Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, n_scan, fs),
             _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
             _ => k += 1,
         }
     };
+    // Then larger radii while the quadric still describes the surface (residual SD within
+    // max_misfit × noise) and every fit's interval t0 ± gamma·se so far intersects
+    // (intersection of confidence intervals).
+    let gamma = a.gamma;
+    if gamma > 0.0 {
+        let (mut lo, mut hi) = (fs.t0 - gamma * fs.se, fs.t0 + gamma * fs.se);
+        for &rk in &prep.radii[k + 1..] {
+            let Some(next) = fit_at(rk).filter(|f| f.sigma <= a.max_misfit * prep.noise) else {
+                break;
+            };
+            lo = lo.max(next.t0 - gamma * next.se);
+            hi = hi.min(next.t0 + gamma * next.se);
+            if lo > hi {
+                break;
+            }
+            (r, n_ref, fs) = (rk, count(refs, rk), next);
+        }
+    }
     let lod = 1.96 * (fs.se + cfg.registration_error);
     Deviation {
         distance: fs.t0,
@@ -301,6 +380,7 @@ fn at(
         n_scan: fs.n,
         direction: Vector3::zeros(),
         spread: [0.0, fs.sigma],
+        peak: f64::NAN,
         reason: Reason::Ok,
     }
     .finish(n)
