@@ -7,8 +7,10 @@
 //! d(X_i, Y) = |δ_i| the one-sided distance from X_i to the scan along X_i's normal (to the
 //! scan point nearest to that normal line among X_i's 8 nearest scan points). The similarity
 //! s(r) = R / R0 compares with a perfect match at the noise level (every d = d0 = σ sqrt(2/π)).
-//! The radius grows through the candidate set while s >= threshold. docs/ALGORITHMS.md has
-//! the details.
+//! The radius grows through the candidate set while s >= threshold, then further while the
+//! quadric fits describe the surface and their confidence intervals intersect (ICI). Error
+//! points also evaluate the reference points around them for the region peaks.
+//! docs/ALGORITHMS.md has the details.
 use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
