@@ -308,7 +308,8 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
 /// At 1.2 million scan points (76 points/mm², spacing 0.115 mm: a 0.64 mm wide bump holds
 /// about 25 points, where it holds 6 at 300,000) the RMS target is met and IoU nearly
 /// (seed 11: 0.93, its 0.07 mm ridge lies within the noise of the tolerance over most of its
-/// area; seed 12: 0.97), and the peaks of defects taller than 0.2 mm are within 10 %.
+/// area; seed 12: 0.97), and the peaks of defects taller than twice the tolerance are within
+/// 10 % (seed 11's 0.07 mm ridge is reported 0.086; seed 12's narrow 0.09 mm pit is missed).
 #[test]
 fn dense_scan_meets_the_rms_target() {
     for (seed, ours, classic) in scores(1_200_000) {
@@ -316,7 +317,7 @@ fn dense_scan_meets_the_rms_target() {
         assert!(ours.iou >= 0.92, "seed {seed}: IoU {}", ours.iou);
         assert!(ours.iou > classic.iou + 0.3, "seed {seed}: IoU vs classic");
         assert_eq!(ours.false_regions, 0, "seed {seed}: false regions");
-        for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.2) {
+        for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.1) {
             let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
             assert!(
                 (peak - h).abs() <= 0.1 * h.abs(),

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use super::fit::{fit, Local};
 use super::grid::Member;
 use super::{AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
-use crate::cloud::PointCloud;
+use crate::cloud::{Neighbours, PointCloud};
 
 /// Fewest scan points a fit may keep before the radius grows.
 const FIT_MIN: usize = 6;
@@ -37,12 +37,19 @@ struct Prepared<'a> {
     /// from that point's tangent plane.
     scan_pair: Vec<f64>,
     radii: Vec<f64>,
-    /// Radius around a core point whose reference points [`refine`] evaluates: the larger of
-    /// the smallest radius and the core-point spacing.
+    /// The core points and their index: [`refine`] evaluates the reference points whose
+    /// nearest core point is the one refined (its Voronoi cell on the reference).
+    core: &'a [Point3<f64>],
+    core_index: Neighbours,
+    /// Radius around a core point that holds its cell: twice the core-point spacing.
     refine_radius: f64,
     noise: f64,
     cos_limit: f64,
 }
+
+/// A refined peak evaluation counts only when its LoD is at most this many times the core
+/// point's own (a fit through a few points at a surface's border is no peak).
+const PEAK_LOD_RATIO: f64 = 2.0;
 
 /// No reference point within a cylinder's reach (see [`Prepared::scan_nearest_ref`]).
 const FAR: u32 = u32::MAX;
@@ -117,6 +124,7 @@ pub fn run(
             [w, w * d.abs()]
         })
         .collect();
+    let core_index = Neighbours::new(&core.points);
     let prep = Prepared {
         clouds,
         ref_normals,
@@ -124,7 +132,9 @@ pub fn run(
         scan_nearest_ref,
         scan_pair,
         radii: radii.to_vec(),
-        refine_radius: radii[0].max(spacing(&core.points)),
+        refine_radius: 2.0 * spacing(&core_index, &core.points),
+        core: &core.points,
+        core_index,
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
     };
@@ -135,10 +145,10 @@ pub fn run(
 }
 
 /// Sets `dev.peak` of a significant core point beyond `refine_above` to the distance of
-/// largest magnitude, of the same sign, at it and at the reference points (whose normal agrees)
-/// within `refine_radius` around it whose fit describes the surface (residual SD at most
-/// `max_misfit` × noise): a defect narrower than the core spacing has its top between core
-/// points.
+/// largest magnitude, of the same sign, at it and at the reference points of its cell (nearest
+/// to it among the core points; normal within `max_normal_angle`) whose fit describes the
+/// surface (residual SD at most `max_misfit` × noise): a defect narrower than the core spacing
+/// has its top between core points.
 fn refine(
     prep: &Prepared,
     mut dev: Deviation,
@@ -156,12 +166,18 @@ fn refine(
         .cylinder(p, n, prep.refine_radius, cfg.max_distance, &mut near);
     for m in &near {
         let (x, nx) = (&c.reference.points[m.index], &prep.ref_normals[m.index]);
-        if nx.dot(n) < prep.cos_limit {
+        let own_cell = prep
+            .core_index
+            .knn(x, 1)
+            .first()
+            .is_some_and(|c| prep.core[c.index] == *p);
+        if nx.dot(n) < prep.cos_limit || !own_cell {
             continue;
         }
         let d = at(prep, x, nx, cfg, &mut scratch);
         if d.significant
             && d.spread[1] <= cfg.adaptive.max_misfit * prep.noise
+            && d.uncertainty <= PEAK_LOD_RATIO * dev.uncertainty
             && d.distance * dev.peak > 0.0
             && d.distance.abs() > dev.peak.abs()
         {
@@ -173,11 +189,10 @@ fn refine(
 
 /// Core-point spacing: the square root of the median area share π d8² / 8 (d8 the distance to
 /// the 8th nearest core point) over up to 1,000 evenly spread core points (as in regions).
-fn spacing(points: &[Point3<f64>]) -> f64 {
+fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
     if points.len() < 9 {
         return 0.0;
     }
-    let index = crate::cloud::Neighbours::new(points);
     let mut shares: Vec<f64> = points
         .iter()
         .step_by((points.len() / 1000).max(1))
