@@ -157,7 +157,7 @@ struct Score {
     regions: usize,
 }
 
-fn score(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
+fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
     let truth: Vec<f64> = dev
         .points
         .iter()
@@ -167,8 +167,12 @@ fn score(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Sco
     if let Some(dump) = std::env::var_os("POLISHBOT_DUMP") {
         let mut cloud = polishbot::compare::to_cloud(dev, &regions.labels);
         cloud.set_field("truth", truth.clone());
-        let path = format!("{}-{:?}.csv", dump.to_string_lossy(), dev.method);
+        let dump = dump.to_string_lossy();
+        let path = format!("{dump}-{seed}-{:?}.csv", dev.method);
         polishbot::cloud::write_csv(Path::new(&path), &cloud).unwrap();
+        case.truth
+            .save(Path::new(&format!("{dump}-{seed}-truth.json")))
+            .unwrap();
     }
     let is_true: Vec<bool> = truth.iter().map(|t| t.abs() > tol).collect();
     let detected: Vec<bool> = dev
@@ -227,14 +231,24 @@ fn seeds() -> Vec<u64> {
     }
 }
 
-/// Scores of (adaptive, classic) on the femoral_dm cases, scan aligned by the true pose.
-fn scores() -> Vec<(u64, Score, Score)> {
+/// Scan points of the accuracy cases: POLISHBOT_SCAN_POINTS, else `default`; the reference
+/// has 4/3 as many.
+fn scan_points(default: usize) -> usize {
+    std::env::var("POLISHBOT_SCAN_POINTS").map_or(default, |s| s.parse().unwrap())
+}
+
+/// Scores of (adaptive, classic) on the femoral_dm cases, scan aligned by the true pose, with
+/// `default_scan_points` scan points unless POLISHBOT_SCAN_POINTS says otherwise.
+fn scores(default_scan_points: usize) -> Vec<(u64, Score, Score)> {
     let tol = RegionConfig::default().tolerance;
     seeds()
         .into_iter()
         .map(|seed| {
-            let case = aligned_case(seed, 400_000, 300_000);
-            let idx: Vec<usize> = (0..case.reference.len()).step_by(4).collect();
+            let scan_points = scan_points(default_scan_points);
+            let case = aligned_case(seed, scan_points / 3 * 4, scan_points);
+            // About 100,000 core points whatever the density.
+            let step = (case.reference.len() / 100_000).max(1);
+            let idx: Vec<usize> = (0..case.reference.len()).step_by(step).collect();
             let core = case.reference.select(&idx);
             let run = |method| {
                 let cfg = CompareConfig {
@@ -243,7 +257,7 @@ fn scores() -> Vec<(u64, Score, Score)> {
                 };
                 let dev = compare(&core, &case.reference, &case.scan, &cfg).unwrap();
                 let regions = find_regions(&dev, &RegionConfig::default());
-                score(&case, &dev, &regions, tol)
+                score(seed, &case, &dev, &regions, tol)
             };
             let (ours, classic) = (run(Method::Adaptive), run(Method::Classic));
             eprintln!("seed {seed} adaptive: {ours:?}");
@@ -253,13 +267,15 @@ fn scores() -> Vec<(u64, Score, Score)> {
         .collect()
 }
 
-/// What the adaptive method reaches today (a regression floor, below issue 5's targets; see
-/// `acceptance_targets`): it beats classic on IoU and RMS, raises no region that truth does
-/// not have (classic raises dozens along the box-cut edges) and finds every defect taller
-/// than twice the tolerance (seed 12 has a narrow 0.09 mm pit that both methods miss).
+/// What the adaptive method reaches at 300,000 scan points (19 points/mm², spacing 0.23 mm;
+/// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.89 / 0.92,
+/// RMS 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
+/// that truth does not have (classic raises dozens along the box-cut edges) and finds every
+/// defect taller than twice the tolerance (seed 12 has a narrow 0.09 mm pit that both methods
+/// miss).
 #[test]
 fn adaptive_finds_the_planted_defects_and_beats_classic() {
-    for (seed, ours, classic) in scores() {
+    for (seed, ours, classic) in scores(300_000) {
         assert!(
             ours.iou > classic.iou + 0.3,
             "seed {seed}: adaptive must beat classic on IoU"
@@ -268,8 +284,8 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             ours.rms < classic.rms,
             "seed {seed}: adaptive must beat classic on RMS"
         );
-        assert!(ours.iou >= 0.75, "seed {seed}: IoU {}", ours.iou);
-        assert!(ours.rms <= 0.02, "seed {seed}: RMS {}", ours.rms);
+        assert!(ours.iou >= 0.85, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.rms <= 0.014, "seed {seed}: RMS {}", ours.rms);
         assert_eq!(
             ours.false_regions, 0,
             "seed {seed}: regions truth does not have"
@@ -289,13 +305,37 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
     }
 }
 
+/// At 1.2 million scan points (76 points/mm², spacing 0.115 mm: a 0.64 mm wide bump holds
+/// about 25 points, where it holds 6 at 300,000) the RMS target is met and IoU nearly
+/// (seed 11: 0.93, its 0.07 mm ridge lies within the noise of the tolerance over most of its
+/// area; seed 12: 0.97), and the peaks of defects taller than twice the tolerance are within
+/// 10 % (seed 11's 0.07 mm ridge is reported 0.086; seed 12's narrow 0.09 mm pit is missed).
+#[test]
+fn dense_scan_meets_the_rms_target() {
+    for (seed, ours, classic) in scores(1_200_000) {
+        assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
+        assert!(ours.iou >= 0.92, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.iou > classic.iou + 0.3, "seed {seed}: IoU vs classic");
+        assert_eq!(ours.false_regions, 0, "seed {seed}: false regions");
+        for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.1) {
+            let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
+            assert!(
+                (peak - h).abs() <= 0.1 * h.abs(),
+                "seed {seed}: peak {peak} for height {h}"
+            );
+        }
+    }
+}
+
 /// Issue 5's acceptance targets (IoU >= 0.95, RMS <= 0.01 mm, every peak within 10 %): not
-/// reached yet (narrow defects: a 0.4-1 mm wide bump holds 2-15 scan points at 19 points/mm²,
-/// and the quadric at the smallest radius flattens its peak). Run with --ignored.
+/// reached at 300,000 scan points (a 0.4-1 mm wide bump holds 2-15 scan points at
+/// 19 points/mm², and the smallest radius that holds a quadric's worth of points flattens its
+/// peak), nor in full at 1.2 million (POLISHBOT_SCAN_POINTS=1200000: IoU 0.93 on seed 11, a
+/// few low defects' peaks off by more than 10 %; docs/ALGORITHMS.md). Run with --ignored.
 #[test]
 #[ignore]
 fn acceptance_targets() {
-    for (seed, ours, _) in scores() {
+    for (seed, ours, _) in scores(300_000) {
         assert!(ours.iou >= 0.95, "seed {seed}: IoU {}", ours.iou);
         assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
         for (h, peak) in &ours.peaks {

@@ -108,6 +108,8 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         cfg.regions.tolerance.is_finite() && cfg.regions.tolerance >= 0.0,
         "--tolerance must be a non-negative number"
     );
+    // Region peaks are refined around the points that can become error points.
+    cfg.compare.adaptive.refine_above = cfg.regions.tolerance;
     let start = Instant::now();
     let mut times = StageTimes::default();
     std::fs::create_dir_all(&args.out)

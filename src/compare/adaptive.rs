@@ -7,8 +7,10 @@
 //! d(X_i, Y) = |δ_i| the one-sided distance from X_i to the scan along X_i's normal (to the
 //! scan point nearest to that normal line among X_i's 8 nearest scan points). The similarity
 //! s(r) = R / R0 compares with a perfect match at the noise level (every d = d0 = σ sqrt(2/π)).
-//! The radius grows through the candidate set while s >= threshold. docs/ALGORITHMS.md has
-//! the details.
+//! The radius grows through the candidate set while s >= threshold, then further while the
+//! quadric fits describe the surface and their confidence intervals intersect (ICI). Error
+//! points also evaluate the reference points around them for the region peaks.
+//! docs/ALGORITHMS.md has the details.
 use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -16,7 +18,7 @@ use rayon::prelude::*;
 use super::fit::{fit, Local};
 use super::grid::Member;
 use super::{AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
-use crate::cloud::PointCloud;
+use crate::cloud::{Neighbours, PointCloud};
 
 /// Fewest scan points a fit may keep before the radius grows.
 const FIT_MIN: usize = 6;
@@ -35,9 +37,19 @@ struct Prepared<'a> {
     /// from that point's tangent plane.
     scan_pair: Vec<f64>,
     radii: Vec<f64>,
+    /// The core points and their index: [`refine`] evaluates the reference points whose
+    /// nearest core point is the one refined (its Voronoi cell on the reference).
+    core: &'a [Point3<f64>],
+    core_index: Neighbours,
+    /// Radius around a core point that holds its cell: twice the core-point spacing.
+    refine_radius: f64,
     noise: f64,
     cos_limit: f64,
 }
+
+/// A refined peak evaluation counts only when its LoD is at most this many times the core
+/// point's own (a fit through a few points at a surface's border is no peak).
+const PEAK_LOD_RATIO: f64 = 2.0;
 
 /// No reference point within a cylinder's reach (see [`Prepared::scan_nearest_ref`]).
 const FAR: u32 = u32::MAX;
@@ -112,6 +124,7 @@ pub fn run(
             [w, w * d.abs()]
         })
         .collect();
+    let core_index = Neighbours::new(&core.points);
     let prep = Prepared {
         clouds,
         ref_normals,
@@ -119,13 +132,75 @@ pub fn run(
         scan_nearest_ref,
         scan_pair,
         radii: radii.to_vec(),
+        refine_radius: 2.0 * spacing(&core_index, &core.points),
+        core: &core.points,
+        core_index,
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
     };
     let values = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
-        at(&prep, p, n, cfg, s)
+        refine(&prep, at(&prep, p, n, cfg, s), p, n, cfg)
     });
     Ok((values, noise))
+}
+
+/// Sets `dev.peak` of a significant core point beyond `refine_above` to the distance of
+/// largest magnitude, of the same sign, at it and at the reference points of its cell (nearest
+/// to it among the core points; normal within `max_normal_angle`) whose fit describes the
+/// surface (residual SD at most `max_misfit` × noise): a defect narrower than the core spacing
+/// has its top between core points.
+fn refine(
+    prep: &Prepared,
+    mut dev: Deviation,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    cfg: &CompareConfig,
+) -> Deviation {
+    if !(dev.significant && dev.distance.abs() > cfg.adaptive.refine_above) {
+        return dev;
+    }
+    let mut scratch = Scratch::default();
+    let mut near = Vec::new();
+    let c = prep.clouds;
+    c.ref_grid
+        .cylinder(p, n, prep.refine_radius, cfg.max_distance, &mut near);
+    for m in &near {
+        let (x, nx) = (&c.reference.points[m.index], &prep.ref_normals[m.index]);
+        let own_cell = prep
+            .core_index
+            .knn(x, 1)
+            .first()
+            .is_some_and(|c| prep.core[c.index] == *p);
+        if nx.dot(n) < prep.cos_limit || !own_cell {
+            continue;
+        }
+        let d = at(prep, x, nx, cfg, &mut scratch);
+        if d.significant
+            && d.spread[1] <= cfg.adaptive.max_misfit * prep.noise
+            && d.uncertainty <= PEAK_LOD_RATIO * dev.uncertainty
+            && d.distance * dev.peak > 0.0
+            && d.distance.abs() > dev.peak.abs()
+        {
+            dev.peak = d.distance;
+        }
+    }
+    dev
+}
+
+/// Core-point spacing: the square root of the median area share π d8² / 8 (d8 the distance to
+/// the 8th nearest core point) over up to 1,000 evenly spread core points (as in regions).
+fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
+    if points.len() < 9 {
+        return 0.0;
+    }
+    let mut shares: Vec<f64> = points
+        .iter()
+        .step_by((points.len() / 1000).max(1))
+        .filter_map(|p| index.knn(p, 9).last().map(|n| n.dist2))
+        .collect();
+    let mid = shares.len() / 2;
+    let (_, d2, _) = shares.select_nth_unstable_by(mid, f64::total_cmp);
+    (std::f64::consts::PI * *d2 / 8.0).sqrt()
 }
 
 /// Distance of scan point `y` from the tangent plane of reference point `i`, along its normal.
@@ -272,8 +347,13 @@ fn at(
         let d = c.scan.points[m.index] - p;
         [d.dot(&e1), d.dot(&e2), m.t]
     };
+    let mut fit_at = |r: f64| {
+        pairs.clear();
+        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
+        fit(pairs, r, 4.0 * prep.noise, prep.noise)
+    };
     // The fit must keep at least FIT_MIN points after trimming, else the next radius.
-    let (r, n_ref, _, fs) = loop {
+    let (mut r, mut n_ref, _, mut fs) = loop {
         let r = prep.radii[k];
         let (n_ref, n_scan) = (count(refs, r), count(scans, r));
         let last = k + 1 == prep.radii.len();
@@ -283,14 +363,30 @@ fn at(
         if n_scan < min {
             return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
         }
-        pairs.clear();
-        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
-        match fit(pairs, r, 4.0 * prep.noise, prep.noise) {
+        match fit_at(r) {
             Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, n_scan, fs),
             _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
             _ => k += 1,
         }
     };
+    // Then larger radii while the quadric still describes the surface (residual SD within
+    // max_misfit × noise) and every fit's interval t0 ± gamma·se so far intersects
+    // (intersection of confidence intervals).
+    let gamma = a.gamma;
+    if gamma > 0.0 {
+        let (mut lo, mut hi) = (fs.t0 - gamma * fs.se, fs.t0 + gamma * fs.se);
+        for &rk in &prep.radii[k + 1..] {
+            let Some(next) = fit_at(rk).filter(|f| f.sigma <= a.max_misfit * prep.noise) else {
+                break;
+            };
+            lo = lo.max(next.t0 - gamma * next.se);
+            hi = hi.min(next.t0 + gamma * next.se);
+            if lo > hi {
+                break;
+            }
+            (r, n_ref, fs) = (rk, count(refs, rk), next);
+        }
+    }
     let lod = 1.96 * (fs.se + cfg.registration_error);
     Deviation {
         distance: fs.t0,
@@ -301,6 +397,7 @@ fn at(
         n_scan: fs.n,
         direction: Vector3::zeros(),
         spread: [0.0, fs.sigma],
+        peak: f64::NAN,
         reason: Reason::Ok,
     }
     .finish(n)

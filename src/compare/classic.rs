@@ -52,6 +52,7 @@ pub fn at(
         n_scan: n2,
         direction: Vector3::zeros(),
         spread: [v1.sqrt(), v2.sqrt()],
+        peak: f64::NAN,
         reason: Reason::Ok,
     }
     .finish(n)

@@ -86,6 +86,18 @@ pub struct AdaptiveConfig {
     /// Scan noise (one standard deviation along the normal), mm (default: none = estimated
     /// from the data).
     pub noise: Option<f64>,
+    /// Beyond the RWME radius the radius keeps growing while the fits' confidence intervals
+    /// t_k ± gamma·se_k all intersect (intersection of confidence intervals); 0 turns this
+    /// off (default 2.0).
+    pub gamma: f64,
+    /// A fit whose residual standard deviation exceeds this many times the noise does not
+    /// describe the surface at its radius (the quadric flattens a narrow peak): the radius
+    /// stops growing before it, and it does not count for a peak (default 1.3).
+    pub max_misfit: f64,
+    /// Significant core points with |distance| above this (mm) get their `peak` from the
+    /// reference points around them (default 0.05, the default tolerance; `inspect` sets the
+    /// tolerance; infinity turns it off).
+    pub refine_above: f64,
 }
 
 impl Default for AdaptiveConfig {
@@ -97,6 +109,9 @@ impl Default for AdaptiveConfig {
             similarity: 0.5,
             max_normal_angle: 35.0,
             noise: None,
+            gamma: 2.0,
+            max_misfit: 1.3,
+            refine_above: 0.05,
         }
     }
 }
@@ -145,6 +160,11 @@ pub struct Deviation {
     pub direction: Vector3<f64>,
     /// Spread (standard deviation along the normal) of the reference and scan points, mm.
     pub spread: [f64; 2],
+    /// Signed distance of largest magnitude around this core point, mm: the adaptive variant
+    /// also evaluates the reference points within the smallest radius of a core point whose
+    /// |distance| exceeds `adaptive.refine_above` (defect peaks fall between core points);
+    /// otherwise equal to `distance`.
+    pub peak: f64,
     /// Why the distance is NaN, if it is.
     pub reason: Reason,
 }
@@ -161,6 +181,7 @@ impl Deviation {
             n_scan,
             direction: Vector3::zeros(),
             spread: [f64::NAN; 2],
+            peak: f64::NAN,
             reason,
         }
     }
@@ -168,6 +189,7 @@ impl Deviation {
     /// Fills `significant` and `direction` from `distance` and `uncertainty`.
     fn finish(mut self, normal: &Vector3<f64>) -> Deviation {
         self.significant = self.distance.abs() > self.uncertainty;
+        self.peak = self.distance;
         if self.distance != 0.0 && self.distance.is_finite() {
             self.direction = normal * self.distance.signum();
         }

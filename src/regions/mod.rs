@@ -189,7 +189,7 @@ fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) 
     let d = |i: usize| dev.values[i].distance;
     let peak = members
         .iter()
-        .map(|&i| d(i))
+        .map(|&i| dev.values[i].peak)
         .max_by(|a, b| a.abs().total_cmp(&b.abs()))
         .unwrap_or(0.0);
     Region {
