@@ -69,6 +69,9 @@ pub fn target_index(points: &[Point3<f64>]) -> Grid {
     Grid::new(points, Grid::provisional_cell(points))
 }
 
+/// A moved source point's nearest target point (index, squared distance), if within reach.
+type Nearest = Option<(usize, f64)>;
+
 /// The nearest indexed point (index, squared distance) of each source point under `pose`,
 /// when within `max_distance` (inclusive); ties to the lowest index. Also the moved points.
 fn nearest_each(
@@ -76,7 +79,7 @@ fn nearest_each(
     index: &Grid,
     pose: &Isometry3<f64>,
     max_distance: f64,
-) -> (Vec<Point3<f64>>, Vec<Option<(usize, f64)>>) {
+) -> (Vec<Point3<f64>>, Vec<Nearest>) {
     let moved: Vec<Point3<f64>> = src.par_iter().map(|s| pose * s).collect();
     let queries = Grid::new(&moved, index.cell());
     let found = index.knn_each(&queries, 1, max_distance, 0.5 * index.cell(), |_, nb| {
