@@ -6,7 +6,7 @@ use super::MergeConfig;
 use crate::cloud::PointCloud;
 use crate::compare::grid::Grid;
 use crate::preprocess::{estimate_normals, mean_spacing, NormalConfig, Orientation};
-use crate::register::icp::{fitness, icp, target_index, IcpParams};
+use crate::register::icp::{fitness, icp, IcpParams};
 use crate::register::{register, RegisterConfig};
 
 /// A view the chain could align.
@@ -59,7 +59,7 @@ pub(super) fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> 
     let target_cloud = PointCloud::from_points(target.clone());
     let normals = estimate_normals(&target_cloud, &ncfg)?.normals;
     Ok(Prepared {
-        index: target_index(&target),
+        index: Grid::for_points(&target),
         target,
         normals,
         sample: strided(&view.points, cfg.icp_max_points),

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use super::fit::{fit, Local};
 use super::grid::Member;
-use super::{AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
+use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
 use crate::cloud::{Neighbours, PointCloud};
 
 /// Fewest scan points a fit may keep before the radius grows.
@@ -187,8 +187,8 @@ fn refine(
     dev
 }
 
-/// Core-point spacing: the square root of the median area share π d8² / 8 (d8 the distance to
-/// the 8th nearest core point) over up to 1,000 evenly spread core points (as in regions).
+/// Core-point spacing: the square root of the median [`area_share`] over up to 1,000 evenly
+/// spread core points (regions take it over all of them).
 fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
     if points.len() < 9 {
         return 0.0;
@@ -196,11 +196,10 @@ fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
     let mut shares: Vec<f64> = points
         .iter()
         .step_by((points.len() / 1000).max(1))
-        .filter_map(|p| index.knn(p, 9).last().map(|n| n.dist2))
+        .filter_map(|p| area_share(index, p))
         .collect();
     let mid = shares.len() / 2;
-    let (_, d2, _) = shares.select_nth_unstable_by(mid, f64::total_cmp);
-    (std::f64::consts::PI * *d2 / 8.0).sqrt()
+    shares.select_nth_unstable_by(mid, f64::total_cmp).1.sqrt()
 }
 
 /// Distance of scan point `y` from the tangent plane of reference point `i`, along its normal.

@@ -9,7 +9,9 @@ use rand::seq::index::sample;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::{sample_mesh, Mesh, PointCloud};
+use nalgebra::Point3;
+
+use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
 
 /// Which reference points become core points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -72,4 +74,15 @@ pub fn core_points(reference: &PointCloud, cfg: &CoreConfig) -> Result<PointClou
     let mut chosen = sample(&mut rng, reference.len(), cfg.count).into_vec();
     chosen.sort_unstable();
     Ok(reference.select(&chosen))
+}
+
+/// Area share of the core point `p` among the core points `index` holds: π r9² / 8, r9 the
+/// distance to its 8th neighbour (the point itself is the first of the 9); None when the
+/// index holds no point. Regions weigh points by it, and its median's square root is the
+/// core-point spacing.
+pub fn area_share(index: &Neighbours, p: &Point3<f64>) -> Option<f64> {
+    index
+        .knn(p, 9)
+        .last()
+        .map(|n| std::f64::consts::PI * n.dist2 / 8.0)
 }

@@ -15,7 +15,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use self::core::{core_points, mesh_reference, CoreConfig, CoreSelection};
+pub use self::core::{area_share, core_points, mesh_reference, CoreConfig, CoreSelection};
 use self::grid::Grid;
 use crate::cloud::PointCloud;
 
@@ -246,7 +246,7 @@ pub fn compare(
     );
     // The scan's density sets the default radii; the grids' cell is the smallest radius.
     let radius_for = |count: f64| {
-        let grid = Grid::new(&scan.points, Grid::provisional_cell(&scan.points));
+        let grid = Grid::for_points(&scan.points);
         (count / (std::f64::consts::PI * scan_density(&grid, scan))).sqrt()
     };
     let (classic_radius, adaptive_radii) = match cfg.method {

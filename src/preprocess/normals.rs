@@ -163,15 +163,13 @@ pub fn estimate_normals(cloud: &PointCloud, cfg: &NormalConfig) -> Result<Normal
     };
     let radius = cfg.radius.unwrap_or(f64::INFINITY);
     // The k nearest within the radius (nearest first, ties to the lowest index), batched.
-    let (grid, halo) = Grid::for_knn(&cloud.points, cfg.k);
-    let pca: Vec<(Vector3<f64>, f64)> =
-        grid.knn_each(&grid, cfg.k, radius, halo.min(radius), |_, nb| {
-            if nb.len() < 3 {
-                (Vector3::z(), 0.0)
-            } else {
-                pca_normal(&cloud.points, nb.iter().map(|&(_, j)| j as usize))
-            }
-        });
+    let pca: Vec<(Vector3<f64>, f64)> = Grid::knn_among(&cloud.points, cfg.k, radius, |_, nb| {
+        if nb.len() < 3 {
+            (Vector3::z(), 0.0)
+        } else {
+            pca_normal(&cloud.points, nb.iter().map(|&(_, j)| j as usize))
+        }
+    });
     let (mut normals, curvature): (Vec<_>, Vec<_>) = pca.into_iter().unzip();
     let orientation_note = orient(cloud, &mut normals, orientation, cfg.propagate_k);
     Ok(NormalEstimate {

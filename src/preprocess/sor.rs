@@ -84,8 +84,7 @@ pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
 pub fn mean_distances(cloud: &PointCloud, k: usize, count_self: bool) -> Vec<f64> {
     let query = if count_self { k } else { k + 1 };
     let skip = usize::from(!count_self);
-    let (grid, halo) = Grid::for_knn(&cloud.points, query);
-    grid.knn_each(&grid, query, f64::INFINITY, halo, |_, found| {
+    Grid::knn_among(&cloud.points, query, f64::INFINITY, |_, found| {
         // Ascending order, summed first to last, as Open3D does (bit-exact means).
         let sum = found[skip..].iter().fold(0.0, |s, e| s + e.0.sqrt());
         sum / (found.len() - skip) as f64

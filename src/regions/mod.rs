@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::Neighbours;
-use crate::compare::Deviations;
+use crate::compare::{area_share, Deviations};
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -105,12 +105,7 @@ fn shares(points: &[Point3<f64>]) -> (Vec<f64>, f64) {
     let index = Neighbours::new(points);
     let share: Vec<f64> = points
         .par_iter()
-        .map(|p| {
-            index
-                .knn(p, 9)
-                .last()
-                .map_or(0.0, |n| std::f64::consts::PI * n.dist2 / 8.0)
-        })
+        .map(|p| area_share(&index, p).unwrap_or(0.0))
         .collect();
     let mut sorted: Vec<f64> = share.iter().copied().filter(|a| *a > 0.0).collect();
     sorted.sort_by(f64::total_cmp);

@@ -79,11 +79,9 @@ pub fn compute_fpfh_at(
 ) -> Vec<Fpfh> {
     // Open3D's hybrid search: the max_nn nearest within the radius, nearest first, ties to
     // the lowest index (the point itself comes first, at distance 0), batched on a grid.
-    let (grid, halo) = Grid::for_knn(points, max_nn);
-    let neighbours: Vec<Vec<(usize, f64)>> =
-        grid.knn_each(&grid, max_nn, radius, halo.min(radius), |_, found| {
-            found.iter().map(|&(d2, j)| (j as usize, d2)).collect()
-        });
+    let neighbours: Vec<Vec<(usize, f64)>> = Grid::knn_among(points, max_nn, radius, |_, found| {
+        found.iter().map(|&(d2, j)| (j as usize, d2)).collect()
+    });
     let spfh: Vec<Fpfh> = (0..points.len())
         .into_par_iter()
         .map(|i| {

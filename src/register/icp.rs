@@ -63,12 +63,6 @@ impl Step {
     }
 }
 
-/// The index ICP searches a target surface's points with (a row grid: the searches of all
-/// source points run as one batch).
-pub fn target_index(points: &[Point3<f64>]) -> Grid {
-    Grid::new(points, Grid::provisional_cell(points))
-}
-
 /// A moved source point's nearest target point (index, squared distance), if within reach.
 type Nearest = Option<(usize, f64)>;
 
@@ -137,8 +131,8 @@ fn median_abs(values: impl Iterator<Item = f64>) -> f64 {
     *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
-/// Aligns `src` to the target surface (points, unit normals, their [`target_index`]) from
-/// `init`.
+/// Aligns `src` to the target surface (points, unit normals, their row grid
+/// [`Grid::for_points`]: the searches of all source points run as one batch) from `init`.
 pub fn icp(
     src: &[Point3<f64>],
     target: &[Point3<f64>],
@@ -241,7 +235,7 @@ mod tests {
             Point3::from(v * r)
         };
         let target: Vec<Point3<f64>> = (0..40_000).map(|_| sphere(&mut rng)).collect();
-        let index = target_index(&target);
+        let index = Grid::for_points(&target);
         let normals = crate::preprocess::estimate_normals(
             &crate::cloud::PointCloud::from_points(target.clone()),
             &crate::preprocess::NormalConfig::default(),

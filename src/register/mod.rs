@@ -21,6 +21,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::PointCloud;
+use crate::compare::grid::Grid;
 use crate::preprocess::{
     estimate_normals, mean_spacing, voxel_downsample, NormalConfig, Orientation,
 };
@@ -294,7 +295,7 @@ pub fn register_with_progress(
     let (s_pts, r_pts) = (s_down.points, r_down.points);
     let s_nrm = s_down.normals.unwrap_or_default();
     let r_nrm = r_down.normals.unwrap_or_default();
-    let r_index = icp::target_index(&r_pts);
+    let r_index = Grid::for_points(&r_pts);
     coarse.resolution = mr;
     coarse.voxel = voxel;
     coarse.normal_radius = normal_radius;
@@ -428,7 +429,7 @@ pub fn register_with_progress(
     let t = Instant::now();
     let stride = scan.len().div_ceil(cfg.icp_max_points.max(1));
     let src_fine: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
-    let ref_index = icp::target_index(&reference.points);
+    let ref_index = Grid::for_points(&reference.points);
     let ref_normals: Vec<Vector3<f64>> = match &reference.normals {
         Some(n) => n.clone(),
         None => {

@@ -241,11 +241,24 @@ fn settle(
 }
 
 impl Grid {
+    /// `f(point, neighbours)` for every point of `points`, where `neighbours` are its `k`
+    /// nearest among `points` within `max_radius` (inclusive; infinity for no limit), as
+    /// [`Grid::knn_each`] gives them (the point itself included, nearest first, ties to the
+    /// lowest index); results in the order of `points`.
+    pub fn knn_among<R, F>(points: &[Point3<f64>], k: usize, max_radius: f64, f: F) -> Vec<R>
+    where
+        R: Send,
+        F: Fn(usize, &[(f64, u32)]) -> R + Sync,
+    {
+        let (grid, halo) = Grid::for_knn(points, k);
+        grid.knn_each(&grid, k, max_radius, halo.min(max_radius), f)
+    }
+
     /// A grid over `points` for their own `k`-nearest-neighbour queries, and the halo to give
     /// [`Grid::knn_each`]: both follow the k-th neighbour distance (only the speed depends on
     /// them).
-    pub fn for_knn(points: &[Point3<f64>], k: usize) -> (Grid, f64) {
-        let grid = Grid::new(points, Grid::provisional_cell(points));
+    fn for_knn(points: &[Point3<f64>], k: usize) -> (Grid, f64) {
+        let grid = Grid::for_points(points);
         let typical = grid.typical_kth(points, k);
         if !(typical > 0.0 && typical.is_finite()) {
             let cell = grid.cell;

@@ -70,6 +70,11 @@ impl Grid {
         self.cell
     }
 
+    /// A grid over `points` with the [`provisional_cell`](Self::provisional_cell).
+    pub fn for_points(points: &[Point3<f64>]) -> Grid {
+        Grid::new(points, Grid::provisional_cell(points))
+    }
+
     /// A first cell for points of unknown density: about four points per cell if the points
     /// covered the faces of their bounding box.
     pub fn provisional_cell(points: &[Point3<f64>]) -> f64 {
