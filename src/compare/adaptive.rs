@@ -15,8 +15,7 @@ use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::fit::{fit, Local};
-use super::grid::Member;
+use super::fit::{fit, FitScratch, Local};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
 use crate::cloud::{Neighbours, PointCloud};
 
@@ -27,16 +26,18 @@ const FIT_MIN: usize = 6;
 struct Prepared<'a> {
     clouds: &'a Clouds<'a>,
     ref_normals: &'a [Vector3<f64>],
-    /// Signed one-sided distance from each reference point to the scan along its normal.
-    /// RWME terms of each reference point: w = exp(-|δ|/h) and w·|δ| (NaN when δ is).
-    weighted: Vec<[f64; 2]>,
-    /// Nearest reference point of each scan point (`FAR` when none is within the reach of a
-    /// cylinder around a reference point: looked up when needed).
-    scan_nearest_ref: Vec<u32>,
-    /// Point-pair distance of each scan point: along its nearest reference point's normal,
-    /// from that point's tangent plane.
-    scan_pair: Vec<f64>,
+    /// Per storage slot of the reference grid (its order keeps a cylinder's points close in
+    /// memory): the point's normal and RWME terms.
+    ref_slots: Vec<RefSlot>,
+    /// Per storage slot of the scan grid: the normal of the nearest reference point and the
+    /// point-pair distance from its tangent plane; None when no reference point is within the
+    /// reach of a cylinder around a reference point (looked up when needed).
+    scan_slots: Vec<Option<(Vector3<f64>, f64)>>,
     radii: Vec<f64>,
+    /// Their squares.
+    radii2: Vec<f64>,
+    /// Half-length of every cylinder: max(max_distance, largest radius).
+    half_length: f64,
     /// The core points and their index: [`refine`] evaluates the reference points whose
     /// nearest core point is the one refined (its Voronoi cell on the reference).
     core: &'a [Point3<f64>],
@@ -47,12 +48,16 @@ struct Prepared<'a> {
     cos_limit: f64,
 }
 
+/// A reference point's data in grid storage order.
+struct RefSlot {
+    normal: Vector3<f64>,
+    /// RWME terms: w = exp(-|δ|/h) and w·|δ| (NaN when δ is: unscanned surface).
+    terms: [f64; 2],
+}
+
 /// A refined peak evaluation counts only when its LoD is at most this many times the core
 /// point's own (a fit through a few points at a surface's border is no peak).
 const PEAK_LOD_RATIO: f64 = 2.0;
-
-/// No reference point within a cylinder's reach (see [`Prepared::scan_nearest_ref`]).
-const FAR: u32 = u32::MAX;
 
 /// The candidate radii: the configured ones, or r0·√2^k for k = 0..4 with `r0` the radius
 /// that holds about 12 scan points.
@@ -72,10 +77,29 @@ pub fn radii(a: &AdaptiveConfig, r0: f64) -> Result<Vec<f64>> {
 /// Per-chunk scratch buffers of [`at`].
 #[derive(Default)]
 pub struct Scratch {
-    refs: Vec<Member>,
-    scans: Vec<Member>,
+    /// Per candidate radius: the reference points first inside it.
+    rings: Vec<Ring>,
+    /// Scan points in the cylinder: index of the smallest radius holding them, and the pair.
+    tagged: Vec<(usize, Local)>,
+    /// The same pairs, ordered by that radius: those within radius k are a prefix.
     pairs: Vec<Local>,
+    /// Pairs within each radius.
+    within: Vec<usize>,
+    /// Next free place of each ring in `pairs` (the counting sort's cursors).
+    next: Vec<usize>,
+    fit: FitScratch,
     knn: Vec<(f64, u32)>,
+}
+
+/// Reference points between two consecutive candidate radii.
+#[derive(Default, Clone, Copy)]
+struct Ring {
+    /// Points whose normal agrees with the core point's.
+    count: usize,
+    /// Of those, the scanned ones (finite δ) and the sums of their RWME terms.
+    scanned: f64,
+    sum_w: f64,
+    sum_wd: f64,
 }
 
 /// Runs the adaptive variant at every core point with the candidate `radii`; returns the
@@ -104,34 +128,47 @@ pub fn run(
         None => robust_sd(&delta),
     };
     let halo = clouds.ref_grid.typical_kth(&clouds.scan.points, 1);
-    let nearest: Vec<(u32, f64)> =
+    let nearest: Vec<Option<(Vector3<f64>, f64)>> =
         clouds
             .ref_grid
             .knn_each(&clouds.scan_grid, 1, reach, halo, |j, found| {
-                match found.first() {
-                    Some(&(_, i)) => (
-                        i,
-                        pair_distance(clouds, ref_normals, i, &clouds.scan.points[j]),
-                    ),
-                    None => (FAR, f64::NAN),
-                }
+                found.first().map(|&(_, i)| {
+                    let y = &clouds.scan.points[j];
+                    (
+                        ref_normals[i as usize],
+                        pair_distance(clouds, ref_normals, i, y),
+                    )
+                })
             });
-    let (scan_nearest_ref, scan_pair) = nearest.into_iter().unzip();
-    let weighted = delta
+    let ref_slots = clouds
+        .ref_grid
+        .slot_ids()
         .par_iter()
-        .map(|d| {
-            let w = (-d.abs() / a.h).exp();
-            [w, w * d.abs()]
+        .map(|&i| {
+            let d = delta[i as usize].abs();
+            let w = (-d / a.h).exp();
+            RefSlot {
+                normal: ref_normals[i as usize],
+                terms: [w, w * d],
+            }
         })
         .collect();
+    let scan_slots = clouds
+        .scan_grid
+        .slot_ids()
+        .par_iter()
+        .map(|&j| nearest[j as usize])
+        .collect();
     let core_index = Neighbours::new(&core.points);
+    let r_max = *radii.last().expect("radii");
     let prep = Prepared {
         clouds,
         ref_normals,
-        weighted,
-        scan_nearest_ref,
-        scan_pair,
+        ref_slots,
+        scan_slots,
         radii: radii.to_vec(),
+        radii2: radii.iter().map(|r| r * r).collect(),
+        half_length: cfg.max_distance.max(r_max),
         refine_radius: 2.0 * spacing(&core_index, &core.points),
         core: &core.points,
         core_index,
@@ -260,26 +297,101 @@ fn tangent_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     (e1, n.cross(&e1))
 }
 
-/// Similarity s(r) of the reference members within `r` (see the module doc).
-fn similarity(prep: &Prepared, refs: &[Member], r: f64, h: f64, lambda: f64) -> f64 {
-    let (mut m, mut sw, mut swd) = (0.0, 0.0, 0.0);
-    for mb in refs.iter().filter(|mb| mb.rho2 <= r * r) {
-        let [w, wd] = prep.weighted[mb.index];
-        if !w.is_nan() {
-            m += 1.0;
-            sw += w;
-            swd += wd;
-        }
-    }
+/// Similarity s(r) of the reference points counted in `ring` (those within r; see the
+/// module doc).
+fn similarity(prep: &Prepared, ring: &Ring, r: f64, h: f64, lambda: f64) -> f64 {
+    let m = ring.scanned;
     if m == 0.0 {
         return 0.0;
     }
     let share = std::f64::consts::PI * r * r / m;
-    let rwme = sw * share / (lambda + swd * share);
+    let rwme = ring.sum_w * share / (lambda + ring.sum_wd * share);
     let d0 = prep.noise * (2.0 / std::f64::consts::PI).sqrt();
     let w0 = (-d0 / h).exp();
     let ideal = m * w0 * share / (lambda + m * w0 * d0 * share);
     rwme / ideal
+}
+
+/// Index of the smallest of the squared radii `radii2` (ascending) that holds `rho2`.
+#[inline]
+fn ring_of(radii2: &[f64], rho2: f64) -> usize {
+    radii2.iter().take_while(|&&r2| rho2 > r2).count()
+}
+
+/// Gathers the cylinder of the largest radius at `p` (normal `n`) into `s`: per radius, the
+/// reference points within it (`s.rings`, made cumulative) and the scan point pairs within it
+/// (a prefix of `s.pairs` of length `s.within[k]`), in the tangent frame (`e1`, `e2`, `n`).
+/// Points whose (nearest reference point's) normal is beyond `max_normal_angle` of `n` are
+/// another surface and are left out.
+fn gather(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, s: &mut Scratch) {
+    let c = prep.clouds;
+    let radii2 = &prep.radii2;
+    let r_max = *prep.radii.last().expect("radii");
+    s.rings.clear();
+    s.rings.resize(radii2.len(), Ring::default());
+    let rings = &mut s.rings;
+    c.ref_grid
+        .near_axis(p, n, r_max, prep.half_length, |slot, _, rho2| {
+            let x = &prep.ref_slots[slot];
+            if x.normal.dot(n) >= prep.cos_limit {
+                let ring = &mut rings[ring_of(radii2, rho2)];
+                ring.count += 1;
+                if !x.terms[0].is_nan() {
+                    ring.scanned += 1.0;
+                    ring.sum_w += x.terms[0];
+                    ring.sum_wd += x.terms[1];
+                }
+            }
+        });
+    for k in 1..rings.len() {
+        let below = rings[k - 1];
+        let ring = &mut rings[k];
+        ring.count += below.count;
+        ring.scanned += below.scanned;
+        ring.sum_w += below.sum_w;
+        ring.sum_wd += below.sum_wd;
+    }
+    let (e1, e2) = tangent_frame(n);
+    let (tagged, knn) = (&mut s.tagged, &mut s.knn);
+    tagged.clear();
+    c.scan_grid
+        .near_axis(p, n, r_max, prep.half_length, |slot, _, rho2| {
+            let y = c.scan_grid.slot_point(slot);
+            let y = Point3::new(y[0], y[1], y[2]);
+            let (normal, pair) = match prep.scan_slots[slot] {
+                Some(nearest) => nearest,
+                None => {
+                    c.ref_grid.knn(&y, 1, f64::INFINITY, knn);
+                    let Some(&(_, i)) = knn.first() else { return };
+                    (
+                        prep.ref_normals[i as usize],
+                        pair_distance(c, prep.ref_normals, i, &y),
+                    )
+                }
+            };
+            if normal.dot(n) >= prep.cos_limit {
+                let d = y - p;
+                tagged.push((ring_of(radii2, rho2), [d.dot(&e1), d.dot(&e2), pair]));
+            }
+        });
+    s.within.clear();
+    s.within.resize(radii2.len(), 0);
+    for &(k, _) in tagged.iter() {
+        s.within[k] += 1;
+    }
+    for k in 1..s.within.len() {
+        s.within[k] += s.within[k - 1];
+    }
+    // Counting sort by ring (stable): ring k's pairs follow those of the smaller radii.
+    s.pairs.clear();
+    s.pairs.resize(tagged.len(), [0.0; 3]);
+    s.next.clear();
+    s.next.push(0);
+    s.next.extend_from_slice(&s.within);
+    for &(k, local) in tagged.iter() {
+        s.pairs[s.next[k]] = local;
+        s.next[k] += 1;
+    }
 }
 
 /// The adaptive result at core point `p` with outward unit normal `n`.
@@ -291,79 +403,50 @@ fn at(
     scratch: &mut Scratch,
 ) -> Deviation {
     let a = &cfg.adaptive;
-    let c = prep.clouds;
-    let r_max = *prep.radii.last().expect("radii");
-    let agrees = |i: usize| prep.ref_normals[i].dot(n) >= prep.cos_limit;
+    gather(prep, p, n, scratch);
     let Scratch {
-        refs,
-        scans,
+        rings,
         pairs,
-        knn,
+        within,
+        fit: fit_scratch,
+        ..
     } = scratch;
-    refs.clear();
-    scans.clear();
-    c.ref_grid.cylinder(p, n, r_max, cfg.max_distance, refs);
-    refs.retain(|m| agrees(m.index));
-    c.scan_grid.cylinder(p, n, r_max, cfg.max_distance, scans);
-    let mut pair = |m: &Member| -> Option<f64> {
-        let y = &c.scan.points[m.index];
-        match prep.scan_nearest_ref[m.index] {
-            FAR => {
-                c.ref_grid.knn(y, 1, f64::INFINITY, knn);
-                let i = knn.first()?.1;
-                agrees(i as usize).then(|| pair_distance(c, prep.ref_normals, i, y))
-            }
-            i => agrees(i as usize).then(|| prep.scan_pair[m.index]),
-        }
-    };
-    // Keep scan points whose nearest reference point is kept; t carries the pair distance.
-    scans.retain_mut(|m| match pair(m) {
-        Some(z) => {
-            m.t = z;
-            true
-        }
-        None => false,
-    });
-    let (refs, scans) = (&refs[..], &scans[..]);
-    let count = |ms: &[Member], r: f64| ms.iter().filter(|m| m.rho2 <= r * r).count();
+    let radii = &prep.radii;
     let min = cfg.min_points.max(1);
     // Grow through the radii while every one so far is similar (stay at the smallest when
     // it is not); then further only as far as needed to hold min_points each.
     let mut k = 0;
-    for (j, &r) in prep.radii.iter().enumerate() {
-        if similarity(prep, refs, r, a.h, a.lambda) < a.similarity {
+    for (j, &r) in radii.iter().enumerate() {
+        if similarity(prep, &rings[j], r, a.h, a.lambda) < a.similarity {
             break;
         }
         k = j;
     }
-    while k + 1 < prep.radii.len()
-        && (count(refs, prep.radii[k]) < min || count(scans, prep.radii[k]) < min)
-    {
+    while k + 1 < radii.len() && (rings[k].count < min || within[k] < min) {
         k += 1;
     }
-    let (e1, e2) = tangent_frame(n);
-    let local = |m: &Member| -> Local {
-        let d = c.scan.points[m.index] - p;
-        [d.dot(&e1), d.dot(&e2), m.t]
-    };
-    let mut fit_at = |r: f64| {
-        pairs.clear();
-        pairs.extend(scans.iter().filter(|m| m.rho2 <= r * r).map(local));
-        fit(pairs, r, 4.0 * prep.noise, prep.noise)
+    let mut fit_at = |k: usize| {
+        fit(
+            &pairs[..within[k]],
+            radii[k],
+            4.0 * prep.noise,
+            prep.noise,
+            fit_scratch,
+        )
     };
     // The fit must keep at least FIT_MIN points after trimming, else the next radius.
-    let (mut r, mut n_ref, _, mut fs) = loop {
-        let r = prep.radii[k];
-        let (n_ref, n_scan) = (count(refs, r), count(scans, r));
-        let last = k + 1 == prep.radii.len();
+    let (mut r, mut n_ref, mut fs) = loop {
+        let r = radii[k];
+        let (n_ref, n_scan) = (rings[k].count, within[k]);
+        let last = k + 1 == radii.len();
         if n_ref < min {
             return Deviation::missing(Reason::FewReference, r, n_ref, n_scan);
         }
         if n_scan < min {
             return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
         }
-        match fit_at(r) {
-            Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, n_scan, fs),
+        match fit_at(k) {
+            Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, fs),
             _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
             _ => k += 1,
         }
@@ -374,8 +457,8 @@ fn at(
     let gamma = a.gamma;
     if gamma > 0.0 {
         let (mut lo, mut hi) = (fs.t0 - gamma * fs.se, fs.t0 + gamma * fs.se);
-        for &rk in &prep.radii[k + 1..] {
-            let Some(next) = fit_at(rk).filter(|f| f.sigma <= a.max_misfit * prep.noise) else {
+        for j in k + 1..radii.len() {
+            let Some(next) = fit_at(j).filter(|f| f.sigma <= a.max_misfit * prep.noise) else {
                 break;
             };
             lo = lo.max(next.t0 - gamma * next.se);
@@ -383,7 +466,7 @@ fn at(
             if lo > hi {
                 break;
             }
-            (r, n_ref, fs) = (rk, count(refs, rk), next);
+            (r, n_ref, fs) = (radii[j], rings[j].count, next);
         }
     }
     let lod = 1.96 * (fs.se + cfg.registration_error);

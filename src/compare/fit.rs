@@ -65,16 +65,34 @@ fn residual(p: &Local, coef: &Vector6<f64>, scale: f64) -> f64 {
     p[2] - basis(p, scale).dot(coef)
 }
 
-/// Points whose residual from `model` is within `max(trim, 3 × 1.4826 × median |residual|)`.
-fn inliers(pts: &[Local], trim: f64, model: impl Fn(&Local) -> f64) -> Vec<Local> {
-    let mut abs: Vec<f64> = pts.iter().map(|p| (p[2] - model(p)).abs()).collect();
+/// Reusable buffers of [`fit`].
+#[derive(Default)]
+pub struct FitScratch {
+    abs: Vec<f64>,
+    kept: Vec<Local>,
+    refit: Vec<Local>,
+}
+
+/// The points of `pts` whose residual from `model` is within
+/// `max(trim, 3 × 1.4826 × median |residual|)`, into `out` (`abs`: scratch).
+fn inliers(
+    pts: &[Local],
+    trim: f64,
+    model: impl Fn(&Local) -> f64,
+    abs: &mut Vec<f64>,
+    out: &mut Vec<Local>,
+) {
+    abs.clear();
+    abs.extend(pts.iter().map(|p| (p[2] - model(p)).abs()));
     let mid = abs.len() / 2;
     let mad = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
     let limit = trim.max(3.0 * 1.4826 * mad);
-    pts.iter()
-        .copied()
-        .filter(|p| (p[2] - model(p)).abs() <= limit)
-        .collect()
+    out.clear();
+    out.extend(
+        pts.iter()
+            .copied()
+            .filter(|p| (p[2] - model(p)).abs() <= limit),
+    );
 }
 
 /// Fits `pts` (at least one); `scale` (the cylinder radius) conditions the system. Robustly:
@@ -82,17 +100,31 @@ fn inliers(pts: &[Local], trim: f64, model: impl Fn(&Local) -> f64) -> Vec<Local
 /// from the first fit, each time beyond `max(trim, 3 × 1.4826 × median |residual|)`.
 /// The residual variance used for the standard error is at least `floor²` (the scan noise:
 /// a fit through few points must not claim more precision than the scanner has).
-pub fn fit(pts: &[Local], scale: f64, trim: f64, floor: f64) -> Option<AxisFit> {
+pub fn fit(
+    pts: &[Local],
+    scale: f64,
+    trim: f64,
+    floor: f64,
+    scratch: &mut FitScratch,
+) -> Option<AxisFit> {
     if pts.is_empty() {
         return None;
     }
-    let mut values: Vec<f64> = pts.iter().map(|p| p[2]).collect();
-    let mid = values.len() / 2;
-    let median = *values.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let kept = inliers(pts, trim, |_| median);
-    let first = fit_once(&kept, scale, floor)?;
-    let kept = inliers(&kept, trim, |p| p[2] - residual(p, &first.0, scale));
-    Some(fit_once(&kept, scale, floor)?.2)
+    let FitScratch { abs, kept, refit } = scratch;
+    abs.clear();
+    abs.extend(pts.iter().map(|p| p[2]));
+    let mid = abs.len() / 2;
+    let median = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
+    inliers(pts, trim, |_| median, abs, kept);
+    let first = fit_once(kept, scale, floor)?;
+    inliers(
+        kept,
+        trim,
+        |p| p[2] - residual(p, &first.0, scale),
+        abs,
+        refit,
+    );
+    Some(fit_once(refit, scale, floor)?.2)
 }
 
 fn fit_once(pts: &[Local], scale: f64, floor: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
@@ -140,13 +172,13 @@ mod tests {
                 ]
             })
             .collect();
-        let f = fit(&pts, 0.4, 0.01, 0.0).unwrap();
+        let f = fit(&pts, 0.4, 0.01, 0.0, &mut FitScratch::default()).unwrap();
         assert!((f.t0 - 0.2).abs() < 1e-12, "{f:?}");
         assert!(f.sigma < 1e-12);
         // Few points: a plane, then a constant.
-        let f = fit(&pts[..5], 0.4, 0.01, 0.0).unwrap();
+        let f = fit(&pts[..5], 0.4, 0.01, 0.0, &mut FitScratch::default()).unwrap();
         assert_eq!(f.n, 5);
-        let f = fit(&pts[..2], 0.4, 0.01, 0.0).unwrap();
+        let f = fit(&pts[..2], 0.4, 0.01, 0.0, &mut FitScratch::default()).unwrap();
         assert!((f.t0 - (pts[0][2] + pts[1][2]) / 2.0).abs() < 1e-12);
     }
 }

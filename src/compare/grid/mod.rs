@@ -57,6 +57,12 @@ fn ifloor(x: f64) -> isize {
     }
 }
 
+/// Rounding slack of a cylinder's bounds (length and radius in mm).
+#[inline]
+fn slack(length: f64, radius: f64) -> f64 {
+    1e-9 * (length + radius) + 1e-12
+}
+
 /// Squared distance in FLANN's summation order (as `cloud::neighbours::dist2`).
 #[inline]
 fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -234,8 +240,99 @@ impl Grid {
         let ball2 = ball * ball;
         let r2 = radius * radius;
         let nslabs = slabs as isize;
-        // Loose bounds for the cheap pre-test (exact tests follow per slab).
-        let slack = 1e-9 * (length + radius) + 1e-12;
+        let slack = slack(length, radius);
+        let c = [core.x, core.y, core.z];
+        let reach = (length + slack, radius + slack);
+        self.rows_near_axis(core, axis, radius, length, |range| {
+            for s in range {
+                let p = &self.pts[s];
+                let d = Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                let t0 = d.dot(axis);
+                if t0.abs() > reach.0 || d.norm_squared() - t0 * t0 > reach.1 * reach.1 {
+                    continue;
+                }
+                // Slabs whose interval can hold t0.
+                let k = ifloor((t0 + length) / (2.0 * half));
+                for i in (k - 1).max(0)..=(k + 1).min(nslabs - 1) {
+                    let offset = (2.0 * i as f64 + 1.0 - slabs) / slabs * length;
+                    if (t0 - offset).abs() > half + slack {
+                        continue;
+                    }
+                    let mid = core + axis * offset;
+                    let m = [mid.x, mid.y, mid.z];
+                    if dist2(&m, p) > ball2 {
+                        continue;
+                    }
+                    let d = Point3::from(*p) - mid;
+                    let along = d.dot(axis);
+                    let rho2 = (d - axis * along).norm_squared();
+                    if rho2 <= r2 && along.abs() < half {
+                        out.push(Member {
+                            index: self.ids[s] as usize,
+                            t: along + offset,
+                            rho2,
+                        });
+                    }
+                }
+            }
+        });
+    }
+
+    /// Calls `f(slot, t, rho2)` for every stored point (`slot`: its position in the grid's
+    /// storage order, see [`Grid::slot_ids`]) whose offset t along the unit vector `axis` from
+    /// `core` has |t| < `half_length` and whose squared distance rho2 from the axis line is
+    /// <= `radius`², in storage order. A plain cylinder (the adaptive variant's), without
+    /// py4dgeo's slabs.
+    pub fn near_axis(
+        &self,
+        core: &Point3<f64>,
+        axis: &Vector3<f64>,
+        radius: f64,
+        half_length: f64,
+        mut f: impl FnMut(usize, f64, f64),
+    ) {
+        if self.pts.is_empty() || !(radius > 0.0 && half_length >= 0.0) {
+            return;
+        }
+        let c = [core.x, core.y, core.z];
+        let r2 = radius * radius;
+        self.rows_near_axis(core, axis, radius, half_length, |range| {
+            for s in range {
+                let p = &self.pts[s];
+                let d = Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
+                let t = d.dot(axis);
+                let rho2 = (d - axis * t).norm_squared();
+                if rho2 <= r2 && t.abs() < half_length {
+                    f(s, t, rho2);
+                }
+            }
+        });
+    }
+
+    /// Original index of the point at each storage slot.
+    pub fn slot_ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    /// Coordinates of the point at storage slot `s`.
+    #[inline]
+    pub fn slot_point(&self, s: usize) -> &[f64; 3] {
+        &self.pts[s]
+    }
+
+    /// Calls `visit` with the stored-point range of every row that can hold a point within
+    /// `radius` of the axis through `core` along the unit vector `axis` and within `length`
+    /// of `core` along it (a superset: each caller tests its points exactly).
+    fn rows_near_axis(
+        &self,
+        core: &Point3<f64>,
+        axis: &Vector3<f64>,
+        radius: f64,
+        length: f64,
+        mut visit: impl FnMut(std::ops::Range<usize>),
+    ) {
+        // Loose bounds (exact tests follow per point).
+        let slack = slack(length, radius);
         let (reach_t, reach_r) = (length + slack, radius + slack);
         // Points of a row are within this of the line through the row's centre.
         let hd = self.cell * std::f64::consts::FRAC_1_SQRT_2 + slack;
@@ -288,39 +385,6 @@ impl Grid {
             let pad = 1e-9 * self.cell;
             let (x0, x1) = ((c[0] + u0 - pad).max(box0), (c[0] + u1 + pad).min(box1));
             (x0 <= x1).then_some((x0, x1))
-        };
-        let mut visit = |range: std::ops::Range<usize>| {
-            for s in range {
-                let p = &self.pts[s];
-                let d = Vector3::new(p[0] - c[0], p[1] - c[1], p[2] - c[2]);
-                let t0 = d.dot(axis);
-                if t0.abs() > reach_t || d.norm_squared() - t0 * t0 > reach_r * reach_r {
-                    continue;
-                }
-                // Slabs whose interval can hold t0.
-                let k = ifloor((t0 + length) / (2.0 * half));
-                for i in (k - 1).max(0)..=(k + 1).min(nslabs - 1) {
-                    let offset = (2.0 * i as f64 + 1.0 - slabs) / slabs * length;
-                    if (t0 - offset).abs() > half + slack {
-                        continue;
-                    }
-                    let mid = core + axis * offset;
-                    let m = [mid.x, mid.y, mid.z];
-                    if dist2(&m, p) > ball2 {
-                        continue;
-                    }
-                    let d = Point3::from(*p) - mid;
-                    let along = d.dot(axis);
-                    let rho2 = (d - axis * along).norm_squared();
-                    if rho2 <= r2 && along.abs() < half {
-                        out.push(Member {
-                            index: self.ids[s] as usize,
-                            t: along + offset,
-                            rho2,
-                        });
-                    }
-                }
-            }
         };
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
@@ -440,6 +504,17 @@ mod tests {
                     let d = points[m.index] - core;
                     assert!((m.t - d.dot(&axis)).abs() < 1e-12);
                 }
+                let mut near = Vec::new();
+                grid.near_axis(&core, &axis, r, len, |s, t, rho2| {
+                    let i = grid.slot_ids()[s] as usize;
+                    let d = points[i] - core;
+                    assert_eq!(grid.slot_point(s), &[points[i].x, points[i].y, points[i].z]);
+                    assert!((t - d.dot(&axis)).abs() < 1e-12);
+                    assert!((rho2 - (d - axis * t).norm_squared()).abs() < 1e-12);
+                    near.push(i);
+                });
+                near.sort();
+                assert_eq!(near, want, "near_axis: cell {cell} r {r} l {l}");
             }
         }
     }
