@@ -33,19 +33,30 @@ fn basis(p: &Local, scale: f64) -> Vector6<f64> {
     Vector6::new(1.0, u, v, u * u, u * v, v * v)
 }
 
-/// Solves the normal equations over `pts` with `k` terms; None when singular.
-fn solve(pts: &[Local], k: usize, scale: f64) -> Option<(Vector6<f64>, f64)> {
+/// The normal equations over `pts` with the first `K` terms (upper triangle and right-hand
+/// side; `K` known at compile time, so the loops unroll).
+fn normal_equations<const K: usize>(pts: &[Local], scale: f64) -> (Matrix6<f64>, Vector6<f64>) {
     let mut a = Matrix6::<f64>::zeros();
     let mut b = Vector6::<f64>::zeros();
     for p in pts {
         let x = basis(p, scale);
-        for i in 0..k {
-            for j in i..k {
+        for i in 0..K {
+            for j in i..K {
                 a[(i, j)] += x[i] * x[j];
             }
             b[i] += x[i] * p[2];
         }
     }
+    (a, b)
+}
+
+/// Solves the normal equations over `pts` with `k` terms (1, 3 or 6); None when singular.
+fn solve(pts: &[Local], k: usize, scale: f64) -> Option<(Vector6<f64>, f64)> {
+    let (mut a, b) = match k {
+        6 => normal_equations::<6>(pts, scale),
+        3 => normal_equations::<3>(pts, scale),
+        _ => normal_equations::<1>(pts, scale),
+    };
     // The lower triangle mirrors the upper (the same products, summed in the same order).
     for i in 0..k {
         for j in 0..i {

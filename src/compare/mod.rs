@@ -244,11 +244,14 @@ pub fn compare(
         cfg.registration_error.is_finite() && cfg.registration_error >= 0.0,
         "registration_error must be a finite non-negative number"
     );
-    // The scan's density sets the default radii; the grids' cell is the smallest radius.
-    let radius_for = |count: f64| {
-        let grid = Grid::for_points(&scan.points);
-        (count / (std::f64::consts::PI * scan_density(&grid, scan))).sqrt()
-    };
+    // The grids' cells only set the speed (every query is exact); the scan's density, from
+    // its grid, sets the default radii.
+    let (ref_grid, scan_grid) = rayon::join(
+        || Grid::for_points(&reference.points),
+        || Grid::for_points(&scan.points),
+    );
+    let radius_for =
+        |count: f64| (count / (std::f64::consts::PI * scan_density(&scan_grid, scan))).sqrt();
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
             let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
@@ -267,11 +270,6 @@ pub fn compare(
             (radii[0], radii)
         }
     };
-    let cell = classic_radius;
-    let (ref_grid, scan_grid) = rayon::join(
-        || Grid::new(&reference.points, cell),
-        || Grid::new(&scan.points, cell),
-    );
     let clouds = Clouds {
         reference,
         scan,
