@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 use nalgebra::Point3;
 
 use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
+use crate::preprocess::{curvature_sample, CurvatureSampleConfig};
 
 /// Which reference points become core points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -19,9 +20,13 @@ use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
 pub enum CoreSelection {
     /// Every reference point.
     All,
-    /// `count` reference points (default).
+    /// `count` reference points drawn uniformly at random (default: the defects' areas keep
+    /// the full density; docs/ALGORITHMS.md has the comparison with `curvature`).
     #[default]
     Sample,
+    /// `count` reference points from the curvature-aware down-sampling
+    /// (`preprocess::curvature_sample`: half from the feature region, by default).
+    Curvature,
 }
 
 /// Settings of [`core_points`].
@@ -34,6 +39,9 @@ pub struct CoreConfig {
     pub count: usize,
     /// Seed of the sample (default 1).
     pub seed: u64,
+    /// Share of a `curvature` sample drawn from the non-feature (flat) region (J; default
+    /// 0.5).
+    pub uniform_ratio: f64,
 }
 
 impl Default for CoreConfig {
@@ -42,6 +50,7 @@ impl Default for CoreConfig {
             selection: CoreSelection::Sample,
             count: 100_000,
             seed: 1,
+            uniform_ratio: 0.5,
         }
     }
 }
@@ -55,8 +64,6 @@ pub fn mesh_reference(mesh: &Mesh, points: usize, seed: u64) -> Result<PointClou
 }
 
 /// The core points of `reference` (which must carry outward unit normals).
-// TODO(preprocess): take the curvature-aware sample (`preprocess::curvature_sample`) once it
-// lands; until then the sample is uniform at random (seeded).
 pub fn core_points(reference: &PointCloud, cfg: &CoreConfig) -> Result<PointCloud> {
     let Some(normals) = &reference.normals else {
         bail!("the reference has no normals: give a mesh, or a cloud with outward normals");
@@ -70,9 +77,26 @@ pub fn core_points(reference: &PointCloud, cfg: &CoreConfig) -> Result<PointClou
     if cfg.selection == CoreSelection::All || cfg.count >= reference.len() {
         return Ok(reference.clone());
     }
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
-    let mut chosen = sample(&mut rng, reference.len(), cfg.count).into_vec();
-    chosen.sort_unstable();
+    let chosen = match cfg.selection {
+        CoreSelection::Curvature => {
+            let sample = curvature_sample(
+                reference,
+                &CurvatureSampleConfig {
+                    target: cfg.count,
+                    uniform_ratio: cfg.uniform_ratio,
+                    seed: cfg.seed,
+                    ..CurvatureSampleConfig::default()
+                },
+            )?;
+            sample.indices
+        }
+        _ => {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
+            let mut chosen = sample(&mut rng, reference.len(), cfg.count).into_vec();
+            chosen.sort_unstable();
+            chosen
+        }
+    };
     Ok(reference.select(&chosen))
 }
 
@@ -85,4 +109,56 @@ pub fn area_share(index: &Neighbours, p: &Point3<f64>) -> Option<f64> {
         .knn(p, 9)
         .last()
         .map(|n| std::f64::consts::PI * n.dist2 / 8.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn curvature_selection_keeps_reference_points_and_favours_the_fold() {
+        // A 60 x 40 sheet (0.5 mm) folded 90 degrees at u = 15, with its normals.
+        let (points, normals): (Vec<_>, Vec<_>) = (0..2400)
+            .map(|i| {
+                let (u, v) = ((i % 60) as f64 * 0.5, (i / 60) as f64 * 0.5);
+                if u <= 15.0 {
+                    (Point3::new(u, v, 0.0), Vector3::z())
+                } else {
+                    (Point3::new(15.0, v, u - 15.0), -Vector3::x())
+                }
+            })
+            .unzip();
+        let reference = PointCloud {
+            points,
+            normals: Some(normals),
+            fields: Vec::new(),
+        };
+        let near_fold = |c: &PointCloud| {
+            c.points
+                .iter()
+                .filter(|p| (p.x - 15.0).abs() < 1.1 && p.z < 1.1)
+                .count()
+        };
+        let cfg = CoreConfig {
+            count: 300,
+            ..CoreConfig::default()
+        };
+        let uniform = core_points(&reference, &cfg).unwrap();
+        let curved = core_points(
+            &reference,
+            &CoreConfig {
+                selection: CoreSelection::Curvature,
+                ..cfg
+            },
+        )
+        .unwrap();
+        assert_eq!(curved.len(), 300);
+        let normals = curved.normals.as_ref().unwrap();
+        for (p, n) in curved.points.iter().zip(normals) {
+            let i = reference.points.iter().position(|q| q == p).unwrap();
+            assert_eq!(reference.normals.as_ref().unwrap()[i], *n);
+        }
+        assert!(near_fold(&curved) > 3 * near_fold(&uniform));
+    }
 }
