@@ -132,11 +132,11 @@ pub fn run(
         None => robust_sd(&delta),
     };
     let halo = clouds.ref_grid.typical_kth(&clouds.scan.points, 1);
-    // Per scan slot: the nearest reference point's normal and the pair distance.
-    let scan_slots =
+    // Per scan point: the nearest reference point's normal and the pair distance.
+    let nearest: Vec<Option<(Vector3<f64>, f64)>> =
         clouds
             .ref_grid
-            .knn_each_stored(&clouds.scan_grid, 1, reach, halo, |j, found| {
+            .knn_each(&clouds.scan_grid, 1, reach, halo, |j, found| {
                 found.first().map(|&(_, i)| {
                     let y = &clouds.scan.points[j];
                     (
@@ -149,14 +149,20 @@ pub fn run(
         .ref_grid
         .slot_ids()
         .par_iter()
-        .zip(&delta)
-        .map(|(&i, d)| {
-            let w = (-d.abs() / a.h).exp();
+        .map(|&i| {
+            let d = delta[i as usize].abs();
+            let w = (-d / a.h).exp();
             RefSlot {
                 normal: ref_normals[i as usize],
-                terms: [w, w * d.abs()],
+                terms: [w, w * d],
             }
         })
+        .collect();
+    let scan_slots = clouds
+        .scan_grid
+        .slot_ids()
+        .par_iter()
+        .map(|&j| nearest[j as usize])
         .collect();
     let core_index = Neighbours::new(&core.points);
     let r_max = *radii.last().expect("radii");
@@ -244,16 +250,15 @@ fn pair_distance(clouds: &Clouds, ref_normals: &[Vector3<f64>], i: u32, y: &Poin
     ref_normals[i].dot(&(y - clouds.reference.points[i]))
 }
 
-/// δ_i for every reference point, in the reference grid's storage order: along its normal,
-/// to the scan point (of its 4 nearest within `reach`) closest to its normal line; NaN when
-/// no scan point is within `reach` (unscanned surface: left out of the similarity and of the
-/// noise estimate).
+/// δ_i for every reference point: along its normal, to the scan point (of its 4 nearest
+/// within `reach`) closest to its normal line; NaN when no scan point is within `reach`
+/// (unscanned surface: left out of the similarity and of the noise estimate).
 fn one_sided_distances(clouds: &Clouds, ref_normals: &[Vector3<f64>], reach: f64) -> Vec<f64> {
     let scan = &clouds.scan.points;
     let halo = clouds
         .scan_grid
         .typical_kth(&clouds.reference.points, DELTA_NEIGHBOURS);
-    clouds.scan_grid.knn_each_stored(
+    clouds.scan_grid.knn_each(
         &clouds.ref_grid,
         DELTA_NEIGHBOURS,
         reach,

@@ -309,31 +309,6 @@ impl Grid {
         R: Send,
         F: Fn(usize, &[(f64, u32)]) -> R + Sync,
     {
-        let stored = self.knn_each_stored(queries, k, max_radius, halo, f);
-        let mut slots: Vec<Option<R>> = stored.iter().map(|_| None).collect();
-        for (&i, v) in queries.ids.iter().zip(stored) {
-            slots[i as usize] = Some(v);
-        }
-        slots
-            .into_iter()
-            .map(|v| v.expect("every query answered"))
-            .collect()
-    }
-
-    /// [`Grid::knn_each`] with the results in the storage order of `queries` (see
-    /// [`Grid::slot_ids`]): what per-slot tables want, without a permutation.
-    pub fn knn_each_stored<R, F>(
-        &self,
-        queries: &Grid,
-        k: usize,
-        max_radius: f64,
-        halo: f64,
-        f: F,
-    ) -> Vec<R>
-    where
-        R: Send,
-        F: Fn(usize, &[(f64, u32)]) -> R + Sync,
-    {
         // A halo of nothing would leave every query to its own search.
         let halo = if halo > 0.0 && halo.is_finite() {
             halo
@@ -341,7 +316,7 @@ impl Grid {
             self.cell
         };
         let planes = queries.dims[2].max(0) as usize;
-        (0..planes)
+        let stored: Vec<R> = (0..planes)
             .into_par_iter()
             .flat_map_iter(|z| {
                 let mut scratch = Scratch::default();
@@ -364,6 +339,14 @@ impl Grid {
                 }
                 out
             })
+            .collect();
+        let mut slots: Vec<Option<R>> = stored.iter().map(|_| None).collect();
+        for (&i, v) in queries.ids.iter().zip(stored) {
+            slots[i as usize] = Some(v);
+        }
+        slots
+            .into_iter()
+            .map(|v| v.expect("every query answered"))
             .collect()
     }
 
