@@ -81,7 +81,7 @@ pub fn radii(a: &AdaptiveConfig, r0: f64) -> Result<Vec<f64>> {
 /// Per-chunk scratch buffers of [`at`].
 #[derive(Default)]
 pub struct Scratch {
-    /// Per candidate radius: the reference points first inside it.
+    /// Per candidate radius: the reference points within it.
     rings: Vec<Ring>,
     /// Scan points in the cylinder: index of the smallest radius holding them, and the pair.
     tagged: Vec<(usize, Local)>,
@@ -95,7 +95,8 @@ pub struct Scratch {
     knn: Vec<(f64, u32)>,
 }
 
-/// Reference points between two consecutive candidate radii.
+/// Reference points within a candidate radius ([`gather`] counts each in the ring between
+/// the radius below and its own, then adds the rings up).
 #[derive(Default, Clone, Copy)]
 struct Ring {
     /// Points whose normal agrees with the core point's.
