@@ -253,7 +253,7 @@ pub fn compare(
         || Grid::for_points(&scan.points),
     );
     let radius_for =
-        |count: f64| (count / (std::f64::consts::PI * scan_density(&scan_grid, scan))).sqrt();
+        |count: f64| (count / (std::f64::consts::PI * scan_density(&scan_grid))).sqrt();
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
             let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
@@ -361,15 +361,21 @@ pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
 }
 
 /// The scan's median surface density (points per mm²), from the 12th-neighbour distance of
-/// up to 1,000 evenly spread scan points.
-fn scan_density(grid: &Grid, scan: &PointCloud) -> f64 {
-    let n = scan.len();
+/// up to 1,000 scan points evenly spread over `grid`'s storage order (spatial: the answer does
+/// not depend on the order of the points in the file).
+fn scan_density(grid: &Grid) -> f64 {
+    let n = grid.slot_ids().len();
     let step = (n / 1000).max(1);
     let mut found = Vec::new();
     let mut densities: Vec<f64> = (0..n)
         .step_by(step)
-        .filter_map(|i| {
-            grid.knn(&scan.points[i], 13, f64::INFINITY, &mut found);
+        .filter_map(|s| {
+            grid.knn(
+                &Point3::from(*grid.slot_point(s)),
+                13,
+                f64::INFINITY,
+                &mut found,
+            );
             let d2 = found.last()?.0;
             (found.len() == 13 && d2 > 0.0).then(|| 12.0 / (std::f64::consts::PI * d2))
         })
@@ -398,4 +404,81 @@ pub fn to_cloud(dev: &Deviations, region: &[i64]) -> PointCloud {
     cloud.set_field("n_scan", col(&|d| d.n_scan as f64));
     cloud.set_field("region", region.iter().map(|&r| r as f64).collect());
     cloud
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A plane with a Gaussian bump (0.2 mm high, σ 0.8 mm) at the origin, scanned with
+    /// 0.005 mm noise; the reference plane has a 3 mm hole around (6, 6).
+    fn bump_case() -> (PointCloud, PointCloud) {
+        let lattice = (0..80 * 80).map(|i| {
+            Point3::new(
+                (i % 80) as f64 * 0.25 - 10.0,
+                (i / 80) as f64 * 0.25 - 10.0,
+                0.0,
+            )
+        });
+        let points: Vec<Point3<f64>> = lattice
+            .filter(|p| (p.x - 6.0).hypot(p.y - 6.0) > 3.0)
+            .collect();
+        let reference = PointCloud {
+            normals: Some(vec![Vector3::z(); points.len()]),
+            points,
+            fields: Vec::new(),
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let scan = PointCloud::from_points(
+            (0..8000)
+                .map(|_| {
+                    let (x, y): (f64, f64) =
+                        (rng.gen_range(-10.0..10.0), rng.gen_range(-10.0..10.0));
+                    let bump = 0.2 * (-(x * x + y * y) / (2.0 * 0.8 * 0.8)).exp();
+                    Point3::new(x, y, bump + 0.005 * (rng.gen::<f64>() - 0.5) * 3.46)
+                })
+                .collect(),
+        );
+        (reference, scan)
+    }
+
+    #[test]
+    fn adaptive_measures_a_bump_whatever_the_input_order() {
+        let (reference, scan) = bump_case();
+        let core = PointCloud {
+            points: vec![
+                Point3::origin(),
+                Point3::new(-6.0, -6.0, 0.0),
+                // In the reference's hole, 0.8 mm from its rim: the cylinder holds rim points,
+                // and scan points farther from every reference point than any cylinder
+                // around a reference point reaches (looked up when met).
+                Point3::new(6.0 - 2.2 / 2f64.sqrt(), 6.0 - 2.2 / 2f64.sqrt(), 0.0),
+                // The hole's centre: no reference point in reach.
+                Point3::new(6.0, 6.0, 0.0),
+            ],
+            normals: Some(vec![Vector3::z(); 4]),
+            fields: Vec::new(),
+        };
+        let cfg = CompareConfig::default();
+        let dev = compare(&core, &reference, &scan, &cfg).unwrap();
+        let [top, flat, rim, hole] = [0, 1, 2, 3].map(|i| dev.values[i]);
+        assert!((top.distance - 0.2).abs() < 0.02, "{top:?}");
+        assert!(top.significant && top.peak >= top.distance);
+        assert!(flat.distance.abs() < 0.01 && !flat.significant, "{flat:?}");
+        assert!(rim.distance.abs() < 0.02 && rim.n_ref >= 3, "{rim:?}");
+        assert_eq!(hole.reason, Reason::FewReference, "{hole:?}");
+        assert!(hole.distance.is_nan());
+        // The clouds are reordered internally: reversed input gives the same answers.
+        let reversed = |c: &PointCloud| {
+            let idx: Vec<usize> = (0..c.len()).rev().collect();
+            c.select(&idx)
+        };
+        let again = compare(&core, &reversed(&reference), &reversed(&scan), &cfg).unwrap();
+        for (a, b) in dev.values.iter().zip(&again.values) {
+            let same = (a.distance - b.distance).abs() < 1e-12 || a.distance.is_nan();
+            assert!(same && a.reason == b.reason, "{a:?} {b:?}");
+            assert_eq!((a.radius, a.n_ref, a.n_scan), (b.radius, b.n_ref, b.n_scan));
+        }
+    }
 }
