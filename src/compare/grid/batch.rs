@@ -28,12 +28,7 @@ struct Candidates {
     y: Vec<f64>,
     z: Vec<f64>,
     id: Vec<u32>,
-    /// The rows they came from: positions and the row's cross-section.
-    rows: Vec<(Range<usize>, Rect)>,
 }
-
-/// A row's cross-section, [y0, y1, z0, z1], widened by the rounding of the row assignment.
-type Rect = [f64; 4];
 
 impl Candidates {
     fn clear(&mut self) {
@@ -41,17 +36,11 @@ impl Candidates {
         self.y.clear();
         self.z.clear();
         self.id.clear();
-        self.rows.clear();
     }
 
-    /// Appends the stored points `range` of `grid`, from a row with cross-section `rect`.
+    /// Appends the stored points `range` of `grid`.
     #[inline]
-    fn push(&mut self, grid: &Grid, range: Range<usize>, rect: Rect) {
-        if range.is_empty() {
-            return;
-        }
-        let at = self.id.len();
-        self.rows.push((at..at + range.len(), rect));
+    fn push(&mut self, grid: &Grid, range: Range<usize>) {
         self.x.extend_from_slice(&grid.xs[range.clone()]);
         self.y.extend_from_slice(&grid.ys[range.clone()]);
         self.z.extend_from_slice(&grid.zs[range.clone()]);
@@ -62,9 +51,9 @@ impl Candidates {
 /// Per-worker buffers.
 #[derive(Default)]
 struct Scratch {
-    ranges: Vec<(Range<usize>, Rect)>,
+    ranges: Vec<Range<usize>>,
     /// Per row of this grid near the query row: slice start, slice end, row end.
-    cursors: Vec<(usize, usize, usize, Rect)>,
+    cursors: Vec<(usize, usize, usize)>,
     /// Candidates of the current run.
     run: Candidates,
     /// Candidates of a single query's own search.
@@ -119,32 +108,18 @@ fn sort(found: &[(f64, u32)], keys: &mut Vec<u64>, sorted: &mut Vec<(f64, u32)>)
     }
 }
 
-/// The candidates within `threshold` (squared distance) of `q`, into `found`. Rows whose
-/// cross-section is farther than that are skipped whole, and in the others (sorted by x)
-/// only the stretch whose x can be close enough is measured.
+/// The candidates within `threshold` (squared distance) of `q`, into `found`: one pass over
+/// all of them (cheaper than pruning by row for the few dozen a query has).
 fn take_under(q: &[f64; 3], c: &Candidates, threshold: f64, found: &mut Vec<(f64, u32)>) {
     found.clear();
-    for (range, rect) in &c.rows {
-        let dy = (rect[0] - q[1]).max(q[1] - rect[1]).max(0.0);
-        let dz = (rect[2] - q[2]).max(q[2] - rect[3]).max(0.0);
-        // A lower bound on the squared distance across x to any point of the row.
-        let across = (dy * dy + dz * dz) * (1.0 - 1e-9);
-        if across > threshold {
-            continue;
-        }
-        // Points farther than this along x are beyond the threshold (widened for rounding).
-        let reach = (threshold - across).sqrt() * (1.0 + 1e-9) + f64::MIN_POSITIVE;
-        let xs = &c.x[range.clone()];
-        let a = xs.iter().filter(|&&x| x < q[0] - reach).count();
-        let b = xs.iter().filter(|&&x| x <= q[0] + reach).count();
-        let at = range.start;
-        for j in at + a..at + b {
-            // The summation order of `dist2` (FLANN's): bit-identical distances.
-            let (dx, dy, dz) = (q[0] - c.x[j], q[1] - c.y[j], q[2] - c.z[j]);
-            let d = dx * dx + dy * dy + dz * dz;
-            if d <= threshold {
-                found.push((d, c.id[j]));
-            }
+    let n = c.id.len();
+    let (xs, ys, zs, ids) = (&c.x[..n], &c.y[..n], &c.z[..n], &c.id[..n]);
+    for j in 0..n {
+        // The summation order of `dist2` (FLANN's): bit-identical distances.
+        let (dx, dy, dz) = (q[0] - xs[j], q[1] - ys[j], q[2] - zs[j]);
+        let d = dx * dx + dy * dy + dz * dz;
+        if d <= threshold {
+            found.push((d, ids[j]));
         }
     }
 }
@@ -386,7 +361,7 @@ impl Grid {
                 let r = (y + self.dims[1] * z) as usize;
                 let (a, b) = (self.rows[r] as usize, self.rows[r + 1] as usize);
                 if a < b {
-                    cursors.push((a, a, b, self.rect(y, z)));
+                    cursors.push((a, a, b));
                 }
             }
         }
@@ -417,7 +392,7 @@ impl Grid {
             (lo_open[0], hi_open[0]) = (lo[0] < self.origin[0], hi[0] > self.hi[0]);
             let c = &mut scratch.run;
             c.clear();
-            for (a, b, e, rect) in scratch.cursors.iter_mut() {
+            for (a, b, e) in scratch.cursors.iter_mut() {
                 while *a < *e && self.xs[*a] < lo[0] {
                     *a += 1;
                 }
@@ -425,7 +400,7 @@ impl Grid {
                 while *b < *e && self.xs[*b] <= hi[0] {
                     *b += 1;
                 }
-                c.push(self, *a..*b, *rect);
+                c.push(self, *a..*b);
             }
             let area = Area {
                 lo,
@@ -484,33 +459,19 @@ impl Grid {
         &self,
         lo: &[f64; 3],
         hi: &[f64; 3],
-        ranges: &mut Vec<(Range<usize>, Rect)>,
+        ranges: &mut Vec<Range<usize>>,
         out: &mut Candidates,
     ) {
         self.slices(lo, hi, ranges);
         out.clear();
-        for (range, rect) in ranges.iter() {
-            out.push(self, range.clone(), *rect);
+        for range in ranges.iter() {
+            out.push(self, range.clone());
         }
-    }
-
-    /// The cross-section of row (y, z), widened by the rounding of the row assignment.
-    fn rect(&self, y: isize, z: isize) -> Rect {
-        let slack = |a: usize| {
-            1e-9 * self.cell + 1e-12 * (self.origin[a].abs() + self.dims[a] as f64 * self.cell)
-        };
-        let side = |a: usize, i: isize| self.origin[a] + i as f64 * self.cell;
-        [
-            side(1, y) - slack(1),
-            side(1, y + 1) + slack(1),
-            side(2, z) - slack(2),
-            side(2, z + 1) + slack(2),
-        ]
     }
 
     /// The stored-point slices of the rows that meet the box [lo, hi], each cut to x in
     /// [lo.x, hi.x], into `out` (cleared first).
-    fn slices(&self, lo: &[f64; 3], hi: &[f64; 3], out: &mut Vec<(Range<usize>, Rect)>) {
+    fn slices(&self, lo: &[f64; 3], hi: &[f64; 3], out: &mut Vec<Range<usize>>) {
         out.clear();
         let (y0, y1) = (self.coord(lo[1], 1).max(0), self.coord(hi[1], 1));
         let (z0, z1) = (self.coord(lo[2], 2).max(0), self.coord(hi[2], 2));
@@ -518,7 +479,7 @@ impl Grid {
             for y in y0..=y1.min(self.dims[1] - 1) {
                 let range = self.row(y, z, lo[0], hi[0]);
                 if !range.is_empty() {
-                    out.push((range, self.rect(y, z)));
+                    out.push(range);
                 }
             }
         }
