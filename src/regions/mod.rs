@@ -169,6 +169,26 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
     }
 }
 
+/// A member counts for the region's peak only when its LoD is at most this many times the
+/// median LoD of the region's members (a core point at a face border or a scan gap whose fit
+/// is poor carries a poor peak).
+const PEAK_LOD_RATIO: f64 = 2.0;
+
+/// Region peak: the `peak` of largest magnitude among the members whose LoD is at most
+/// [`PEAK_LOD_RATIO`] × the members' median LoD.
+fn peak(dev: &Deviations, members: &[usize]) -> f64 {
+    let mut lods: Vec<f64> = members.iter().map(|&i| dev.values[i].uncertainty).collect();
+    let mid = lods.len() / 2;
+    let cap = PEAK_LOD_RATIO * *lods.select_nth_unstable_by(mid, f64::total_cmp).1;
+    members
+        .iter()
+        .map(|&i| &dev.values[i])
+        .filter(|v| v.uncertainty <= cap)
+        .map(|v| v.peak)
+        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
+        .unwrap_or(0.0)
+}
+
 fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) -> Region {
     let n = members.len() as f64;
     let centroid = members
@@ -182,11 +202,7 @@ fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) 
         .sum::<Vector3<f64>>();
     let normal = normal.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
     let d = |i: usize| dev.values[i].distance;
-    let peak = members
-        .iter()
-        .map(|&i| dev.values[i].peak)
-        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
-        .unwrap_or(0.0);
+    let peak = peak(dev, members);
     Region {
         id: 0,
         centroid: centroid.into(),
