@@ -16,7 +16,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::fit::{fit, FitScratch, Local};
-use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason};
+use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
 
 /// δ_i looks among this many nearest scan points of a reference point (8 gave the same
@@ -58,10 +58,6 @@ struct RefSlot {
     /// RWME terms: w = exp(-|δ|/h) and w·|δ| (NaN when δ is: unscanned surface).
     terms: [f64; 2],
 }
-
-/// A refined peak evaluation counts only when its LoD is at most this many times the core
-/// point's own (a fit through a few points at a surface's border is no peak).
-const PEAK_LOD_RATIO: f64 = 2.0;
 
 /// The candidate radii: the configured ones, or r0·√2^k for k = 0..4 with `r0` the radius
 /// that holds about 12 scan points.

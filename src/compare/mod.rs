@@ -118,6 +118,11 @@ impl Default for AdaptiveConfig {
     }
 }
 
+/// A peak evaluation counts only when its LoD is at most this many times that of what it is
+/// compared with: a refined evaluation against its core point's, a region member against the
+/// region's median (a fit through a few points at a face border or a scan gap is no peak).
+pub const PEAK_LOD_RATIO: f64 = 2.0;
+
 /// Why a core point has no distance.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::Neighbours;
-use crate::compare::{area_share, Deviations};
+use crate::compare::{area_share, Deviations, PEAK_LOD_RATIO};
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -168,11 +168,6 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
         labels,
     }
 }
-
-/// A member counts for the region's peak only when its LoD is at most this many times the
-/// median LoD of the region's members (a core point at a face border or a scan gap whose fit
-/// is poor carries a poor peak).
-const PEAK_LOD_RATIO: f64 = 2.0;
 
 /// Region peak: the `peak` of largest magnitude among the members whose LoD is at most
 /// [`PEAK_LOD_RATIO`] × the members' median LoD.
