@@ -16,6 +16,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::fit::{fit, FitScratch, Local};
+use super::grid::Member;
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
 
@@ -89,6 +90,8 @@ pub struct Scratch {
     next: Vec<usize>,
     fit: FitScratch,
     knn: Vec<(f64, u32)>,
+    /// Reference points around a core point whose peak is refined.
+    near: Vec<Member>,
 }
 
 /// Reference points within a candidate radius ([`gather`] counts each in the ring between
@@ -178,7 +181,8 @@ pub fn run(
         cos_limit: a.max_normal_angle.to_radians().cos(),
     };
     let values = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
-        refine(&prep, at(&prep, p, n, cfg, s), p, n, cfg)
+        let dev = at(&prep, p, n, cfg, s);
+        refine(&prep, dev, p, n, cfg, s)
     });
     Ok((values, noise))
 }
@@ -194,12 +198,14 @@ fn refine(
     p: &Point3<f64>,
     n: &Vector3<f64>,
     cfg: &CompareConfig,
+    scratch: &mut Scratch,
 ) -> Deviation {
     if !(dev.significant && dev.distance.abs() > cfg.adaptive.refine_above) {
         return dev;
     }
-    let mut scratch = Scratch::default();
-    let mut near = Vec::new();
+    // The candidate list is taken out of the scratch while `at` uses the rest of it.
+    let mut near = std::mem::take(&mut scratch.near);
+    near.clear();
     let c = prep.clouds;
     c.ref_grid
         .cylinder(p, n, prep.refine_radius, cfg.max_distance, &mut near);
@@ -213,7 +219,7 @@ fn refine(
         if nx.dot(n) < prep.cos_limit || !own_cell {
             continue;
         }
-        let d = at(prep, x, nx, cfg, &mut scratch);
+        let d = at(prep, x, nx, cfg, scratch);
         if d.significant
             && d.spread[1] <= cfg.adaptive.max_misfit * prep.noise
             && d.uncertainty <= PEAK_LOD_RATIO * dev.uncertainty
@@ -223,6 +229,7 @@ fn refine(
             dev.peak = d.distance;
         }
     }
+    scratch.near = near;
     dev
 }
 

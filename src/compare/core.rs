@@ -90,7 +90,7 @@ pub fn core_points(reference: &PointCloud, cfg: &CoreConfig) -> Result<PointClou
             )?;
             sample.indices
         }
-        _ => {
+        CoreSelection::Sample | CoreSelection::All => {
             let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(cfg.seed);
             let mut chosen = sample(&mut rng, reference.len(), cfg.count).into_vec();
             chosen.sort_unstable();
