@@ -35,6 +35,25 @@ fn synth_case(cfg: &SynthConfig) -> ((f64, f64), (f64, f64)) {
         reg.coarse.inlier_ratio, reg.coarse.mac.cliques_found, reg.coarse.mac.hypotheses,
         reg.coarse.chosen, reg.fitness, reg.fine.map_or(0, |x| x.iterations), reg.times
     );
+    // The registration error the LoD uses covers the pose's actual error on the surface.
+    let err = reg.pose * truth.inverse();
+    let surface_error = case
+        .reference
+        .points
+        .iter()
+        .zip(case.reference.normals.as_ref().unwrap())
+        .map(|(p, n)| (err * p - p).dot(n).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "  largest error along the normal {surface_error:.6} mm, registration error {:.6} mm",
+        reg.registration_error
+    );
+    assert!(
+        surface_error <= 1.96 * reg.registration_error,
+        "seed {}: {surface_error} mm off, registration error {}",
+        cfg.seed,
+        reg.registration_error
+    );
     eprintln!(
         "  points {} keypoints {} ref {} mac {:?}",
         reg.coarse.scan_points,

@@ -33,7 +33,8 @@ pub struct InspectArgs {
     /// M3C2 variant [default: adaptive].
     #[arg(long, value_enum)]
     pub method: Option<Method>,
-    /// Registration error for the level of detection, mm [default: the ICP inlier RMSE].
+    /// Registration error for the level of detection, mm [default: the registration's
+    /// `registration_error`, 2 × the fine ICP's pose uncertainty on the surface].
     #[arg(long)]
     pub registration_error: Option<f64>,
     /// Skip registration: take scan_to_reference from this JSON file (registration.json or
@@ -157,16 +158,22 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
                 &args.reference,
             )?;
             let line = format!(
-                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, {:.2} s",
+                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, registration error {:.5} mm, {:.2} s",
                 reg.fitness,
                 reg.inlier_rmse,
                 reg.fine.map_or(f64::NAN, |f| f.plane_rmse),
+                reg.registration_error,
                 reg.times.total
             );
-            // The registration error of the level of detection is the fine ICP's
-            // point-to-plane RMS residual: the point-to-point inlier RMSE is dominated by the
-            // reference's sampling spacing, not by how well the surfaces agree.
-            let reg_error = reg.fine.map_or(reg.inlier_rmse, |f| f.plane_rmse);
+            // The registration error of the level of detection is the pose's own
+            // uncertainty on the surface (`Registration::registration_error`), not a residual
+            // RMSE: those hold the scan noise, which the LoD already counts, and the
+            // reference's sampling spacing.
+            let reg_error = if reg.registration_error.is_finite() {
+                reg.registration_error
+            } else {
+                reg.inlier_rmse
+            };
             (reg.pose, Some(reg_error), line)
         }
     };

@@ -40,6 +40,59 @@ pub struct IcpResult {
     pub plane_rmse: f64,
     /// Kernel scale of the last iteration (mm).
     pub kernel_scale: f64,
+    /// How far the pose's statistical uncertainty can move the surface: the largest 1-σ
+    /// displacement along the target normal over the matched points (mm), from the
+    /// cluster-robust covariance of the pose ([`pose_std`]). NaN when the pose is not
+    /// determined (too few pairs or blocks).
+    pub pose_std: f64,
+}
+
+/// Edge of the cubes that group the residuals of [`pose_std`] (mm): residuals within a cube
+/// may be correlated (a defect, a scanner stripe), residuals of different cubes are taken as
+/// independent. Larger than the widest defect the synthetic cases plant (3 mm).
+pub const UNCERTAINTY_BLOCK: f64 = 15.0;
+
+/// The pose's statistical uncertainty projected on the surface: the largest 1-σ displacement
+/// along a target normal over `pairs` (moved point, target index, residual, ...) under the
+/// pose covariance `H⁻¹ M H⁻¹`. `H = Σ w J Jᵀ` is the Gauss–Newton matrix of the robust
+/// point-to-plane fit (`w` the Geman–McClure weight with scale `k`, `J = [q × n, n]`) and
+/// `M = G/(G-1) Σ_b s_b s_bᵀ` sums the score `s_b = Σ_{i∈b} w_i r_i J_i` of each
+/// [`UNCERTAINTY_BLOCK`] cube `b` (a cluster-robust sandwich: it holds when residuals are
+/// correlated within a cube). NaN when fewer than 7 cubes hold pairs or `H` is singular.
+pub fn pose_std(pairs: &[(Point3<f64>, usize, f64, f64)], normals: &[Vector3<f64>], k: f64) -> f64 {
+    let k2 = k * k;
+    let mut h = Matrix6::<f64>::zeros();
+    let mut blocks: std::collections::HashMap<[i64; 3], Vector6<f64>> = Default::default();
+    for &(q, j, r, _) in pairs {
+        let jac = jacobian(&q, &normals[j]);
+        let w = (k2 / (k2 + r * r)).powi(2);
+        h += jac * jac.transpose() * w;
+        let key = q.coords.map(|c| (c / UNCERTAINTY_BLOCK).floor() as i64);
+        *blocks.entry([key.x, key.y, key.z]).or_default() += jac * (w * r);
+    }
+    let g = blocks.len() as f64;
+    let Some(h_inv) = h.try_inverse().filter(|_| blocks.len() >= 7) else {
+        return f64::NAN;
+    };
+    let meat = blocks
+        .values()
+        .fold(Matrix6::zeros(), |m, s| m + s * s.transpose())
+        * (g / (g - 1.0));
+    let cov = h_inv * meat * h_inv;
+    pairs
+        .iter()
+        .map(|(q, j, _, _)| {
+            let jac = jacobian(q, &normals[*j]);
+            (jac.transpose() * cov * jac)[0].max(0.0).sqrt()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Derivative of the point-to-plane residual of `q` (target normal `n`) with respect to a
+/// small move (rotation vector, translation) applied in the target frame: `[q × n, n]`.
+fn jacobian(q: &Point3<f64>, n: &Vector3<f64>) -> Vector6<f64> {
+    let c = q.coords.cross(n);
+    Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z)
 }
 
 /// One linearisation: normal equations plus the statistics at the current pose.
@@ -152,7 +205,9 @@ pub fn icp(
         inlier_rmse: 0.0,
         plane_rmse: 0.0,
         kernel_scale: 0.0,
+        pose_std: f64::NAN,
     };
+    let mut final_pairs = Vec::new();
     for it in 0..=p.max_iterations {
         let pairs = residuals(src, target, normals, index, &pose, p.max_distance);
         let k = p.kernel_scale.unwrap_or_else(|| {
@@ -162,10 +217,7 @@ pub fn icp(
         let step = pairs
             .par_iter()
             .fold(Step::default, |mut s, &(q, j, r, d2)| {
-                let nj = normals[j];
-                let jac = Vector6::new(0.0, 0.0, 0.0, nj.x, nj.y, nj.z);
-                let c = q.coords.cross(&nj);
-                let jac = Vector6::new(c.x, c.y, c.z, jac[3], jac[4], jac[5]);
+                let jac = jacobian(&q, &normals[j]);
                 let w = (k2 / (k2 + r * r)).powi(2);
                 s.a += jac * jac.transpose() * w;
                 s.b += jac * (w * r);
@@ -186,7 +238,9 @@ pub fn icp(
             inlier_rmse: rmse,
             plane_rmse: (step.sum_r2 / pairs_f).sqrt(),
             kernel_scale: k,
+            pose_std: f64::NAN,
         };
+        final_pairs = pairs;
         if let Some((f0, r0)) = last {
             let rel = |a: f64, b: f64| (a - b).abs() / b.abs().max(1e-300);
             if rel(fitness, f0) < p.relative_tolerance && rel(rmse, r0) < p.relative_tolerance {
@@ -212,6 +266,7 @@ pub fn icp(
             break;
         }
     }
+    result.pose_std = pose_std(&final_pairs, normals, result.kernel_scale);
     result
 }
 
