@@ -3,6 +3,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use crate::cloud::{Aabb, PointCloud};
+use crate::compare::grid::Grid;
 
 /// Replaces the points of each occupied voxel (edge `voxel_mm`) by their centroid; normals are
 /// averaged and renormalised (the first point's normal when they cancel), scalar fields
@@ -63,15 +64,42 @@ pub fn voxel_downsample(cloud: &PointCloud, voxel_mm: f64) -> PointCloud {
     }
 }
 
-/// Mean distance from each point to its nearest other point (the cloud resolution "mr", mm);
-/// 0 for fewer than two points.
+/// Most points whose nearest-neighbour distance enters [`mean_spacing`] (evenly strided): the
+/// distances scatter by about half their mean, so 20,000 of them give the mean within about
+/// 0.5 %, at a tenth of the cost of every point on a 300k cloud.
+pub const SPACING_SAMPLE: usize = 20_000;
+
+/// Mean distance from a point to its nearest other point (the cloud resolution "mr", mm), over
+/// every point of a cloud of up to [`SPACING_SAMPLE`] points, else over that many evenly
+/// strided ones; 0 for fewer than two points.
 pub fn mean_spacing(cloud: &PointCloud) -> f64 {
     if cloud.len() < 2 {
         return 0.0;
     }
-    // The outlier filter's batched k-NN with k = 1 other point: the same distances.
-    let nearest = super::sor::mean_distances(cloud, 1, false);
-    nearest.iter().sum::<f64>() / cloud.len() as f64
+    mean_spacing_in(&Grid::for_points(&cloud.points), &cloud.points)
+}
+
+/// [`mean_spacing`] of `points`, searched in `grid` (a [`Grid`] built over exactly `points`,
+/// not renumbered).
+pub fn mean_spacing_in(grid: &Grid, points: &[Point3<f64>]) -> f64 {
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let step = points.len().div_ceil(SPACING_SAMPLE);
+    let sample: Vec<usize> = (0..points.len()).step_by(step).collect();
+    let nearest: Vec<f64> = sample
+        .par_iter()
+        .map_init(Vec::new, |found, &i| {
+            grid.knn(&points[i], 2, f64::INFINITY, found);
+            // The point itself is one of the two (a duplicate of it counts at distance 0).
+            found
+                .iter()
+                .find(|e| e.1 as usize != i)
+                .map_or(0.0, |e| e.0.sqrt())
+        })
+        .collect();
+    // Summed in order: the same resolution (and so the same voxels) on every run.
+    nearest.iter().sum::<f64>() / nearest.len() as f64
 }
 
 #[cfg(test)]
@@ -107,5 +135,24 @@ mod tests {
         );
         assert_eq!(mean_spacing(&cloud), 0.5);
         assert_eq!(mean_spacing(&PointCloud::default()), 0.0);
+    }
+
+    #[test]
+    fn sampled_spacing_is_within_a_percent_of_every_points_mean() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        // 200,000 random points on a wavy sheet: uneven spacing, as a scan has.
+        let cloud = PointCloud::from_points(
+            (0..200_000)
+                .map(|_| {
+                    let (x, y) = (rng.gen_range(0.0..60.0), rng.gen_range(0.0..40.0f64));
+                    Point3::new(x, y, 3.0 * (x / 7.0).sin() * (y / 5.0).cos())
+                })
+                .collect(),
+        );
+        let every = super::super::sor::mean_distances(&cloud, 1, false);
+        let exact = every.iter().sum::<f64>() / every.len() as f64;
+        let sampled = mean_spacing(&cloud);
+        assert!((sampled / exact - 1.0).abs() < 0.01, "{sampled} vs {exact}");
     }
 }

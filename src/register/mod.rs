@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use crate::cloud::PointCloud;
 use crate::compare::grid::Grid;
 use crate::preprocess::{
-    estimate_normals, mean_spacing, voxel_downsample, NormalConfig, Orientation,
+    estimate_normals, mean_spacing_in, voxel_downsample, NormalConfig, Orientation,
 };
 use icp::{IcpParams, IcpResult};
 use mac::{MacParams, MacStats};
@@ -71,7 +71,7 @@ pub struct RegisterConfig {
     pub icp_max_distance: Option<f64>,
     /// Fine ICP iteration cap (default 100).
     pub icp_max_iterations: usize,
-    /// Fine ICP relative tolerance on fitness and inlier RMSE (default 1e-9).
+    /// Fine ICP relative tolerance on fitness and inlier RMSE (default 1e-7).
     pub icp_relative_tolerance: f64,
     /// Fixed Geman–McClure scale of the fine ICP; default adaptive (3 × robust sigma).
     pub icp_kernel_scale: Option<f64>,
@@ -105,7 +105,7 @@ impl Default for RegisterConfig {
             icp_max_points: 100_000,
             icp_max_distance: None,
             icp_max_iterations: 100,
-            icp_relative_tolerance: 1e-9,
+            icp_relative_tolerance: 1e-7,
             icp_kernel_scale: None,
             fitness_distance: None,
             min_fitness: 0.2,
@@ -271,8 +271,14 @@ pub fn register_with_progress(
 
     progress("down-sampling and normals");
     let t = Instant::now();
-    let mr_ref = mean_spacing(reference);
-    let mr = mean_spacing(scan).max(mr_ref);
+    // The reference's grid serves its resolution here and the fine ICP's searches.
+    let (ref_index, scan_index) = rayon::join(
+        || Grid::for_points(&reference.points),
+        || Grid::for_points(&scan.points),
+    );
+    let mr_ref = mean_spacing_in(&ref_index, &reference.points);
+    let mr = mean_spacing_in(&scan_index, &scan.points).max(mr_ref);
+    drop(scan_index);
     let voxel = cfg.voxel.unwrap_or(5.0 * mr);
     if voxel.is_nan() || voxel <= 0.0 {
         return Err(RegisterError::Input(
@@ -442,7 +448,6 @@ pub fn register_with_progress(
     let t = Instant::now();
     let stride = scan.len().div_ceil(cfg.icp_max_points.max(1));
     let src_fine: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
-    let ref_index = Grid::for_points(&reference.points);
     let ref_normals: Vec<Vector3<f64>> = match &reference.normals {
         Some(n) => n.clone(),
         None => {
