@@ -67,14 +67,19 @@ pub struct InspectConfig {
     pub register: RegisterConfig,
 }
 
-fn load_reference(path: &Path, input: &GeometryInput, samples: usize) -> Result<PointCloud> {
+/// The reference as a cloud with outward normals, and where the normals came from.
+fn load_reference(
+    path: &Path,
+    input: &GeometryInput,
+    samples: usize,
+) -> Result<(PointCloud, String)> {
     match cloud::load(path, input.format, input.units)?.geometry {
-        Geometry::Mesh { mesh, .. } => compare::mesh_reference(&mesh, samples, 1),
-        Geometry::Cloud(c) if c.normals.is_some() => Ok(c),
-        Geometry::Cloud(_) => anyhow::bail!(
-            "{}: a reference cloud needs outward normals (or give the mesh)",
-            path.display()
-        ),
+        Geometry::Mesh { mesh, .. } => Ok((
+            compare::mesh_reference(&mesh, samples, 1)?,
+            format!("{samples} points sampled from the mesh, with its facet normals"),
+        )),
+        Geometry::Cloud(c) => compare::cloud_reference(c)
+            .with_context(|| format!("{}: reference normals", path.display())),
     }
 }
 
@@ -121,7 +126,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     } else {
         cfg.reference_points
     };
-    let reference = load_reference(&args.reference, &args.input, samples)?;
+    let (reference, reference_note) = load_reference(&args.reference, &args.input, samples)?;
     let scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
     spin.finish_and_clear();
     times.lap("load");
@@ -180,6 +185,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     scan.transform(&pose);
     times.lap("register");
     let report_summary = vec![
+        ("reference normals".to_string(), reference_note),
         ("registration".to_string(), reg_line),
         (
             "outlier filter".to_string(),

@@ -2,8 +2,9 @@
 //!
 //! A mesh reference is sampled area-uniformly with facet normals after orienting the winding
 //! outward (so a core point next to a sharp edge carries its own facet's normal, not an
-//! average across the edge). A cloud reference must carry normals (estimated ones must be
-//! oriented outward consistently; a fixed orientation vector flips signs on a closed part).
+//! average across the edge). A cloud reference keeps its normals, or gets PCA normals oriented
+//! outward by propagation ([`cloud_reference`]; a fixed orientation vector would flip signs on
+//! a closed part).
 use anyhow::{bail, Result};
 use rand::seq::index::sample;
 use rand::SeedableRng;
@@ -12,7 +13,9 @@ use serde::{Deserialize, Serialize};
 use nalgebra::Point3;
 
 use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
-use crate::preprocess::{curvature_sample, CurvatureSampleConfig};
+use crate::preprocess::{
+    curvature_sample, estimate_normals, CurvatureSampleConfig, NormalConfig, Orientation,
+};
 
 /// Which reference points become core points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -61,6 +64,31 @@ pub fn mesh_reference(mesh: &Mesh, points: usize, seed: u64) -> Result<PointClou
     let mut mesh = mesh.clone();
     mesh.orient_outward();
     Ok(sample_mesh(&mesh, points, seed)?.cloud)
+}
+
+/// A reference cloud ready for the comparison, and a sentence saying where its normals came
+/// from. A cloud with normals keeps them (they must point outward). A cloud without gets PCA
+/// normals of its 20 nearest points, oriented consistently and outward on a closed part
+/// without a fixed orientation vector: [`Orientation::Propagate`] (a minimum spanning tree of
+/// the 10-NN graph walked from the highest point, whose normal is turned up: outward on a
+/// closed surface). Near a sharp edge a PCA normal averages the two faces (a mesh reference
+/// keeps the facet normals there).
+pub fn cloud_reference(mut cloud: PointCloud) -> Result<(PointCloud, String)> {
+    if cloud.normals.is_some() {
+        return Ok((cloud, "the reference cloud's own normals".into()));
+    }
+    let est = estimate_normals(
+        &cloud,
+        &NormalConfig {
+            orientation: Orientation::Propagate,
+            ..NormalConfig::default()
+        },
+    )?;
+    cloud.normals = Some(est.normals);
+    Ok((
+        cloud,
+        format!("PCA of 20 neighbours, {}", est.orientation_note),
+    ))
 }
 
 /// The core points of `reference` (which must carry outward unit normals).

@@ -17,7 +17,9 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use self::core::{area_share, core_points, mesh_reference, CoreConfig, CoreSelection};
+pub use self::core::{
+    area_share, cloud_reference, core_points, mesh_reference, CoreConfig, CoreSelection,
+};
 use self::grid::Grid;
 use crate::cloud::PointCloud;
 

@@ -1,14 +1,14 @@
 //! Normals and surface variation by PCA over each point's neighbourhood (Open3D's definition:
 //! covariance of the neighbourhood including the point, normal = eigenvector of the smallest
 //! eigenvalue), then a consistent orientation.
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 
 use anyhow::{bail, Result};
 use nalgebra::{Matrix3, Point3, SymmetricEigen, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::{Neighbours, PointCloud};
+use rayon::prelude::*;
+
+use crate::cloud::PointCloud;
 use crate::compare::grid::Grid;
 
 /// How the sign of each normal is chosen (PCA gives an axis, not a direction).
@@ -20,9 +20,10 @@ pub enum Orientation {
     Auto,
     /// Every normal points toward this viewpoint (the scanner position), mm.
     Viewpoint(Point3<f64>),
-    /// Hoppe's propagation: a minimum spanning tree over the k-NN graph with edge cost
-    /// 1 - |nᵢ·nⱼ|; each connected component is seeded at its highest point (largest z) with
-    /// nz >= 0 and every normal is flipped to agree with its parent in the tree.
+    /// Hoppe's propagation: a minimum spanning forest of the k-NN graph with edge cost
+    /// 1 - |nᵢ·nⱼ| + |nᵢ·d| + |nⱼ·d| (d the unit edge direction); each tree is walked from its
+    /// highest point (largest z) with nz >= 0, every normal flipped to agree with its parent
+    /// (outward on a closed surface).
     Propagate,
     /// Each normal agrees in sign with the input's normal at the same point (scanner or
     /// mesh normals).
@@ -211,9 +212,9 @@ fn orient(
             "agreeing with the input's normals".into()
         }
         Orientation::Propagate => {
-            let components = propagate(p, &Neighbours::new(p), normals, propagate_k);
+            let components = propagate(p, normals, propagate_k);
             format!(
-                "propagated over a {propagate_k}-NN graph (minimum spanning tree, cost 1-|n·n'|), \
+                "propagated over a {propagate_k}-NN graph (minimum spanning tree, cost 1-|n·n'|+|n·d|+|n'·d|), \
                  {components} component(s), each seeded with nz >= 0 at its highest point"
             )
         }
@@ -221,60 +222,67 @@ fn orient(
     }
 }
 
-/// A graph edge in the propagation heap, cheapest first.
-#[derive(PartialEq)]
-struct Edge {
-    cost: f64,
-    from: u32,
-    to: u32,
+/// Cost of the propagation edge between points `a` and `b` (normals `na`, `nb`; sign-free):
+/// `1 - |na·nb|` (Hoppe), plus how far each normal leans along the edge, `|na·d| + |nb·d|`
+/// (d the unit edge direction). Two points facing each other across a thin wall have parallel
+/// axes, so Hoppe's term alone makes that edge one of the cheapest; the lean term makes it one
+/// of the dearest (the edge runs along both normals) while neighbours on one smooth surface
+/// keep a cost near 0.
+fn edge_cost(a: &Point3<f64>, na: &Vector3<f64>, b: &Point3<f64>, nb: &Vector3<f64>) -> f64 {
+    let d = (b - a).normalize();
+    let lean = if d.iter().all(|c| c.is_finite()) {
+        na.dot(&d).abs() + nb.dot(&d).abs()
+    } else {
+        0.0
+    };
+    1.0 - na.dot(nb).abs() + lean
 }
 
-impl Eq for Edge {}
-
-impl Ord for Edge {
-    fn cmp(&self, other: &Self) -> Ordering {
-        other
-            .cost
-            .total_cmp(&self.cost)
-            .then(other.to.cmp(&self.to))
-            .then(other.from.cmp(&self.from))
+/// The root of `i`'s set (with path halving).
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        let up = parent[parent[i as usize] as usize];
+        parent[i as usize] = up;
+        i = up;
     }
+    i
 }
 
-impl PartialOrd for Edge {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-/// Prim's minimum spanning tree over the symmetric k-NN graph, flipping each newly reached
-/// normal to agree with the one it was reached from. Returns the number of components.
-fn propagate(
-    points: &[Point3<f64>],
-    index: &Neighbours,
-    normals: &mut [Vector3<f64>],
-    k: usize,
-) -> usize {
-    let knn: Vec<Vec<u32>> = index.par_map_points(
-        || (),
-        |_, i| {
-            let nb = index.knn(&points[i], k + 1);
-            nb.iter()
-                .filter(|n| n.index != i)
-                .map(|n| n.index as u32)
+/// Minimum spanning forest of the symmetric k-NN graph under [`edge_cost`] (Kruskal: edges
+/// sorted by cost, ties by index), then each tree is walked from its highest point (largest
+/// z; its normal turned up, nz >= 0), every normal flipped to agree with its parent's.
+/// Returns the number of trees (connected components).
+fn propagate(points: &[Point3<f64>], normals: &mut [Vector3<f64>], k: usize) -> usize {
+    let lists: Vec<Vec<(f64, u32, u32)>> =
+        Grid::knn_among(points, k + 1, f64::INFINITY, |i, found| {
+            found
+                .iter()
+                .map(|&(_, j)| j as usize)
+                .filter(|&j| j != i)
+                .map(|j| {
+                    let (a, b) = (i.min(j), i.max(j));
+                    let cost = edge_cost(&points[a], &normals[a], &points[b], &normals[b]);
+                    (cost, a as u32, b as u32)
+                })
                 .collect()
-        },
-    );
-    let mut adjacency = knn.clone();
-    for (i, list) in knn.iter().enumerate() {
-        for &j in list {
-            adjacency[j as usize].push(i as u32);
+        });
+    let mut edges: Vec<(f64, u32, u32)> = lists.into_iter().flatten().collect();
+    edges.par_sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+    edges.dedup_by(|x, y| x.1 == y.1 && x.2 == y.2);
+    let mut parent: Vec<u32> = (0..points.len() as u32).collect();
+    let mut tree: Vec<Vec<u32>> = vec![Vec::new(); points.len()];
+    for &(_, a, b) in &edges {
+        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+        if ra != rb {
+            parent[ra.max(rb) as usize] = ra.min(rb);
+            tree[a as usize].push(b);
+            tree[b as usize].push(a);
         }
     }
     let mut seeds: Vec<usize> = (0..points.len()).collect();
-    seeds.sort_by(|&a, &b| points[b].z.total_cmp(&points[a].z).then(a.cmp(&b)));
+    seeds.par_sort_unstable_by(|&a, &b| points[b].z.total_cmp(&points[a].z).then(a.cmp(&b)));
     let mut done = vec![false; points.len()];
-    let mut heap = BinaryHeap::new();
+    let mut stack = Vec::new();
     let mut components = 0;
     for seed in seeds {
         if done[seed] {
@@ -284,27 +292,17 @@ fn propagate(
         if normals[seed].z < 0.0 {
             normals[seed] = -normals[seed];
         }
-        heap.push(Edge {
-            cost: 0.0,
-            from: seed as u32,
-            to: seed as u32,
-        });
-        while let Some(Edge { from, to, .. }) = heap.pop() {
-            let (from, to) = (from as usize, to as usize);
-            if done[to] {
-                continue;
-            }
-            done[to] = true;
-            if normals[to].dot(&normals[from]) < 0.0 {
-                normals[to] = -normals[to];
-            }
-            for &j in &adjacency[to] {
-                if !done[j as usize] {
-                    heap.push(Edge {
-                        cost: 1.0 - normals[to].dot(&normals[j as usize]).abs(),
-                        from: to as u32,
-                        to: j,
-                    });
+        done[seed] = true;
+        stack.push(seed);
+        while let Some(from) = stack.pop() {
+            for &to in &tree[from] {
+                let to = to as usize;
+                if !done[to] {
+                    done[to] = true;
+                    if normals[to].dot(&normals[from]) < 0.0 {
+                        normals[to] = -normals[to];
+                    }
+                    stack.push(to);
                 }
             }
         }
