@@ -1,10 +1,12 @@
 //! Classic M3C2 at one core point (Lague et al. 2013, as py4dgeo 1.2 computes it): distance =
 //! mean position of the scan's cylinder points along the normal minus the reference's;
-//! LoD95 = 1.96 (sqrt(s1²/n1 + s2²/n2) + reg) with sample standard deviations (n - 1).
+//! LoD95 = 1.96 (sqrt(s1²/n1 + s2²/n2) + reg) with sample standard deviations (n - 1); or
+//! ([`Aggregate::Median`]) medians and interquartile ranges in their place, as py4dgeo's
+//! `robust_aggr`.
 use nalgebra::{Point3, Vector3};
 
 use super::grid::Member;
-use super::{Clouds, CompareConfig, Deviation, Reason};
+use super::{Aggregate, Clouds, CompareConfig, Deviation, Reason};
 
 /// Mean and sample variance (n - 1; NaN below two values, as py4dgeo) of the axial offsets.
 fn mean_var(members: &[Member]) -> (f64, f64) {
@@ -12,6 +14,29 @@ fn mean_var(members: &[Member]) -> (f64, f64) {
     let mean = members.iter().map(|m| m.t).sum::<f64>() / n;
     let ss: f64 = members.iter().map(|m| (m.t - mean) * (m.t - mean)).sum();
     (mean, ss / (n - 1.0))
+}
+
+/// Median and interquartile range of the axial offsets, with py4dgeo's quartiles: order
+/// statistic ⌊n/4⌋, ⌊n/2⌋ and ⌊3n/4⌋, each averaged with the one below it when n is a multiple
+/// of 4 (quartiles) or of 2 (median).
+fn median_iqr(members: &[Member], sorted: &mut Vec<f64>) -> (f64, f64) {
+    sorted.clear();
+    sorted.extend(members.iter().map(|m| m.t));
+    sorted.sort_unstable_by(f64::total_cmp);
+    let n = sorted.len();
+    let at = |pos: usize, average: bool| {
+        if average && pos > 0 {
+            (sorted[pos] + sorted[pos - 1]) / 2.0
+        } else {
+            sorted[pos]
+        }
+    };
+    let (q1, q2, q3) = (
+        at(n / 4, n % 4 == 0),
+        at(n / 2, n % 2 == 0),
+        at(3 * n / 4, n % 4 == 0),
+    );
+    (q2, q3 - q1)
 }
 
 /// The classic M3C2 result at core point `p` with outward unit normal `n`; `buf` is scratch.
@@ -40,9 +65,21 @@ pub fn at(
     if n2 < min {
         return Deviation::missing(Reason::FewScan, radius, n1, n2);
     }
-    let (m1, v1) = mean_var(ref_in);
-    let (m2, v2) = mean_var(scan_in);
-    let lod = 1.96 * ((v1 / n1 as f64 + v2 / n2 as f64).sqrt() + cfg.registration_error);
+    let ([m1, m2], [s1, s2]) = match cfg.aggregate {
+        Aggregate::Mean => {
+            let ((m1, v1), (m2, v2)) = (mean_var(ref_in), mean_var(scan_in));
+            ([m1, m2], [v1.sqrt(), v2.sqrt()])
+        }
+        Aggregate::Median => {
+            let mut sorted = Vec::with_capacity(n1.max(n2));
+            let ((m1, s1), (m2, s2)) = (
+                median_iqr(ref_in, &mut sorted),
+                median_iqr(scan_in, &mut sorted),
+            );
+            ([m1, m2], [s1, s2])
+        }
+    };
+    let lod = 1.96 * ((s1 * s1 / n1 as f64 + s2 * s2 / n2 as f64).sqrt() + cfg.registration_error);
     Deviation {
         distance: m2 - m1,
         uncertainty: lod,
@@ -51,7 +88,7 @@ pub fn at(
         n_ref: n1,
         n_scan: n2,
         direction: Vector3::zeros(),
-        spread: [v1.sqrt(), v2.sqrt()],
+        spread: [s1, s2],
         peak: f64::NAN,
         reason: Reason::Ok,
     }

@@ -34,6 +34,19 @@ pub enum Method {
     Classic,
 }
 
+/// How classic M3C2 sums up each cylinder's positions along the normal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Aggregate {
+    /// Mean and sample standard deviation (Lague et al.; py4dgeo's default).
+    #[default]
+    Mean,
+    /// Median and interquartile range, robust to outliers in a cylinder (py4dgeo's
+    /// `robust_aggr=True`: its quartiles, and the IQR in place of the standard deviation in
+    /// the LoD, which makes the LoD about 1.35 × the mean's for Gaussian noise).
+    Median,
+}
+
 /// Settings of [`compare`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default)]
@@ -47,8 +60,10 @@ pub struct CompareConfig {
     /// below the radius means the radius, as in py4dgeo). Default 1.0.
     pub max_distance: f64,
     /// Registration error added to the level of detection, mm (default 0; `inspect` puts the
-    /// ICP inlier RMSE here unless given).
+    /// registration's `registration_error` here unless given).
     pub registration_error: f64,
+    /// Classic only: mean or median of each cylinder (default mean).
+    pub aggregate: Aggregate,
     /// Fewest points each cloud must have in a cylinder; fewer gives NaN with a reason
     /// (default 3; 1 reproduces py4dgeo, which only fails on empty cylinders).
     pub min_points: usize,
@@ -63,6 +78,7 @@ impl Default for CompareConfig {
             radius: None,
             max_distance: 1.0,
             registration_error: 0.0,
+            aggregate: Aggregate::Mean,
             min_points: 3,
             adaptive: AdaptiveConfig::default(),
         }
