@@ -32,9 +32,9 @@ fn median_iqr(members: &[Member], sorted: &mut Vec<f64>) -> (f64, f64) {
         }
     };
     let (q1, q2, q3) = (
-        at(n / 4, n % 4 == 0),
-        at(n / 2, n % 2 == 0),
-        at(3 * n / 4, n % 4 == 0),
+        at(n / 4, n.is_multiple_of(4)),
+        at(n / 2, n.is_multiple_of(2)),
+        at(3 * n / 4, n.is_multiple_of(4)),
     );
     (q2, q3 - q1)
 }
