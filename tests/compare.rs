@@ -170,6 +170,9 @@ struct Score {
     rms: f64,
     /// (defect height, region peak) for every defect taller than the tolerance.
     peaks: Vec<(f64, Option<f64>)>,
+    /// IoU of the members of regions (what the report shows as defects: error points in
+    /// groups of at least `min_points`) instead of every error point.
+    region_iou: f64,
     false_regions: usize,
     regions: usize,
 }
@@ -197,16 +200,12 @@ fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: 
         .iter()
         .map(|v| v.significant && v.distance.abs() > tol)
         .collect();
-    let both = is_true
-        .iter()
-        .zip(&detected)
-        .filter(|(a, b)| **a && **b)
-        .count();
-    let either = is_true
-        .iter()
-        .zip(&detected)
-        .filter(|(a, b)| **a || **b)
-        .count();
+    let iou = |detected: &[bool]| {
+        let both = is_true.iter().zip(detected).filter(|(a, b)| **a && **b);
+        let either = is_true.iter().zip(detected).filter(|(a, b)| **a || **b);
+        both.count() as f64 / either.count().max(1) as f64
+    };
+    let in_region: Vec<bool> = regions.labels.iter().map(|&l| l >= 0).collect();
     let errs: Vec<f64> = (0..truth.len())
         .filter(|&i| is_true[i])
         .map(|i| dev.values[i].distance - truth[i])
@@ -233,7 +232,8 @@ fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: 
         }
     }
     Score {
-        iou: both as f64 / either.max(1) as f64,
+        iou: iou(&detected),
+        region_iou: iou(&in_region),
         rms,
         peaks,
         false_regions: with_truth.iter().filter(|t| !**t).count(),
