@@ -123,7 +123,8 @@ fn ply_round_trip_is_bitwise() {
 #[test]
 fn csv_round_trip_is_exact() {
     let dir = tempdir();
-    let c = sample_cloud(500);
+    // Several of write_csv's parallel row blocks (8192 rows each).
+    let c = sample_cloud(20_000);
     let path = dir.path().join("c.csv");
     cloud::write_csv(&path, &c).unwrap();
     let back = cloud::load_cloud(&path, None, Some(Units::Mm)).unwrap();
