@@ -53,6 +53,7 @@ pub fn at(
         direction: Vector3::zeros(),
         spread: [v1.sqrt(), v2.sqrt()],
         peak: f64::NAN,
+        peak_fitted: false,
         reason: Reason::Ok,
     }
     .finish(n)

@@ -169,19 +169,35 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
     }
 }
 
-/// Region peak: the `peak` of largest magnitude among the members whose LoD is at most
-/// [`PEAK_LOD_RATIO`] × the members' median LoD.
+/// Region peak: when members have a fitted peak (their own guard vouches for them), the
+/// largest fitted one, unless another member's peak exceeds it by more than that member's LoD
+/// (a second, taller top in the region whose fit was refused): the largest of many noisy
+/// quadric estimates on a plateau is biased high, the fit is not. Other members count only
+/// when their LoD is at most [`PEAK_LOD_RATIO`] × the members' median LoD; without a fitted
+/// peak, the largest of those.
 fn peak(dev: &Deviations, members: &[usize]) -> f64 {
     let mut lods: Vec<f64> = members.iter().map(|&i| dev.values[i].uncertainty).collect();
     let mid = lods.len() / 2;
     let cap = PEAK_LOD_RATIO * *lods.select_nth_unstable_by(mid, f64::total_cmp).1;
-    members
-        .iter()
-        .map(|&i| &dev.values[i])
-        .filter(|v| v.uncertainty <= cap)
-        .map(|v| v.peak)
-        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
-        .unwrap_or(0.0)
+    let largest = |peaks: &mut dyn Iterator<Item = f64>| {
+        peaks.max_by(|a: &f64, b: &f64| a.abs().total_cmp(&b.abs()))
+    };
+    let eligible = || {
+        members
+            .iter()
+            .map(|&i| &dev.values[i])
+            .filter(move |v| v.peak_fitted || v.uncertainty <= cap)
+    };
+    let fitted = largest(&mut eligible().filter(|v| v.peak_fitted).map(|v| v.peak));
+    let peak = match fitted {
+        Some(f) => largest(
+            &mut eligible()
+                .filter(|v| v.peak_fitted || v.peak.abs() > f.abs() + v.uncertainty)
+                .map(|v| v.peak),
+        ),
+        None => largest(&mut eligible().map(|v| v.peak)),
+    };
+    peak.unwrap_or(0.0)
 }
 
 fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) -> Region {
