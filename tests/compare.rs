@@ -251,10 +251,13 @@ fn scores(default_scan_points: usize) -> Vec<(u64, Score, Score)> {
             let idx: Vec<usize> = (0..case.reference.len()).step_by(step).collect();
             let core = case.reference.select(&idx);
             let run = |method| {
-                let cfg = CompareConfig {
+                let mut cfg = CompareConfig {
                     method,
                     ..CompareConfig::default()
                 };
+                // POLISHBOT_PEAK_FIT=0: the peaks without the peak fit (for comparison).
+                cfg.adaptive.peak_fit =
+                    std::env::var("POLISHBOT_PEAK_FIT").map_or(true, |v| v != "0");
                 let dev = compare(&core, &case.reference, &case.scan, &cfg).unwrap();
                 let regions = find_regions(&dev, &RegionConfig::default());
                 score(seed, &case, &dev, &regions, tol)
