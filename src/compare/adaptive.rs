@@ -9,7 +9,8 @@
 //! s(r) = R / R0 compares with a perfect match at the noise level (every d = d0 = σ sqrt(2/π)).
 //! The radius grows through the candidate set while s >= threshold, then further while the
 //! quadric fits describe the surface and their confidence intervals intersect (ICI). Error
-//! points also evaluate the reference points around them for the region peaks.
+//! points also evaluate the reference points around them for the region peaks, and at each
+//! summit of those peaks a peak model is fitted to the scan points (`peakfit.rs`).
 //! docs/ALGORITHMS.md has the details.
 use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};

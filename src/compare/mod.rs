@@ -175,8 +175,9 @@ pub struct Deviation {
     pub spread: [f64; 2],
     /// Signed distance of largest magnitude around this core point, mm: the adaptive variant
     /// also evaluates the reference points within the smallest radius of a core point whose
-    /// |distance| exceeds `adaptive.refine_above` (defect peaks fall between core points);
-    /// otherwise equal to `distance`.
+    /// |distance| exceeds `adaptive.refine_above` (defect peaks fall between core points), and
+    /// at the summits of those peaks it is the height of a fitted peak model when the fit is
+    /// accepted (`adaptive.peak_fit`, then `peak_fitted`); otherwise equal to `distance`.
     pub peak: f64,
     /// `peak` comes from a peak-model fit (adaptive `peak_fit`) rather than from the largest
     /// of the quadric estimates: region peaks prefer it.
