@@ -229,3 +229,77 @@ fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) 
         repairable: peak > 0.0,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compare::{Deviation, Method, Reason};
+
+    /// A 5 × 5 patch of error points 0.5 mm apart, every distance 0.1 mm with LoD 0.02 mm;
+    /// `peaks` sets (index, peak, fitted).
+    fn patch(peaks: &[(usize, f64, bool)]) -> Deviations {
+        let points: Vec<Point3<f64>> = (0..25)
+            .map(|i| Point3::new((i % 5) as f64 * 0.5, (i / 5) as f64 * 0.5, 0.0))
+            .collect();
+        let mut values = vec![
+            Deviation {
+                distance: 0.1,
+                uncertainty: 0.02,
+                significant: true,
+                radius: 0.5,
+                n_ref: 20,
+                n_scan: 20,
+                direction: Vector3::z(),
+                spread: [0.0, 0.015],
+                peak: 0.1,
+                peak_fitted: false,
+                reason: Reason::Ok,
+            };
+            25
+        ];
+        for &(i, peak, fitted) in peaks {
+            values[i].peak = peak;
+            values[i].peak_fitted = fitted;
+        }
+        Deviations {
+            normals: vec![Vector3::z(); points.len()],
+            points,
+            values,
+            method: Method::Adaptive,
+            noise: 0.015,
+            radii: vec![0.5],
+        }
+    }
+
+    fn region_peak(dev: &Deviations) -> f64 {
+        let regions = find_regions(dev, &RegionConfig::default());
+        assert_eq!(regions.regions.len(), 1);
+        regions.regions[0].peak
+    }
+
+    #[test]
+    fn region_peak_prefers_the_fitted_peak() {
+        // Without a fit: the largest member peak.
+        assert_eq!(
+            region_peak(&patch(&[(12, 0.14, false), (3, 0.13, false)])),
+            0.14
+        );
+        // A fitted peak below a noisy quadric maximum (within that member's LoD) wins...
+        let dev = patch(&[(12, 0.125, true), (3, 0.14, false)]);
+        assert_eq!(region_peak(&dev), 0.125);
+        // ...and one above it too.
+        assert_eq!(
+            region_peak(&patch(&[(12, 0.16, true), (3, 0.14, false)])),
+            0.16
+        );
+        // A second top clearly taller than the fitted one (by more than its LoD) counts.
+        assert_eq!(
+            region_peak(&patch(&[(12, 0.125, true), (3, 0.3, false)])),
+            0.3
+        );
+        // A fitted member counts whatever its core point's LoD.
+        let mut dev = patch(&[(12, 0.2, true)]);
+        dev.values[12].uncertainty = 0.09;
+        assert_eq!(region_peak(&dev), 0.2);
+    }
+}
