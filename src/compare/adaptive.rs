@@ -264,6 +264,9 @@ fn fit_peaks(
     let refined_ids: Vec<usize> = (0..values.len())
         .filter(|&i| refined(&values[i], cfg))
         .collect();
+    if refined_ids.is_empty() {
+        return;
+    }
     let pts: Vec<Point3<f64>> = refined_ids.iter().map(|&i| prep.core[i]).collect();
     let index = Neighbours::new(&pts);
     let magnitude = |k: usize| values[refined_ids[k]].peak.abs();
