@@ -268,10 +268,13 @@ fn scores(default_scan_points: usize) -> Vec<(u64, Score, Score)> {
             let idx: Vec<usize> = (0..case.reference.len()).step_by(step).collect();
             let core = case.reference.select(&idx);
             let run = |method| {
-                let cfg = CompareConfig {
+                let mut cfg = CompareConfig {
                     method,
                     ..CompareConfig::default()
                 };
+                // POLISHBOT_PEAK_FIT=0: the peaks without the peak fit (for comparison).
+                cfg.adaptive.peak_fit =
+                    std::env::var("POLISHBOT_PEAK_FIT").map_or(true, |v| v != "0");
                 let dev = compare(&core, &case.reference, &case.scan, &cfg).unwrap();
                 let regions = find_regions(&dev, &RegionConfig::default());
                 score(seed, &case, &dev, &regions, tol)
@@ -289,7 +292,9 @@ fn scores(default_scan_points: usize) -> Vec<(u64, Score, Score)> {
 /// RMS 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
 /// that truth does not have (classic raises dozens along the box-cut edges) and finds every
 /// defect taller than twice the tolerance (seed 12 has a narrow 0.09 mm pit that both methods
-/// miss).
+/// miss), with its peak within 15 % (the peak fit: every one within 10 % but seed 11's
+/// 0.29 mm, 0.64 mm wide bump, -11 %; seeds 13 and 14 all within 10 %; before the fit seed 11's
+/// bump was reported 0.17 mm, -42 %).
 #[test]
 fn adaptive_finds_the_planted_defects_and_beats_classic() {
     for (seed, ours, classic) in scores(300_000) {
@@ -321,7 +326,7 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
         for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.1) {
             let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
             assert!(
-                peak.signum() == h.signum(),
+                (peak - h).abs() <= 0.15 * h.abs(),
                 "seed {seed}: peak {peak} for height {h}"
             );
         }
@@ -331,8 +336,9 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
 /// At 1.2 million scan points (76 points/mm², spacing 0.115 mm: a 0.64 mm wide bump holds
 /// about 25 points, where it holds 6 at 300,000) the RMS target is met and IoU nearly
 /// (seed 11: 0.93, its 0.07 mm ridge lies within the noise of the tolerance over most of its
-/// area; seed 12: 0.97), and the peaks of defects taller than twice the tolerance are within
-/// 10 % (seed 11's 0.07 mm ridge is reported 0.086; seed 12's narrow 0.09 mm pit is missed).
+/// area; seed 12: 0.97), every defect taller than twice the tolerance is found, and the peak
+/// of every found defect is within 10 % (the largest errors: seed 11's 0.07 mm ridge +5.5 %,
+/// its 0.29 mm bump -3.8 %; seed 12's narrow 0.09 mm pit is missed).
 #[test]
 fn dense_scan_meets_the_rms_target() {
     for (seed, ours, classic) in scores(1_200_000) {
@@ -340,8 +346,11 @@ fn dense_scan_meets_the_rms_target() {
         assert!(ours.iou >= 0.92, "seed {seed}: IoU {}", ours.iou);
         assert!(ours.iou > classic.iou + 0.3, "seed {seed}: IoU vs classic");
         assert_eq!(ours.false_regions, 0, "seed {seed}: false regions");
-        for (h, peak) in ours.peaks.iter().filter(|(h, _)| h.abs() > 0.1) {
-            let peak = peak.unwrap_or_else(|| panic!("seed {seed}: defect of height {h} missed"));
+        for (h, peak) in &ours.peaks {
+            let Some(peak) = peak else {
+                assert!(h.abs() < 0.1, "seed {seed}: defect of height {h} missed");
+                continue;
+            };
             assert!(
                 (peak - h).abs() <= 0.1 * h.abs(),
                 "seed {seed}: peak {peak} for height {h}"
@@ -351,10 +360,10 @@ fn dense_scan_meets_the_rms_target() {
 }
 
 /// Issue 5's acceptance targets (IoU >= 0.95, RMS <= 0.01 mm, every peak within 10 %): not
-/// reached at 300,000 scan points (a 0.4-1 mm wide bump holds 2-15 scan points at
-/// 19 points/mm², and the smallest radius that holds a quadric's worth of points flattens its
-/// peak), nor in full at 1.2 million (POLISHBOT_SCAN_POINTS=1200000: IoU 0.93 on seed 11, a
-/// few low defects' peaks off by more than 10 %; docs/ALGORITHMS.md). Run with --ignored.
+/// reached at 300,000 scan points (IoU 0.89 / 0.91 and RMS 0.013 / 0.010 mm on seeds 11 / 12;
+/// seed 11's narrow 0.29 mm bump reported -11 %; seed 12's narrow 0.09 mm pit missed), nor in
+/// full at 1.2 million (POLISHBOT_SCAN_POINTS=1200000: IoU 0.93 on seed 11, the 0.09 mm pit
+/// still missed; every found peak within 10 %; docs/ALGORITHMS.md). Run with --ignored.
 #[test]
 #[ignore]
 fn acceptance_targets() {

@@ -9,7 +9,8 @@
 //! s(r) = R / R0 compares with a perfect match at the noise level (every d = d0 = σ sqrt(2/π)).
 //! The radius grows through the candidate set while s >= threshold, then further while the
 //! quadric fits describe the surface and their confidence intervals intersect (ICI). Error
-//! points also evaluate the reference points around them for the region peaks.
+//! points also evaluate the reference points around them for the region peaks, and at each
+//! summit of those peaks a peak model is fitted to the scan points (`peakfit.rs`).
 //! docs/ALGORITHMS.md has the details.
 use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
@@ -17,6 +18,7 @@ use rayon::prelude::*;
 
 use super::fit::{fit, FitScratch, Local};
 use super::grid::Member;
+use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
 
@@ -180,10 +182,14 @@ pub fn run(
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
     };
-    let values = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
+    let refined = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
         let dev = at(&prep, p, n, cfg, s);
         refine(&prep, dev, p, n, cfg, s)
     });
+    let (mut values, tops): (Vec<Deviation>, Vec<Point3<f64>>) = refined.into_iter().unzip();
+    if a.peak_fit {
+        fit_peaks(&prep, normals, &tops, &mut values, cfg);
+    }
     Ok((values, noise))
 }
 
@@ -191,7 +197,8 @@ pub fn run(
 /// largest magnitude, of the same sign, at it and at the reference points of its cell (nearest
 /// to it among the core points; normal within `max_normal_angle`) whose fit describes the
 /// surface (residual SD at most `max_misfit` × noise): a defect narrower than the core spacing
-/// has its top between core points.
+/// has its top between core points. Also returns where that peak was found (`p` unless a
+/// reference point of the cell gave it).
 fn refine(
     prep: &Prepared,
     mut dev: Deviation,
@@ -199,9 +206,10 @@ fn refine(
     n: &Vector3<f64>,
     cfg: &CompareConfig,
     scratch: &mut Scratch,
-) -> Deviation {
-    if !(dev.significant && dev.distance.abs() > cfg.adaptive.refine_above) {
-        return dev;
+) -> (Deviation, Point3<f64>) {
+    let mut top = *p;
+    if !refined(&dev, cfg) {
+        return (dev, top);
     }
     // The candidate list is taken out of the scratch while `at` uses the rest of it.
     let mut near = std::mem::take(&mut scratch.near);
@@ -227,10 +235,82 @@ fn refine(
             && d.distance.abs() > dev.peak.abs()
         {
             dev.peak = d.distance;
+            top = *x;
         }
     }
     scratch.near = near;
-    dev
+    (dev, top)
+}
+
+/// Whether [`refine`] looks for a peak around this result: significant and beyond
+/// `refine_above`.
+fn refined(dev: &Deviation, cfg: &CompareConfig) -> bool {
+    dev.significant && dev.distance.abs() > cfg.adaptive.refine_above
+}
+
+/// The peak fit (`peak_fit`): at every summit — a refined core point whose |peak| is the
+/// largest among the refined core points of the same sign within the refine radius (one per
+/// bump, a few along a ridge) — the peak model is fitted to the scan points within the
+/// window radius (largest candidate radius + refine radius: the cell's reach plus the widest
+/// flank a quadric estimate sees) of the refined top, in the tangent frame of the core point's
+/// normal, heights = the point-pair distances. An accepted fit replaces that core point's peak.
+fn fit_peaks(
+    prep: &Prepared,
+    normals: &[Vector3<f64>],
+    tops: &[Point3<f64>],
+    values: &mut [Deviation],
+    cfg: &CompareConfig,
+) {
+    let refined_ids: Vec<usize> = (0..values.len())
+        .filter(|&i| refined(&values[i], cfg))
+        .collect();
+    if refined_ids.is_empty() {
+        return;
+    }
+    let pts: Vec<Point3<f64>> = refined_ids.iter().map(|&i| prep.core[i]).collect();
+    let index = Neighbours::new(&pts);
+    let magnitude = |k: usize| values[refined_ids[k]].peak.abs();
+    let sign = |k: usize| values[refined_ids[k]].peak > 0.0;
+    let summits: Vec<usize> = (0..pts.len())
+        .into_par_iter()
+        .filter(|&k| {
+            index
+                .within_unsorted(&pts[k], prep.refine_radius)
+                .iter()
+                .filter(|nb| nb.index != k && sign(nb.index) == sign(k))
+                .all(|nb| (magnitude(k), nb.index) > (magnitude(nb.index), k))
+        })
+        .map(|k| refined_ids[k])
+        .collect();
+    let radius = prep.radii.last().expect("radii") + prep.refine_radius;
+    let fitted: Vec<(usize, f64)> = summits
+        .par_iter()
+        .map_init(
+            || (Vec::new(), Vec::new(), PeakScratch::default()),
+            |(knn, window, scratch), &i| {
+                let (top, n) = (&tops[i], &normals[i]);
+                let (e1, e2) = tangent_frame(n);
+                window.clear();
+                scan_pairs(prep, top, n, radius, knn, |_, d, pair| {
+                    window.push([d.dot(&e1), d.dot(&e2), pair]);
+                });
+                let w = PeakWindow {
+                    radius,
+                    noise: prep.noise,
+                    max_misfit: cfg.adaptive.max_misfit,
+                    start: values[i].peak,
+                };
+                fit_peak(window, &w, scratch)
+                    .filter(|f| f.accepted(&w))
+                    .map(|f| (i, f.peak))
+            },
+        )
+        .flatten()
+        .collect();
+    for (i, peak) in fitted {
+        values[i].peak = peak;
+        values[i].peak_fitted = true;
+    }
 }
 
 /// Core-point spacing: the square root of the median [`area_share`] over up to 1,000 evenly
@@ -367,28 +447,11 @@ fn gather(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, s: &mut Scratch) {
         ring.sum_wd += below.sum_wd;
     }
     let (e1, e2) = tangent_frame(n);
-    let (tagged, knn) = (&mut s.tagged, &mut s.knn);
+    let tagged = &mut s.tagged;
     tagged.clear();
-    c.scan_grid
-        .near_axis(p, n, r_max, prep.half_length, |slot, _, rho2| {
-            let y = c.scan_grid.slot_point(slot);
-            let y = Point3::new(y[0], y[1], y[2]);
-            let (normal, pair) = match prep.scan_slots[slot] {
-                Some(nearest) => nearest,
-                None => {
-                    c.ref_grid.knn(&y, 1, f64::INFINITY, knn);
-                    let Some(&(_, i)) = knn.first() else { return };
-                    (
-                        prep.ref_normals[i as usize],
-                        pair_distance(c, prep.ref_normals, i, &y),
-                    )
-                }
-            };
-            if normal.dot(n) >= prep.cos_limit {
-                let d = y - p;
-                tagged.push((ring_of(radii2, rho2), [d.dot(&e1), d.dot(&e2), pair]));
-            }
-        });
+    scan_pairs(prep, p, n, r_max, &mut s.knn, |rho2, d, pair| {
+        tagged.push((ring_of(radii2, rho2), [d.dot(&e1), d.dot(&e2), pair]));
+    });
     s.within.clear();
     s.within.resize(radii2.len(), 0);
     for &(k, _) in tagged.iter() {
@@ -407,6 +470,39 @@ fn gather(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, s: &mut Scratch) {
         s.pairs[s.next[k]] = local;
         s.next[k] += 1;
     }
+}
+
+/// Calls `f(rho², y - p, pair distance)` for every scan point y within `radius` of the axis
+/// through `p` along `n` (half-length: the cylinders') whose nearest reference point's normal
+/// is within `max_normal_angle` of `n` (`knn`: scratch).
+fn scan_pairs(
+    prep: &Prepared,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    radius: f64,
+    knn: &mut Vec<(f64, u32)>,
+    mut f: impl FnMut(f64, Vector3<f64>, f64),
+) {
+    let c = prep.clouds;
+    c.scan_grid
+        .near_axis(p, n, radius, prep.half_length, |slot, _, rho2| {
+            let y = c.scan_grid.slot_point(slot);
+            let y = Point3::new(y[0], y[1], y[2]);
+            let (normal, pair) = match prep.scan_slots[slot] {
+                Some(nearest) => nearest,
+                None => {
+                    c.ref_grid.knn(&y, 1, f64::INFINITY, knn);
+                    let Some(&(_, i)) = knn.first() else { return };
+                    (
+                        prep.ref_normals[i as usize],
+                        pair_distance(c, prep.ref_normals, i, &y),
+                    )
+                }
+            };
+            if normal.dot(n) >= prep.cos_limit {
+                f(rho2, y - p, pair);
+            }
+        });
 }
 
 /// The adaptive result at core point `p` with outward unit normal `n`.
@@ -495,6 +591,7 @@ fn at(
         direction: Vector3::zeros(),
         spread: [0.0, fs.sigma],
         peak: f64::NAN,
+        peak_fitted: false,
         reason: Reason::Ok,
     }
     .finish(n)

@@ -90,6 +90,7 @@ pub fn at(
         direction: Vector3::zeros(),
         spread: [s1, s2],
         peak: f64::NAN,
+        peak_fitted: false,
         reason: Reason::Ok,
     }
     .finish(n)

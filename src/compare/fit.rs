@@ -86,7 +86,7 @@ pub struct FitScratch {
 
 /// The points of `pts` whose residual from `model` is within
 /// `max(trim, 3 × 1.4826 × median |residual|)`, into `out` (`abs`: scratch).
-fn inliers(
+pub(super) fn inliers(
     pts: &[Local],
     trim: f64,
     model: impl Fn(&Local) -> f64,

@@ -9,6 +9,7 @@ mod classic;
 mod core;
 mod fit;
 pub(crate) mod grid;
+mod peakfit;
 
 use std::borrow::Cow;
 
@@ -118,6 +119,10 @@ pub struct AdaptiveConfig {
     /// reference points around them (default 0.05, the default tolerance; `inspect` sets the
     /// tolerance; infinity turns it off).
     pub refine_above: f64,
+    /// Fit a peak model (an elliptic Gaussian on a plane) to the scan points around the top of
+    /// each defect and report its height as the `peak` of the error point whose cell holds
+    /// the top, when the fit passes its guard (default true; docs/ALGORITHMS.md).
+    pub peak_fit: bool,
 }
 
 impl Default for AdaptiveConfig {
@@ -132,6 +137,7 @@ impl Default for AdaptiveConfig {
             gamma: 2.0,
             max_misfit: 1.3,
             refine_above: 0.05,
+            peak_fit: true,
         }
     }
 }
@@ -187,9 +193,13 @@ pub struct Deviation {
     pub spread: [f64; 2],
     /// Signed distance of largest magnitude around this core point, mm: the adaptive variant
     /// also evaluates the reference points within the smallest radius of a core point whose
-    /// |distance| exceeds `adaptive.refine_above` (defect peaks fall between core points);
-    /// otherwise equal to `distance`.
+    /// |distance| exceeds `adaptive.refine_above` (defect peaks fall between core points), and
+    /// at the summits of those peaks it is the height of a fitted peak model when the fit is
+    /// accepted (`adaptive.peak_fit`, then `peak_fitted`); otherwise equal to `distance`.
     pub peak: f64,
+    /// `peak` comes from a peak-model fit (adaptive `peak_fit`) rather than from the largest
+    /// of the quadric estimates: region peaks prefer it.
+    pub peak_fitted: bool,
     /// Why the distance is NaN, if it is.
     pub reason: Reason,
 }
@@ -207,6 +217,7 @@ impl Deviation {
             direction: Vector3::zeros(),
             spread: [f64::NAN; 2],
             peak: f64::NAN,
+            peak_fitted: false,
             reason,
         }
     }
@@ -346,21 +357,22 @@ fn in_storage_order(cloud: &PointCloud, ids: &[u32]) -> PointCloud {
     }
 }
 
-/// Runs `f` at every core point in parallel, with a progress bar; `f` gets a scratch value
-/// (one per chunk of core points) to reuse. Core points are visited in the grid's spatial
+/// Runs `f` at every core point in parallel (one result each), with a progress bar; `f` gets
+/// a scratch value (one per chunk of core points) to reuse. Core points are visited in the grid's spatial
 /// order (cache-friendly); the results come back in the core points' order.
-fn run<S, F>(grid: &Grid, core: &PointCloud, normals: &[Vector3<f64>], f: F) -> Vec<Deviation>
+fn run<S, T, F>(grid: &Grid, core: &PointCloud, normals: &[Vector3<f64>], f: F) -> Vec<T>
 where
     S: Default,
-    F: Fn(&mut S, &Point3<f64>, &Vector3<f64>) -> Deviation + Sync,
+    T: Copy + Send,
+    F: Fn(&mut S, &Point3<f64>, &Vector3<f64>) -> T + Sync,
 {
     let bar = crate::progress::bar(core.len() as u64, "compare");
     let order = grid.spatial_order(&core.points);
-    let done: Vec<Deviation> = order
+    let done: Vec<T> = order
         .par_chunks(512)
         .flat_map_iter(|chunk| {
             let mut scratch = S::default();
-            let done: Vec<Deviation> = chunk
+            let done: Vec<T> = chunk
                 .iter()
                 .map(|&i| f(&mut scratch, &core.points[i], &normals[i]))
                 .collect();

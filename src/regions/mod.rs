@@ -169,19 +169,35 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
     }
 }
 
-/// Region peak: the `peak` of largest magnitude among the members whose LoD is at most
-/// [`PEAK_LOD_RATIO`] × the members' median LoD.
+/// Region peak: when members have a fitted peak (their own guard vouches for them), the
+/// largest fitted one, unless another member's peak exceeds it by more than that member's LoD
+/// (a second, taller top in the region whose fit was refused): the largest of many noisy
+/// quadric estimates on a plateau is biased high, the fit is not. Other members count only
+/// when their LoD is at most [`PEAK_LOD_RATIO`] × the members' median LoD; without a fitted
+/// peak, the largest of those.
 fn peak(dev: &Deviations, members: &[usize]) -> f64 {
     let mut lods: Vec<f64> = members.iter().map(|&i| dev.values[i].uncertainty).collect();
     let mid = lods.len() / 2;
     let cap = PEAK_LOD_RATIO * *lods.select_nth_unstable_by(mid, f64::total_cmp).1;
-    members
-        .iter()
-        .map(|&i| &dev.values[i])
-        .filter(|v| v.uncertainty <= cap)
-        .map(|v| v.peak)
-        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
-        .unwrap_or(0.0)
+    let largest = |peaks: &mut dyn Iterator<Item = f64>| {
+        peaks.max_by(|a: &f64, b: &f64| a.abs().total_cmp(&b.abs()))
+    };
+    let eligible = || {
+        members
+            .iter()
+            .map(|&i| &dev.values[i])
+            .filter(move |v| v.peak_fitted || v.uncertainty <= cap)
+    };
+    let fitted = largest(&mut eligible().filter(|v| v.peak_fitted).map(|v| v.peak));
+    let peak = match fitted {
+        Some(f) => largest(
+            &mut eligible()
+                .filter(|v| v.peak_fitted || v.peak.abs() > f.abs() + v.uncertainty)
+                .map(|v| v.peak),
+        ),
+        None => largest(&mut eligible().map(|v| v.peak)),
+    };
+    peak.unwrap_or(0.0)
 }
 
 fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) -> Region {
@@ -211,5 +227,79 @@ fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) 
             .sum(),
         points: members.len(),
         repairable: peak > 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compare::{Deviation, Method, Reason};
+
+    /// A 5 × 5 patch of error points 0.5 mm apart, every distance 0.1 mm with LoD 0.02 mm;
+    /// `peaks` sets (index, peak, fitted).
+    fn patch(peaks: &[(usize, f64, bool)]) -> Deviations {
+        let points: Vec<Point3<f64>> = (0..25)
+            .map(|i| Point3::new((i % 5) as f64 * 0.5, (i / 5) as f64 * 0.5, 0.0))
+            .collect();
+        let mut values = vec![
+            Deviation {
+                distance: 0.1,
+                uncertainty: 0.02,
+                significant: true,
+                radius: 0.5,
+                n_ref: 20,
+                n_scan: 20,
+                direction: Vector3::z(),
+                spread: [0.0, 0.015],
+                peak: 0.1,
+                peak_fitted: false,
+                reason: Reason::Ok,
+            };
+            25
+        ];
+        for &(i, peak, fitted) in peaks {
+            values[i].peak = peak;
+            values[i].peak_fitted = fitted;
+        }
+        Deviations {
+            normals: vec![Vector3::z(); points.len()],
+            points,
+            values,
+            method: Method::Adaptive,
+            noise: 0.015,
+            radii: vec![0.5],
+        }
+    }
+
+    fn region_peak(dev: &Deviations) -> f64 {
+        let regions = find_regions(dev, &RegionConfig::default());
+        assert_eq!(regions.regions.len(), 1);
+        regions.regions[0].peak
+    }
+
+    #[test]
+    fn region_peak_prefers_the_fitted_peak() {
+        // Without a fit: the largest member peak.
+        assert_eq!(
+            region_peak(&patch(&[(12, 0.14, false), (3, 0.13, false)])),
+            0.14
+        );
+        // A fitted peak below a noisy quadric maximum (within that member's LoD) wins...
+        let dev = patch(&[(12, 0.125, true), (3, 0.14, false)]);
+        assert_eq!(region_peak(&dev), 0.125);
+        // ...and one above it too.
+        assert_eq!(
+            region_peak(&patch(&[(12, 0.16, true), (3, 0.14, false)])),
+            0.16
+        );
+        // A second top clearly taller than the fitted one (by more than its LoD) counts.
+        assert_eq!(
+            region_peak(&patch(&[(12, 0.125, true), (3, 0.3, false)])),
+            0.3
+        );
+        // A fitted member counts whatever its core point's LoD.
+        let mut dev = patch(&[(12, 0.2, true)]);
+        dev.values[12].uncertainty = 0.09;
+        assert_eq!(region_peak(&dev), 0.2);
     }
 }
