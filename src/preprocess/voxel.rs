@@ -70,8 +70,8 @@ pub fn voxel_downsample(cloud: &PointCloud, voxel_mm: f64) -> PointCloud {
 pub const SPACING_SAMPLE: usize = 20_000;
 
 /// Mean distance from a point to its nearest other point (the cloud resolution "mr", mm), over
-/// every point of a cloud of up to [`SPACING_SAMPLE`] points, else over that many evenly
-/// strided ones; 0 for fewer than two points.
+/// every point of a cloud of up to [`SPACING_SAMPLE`] points, else over every ⌈n /
+/// SPACING_SAMPLE⌉-th point (at most that many); 0 for fewer than two points.
 pub fn mean_spacing(cloud: &PointCloud) -> f64 {
     if cloud.len() < 2 {
         return 0.0;
