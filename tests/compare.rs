@@ -495,36 +495,30 @@ fn inspect_writes_the_design_files() {
 
 /// Writes a synth case (femoral_dm with its contact surface, default densities) into `case`.
 fn synth_files(case: &Path, seed: u64) {
-    let status = common::polishbot()
-        .arg("synth")
-        .arg("--mesh")
-        .arg(common::shared_data("femoral_dm.stl"))
-        .arg("--surface")
-        .arg(common::shared_data("femoral_dm_contact.stl"))
-        .args(["--units", "m", "--seed", &seed.to_string(), "--out"])
-        .arg(case)
-        .status()
-        .unwrap();
-    assert!(status.success());
+    common::succeed(
+        common::polishbot()
+            .arg("synth")
+            .arg("--mesh")
+            .arg(common::shared_data("femoral_dm.stl"))
+            .arg("--surface")
+            .arg(common::shared_data("femoral_dm_contact.stl"))
+            .args(["--units", "m", "--seed", &seed.to_string(), "--out"])
+            .arg(case),
+    );
 }
 
 /// Runs `polishbot inspect` with `extra` arguments into `out`; panics with its stderr.
 fn inspect(reference: &Path, scan: &Path, out: &Path, extra: &[&str]) {
-    let run = common::polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(reference)
-        .arg("--scan")
-        .arg(scan)
-        .args(extra)
-        .arg("-o")
-        .arg(out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    common::succeed(
+        common::polishbot()
+            .arg("inspect")
+            .arg("--reference")
+            .arg(reference)
+            .arg("--scan")
+            .arg(scan)
+            .args(extra)
+            .arg("-o")
+            .arg(out),
     );
 }
 

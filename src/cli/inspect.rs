@@ -136,7 +136,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let mut scan = sor.apply(&scan);
     times.lap("filter");
     let reg_file = args.out.join("registration.json");
-    let (pose, inlier_rmse, reg_line) = match &args.pose {
+    let (pose, reg_error, reg_line) = match &args.pose {
         Some(pose_file) => {
             let pose = read_pose(pose_file)?;
             write_json(
@@ -174,12 +174,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
             // uncertainty on the surface (`Registration::registration_error`), not a residual
             // RMSE: those hold the scan noise, which the LoD already counts, and the
             // reference's sampling spacing.
-            let reg_error = if reg.registration_error.is_finite() {
-                reg.registration_error
-            } else {
-                reg.inlier_rmse
-            };
-            (reg.pose, Some(reg_error), line)
+            (reg.pose, Some(reg.registration_error), line)
         }
     };
     scan.transform(&pose);
@@ -198,7 +193,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     ];
     cfg.compare.registration_error = args
         .registration_error
-        .or(inlier_rmse)
+        .or(reg_error)
         .unwrap_or(cfg.compare.registration_error);
 
     let core = match &args.core {

@@ -18,17 +18,15 @@ fn mean_var(members: &[Member]) -> (f64, f64) {
 
 /// Median and interquartile range of the axial offsets, with py4dgeo's quartiles: order
 /// statistic ⌊n/4⌋, ⌊n/2⌋ and ⌊3n/4⌋, each averaged with the one below it when n is a multiple
-/// of 4 (quartiles) or of 2 (median).
-fn median_iqr(members: &[Member], sorted: &mut Vec<f64>) -> (f64, f64) {
-    sorted.clear();
-    sorted.extend(members.iter().map(|m| m.t));
-    sorted.sort_unstable_by(f64::total_cmp);
-    let n = sorted.len();
+/// of 4 (quartiles) or of 2 (median). Sorts `members` (scratch) by offset.
+fn median_iqr(members: &mut [Member]) -> (f64, f64) {
+    members.sort_unstable_by(|a, b| a.t.total_cmp(&b.t));
+    let n = members.len();
     let at = |pos: usize, average: bool| {
         if average && pos > 0 {
-            (sorted[pos] + sorted[pos - 1]) / 2.0
+            (members[pos].t + members[pos - 1].t) / 2.0
         } else {
-            sorted[pos]
+            members[pos].t
         }
     };
     let (q1, q2, q3) = (
@@ -71,11 +69,7 @@ pub fn at(
             ([m1, m2], [v1.sqrt(), v2.sqrt()])
         }
         Aggregate::Median => {
-            let mut sorted = Vec::with_capacity(n1.max(n2));
-            let ((m1, s1), (m2, s2)) = (
-                median_iqr(ref_in, &mut sorted),
-                median_iqr(scan_in, &mut sorted),
-            );
+            let ((m1, s1), (m2, s2)) = (median_iqr(ref_in), median_iqr(scan_in));
             ([m1, m2], [s1, s2])
         }
     };

@@ -358,8 +358,8 @@ fn in_storage_order(cloud: &PointCloud, ids: &[u32]) -> PointCloud {
 }
 
 /// Runs `f` at every core point in parallel (one result each), with a progress bar; `f` gets
-/// a scratch value (one per chunk of core points) to reuse. Core points are visited in the grid's spatial
-/// order (cache-friendly); the results come back in the core points' order.
+/// a scratch value (one per chunk of core points) to reuse. Core points are visited in the
+/// grid's spatial order (cache-friendly); the results come back in the core points' order.
 fn run<S, T, F>(grid: &Grid, core: &PointCloud, normals: &[Vector3<f64>], f: F) -> Vec<T>
 where
     S: Default,

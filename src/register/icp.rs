@@ -65,7 +65,7 @@ pub fn pose_std(pairs: &[(Point3<f64>, usize, f64, f64)], normals: &[Vector3<f64
     let mut blocks: std::collections::HashMap<[i64; 3], Vector6<f64>> = Default::default();
     for &(q, j, r, _) in pairs {
         let jac = jacobian(&q, &normals[j]);
-        let w = (k2 / (k2 + r * r)).powi(2);
+        let w = weight(r, k2);
         h += jac * jac.transpose() * w;
         let key = q.coords.map(|c| (c / UNCERTAINTY_BLOCK).floor() as i64);
         *blocks.entry([key.x, key.y, key.z]).or_default() += jac * (w * r);
@@ -86,6 +86,11 @@ pub fn pose_std(pairs: &[(Point3<f64>, usize, f64, f64)], normals: &[Vector3<f64
             (jac.transpose() * cov * jac)[0].max(0.0).sqrt()
         })
         .fold(0.0, f64::max)
+}
+
+/// Geman–McClure weight `(k² / (k² + r²))²` of residual `r` (`k2` = k²).
+fn weight(r: f64, k2: f64) -> f64 {
+    (k2 / (k2 + r * r)).powi(2)
 }
 
 /// Derivative of the point-to-plane residual of `q` (target normal `n`) with respect to a
@@ -218,7 +223,7 @@ pub fn icp(
             .par_iter()
             .fold(Step::default, |mut s, &(q, j, r, d2)| {
                 let jac = jacobian(&q, &normals[j]);
-                let w = (k2 / (k2 + r * r)).powi(2);
+                let w = weight(r, k2);
                 s.a += jac * jac.transpose() * w;
                 s.b += jac * (w * r);
                 s.pairs += 1;

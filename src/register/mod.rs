@@ -204,8 +204,8 @@ pub struct Registration {
     pub fitness_distance: f64,
     /// Registration error for the comparison's level of detection (mm, 1 σ):
     /// [`POSE_STD_FACTOR`] × the fine ICP's `pose_std`; when that is undetermined the
-    /// point-to-plane RMSE (conservative: it holds the scan noise too); without a fine stage
-    /// the inlier RMSE.
+    /// point-to-plane RMSE (conservative: it holds the scan noise too); NaN when registration
+    /// failed before the fine stage.
     pub registration_error: f64,
     /// Coarse stage diagnostics.
     pub coarse: Coarse,
