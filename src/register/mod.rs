@@ -1,7 +1,7 @@
 //! Registration: brings a scan into the reference (CAD) frame.
 //!
 //! ```text
-//! scan, reference ─ mean spacing mr ─ voxel grid (5 mr) ─ normals (radius 2 voxel)
+//! scan, reference ─ mean spacing mr ─ voxel grid (10 mr) ─ normals (radius 2 voxel)
 //!   ─ FPFH (radius 5 voxel) ─ feature matches (mutual, capped)
 //!   ─ MAC: compatibility graph, W ⊙ (W × W), maximal cliques, node-guided selection,
 //!          weighted SVD per clique, MAE score, re-weighted refinement
@@ -28,12 +28,20 @@ use crate::preprocess::{
 use icp::{IcpParams, IcpResult};
 use mac::{MacParams, MacStats};
 
+/// Default coarse voxel in units of the cloud resolution mr. 10 mr leaves about 14k / 17k
+/// points of a 400k / 300k femoral case. Against 5 mr, on the 20 synth cases of
+/// tests/register.rs: the final poses are the same (worst 0.001 deg / 0.0008 mm), the coarse
+/// ones stay well inside the fine ICP's reach (worst 0.23 deg / 0.18 mm against 0.14 deg /
+/// 0.08 mm), more feature matches are inliers (25-49 % against 7-17 %), and registration
+/// takes 1.0-1.4 s instead of 1.6-2.2 s.
+pub const VOXEL_SPACINGS: f64 = 10.0;
+
 /// Settings of the registration stage. Lengths in mm; `None` lengths derive from the cloud
 /// resolution `mr` (mean nearest-neighbour spacing, the larger of the two clouds').
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RegisterConfig {
-    /// Voxel size of the coarse stage (default 5 mr).
+    /// Voxel size of the coarse stage (default [`VOXEL_SPACINGS`] mr).
     pub voxel: Option<f64>,
     /// Normal estimation radius on the voxel clouds (default 2 voxel), at most 30 neighbours.
     pub normal_radius: Option<f64>,
@@ -279,7 +287,7 @@ pub fn register_with_progress(
     let mr_ref = mean_spacing_in(&ref_index, &reference.points);
     let mr = mean_spacing_in(&scan_index, &scan.points).max(mr_ref);
     drop(scan_index);
-    let voxel = cfg.voxel.unwrap_or(5.0 * mr);
+    let voxel = cfg.voxel.unwrap_or(VOXEL_SPACINGS * mr);
     if voxel.is_nan() || voxel <= 0.0 {
         return Err(RegisterError::Input(
             "cloud resolution is zero (all points coincide)".into(),
