@@ -288,8 +288,8 @@ fn scores(default_scan_points: usize) -> Vec<(u64, Score, Score)> {
 }
 
 /// What the adaptive method reaches at 300,000 scan points (19 points/mm², spacing 0.23 mm;
-/// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.89 / 0.92,
-/// RMS 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
+/// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.91 / 0.93
+/// (0.89 / 0.91 before the LoD took Student's t), RMS 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
 /// that truth does not have (classic raises dozens along the box-cut edges) and finds every
 /// defect taller than twice the tolerance (seed 12 has a narrow 0.09 mm pit that both methods
 /// miss), with its peak within 15 % (the peak fit: every one within 10 % but seed 11's
@@ -306,7 +306,7 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             ours.rms < classic.rms,
             "seed {seed}: adaptive must beat classic on RMS"
         );
-        assert!(ours.iou >= 0.85, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.iou >= 0.9, "seed {seed}: IoU {}", ours.iou);
         // Region members: 0.924 / 0.942 (isolated error points at the box cuts drop out).
         assert!(
             ours.region_iou >= 0.9,
@@ -543,7 +543,7 @@ fn csv_iou(out: &Path, truth: &Path) -> f64 {
 
 /// The whole `inspect` as a user runs it (outlier filter, registration, comparison; no
 /// truth pose) finds seed 11's defects as well as the comparison does from the true pose
-/// (`adaptive_finds_the_planted_defects_and_beats_classic`: IoU 0.886). The LoD's
+/// (`adaptive_finds_the_planted_defects_and_beats_classic`: IoU 0.907; this test 0.883). The LoD's
 /// registration term is the pose's uncertainty (registration.json `registration_error`, a
 /// few 10⁻⁴ mm), not a residual RMSE: the point-to-plane RMSE (0.028 mm) would keep every
 /// deviation below 0.055 mm insignificant and drop the IoU to 0.77.

@@ -16,7 +16,7 @@ use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::fit::{fit, FitScratch, Local};
+use super::fit::{fit, student_t95, FitScratch, Local};
 use super::grid::Member;
 use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
@@ -580,7 +580,9 @@ fn at(
             (r, n_ref, fs) = (radii[j], rings[j].count, next);
         }
     }
-    let lod = 1.96 * (fs.se + cfg.registration_error);
+    // The fit's standard error comes from its own residuals: Student's t at their degrees of
+    // freedom (a handful of points on a narrow face estimate their scatter poorly).
+    let lod = student_t95(fs.dof) * fs.se + 1.96 * cfg.registration_error;
     Deviation {
         distance: fs.t0,
         uncertainty: lod,

@@ -18,6 +18,33 @@ pub struct AxisFit {
     pub sigma: f64,
     /// Points used.
     pub n: usize,
+    /// Residual degrees of freedom: points used minus the model's terms.
+    pub dof: usize,
+}
+
+/// Two-sided 95 % quantile of Student's t distribution with `dof` degrees of freedom
+/// (`scipy.stats.t.ppf(0.975, dof)`): exact to 8 digits up to 30, then the Cornish–Fisher
+/// expansion around the normal quantile (within 1e-4); infinite for 0.
+pub fn student_t95(dof: usize) -> f64 {
+    #[rustfmt::skip]
+    const TABLE: [f64; 30] = [
+        12.70620474, 4.30265273, 3.18244631, 2.77644511, 2.57058184, 2.44691185, 2.36462425,
+        2.30600414, 2.26215716, 2.22813885, 2.20098516, 2.17881283, 2.16036866, 2.14478669,
+        2.13144955, 2.11990530, 2.10981558, 2.10092204, 2.09302405, 2.08596345, 2.07961384,
+        2.07387307, 2.06865761, 2.06389856, 2.05953855, 2.05552944, 2.05183052, 2.04840714,
+        2.04522964, 2.04227246,
+    ];
+    match dof {
+        0 => f64::INFINITY,
+        1..=30 => TABLE[dof - 1],
+        _ => {
+            let (z, v) = (1.959963984540054f64, dof as f64);
+            let g1 = (z.powi(3) + z) / 4.0;
+            let g2 = (5.0 * z.powi(5) + 16.0 * z.powi(3) + 3.0 * z) / 96.0;
+            let g3 = (3.0 * z.powi(7) + 19.0 * z.powi(5) + 17.0 * z.powi(3) - 15.0 * z) / 384.0;
+            z + g1 / v + g2 / (v * v) + g3 / (v * v * v)
+        }
+    }
 }
 
 fn terms(count: usize) -> usize {
@@ -163,6 +190,7 @@ fn fit_once(pts: &[Local], scale: f64, floor: f64) -> Option<(Vector6<f64>, f64,
             se: (var.max(floor * floor) * inv00).sqrt(),
             sigma,
             n: pts.len(),
+            dof: pts.len() - k,
         },
     ))
 }
@@ -191,5 +219,25 @@ mod tests {
         assert_eq!(f.n, 5);
         let f = fit(&pts[..2], 0.4, 0.01, 0.0, &mut FitScratch::default()).unwrap();
         assert!((f.t0 - (pts[0][2] + pts[1][2]) / 2.0).abs() < 1e-12);
+        assert_eq!(f.dof, 1);
+    }
+
+    #[test]
+    fn student_quantiles_match_scipy() {
+        // scipy.stats.t.ppf(0.975, dof), scipy 1.17.1.
+        for (dof, want) in [
+            (1, 12.70620474),
+            (7, 2.36462425),
+            (30, 2.04227246),
+            (31, 2.03951345),
+            (40, 2.02107539),
+            (60, 2.00029782),
+            (100, 1.98397152),
+            (1000, 1.96233908),
+        ] {
+            let got = student_t95(dof);
+            assert!((got - want).abs() < 1e-4, "dof {dof}: {got} against {want}");
+        }
+        assert!(student_t95(0).is_infinite());
     }
 }
