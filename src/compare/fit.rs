@@ -24,7 +24,9 @@ pub struct AxisFit {
 
 /// Two-sided 95 % quantile of Student's t distribution with `dof` degrees of freedom
 /// (`scipy.stats.t.ppf(0.975, dof)`): exact to 8 digits up to 30, then the Cornish–Fisher
-/// expansion around the normal quantile (within 1e-4); infinite for 0.
+/// expansion around the normal quantile (within 1e-4). NaN for 0: no residual estimates the
+/// scatter (like py4dgeo's NaN LoD of a one-point cylinder), so the LoD is NaN and the point
+/// not significant.
 pub fn student_t95(dof: usize) -> f64 {
     #[rustfmt::skip]
     const TABLE: [f64; 30] = [
@@ -35,7 +37,7 @@ pub fn student_t95(dof: usize) -> f64 {
         2.04522964, 2.04227246,
     ];
     match dof {
-        0 => f64::INFINITY,
+        0 => f64::NAN,
         1..=30 => TABLE[dof - 1],
         _ => {
             let (z, v) = (1.959963984540054f64, dof as f64);
@@ -238,6 +240,6 @@ mod tests {
             let got = student_t95(dof);
             assert!((got - want).abs() < 1e-4, "dof {dof}: {got} against {want}");
         }
-        assert!(student_t95(0).is_infinite());
+        assert!(student_t95(0).is_nan());
     }
 }
