@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use nalgebra::Point3;
 
+use super::grid::Grid;
 use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
 use crate::preprocess::{
     curvature_sample, estimate_normals, CurvatureSampleConfig, NormalConfig, Orientation,
@@ -133,16 +134,43 @@ pub fn core_points(reference: &PointCloud, cfg: &CoreConfig) -> Result<PointClou
 /// index holds no point. Regions weigh points by it, and its median's square root is the
 /// core-point spacing.
 pub fn area_share(index: &Neighbours, p: &Point3<f64>) -> Option<f64> {
-    index
-        .knn(p, 9)
-        .last()
-        .map(|n| std::f64::consts::PI * n.dist2 / 8.0)
+    index.knn(p, 9).last().map(|n| share_of(n.dist2))
+}
+
+/// [`area_share`] of every one of `points` among them (0 for an empty cloud's none), searched
+/// as one batch on a grid: the same values, a fraction of the time for 100,000 points.
+pub fn area_shares(points: &[Point3<f64>]) -> Vec<f64> {
+    Grid::knn_among(points, 9, f64::INFINITY, |_, found| {
+        found.last().map_or(0.0, |&(d2, _)| share_of(d2))
+    })
+}
+
+/// π r² / 8 for r² the squared distance to the 8th neighbour.
+fn share_of(dist2: f64) -> f64 {
+    std::f64::consts::PI * dist2 / 8.0
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    #[test]
+    fn batched_area_shares_equal_the_single_queries() {
+        use rand::Rng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut points: Vec<Point3<f64>> = (0..3000)
+            .map(|_| Point3::new(rng.gen_range(0.0..30.0), rng.gen_range(0.0..20.0), 0.0))
+            .collect();
+        points.push(points[7]); // a duplicate
+        let index = Neighbours::new(&points);
+        let single: Vec<f64> = points
+            .iter()
+            .map(|p| area_share(&index, p).unwrap())
+            .collect();
+        assert_eq!(area_shares(&points), single);
+        assert!(area_shares(&[]).is_empty());
+    }
 
     #[test]
     fn curvature_selection_keeps_reference_points_and_favours_the_fold() {

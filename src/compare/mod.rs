@@ -19,7 +19,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub use self::core::{
-    area_share, cloud_reference, core_points, mesh_reference, CoreConfig, CoreSelection,
+    area_share, area_shares, cloud_reference, core_points, mesh_reference, CoreConfig,
+    CoreSelection,
 };
 use self::grid::Grid;
 use crate::cloud::PointCloud;

@@ -8,11 +8,10 @@
 //!
 //! Front: [`find_regions`].
 use nalgebra::{Point3, Vector3};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::Neighbours;
-use crate::compare::{area_share, Deviations, PEAK_LOD_RATIO};
+use crate::compare::{area_shares, Deviations, PEAK_LOD_RATIO};
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -102,11 +101,7 @@ fn find(parent: &mut [usize], mut i: usize) -> usize {
 /// distance of randomly placed core points is about half of that, and connecting within a few
 /// of those sits at the percolation threshold: one defect fell apart into several regions.)
 fn shares(points: &[Point3<f64>]) -> (Vec<f64>, f64) {
-    let index = Neighbours::new(points);
-    let share: Vec<f64> = points
-        .par_iter()
-        .map(|p| area_share(&index, p).unwrap_or(0.0))
-        .collect();
+    let share = area_shares(points);
     let mut sorted: Vec<f64> = share.iter().copied().filter(|a| *a > 0.0).collect();
     sorted.sort_by(f64::total_cmp);
     let spacing = sorted.get(sorted.len() / 2).map_or(0.0, |a| a.sqrt());
