@@ -116,6 +116,8 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     );
     // Region peaks are refined around the points that can become error points.
     cfg.compare.adaptive.refine_above = cfg.regions.tolerance;
+    // Core points are added around the summits of deviations beyond half the tolerance.
+    cfg.compare.adaptive.densify_above = 0.5 * cfg.regions.tolerance;
     let start = Instant::now();
     let mut times = StageTimes::default();
     std::fs::create_dir_all(&args.out)
@@ -272,8 +274,10 @@ impl StageTimes {
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
     let valid = dev.values.iter().filter(|v| v.distance.is_finite()).count();
     println!(
-        "inspect: {} core points ({} with a distance), method {:?}, tolerance {} mm, {:.2} s",
+        "inspect: {} core points ({} added around defects, {} with a distance), method {:?}, \
+         tolerance {} mm, {:.2} s",
         dev.values.len(),
+        dev.added(),
         valid,
         dev.method,
         found.tolerance,

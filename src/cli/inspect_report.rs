@@ -40,7 +40,12 @@ pub fn write(
             ("method".to_string(), format!("{:?} M3C2", dev.method)),
             (
                 "core points".to_string(),
-                format!("{} ({} with a distance)", dev.values.len(), valid),
+                format!(
+                    "{} ({} added around defects, {} with a distance)",
+                    dev.values.len(),
+                    dev.added(),
+                    valid
+                ),
             ),
         ],
     );

@@ -16,6 +16,7 @@ use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
+use super::densify::{densify, Densified};
 use super::fit::{fit, student_t95, FitScratch, Local};
 use super::grid::Member;
 use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
@@ -30,9 +31,9 @@ const DELTA_NEIGHBOURS: usize = 4;
 const FIT_MIN: usize = 6;
 
 /// Per-cloud data shared by all core points.
-struct Prepared<'a> {
-    clouds: &'a Clouds<'a>,
-    ref_normals: &'a [Vector3<f64>],
+pub(super) struct Prepared<'a> {
+    pub(super) clouds: &'a Clouds<'a>,
+    pub(super) ref_normals: &'a [Vector3<f64>],
     /// Per storage slot of the reference grid (its order keeps a cylinder's points close in
     /// memory): the point's normal and RWME terms.
     ref_slots: Vec<RefSlot>,
@@ -47,12 +48,12 @@ struct Prepared<'a> {
     half_length: f64,
     /// The core points and their index: [`refine`] evaluates the reference points whose
     /// nearest core point is the one refined (its Voronoi cell on the reference).
-    core: &'a [Point3<f64>],
-    core_index: Neighbours,
+    pub(super) core: &'a [Point3<f64>],
+    pub(super) core_index: Neighbours,
     /// Radius around a core point that holds its cell: twice the core-point spacing.
-    refine_radius: f64,
+    pub(super) refine_radius: f64,
     noise: f64,
-    cos_limit: f64,
+    pub(super) cos_limit: f64,
 }
 
 /// A reference point's data in grid storage order.
@@ -79,7 +80,7 @@ pub fn radii(a: &AdaptiveConfig, r0: f64) -> Result<Vec<f64>> {
 
 /// Per-chunk scratch buffers of [`at`].
 #[derive(Default)]
-pub struct Scratch {
+pub(super) struct Scratch {
     /// Per candidate radius: the reference points within it.
     rings: Vec<Ring>,
     /// Scan points in the cylinder: index of the smallest radius holding them, and the pair.
@@ -109,14 +110,15 @@ struct Ring {
 }
 
 /// Runs the adaptive variant at every core point with the candidate `radii`; returns the
-/// results and the noise used.
+/// results (those of the core points added by densification after those of `core`), the
+/// noise used and the added core points.
 pub fn run(
     clouds: &Clouds,
     core: &PointCloud,
     normals: &[Vector3<f64>],
     radii: &[f64],
     cfg: &CompareConfig,
-) -> Result<(Vec<Deviation>, f64)> {
+) -> Result<(Vec<Deviation>, f64, Densified)> {
     let a = &cfg.adaptive;
     let ref_normals = clouds.reference.normals.as_deref().ok_or_else(|| {
         anyhow::anyhow!("the adaptive method needs reference normals (give a mesh or normals)")
@@ -186,11 +188,17 @@ pub fn run(
         let dev = at(&prep, p, n, cfg, s);
         refine(&prep, dev, p, n, cfg, s)
     });
-    let (mut values, tops): (Vec<Deviation>, Vec<Point3<f64>>) = refined.into_iter().unzip();
+    let (mut values, mut tops): (Vec<Deviation>, Vec<Point3<f64>>) = refined.into_iter().unzip();
+    // The added core points follow the given ones; each is its own top.
+    let (extra, extra_values) = densify(&prep, normals, &values, cfg);
+    values.extend(extra_values);
+    tops.extend(&extra.points);
     if a.peak_fit {
-        fit_peaks(&prep, normals, &tops, &mut values, cfg);
+        let points = [&core.points[..], &extra.points].concat();
+        let normals = [normals, &extra.normals].concat();
+        fit_peaks(&prep, &points, &tops, &normals, &mut values, cfg);
     }
-    Ok((values, noise))
+    Ok((values, noise, extra))
 }
 
 /// Sets `dev.peak` of a significant core point beyond `refine_above` to the distance of
@@ -256,8 +264,9 @@ fn refined(dev: &Deviation, cfg: &CompareConfig) -> bool {
 /// normal, heights = the point-pair distances. An accepted fit replaces that core point's peak.
 fn fit_peaks(
     prep: &Prepared,
-    normals: &[Vector3<f64>],
+    points: &[Point3<f64>],
     tops: &[Point3<f64>],
+    normals: &[Vector3<f64>],
     values: &mut [Deviation],
     cfg: &CompareConfig,
 ) {
@@ -267,21 +276,8 @@ fn fit_peaks(
     if refined_ids.is_empty() {
         return;
     }
-    let pts: Vec<Point3<f64>> = refined_ids.iter().map(|&i| prep.core[i]).collect();
-    let index = Neighbours::new(&pts);
-    let magnitude = |k: usize| values[refined_ids[k]].peak.abs();
-    let sign = |k: usize| values[refined_ids[k]].peak > 0.0;
-    let summits: Vec<usize> = (0..pts.len())
-        .into_par_iter()
-        .filter(|&k| {
-            index
-                .within_unsorted(&pts[k], prep.refine_radius)
-                .iter()
-                .filter(|nb| nb.index != k && sign(nb.index) == sign(k))
-                .all(|nb| (magnitude(k), nb.index) > (magnitude(nb.index), k))
-        })
-        .map(|k| refined_ids[k])
-        .collect();
+    let peaks: Vec<f64> = values.iter().map(|v| v.peak).collect();
+    let summits = summits(prep, points, &refined_ids, &peaks);
     let radius = prep.radii.last().expect("radii") + prep.refine_radius;
     let fitted: Vec<(usize, f64)> = summits
         .par_iter()
@@ -311,6 +307,32 @@ fn fit_peaks(
         values[i].peak = peak;
         values[i].peak_fitted = true;
     }
+}
+
+/// Those of the core points `ids` whose |value| (`values` per core point) is the largest
+/// among the core points of `ids` of the same sign within the refine radius (ties: the lower
+/// index): one per bump, a few along a ridge.
+pub(super) fn summits(
+    prep: &Prepared,
+    points: &[Point3<f64>],
+    ids: &[usize],
+    values: &[f64],
+) -> Vec<usize> {
+    let pts: Vec<Point3<f64>> = ids.iter().map(|&i| points[i]).collect();
+    let index = Neighbours::new(&pts);
+    let magnitude = |k: usize| values[ids[k]].abs();
+    let sign = |k: usize| values[ids[k]] > 0.0;
+    (0..pts.len())
+        .into_par_iter()
+        .filter(|&k| {
+            index
+                .within_unsorted(&pts[k], prep.refine_radius)
+                .iter()
+                .filter(|nb| nb.index != k && sign(nb.index) == sign(k))
+                .all(|nb| (magnitude(k), nb.index) > (magnitude(nb.index), k))
+        })
+        .map(|k| ids[k])
+        .collect()
 }
 
 /// Core-point spacing: the square root of the median [`area_share`] over up to 1,000 evenly
@@ -506,7 +528,7 @@ fn scan_pairs(
 }
 
 /// The adaptive result at core point `p` with outward unit normal `n`.
-fn at(
+pub(super) fn at(
     prep: &Prepared,
     p: &Point3<f64>,
     n: &Vector3<f64>,

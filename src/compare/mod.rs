@@ -7,6 +7,7 @@
 mod adaptive;
 mod classic;
 mod core;
+mod densify;
 mod fit;
 pub(crate) mod grid;
 mod peakfit;
@@ -124,6 +125,12 @@ pub struct AdaptiveConfig {
     /// each defect and report its height as the `peak` of the error point whose cell holds
     /// the top, when the fit passes its guard (default true; docs/ALGORITHMS.md).
     pub peak_fit: bool,
+    /// Around each summit of the significant core points with |distance| above this (mm),
+    /// every reference point within the refine radius becomes a core point too: a defect
+    /// narrower than about twice the core spacing is otherwise sampled by one or two core
+    /// points (default 0.025, half the default tolerance; `inspect` sets half the tolerance;
+    /// infinity turns it off).
+    pub densify_above: f64,
 }
 
 impl Default for AdaptiveConfig {
@@ -139,6 +146,7 @@ impl Default for AdaptiveConfig {
             max_misfit: 1.3,
             refine_above: 0.05,
             peak_fit: true,
+            densify_above: 0.025,
         }
     }
 }
@@ -243,12 +251,22 @@ pub struct Deviations {
     pub normals: Vec<Vector3<f64>>,
     /// One result per core point.
     pub values: Vec<Deviation>,
+    /// The first `given` core points are those given to [`compare`]; the others were added
+    /// by densification around the summits of defects (adaptive `densify_above`).
+    pub given: usize,
     /// Variant used.
     pub method: Method,
     /// Scan noise used by the adaptive variant (mm; NaN for classic).
     pub noise: f64,
     /// Candidate radii (adaptive) or the one radius (classic), mm.
     pub radii: Vec<f64>,
+}
+
+impl Deviations {
+    /// Core points added by densification (the last rows).
+    pub fn added(&self) -> usize {
+        self.values.len() - self.given
+    }
 }
 
 /// Data every variant reads: the two clouds and their grids.
@@ -324,26 +342,49 @@ pub fn compare(
         ref_grid,
         scan_grid,
     };
-    let (values, noise, radii) = match cfg.method {
+    let (mut dev, extra) = match cfg.method {
         Method::Classic => {
             let values = run(&clouds.ref_grid, core, normals, |buf, p, n| {
                 classic::at(&clouds, p, n, classic_radius, cfg, buf)
             });
-            (values, f64::NAN, vec![classic_radius])
+            let radii = vec![classic_radius];
+            (
+                deviations(core, normals, values, cfg, f64::NAN, radii),
+                None,
+            )
         }
         Method::Adaptive => {
-            let (values, noise) = adaptive::run(&clouds, core, normals, &adaptive_radii, cfg)?;
-            (values, noise, adaptive_radii)
+            let (values, noise, extra) =
+                adaptive::run(&clouds, core, normals, &adaptive_radii, cfg)?;
+            let dev = deviations(core, normals, values, cfg, noise, adaptive_radii);
+            (dev, Some(extra))
         }
     };
-    Ok(Deviations {
+    if let Some(extra) = extra {
+        dev.points.extend(extra.points);
+        dev.normals.extend(extra.normals);
+    }
+    Ok(dev)
+}
+
+/// The [`Deviations`] of the given core points (none added yet).
+fn deviations(
+    core: &PointCloud,
+    normals: &[Vector3<f64>],
+    values: Vec<Deviation>,
+    cfg: &CompareConfig,
+    noise: f64,
+    radii: Vec<f64>,
+) -> Deviations {
+    Deviations {
         points: core.points.clone(),
-        normals: normals.clone(),
+        normals: normals.to_vec(),
         values,
+        given: core.len(),
         method: cfg.method,
         noise,
         radii,
-    })
+    }
 }
 
 /// The points and normals of `cloud` in the order `ids` (scalar fields are not needed here).

@@ -260,6 +260,7 @@ mod tests {
             normals: vec![Vector3::z(); points.len()],
             points,
             values,
+            given: 25,
             method: Method::Adaptive,
             noise: 0.015,
             radii: vec![0.5],

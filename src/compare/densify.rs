@@ -1,0 +1,80 @@
+//! Densification (adaptive variant): extra core points where a defect may lie between the
+//! given ones. A defect narrower than about twice the core-point spacing holds one or two core
+//! points, often off its top, and a region needs `min_points` error points; so at every summit
+//! of the significant core points beyond `densify_above` whose LoD is at most `densify_above`
+//! (the largest |distance| of its sign among them within the refine radius; a fit through the
+//! few points of a narrow face, LoD near the tolerance, is not followed up), each reference point within the refine radius (normal within
+//! `max_normal_angle`, not itself a core point) becomes a core point of its own, evaluated
+//! like the others. docs/ALGORITHMS.md has the numbers.
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::adaptive::{at, summits, Prepared, Scratch};
+use super::{CompareConfig, Deviation};
+
+/// Core points added by [`densify`].
+#[derive(Default)]
+pub(super) struct Densified {
+    pub points: Vec<Point3<f64>>,
+    /// Their outward unit normals (the reference's).
+    pub normals: Vec<Vector3<f64>>,
+}
+
+/// The extra core points around the summits among `values` (one per core point of `prep`,
+/// whose outward unit normals are `normals`), and their results.
+pub(super) fn densify(
+    prep: &Prepared,
+    normals: &[Vector3<f64>],
+    values: &[Deviation],
+    cfg: &CompareConfig,
+) -> (Densified, Vec<Deviation>) {
+    let above = cfg.adaptive.densify_above;
+    let candidates: Vec<usize> = (0..values.len())
+        .filter(|&i| {
+            let v = &values[i];
+            v.significant && v.distance.abs() > above && v.uncertainty <= above
+        })
+        .collect();
+    if candidates.is_empty() {
+        return (Densified::default(), Vec::new());
+    }
+    let distances: Vec<f64> = values.iter().map(|v| v.distance).collect();
+    let tops = summits(prep, prep.core, &candidates, &distances);
+    let c = prep.clouds;
+    let mut extra: Vec<usize> = tops
+        .par_iter()
+        .map_init(Vec::new, |near, &i| {
+            let (p, n) = (&prep.core[i], &normals[i]);
+            near.clear();
+            c.ref_grid
+                .cylinder(p, n, prep.refine_radius, cfg.max_distance, near);
+            near.iter()
+                .map(|m| m.index)
+                .filter(|&j| {
+                    let x = &c.reference.points[j];
+                    prep.ref_normals[j].dot(n) >= prep.cos_limit
+                        && prep
+                            .core_index
+                            .knn(x, 1)
+                            .first()
+                            .is_some_and(|nb| prep.core[nb.index] != *x)
+                })
+                .collect::<Vec<usize>>()
+        })
+        .flatten()
+        .collect();
+    extra.sort_unstable();
+    extra.dedup();
+    let values = extra
+        .par_iter()
+        .map_init(Scratch::default, |scratch, &j| {
+            let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
+            at(prep, x, n, cfg, scratch)
+        })
+        .collect();
+    let added = Densified {
+        points: extra.iter().map(|&j| c.reference.points[j]).collect(),
+        normals: extra.iter().map(|&j| prep.ref_normals[j]).collect(),
+    };
+    (added, values)
+}
