@@ -127,6 +127,10 @@ pub fn run(
         a.lambda > 0.0 && a.h > 0.0,
         "adaptive lambda and h must be positive"
     );
+    ensure!(
+        a.refine_above >= 0.0 && a.densify_above >= 0.0,
+        "adaptive refine_above and densify_above must be non-negative (inf turns them off)"
+    );
     // A scan point inside a cylinder around a reference point is within `reach` of it.
     let r_max = *radii.last().expect("radii");
     let reach = r_max.hypot(cfg.max_distance.max(r_max)) * (1.0 + 1e-9);
