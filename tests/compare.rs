@@ -405,11 +405,11 @@ fn dense_scan_finds_every_defect_of_ten_more_cases() {
 /// whose top lies 0.3 mm from the nearest of core points 0.8 mm apart: that core point's
 /// truth is 0.055 mm and only it exceeds the tolerance, so without densification no region
 /// can form (one error point at most). With it the reference points around the bump become
-/// core points: one region, at the bump, peak within 15 % (0.146-0.156 on noise seeds 1-9,
-/// 26-35 points); nothing elsewhere. On noise seed 10 that core point measures 0.050 with
-/// LoD 0.047 (radius r0): beyond half the tolerance, so it is no summit and the bump is
-/// missed; allowing LoD up to the tolerance finds it, but gives 1-3 false regions on synth
-/// seeds 15, 21 and 22 at 300k (docs/ALGORITHMS.md, adaptive step 11).
+/// core points: one region, at the bump, peak within 15 % (0.146-0.156 on noise seeds 1-10,
+/// 26-35 points; found on 20 of 20 seeds); nothing elsewhere. A summit needs LoD within the
+/// tolerance and a covered disc: with LoD within half of it (the first rule) noise seed 10's
+/// core point (0.050, LoD 0.047, at the smallest radius) was no summit and the bump was
+/// missed (docs/ALGORITHMS.md, adaptive step 11).
 #[test]
 fn densification_finds_a_bump_between_core_points() {
     use rand::{Rng, SeedableRng};

@@ -1,9 +1,10 @@
 //! Densification (adaptive variant): extra core points where a defect may lie between the
 //! given ones. A defect narrower than about twice the core-point spacing holds one or two core
 //! points, often off its top, and a region needs `min_points` error points; so at every summit
-//! of the significant core points beyond `densify_above` whose LoD is at most `densify_above`
-//! (the largest |distance| of its sign among them within the refine radius; a fit through the
-//! few points of a narrow face, LoD near the tolerance, is not followed up), each reference point within the refine radius (normal within
+//! of the significant core points beyond `densify_above` whose LoD is at most twice that (the
+//! tolerance, in `inspect`) and whose cylinder is mostly covered by the reference surface
+//! ([`MIN_COVERAGE`]; the largest |distance| of its sign among them within the refine radius),
+//! each reference point within the refine radius (normal within
 //! `max_normal_angle`, not itself a core point) becomes a core point of its own, evaluated
 //! like the others. docs/ALGORITHMS.md has the numbers.
 use nalgebra::{Point3, Vector3};
@@ -11,6 +12,11 @@ use rayon::prelude::*;
 
 use super::adaptive::{at, summits, Prepared, Scratch};
 use super::{CompareConfig, Deviation};
+
+/// A summit's cylinder must hold at least this share of the reference points a full disc of
+/// its radius holds: fits through the few points of a narrow face or a strip beside an edge
+/// (a third or less) give chance error points that densification would turn into regions.
+const MIN_COVERAGE: f64 = 0.6;
 
 /// Core points added by [`densify`].
 #[derive(Default)]
@@ -29,10 +35,16 @@ pub(super) fn densify(
     cfg: &CompareConfig,
 ) -> (Densified, Vec<Deviation>) {
     let above = cfg.adaptive.densify_above;
+    // Reference points per mm² (median): a full disc of radius r holds about π r² of them.
+    let density = super::surface_density(&prep.clouds.ref_grid);
     let candidates: Vec<usize> = (0..values.len())
         .filter(|&i| {
             let v = &values[i];
-            v.significant && v.distance.abs() > above && v.uncertainty <= above
+            let disc = std::f64::consts::PI * v.radius * v.radius * density;
+            v.significant
+                && v.distance.abs() > above
+                && v.uncertainty <= 2.0 * above
+                && v.n_ref as f64 >= MIN_COVERAGE * disc
         })
         .collect();
     if candidates.is_empty() {

@@ -125,7 +125,8 @@ pub struct AdaptiveConfig {
     /// each defect and report its height as the `peak` of the error point whose cell holds
     /// the top, when the fit passes its guard (default true; docs/ALGORITHMS.md).
     pub peak_fit: bool,
-    /// Around each summit of the significant core points with |distance| above this (mm),
+    /// Around each summit of the significant core points with |distance| above this (mm) and
+    /// LoD at most twice this, whose cylinder is mostly covered by the reference surface,
     /// every reference point within the refine radius becomes a core point too: a defect
     /// narrower than about twice the core spacing is otherwise sampled by one or two core
     /// points (default 0.025, half the default tolerance; `inspect` sets half the tolerance;
@@ -306,7 +307,7 @@ pub fn compare(
         || Grid::for_points(&scan.points),
     );
     let radius_for =
-        |count: f64| (count / (std::f64::consts::PI * scan_density(&scan_grid))).sqrt();
+        |count: f64| (count / (std::f64::consts::PI * surface_density(&scan_grid))).sqrt();
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
             let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
@@ -437,10 +438,11 @@ pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
         .collect()
 }
 
-/// The scan's median surface density (points per mm²), from the 12th-neighbour distance of
-/// up to 1,000 scan points evenly spread over `grid`'s storage order (spatial: the answer does
-/// not depend on the order of the points in the file).
-fn scan_density(grid: &Grid) -> f64 {
+/// The median surface density (points per mm²) of the points of `grid` (the scan's, or the
+/// reference's), from the 12th-neighbour distance of up to 1,000 of them evenly spread over
+/// the grid's storage order (spatial: the answer does not depend on the order of the points
+/// in the file).
+fn surface_density(grid: &Grid) -> f64 {
     let n = grid.slot_ids().len();
     let step = (n / 1000).max(1);
     let mut found = Vec::new();
