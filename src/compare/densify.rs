@@ -21,6 +21,7 @@ const MIN_COVERAGE: f64 = 0.6;
 /// Core points added by [`densify`].
 #[derive(Default)]
 pub(super) struct Densified {
+    /// The reference points made core points.
     pub points: Vec<Point3<f64>>,
     /// Their outward unit normals (the reference's).
     pub normals: Vec<Vector3<f64>>,

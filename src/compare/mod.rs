@@ -23,6 +23,7 @@ pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, mesh_reference, CoreConfig,
     CoreSelection,
 };
+use self::densify::Densified;
 use self::grid::Grid;
 use crate::cloud::PointCloud;
 
@@ -343,49 +344,29 @@ pub fn compare(
         ref_grid,
         scan_grid,
     };
-    let (mut dev, extra) = match cfg.method {
+    let (values, noise, radii, added) = match cfg.method {
         Method::Classic => {
             let values = run(&clouds.ref_grid, core, normals, |buf, p, n| {
                 classic::at(&clouds, p, n, classic_radius, cfg, buf)
             });
             let radii = vec![classic_radius];
-            (
-                deviations(core, normals, values, cfg, f64::NAN, radii),
-                None,
-            )
+            (values, f64::NAN, radii, Densified::default())
         }
         Method::Adaptive => {
-            let (values, noise, extra) =
+            let (values, noise, added) =
                 adaptive::run(&clouds, core, normals, &adaptive_radii, cfg)?;
-            let dev = deviations(core, normals, values, cfg, noise, adaptive_radii);
-            (dev, Some(extra))
+            (values, noise, adaptive_radii, added)
         }
     };
-    if let Some(extra) = extra {
-        dev.points.extend(extra.points);
-        dev.normals.extend(extra.normals);
-    }
-    Ok(dev)
-}
-
-/// The [`Deviations`] of the given core points (none added yet).
-fn deviations(
-    core: &PointCloud,
-    normals: &[Vector3<f64>],
-    values: Vec<Deviation>,
-    cfg: &CompareConfig,
-    noise: f64,
-    radii: Vec<f64>,
-) -> Deviations {
-    Deviations {
-        points: core.points.clone(),
-        normals: normals.to_vec(),
+    Ok(Deviations {
+        points: [&core.points[..], &added.points].concat(),
+        normals: [&normals[..], &added.normals].concat(),
         values,
         given: core.len(),
         method: cfg.method,
         noise,
         radii,
-    }
+    })
 }
 
 /// The points and normals of `cloud` in the order `ids` (scalar fields are not needed here).
