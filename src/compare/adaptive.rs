@@ -16,7 +16,7 @@ use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::densify::{densify, Densified};
+use super::densify::densify;
 use super::fit::{fit, student_t95, FitScratch, Local};
 use super::grid::Member;
 use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
@@ -49,11 +49,21 @@ pub(super) struct Prepared<'a> {
     /// The core points and their index: [`refine`] evaluates the reference points whose
     /// nearest core point is the one refined (its Voronoi cell on the reference).
     pub(super) core: &'a [Point3<f64>],
-    pub(super) core_index: Neighbours,
+    core_index: Neighbours,
     /// Radius around a core point that holds its cell: twice the core-point spacing.
     pub(super) refine_radius: f64,
     noise: f64,
     pub(super) cos_limit: f64,
+}
+
+impl Prepared<'_> {
+    /// The core point nearest to `x` (None without core points).
+    pub(super) fn nearest_core(&self, x: &Point3<f64>) -> Option<&Point3<f64>> {
+        self.core_index
+            .knn(x, 1)
+            .first()
+            .map(|c| &self.core[c.index])
+    }
 }
 
 /// A reference point's data in grid storage order.
@@ -109,16 +119,15 @@ struct Ring {
     sum_wd: f64,
 }
 
-/// Runs the adaptive variant at every core point with the candidate `radii`; returns the
-/// results (those of the core points added by densification after those of `core`), the
-/// noise used and the added core points.
+/// Runs the adaptive variant at every core point with the candidate `radii`, adding core
+/// points around the summits of defects (`densify.rs`).
 pub fn run(
     clouds: &Clouds,
     core: &PointCloud,
     normals: &[Vector3<f64>],
     radii: &[f64],
     cfg: &CompareConfig,
-) -> Result<(Vec<Deviation>, f64, Densified)> {
+) -> Result<Evaluated> {
     let a = &cfg.adaptive;
     let ref_normals = clouds.reference.normals.as_deref().ok_or_else(|| {
         anyhow::anyhow!("the adaptive method needs reference normals (give a mesh or normals)")
@@ -197,12 +206,30 @@ pub fn run(
     let (extra, extra_values) = densify(&prep, normals, &values, cfg);
     values.extend(extra_values);
     tops.extend(&extra.points);
+    let points = [&core.points[..], &extra.points].concat();
+    let normals = [normals, &extra.normals].concat();
     if a.peak_fit {
-        let points = [&core.points[..], &extra.points].concat();
-        let normals = [normals, &extra.normals].concat();
         fit_peaks(&prep, &points, &tops, &normals, &mut values, cfg);
     }
-    Ok((values, noise, extra))
+    Ok(Evaluated {
+        values,
+        noise,
+        points,
+        normals,
+    })
+}
+
+/// What [`run`] returns: every core point (the given ones, then those densification added)
+/// with its outward unit normal and result, and the noise used.
+pub struct Evaluated {
+    /// One result per core point.
+    pub values: Vec<Deviation>,
+    /// Scan noise used, mm.
+    pub noise: f64,
+    /// The core points.
+    pub points: Vec<Point3<f64>>,
+    /// Their outward unit normals.
+    pub normals: Vec<Vector3<f64>>,
 }
 
 /// Sets `dev.peak` of a significant core point beyond `refine_above` to the distance of
@@ -231,11 +258,7 @@ fn refine(
         .cylinder(p, n, prep.refine_radius, cfg.max_distance, &mut near);
     for m in &near {
         let (x, nx) = (&c.reference.points[m.index], &prep.ref_normals[m.index]);
-        let own_cell = prep
-            .core_index
-            .knn(x, 1)
-            .first()
-            .is_some_and(|c| prep.core[c.index] == *p);
+        let own_cell = prep.nearest_core(x) == Some(p);
         if nx.dot(n) < prep.cos_limit || !own_cell {
             continue;
         }

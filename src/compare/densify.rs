@@ -66,11 +66,7 @@ pub(super) fn densify(
                 .filter(|&j| {
                     let x = &c.reference.points[j];
                     prep.ref_normals[j].dot(n) >= prep.cos_limit
-                        && prep
-                            .core_index
-                            .knn(x, 1)
-                            .first()
-                            .is_some_and(|nb| prep.core[nb.index] != *x)
+                        && prep.nearest_core(x).is_some_and(|c| c != x)
                 })
                 .collect::<Vec<usize>>()
         })

@@ -23,7 +23,6 @@ pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, mesh_reference, CoreConfig,
     CoreSelection,
 };
-use self::densify::Densified;
 use self::grid::Grid;
 use crate::cloud::PointCloud;
 
@@ -344,23 +343,34 @@ pub fn compare(
         ref_grid,
         scan_grid,
     };
-    let (values, noise, radii, added) = match cfg.method {
+    let (values, noise, radii, points, normals) = match cfg.method {
         Method::Classic => {
             let values = run(&clouds.ref_grid, core, normals, |buf, p, n| {
                 classic::at(&clouds, p, n, classic_radius, cfg, buf)
             });
             let radii = vec![classic_radius];
-            (values, f64::NAN, radii, Densified::default())
+            (
+                values,
+                f64::NAN,
+                radii,
+                core.points.clone(),
+                normals.clone(),
+            )
         }
         Method::Adaptive => {
-            let (values, noise, added) =
-                adaptive::run(&clouds, core, normals, &adaptive_radii, cfg)?;
-            (values, noise, adaptive_radii, added)
+            let all = adaptive::run(&clouds, core, normals, &adaptive_radii, cfg)?;
+            (
+                all.values,
+                all.noise,
+                adaptive_radii,
+                all.points,
+                all.normals,
+            )
         }
     };
     Ok(Deviations {
-        points: [&core.points[..], &added.points].concat(),
-        normals: [&normals[..], &added.normals].concat(),
+        points,
+        normals,
         values,
         given: core.len(),
         method: cfg.method,
