@@ -57,18 +57,19 @@ fn terms(count: usize) -> usize {
     }
 }
 
-fn basis(p: &Local, scale: f64) -> Vector6<f64> {
-    let (u, v) = (p[0] / scale, p[1] / scale);
+/// The quadric's monomials at a point whose (u, v) are in units of the cylinder radius.
+fn basis(p: &Local) -> Vector6<f64> {
+    let (u, v) = (p[0], p[1]);
     Vector6::new(1.0, u, v, u * u, u * v, v * v)
 }
 
-/// The normal equations over `pts` with the first `K` terms (upper triangle and right-hand
-/// side; `K` known at compile time, so the loops unroll).
-fn normal_equations<const K: usize>(pts: &[Local], scale: f64) -> (Matrix6<f64>, Vector6<f64>) {
+/// The normal equations over `pts` (scaled) with the first `K` terms (upper triangle and
+/// right-hand side; `K` known at compile time, so the loops unroll).
+fn normal_equations<const K: usize>(pts: &[Local]) -> (Matrix6<f64>, Vector6<f64>) {
     let mut a = Matrix6::<f64>::zeros();
     let mut b = Vector6::<f64>::zeros();
     for p in pts {
-        let x = basis(p, scale);
+        let x = basis(p);
         for i in 0..K {
             for j in i..K {
                 a[(i, j)] += x[i] * x[j];
@@ -79,12 +80,13 @@ fn normal_equations<const K: usize>(pts: &[Local], scale: f64) -> (Matrix6<f64>,
     (a, b)
 }
 
-/// Solves the normal equations over `pts` with `k` terms (1, 3 or 6); None when singular.
-fn solve(pts: &[Local], k: usize, scale: f64) -> Option<(Vector6<f64>, f64)> {
+/// Solves the normal equations over `pts` (scaled) with `k` terms (1, 3 or 6); None when
+/// singular.
+fn solve(pts: &[Local], k: usize) -> Option<(Vector6<f64>, f64)> {
     let (mut a, b) = match k {
-        6 => normal_equations::<6>(pts, scale),
-        3 => normal_equations::<3>(pts, scale),
-        _ => normal_equations::<1>(pts, scale),
+        6 => normal_equations::<6>(pts),
+        3 => normal_equations::<3>(pts),
+        _ => normal_equations::<1>(pts),
     };
     // The lower triangle mirrors the upper (the same products, summed in the same order).
     for i in 0..k {
@@ -101,14 +103,15 @@ fn solve(pts: &[Local], k: usize, scale: f64) -> Option<(Vector6<f64>, f64)> {
     Some((coef, inv00))
 }
 
-fn residual(p: &Local, coef: &Vector6<f64>, scale: f64) -> f64 {
-    p[2] - basis(p, scale).dot(coef)
+fn residual(p: &Local, coef: &Vector6<f64>) -> f64 {
+    p[2] - basis(p).dot(coef)
 }
 
 /// Reusable buffers of [`fit`].
 #[derive(Default)]
 pub struct FitScratch {
     abs: Vec<f64>,
+    scaled: Vec<Local>,
     kept: Vec<Local>,
     refit: Vec<Local>,
 }
@@ -122,16 +125,20 @@ pub(super) fn inliers(
     abs: &mut Vec<f64>,
     out: &mut Vec<Local>,
 ) {
+    // |residual| per point, then a copy that the median search reorders.
+    let n = pts.len();
     abs.clear();
     abs.extend(pts.iter().map(|p| (p[2] - model(p)).abs()));
-    let mid = abs.len() / 2;
-    let mad = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
+    abs.extend_from_within(..n);
+    let (residuals, order) = abs.split_at_mut(n);
+    let mad = *order.select_nth_unstable_by(n / 2, f64::total_cmp).1;
     let limit = trim.max(3.0 * 1.4826 * mad);
     out.clear();
     out.extend(
         pts.iter()
-            .copied()
-            .filter(|p| (p[2] - model(p)).abs() <= limit),
+            .zip(residuals.iter())
+            .filter(|(_, r)| **r <= limit)
+            .map(|(p, _)| *p),
     );
 }
 
@@ -150,37 +157,40 @@ pub fn fit(
     if pts.is_empty() {
         return None;
     }
-    let FitScratch { abs, kept, refit } = scratch;
+    let FitScratch {
+        abs,
+        scaled,
+        kept,
+        refit,
+    } = scratch;
+    // (u, v) in units of `scale` once: the monomials stay near 1 (a well-conditioned system).
+    scaled.clear();
+    scaled.extend(pts.iter().map(|p| [p[0] / scale, p[1] / scale, p[2]]));
     abs.clear();
     abs.extend(pts.iter().map(|p| p[2]));
     let mid = abs.len() / 2;
     let median = *abs.select_nth_unstable_by(mid, f64::total_cmp).1;
-    inliers(pts, trim, |_| median, abs, kept);
-    let first = fit_once(kept, scale, floor)?;
-    inliers(
-        kept,
-        trim,
-        |p| p[2] - residual(p, &first.0, scale),
-        abs,
-        refit,
-    );
-    Some(fit_once(refit, scale, floor)?.2)
+    inliers(scaled, trim, |_| median, abs, kept);
+    let first = fit_once(kept, floor)?;
+    inliers(kept, trim, |p| p[2] - residual(p, &first.0), abs, refit);
+    Some(fit_once(refit, floor)?.2)
 }
 
-fn fit_once(pts: &[Local], scale: f64, floor: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
+/// One least-squares fit over `pts` (scaled).
+fn fit_once(pts: &[Local], floor: f64) -> Option<(Vector6<f64>, f64, AxisFit)> {
     if pts.is_empty() {
         return None;
     }
     let mut k = terms(pts.len());
     let (coef, inv00) = loop {
-        match solve(pts, k, scale) {
+        match solve(pts, k) {
             Some(s) => break s,
             None if k == 6 => k = 3,
             None if k == 3 => k = 1,
             None => return None,
         }
     };
-    let rss: f64 = pts.iter().map(|p| residual(p, &coef, scale).powi(2)).sum();
+    let rss: f64 = pts.iter().map(|p| residual(p, &coef).powi(2)).sum();
     let dof = pts.len() as f64 - k as f64;
     let var = rss / dof;
     let sigma = var.sqrt();
