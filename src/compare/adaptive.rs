@@ -441,18 +441,19 @@ fn tangent_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     (e1, n.cross(&e1))
 }
 
-/// Similarity s(r) of the reference points counted in `ring` (those within r; see the
-/// module doc).
+/// Similarity s(r) of the reference points counted in `ring` (those within r): the RWME of
+/// the module doc, R = Σ w_i |X_i| / (λ + Σ w_i |δ_i|) with |X_i| = π r² / m, over its value
+/// at a perfect match (every |δ_i| = d0).
 fn similarity(prep: &Prepared, ring: &Ring, r: f64, h: f64, lambda: f64) -> f64 {
     let m = ring.scanned;
     if m == 0.0 {
         return 0.0;
     }
     let share = std::f64::consts::PI * r * r / m;
-    let rwme = ring.sum_w * share / (lambda + ring.sum_wd * share);
+    let rwme = ring.sum_w * share / (lambda + ring.sum_wd);
     let d0 = prep.noise * (2.0 / std::f64::consts::PI).sqrt();
     let w0 = (-d0 / h).exp();
-    let ideal = m * w0 * share / (lambda + m * w0 * d0 * share);
+    let ideal = m * w0 * share / (lambda + m * w0 * d0);
     rwme / ideal
 }
 
