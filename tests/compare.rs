@@ -316,10 +316,11 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
 /// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.91 / 0.93
 /// (0.89 / 0.91 before the LoD took Student's t), RMS 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
 /// that truth does not have (classic raises dozens along the box-cut edges) and finds every
-/// defect taller than twice the tolerance (seed 12 has a narrow 0.09 mm pit that both methods
-/// miss), with its peak within 15 % (the peak fit: every one within 10 % but seed 11's
-/// 0.29 mm, 0.64 mm wide bump, -11 %; seeds 13 and 14 all within 10 %; before the fit seed 11's
-/// bump was reported 0.17 mm, -42 %).
+/// defect taller than the tolerance, seed 12's narrow 0.09 mm pit included (a peak model
+/// measures it, -4 %: docs/ALGORITHMS.md, adaptive step 12; missed before), with its peak
+/// within 15 % (the peak fit: every one within 10 % but seed 11's 0.29 mm, 0.64 mm wide bump,
+/// -11 %; seeds 13 and 14 all within 10 %; before the fit seed 11's bump was reported
+/// 0.17 mm, -42 %).
 #[test]
 fn adaptive_finds_the_planted_defects_and_beats_classic() {
     for (seed, ours, classic) in scores(300_000) {
@@ -348,7 +349,7 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             "seed {seed}: the case must have sharp-edge traps"
         );
         assert!(ours.regions > 0, "seed {seed}: no region at all");
-        assert_peaks(seed, &ours, 0.1, 0.15);
+        assert_peaks(seed, &ours, RegionConfig::default().tolerance, 0.15);
     }
 }
 
@@ -405,74 +406,174 @@ fn dense_scan_finds_every_defect_of_ten_more_cases() {
 /// missed (docs/ALGORITHMS.md, adaptive step 11).
 #[test]
 fn densification_finds_a_bump_between_core_points() {
-    use rand::{Rng, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-    let (top, height, sigma) = (Point3::new(4.3, 4.0, 0.0), 0.15, 0.5 / 2.3548);
-    let bump = |x: f64, y: f64| {
-        let r2 = (x - top.x).powi(2) + (y - top.y).powi(2);
-        height * (-r2 / (2.0 * sigma * sigma)).exp()
+    let bump = Bump {
+        top: Point3::new(4.3, 4.0, 0.0),
+        height: 0.15,
+        fwhm: 0.5,
+        scan_density: 100.0,
+        noise: 0.01,
+        core_step: 0.8,
+        seed: 5,
     };
-    let lattice = |step: f64| -> Vec<Point3<f64>> {
-        let n = (8.0 / step).round() as usize;
-        (0..=n)
-            .flat_map(|i| (0..=n).map(move |j| Point3::new(i as f64 * step, j as f64 * step, 0.0)))
-            .collect()
-    };
-    let with_normals = |points: Vec<Point3<f64>>| PointCloud {
-        normals: Some(vec![nalgebra::Vector3::z(); points.len()]),
-        points,
-        fields: Vec::new(),
-    };
-    let reference = with_normals(lattice(0.1));
-    let core = with_normals(lattice(0.8));
-    let scan = PointCloud {
-        points: (0..6400)
-            .map(|_| {
-                let (x, y) = (rng.gen::<f64>() * 8.0, rng.gen::<f64>() * 8.0);
-                let (u1, u2): (f64, f64) = (rng.gen::<f64>().max(1e-300), rng.gen());
-                let noise = 0.01 * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-                Point3::new(x, y, bump(x, y) + noise)
-            })
-            .collect(),
-        normals: None,
-        fields: Vec::new(),
-    };
-    let tol = RegionConfig::default().tolerance;
-    let run = |densify_above: f64| {
-        let mut cfg = CompareConfig::default();
-        cfg.adaptive.densify_above = densify_above;
-        let dev = compare(&core, &reference, &scan, &cfg).unwrap();
-        let regions = find_regions(&dev, &RegionConfig::default());
-        (dev, regions)
-    };
+    let (core, reference, scan) = bump.case();
     let mut bad = CompareConfig::default();
     bad.adaptive.densify_above = f64::NAN;
     let err = compare(&core, &reference, &scan, &bad)
         .unwrap_err()
         .to_string();
     assert!(err.contains("densify_above"), "{err}");
-    let (dev, regions) = run(f64::INFINITY);
+    let (dev, regions) = bump.run(&core, &reference, &scan, f64::INFINITY);
     assert_eq!(dev.added(), 0);
     assert!(regions.regions.is_empty(), "{:?}", regions.regions);
-    let (dev, regions) = run(0.5 * tol);
+    let (dev, regions) = bump.run(&core, &reference, &scan, DENSIFY_ABOVE);
     assert!(dev.added() > 0);
-    assert_eq!(regions.regions.len(), 1, "{:?}", regions.regions);
-    let region = &regions.regions[0];
-    let centroid = Point3::from(region.centroid);
-    assert!((centroid - top).norm() < 0.2, "region at {centroid}");
+    let peak = bump.found(&regions).expect("one region, at the bump");
     assert!(
-        (region.peak - height).abs() <= 0.15 * height,
-        "peak {} for height {height}",
-        region.peak
+        (peak - bump.height).abs() <= 0.15 * bump.height,
+        "peak {peak} for height {}",
+        bump.height
     );
 }
 
+/// `inspect`'s densification threshold: half the default tolerance.
+const DENSIFY_ABOVE: f64 = 0.025;
+
+/// A Gaussian bump on the plane z = 0 over [0, 8]², sampled: the reference every 0.1 mm with
+/// normals +z, core points every `core_step`, the scan at random with `scan_density` points
+/// per mm² and Gaussian noise.
+struct Bump {
+    top: Point3<f64>,
+    height: f64,
+    /// Full width at half height, mm.
+    fwhm: f64,
+    scan_density: f64,
+    noise: f64,
+    core_step: f64,
+    seed: u64,
+}
+
+impl Bump {
+    /// Core points, reference and scan.
+    fn case(&self) -> (PointCloud, PointCloud, PointCloud) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.seed);
+        let sigma = self.fwhm / 2.3548;
+        let bump = |x: f64, y: f64| {
+            let r2 = (x - self.top.x).powi(2) + (y - self.top.y).powi(2);
+            self.height * (-r2 / (2.0 * sigma * sigma)).exp()
+        };
+        let lattice = |step: f64| -> Vec<Point3<f64>> {
+            let n = (8.0 / step).round() as usize;
+            (0..=n)
+                .flat_map(|i| {
+                    (0..=n).map(move |j| Point3::new(i as f64 * step, j as f64 * step, 0.0))
+                })
+                .collect()
+        };
+        let with_normals = |points: Vec<Point3<f64>>| PointCloud {
+            normals: Some(vec![nalgebra::Vector3::z(); points.len()]),
+            points,
+            fields: Vec::new(),
+        };
+        let scan = PointCloud {
+            points: (0..(64.0 * self.scan_density) as usize)
+                .map(|_| {
+                    let (x, y) = (rng.gen::<f64>() * 8.0, rng.gen::<f64>() * 8.0);
+                    let (u1, u2): (f64, f64) = (rng.gen::<f64>().max(1e-300), rng.gen());
+                    let noise =
+                        self.noise * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                    Point3::new(x, y, bump(x, y) + noise)
+                })
+                .collect(),
+            normals: None,
+            fields: Vec::new(),
+        };
+        (
+            with_normals(lattice(self.core_step)),
+            with_normals(lattice(0.1)),
+            scan,
+        )
+    }
+
+    /// The default comparison with `densify_above`, and its regions.
+    fn run(
+        &self,
+        core: &PointCloud,
+        reference: &PointCloud,
+        scan: &PointCloud,
+        densify_above: f64,
+    ) -> (Deviations, Regions) {
+        let mut cfg = CompareConfig::default();
+        cfg.adaptive.densify_above = densify_above;
+        let dev = compare(core, reference, scan, &cfg).unwrap();
+        let regions = find_regions(&dev, &RegionConfig::default());
+        (dev, regions)
+    }
+
+    /// The peak of the only region when there is one, within 0.2 mm of the top.
+    fn found(&self, regions: &Regions) -> Option<f64> {
+        match &regions.regions[..] {
+            [region] if (Point3::from(region.centroid) - self.top).norm() < 0.2 => {
+                Some(region.peak)
+            }
+            _ => None,
+        }
+    }
+}
+
+/// Bumps narrower than the smallest cylinder, as the 300k synth cases have (seed 22's
+/// 0.32 mm high, 0.44 mm wide one): 0.3 mm high, 0.44 mm wide, 19 scan points/mm² with
+/// 0.015 mm noise (the smallest cylinder, 12 scan points, is 0.45 mm in radius), the top
+/// 0.28 mm from the nearest of core points 0.4 mm apart; 20 noise seeds. The cylinders miss
+/// them (no region on 19 of 20 seeds: half of r0's reference points still match, so the radius
+/// grows and the bump's points are trimmed). With densification one region at the bump on
+/// every seed: on 17 a peak model fitted where the scan's own heights (δ) rise measures it
+/// (`Reason::PeakModel`), on 2 the cylinders at the added core points do. The peak is within
+/// 10 % on 15 seeds (the others +14 %, -10.1 %, +18 %, +12 %, and -21 % on the seed the
+/// cylinders find alone): about 8 scan points lie on such a bump. Requiring 8 supporting
+/// points (the peak fit's own floor) left 5 of 20 without a region.
+#[test]
+fn bumps_narrower_than_the_cylinders_are_measured_by_a_peak_model() {
+    let (mut found_by_cylinders, mut within, mut modelled) = (0, 0, 0);
+    for seed in 1..=20 {
+        let bump = Bump {
+            top: Point3::new(4.2, 4.2, 0.0),
+            height: 0.3,
+            fwhm: 0.44,
+            scan_density: 19.0,
+            noise: 0.015,
+            core_step: 0.4,
+            seed,
+        };
+        let (core, reference, scan) = bump.case();
+        let (_, regions) = bump.run(&core, &reference, &scan, f64::INFINITY);
+        let by_cylinders = !regions.regions.is_empty();
+        found_by_cylinders += usize::from(by_cylinders);
+        let (dev, regions) = bump.run(&core, &reference, &scan, DENSIFY_ABOVE);
+        let peak = bump
+            .found(&regions)
+            .unwrap_or_else(|| panic!("seed {seed}: {:?}", regions.regions));
+        within += usize::from((peak - bump.height).abs() <= 0.1 * bump.height);
+        let model = dev
+            .values
+            .iter()
+            .any(|v| v.reason == polishbot::compare::Reason::PeakModel);
+        modelled += usize::from(model);
+        eprintln!(
+            "seed {seed}: peak {peak:.4}, cylinders alone {by_cylinders}, peak model {model}"
+        );
+    }
+    assert!(found_by_cylinders <= 1, "{found_by_cylinders}");
+    assert!(modelled >= 15, "a peak model on {modelled} of 20");
+    assert!(within >= 14, "{within} of 20 peaks within 10 %");
+}
+
 /// Issue 5's acceptance targets (IoU >= 0.95, RMS <= 0.01 mm, every peak within 10 %): not
-/// reached at 300,000 scan points (IoU 0.91 / 0.93 and RMS 0.013 / 0.010 mm on seeds 11 / 12;
-/// seed 11's narrow 0.29 mm bump reported -11 %; seed 12's narrow 0.09 mm pit missed: about
-/// 5 scan points lie where it exceeds the tolerance), nor in full at 1.2 million
-/// (POLISHBOT_SCAN_POINTS=1200000: IoU 0.935 on seed 11; every peak within 10 %, the pit
-/// included; docs/ALGORITHMS.md). Run with --ignored.
+/// reached at 300,000 scan points (IoU 0.905 / 0.928 and RMS 0.013 / 0.010 mm on seeds 11 /
+/// 12; seed 11's narrow 0.29 mm bump reported -11 %; seed 12's narrow 0.09 mm pit found by a
+/// peak model, -4 %), nor in full at 1.2 million (POLISHBOT_SCAN_POINTS=1200000: IoU 0.932
+/// on seed 11; every peak within 10 %, the pit included; docs/ALGORITHMS.md). Run with
+/// --ignored.
 #[test]
 #[ignore]
 fn acceptance_targets() {
@@ -656,7 +757,7 @@ fn csv_iou(out: &Path, truth: &Path) -> f64 {
 /// truth pose) finds seed 11's defects as well as the comparison does from the true pose
 /// (`adaptive_finds_the_planted_defects_and_beats_classic`: IoU 0.905 over the given core
 /// points; this test, over every row of deviations.csv, the points densification added at
-/// defect tops included: 0.939). The LoD's
+/// defect tops included: 0.944). The LoD's
 /// registration term is the pose's uncertainty (registration.json `registration_error`, a
 /// few 10⁻⁴ mm), not a residual RMSE: the point-to-plane RMSE (0.028 mm) would keep every
 /// deviation below 0.055 mm insignificant and drop the IoU to 0.77.

@@ -18,7 +18,6 @@ use rayon::prelude::*;
 
 use super::densify::densify;
 use super::fit::{fit, student_t95, FitScratch, Local};
-use super::grid::Member;
 use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
@@ -52,17 +51,52 @@ pub(super) struct Prepared<'a> {
     core_index: Neighbours,
     /// Radius around a core point that holds its cell: twice the core-point spacing.
     pub(super) refine_radius: f64,
-    noise: f64,
+    pub(super) noise: f64,
     pub(super) cos_limit: f64,
+    /// δ of every reference point (see [`one_sided_distances`]).
+    pub(super) delta: Vec<f64>,
 }
 
 impl Prepared<'_> {
     /// The core point nearest to `x` (None without core points).
     pub(super) fn nearest_core(&self, x: &Point3<f64>) -> Option<&Point3<f64>> {
-        self.core_index
-            .knn(x, 1)
-            .first()
-            .map(|c| &self.core[c.index])
+        self.nearest_core_id(x).map(|i| &self.core[i])
+    }
+
+    /// Index of the core point nearest to `x` (None without core points).
+    pub(super) fn nearest_core_id(&self, x: &Point3<f64>) -> Option<usize> {
+        self.core_index.knn(x, 1).first().map(|c| c.index)
+    }
+
+    /// The smallest candidate radius.
+    pub(super) fn smallest_radius(&self) -> f64 {
+        self.radii[0]
+    }
+
+    /// Indices of the reference points within `radius` of the axis through `p` along `n` and
+    /// within max(`max_distance`, `radius`) of `p` along it, in storage order: a plain
+    /// cylinder (py4dgeo's slabs, [`super::grid::Grid::cylinder`], leave out a plane through
+    /// `p` when the cylinder has two: it lies on their common boundary).
+    pub(super) fn reference_near(
+        &self,
+        p: &Point3<f64>,
+        n: &Vector3<f64>,
+        radius: f64,
+        max_distance: f64,
+        out: &mut Vec<usize>,
+    ) {
+        out.clear();
+        self.clouds
+            .ref_grid
+            .near_axis(p, n, radius, max_distance.max(radius), |slot, _, _| {
+                out.push(slot)
+            });
+    }
+
+    /// Radius of a peak fit's window: the largest candidate radius plus the refine radius
+    /// (the cell's reach plus the widest flank a quadric estimate sees).
+    pub(super) fn peak_window(&self) -> f64 {
+        self.radii.last().expect("radii") + self.refine_radius
     }
 }
 
@@ -104,7 +138,7 @@ pub(super) struct Scratch {
     fit: FitScratch,
     knn: Vec<(f64, u32)>,
     /// Reference points around a core point whose peak is refined.
-    near: Vec<Member>,
+    near: Vec<usize>,
 }
 
 /// Reference points within a candidate radius ([`gather`] counts each in the ring between
@@ -196,6 +230,7 @@ pub fn run(
         core_index,
         noise,
         cos_limit: a.max_normal_angle.to_radians().cos(),
+        delta,
     };
     let refined = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
         let dev = at(&prep, p, n, cfg, s);
@@ -254,10 +289,9 @@ fn refine(
     let mut near = std::mem::take(&mut scratch.near);
     near.clear();
     let c = prep.clouds;
-    c.ref_grid
-        .cylinder(p, n, prep.refine_radius, cfg.max_distance, &mut near);
-    for m in &near {
-        let (x, nx) = (&c.reference.points[m.index], &prep.ref_normals[m.index]);
+    prep.reference_near(p, n, prep.refine_radius, cfg.max_distance, &mut near);
+    for &m in &near {
+        let (x, nx) = (&c.reference.points[m], &prep.ref_normals[m]);
         let own_cell = prep.nearest_core(x) == Some(p);
         if nx.dot(n) < prep.cos_limit || !own_cell {
             continue;
@@ -297,15 +331,16 @@ fn fit_peaks(
     values: &mut [Deviation],
     cfg: &CompareConfig,
 ) {
+    // Points a peak model measured (densification) have their peak from it already.
     let refined_ids: Vec<usize> = (0..values.len())
-        .filter(|&i| refined(&values[i], cfg))
+        .filter(|&i| refined(&values[i], cfg) && values[i].reason != Reason::PeakModel)
         .collect();
     if refined_ids.is_empty() {
         return;
     }
     let peaks: Vec<f64> = values.iter().map(|v| v.peak).collect();
     let summits = summits(prep, points, &refined_ids, &peaks);
-    let radius = prep.radii.last().expect("radii") + prep.refine_radius;
+    let radius = prep.peak_window();
     let fitted: Vec<(usize, f64)> = summits
         .par_iter()
         .map_init(
@@ -431,7 +466,7 @@ fn robust_sd(delta: &[f64]) -> f64 {
 }
 
 /// Two unit vectors completing `n` to a right-handed frame.
-fn tangent_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+pub(super) fn tangent_frame(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
     let helper = if n.x.abs() < 0.9 {
         Vector3::x()
     } else {
@@ -525,7 +560,7 @@ fn gather(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, s: &mut Scratch) {
 /// Calls `f(rho², y - p, pair distance)` for every scan point y within `radius` of the axis
 /// through `p` along `n` (half-length: the cylinders') whose nearest reference point's normal
 /// is within `max_normal_angle` of `n` (`knn`: scratch).
-fn scan_pairs(
+pub(super) fn scan_pairs(
     prep: &Prepared,
     p: &Point3<f64>,
     n: &Vector3<f64>,

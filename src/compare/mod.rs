@@ -167,15 +167,20 @@ pub enum Reason {
     FewReference,
     /// Fewer than `min_points` scan points in the cylinder.
     FewScan,
+    /// The distance is the height of a peak model fitted around the top of a defect that the
+    /// cylinders cannot resolve (adaptive densification; `n_ref` 0, `radius` the model's
+    /// window, `n_scan` the scan points it used).
+    PeakModel,
 }
 
 impl Reason {
-    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points.
+    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points, 3 peak model.
     pub fn code(self) -> u8 {
         match self {
             Reason::Ok => 0,
             Reason::FewReference => 1,
             Reason::FewScan => 2,
+            Reason::PeakModel => 3,
         }
     }
 }

@@ -28,7 +28,7 @@ const MAX_ITERATIONS: usize = 100;
 
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
 /// cannot pin its six shape parameters (a spike through one noisy point).
-const MIN_SUPPORT: usize = 8;
+pub const MIN_SUPPORT: usize = 8;
 
 /// The window and the expectations of a peak fit.
 #[derive(Debug, Clone, Copy)]
@@ -69,6 +69,11 @@ pub struct PeakFit {
     pub trimmed: usize,
     /// Points where the Gaussian is at least 10 % of A.
     pub support: usize,
+    /// The fitted parameters (scaled units), their covariance and the scale (the window
+    /// radius), for [`PeakFit::height_at`].
+    params: Params,
+    cov: Normal,
+    scale: f64,
 }
 
 impl PeakFit {
@@ -79,16 +84,37 @@ impl PeakFit {
     /// suits it), the peak's standard error at most a tenth of its height, and the peak at
     /// most twice the quadric top plus 4 noise SD.
     pub fn accepted(&self, w: &PeakWindow) -> bool {
+        self.describes(w, MIN_SUPPORT) && self.se <= 0.1 * self.peak.abs()
+    }
+
+    /// The guard of [`PeakFit::accepted`] without its bound on the standard error, with
+    /// `min_support` points in place of [`MIN_SUPPORT`]: the model describes the data around
+    /// a top of the start's sign.
+    pub fn describes(&self, w: &PeakWindow, min_support: usize) -> bool {
         let sign = w.start.signum();
         self.trimmed <= 1 + (self.n + self.trimmed) / 50
             && self.offset <= 0.5 * w.radius
             && self.widths[0] <= w.radius
-            && self.support >= MIN_SUPPORT
+            && self.support >= min_support
             && self.amplitude * sign > 0.0
             && self.peak * sign > 0.0
             && self.peak.abs() <= height_limit(w)
             && self.sigma <= w.max_misfit * w.noise
-            && self.se <= 0.1 * self.peak.abs()
+    }
+}
+
+impl PeakFit {
+    /// Residual degrees of freedom: points used minus the model's parameters.
+    pub fn dof(&self) -> usize {
+        self.n - PARAMS
+    }
+
+    /// The fitted surface's height at (u, v) of the window's frame (mm) and its standard
+    /// error from the fit's covariance (NaN when that is not positive there).
+    pub fn height_at(&self, u: f64, v: f64) -> (f64, f64) {
+        let (value, grad) = model(&self.params, u / self.scale, v / self.scale);
+        let var = grad.dot(&(self.cov * grad));
+        (value, if var > 0.0 { var.sqrt() } else { f64::NAN })
     }
 }
 
@@ -300,6 +326,9 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         n,
         trimmed: scaled.len() - n,
         support,
+        params: t,
+        cov,
+        scale: s,
     })
 }
 
