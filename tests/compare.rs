@@ -425,7 +425,7 @@ fn densification_finds_a_bump_between_core_points() {
     let (dev, regions) = bump.run(&core, &reference, &scan, f64::INFINITY);
     assert_eq!(dev.added(), 0);
     assert!(regions.regions.is_empty(), "{:?}", regions.regions);
-    let (dev, regions) = bump.run(&core, &reference, &scan, DENSIFY_ABOVE);
+    let (dev, regions) = bump.run(&core, &reference, &scan, densify_above());
     assert!(dev.added() > 0);
     let peak = bump.found(&regions).expect("one region, at the bump");
     assert!(
@@ -435,8 +435,10 @@ fn densification_finds_a_bump_between_core_points() {
     );
 }
 
-/// `inspect`'s densification threshold: half the default tolerance.
-const DENSIFY_ABOVE: f64 = 0.025;
+/// The default densification threshold (`inspect`'s: half the default tolerance).
+fn densify_above() -> f64 {
+    CompareConfig::default().adaptive.densify_above
+}
 
 /// A Gaussian bump on the plane z = 0 over [0, 8]², sampled: the reference every 0.1 mm with
 /// normals +z, core points every `core_step`, the scan at random with `scan_density` points
@@ -549,7 +551,7 @@ fn bumps_narrower_than_the_cylinders_are_measured_by_a_peak_model() {
         let (_, regions) = bump.run(&core, &reference, &scan, f64::INFINITY);
         let by_cylinders = !regions.regions.is_empty();
         found_by_cylinders += usize::from(by_cylinders);
-        let (dev, regions) = bump.run(&core, &reference, &scan, DENSIFY_ABOVE);
+        let (dev, regions) = bump.run(&core, &reference, &scan, densify_above());
         let peak = bump
             .found(&regions)
             .unwrap_or_else(|| panic!("seed {seed}: {:?}", regions.regions));

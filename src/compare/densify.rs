@@ -4,9 +4,11 @@
 //! of the significant core points beyond `densify_above` whose LoD is at most twice that (the
 //! tolerance, in `inspect`) and whose cylinder is mostly covered by the reference surface
 //! ([`MIN_COVERAGE`]; the largest |distance| of its sign among them within the refine radius),
-//! each reference point within the refine radius (normal within
-//! `max_normal_angle`, not itself a core point) becomes a core point of its own, evaluated
-//! like the others. docs/ALGORITHMS.md has the numbers.
+//! each reference point within the refine radius (normal within `max_normal_angle`, not
+//! itself a core point) becomes a core point of its own, evaluated like the others. Defects
+//! too narrow for any cylinder's quadric are found from the scan's own heights instead and
+//! measured by a peak model ([`modelled`]). docs/ALGORITHMS.md (adaptive steps 11 and 12)
+//! has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -92,14 +94,14 @@ pub(super) fn densify(
             at(prep, x, n, cfg, scratch)
         })
         .collect();
-    // A peak model's value replaces a cylinder's where both measured a point.
-    let mut position: std::collections::HashMap<usize, usize> =
+    // A peak model's value replaces a cylinder's where both measured a point (each point
+    // comes from one model at most).
+    let position: std::collections::HashMap<usize, usize> =
         extra.iter().enumerate().map(|(k, &j)| (j, k)).collect();
     for (j, value) in modelled(prep, values, cfg) {
         match position.get(&j) {
             Some(&k) => added[k] = value,
             None => {
-                position.insert(j, extra.len());
                 extra.push(j);
                 added.push(value);
             }
@@ -126,17 +128,16 @@ fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
 /// (the nearest one; else the summits above cover it), with [`MIN_CLUSTER`] such reference
 /// points within the smallest radius, and a peak window holding at least [`MIN_COVERAGE`] of
 /// the scan points a full one holds (at a scan's border or hole a few points let a Gaussian
-/// fit anything). The peak model (`peakfit.rs`) is fitted to the scan
-/// points of the peak window around it; when the model describes them (the peak fit's guard
-/// without its bound on the standard error: at 19 scan points/mm² a 0.44 mm wide bump has
-/// about 8 points on it and its height a standard error of 15 %; [`MODEL_MIN_SUPPORT`]
-/// supporting points, at least [`MIN_WIDTH`] scan spacings wide) and the fitted peak exceeds
-/// the tolerance by t95(n - 9) standard errors, every reference point within the refine
-/// radius of the top (normal within `max_normal_angle`, not a core point) becomes a core
-/// point whose
-/// distance is the model's height there, with LoD t95(n - 9) × its standard error plus the
-/// registration term ([`Reason::PeakModel`], [`measured`]). Larger tops first; a reference
-/// point goes to the first top that reaches it.
+/// fit anything). The peak model (`peakfit.rs`) is fitted to the scan points of the peak
+/// window around it; when the model describes them (the peak fit's guard without its bound
+/// on the standard error: at 19 scan points/mm² a 0.44 mm wide bump has about 8 points on it
+/// and its height a standard error of 15 %; [`MODEL_MIN_SUPPORT`] supporting points, at least
+/// [`MIN_WIDTH`] scan spacings wide) and the fitted peak exceeds the tolerance by t95(n - 9)
+/// standard errors, every reference point within the refine radius of the top (normal within
+/// `max_normal_angle`, not a core point) becomes a core point whose distance is the model's
+/// height there, with LoD t95(n - 9) × its standard error plus the registration term
+/// ([`Reason::PeakModel`], [`measured`]). Larger tops first; a reference point goes to the
+/// first top that reaches it.
 fn modelled(prep: &Prepared, given: &[Deviation], cfg: &CompareConfig) -> Vec<(usize, Deviation)> {
     let above = cfg.adaptive.densify_above;
     let tolerance = 2.0 * above;
@@ -153,9 +154,8 @@ fn modelled(prep: &Prepared, given: &[Deviation], cfg: &CompareConfig) -> Vec<(u
     let tops = summits(prep, &c.reference.points, &ids, &prep.delta);
     let window = prep.peak_window();
     // Scan points a covered window holds, and their spacing (median density).
-    let density = super::surface_density(&c.scan_grid);
-    let full = std::f64::consts::PI * window * window * density;
-    let spacing = density.sqrt().recip();
+    let full = std::f64::consts::PI * window * window * c.scan_density;
+    let spacing = c.scan_density.sqrt().recip();
     let mut fits: Vec<(usize, PeakFit)> = tops
         .par_iter()
         .map_init(
@@ -218,6 +218,7 @@ fn measured(
     let c = prep.clouds;
     let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
     let (e1, e2) = tangent_frame(n);
+    let window = prep.peak_window();
     let mut near = Vec::new();
     prep.reference_near(x, n, prep.refine_radius, cfg.max_distance, &mut near);
     let mut values: Vec<(usize, Deviation)> = Vec::new();
@@ -238,7 +239,7 @@ fn measured(
             distance: height,
             uncertainty: student_t95(fit.dof()) * se + 1.96 * cfg.registration_error,
             significant: false,
-            radius: prep.peak_window(),
+            radius: window,
             n_ref: 0,
             n_scan: fit.n,
             direction: Vector3::zeros(),

@@ -281,6 +281,8 @@ pub(crate) struct Clouds<'a> {
     pub scan: &'a PointCloud,
     pub ref_grid: Grid,
     pub scan_grid: Grid,
+    /// The scan's median surface density, points per mm² ([`surface_density`]).
+    pub scan_density: f64,
 }
 
 /// Compares `scan` with `reference` at the core points `core` (points with outward unit
@@ -311,8 +313,8 @@ pub fn compare(
         || Grid::for_points(&reference.points),
         || Grid::for_points(&scan.points),
     );
-    let radius_for =
-        |count: f64| (count / (std::f64::consts::PI * surface_density(&scan_grid))).sqrt();
+    let scan_density = surface_density(&scan_grid);
+    let radius_for = |count: f64| (count / (std::f64::consts::PI * scan_density)).sqrt();
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
             let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
@@ -347,17 +349,17 @@ pub fn compare(
         scan: &scan,
         ref_grid,
         scan_grid,
+        scan_density,
     };
     let (values, noise, radii, points, normals) = match cfg.method {
         Method::Classic => {
             let values = run(&clouds.ref_grid, core, normals, |buf, p, n| {
                 classic::at(&clouds, p, n, classic_radius, cfg, buf)
             });
-            let radii = vec![classic_radius];
             (
                 values,
                 f64::NAN,
-                radii,
+                vec![classic_radius],
                 core.points.clone(),
                 normals.clone(),
             )

@@ -28,7 +28,7 @@ const MAX_ITERATIONS: usize = 100;
 
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
 /// cannot pin its six shape parameters (a spike through one noisy point).
-pub const MIN_SUPPORT: usize = 8;
+const MIN_SUPPORT: usize = 8;
 
 /// The window and the expectations of a peak fit.
 #[derive(Debug, Clone, Copy)]
@@ -101,9 +101,7 @@ impl PeakFit {
             && self.peak.abs() <= height_limit(w)
             && self.sigma <= w.max_misfit * w.noise
     }
-}
 
-impl PeakFit {
     /// Residual degrees of freedom: points used minus the model's parameters.
     pub fn dof(&self) -> usize {
         self.n - PARAMS
