@@ -313,8 +313,10 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
 }
 
 /// What the adaptive method reaches at 300,000 scan points (19 points/mm², spacing 0.23 mm;
-/// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.91 / 0.93
-/// (0.89 / 0.91 before the LoD took Student's t), RMS 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
+/// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.924 / 0.942
+/// (0.905 / 0.928 before scan points at sharp edges were paired with the face they lie on and
+/// quadrics that extrapolate became planes; 0.89 / 0.91 before the LoD took Student's t), RMS
+/// 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
 /// that truth does not have (classic raises dozens along the box-cut edges) and finds every
 /// defect taller than the tolerance, seed 12's narrow 0.09 mm pit included (a peak model
 /// measures it, -4 %: docs/ALGORITHMS.md, adaptive step 12; missed before), with its peak
@@ -332,7 +334,7 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             ours.rms < classic.rms,
             "seed {seed}: adaptive must beat classic on RMS"
         );
-        assert!(ours.iou >= 0.9, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.iou >= 0.915, "seed {seed}: IoU {}", ours.iou);
         // Region members: 0.924 / 0.946 (isolated error points at the box cuts drop out).
         assert!(
             ours.region_iou >= 0.9,
@@ -350,6 +352,30 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
         );
         assert!(ours.regions > 0, "seed {seed}: no region at all");
         assert_peaks(seed, &ours, RegionConfig::default().tolerance, 0.15);
+    }
+}
+
+/// Narrow faces and the strips beside the box cuts hold a few points of a cylinder, where the
+/// error of a fit is largest. On these five cases at 300,000 scan points main had one region
+/// that truth does not have on seeds 24, 26 and 27 until 2026-12-01, and intermediate versions
+/// of the fix one on seeds 25 and 32 (traced in docs/ALGORITHMS.md, adaptive M3C2,
+/// "Precomputed once" and step 5):
+/// - seeds 24, 27 and 32: scan points of a neighbouring face within a reference spacing of a
+///   sharp edge were paired with the nearer reference point of the other face and lay
+///   0.05-0.19 mm off its tangent plane (seed 24: a 3-point region reading 0.055 mm);
+/// - seed 26: a plane through six scan points on a strip 0.3-0.76 mm to one side of the axis
+///   extrapolated to -0.44 mm (a 5-point pit region; the points' mean is 0.00);
+/// - seed 25: a 3-point pit region of smallest-radius fits on a narrow face.
+///
+/// Pairing a scan point at a sharp edge with the face whose patch lies nearest removed all of
+/// them; quadrics that extrapolate now step down to planes.
+#[test]
+fn narrow_faces_raise_no_false_region() {
+    for (seed, ours, _) in scores_of(&[24, 25, 26, 27, 32], 300_000) {
+        assert_eq!(
+            ours.false_regions, 0,
+            "seed {seed}: regions truth does not have"
+        );
     }
 }
 
