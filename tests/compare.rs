@@ -189,6 +189,12 @@ fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: 
     if let Some(dump) = std::env::var_os("POLISHBOT_DUMP") {
         let mut cloud = polishbot::compare::to_cloud(dev, &regions.labels);
         cloud.set_field("truth", truth.clone());
+        let col = |f: &dyn Fn(&polishbot::compare::Deviation) -> f64| {
+            dev.values.iter().map(f).collect::<Vec<f64>>()
+        };
+        cloud.set_field("peak", col(&|d| d.peak));
+        cloud.set_field("peak_fitted", col(&|d| d.peak_fitted as u8 as f64));
+        cloud.set_field("reason", col(&|d| d.reason as u8 as f64));
         let dump = dump.to_string_lossy();
         let path = format!("{dump}-{seed}-{:?}.csv", dev.method);
         polishbot::cloud::write_csv(Path::new(&path), &cloud).unwrap();

@@ -6,7 +6,10 @@
 //! (u, v) of a window around the top:
 //! h(x) = a0 + a1 u + a2 v + A exp(-½ (x - c)ᵀ P (x - c)), P = LᵀL, L = [[l11, l12], [0, l22]]
 //! (an elliptic Gaussian whose precision P is positive semi-definite by construction: a ridge's
-//! cross-section is fitted and its length may be unbounded). Nine parameters, fitted by
+//! cross-section is fitted and its length may be unbounded). When that ellipse is elongated,
+//! a capsule is fitted as well — A exp(-½ d²/s²), d the distance to a segment through the
+//! centre (a Gaussian cross-section with a flat top along the length, as a ridge whose ends
+//! lie in the window has) — and kept when it explains clearly more. Nine parameters, fitted by
 //! Levenberg-Marquardt (nalgebra), trimmed twice like the quadric fits
 //! (residual beyond max(4σ, 3 × 1.4826 × MAD)). The peak is the fitted surface at the centre,
 //! a0 + a1 c_u + a2 c_v + A: a deviation from the reference like every distance (the plane is
@@ -22,6 +25,10 @@ type Normal = SMatrix<f64, 9, 9>;
 
 /// Parameters of the model.
 const PARAMS: usize = 9;
+
+/// An ellipse whose wide width is at least this many times its narrow one is a ridge, and the
+/// capsule is tried as well.
+const ELONGATED: f64 = 2.0;
 
 /// Levenberg-Marquardt iterations before a fit counts as not converged.
 const MAX_ITERATIONS: usize = 100;
@@ -74,6 +81,7 @@ pub struct PeakFit {
     params: Params,
     cov: Normal,
     scale: f64,
+    shape: Shape,
 }
 
 impl PeakFit {
@@ -110,7 +118,7 @@ impl PeakFit {
     /// The fitted surface's height at (u, v) of the window's frame (mm) and its standard
     /// error from the fit's covariance (NaN when that is not positive there).
     pub fn height_at(&self, u: f64, v: f64) -> (f64, f64) {
-        let (value, grad) = model(&self.params, u / self.scale, v / self.scale);
+        let (value, grad) = model(self.shape, &self.params, u / self.scale, v / self.scale);
         let var = grad.dot(&(self.cov * grad));
         (value, if var > 0.0 { var.sqrt() } else { f64::NAN })
     }
@@ -130,8 +138,27 @@ pub struct PeakScratch {
     abs: Vec<f64>,
 }
 
+/// The shape of the defect term.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Shape {
+    /// A exp(-½ (x - c)ᵀ LᵀL (x - c)), L = [[t6, t7], [0, t8]]: an elliptic Gaussian.
+    Ellipse,
+    /// A exp(-½ k² d²), d the distance from x to the segment of half-length ℓ = t8² through
+    /// the centre along (cos t6, sin t6), k = t7: a Gaussian cross-section with a flat top
+    /// along its length (a ridge whose ends lie in the window; ℓ = 0 is a round bump).
+    Capsule,
+}
+
 /// The model's value at scaled (u, v) and its gradient in the parameters.
-fn model(t: &Params, u: f64, v: f64) -> (f64, Params) {
+fn model(shape: Shape, t: &Params, u: f64, v: f64) -> (f64, Params) {
+    match shape {
+        Shape::Ellipse => ellipse(t, u, v),
+        Shape::Capsule => capsule(t, u, v),
+    }
+}
+
+/// [`Shape::Ellipse`]'s value and gradient.
+fn ellipse(t: &Params, u: f64, v: f64) -> (f64, Params) {
     let (du, dv) = (u - t[4], v - t[5]);
     let w1 = t[6] * du + t[7] * dv;
     let w2 = t[8] * dv;
@@ -152,11 +179,50 @@ fn model(t: &Params, u: f64, v: f64) -> (f64, Params) {
     (value, grad)
 }
 
+/// [`Shape::Capsule`]'s value and gradient.
+fn capsule(t: &Params, u: f64, v: f64) -> (f64, Params) {
+    let (du, dv) = (u - t[4], v - t[5]);
+    let (sin, cos) = t[6].sin_cos();
+    let (k, half) = (t[7], t[8] * t[8]);
+    // Position along the axis and across it; the nearest point of the segment.
+    let (along, across) = (du * cos + dv * sin, -du * sin + dv * cos);
+    let end = along.clamp(-half, half);
+    let (qa, qc) = (along - end, across);
+    let d2 = qa * qa + qc * qc;
+    let g = (-0.5 * k * k * d2).exp();
+    let ag = t[3] * g;
+    let value = t[0] + t[1] * u + t[2] * v + ag;
+    // d² = |x - c - end·e|²: ∂/∂c = -2q (q the offset from the segment), ∂/∂θ = -2 along·across
+    // inside the segment and -2 end·qc at its caps (∂ along/∂θ = across), ∂/∂ℓ = -2 |qa| at
+    // the caps.
+    let (qu, qv) = (qa * cos - qc * sin, qa * sin + qc * cos);
+    let inside = along.abs() < half;
+    let dd_theta = if inside {
+        -2.0 * along * across
+    } else {
+        -2.0 * end * qc
+    };
+    let dd_half = if inside { 0.0 } else { -2.0 * qa.abs() };
+    let f = -0.5 * k * k * ag;
+    let grad = Params::from([
+        1.0,
+        u,
+        v,
+        g,
+        f * -2.0 * qu,
+        f * -2.0 * qv,
+        f * dd_theta,
+        -k * d2 * ag,
+        f * dd_half * 2.0 * t[8],
+    ]);
+    (value, grad)
+}
+
 /// Residual sum of squares, JᵀJ and Jᵀr over `pts` at `t`.
-fn normal_equations(pts: &[Local], t: &Params) -> (f64, Normal, Params) {
+fn normal_equations(shape: Shape, pts: &[Local], t: &Params) -> (f64, Normal, Params) {
     let (mut rss, mut jtj, mut jtr) = (0.0, Normal::zeros(), Params::zeros());
     for p in pts {
-        let (value, grad) = model(t, p[0], p[1]);
+        let (value, grad) = model(shape, t, p[0], p[1]);
         let r = p[2] - value;
         rss += r * r;
         jtj.ger(1.0, &grad, &grad, 1.0);
@@ -167,8 +233,12 @@ fn normal_equations(pts: &[Local], t: &Params) -> (f64, Normal, Params) {
 
 /// Levenberg-Marquardt from `t`: the parameters, the RSS and JᵀJ at the minimum; None when it
 /// does not converge within [`MAX_ITERATIONS`].
-fn levenberg_marquardt(pts: &[Local], mut t: Params) -> Option<(Params, f64, Normal)> {
-    let (mut rss, mut jtj, mut jtr) = normal_equations(pts, &t);
+fn levenberg_marquardt(
+    shape: Shape,
+    pts: &[Local],
+    mut t: Params,
+) -> Option<(Params, f64, Normal)> {
+    let (mut rss, mut jtj, mut jtr) = normal_equations(shape, pts, &t);
     let mut mu = 1e-3;
     for _ in 0..MAX_ITERATIONS {
         let mut damped = jtj;
@@ -180,7 +250,7 @@ fn levenberg_marquardt(pts: &[Local], mut t: Params) -> Option<(Params, f64, Nor
             continue;
         };
         let next = t + step;
-        let (rss_next, jtj_next, jtr_next) = normal_equations(pts, &next);
+        let (rss_next, jtj_next, jtr_next) = normal_equations(shape, pts, &next);
         if rss_next < rss {
             let done = rss - rss_next <= 1e-10 * rss || step.norm() <= 1e-10 * t.norm();
             (t, rss, jtj, jtr) = (next, rss_next, jtj_next, jtr_next);
@@ -259,21 +329,36 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
     if scaled.len() < 2 * PARAMS {
         return None;
     }
-    let mut t = start(scaled, w, abs)?;
-    let mut current: &[Local] = scaled;
-    let mut fitted = levenberg_marquardt(current, t)?;
-    for _ in 0..2 {
-        t = fitted.0;
-        let model_at = |p: &Local| model(&t, p[0], p[1]).0;
-        inliers(scaled, 4.0 * w.noise, model_at, abs, kept);
-        current = kept;
-        if current.len() < 2 * PARAMS {
-            return None;
-        }
-        fitted = levenberg_marquardt(current, t)?;
-    }
-    let (t, rss, jtj) = fitted;
-    let n = current.len();
+    let ellipse = fit_shape(Shape::Ellipse, scaled, start(scaled, w, abs)?, w, abs, kept)?;
+    let mut capsule_kept = Vec::new();
+    // The capsule starts from the ellipse: along its wide axis, with its narrow width and a
+    // segment as long as the wide width exceeds the narrow one (capped by the window).
+    let (narrow_axis, widths) = principal(&ellipse.0);
+    let theta = (-narrow_axis.x).atan2(narrow_axis.y);
+    let half = (widths[1].min(2.0) - widths[0]).max(0.0);
+    let mut t0 = ellipse.0;
+    (t0[6], t0[7], t0[8]) = (theta, 1.0 / widths[0].max(1e-3), half.sqrt());
+    // Only for an elongated ellipse: on a round bump the capsule's extra freedom (a short
+    // flat top) fits the noise and lowers the peak.
+    let capsule = match widths[1] >= ELONGATED * widths[0] {
+        true => fit_shape(Shape::Capsule, scaled, t0, w, abs, &mut capsule_kept),
+        false => None,
+    };
+    // The capsule when it explains clearly more: its residual sum of squares lower than the
+    // ellipse's (over the ellipse's points) by more than a chi-square(1) 95 % quantile
+    // of its residual variance.
+    let variance = |f: &(Params, f64, Normal, usize)| f.1 / (f.3 - PARAMS) as f64;
+    let clearly_better = |c: &(Params, f64, Normal, usize)| {
+        let rss_ellipse_pts: f64 = kept
+            .iter()
+            .map(|p| (p[2] - model(Shape::Capsule, &c.0, p[0], p[1]).0).powi(2))
+            .sum();
+        ellipse.1 - rss_ellipse_pts > 3.84 * variance(c)
+    };
+    let (shape, (t, rss, jtj, n), current) = match capsule {
+        Some(c) if clearly_better(&c) => (Shape::Capsule, c, &capsule_kept),
+        _ => (Shape::Ellipse, ellipse, &*kept),
+    };
     let var = rss / (n - PARAMS) as f64;
     // Pseudo-inverse: along a ridge longer than the window the centre is undetermined (a
     // null direction of JᵀJ that the peak barely depends on).
@@ -288,38 +373,29 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
     } else {
         f64::NAN
     };
-    // Principal widths from the precision LᵀL (scaled units).
-    let l = Matrix2::new(t[6], t[7], 0.0, t[8]);
-    let eig = (l.transpose() * l).symmetric_eigen();
-    let (narrow, wide) = match eig.eigenvalues[0] >= eig.eigenvalues[1] {
-        true => (0, 1),
-        false => (1, 0),
-    };
-    let (big, small) = (eig.eigenvalues[narrow], eig.eigenvalues[wide]);
-    let width = |lambda: f64| match lambda > 1e-12 {
-        true => s / lambda.sqrt(),
-        false => f64::INFINITY,
+    let (narrow_axis, [narrow, wide]) = match shape {
+        Shape::Ellipse => principal(&t),
+        Shape::Capsule => {
+            let (sin, cos) = t[6].sin_cos();
+            let width = 1.0 / t[7].abs();
+            let half = t[8] * t[8];
+            (nalgebra::Vector2::new(-sin, cos), [width, width + half])
+        }
     };
     let c = nalgebra::Vector2::new(cu, cv) * s;
-    let offset = match width(small) > s {
-        true => c.dot(&eig.eigenvectors.column(narrow)).abs(),
+    let offset = match wide > 1.0 {
+        true => c.dot(&narrow_axis).abs(),
         false => c.norm(),
     };
-    let support = current
-        .iter()
-        .filter(|p| {
-            let (du, dv) = (p[0] - cu, p[1] - cv);
-            let (w1, w2) = (t[6] * du + t[7] * dv, t[8] * dv);
-            w1 * w1 + w2 * w2 <= 2.0 * std::f64::consts::LN_10
-        })
-        .count();
+    let cut = (2.0 * std::f64::consts::LN_10).sqrt();
+    let support = current_support(shape, &t, current, cut);
     Some(PeakFit {
         peak,
         se,
         amplitude: t[3],
         centre: [cu * s, cv * s],
         offset,
-        widths: [width(big), width(small)],
+        widths: [narrow * s, wide * s],
         sigma: var.sqrt(),
         n,
         trimmed: scaled.len() - n,
@@ -327,7 +403,63 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         params: t,
         cov,
         scale: s,
+        shape,
     })
+}
+
+/// Levenberg-Marquardt of `shape` from `t` over `scaled`, then twice more over the points
+/// within the trimming limit of the last fit (left in `kept`): the parameters, RSS, JᵀJ and
+/// the number of points kept (the first of `kept`).
+fn fit_shape(
+    shape: Shape,
+    scaled: &[Local],
+    t: Params,
+    w: &PeakWindow,
+    abs: &mut Vec<f64>,
+    kept: &mut Vec<Local>,
+) -> Option<(Params, f64, Normal, usize)> {
+    let mut fitted = levenberg_marquardt(shape, scaled, t)?;
+    for _ in 0..2 {
+        let t = fitted.0;
+        let model_at = |p: &Local| model(shape, &t, p[0], p[1]).0;
+        inliers(scaled, 4.0 * w.noise, model_at, abs, kept);
+        if kept.len() < 2 * PARAMS {
+            return None;
+        }
+        fitted = levenberg_marquardt(shape, kept, t)?;
+    }
+    Some((fitted.0, fitted.1, fitted.2, kept.len()))
+}
+
+/// An ellipse's narrow axis (unit, scaled frame) and its principal standard deviations
+/// (narrow, wide; scaled units, infinite along a null direction of the precision).
+fn principal(t: &Params) -> (nalgebra::Vector2<f64>, [f64; 2]) {
+    let l = Matrix2::new(t[6], t[7], 0.0, t[8]);
+    let eig = (l.transpose() * l).symmetric_eigen();
+    let (narrow, wide) = match eig.eigenvalues[0] >= eig.eigenvalues[1] {
+        true => (0, 1),
+        false => (1, 0),
+    };
+    let width = |lambda: f64| match lambda > 1e-12 {
+        true => 1.0 / lambda.sqrt(),
+        false => f64::INFINITY,
+    };
+    (
+        eig.eigenvectors.column(narrow).into_owned(),
+        [width(eig.eigenvalues[narrow]), width(eig.eigenvalues[wide])],
+    )
+}
+
+/// Points of `pts` where the defect term is at least 10 % of A (`cut` = sqrt(2 ln 10)
+/// standard deviations from its core).
+fn current_support(shape: Shape, t: &Params, pts: &[Local], cut: f64) -> usize {
+    pts.iter()
+        .filter(|p| {
+            let (value, _) = model(shape, t, p[0], p[1]);
+            let plane = t[0] + t[1] * p[0] + t[2] * p[1];
+            (value - plane) / t[3] >= (-0.5 * cut * cut).exp()
+        })
+        .count()
 }
 
 #[cfg(test)]
@@ -395,6 +527,33 @@ mod tests {
             "{f:?}"
         );
         assert!(f.widths[1] > 5.0 * f.widths[0], "{f:?}");
+    }
+
+    /// A ridge whose ends lie in the window (0.2 mm high, 0.5 mm wide, its core segment
+    /// 1.5 mm long: the synth cases' ridge shape, a Gaussian cross-section around a segment).
+    /// An elliptic Gaussian must bend down along the flat top and overshoots it (measured:
+    /// +11 to +22 % on the 300k synth cases' short ridges); the capsule fits the flat top:
+    /// every seed within 10 %, the mean within 3 %.
+    #[test]
+    fn recovers_a_short_ridge() {
+        let sigma = 0.5 / 2.3548;
+        let (dir, half) = ((0.6f64, 0.8f64), 0.75);
+        let ridge = |u: f64, v: f64| {
+            let (du, dv) = (u - 0.1, v + 0.05);
+            let along = (du * dir.0 + dv * dir.1).clamp(-half, half);
+            let r2 = (du - along * dir.0).powi(2) + (dv - along * dir.1).powi(2);
+            0.2 * (-r2 / (2.0 * sigma * sigma)).exp()
+        };
+        let mut sum = 0.0;
+        for seed in 0..8 {
+            let pts = planted(ridge, seed);
+            let w = window(0.17);
+            let f = fit_peak(&pts, &w, &mut PeakScratch::default()).expect("converges");
+            assert!(f.accepted(&w), "seed {seed}: {f:?}");
+            assert!((f.peak - 0.2).abs() <= 0.1 * 0.2, "seed {seed}: {f:?}");
+            sum += f.peak;
+        }
+        assert!((sum / 8.0 - 0.2).abs() <= 0.03 * 0.2, "mean {}", sum / 8.0);
     }
 
     /// Shapes that are not Gaussian: a cone (0.3 mm high, 0.5 mm base radius) and a spherical
