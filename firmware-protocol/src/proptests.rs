@@ -71,9 +71,18 @@ proptest! {
         bad[i] ^= flip;
         let mut dec = Decoder::replies();
         let events: Vec<_> = dec.feed(&bad).collect();
-        // Never accepted as a frame; and the decoder shows it saw something wrong: an error,
-        // skipped bytes (broken header) or bytes held for a longer frame (LEN grew).
-        prop_assert!(events.iter().all(|e| e.is_err()), "corruption at {} accepted", i);
+        // Never accepted as a frame, except that a smaller LEN can cut a shorter frame whose
+        // additive checksum happens to match (about 1 in 256; DOFBOT.md's CHK cannot tell):
+        // such a frame is never the original, and the typed reply parser and the driver's
+        // raw-range check stand behind it (a position reply cut by one byte reads the echo
+        // byte 0x31..0x36 as the high byte: raw >= 0x3100, beyond every servo's range).
+        // And the decoder shows it saw something wrong: an error, skipped bytes (broken
+        // header) or bytes held for a longer frame (LEN grew).
+        let accepted_shorter = |e: &Result<Frame, FrameError>| match e {
+            Ok(f) => i == 2 && f.payload().len() < frame.payload().len(),
+            Err(_) => true,
+        };
+        prop_assert!(events.iter().all(accepted_shorter), "corruption at {} accepted", i);
         prop_assert!(!events.is_empty() || dec.skipped() > 0 || dec.pending() > 0);
         if i != 2 {
             // LEN intact: the next good frame is found again right after.
