@@ -418,7 +418,6 @@ fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
     shares.select_nth_unstable_by(mid, f64::total_cmp).1.sqrt()
 }
 
-/// Distance of scan point `y` from the tangent plane of reference point `i`, along its normal.
 /// Reference points a scan point's pairing looks among ([`Pairing::pair`]).
 const PAIR_CANDIDATES: usize = 4;
 

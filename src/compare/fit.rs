@@ -1,7 +1,8 @@
 //! Least-squares height fields t(u, v) over a cylinder's points, in the core point's tangent
 //! frame: a full quadric (6 terms) when there are at least 10 points and they pin its value at
-//! the axis ([`MAX_LEVERAGE`]), else a plane (3) from 4, a constant below. The value at the axis, t(0, 0), is where the surface crosses the normal
-//! line through the core point; its standard error comes from the fit's residuals.
+//! the axis ([`MAX_LEVERAGE`]), else a plane (3) from 4, a constant below. The value at the
+//! axis, t(0, 0), is where the surface crosses the normal line through the core point; its
+//! standard error comes from the fit's residuals.
 use nalgebra::{Matrix6, Vector6};
 
 /// A point in the tangent frame: (u, v) across the axis, t along it (mm).

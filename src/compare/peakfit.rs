@@ -135,6 +135,7 @@ fn height_limit(w: &PeakWindow) -> f64 {
 pub struct PeakScratch {
     scaled: Vec<Local>,
     kept: Vec<Local>,
+    capsule_kept: Vec<Local>,
     abs: Vec<f64>,
 }
 
@@ -317,7 +318,12 @@ fn start(pts: &[Local], w: &PeakWindow, abs: &mut Vec<f64>) -> Option<Params> {
 /// the window's origin at (0, 0)); None when the fit does not converge or is degenerate. The
 /// caller applies [`PeakFit::accepted`].
 pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Option<PeakFit> {
-    let PeakScratch { scaled, kept, abs } = scratch;
+    let PeakScratch {
+        scaled,
+        kept,
+        capsule_kept,
+        abs,
+    } = scratch;
     let s = w.radius;
     let limit = height_limit(w);
     scaled.clear();
@@ -330,7 +336,6 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         return None;
     }
     let ellipse = fit_shape(Shape::Ellipse, scaled, start(scaled, w, abs)?, w, abs, kept)?;
-    let mut capsule_kept = Vec::new();
     // The capsule starts from the ellipse: along its wide axis, with its narrow width and a
     // segment as long as the wide width exceeds the narrow one (capped by the window).
     let (narrow_axis, widths) = principal(&ellipse.0);
@@ -341,7 +346,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
     // Only for an elongated ellipse: on a round bump the capsule's extra freedom (a short
     // flat top) fits the noise and lowers the peak.
     let capsule = match widths[1] >= ELONGATED * widths[0] {
-        true => fit_shape(Shape::Capsule, scaled, t0, w, abs, &mut capsule_kept),
+        true => fit_shape(Shape::Capsule, scaled, t0, w, abs, capsule_kept),
         false => None,
     };
     // The capsule when it explains clearly more: its residual sum of squares lower than the
@@ -356,7 +361,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         ellipse.1 - rss_ellipse_pts > 3.84 * variance(c)
     };
     let (shape, (t, rss, jtj, n), current) = match capsule {
-        Some(c) if clearly_better(&c) => (Shape::Capsule, c, &capsule_kept),
+        Some(c) if clearly_better(&c) => (Shape::Capsule, c, &*capsule_kept),
         _ => (Shape::Ellipse, ellipse, &*kept),
     };
     let var = rss / (n - PARAMS) as f64;
@@ -387,8 +392,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         true => c.dot(&narrow_axis).abs(),
         false => c.norm(),
     };
-    let cut = (2.0 * std::f64::consts::LN_10).sqrt();
-    let support = current_support(shape, &t, current, cut);
+    let support = support(shape, &t, current);
     Some(PeakFit {
         peak,
         se,
@@ -450,14 +454,13 @@ fn principal(t: &Params) -> (nalgebra::Vector2<f64>, [f64; 2]) {
     )
 }
 
-/// Points of `pts` where the defect term is at least 10 % of A (`cut` = sqrt(2 ln 10)
-/// standard deviations from its core).
-fn current_support(shape: Shape, t: &Params, pts: &[Local], cut: f64) -> usize {
+/// Points of `pts` where the defect term is at least 10 % of A.
+fn support(shape: Shape, t: &Params, pts: &[Local]) -> usize {
     pts.iter()
         .filter(|p| {
             let (value, _) = model(shape, t, p[0], p[1]);
             let plane = t[0] + t[1] * p[0] + t[2] * p[1];
-            (value - plane) / t[3] >= (-0.5 * cut * cut).exp()
+            (value - plane) / t[3] >= 0.1
         })
         .count()
 }
