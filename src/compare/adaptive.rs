@@ -182,10 +182,11 @@ pub fn run(
     let halo = clouds
         .ref_grid
         .typical_kth(&clouds.scan.points, PAIR_CANDIDATES);
+    let cos_limit = a.max_normal_angle.to_radians().cos();
     let pairing = Pairing {
         clouds,
         ref_normals,
-        cos_limit: a.max_normal_angle.to_radians().cos(),
+        cos_limit,
         over: clouds.ref_grid.typical_kth(&clouds.scan.points, 1),
     };
     // Per scan point: its reference point's normal and the pair distance.
@@ -196,7 +197,7 @@ pub fn run(
         halo,
         |j, found| pairing.pair(&clouds.scan.points[j], found),
     );
-    let delta = one_sided_distances(clouds, ref_normals, &nearest, pairing.cos_limit, reach);
+    let delta = one_sided_distances(clouds, ref_normals, &nearest, cos_limit, reach);
     let noise = match a.noise {
         Some(s) => s,
         None => robust_sd(&delta),
@@ -235,7 +236,7 @@ pub fn run(
         core: &core.points,
         core_index,
         noise,
-        cos_limit: a.max_normal_angle.to_radians().cos(),
+        cos_limit,
         delta,
     };
     let refined = super::run(&clouds.ref_grid, core, normals, |s: &mut Scratch, p, n| {
