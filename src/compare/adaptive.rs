@@ -565,7 +565,10 @@ fn similarity(prep: &Prepared, ring: &Ring, r: f64, h: f64, lambda: f64) -> f64 
 /// Index of the smallest of the squared radii `radii2` (ascending) that holds `rho2`.
 #[inline]
 fn ring_of(radii2: &[f64], rho2: f64) -> usize {
-    radii2.iter().take_while(|&&r2| rho2 > r2).count()
+    // Without branches (the radii ascend, so those below rho are a prefix): the per-core-point
+    // loop took 490 ms instead of 570 ms at 100k core points with a loop that stops at the
+    // first radius holding rho (mispredicted branches).
+    radii2.iter().map(|&r2| usize::from(rho2 > r2)).sum()
 }
 
 /// Gathers the cylinder of the largest radius at `p` (normal `n`) into `s`: per radius, the
