@@ -30,8 +30,11 @@ const PARAMS: usize = 9;
 /// capsule is tried as well.
 const ELONGATED: f64 = 2.0;
 
-/// Levenberg-Marquardt iterations before a fit counts as not converged.
-const MAX_ITERATIONS: usize = 100;
+/// Levenberg-Marquardt iterations before a fit counts as not converged. Fits that do
+/// converge take about 16 on average; most of those that reach the cap are windows of noise
+/// that never converge. Against 100: the same results on seeds 11-34 at 300k, and the
+/// narrow-defect search (`densify.rs`) at 20k core points takes 35 ms instead of 68 ms.
+const MAX_ITERATIONS: usize = 50;
 
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
 /// cannot pin its six shape parameters (a spike through one noisy point).
