@@ -128,8 +128,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     } else {
         cfg.reference_points
     };
-    let (reference, reference_note) = load_reference(&args.reference, &args.input, samples)?;
-    let scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
+    // Both files at once: parsing is single-threaded.
+    let (reference, scan) = rayon::join(
+        || load_reference(&args.reference, &args.input, samples),
+        || cloud::load_cloud(&args.scan, args.input.format, args.input.units),
+    );
+    let ((reference, reference_note), scan) = (reference?, scan?);
     spin.finish_and_clear();
     times.lap("load");
     // Statistical outlier filter of the scan, then registration (unless the pose is given).
@@ -229,7 +233,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let path = args.out.join("regions.json");
     std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
     times.lap("files");
-    super::inspect_report::write(&args.out, &dev, &found, report_summary.clone())?;
+    super::inspect_report::write(&args.out, &dev, &found, report_summary)?;
     times.lap("report");
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
     println!("times: {}", times.line());
