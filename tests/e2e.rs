@@ -7,21 +7,10 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::sync::{Mutex, MutexGuard, OnceLock};
+use std::sync::OnceLock;
 
 use common::{polishbot, succeed, Mock};
 use serde_json::Value;
-
-/// One run against a mock board at a time. The board answers within the run's reply timeout
-/// (50 ms, 4 attempts); three runs with their Python mocks at once on a 2-core machine once
-/// starved a mock past it on a fresh CI machine (two runs stopped with `timeout`), which is
-/// the test machine's load, not the protocol under test.
-fn one_board_at_a_time() -> MutexGuard<'static, ()> {
-    static BOARD: Mutex<()> = Mutex::new(());
-    BOARD
-        .lock()
-        .unwrap_or_else(|poisoned| poisoned.into_inner())
-}
 
 /// The case every test here shares: made once per test binary run.
 struct Case {
@@ -245,7 +234,7 @@ fn assert_at_final_pose(state: &Value, c: &Case) {
 /// exactly the plan's frames and end at its final pose. Returns the journal's error codes.
 fn whole_run(py: &Path, flags: &[&str]) -> Vec<String> {
     let c = case();
-    let _board = one_board_at_a_time();
+    let _board = common::take_turns();
     let tmp = common::tempdir();
     let journal = tmp.path().join("journal.jsonl");
     let mock = Mock::start(py, flags);
@@ -288,7 +277,7 @@ fn a_run_cut_off_mid_way_resumes_from_its_journal_to_the_same_final_pose() {
         return;
     };
     let c = case();
-    let _board = one_board_at_a_time();
+    let _board = common::take_turns();
     let tmp = common::tempdir();
     let journal = tmp.path().join("journal.jsonl");
     // The board counts every frame (pings and reads too): cut the link about half-way.

@@ -131,6 +131,16 @@ impl Drop for Mock {
     }
 }
 
+/// Tests of one binary that time a Python mock board's replies, or that load both cores,
+/// take turns through this lock. The board must answer within the driver's reply timeout
+/// (50 ms, 4 attempts): on a 2-core CI machine, three runs with their mocks at once
+/// (tests/e2e.rs), and a run beside an `inspect` of another test (tests/plan.rs), each once
+/// starved a mock past it. That is the test machine's load, not the protocol under test.
+pub fn take_turns() -> std::sync::MutexGuard<'static, ()> {
+    static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 /// Runs `cmd` and returns its output, failing the test with its stderr when it did not succeed.
 pub fn succeed(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().expect("start the command");
