@@ -20,8 +20,9 @@ d1,..,d6 (servo i reads and moves to the raw of servo angle physical + d_i), --r
 N with --noise-seed S (every read adds a uniform integer in -N..N, splitmix64), and
 --start-physical-deg a1,..,a6 (the arm starts held by hand at these physical servo angles, 90 =
 joint zero, torque off). The state file then also holds `physical_deg`.
-The state file (--state) holds the servo positions and targets, rewritten after every frame
-and at exit (SIGTERM, SIGINT or an injected disconnect).
+The state file (--state) holds the servo positions and targets, rewritten in place after every
+frame and at exit (SIGTERM, SIGINT or an injected disconnect): read it once the mock has
+exited (a read while it runs may see a rewrite half done).
 """
 import argparse
 import heapq
@@ -383,17 +384,23 @@ def main(argv):
     t0 = time.monotonic()
     clock = lambda: time.monotonic() - t0
 
+    state_file = open(args.state, "w") if args.state else None
+
     def write_state():
-        if not args.state:
+        if not state_file:
             return
         t = clock()
         state = {"t": t, "positions": board.positions(t), "targets": board.targets(),
                  "torque": board.torque, "frames": board.frames, "disconnected": board.disconnected,
                  "physical_deg": board.physical_deg(t)}
-        tmp = args.state + ".tmp"
-        with open(tmp, "w") as f:
-            json.dump(state, f)
-        os.replace(tmp, args.state)
+        # Rewritten in place, one open file: a new file renamed over the old one freed the old
+        # one's blocks on every frame, and on a disk mounted with `discard` that stalled the
+        # mock for up to 0.5 s now and then (measured: 519 ms worst in 6,000 such rewrites,
+        # 0.2 ms in place), past the host's 50 ms reply timeout.
+        state_file.seek(0)
+        state_file.write(json.dumps(state))
+        state_file.truncate()
+        state_file.flush()
 
     def stop(*_):
         raise SystemExit(0)
@@ -445,6 +452,8 @@ def main(argv):
                     break
     finally:
         write_state()
+        if state_file:
+            state_file.close()
         link.close()
         if log:
             log.close()

@@ -304,8 +304,8 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
 }
 
 /// Every test here but the file-error one takes turns (`common::take_turns`): beside the
-/// others' planning and `inspect`, this one's mock board missed the run's 50 ms reply timeout
-/// in about half of the runs on a 2-core machine; alone it never did.
+/// others this one's mock board missed the run's 50 ms reply timeout in about half of the
+/// runs (its state-file rewrites stalled on the disk), alone it never did.
 #[test]
 fn cli_plan_then_run_against_the_mock_board() {
     let _turn = common::take_turns();

@@ -131,11 +131,12 @@ impl Drop for Mock {
     }
 }
 
-/// Tests of one binary that time a Python mock board's replies, or that load both cores,
+/// Tests of one binary that time a Python mock board's replies, or that load the machine,
 /// take turns through this lock. The board must answer within the driver's reply timeout
-/// (50 ms, 4 attempts): on a 2-core CI machine, three runs with their mocks at once
-/// (tests/e2e.rs), and a run beside an `inspect` of another test (tests/plan.rs), each once
-/// starved a mock past it. That is the test machine's load, not the protocol under test.
+/// (50 ms, 4 attempts). Runs here stopped with `timeout` now and then (tests/e2e.rs,
+/// tests/plan.rs); the cause was the mock's own disk writes stalling for up to 0.5 s (see
+/// `write_state` in mocks/dofbot_mock.py), more often while other tests wrote and deleted
+/// files: the test machine, not the protocol under test.
 pub fn take_turns() -> std::sync::MutexGuard<'static, ()> {
     static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
     TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
