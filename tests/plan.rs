@@ -144,7 +144,6 @@ fn polyline_distance(p: &Vector3<f64>, line: &[Vector3<f64>]) -> f64 {
 
 #[test]
 fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
-    let _turn = common::take_turns();
     let tmp = common::tempdir();
     let truth = synthetic_inspection(tmp.path(), 11, 6);
     let inspection = Inspection::load(tmp.path()).expect("load inspection");
@@ -265,7 +264,6 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 #[test]
 fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
-    let _turn = common::take_turns();
     use polishbot::bus::{Bus, BusConfig, Journal, SimArm, SimOptions};
     let tmp = common::tempdir();
     let (_, path) = small_plan(tmp.path());
@@ -303,12 +301,8 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     );
 }
 
-/// Every test here but the file-error one takes turns (`common::take_turns`): beside the
-/// others this one's mock board missed the run's 50 ms reply timeout in about half of the
-/// runs (its state-file rewrites stalled on the disk), alone it never did.
 #[test]
 fn cli_plan_then_run_against_the_mock_board() {
-    let _turn = common::take_turns();
     let Some(py) = common::oracle_python() else {
         return;
     };
@@ -381,7 +375,6 @@ fn cli_plan_then_run_against_the_mock_board() {
 
 #[test]
 fn run_refuses_a_tampered_plan_before_sending_anything() {
-    let _turn = common::take_turns();
     let tmp = common::tempdir();
     let (p, path) = small_plan(tmp.path());
     let (robot, _) = dofbot();
@@ -439,7 +432,6 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
 
 #[test]
 fn unreachable_regions_are_reported_point_by_point() {
-    let _turn = common::take_turns();
     let tmp = common::tempdir();
     synthetic_inspection(tmp.path(), 11, 6);
     let inspection = Inspection::load(tmp.path()).unwrap();
@@ -506,7 +498,6 @@ fn bad_inspection_files_are_refused_with_file_and_place() {
 
 #[test]
 fn plan_from_the_inspect_command_of_a_synth_case() {
-    let _turn = common::take_turns();
     let tmp = common::tempdir();
     let case = tmp.path().join("case");
     let run = |args: &[&str]| {

@@ -46,12 +46,8 @@ pub(super) struct Prepared<'a> {
     /// Their squares.
     radii2: Vec<f64>,
     /// Half-length of every cylinder: max(max_distance, smallest radius), py4dgeo's rule
-    /// with the smallest candidate radius. With the largest one (until 2026-12-01) the
-    /// cylinders reached 1.31 mm along the normal at the default max_distance of 1 mm, where
-    /// synth's outlier clusters (1-5 mm off the surface) begin: with a density estimate about
-    /// 1 % off, seed 14 (300k) read 1.05 ± 0.40 mm where the truth is 0.19, from a cluster
-    /// holding 8 of a cylinder's 20 scan points, which the fit's median trimming cannot
-    /// remove. Seeds 11-34 at 300k: mean IoU 0.9140 against 0.9145, the same RMS.
+    /// with the smallest candidate radius (not the largest: that reached outlier clusters
+    /// beyond max_distance; docs/ALGORITHMS.md, adaptive step 1).
     half_length: f64,
     /// The core points and their index: [`refine`] evaluates the reference points whose
     /// nearest core point is the one refined (its Voronoi cell on the reference).

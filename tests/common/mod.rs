@@ -131,12 +131,11 @@ impl Drop for Mock {
     }
 }
 
-/// Tests of one binary that time a Python mock board's replies, or that load the machine,
-/// take turns through this lock. The board must answer within the driver's reply timeout
-/// (50 ms, 4 attempts). Runs here stopped with `timeout` now and then (tests/e2e.rs,
-/// tests/plan.rs); the cause was the mock's own disk writes stalling for up to 0.5 s (see
-/// `write_state` in mocks/dofbot_mock.py), more often while other tests wrote and deleted
-/// files: the test machine, not the protocol under test.
+/// Tests of one binary that run several Python mock boards take turns through this lock:
+/// the board must answer within the driver's reply timeout (50 ms, 4 attempts), and three
+/// runs with their mocks at once on a 2-core machine load it beyond what the protocol under
+/// test is about. (The mock's own disk stalls, once blamed on load, are fixed in the mock:
+/// see `write_state` in mocks/dofbot_mock.py.)
 pub fn take_turns() -> std::sync::MutexGuard<'static, ()> {
     static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
     TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
