@@ -57,9 +57,9 @@ pub(super) fn densify(
     let above = cfg.adaptive.densify_above;
     // Reference points per mm² (median): a full disc of radius r holds about π r² of them.
     let density = super::surface_density(&prep.clouds.ref_grid);
-    let candidates: Vec<usize> = (0..values.len())
-        .filter(|&i| {
-            let v = &values[i];
+    let is_candidate: Vec<bool> = values
+        .iter()
+        .map(|v| {
             let disc = std::f64::consts::PI * v.radius * v.radius * density;
             v.significant
                 && v.distance.abs() > above
@@ -67,6 +67,7 @@ pub(super) fn densify(
                 && v.n_ref as f64 >= MIN_COVERAGE * disc
         })
         .collect();
+    let candidates: Vec<usize> = (0..values.len()).filter(|&i| is_candidate[i]).collect();
     let distances: Vec<f64> = values.iter().map(|v| v.distance).collect();
     let tops = match candidates.is_empty() {
         true => Vec::new(),
@@ -98,7 +99,7 @@ pub(super) fn densify(
     // comes from one model at most).
     let position: std::collections::HashMap<usize, usize> =
         extra.iter().enumerate().map(|(k, &j)| (j, k)).collect();
-    for (j, value) in modelled(prep, values, cfg) {
+    for (j, value) in modelled(prep, &is_candidate, cfg) {
         match position.get(&j) {
             Some(&k) => added[k] = value,
             None => {
@@ -124,8 +125,8 @@ fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
 /// Defects narrower than the smallest cylinder, found from the scan's own evidence and
 /// measured by a peak model. A top is a reference point whose δ (one scan point's height above
 /// it) is beyond the tolerance (twice `densify_above`; below `max_distance`) and the largest
-/// |δ| of its sign within the refine radius, where no core point is beyond `densify_above`
-/// (the nearest one; else the summits above cover it), with [`MIN_CLUSTER`] such reference
+/// |δ| of its sign within the refine radius, whose nearest core point is no summit candidate
+/// of [`densify`] (else the summits above cover it), with [`MIN_CLUSTER`] such reference
 /// points within the smallest radius, and a peak window holding at least [`MIN_COVERAGE`] of
 /// the scan points a full one holds (at a scan's border or hole a few points let a Gaussian
 /// fit anything). The peak model (`peakfit.rs`) is fitted to the scan points of the peak
@@ -138,7 +139,11 @@ fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
 /// height there, with LoD t95(n - 9) × its standard error plus the registration term
 /// ([`Reason::PeakModel`], [`measured`]). Larger tops first; a reference point goes to the
 /// first top that reaches it.
-fn modelled(prep: &Prepared, given: &[Deviation], cfg: &CompareConfig) -> Vec<(usize, Deviation)> {
+fn modelled(
+    prep: &Prepared,
+    is_candidate: &[bool],
+    cfg: &CompareConfig,
+) -> Vec<(usize, Deviation)> {
     let above = cfg.adaptive.densify_above;
     let tolerance = 2.0 * above;
     let c = prep.clouds;
@@ -162,9 +167,7 @@ fn modelled(prep: &Prepared, given: &[Deviation], cfg: &CompareConfig) -> Vec<(u
             || (Vec::new(), Vec::new(), PeakScratch::default()),
             |(knn, pts, scratch), &j| {
                 let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
-                let caught = prep
-                    .nearest_core_id(x)
-                    .is_some_and(|i| given[i].significant && given[i].distance.abs() > above);
+                let caught = prep.nearest_core_id(x).is_some_and(|i| is_candidate[i]);
                 if caught || cluster(prep, j, tolerance, cfg) < MIN_CLUSTER {
                     return None;
                 }
