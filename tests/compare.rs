@@ -5,7 +5,9 @@ use std::path::Path;
 
 use nalgebra::Point3;
 use polishbot::cloud::{PointCloud, Units};
-use polishbot::compare::{compare, Aggregate, CompareConfig, Deviations, Method};
+use polishbot::compare::{
+    compare, core_points, Aggregate, CompareConfig, CoreConfig, Deviations, Method,
+};
 use polishbot::regions::{find_regions, RegionConfig, Regions};
 use polishbot::synth::{synth, SynthCase, SynthConfig};
 
@@ -177,6 +179,9 @@ struct Score {
     regions: usize,
     /// Core points added by densification.
     densified: usize,
+    /// Per defect taller than the tolerance: [true volume, regions' volume, true area,
+    /// regions' area] ([`sizes`]).
+    sizes: Vec<[f64; 4]>,
 }
 
 fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
@@ -250,7 +255,40 @@ fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: 
         false_regions: with_truth.iter().filter(|t| !**t).count(),
         regions: regions.regions.len(),
         densified: dev.added(),
+        sizes: sizes(case, dev, regions, tol),
     }
+}
+
+/// Per defect of `case` taller than `tol`: its true volume beyond the tolerance (mm³) and
+/// area beyond it (mm²), summed over the reference points within its support with their area
+/// shares, and the volume and area of the regions with a member within its support.
+fn sizes(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Vec<[f64; 4]> {
+    let shares = polishbot::compare::area_shares(&case.reference.points);
+    let normals = case.reference.normals.as_ref().unwrap();
+    let defects = case.truth.defects.iter().filter(|d| d.height.abs() > tol);
+    defects
+        .map(|d| {
+            let c = Point3::from(d.centre);
+            let (mut volume, mut area) = (0.0, 0.0);
+            for (k, p) in case.reference.points.iter().enumerate() {
+                let t = d.displacement(p, &normals[k]);
+                if (p - c).norm() < d.support() && t.abs() > tol {
+                    volume += shares[k] * (t.abs() - tol);
+                    area += shares[k];
+                }
+            }
+            let mut ids: Vec<usize> = (0..dev.points.len())
+                .filter(|&i| regions.labels[i] >= 0 && (dev.points[i] - c).norm() < d.support())
+                .map(|i| regions.labels[i] as usize)
+                .collect();
+            ids.sort_unstable();
+            ids.dedup();
+            let found = |f: fn(&polishbot::regions::Region) -> f64| {
+                ids.iter().map(|&r| f(&regions.regions[r])).sum::<f64>()
+            };
+            [volume, found(|r| r.volume), area, found(|r| r.area)]
+        })
+        .collect()
 }
 
 /// Every defect of `score` taller than `above` (mm; its peaks are those of defects taller than
@@ -294,10 +332,15 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
         .map(|seed| {
             let scan_points = scan_points(default_scan_points);
             let case = aligned_case(seed, scan_points / 3 * 4, scan_points);
-            // About 100,000 core points whatever the density.
-            let step = (case.reference.len() / 100_000).max(1);
-            let idx: Vec<usize> = (0..case.reference.len()).step_by(step).collect();
-            let core = case.reference.select(&idx);
+            // The core points `inspect` takes: the default sample for the scan's size, unless
+            // POLISHBOT_CORE_POINTS gives the count.
+            let core_cfg = CoreConfig {
+                count: std::env::var("POLISHBOT_CORE_POINTS")
+                    .ok()
+                    .map(|s| s.parse().unwrap()),
+                ..CoreConfig::default()
+            };
+            let core = core_points(&case.reference, case.scan.len(), &core_cfg).unwrap();
             let run = |method| {
                 let mut cfg = CompareConfig {
                     method,
@@ -319,7 +362,12 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
 }
 
 /// What the adaptive method reaches at 300,000 scan points (19 points/mm², spacing 0.23 mm;
-/// a regression floor below issue 5's targets, see `acceptance_targets`): IoU 0.924 / 0.950
+/// a regression floor below issue 5's targets, see `acceptance_targets`), on `inspect`'s
+/// core points (50,500 of the 400,000 reference points, drawn at random; until 2026-12-01
+/// every 4th reference point): IoU 0.912 / 0.905, RMS 0.012 / 0.010 mm. The per-point results
+/// do not depend on the sample, but IoU over a sample spreads by about ±0.03 on one case
+/// (docs/ALGORITHMS.md, Comparison: seed 12 reads 0.905-0.966 over four samples, 0.932 over
+/// every reference point). With every 4th point: IoU 0.924 / 0.950
 /// (0.905 / 0.928 before scan points at sharp edges were paired with the face they lie on and
 /// quadrics that extrapolate became planes; 0.89 / 0.91 before the LoD took Student's t), RMS
 /// 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
@@ -340,8 +388,8 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             ours.rms < classic.rms,
             "seed {seed}: adaptive must beat classic on RMS"
         );
-        assert!(ours.iou >= 0.915, "seed {seed}: IoU {}", ours.iou);
-        // Region members: 0.924 / 0.950 (isolated error points at the box cuts drop out).
+        assert!(ours.iou >= 0.9, "seed {seed}: IoU {}", ours.iou);
+        // Region members: 0.912 / 0.905 (isolated error points at the box cuts drop out).
         assert!(
             ours.region_iou >= 0.9,
             "seed {seed}: region IoU {}",
@@ -358,6 +406,18 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
         );
         assert!(ours.regions > 0, "seed {seed}: no region at all");
         assert_peaks(seed, &ours, RegionConfig::default().tolerance, 0.15);
+        // Volume and area beyond the tolerance against truth, summed over the case's defects:
+        // -13 % / -9 % and -13 % / -8 % (the regions' edges lie where the distance crosses
+        // the tolerance in noise); each defect's volume within -38 % (seed 12's 0.09 mm pit)
+        // to +2 %.
+        let total = |k: usize| ours.sizes.iter().map(|s| s[k]).sum::<f64>();
+        for (what, truth, found) in [("volume", 0, 1), ("area", 2, 3)] {
+            let (t, f) = (total(truth), total(found));
+            assert!((f - t).abs() <= 0.2 * t, "seed {seed}: {what} {f} for {t}");
+        }
+        for s in &ours.sizes {
+            assert!((s[1] - s[0]).abs() <= 0.5 * s[0], "seed {seed}: volume {s:?}");
+        }
     }
 }
 
@@ -387,35 +447,40 @@ fn narrow_faces_raise_no_false_region() {
 
 /// At 1.2 million scan points (76 points/mm², spacing 0.115 mm: a 0.64 mm wide bump holds
 /// about 25 points, where it holds 6 at 300,000) the RMS target is met and IoU nearly
-/// (seed 11: 0.935, its 0.07 mm ridge lies within the noise of the tolerance over most of its
-/// area; seed 12: 0.962), every defect is found and its peak is within 10 % (the largest
-/// errors: seed 11's 0.07 mm ridge +6 %, its 0.29 mm bump -4 %). Seed 12's 0.09 mm deep,
+/// (seed 11: 0.920, its 0.07 mm ridge lies within the noise of the tolerance over most of its
+/// area; seed 12: 0.965; on `inspect`'s 100,000 core points, drawn at random; 0.935 / 0.962
+/// on every 16th reference point, the tests' sample until 2026-12-01), every defect is found
+/// and its peak is within 15 % (the largest errors: seed 11's 0.07 mm ridge, 2.7 mm wide and
+/// 8.5 mm long, +13 %: the largest of the many core points along its crest, where a few
+/// neighbouring cylinders read 0.078 against a truth of 0.068, 1.5 LoD; +6 % on the strided
+/// sample; its 0.29 mm bump -4 %; every other within 5 %). Seed 12's 0.09 mm deep,
 /// 0.65 mm wide pit exceeds the tolerance on about 0.3 mm² (two core points' share): it is
-/// found (-0.093 mm) by the core points densification adds around it, and was missed before.
+/// found (-0.092 mm) by the core points densification adds around it, and was missed before.
 #[test]
 fn dense_scan_meets_the_rms_target() {
     for (seed, ours, classic) in scores(1_200_000) {
         assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
-        assert!(ours.iou >= 0.92, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.iou >= 0.91, "seed {seed}: IoU {}", ours.iou);
         assert!(ours.iou > classic.iou + 0.3, "seed {seed}: IoU vs classic");
         assert_eq!(ours.false_regions, 0, "seed {seed}: false regions");
-        // Densification stays local: 1,150-2,450 core points added to 100,000 (seeds 11-22).
+        // Densification stays local: 1,400-3,400 core points added to 100,000 (seeds 11-22).
         assert!(
             ours.densified > 0 && ours.densified < 5_000,
             "seed {seed}: {} core points added",
             ours.densified
         );
-        assert_peaks(seed, &ours, 0.0, 0.1);
+        assert_peaks(seed, &ours, 0.0, 0.15);
     }
 }
 
 /// The same at 1.2 million scan points on ten more cases (seeds 13-22; 59 defects taller
-/// than the tolerance, 0.059-0.5 mm, from 0.43 mm wide): every defect taller than the tolerance has a region whose
-/// peak is within 15 % (the largest errors: seed 15's 0.072 mm bump -12 %, seed 16's
-/// 0.059 mm pit -10 %, seed 21's 0.29 mm bump +9 %), no region that truth does not have,
-/// IoU 0.887 (seed 15: a 0.32 mm ridge 0.47 mm wide) to 0.974. At 300,000 points the same
-/// seeds miss a 0.1 mm, 0.5 mm wide bump (17; peak models find the narrow 0.21 and 0.32 mm
-/// bumps of seeds 18 and 22) and reach IoU 0.71-0.96: docs/ALGORITHMS.md.
+/// than the tolerance, 0.059-0.5 mm, from 0.43 mm wide): every defect taller than the
+/// tolerance has a region whose peak is within 15 % (the largest errors: seed 15's 0.072 mm
+/// bump -12 %, seed 16's 0.059 mm pit -10 %, seed 21's 0.105 mm pit -7 %), no region that
+/// truth does not have, IoU 0.889 (seed 21) to 0.974 (`inspect`'s core points; on every
+/// 16th reference point 0.887 to 0.974). At 300,000 points the same seeds miss a 0.1 mm,
+/// 0.5 mm wide bump (17; peak models find the narrow 0.21 and 0.32 mm bumps of seeds 18 and
+/// 22) and reach IoU 0.71-0.96: docs/ALGORITHMS.md.
 #[test]
 fn dense_scan_finds_every_defect_of_ten_more_cases() {
     let seeds: Vec<u64> = (13..=22).collect();
@@ -673,7 +738,8 @@ fn inspect_writes_the_design_files() {
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
         .collect();
-    // 100,000 selected core points, then those added around the defects' tops.
+    // 50,000 selected core points (the default for a scan of 90,000 points, see
+    // `default_count`), then those added around the defects' tops.
     let added: usize = stdout
         .split(" added around defects")
         .next()
@@ -681,7 +747,7 @@ fn inspect_writes_the_design_files() {
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("no count of added core points: {stdout}"));
     assert!(added > 0, "{stdout}");
-    assert_eq!(rows.len(), 100_000 + added);
+    assert_eq!(rows.len(), 50_000 + added);
     let ply = std::fs::read(out.join("deviations.ply")).unwrap();
     let head = String::from_utf8_lossy(&ply[..600]);
     for field in [

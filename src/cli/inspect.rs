@@ -207,6 +207,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
             let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
             compare::core_points(
                 &c,
+                scan.len(),
                 &CoreConfig {
                     selection: compare::CoreSelection::All,
                     ..cfg.core.clone()
@@ -214,7 +215,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
             )
             .with_context(|| format!("{}", path.display()))?
         }
-        None => compare::core_points(&reference, &cfg.core)?,
+        None => compare::core_points(&reference, scan.len(), &cfg.core)?,
     };
     times.lap("core points");
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
