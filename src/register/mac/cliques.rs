@@ -147,11 +147,13 @@ fn degeneracy_positions(g: &Graph) -> Vec<usize> {
 
 /// Enumerates the maximal cliques containing `v` as their earliest vertex in the order,
 /// calling `report` with each (global indices) and its weight (sum of edge weights).
+/// `local` is scratch of one entry per vertex, all `u32::MAX`, and is left so.
 fn cliques_from(
     g: &Graph,
     pos: &[usize],
     v: usize,
     budget: &Budget,
+    local: &mut [u32],
     report: &mut dyn FnMut(&[u32], f64),
 ) {
     let nb: Vec<u32> = g.adj[v].iter().map(|e| e.0).collect();
@@ -159,27 +161,27 @@ fn cliques_from(
     if d + 1 < budget.limits.min_size {
         return;
     }
+    // N(u) ∩ N(v) for every u in N(v), by looking each of N(u) up in N(v)'s local indices
+    // (a merge of the two sorted lists branches unpredictably at every step).
+    for (k, &u) in nb.iter().enumerate() {
+        local[u as usize] = k as u32;
+    }
     let local_adj: Vec<Bits> = nb
         .iter()
         .map(|&u| {
-            // Merge-intersect the sorted lists N(u) and N(v).
             let mut b = Bits::new(d);
-            let row = &g.adj[u as usize];
-            let (mut i, mut k) = (0, 0);
-            while i < row.len() && k < d {
-                match row[i].0.cmp(&nb[k]) {
-                    std::cmp::Ordering::Less => i += 1,
-                    std::cmp::Ordering::Greater => k += 1,
-                    std::cmp::Ordering::Equal => {
-                        b.set(k);
-                        i += 1;
-                        k += 1;
-                    }
+            for e in &g.adj[u as usize] {
+                let k = local[e.0 as usize] as usize;
+                if k < d {
+                    b.set(k);
                 }
             }
             b
         })
         .collect();
+    for &u in &nb {
+        local[u as usize] = u32::MAX;
+    }
     let (mut p, mut x) = (Bits::new(d), Bits::new(d));
     for (k, &u) in nb.iter().enumerate() {
         if pos[u as usize] > pos[v] {
@@ -287,8 +289,9 @@ pub fn maximal_cliques(g: &Graph, min_size: usize) -> Vec<Vec<u32>> {
     budget.per_vertex = usize::MAX;
     let pos = degeneracy_positions(g);
     let mut out = Vec::new();
+    let mut local = vec![u32::MAX; g.len()];
     for v in 0..g.len() {
-        cliques_from(g, &pos, v, &budget, &mut |c, _| {
+        cliques_from(g, &pos, v, &budget, &mut local, &mut |c, _| {
             let mut c = c.to_vec();
             c.sort_unstable();
             out.push(c);
@@ -371,14 +374,15 @@ pub fn node_guided(g: &Graph, limits: CliqueLimits, top_k: usize) -> Selection {
     let best = (0..n)
         .into_par_iter()
         .fold(
-            || NodeBest::new(n),
-            |mut acc, v| {
-                cliques_from(g, &pos, v, &budget, &mut |c, w| {
+            || (NodeBest::new(n), vec![u32::MAX; n]),
+            |(mut acc, mut local), v| {
+                cliques_from(g, &pos, v, &budget, &mut local, &mut |c, w| {
                     acc.offer(c, w);
                 });
-                acc
+                (acc, local)
             },
         )
+        .map(|(acc, _)| acc)
         .reduce(|| NodeBest::new(n), NodeBest::merge);
     let mut ids: Vec<u32> = best
         .index
