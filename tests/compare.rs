@@ -416,7 +416,10 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             assert!((f - t).abs() <= 0.2 * t, "seed {seed}: {what} {f} for {t}");
         }
         for s in &ours.sizes {
-            assert!((s[1] - s[0]).abs() <= 0.5 * s[0], "seed {seed}: volume {s:?}");
+            assert!(
+                (s[1] - s[0]).abs() <= 0.5 * s[0],
+                "seed {seed}: volume {s:?}"
+            );
         }
     }
 }
