@@ -686,6 +686,55 @@ fn acceptance_targets() {
     }
 }
 
+/// A reference cloud no larger than the core-point sample makes every reference point a core
+/// point, and densification has nothing left to add around a defect's top (docs/ALGORITHMS.md,
+/// Comparison: 10 defects missed on seeds 11-34 at 300k instead of 6): `inspect` says so on
+/// stderr and in the report's summary; with a larger reference it says which share it took.
+#[test]
+fn inspect_warns_when_every_reference_point_is_a_core_point() {
+    let dir = common::tempdir();
+    let data = common::shared_data("femoral_dm.stl");
+    for (reference_points, warned, sample) in [
+        ("30000", true, "all 30000 reference points"),
+        ("60000", false, "50000 of 60000 reference points"),
+    ] {
+        let case = dir.path().join(reference_points);
+        let status = common::polishbot()
+            .args(["synth", "--mesh", data.to_str().unwrap(), "--units", "m"])
+            .args(["--seed", "4", "--reference-points", reference_points])
+            .args(["--scan-points", "40000", "--out"])
+            .arg(&case)
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let out = case.join("out");
+        let run = common::polishbot()
+            .arg("inspect")
+            .arg("--reference")
+            .arg(case.join("reference.ply"))
+            .arg("--scan")
+            .arg(case.join("scan.ply"))
+            .arg("--pose")
+            .arg(case.join("truth.json"))
+            .arg("-o")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(run.status.success(), "{stderr}");
+        assert_eq!(
+            stderr.contains("every one of the 30000 reference points is a core point"),
+            warned,
+            "{stderr}"
+        );
+        let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(
+            report.contains(sample),
+            "{reference_points}: no '{sample}' in the report"
+        );
+    }
+}
+
 #[test]
 fn inspect_writes_the_design_files() {
     let dir = common::tempdir();

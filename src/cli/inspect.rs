@@ -185,7 +185,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     };
     scan.transform(&pose);
     times.lap("register");
-    let report_summary = vec![
+    let mut report_summary = vec![
         ("reference normals".to_string(), reference_note),
         ("registration".to_string(), reg_line),
         (
@@ -217,6 +217,23 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         }
         None => compare::core_points(&reference, scan.len(), &cfg.core)?,
     };
+    let every_point = args.core.is_none() && core.len() == reference.len();
+    if every_point && cfg.compare.method == Method::Adaptive {
+        eprintln!(
+            "inspect: warning: every one of the {} reference points is a core point: \
+             densification has none left to add around a defect's top, so defects narrower \
+             than about twice their spacing may be missed; give a denser reference",
+            reference.len()
+        );
+    }
+    report_summary.push((
+        "core point sample".to_string(),
+        match (&args.core, every_point) {
+            (Some(path), _) => format!("{} from {}", core.len(), path.display()),
+            (None, true) => format!("all {} reference points", core.len()),
+            (None, false) => format!("{} of {} reference points", core.len(), reference.len()),
+        },
+    ));
     times.lap("core points");
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
     times.lap("compare");
