@@ -7,6 +7,7 @@
 //! contiguous slice found by two binary searches. A query walks the rows near it, takes the
 //! x interval a row can contribute, and never allocates (the caller owns the output buffers).
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 
 mod batch;
 
@@ -132,7 +133,7 @@ impl Grid {
         };
         let nrows = (dims[1] * dims[2]) as usize;
         let keys: Vec<u32> = points
-            .iter()
+            .par_iter()
             .map(|p| {
                 let y = grid.coord(p.y, 1).clamp(0, dims[1] - 1);
                 let z = grid.coord(p.z, 2).clamp(0, dims[2] - 1);
@@ -152,20 +153,27 @@ impl Grid {
             order[next[k as usize] as usize] = i as u32;
             next[k as usize] += 1;
         }
+        // Each row by x, rows in parallel (a single grid is otherwise built on one core).
+        let mut row_slices: Vec<&mut [u32]> = Vec::with_capacity(nrows);
+        let mut rest = &mut order[..];
         for w in rows.windows(2) {
-            order[w[0] as usize..w[1] as usize]
-                .sort_unstable_by(|&a, &b| points[a as usize].x.total_cmp(&points[b as usize].x));
+            let (row, tail) = rest.split_at_mut((w[1] - w[0]) as usize);
+            row_slices.push(row);
+            rest = tail;
         }
+        row_slices.par_iter_mut().with_min_len(64).for_each(|row| {
+            row.sort_unstable_by(|&a, &b| points[a as usize].x.total_cmp(&points[b as usize].x))
+        });
         grid.pts = order
-            .iter()
+            .par_iter()
             .map(|&i| {
                 let p = &points[i as usize];
                 [p.x, p.y, p.z]
             })
             .collect();
-        grid.xs = grid.pts.iter().map(|p| p[0]).collect();
-        grid.ys = grid.pts.iter().map(|p| p[1]).collect();
-        grid.zs = grid.pts.iter().map(|p| p[2]).collect();
+        grid.xs = grid.pts.par_iter().map(|p| p[0]).collect();
+        grid.ys = grid.pts.par_iter().map(|p| p[1]).collect();
+        grid.zs = grid.pts.par_iter().map(|p| p[2]).collect();
         grid.ids = order;
         grid.rows = rows;
         grid
