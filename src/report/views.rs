@@ -4,6 +4,7 @@ use std::path::Path;
 use anyhow::{anyhow, Result};
 use nalgebra::Vector3;
 use plotters::prelude::*;
+use rayon::prelude::*;
 
 use super::colour::{diverging, shade};
 use super::{font, ReportConfig, ReportInput};
@@ -79,40 +80,24 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
         .ceil()
         .clamp(2.0, 8.0) as i64;
     let title = TextStyle::from((font::FAMILY, 24).into_font()).color(&BLACK);
-    for (k, (view, (right, up))) in views.iter().zip(&frames).enumerate() {
-        let (lo, hi) = boxes[k];
-        let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
-        let size = panel as usize;
-        let mut depth = vec![f64::MIN; size * size];
-        let mut colour: Vec<Option<RGBColor>> = vec![None; size * size];
-        let light = (view.towards + up * 0.3 + right * 0.2).normalize();
-        for (i, p) in input.points.iter().enumerate() {
-            let nrm = input.normals[i];
-            if nrm.dot(&view.towards) < 0.0 {
-                continue;
-            }
-            let x = (panel as f64 / 2.0 + (p.coords.dot(right) - centre[0]) * px_per_mm) as i64;
-            let y = (panel as f64 / 2.0 - (p.coords.dot(up) - centre[1]) * px_per_mm) as i64;
-            let d = p.coords.dot(&view.towards);
-            let c = shade(diverging(input.distances[i], range), nrm.dot(&light));
-            for py in y - splat / 2..=y + splat / 2 {
-                for px in x - splat / 2..=x + splat / 2 {
-                    if px < 0 || py < 0 || px >= panel as i64 || py >= panel as i64 {
-                        continue;
-                    }
-                    let idx = py as usize * size + px as usize;
-                    if d > depth[idx] {
-                        depth[idx] = d;
-                        colour[idx] = Some(c);
-                    }
-                }
-            }
-        }
-        fill_holes(&mut colour, &mut depth, size);
+    let scale = Scale {
+        panel: panel as usize,
+        px_per_mm,
+        splat,
+        range,
+    };
+    // The three panels are rasterised at once; drawing them into the page is serial.
+    let panels: Vec<Vec<Option<RGBColor>>> = views
+        .par_iter()
+        .zip(frames.par_iter())
+        .zip(boxes.par_iter())
+        .map(|((view, frame), bounds)| raster(input, view, frame, bounds, &scale))
+        .collect();
+    for (k, (view, colour)) in views.iter().zip(&panels).enumerate() {
         let x0 = k as i32 * panel as i32;
         for (idx, c) in colour.iter().enumerate() {
             if let Some(c) = c {
-                let (px, py) = ((idx % size) as i32, (idx / size) as i32);
+                let (px, py) = ((idx % scale.panel) as i32, (idx / scale.panel) as i32);
                 root.draw_pixel((x0 + px, TITLE_H as i32 + py), c)
                     .map_err(err)?;
             }
@@ -123,6 +108,60 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
     colour_bar(&root, 3 * panel as i32, range, input.tolerance).map_err(err)?;
     root.present().map_err(err)?;
     Ok(())
+}
+
+/// How points map to a panel's pixels.
+struct Scale {
+    /// Panel side, px.
+    panel: usize,
+    /// Pixels per mm (one scale for all panels, so sizes compare).
+    px_per_mm: f64,
+    /// Side of a point's square splat, px.
+    splat: i64,
+    /// Half-width of the colour scale, mm.
+    range: f64,
+}
+
+/// One panel's pixels, row-major: the shaded colour of the front-most splat (None where no
+/// point faces the viewer), pinholes filled. `frame` is the view's (right, up), `bounds` the
+/// points' (lo, hi) in it.
+fn raster(
+    input: &ReportInput,
+    view: &View,
+    (right, up): &(Vector3<f64>, Vector3<f64>),
+    (lo, hi): &([f64; 2], [f64; 2]),
+    scale: &Scale,
+) -> Vec<Option<RGBColor>> {
+    let (size, px_per_mm, splat) = (scale.panel, scale.px_per_mm, scale.splat);
+    let half = size as f64 / 2.0;
+    let centre = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let mut depth = vec![f64::MIN; size * size];
+    let mut colour: Vec<Option<RGBColor>> = vec![None; size * size];
+    let light = (view.towards + up * 0.3 + right * 0.2).normalize();
+    for (i, p) in input.points.iter().enumerate() {
+        let nrm = input.normals[i];
+        if nrm.dot(&view.towards) < 0.0 {
+            continue;
+        }
+        let x = (half + (p.coords.dot(right) - centre[0]) * px_per_mm) as i64;
+        let y = (half - (p.coords.dot(up) - centre[1]) * px_per_mm) as i64;
+        let d = p.coords.dot(&view.towards);
+        let c = shade(diverging(input.distances[i], scale.range), nrm.dot(&light));
+        for py in y - splat / 2..=y + splat / 2 {
+            for px in x - splat / 2..=x + splat / 2 {
+                if px < 0 || py < 0 || px >= size as i64 || py >= size as i64 {
+                    continue;
+                }
+                let idx = py as usize * size + px as usize;
+                if d > depth[idx] {
+                    depth[idx] = d;
+                    colour[idx] = Some(c);
+                }
+            }
+        }
+    }
+    fill_holes(&mut colour, &mut depth, size);
+    colour
 }
 
 /// Closes the pinholes a random sample leaves between splats: an empty pixel with at least 5
