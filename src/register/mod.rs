@@ -324,7 +324,8 @@ pub fn register_with_progress(
             ..d
         })
     };
-    let (s_down, r_down) = (down(scan)?, down(reference)?);
+    let (s_down, r_down) = rayon::join(|| down(scan), || down(reference));
+    let (s_down, r_down) = (s_down?, r_down?);
     let (s_pts, r_pts) = (s_down.points, r_down.points);
     let s_nrm = s_down.normals.unwrap_or_default();
     let r_nrm = r_down.normals.unwrap_or_default();
