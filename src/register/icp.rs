@@ -62,7 +62,8 @@ pub const UNCERTAINTY_BLOCK: f64 = 15.0;
 pub fn pose_std(pairs: &[(Point3<f64>, usize, f64, f64)], normals: &[Vector3<f64>], k: f64) -> f64 {
     let k2 = k * k;
     let mut h = Matrix6::<f64>::zeros();
-    let mut blocks: std::collections::HashMap<[i64; 3], Vector6<f64>> = Default::default();
+    // Ordered by key, so the sums below run in the same order on every run.
+    let mut blocks: std::collections::BTreeMap<[i64; 3], Vector6<f64>> = Default::default();
     for &(q, j, r, _) in pairs {
         let jac = jacobian(&q, &normals[j]);
         let w = weight(r, k2);
@@ -99,6 +100,9 @@ fn jacobian(q: &Point3<f64>, n: &Vector3<f64>) -> Vector6<f64> {
     let c = q.coords.cross(n);
     Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z)
 }
+
+/// Pairs per partial sum of a linearisation ([`Step`]).
+const SUM_CHUNK: usize = 4096;
 
 /// One linearisation: normal equations plus the statistics at the current pose.
 #[derive(Default)]
@@ -219,19 +223,25 @@ pub fn icp(
             (3.0 * 1.4826 * median_abs(pairs.iter().map(|e| e.2))).max(p.min_kernel_scale)
         });
         let k2 = k * k;
+        // Fixed chunks summed in order: the same sums (and pose) on every run, whatever
+        // thread took which chunk.
         let step = pairs
-            .par_iter()
-            .fold(Step::default, |mut s, &(q, j, r, d2)| {
-                let jac = jacobian(&q, &normals[j]);
-                let w = weight(r, k2);
-                s.a += jac * jac.transpose() * w;
-                s.b += jac * (w * r);
-                s.pairs += 1;
-                s.sum_d2 += d2;
-                s.sum_r2 += r * r;
-                s
+            .par_chunks(SUM_CHUNK)
+            .map(|chunk| {
+                chunk.iter().fold(Step::default(), |mut s, &(q, j, r, d2)| {
+                    let jac = jacobian(&q, &normals[j]);
+                    let w = weight(r, k2);
+                    s.a += jac * jac.transpose() * w;
+                    s.b += jac * (w * r);
+                    s.pairs += 1;
+                    s.sum_d2 += d2;
+                    s.sum_r2 += r * r;
+                    s
+                })
             })
-            .reduce(Step::default, Step::add);
+            .collect::<Vec<Step>>()
+            .into_iter()
+            .fold(Step::default(), Step::add);
         let fitness = step.pairs as f64 / n;
         let pairs_f = step.pairs.max(1) as f64;
         let rmse = (step.sum_d2 / pairs_f).sqrt();
