@@ -9,7 +9,7 @@ use polishbot::compare::{
     compare, core_points, Aggregate, CompareConfig, CoreConfig, Deviations, Method,
 };
 use polishbot::regions::{find_regions, RegionConfig, Regions};
-use polishbot::synth::{synth, SynthCase, SynthConfig};
+use polishbot::synth::{synth, Defect, SynthCase, SynthConfig};
 
 /// A femoral_dm case with the scan moved back into the reference frame by the true pose.
 fn aligned_case(seed: u64, reference_points: usize, scan_points: usize) -> SynthCase {
@@ -184,7 +184,15 @@ struct Score {
     sizes: Vec<[f64; 4]>,
 }
 
-fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Score {
+/// `truth_sizes`: [`true_sizes`] of `case`.
+fn score(
+    seed: u64,
+    case: &SynthCase,
+    truth_sizes: &[[f64; 2]],
+    dev: &Deviations,
+    regions: &Regions,
+    tol: f64,
+) -> Score {
     let truth: Vec<f64> = dev
         .points
         .iter()
@@ -255,18 +263,25 @@ fn score(seed: u64, case: &SynthCase, dev: &Deviations, regions: &Regions, tol: 
         false_regions: with_truth.iter().filter(|t| !**t).count(),
         regions: regions.regions.len(),
         densified: dev.added(),
-        sizes: sizes(case, dev, regions, tol),
+        sizes: sizes(case, truth_sizes, dev, regions, tol),
     }
+}
+
+/// The defects of `case` taller than `tol`.
+fn tall_defects(case: &SynthCase, tol: f64) -> impl Iterator<Item = &Defect> {
+    case.truth
+        .defects
+        .iter()
+        .filter(move |d| d.height.abs() > tol)
 }
 
 /// Per defect of `case` taller than `tol`: its true volume beyond the tolerance (mm³) and
 /// area beyond it (mm²), summed over the reference points within its support with their area
-/// shares, and the volume and area of the regions with a member within its support.
-fn sizes(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Vec<[f64; 4]> {
+/// shares.
+fn true_sizes(case: &SynthCase, tol: f64) -> Vec<[f64; 2]> {
     let shares = polishbot::compare::area_shares(&case.reference.points);
     let normals = case.reference.normals.as_ref().unwrap();
-    let defects = case.truth.defects.iter().filter(|d| d.height.abs() > tol);
-    defects
+    tall_defects(case, tol)
         .map(|d| {
             let c = Point3::from(d.centre);
             let (mut volume, mut area) = (0.0, 0.0);
@@ -277,6 +292,25 @@ fn sizes(case: &SynthCase, dev: &Deviations, regions: &Regions, tol: f64) -> Vec
                     area += shares[k];
                 }
             }
+            [volume, area]
+        })
+        .collect()
+}
+
+/// Per defect of `case` taller than `tol`: [true volume, regions' volume, true area,
+/// regions' area], the truth from `truth_sizes` ([`true_sizes`]), the regions those with a
+/// member within its support.
+fn sizes(
+    case: &SynthCase,
+    truth_sizes: &[[f64; 2]],
+    dev: &Deviations,
+    regions: &Regions,
+    tol: f64,
+) -> Vec<[f64; 4]> {
+    tall_defects(case, tol)
+        .zip(truth_sizes)
+        .map(|(d, &[volume, area])| {
+            let c = Point3::from(d.centre);
             let mut ids: Vec<usize> = (0..dev.points.len())
                 .filter(|&i| regions.labels[i] >= 0 && (dev.points[i] - c).norm() < d.support())
                 .map(|i| regions.labels[i] as usize)
@@ -341,6 +375,7 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
                 ..CoreConfig::default()
             };
             let core = core_points(&case.reference, case.scan.len(), &core_cfg).unwrap();
+            let truth_sizes = true_sizes(&case, tol);
             let run = |method| {
                 let mut cfg = CompareConfig {
                     method,
@@ -351,7 +386,7 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
                     std::env::var("POLISHBOT_PEAK_FIT").map_or(true, |v| v != "0");
                 let dev = compare(&core, &case.reference, &case.scan, &cfg).unwrap();
                 let regions = find_regions(&dev, &RegionConfig::default());
-                score(seed, &case, &dev, &regions, tol)
+                score(seed, &case, &truth_sizes, &dev, &regions, tol)
             };
             let (ours, classic) = (run(Method::Adaptive), run(Method::Classic));
             eprintln!("seed {seed} adaptive: {ours:?}");
@@ -686,6 +721,36 @@ fn acceptance_targets() {
     }
 }
 
+/// `polishbot synth` of femoral_dm (seed 4) with these point counts into `case`.
+fn synth_femoral_case(case: &Path, reference_points: &str, scan_points: &str) {
+    let data = common::shared_data("femoral_dm.stl");
+    let status = common::polishbot()
+        .args(["synth", "--mesh", data.to_str().unwrap(), "--units", "m"])
+        .args(["--seed", "4", "--reference-points", reference_points])
+        .args(["--scan-points", scan_points, "--out"])
+        .arg(case)
+        .status()
+        .unwrap();
+    assert!(status.success());
+}
+
+/// `polishbot inspect` of a synth `case` at its true pose into `out`, with `extra` options.
+fn inspect_with_true_pose(case: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
+    common::polishbot()
+        .arg("inspect")
+        .arg("--reference")
+        .arg(case.join("reference.ply"))
+        .arg("--scan")
+        .arg(case.join("scan.ply"))
+        .arg("--pose")
+        .arg(case.join("truth.json"))
+        .args(extra)
+        .arg("-o")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
 /// A reference cloud no larger than the core-point sample makes every reference point a core
 /// point, and densification has nothing left to add around a defect's top (docs/ALGORITHMS.md,
 /// Comparison: 10 defects missed on seeds 11-34 at 300k instead of 6): `inspect` says so on
@@ -693,33 +758,14 @@ fn acceptance_targets() {
 #[test]
 fn inspect_warns_when_every_reference_point_is_a_core_point() {
     let dir = common::tempdir();
-    let data = common::shared_data("femoral_dm.stl");
     for (reference_points, warned, sample) in [
         ("30000", true, "all 30000 reference points"),
         ("60000", false, "50000 of 60000 reference points"),
     ] {
         let case = dir.path().join(reference_points);
-        let status = common::polishbot()
-            .args(["synth", "--mesh", data.to_str().unwrap(), "--units", "m"])
-            .args(["--seed", "4", "--reference-points", reference_points])
-            .args(["--scan-points", "40000", "--out"])
-            .arg(&case)
-            .status()
-            .unwrap();
-        assert!(status.success());
+        synth_femoral_case(&case, reference_points, "40000");
         let out = case.join("out");
-        let run = common::polishbot()
-            .arg("inspect")
-            .arg("--reference")
-            .arg(case.join("reference.ply"))
-            .arg("--scan")
-            .arg(case.join("scan.ply"))
-            .arg("--pose")
-            .arg(case.join("truth.json"))
-            .arg("-o")
-            .arg(&out)
-            .output()
-            .unwrap();
+        let run = inspect_with_true_pose(&case, &out, &[]);
         let stderr = String::from_utf8_lossy(&run.stderr);
         assert!(run.status.success(), "{stderr}");
         assert_eq!(
@@ -740,40 +786,12 @@ fn inspect_writes_the_design_files() {
     let dir = common::tempdir();
     let case = dir.path().join("case");
     let out = dir.path().join("out");
-    let data = common::shared_data("femoral_dm.stl");
-    let status = common::polishbot()
-        .args([
-            "synth",
-            "--mesh",
-            data.to_str().unwrap(),
-            "--units",
-            "m",
-            "--seed",
-            "4",
-        ])
-        .args([
-            "--reference-points",
-            "120000",
-            "--scan-points",
-            "90000",
-            "--out",
-        ])
-        .arg(&case)
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let run = common::polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(case.join("reference.ply"))
-        .arg("--scan")
-        .arg(case.join("scan.ply"))
-        .arg("--pose")
-        .arg(case.join("truth.json"))
-        .args(["--tolerance", "0.05", "--method", "adaptive", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
+    synth_femoral_case(&case, "120000", "90000");
+    let run = inspect_with_true_pose(
+        &case,
+        &out,
+        &["--tolerance", "0.05", "--method", "adaptive"],
+    );
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(
         run.status.success(),

@@ -61,10 +61,10 @@ impl Default for CoreConfig {
 }
 
 /// Scan points per core point of the default sample ([`default_count`]).
-pub const SCAN_POINTS_PER_CORE_POINT: usize = 6;
+const SCAN_POINTS_PER_CORE_POINT: usize = 6;
 
 /// Bounds of the default sample size ([`default_count`]).
-pub const DEFAULT_COUNT_RANGE: (usize, usize) = (50_000, 100_000);
+const DEFAULT_COUNT_RANGE: (usize, usize) = (50_000, 100_000);
 
 /// The default number of core points for a scan of `scan_points` points: one per
 /// [`SCAN_POINTS_PER_CORE_POINT`] scan points, within [`DEFAULT_COUNT_RANGE`]. Each core

@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 
 pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
-    CoreConfig, CoreSelection, DEFAULT_COUNT_RANGE, SCAN_POINTS_PER_CORE_POINT,
+    CoreConfig, CoreSelection,
 };
 use self::grid::Grid;
 use crate::cloud::PointCloud;
