@@ -399,19 +399,16 @@ fn scores_of(default_seeds: &[u64], default_scan_points: usize) -> Vec<(u64, Sco
 /// What the adaptive method reaches at 300,000 scan points (19 points/mm², spacing 0.23 mm;
 /// a regression floor below issue 5's targets, see `acceptance_targets`), on `inspect`'s
 /// core points (50,500 of the 400,000 reference points, drawn at random; until 2026-12-01
-/// every 4th reference point): IoU 0.912 / 0.905, RMS 0.012 / 0.010 mm. The per-point results
-/// do not depend on the sample, but IoU over a sample spreads by about ±0.03 on one case
-/// (docs/ALGORITHMS.md, Comparison: seed 12 reads 0.905-0.966 over four samples, 0.932 over
-/// every reference point). With every 4th point: IoU 0.924 / 0.950
-/// (0.905 / 0.928 before scan points at sharp edges were paired with the face they lie on and
-/// quadrics that extrapolate became planes; 0.89 / 0.91 before the LoD took Student's t), RMS
-/// 0.013 / 0.010 mm on seeds 11 / 12; it beats classic on IoU and RMS, raises no region
-/// that truth does not have (classic raises dozens along the box-cut edges) and finds every
-/// defect taller than the tolerance, seed 12's narrow 0.09 mm pit included (a peak model
-/// measures it, -4 %: docs/ALGORITHMS.md, adaptive step 12; missed before), with its peak
-/// within 15 % (the peak fit: every one within 10 % but seed 11's 0.29 mm, 0.64 mm wide bump,
-/// -11 %; seeds 13 and 14 all within 10 %; before the fit seed 11's bump was reported
-/// 0.17 mm, -42 %).
+/// every 4th reference point): IoU 0.956 / 0.927, RMS 0.0047 / 0.0068 mm on seeds 11 / 12
+/// since the model fill (docs/ALGORITHMS.md, adaptive step 13; before it 0.912 / 0.905 and
+/// 0.012 / 0.010 mm). The per-point results do not depend on the sample, but IoU over a
+/// sample spreads by about ±0.03 on one case (docs/ALGORITHMS.md, Comparison). It beats
+/// classic on IoU and RMS, raises no region that truth does not have (classic raises dozens
+/// along the box-cut edges) and finds every defect taller than the tolerance, seed 12's
+/// narrow 0.09 mm pit included (a peak model measures it, -4 %: adaptive step 12; missed
+/// before), with its peak within 15 % (the peak fit: every one within 10 % but seed 11's
+/// 0.29 mm, 0.64 mm wide bump, -11 %; before the fit seed 11's bump was reported 0.17 mm,
+/// -42 %).
 #[test]
 fn adaptive_finds_the_planted_defects_and_beats_classic() {
     for (seed, ours, classic) in scores(300_000) {
@@ -423,14 +420,15 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
             ours.rms < classic.rms,
             "seed {seed}: adaptive must beat classic on RMS"
         );
-        assert!(ours.iou >= 0.9, "seed {seed}: IoU {}", ours.iou);
-        // Region members: 0.912 / 0.905 (isolated error points at the box cuts drop out).
+        assert!(ours.iou >= 0.92, "seed {seed}: IoU {}", ours.iou);
+        // Region members: 0.956 / 0.927 (isolated error points at the box cuts drop out).
         assert!(
-            ours.region_iou >= 0.9,
+            ours.region_iou >= 0.92,
             "seed {seed}: region IoU {}",
             ours.region_iou
         );
-        assert!(ours.rms <= 0.014, "seed {seed}: RMS {}", ours.rms);
+        // Issue 5's RMS target, met at 300k since the model fill (0.0047 / 0.0068 mm).
+        assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
         assert_eq!(
             ours.false_regions, 0,
             "seed {seed}: regions truth does not have"
@@ -442,9 +440,9 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
         assert!(ours.regions > 0, "seed {seed}: no region at all");
         assert_peaks(seed, &ours, RegionConfig::default().tolerance, 0.15);
         // Volume and area beyond the tolerance against truth, summed over the case's defects:
-        // -13 % / -9 % and -13 % / -8 % (the regions' edges lie where the distance crosses
-        // the tolerance in noise); each defect's volume within -38 % (seed 12's 0.09 mm pit)
-        // to +2 %.
+        // -11 % / -8 % and -12 % / -8 % (-13 % / -9 % and -13 % / -8 % before the model
+        // fill); each defect's volume within -25 % (seed 12's 0.09 mm pit; -38 % before) to
+        // +3 %.
         let total = |k: usize| ours.sizes.iter().map(|s| s[k]).sum::<f64>();
         for (what, truth, found) in [("volume", 0, 1), ("area", 2, 3)] {
             let (t, f) = (total(truth), total(found));
@@ -485,20 +483,19 @@ fn narrow_faces_raise_no_false_region() {
 
 /// At 1.2 million scan points (76 points/mm², spacing 0.115 mm: a 0.64 mm wide bump holds
 /// about 25 points, where it holds 6 at 300,000) the RMS target is met and IoU nearly
-/// (seed 11: 0.920, its 0.07 mm ridge lies within the noise of the tolerance over most of its
-/// area; seed 12: 0.965; on `inspect`'s 100,000 core points, drawn at random; 0.935 / 0.962
-/// on every 16th reference point, the tests' sample until 2026-12-01), every defect is found
-/// and its peak is within 15 % (the largest errors: seed 11's 0.07 mm ridge, 2.7 mm wide and
-/// 8.5 mm long, +13 %: the largest of the many core points along its crest, where a few
-/// neighbouring cylinders read 0.078 against a truth of 0.068, 1.5 LoD; +6 % on the strided
-/// sample; its 0.29 mm bump -4 %; every other within 5 %). Seed 12's 0.09 mm deep,
-/// 0.65 mm wide pit exceeds the tolerance on about 0.3 mm² (two core points' share): it is
-/// found (-0.092 mm) by the core points densification adds around it, and was missed before.
+/// (seed 11: 0.936, its 0.07 mm ridge, 2.7 mm wide and 8.5 mm long, lies within the noise of
+/// the tolerance over most of its area and is too wide for a peak model's window; seed 12:
+/// 0.969; on `inspect`'s 100,000 core points, drawn at random; 0.920 / 0.965 before the model
+/// fill of adaptive step 13), every defect is found and its peak is within 10 % (the ridge
+/// +6 %: +13 % before the model fill, the largest of the many core points along its crest).
+/// Seed 12's 0.09 mm deep, 0.65 mm wide pit exceeds the tolerance on about 0.3 mm² (two core
+/// points' share): it is found (-0.092 mm) by the core points densification adds around it,
+/// and was missed before.
 #[test]
 fn dense_scan_meets_the_rms_target() {
     for (seed, ours, classic) in scores(1_200_000) {
-        assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
-        assert!(ours.iou >= 0.91, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.rms <= 0.006, "seed {seed}: RMS {}", ours.rms);
+        assert!(ours.iou >= 0.93, "seed {seed}: IoU {}", ours.iou);
         assert!(ours.iou > classic.iou + 0.3, "seed {seed}: IoU vs classic");
         assert_eq!(ours.false_regions, 0, "seed {seed}: false regions");
         // Densification stays local: 1,400-3,400 core points added to 100,000 (seeds 11-22).
@@ -507,23 +504,23 @@ fn dense_scan_meets_the_rms_target() {
             "seed {seed}: {} core points added",
             ours.densified
         );
-        assert_peaks(seed, &ours, 0.0, 0.15);
+        assert_peaks(seed, &ours, 0.0, 0.1);
     }
 }
 
 /// The same at 1.2 million scan points on ten more cases (seeds 13-22; 59 defects taller
 /// than the tolerance, 0.059-0.5 mm, from 0.43 mm wide): every defect taller than the
-/// tolerance has a region whose peak is within 15 % (the largest errors: seed 15's 0.072 mm
-/// bump -12 %, seed 16's 0.059 mm pit -10 %, seed 21's 0.105 mm pit -7 %), no region that
-/// truth does not have, IoU 0.889 (seed 21) to 0.974 (`inspect`'s core points; on every
-/// 16th reference point 0.887 to 0.974). At 300,000 points the same seeds miss a 0.1 mm,
-/// 0.5 mm wide bump (17; peak models find the narrow 0.21 and 0.32 mm bumps of seeds 18 and
-/// 22) and reach IoU 0.71-0.96: docs/ALGORITHMS.md.
+/// tolerance has a region whose peak is within 15 % (the largest error: seed 15's 0.072 mm
+/// bump -12 %), no region that truth does not have, IoU 0.954 (seed 14) to 0.986
+/// (`inspect`'s core points; 0.889 to 0.974 before the model fill of adaptive step 13). At
+/// 300,000 points the same seeds miss a 0.1 mm, 0.5 mm wide bump (17; peak models find the
+/// narrow 0.21 and 0.32 mm bumps of seeds 18 and 22) and reach IoU 0.88-0.98:
+/// docs/ALGORITHMS.md.
 #[test]
 fn dense_scan_finds_every_defect_of_ten_more_cases() {
     let seeds: Vec<u64> = (13..=22).collect();
     for (seed, ours, _) in scores_of(&seeds, 1_200_000) {
-        assert!(ours.iou >= 0.8, "seed {seed}: IoU {}", ours.iou);
+        assert!(ours.iou >= 0.94, "seed {seed}: IoU {}", ours.iou);
         assert_eq!(ours.false_regions, 0, "seed {seed}: false regions");
         assert_peaks(seed, &ours, 0.0, 0.15);
     }
@@ -545,6 +542,7 @@ fn densification_finds_a_bump_between_core_points() {
         top: Point3::new(4.3, 4.0, 0.0),
         height: 0.15,
         fwhm: 0.5,
+        profile: Profile::Gaussian,
         scan_density: 100.0,
         noise: 0.01,
         core_step: 0.8,
@@ -570,19 +568,33 @@ fn densification_finds_a_bump_between_core_points() {
     );
 }
 
+/// Shapes of [`Bump`].
+#[derive(Debug, Clone, Copy)]
+enum Profile {
+    /// exp(-r² / 2σ²).
+    Gaussian,
+    /// Linear flanks: half the height at half the `fwhm`, zero at the `fwhm`.
+    Cone,
+    /// A spherical cap whose base circle has the radius `fwhm`.
+    Cap,
+    /// Flat within half the `fwhm`, a cosine flank out to the `fwhm`.
+    Plateau,
+}
+
 /// The default densification threshold (`inspect`'s: half the default tolerance).
 fn densify_above() -> f64 {
     CompareConfig::default().adaptive.densify_above
 }
 
-/// A Gaussian bump on the plane z = 0 over [0, 8]², sampled: the reference every 0.1 mm with
-/// normals +z, core points every `core_step`, the scan at random with `scan_density` points
-/// per mm² and Gaussian noise.
+/// A bump (Gaussian unless `profile` says otherwise) on the plane z = 0 over [0, 8]², sampled:
+/// the reference every 0.1 mm with normals +z, core points every `core_step`, the scan at
+/// random with `scan_density` points per mm² and Gaussian noise.
 struct Bump {
     top: Point3<f64>,
     height: f64,
     /// Full width at half height, mm.
     fwhm: f64,
+    profile: Profile,
     scan_density: f64,
     noise: f64,
     core_step: f64,
@@ -594,11 +606,7 @@ impl Bump {
     fn case(&self) -> (PointCloud, PointCloud, PointCloud) {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.seed);
-        let sigma = self.fwhm / 2.3548;
-        let bump = |x: f64, y: f64| {
-            let r2 = (x - self.top.x).powi(2) + (y - self.top.y).powi(2);
-            self.height * (-r2 / (2.0 * sigma * sigma)).exp()
-        };
+        let bump = |x: f64, y: f64| self.height_at(x, y);
         let lattice = |step: f64| -> Vec<Point3<f64>> {
             let n = (8.0 / step).round() as usize;
             (0..=n)
@@ -632,7 +640,33 @@ impl Bump {
         )
     }
 
-    /// The default comparison with `densify_above`, and its regions.
+    /// The bump's height at (x, y).
+    fn height_at(&self, x: f64, y: f64) -> f64 {
+        let r = (x - self.top.x).hypot(y - self.top.y);
+        let half = self.fwhm / 2.0;
+        self.height
+            * match self.profile {
+                Profile::Gaussian => {
+                    let sigma = self.fwhm / 2.3548;
+                    (-r * r / (2.0 * sigma * sigma)).exp()
+                }
+                Profile::Cone => (1.0 - 0.5 * r / half).max(0.0),
+                Profile::Cap => {
+                    // The sphere through the top and the base circle of radius `fwhm`.
+                    let (h, a) = (self.height, self.fwhm);
+                    let sphere = (a * a + h * h) / (2.0 * h);
+                    (((sphere * sphere - r * r).max(0.0).sqrt() - (sphere - h)) / h).max(0.0)
+                }
+                Profile::Plateau => {
+                    // Flat within `half`, a cosine flank as wide again.
+                    let t = ((r - half) / half).clamp(0.0, 1.0);
+                    0.5 * (1.0 + (std::f64::consts::PI * t).cos())
+                }
+            }
+    }
+
+    /// The default comparison with `densify_above`, and its regions; with `densify_above`
+    /// infinite, the cylinders alone (no densification and no model fill).
     fn run(
         &self,
         core: &PointCloud,
@@ -642,6 +676,7 @@ impl Bump {
     ) -> (Deviations, Regions) {
         let mut cfg = CompareConfig::default();
         cfg.adaptive.densify_above = densify_above;
+        cfg.adaptive.model_fill = densify_above.is_finite();
         let dev = compare(core, reference, scan, &cfg).unwrap();
         let regions = find_regions(&dev, &RegionConfig::default());
         (dev, regions)
@@ -666,7 +701,7 @@ impl Bump {
 /// grows and the bump's points are trimmed). With densification one region at the bump on
 /// every seed: on 17 a peak model fitted where the scan's own heights (δ) rise measures it
 /// (`Reason::PeakModel`), on 2 the cylinders at the added core points do. The peak is within
-/// 10 % on 15 seeds (the others +14 %, -10.1 %, +18 %, +12 %, and -21 % on the seed the
+/// 10 % on 15 seeds (the others +14 %, -10.1 %, +18 %, +12 %, and -44 % on the seed the
 /// cylinders find alone): about 8 scan points lie on such a bump. Requiring 8 supporting
 /// points (the peak fit's own floor) left 5 of 20 without a region.
 #[test]
@@ -677,6 +712,7 @@ fn bumps_narrower_than_the_cylinders_are_measured_by_a_peak_model() {
             top: Point3::new(4.2, 4.2, 0.0),
             height: 0.3,
             fwhm: 0.44,
+            profile: Profile::Gaussian,
             scan_density: 19.0,
             noise: 0.015,
             core_step: 0.4,
@@ -705,12 +741,96 @@ fn bumps_narrower_than_the_cylinders_are_measured_by_a_peak_model() {
     assert!(within >= 14, "{within} of 20 peaks within 10 %");
 }
 
-/// Issue 5's acceptance targets (IoU >= 0.95, RMS <= 0.01 mm, every peak within 10 %): not
-/// reached at 300,000 scan points (IoU 0.924 / 0.950 and RMS 0.013 / 0.010 mm on seeds 11 /
-/// 12; seed 11's narrow 0.29 mm bump reported -11 %; seed 12's narrow 0.09 mm pit found by a
-/// peak model, -4 %), nor in full at 1.2 million (POLISHBOT_SCAN_POINTS=1200000: IoU 0.935
-/// on seed 11; every peak within 10 %, the pit included; docs/ALGORITHMS.md). Run with
-/// --ignored.
+/// RMS error (over the given core points where the truth exceeds 0.01 mm) and IoU (points
+/// beyond the default tolerance, 0.05 mm) of the default comparison of `bump`, with or
+/// without the model fill, and how many core points a model measured.
+fn bump_scores(bump: &Bump, model_fill: bool) -> (f64, f64, usize) {
+    let (core, reference, scan) = bump.case();
+    let mut cfg = CompareConfig::default();
+    cfg.adaptive.model_fill = model_fill;
+    let dev = compare(&core, &reference, &scan, &cfg).unwrap();
+    let (mut sum2, mut n, mut both, mut either, mut modelled) = (0.0, 0, 0, 0, 0);
+    for (p, v) in dev.points.iter().zip(&dev.values).take(dev.given) {
+        let truth = bump.height_at(p.x, p.y);
+        modelled += usize::from(v.reason == polishbot::compare::Reason::PeakModel);
+        if truth > 0.01 {
+            sum2 += (v.distance - truth).powi(2);
+            n += 1;
+        }
+        let (is_true, detected) = (truth > 0.05, v.significant && v.distance > 0.05);
+        both += usize::from(is_true && detected);
+        either += usize::from(is_true || detected);
+    }
+    (
+        (sum2 / n as f64).sqrt(),
+        both as f64 / either as f64,
+        modelled,
+    )
+}
+
+/// The model fill (adaptive step 13) on bumps of four shapes, three sizes and four noise seeds
+/// each, at 300k-like density (19 scan points/mm², 0.015 mm noise), core points 0.2 mm apart.
+/// Gaussian bumps (what the peak model is) are measured much better: mean RMS 0.0129 →
+/// 0.0050 mm, mean IoU 0.83 → 0.91. Cones, spherical caps and flat-topped plateaus are not
+/// Gaussians: where a Gaussian was accepted on them anyway, the profile test (mean residual
+/// per level of the model) refuses the flat tops and the large caps, and no case ends up
+/// worse than the cylinders (without the profile test a 0.1 mm plateau read 0.0164-0.0181 mm
+/// RMS against 0.0121-0.0148 mm).
+#[test]
+fn model_fill_measures_gaussian_defects_and_spares_other_shapes() {
+    let profiles = [
+        Profile::Gaussian,
+        Profile::Cone,
+        Profile::Cap,
+        Profile::Plateau,
+    ];
+    let mut gaussian = [[0.0; 2]; 2];
+    for profile in profiles {
+        for (height, fwhm) in [(0.1, 1.0), (0.3, 0.8), (0.2, 1.6)] {
+            for seed in 1..=4 {
+                let bump = Bump {
+                    top: Point3::new(4.1, 3.9, 0.0),
+                    height,
+                    fwhm,
+                    profile,
+                    scan_density: 19.0,
+                    noise: 0.015,
+                    core_step: 0.2,
+                    seed,
+                };
+                let (rms_off, iou_off, none) = bump_scores(&bump, false);
+                let (rms_on, iou_on, modelled) = bump_scores(&bump, true);
+                let case = format!("{profile:?} {height} mm high, {fwhm} mm wide, seed {seed}");
+                eprintln!(
+                    "{case}: RMS {rms_off:.4} -> {rms_on:.4}, IoU {iou_off:.3} -> {iou_on:.3}, \
+                     {modelled} core points modelled"
+                );
+                assert_eq!(none, 0, "{case}");
+                assert!(rms_on <= rms_off + 0.0005, "{case}: worse with the fill");
+                if let Profile::Gaussian = profile {
+                    assert!(modelled > 0, "{case}: no model");
+                    for (k, (off, on)) in [(rms_off, rms_on), (iou_off, iou_on)].iter().enumerate()
+                    {
+                        gaussian[k][0] += off / 12.0;
+                        gaussian[k][1] += on / 12.0;
+                    }
+                }
+            }
+        }
+    }
+    let [rms, iou] = gaussian;
+    eprintln!("Gaussian bumps: mean RMS {rms:?}, mean IoU {iou:?}");
+    assert!(rms[1] <= 0.5 * rms[0], "{rms:?}");
+    assert!(iou[1] >= iou[0] + 0.05, "{iou:?}");
+}
+
+/// Issue 5's acceptance targets (IoU >= 0.95, RMS <= 0.01 mm, every peak within 10 %): at
+/// 300,000 scan points RMS is met since the model fill (0.0047 / 0.0068 mm on seeds 11 / 12;
+/// every one of seeds 11-34 within 0.0092 mm) and IoU on seed 11 (0.956), not on seed 12
+/// (0.927: five of its 120 true error points read just inside the tolerance, four points
+/// just outside read just beyond it), and seed 11's narrow 0.29 mm bump is reported -11 %.
+/// At 1.2 million (POLISHBOT_SCAN_POINTS=1200000) everything but seed 11's IoU (0.936).
+/// docs/ALGORITHMS.md, adaptive step 13. Run with --ignored.
 #[test]
 #[ignore]
 fn acceptance_targets() {

@@ -17,6 +17,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::densify::densify;
+use super::fill::{fill, Model};
 use super::fit::{fit, student_t95, FitScratch, Local};
 use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
@@ -48,7 +49,7 @@ pub(super) struct Prepared<'a> {
     /// Half-length of every cylinder: max(max_distance, smallest radius), py4dgeo's rule
     /// with the smallest candidate radius (not the largest: that reached outlier clusters
     /// beyond max_distance; docs/ALGORITHMS.md, adaptive step 1).
-    half_length: f64,
+    pub(super) half_length: f64,
     /// The core points and their index: [`refine`] evaluates the reference points whose
     /// nearest core point is the one refined (its Voronoi cell on the reference).
     pub(super) core: &'a [Point3<f64>],
@@ -251,8 +252,12 @@ pub fn run(
     tops.extend(&extra.points);
     let points = [&core.points[..], &extra.points].concat();
     let normals = [normals, &extra.normals].concat();
+    let mut models = extra.models;
     if a.peak_fit {
-        fit_peaks(&prep, &points, &tops, &normals, &mut values, cfg);
+        models.extend(fit_peaks(&prep, &points, &tops, &normals, &mut values, cfg));
+    }
+    if a.model_fill {
+        fill(&prep, &points, &normals, &mut values, &models, cfg);
     }
     Ok(Evaluated {
         values,
@@ -330,7 +335,8 @@ fn refined(dev: &Deviation, cfg: &CompareConfig) -> bool {
 /// bump, a few along a ridge) — the peak model is fitted to the scan points within the
 /// window radius (largest candidate radius + refine radius: the cell's reach plus the widest
 /// flank a quadric estimate sees) of the refined top, in the tangent frame of the core point's
-/// normal, heights = the point-pair distances. An accepted fit replaces that core point's peak.
+/// normal, heights = the point-pair distances. An accepted fit replaces that core point's peak;
+/// the accepted models are returned.
 fn fit_peaks(
     prep: &Prepared,
     points: &[Point3<f64>],
@@ -338,18 +344,18 @@ fn fit_peaks(
     normals: &[Vector3<f64>],
     values: &mut [Deviation],
     cfg: &CompareConfig,
-) {
+) -> Vec<Model> {
     // Points a peak model measured (densification) have their peak from it already.
     let refined_ids: Vec<usize> = (0..values.len())
         .filter(|&i| refined(&values[i], cfg) && values[i].reason != Reason::PeakModel)
         .collect();
     if refined_ids.is_empty() {
-        return;
+        return Vec::new();
     }
     let peaks: Vec<f64> = values.iter().map(|v| v.peak).collect();
     let summits = summits(prep, points, &refined_ids, &peaks);
     let radius = prep.peak_window();
-    let fitted: Vec<(usize, f64)> = summits
+    let fitted: Vec<(usize, Model)> = summits
         .par_iter()
         .map_init(
             || (Vec::new(), Vec::new(), PeakScratch::default()),
@@ -368,15 +374,29 @@ fn fit_peaks(
                 };
                 fit_peak(window, &w, scratch)
                     .filter(|f| f.accepted(&w))
-                    .map(|f| (i, f.peak))
+                    .map(|fit| {
+                        let (origin, normal) = (*top, *n);
+                        (
+                            i,
+                            Model {
+                                origin,
+                                normal,
+                                fit,
+                            },
+                        )
+                    })
             },
         )
         .flatten()
         .collect();
-    for (i, peak) in fitted {
-        values[i].peak = peak;
-        values[i].peak_fitted = true;
-    }
+    fitted
+        .into_iter()
+        .map(|(i, model)| {
+            values[i].peak = model.fit.peak;
+            values[i].peak_fitted = true;
+            model
+        })
+        .collect()
 }
 
 /// Those of the core points `ids` whose |value| (`values` per core point) is the largest

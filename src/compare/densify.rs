@@ -13,9 +13,10 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::adaptive::{at, scan_pairs, summits, tangent_frame, Prepared, Scratch};
+use super::fill::{model_result, Model};
 use super::fit::student_t95;
 use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow};
-use super::{CompareConfig, Deviation, Reason};
+use super::{CompareConfig, Deviation};
 
 /// A summit's cylinder must hold at least this share of the reference points a full disc of
 /// its radius holds: fits through the few points of a narrow face or a strip beside an edge
@@ -37,12 +38,13 @@ const MODEL_MIN_SUPPORT: usize = 5;
 const MIN_WIDTH: f64 = 0.5;
 
 /// Core points added by [`densify`].
-#[derive(Default)]
 pub(super) struct Densified {
     /// The reference points made core points.
     pub points: Vec<Point3<f64>>,
     /// Their outward unit normals (the reference's).
     pub normals: Vec<Vector3<f64>>,
+    /// The peak models that measured narrow defects ([`modelled`]).
+    pub models: Vec<Model>,
 }
 
 /// The extra core points around the summits among `values` (one per given core point of
@@ -99,7 +101,8 @@ pub(super) fn densify(
     // comes from one model at most).
     let position: std::collections::HashMap<usize, usize> =
         extra.iter().enumerate().map(|(k, &j)| (j, k)).collect();
-    for (j, value) in modelled(prep, &is_candidate, cfg) {
+    let (values, models) = modelled(prep, &is_candidate, cfg);
+    for (j, value) in values {
         match position.get(&j) {
             Some(&k) => added[k] = value,
             None => {
@@ -111,6 +114,7 @@ pub(super) fn densify(
     let points = Densified {
         points: extra.iter().map(|&j| c.reference.points[j]).collect(),
         normals: extra.iter().map(|&j| prep.ref_normals[j]).collect(),
+        models,
     };
     (points, added)
 }
@@ -137,13 +141,13 @@ fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
 /// standard errors, every reference point within the refine radius of the top (normal within
 /// `max_normal_angle`, not a core point) becomes a core point whose distance is the model's
 /// height there, with LoD t95(n - 9) × its standard error plus the registration term
-/// ([`Reason::PeakModel`], [`measured`]). Larger tops first; a reference point goes to the
+/// ([`super::Reason::PeakModel`], [`measured`]). Larger tops first; a reference point goes to the
 /// first top that reaches it.
 fn modelled(
     prep: &Prepared,
     is_candidate: &[bool],
     cfg: &CompareConfig,
-) -> Vec<(usize, Deviation)> {
+) -> (Vec<(usize, Deviation)>, Vec<Model>) {
     let above = cfg.adaptive.densify_above;
     let tolerance = 2.0 * above;
     let c = prep.clouds;
@@ -154,7 +158,7 @@ fn modelled(
         })
         .collect();
     if ids.is_empty() {
-        return Vec::new();
+        return (Vec::new(), Vec::new());
     }
     let tops = summits(prep, &c.reference.points, &ids, &prep.delta);
     let window = prep.peak_window();
@@ -203,9 +207,19 @@ fn modelled(
             .then(a.0.cmp(&b.0))
     });
     let mut used = vec![false; c.reference.len()];
-    fits.iter()
+    let values = fits
+        .iter()
         .flat_map(|(j, fit)| measured(prep, *j, fit, cfg, &mut used))
-        .collect()
+        .collect();
+    let models = fits
+        .into_iter()
+        .map(|(j, fit)| Model {
+            origin: c.reference.points[j],
+            normal: prep.ref_normals[j],
+            fit,
+        })
+        .collect();
+    (values, models)
 }
 
 /// The reference points within the refine radius of top `j` (normal within
@@ -221,7 +235,6 @@ fn measured(
     let c = prep.clouds;
     let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
     let (e1, e2) = tangent_frame(n);
-    let window = prep.peak_window();
     let mut near = Vec::new();
     prep.reference_near(x, n, prep.refine_radius, cfg.max_distance, &mut near);
     let mut values: Vec<(usize, Deviation)> = Vec::new();
@@ -238,20 +251,10 @@ fn measured(
         if off < nearest_centre.0 {
             nearest_centre = (off, values.len());
         }
-        let value = Deviation {
-            distance: height,
-            uncertainty: student_t95(fit.dof()) * se + 1.96 * cfg.registration_error,
-            significant: false,
-            radius: window,
-            n_ref: 0,
-            n_scan: fit.n,
-            direction: Vector3::zeros(),
-            spread: [0.0, fit.sigma],
-            peak: f64::NAN,
-            peak_fitted: false,
-            reason: Reason::PeakModel,
-        };
-        values.push((k, value.finish(&prep.ref_normals[k])));
+        values.push((
+            k,
+            model_result(prep, fit, height, se, &prep.ref_normals[k], cfg),
+        ));
     }
     if let Some((_, top)) = values.get_mut(nearest_centre.1) {
         top.peak = fit.peak;

@@ -8,6 +8,7 @@ mod adaptive;
 mod classic;
 mod core;
 mod densify;
+mod fill;
 mod fit;
 pub(crate) mod grid;
 mod peakfit;
@@ -132,6 +133,12 @@ pub struct AdaptiveConfig {
     /// points (default 0.025, half the default tolerance; `inspect` sets half the tolerance;
     /// infinity turns it off).
     pub densify_above: f64,
+    /// Inside a defect that an accepted peak model describes (those of `peak_fit` and of the
+    /// narrow defects densification measures), the model's height replaces the cylinder
+    /// estimate at the core points whose surrounding scan points agree with it (a
+    /// lack-of-fit test); those rows become `Reason::PeakModel` (default true;
+    /// docs/ALGORITHMS.md, adaptive step 13).
+    pub model_fill: bool,
 }
 
 impl Default for AdaptiveConfig {
@@ -148,6 +155,7 @@ impl Default for AdaptiveConfig {
             refine_above: 0.05,
             peak_fit: true,
             densify_above: 0.025,
+            model_fill: true,
         }
     }
 }
@@ -167,9 +175,10 @@ pub enum Reason {
     FewReference,
     /// Fewer than `min_points` scan points in the cylinder.
     FewScan,
-    /// The distance is the height of a peak model fitted around the top of a defect that the
-    /// cylinders cannot resolve (adaptive densification; `n_ref` 0, `radius` the model's
-    /// window, `n_scan` the scan points it used).
+    /// The distance is the height of a peak model fitted to a defect: around the top of a
+    /// defect that the cylinders cannot resolve (adaptive densification), or inside a defect
+    /// whose model follows the scan points (adaptive model fill); `n_ref` 0, `radius` the
+    /// model's window, `n_scan` the scan points it used.
     PeakModel,
 }
 

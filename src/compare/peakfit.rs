@@ -118,6 +118,13 @@ impl PeakFit {
         self.n - PARAMS
     }
 
+    /// The defect term's share of its amplitude at (u, v) of the window's frame (mm): 1 at
+    /// the top, falling to 0 off the defect.
+    pub fn defect_share(&self, u: f64, v: f64) -> f64 {
+        // The gradient along the amplitude is the defect term over the amplitude.
+        model(self.shape, &self.params, u / self.scale, v / self.scale).1[3]
+    }
+
     /// The fitted surface's height at (u, v) of the window's frame (mm) and its standard
     /// error from the fit's covariance (NaN when that is not positive there).
     pub fn height_at(&self, u: f64, v: f64) -> (f64, f64) {

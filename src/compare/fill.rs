@@ -1,0 +1,221 @@
+//! Model fill (adaptive step 13): inside a defect that an accepted peak model describes, the
+//! model's height replaces the cylinder estimate at the core points. A cylinder's quadric
+//! flattens a narrow defect and at the largest radius trims it as outliers, so the core points
+//! on a defect's flanks (where its boundary at the tolerance lies) read 0.01-0.07 mm off; the
+//! model is fitted to all the scan points of the defect and pins the flank to a few
+//! micrometres where it describes them. A core point takes the model only where the scan
+//! points around it agree with the model (a lack-of-fit test), so a defect of another shape
+//! keeps its cylinder values where the model misses it. docs/ALGORITHMS.md (adaptive step 13)
+//! has the numbers.
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::adaptive::{scan_pairs, tangent_frame, Prepared};
+use super::fit::student_t95;
+use super::peakfit::PeakFit;
+use super::{CompareConfig, Deviation, Reason};
+use crate::cloud::Neighbours;
+
+/// A core point is inside a model's defect where the defect term is at least this share of
+/// its amplitude (5 %: about 2.4 standard deviations of a Gaussian from its core).
+const MIN_SHARE: f64 = 0.05;
+
+/// The mean residual of the scan points around a core point against the model must be within
+/// this many of its standard errors: beyond, the model does not describe the surface there.
+const LACK_OF_FIT: f64 = 3.0;
+
+/// Levels of the defect term (share of its amplitude) that split a window's scan points for
+/// [`follows_profile`].
+const LEVELS: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 1.01];
+
+/// Residuals beyond this many noise SD are outliers (the peak fit trims them likewise) and
+/// do not count in the lack-of-fit tests.
+const OUTLIER: f64 = 4.0;
+
+/// Fewest scan points around a core point for the lack-of-fit test (fewer: the model would
+/// extrapolate into a hole, and the cylinder value stays).
+const MIN_LOCAL: usize = 4;
+
+/// An accepted peak model and its frame: the window's origin and normal.
+pub(super) struct Model {
+    /// The window's origin (the model's (u, v) = (0, 0)).
+    pub origin: Point3<f64>,
+    /// The window's normal (the model's heights are along it).
+    pub normal: Vector3<f64>,
+    /// The fitted model.
+    pub fit: PeakFit,
+}
+
+impl Model {
+    /// (u, v) of `x` in the model's tangent frame and its offset along the normal.
+    fn local(&self, x: &Point3<f64>) -> (f64, f64, f64) {
+        let (e1, e2) = tangent_frame(&self.normal);
+        let d = x - self.origin;
+        (d.dot(&e1), d.dot(&e2), d.dot(&self.normal))
+    }
+}
+
+/// Replaces the result of every core point (`points`, outward unit `normals`, `values`; rows
+/// already measured by a model are left alone) that lies inside the defect of one of `models`
+/// whose window follows its profile ([`follows_profile`])
+/// ([`MIN_SHARE`], within the window radius and the cylinders' half-length, normal within
+/// `max_normal_angle`; the model whose origin is nearest when several reach it) by that
+/// model's height there, when the scan points within the smallest radius around it pass the
+/// lack-of-fit test ([`LACK_OF_FIT`]). The LoD is t95(n - 9) × the height's standard error
+/// from the fit's covariance plus the registration term; rows become [`Reason::PeakModel`]
+/// (`radius` the window, `n_ref` 0, `n_scan` the model's points).
+pub(super) fn fill(
+    prep: &Prepared,
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    values: &mut [Deviation],
+    models: &[Model],
+    cfg: &CompareConfig,
+) {
+    if models.is_empty() {
+        return;
+    }
+    let window = prep.peak_window();
+    let index = Neighbours::new(points);
+    let shaped: Vec<bool> = models
+        .par_iter()
+        .map_init(Vec::new, |knn, m| follows_profile(prep, m, knn))
+        .collect();
+    // Per core point: the nearest model that reaches it (distance from its origin, model).
+    let mut owner: Vec<Option<(f64, usize)>> = vec![None; points.len()];
+    for (m, model) in models.iter().enumerate() {
+        if !shaped[m] {
+            continue;
+        }
+        for nb in index.within_unsorted(&model.origin, window) {
+            let k = nb.index;
+            if values[k].reason != Reason::Ok || normals[k].dot(&model.normal) < prep.cos_limit {
+                continue;
+            }
+            let (u, v, along) = model.local(&points[k]);
+            let r = u.hypot(v);
+            let inside = r <= window
+                && along.abs() <= prep.half_length
+                && model.fit.defect_share(u, v) >= MIN_SHARE;
+            if inside && owner[k].is_none_or(|(best, _)| r < best) {
+                owner[k] = Some((r, m));
+            }
+        }
+    }
+    let filled: Vec<(usize, Deviation)> = owner
+        .par_iter()
+        .enumerate()
+        .filter_map(|(k, o)| o.map(|(_, m)| (k, m)))
+        .map_init(Vec::new, |knn, (k, m)| {
+            let value = modelled_at(prep, &models[m], &points[k], &normals[k], cfg, knn)?;
+            Some((k, value))
+        })
+        .flatten()
+        .collect();
+    for (k, value) in &filled {
+        let peak_fitted = values[*k].peak_fitted;
+        let peak = values[*k].peak;
+        values[*k] = *value;
+        // A summit keeps the fitted peak of its defect.
+        if peak_fitted {
+            values[*k].peak = peak;
+            values[*k].peak_fitted = true;
+        }
+    }
+}
+
+/// Whether the scan points of `model`'s window follow its profile: at every level of the
+/// defect term ([`LEVELS`]) with at least [`MIN_LOCAL`] points, their mean residual is within
+/// [`LACK_OF_FIT`] standard errors (noise / √n). A Gaussian fitted to a flat-topped or
+/// spherical defect passes the peak fit's guard (residual SD within 1.3 × the noise) but
+/// overshoots at the top and falls short on the shoulders, which these means show.
+fn follows_profile(prep: &Prepared, model: &Model, knn: &mut Vec<(f64, u32)>) -> bool {
+    let mut bins = [(0usize, 0.0); LEVELS.len() - 1];
+    let o = model.origin;
+    scan_pairs(
+        prep,
+        &o,
+        &model.normal,
+        prep.peak_window(),
+        knn,
+        |_, d, pair| {
+            let (u, v, _) = model.local(&(o + d));
+            let share = model.fit.defect_share(u, v);
+            let residual = pair - model.fit.height_at(u, v).0;
+            let level = LEVELS
+                .windows(2)
+                .position(|w| share >= w[0] && share < w[1]);
+            if let (Some(b), true) = (level, residual.abs() <= OUTLIER * prep.noise) {
+                bins[b].0 += 1;
+                bins[b].1 += residual;
+            }
+        },
+    );
+    bins.iter().all(|&(n, sum)| {
+        n < MIN_LOCAL || (sum / n as f64).abs() <= LACK_OF_FIT * prep.noise / (n as f64).sqrt()
+    })
+}
+
+/// `model`'s result at core point `p` (outward unit normal `n`), or None when the scan points
+/// within the smallest radius of `p` do not agree with the model ([`LACK_OF_FIT`]) or are
+/// fewer than [`MIN_LOCAL`] (`knn`: scratch).
+fn modelled_at(
+    prep: &Prepared,
+    model: &Model,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    cfg: &CompareConfig,
+    knn: &mut Vec<(f64, u32)>,
+) -> Option<Deviation> {
+    let fit = &model.fit;
+    let (u, v, _) = model.local(p);
+    let (height, se) = fit.height_at(u, v);
+    if !se.is_finite() {
+        return None;
+    }
+    let (mut count, mut sum) = (0usize, 0.0);
+    scan_pairs(prep, p, n, prep.smallest_radius(), knn, |_, d, pair| {
+        let (su, sv, _) = model.local(&(p + d));
+        let residual = pair - fit.height_at(su, sv).0;
+        if residual.abs() <= OUTLIER * prep.noise {
+            sum += residual;
+            count += 1;
+        }
+    });
+    if count < MIN_LOCAL {
+        return None;
+    }
+    let mean = sum / count as f64;
+    let se_mean = (prep.noise * prep.noise / count as f64 + se * se).sqrt();
+    if mean.abs() > LACK_OF_FIT * se_mean {
+        return None;
+    }
+    Some(model_result(prep, fit, height, se, n, cfg))
+}
+
+/// The [`Reason::PeakModel`] result of `fit`'s `height` (standard error `se`) at a core point
+/// with outward unit normal `n`: LoD t95(n - 9) × se plus the registration term, `radius` the
+/// window, `n_ref` 0, `n_scan` the model's points.
+pub(super) fn model_result(
+    prep: &Prepared,
+    fit: &PeakFit,
+    height: f64,
+    se: f64,
+    n: &Vector3<f64>,
+    cfg: &CompareConfig,
+) -> Deviation {
+    let value = Deviation {
+        distance: height,
+        uncertainty: student_t95(fit.dof()) * se + 1.96 * cfg.registration_error,
+        significant: false,
+        radius: prep.peak_window(),
+        n_ref: 0,
+        n_scan: fit.n,
+        direction: Vector3::zeros(),
+        spread: [0.0, fit.sigma],
+        peak: f64::NAN,
+        peak_fitted: false,
+        reason: Reason::PeakModel,
+    };
+    value.finish(n)
+}
