@@ -26,7 +26,11 @@ const LACK_OF_FIT: f64 = 3.0;
 
 /// Levels of the defect term (share of its amplitude) that split a window's scan points for
 /// [`follows_profile`].
-const LEVELS: [f64; 5] = [0.05, 0.25, 0.5, 0.75, 1.01];
+const LEVELS: [f64; 7] = [0.05, 0.15, 0.3, 0.5, 0.7, 0.85, 1.01];
+
+/// 99 % quantiles of the chi-square distribution with 0-6 degrees of freedom (one per level
+/// of [`LEVELS`] that holds points).
+const CHI2_99: [f64; 7] = [0.0, 6.63, 9.21, 11.34, 13.28, 15.09, 16.81];
 
 /// Residuals beyond this many noise SD are outliers (the peak fit trims them likewise) and
 /// do not count in the lack-of-fit tests.
@@ -124,11 +128,13 @@ pub(super) fn fill(
     }
 }
 
-/// Whether the scan points of `model`'s window follow its profile: at every level of the
-/// defect term ([`LEVELS`]) with at least [`MIN_LOCAL`] points, their mean residual is within
-/// [`LACK_OF_FIT`] standard errors (noise / √n). A Gaussian fitted to a flat-topped or
-/// spherical defect passes the peak fit's guard (residual SD within 1.3 × the noise) but
-/// overshoots at the top and falls short on the shoulders, which these means show.
+/// Whether the scan points of `model`'s window follow its profile: split by the level of the
+/// defect term ([`LEVELS`]; levels with fewer than [`MIN_LOCAL`] points left out), the sum of
+/// the squared standardised mean residuals (mean / (noise / √n) per level) is within the
+/// 99 % quantile of a chi-square with one degree of freedom per level ([`CHI2_99`]). A
+/// Gaussian fitted to a flat-topped or spherical defect passes the peak fit's guard (residual
+/// SD within 1.3 × the noise) but overshoots at the top and falls short on the shoulders,
+/// which these means show.
 fn follows_profile(prep: &Prepared, model: &Model, knn: &mut Vec<(f64, u32)>) -> bool {
     let mut bins = [(0usize, 0.0); LEVELS.len() - 1];
     let o = model.origin;
@@ -151,9 +157,17 @@ fn follows_profile(prep: &Prepared, model: &Model, knn: &mut Vec<(f64, u32)>) ->
             }
         },
     );
-    bins.iter().all(|&(n, sum)| {
-        n < MIN_LOCAL || (sum / n as f64).abs() <= LACK_OF_FIT * prep.noise / (n as f64).sqrt()
-    })
+    // The levels' standardised mean residuals, squared and summed: a chi-square with as
+    // many degrees of freedom as levels when the model is right.
+    let (mut chi2, mut levels) = (0.0, 0);
+    for &(n, sum) in &bins {
+        if n >= MIN_LOCAL {
+            let z = sum / n as f64 / (prep.noise / (n as f64).sqrt());
+            chi2 += z * z;
+            levels += 1;
+        }
+    }
+    chi2 <= CHI2_99[levels]
 }
 
 /// `model`'s result at core point `p` (outward unit normal `n`), or None when the scan points
