@@ -17,9 +17,8 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::densify::densify;
-use super::fill::{fill, Model};
+use super::fill::{fill, fit_model, Model, ModelScratch};
 use super::fit::{fit, student_t95, FitScratch, Local};
-use super::peakfit::{fit_peak, PeakScratch, PeakWindow};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
 
@@ -266,7 +265,7 @@ pub fn run(
         models.extend(fit_peaks(&prep, &points, &tops, &normals, &mut values, cfg));
     }
     if a.model_fill {
-        fill(&prep, &points, &normals, &mut values, &models, cfg);
+        fill(&prep, &points, &normals, &mut values, models, cfg);
     }
     Ok(Evaluated {
         values,
@@ -363,39 +362,12 @@ fn fit_peaks(
     }
     let peaks: Vec<f64> = values.iter().map(|v| v.peak).collect();
     let summits = summits(prep, points, &refined_ids, &peaks);
-    let radius = prep.peak_window();
     let fitted: Vec<(usize, Model)> = summits
         .par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new(), PeakScratch::default()),
-            |(knn, window, scratch), &i| {
-                let (top, n) = (&tops[i], &normals[i]);
-                let (e1, e2) = tangent_frame(n);
-                window.clear();
-                scan_pairs(prep, top, n, radius, knn, |_, d, pair| {
-                    window.push([d.dot(&e1), d.dot(&e2), pair]);
-                });
-                let w = PeakWindow {
-                    radius,
-                    noise: prep.noise,
-                    max_misfit: cfg.adaptive.max_misfit,
-                    start: values[i].peak,
-                };
-                fit_peak(window, &w, scratch)
-                    .filter(|f| f.accepted(&w))
-                    .map(|fit| {
-                        let (origin, normal) = (*top, *n);
-                        (
-                            i,
-                            Model {
-                                origin,
-                                normal,
-                                fit,
-                            },
-                        )
-                    })
-            },
-        )
+        .map_init(ModelScratch::default, |scratch, &i| {
+            let start = values[i].peak;
+            fit_model(prep, &tops[i], &normals[i], start, cfg, scratch).map(|m| (i, m))
+        })
         .flatten()
         .collect();
     fitted

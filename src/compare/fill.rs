@@ -12,7 +12,8 @@ use rayon::prelude::*;
 
 use super::adaptive::{scan_pairs, tangent_frame, Prepared};
 use super::fit::student_t95;
-use super::peakfit::PeakFit;
+use super::fit::Local;
+use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow};
 use super::{CompareConfig, Deviation, Reason};
 use crate::cloud::Neighbours;
 
@@ -23,6 +24,106 @@ const MIN_SHARE: f64 = 0.05;
 /// The mean residual of the scan points around a core point against the model must be within
 /// this many of its standard errors: beyond, the model does not describe the surface there.
 const LACK_OF_FIT: f64 = 3.0;
+
+/// Those of `models` whose window follows their profile ([`follows_profile`]).
+fn shaped(prep: &Prepared, models: Vec<Model>) -> Vec<Model> {
+    models
+        .into_par_iter()
+        .map_init(Vec::new, |knn, m| {
+            follows_profile(prep, &m, knn).then_some(m)
+        })
+        .flatten()
+        .collect()
+}
+
+/// Sets `owner` of the core points inside the defects of `models[from..]` (see [`fill`]) to
+/// the model whose origin is nearest; points owned before `from` keep their model.
+#[allow(clippy::too_many_arguments)]
+fn claim(
+    prep: &Prepared,
+    index: &Neighbours,
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    values: &[Deviation],
+    models: &[Model],
+    from: usize,
+    owner: &mut [Option<(f64, usize)>],
+) {
+    let window = prep.peak_window();
+    let before: Vec<bool> = owner.iter().map(Option::is_some).collect();
+    for (m, model) in models.iter().enumerate().skip(from) {
+        for nb in index.within_unsorted(&model.origin, window) {
+            let k = nb.index;
+            let foreign =
+                values[k].reason != Reason::Ok || normals[k].dot(&model.normal) < prep.cos_limit;
+            if foreign || before[k] {
+                continue;
+            }
+            let (u, v, along) = model.local(&points[k]);
+            let r = u.hypot(v);
+            let inside = r <= window
+                && along.abs() <= prep.half_length
+                && model.fit.defect_share(u, v) >= MIN_SHARE;
+            if inside && owner[k].is_none_or(|(best, _)| r < best) {
+                owner[k] = Some((r, m));
+            }
+        }
+    }
+}
+
+/// Models for the error points that no model reaches (beyond `refine_above`, significant,
+/// not `owner`ed): a long ridge holds a few summits whose fits do not all converge, and the
+/// windows of those that do cover a part of it. Larger |distance| first, each at least half
+/// a window radius from those taken before, a model fitted around it ([`fit_model`]).
+fn more_models(
+    prep: &Prepared,
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    values: &[Deviation],
+    owner: &[Option<(f64, usize)>],
+    cfg: &CompareConfig,
+) -> Vec<Model> {
+    let mut open: Vec<usize> = (0..values.len())
+        .filter(|&k| {
+            let v = &values[k];
+            owner[k].is_none()
+                && v.reason == Reason::Ok
+                && v.significant
+                && v.distance.abs() > cfg.adaptive.refine_above
+        })
+        .collect();
+    open.sort_by(|&a, &b| {
+        values[b]
+            .distance
+            .abs()
+            .total_cmp(&values[a].distance.abs())
+            .then(a.cmp(&b))
+    });
+    let apart = 0.5 * prep.peak_window();
+    let mut starts: Vec<usize> = Vec::new();
+    for k in open {
+        if starts
+            .iter()
+            .all(|&s| (points[s] - points[k]).norm() >= apart)
+        {
+            starts.push(k);
+        }
+    }
+    starts
+        .par_iter()
+        .map_init(ModelScratch::default, |scratch, &k| {
+            fit_model(
+                prep,
+                &points[k],
+                &normals[k],
+                values[k].distance,
+                cfg,
+                scratch,
+            )
+        })
+        .flatten()
+        .collect()
+}
 
 /// Levels of the defect term (share of its amplitude) that split a window's scan points for
 /// [`follows_profile`].
@@ -59,6 +160,54 @@ impl Model {
     }
 }
 
+/// Reusable buffers of [`fit_model`].
+#[derive(Default)]
+pub(super) struct ModelScratch {
+    knn: Vec<(f64, u32)>,
+    window: Vec<Local>,
+    peak: PeakScratch,
+}
+
+/// The peak model (`peakfit.rs`) fitted to the scan points of the peak window around
+/// `origin` (outward unit `normal`; heights = their point-pair distances, in the normal's
+/// tangent frame), started from the height `start`; None unless the fit is accepted
+/// ([`PeakFit::accepted`]).
+pub(super) fn fit_model(
+    prep: &Prepared,
+    origin: &Point3<f64>,
+    normal: &Vector3<f64>,
+    start: f64,
+    cfg: &CompareConfig,
+    scratch: &mut ModelScratch,
+) -> Option<Model> {
+    let radius = prep.peak_window();
+    let (e1, e2) = tangent_frame(normal);
+    let window = &mut scratch.window;
+    window.clear();
+    scan_pairs(
+        prep,
+        origin,
+        normal,
+        radius,
+        &mut scratch.knn,
+        |_, d, pair| {
+            window.push([d.dot(&e1), d.dot(&e2), pair]);
+        },
+    );
+    let w = PeakWindow {
+        radius,
+        noise: prep.noise,
+        max_misfit: cfg.adaptive.max_misfit,
+        start,
+    };
+    let fit = fit_peak(window, &w, &mut scratch.peak).filter(|f| f.accepted(&w))?;
+    Some(Model {
+        origin: *origin,
+        normal: *normal,
+        fit,
+    })
+}
+
 /// Replaces the result of every core point (`points`, outward unit `normals`, `values`; rows
 /// already measured by a model are left alone) that lies inside the defect of one of `models`
 /// whose window follows its profile ([`follows_profile`])
@@ -73,39 +222,22 @@ pub(super) fn fill(
     points: &[Point3<f64>],
     normals: &[Vector3<f64>],
     values: &mut [Deviation],
-    models: &[Model],
+    models: Vec<Model>,
     cfg: &CompareConfig,
 ) {
-    if models.is_empty() {
-        return;
-    }
-    let window = prep.peak_window();
     let index = Neighbours::new(points);
-    let shaped: Vec<bool> = models
-        .par_iter()
-        .map_init(Vec::new, |knn, m| follows_profile(prep, m, knn))
-        .collect();
+    let mut models = shaped(prep, models);
     // Per core point: the nearest model that reaches it (distance from its origin, model).
     let mut owner: Vec<Option<(f64, usize)>> = vec![None; points.len()];
-    for (m, model) in models.iter().enumerate() {
-        if !shaped[m] {
-            continue;
-        }
-        for nb in index.within_unsorted(&model.origin, window) {
-            let k = nb.index;
-            if values[k].reason != Reason::Ok || normals[k].dot(&model.normal) < prep.cos_limit {
-                continue;
-            }
-            let (u, v, along) = model.local(&points[k]);
-            let r = u.hypot(v);
-            let inside = r <= window
-                && along.abs() <= prep.half_length
-                && model.fit.defect_share(u, v) >= MIN_SHARE;
-            if inside && owner[k].is_none_or(|(best, _)| r < best) {
-                owner[k] = Some((r, m));
-            }
-        }
-    }
+    claim(
+        prep, &index, points, normals, values, &models, 0, &mut owner,
+    );
+    let first = models.len();
+    let extra = more_models(prep, points, normals, values, &owner, cfg);
+    models.extend(shaped(prep, extra));
+    claim(
+        prep, &index, points, normals, values, &models, first, &mut owner,
+    );
     let filled: Vec<(usize, Deviation)> = owner
         .par_iter()
         .enumerate()
