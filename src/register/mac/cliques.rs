@@ -57,6 +57,9 @@ impl Bits {
     }
 }
 
+/// Start vertices enumerated between two checks of the clique cap ([`node_guided`]).
+const CAP_CHUNK: usize = 16;
+
 /// Limits that keep enumeration bounded on dense graphs.
 #[derive(Debug, Clone, Copy)]
 pub struct CliqueLimits {
@@ -99,8 +102,9 @@ impl Budget {
         if self.stopped.load(Ordering::Relaxed) {
             return true;
         }
-        let out = self.found.load(Ordering::Relaxed) >= self.limits.max_cliques
-            || self.limits.deadline.is_some_and(|d| Instant::now() >= d);
+        // The clique cap is applied between chunks of start vertices ([`node_guided`]), so
+        // that which cliques are found does not depend on the threads' timing.
+        let out = self.limits.deadline.is_some_and(|d| Instant::now() >= d);
         if out {
             self.stopped.store(true, Ordering::Relaxed);
         }
@@ -371,19 +375,31 @@ pub fn node_guided(g: &Graph, limits: CliqueLimits, top_k: usize) -> Selection {
     let n = g.len();
     let budget = Budget::new(limits, n);
     let pos = degeneracy_positions(g);
-    let best = (0..n)
-        .into_par_iter()
-        .fold(
-            || (NodeBest::new(n), vec![u32::MAX; n]),
-            |(mut acc, mut local), v| {
-                cliques_from(g, &pos, v, &budget, &mut local, &mut |c, w| {
-                    acc.offer(c, w);
-                });
-                (acc, local)
-            },
-        )
-        .map(|(acc, _)| acc)
-        .reduce(|| NodeBest::new(n), NodeBest::merge);
+    // Start vertices in chunks, in order; the cap is checked after each chunk: the cliques
+    // found are the same from run to run (a shared counter checked inside the recursion let
+    // the threads' timing choose them).
+    let mut best = NodeBest::new(n);
+    let mut capped = false;
+    for start in (0..n).step_by(CAP_CHUNK) {
+        if budget.found.load(Ordering::Relaxed) >= limits.max_cliques {
+            capped = true;
+            break;
+        }
+        let chunk = (start..(start + CAP_CHUNK).min(n))
+            .into_par_iter()
+            .fold(
+                || (NodeBest::new(n), vec![u32::MAX; n]),
+                |(mut acc, mut local), v| {
+                    cliques_from(g, &pos, v, &budget, &mut local, &mut |c, w| {
+                        acc.offer(c, w);
+                    });
+                    (acc, local)
+                },
+            )
+            .map(|(acc, _)| acc)
+            .reduce(|| NodeBest::new(n), NodeBest::merge);
+        best = best.merge(chunk);
+    }
     let mut ids: Vec<u32> = best
         .index
         .iter()
@@ -402,7 +418,9 @@ pub fn node_guided(g: &Graph, limits: CliqueLimits, top_k: usize) -> Selection {
     Selection {
         cliques,
         found: budget.found.load(Ordering::Relaxed),
-        truncated: budget.stopped.load(Ordering::Relaxed) || budget.capped.load(Ordering::Relaxed),
+        truncated: capped
+            || budget.stopped.load(Ordering::Relaxed)
+            || budget.capped.load(Ordering::Relaxed),
     }
 }
 
@@ -508,6 +526,28 @@ mod tests {
             10,
         );
         assert!(sel.truncated);
-        assert!(sel.found < 50 + rayon::current_num_threads() * 2);
+        // The cap is checked after each chunk of start vertices: the enumeration stops within
+        // one chunk of reaching it, short of every clique.
+        let all = maximal_cliques(&g, 3).len();
+        assert!(sel.found >= 50 && sel.found < all, "{} of {all}", sel.found);
+    }
+
+    /// The same cliques, the same count, whatever the threads do (a shared counter checked
+    /// inside the recursion let their timing decide which cliques a capped search found).
+    #[test]
+    fn capped_search_is_repeatable() {
+        let g = random_graph(200, 0.3, 11);
+        let limits = CliqueLimits {
+            min_size: 3,
+            max_cliques: 500,
+            deadline: None,
+        };
+        let first = node_guided(&g, limits, 20);
+        assert!(first.truncated);
+        for _ in 0..20 {
+            let again = node_guided(&g, limits, 20);
+            assert_eq!(again.found, first.found);
+            assert_eq!(again.cliques, first.cliques);
+        }
     }
 }
