@@ -940,6 +940,21 @@ fn inspect_writes_the_design_files() {
         .unwrap_or_else(|| panic!("no count of added core points: {stdout}"));
     assert!(added > 0, "{stdout}");
     assert_eq!(rows.len(), 50_000 + added);
+    // Rows measured by a defect model have n_ref 0 and a distance; the summary counts them.
+    let modelled: usize = stdout
+        .split(" measured by defect models")
+        .next()
+        .and_then(|head| head.rsplit(", ").next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count of modelled core points: {stdout}"));
+    let n_ref_0 = rows
+        .iter()
+        .filter(|r| r[10] == 0.0 && r[6].is_finite())
+        .count();
+    assert!(
+        modelled > 0 && modelled == n_ref_0,
+        "{modelled} / {n_ref_0}: {stdout}"
+    );
     let ply = std::fs::read(out.join("deviations.ply")).unwrap();
     let head = String::from_utf8_lossy(&ply[..600]);
     for field in [

@@ -294,13 +294,9 @@ impl StageTimes {
 }
 
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
-    let valid = dev.values.iter().filter(|v| v.distance.is_finite()).count();
     println!(
-        "inspect: {} core points ({} added around defects, {} with a distance), method {:?}, \
-         tolerance {} mm, {:.2} s",
-        dev.values.len(),
-        dev.added(),
-        valid,
+        "inspect: core points {}, method {:?}, tolerance {} mm, {:.2} s",
+        dev.summary(),
         dev.method,
         found.tolerance,
         seconds

@@ -24,7 +24,6 @@ pub fn write(
     mut summary: Vec<(String, String)>,
 ) -> Result<()> {
     let distances: Vec<f64> = dev.values.iter().map(|v| v.distance).collect();
-    let valid = distances.iter().filter(|d| d.is_finite()).count();
     summary.splice(
         0..0,
         [
@@ -38,15 +37,7 @@ pub fn write(
             ),
             ("tolerance".to_string(), format!("{} mm", found.tolerance)),
             ("method".to_string(), format!("{:?} M3C2", dev.method)),
-            (
-                "core points".to_string(),
-                format!(
-                    "{} ({} added around defects, {} with a distance)",
-                    dev.values.len(),
-                    dev.added(),
-                    valid
-                ),
-            ),
+            ("core points".to_string(), dev.summary()),
         ],
     );
     let rows = found

@@ -282,6 +282,29 @@ impl Deviations {
     pub fn added(&self) -> usize {
         self.values.len() - self.given
     }
+
+    /// Core points whose distance is a defect model's height ([`Reason::PeakModel`]).
+    pub fn modelled(&self) -> usize {
+        let model = |v: &&Deviation| v.reason == Reason::PeakModel;
+        self.values.iter().filter(model).count()
+    }
+
+    /// One line on the core points: how many, how many added, measured by defect models,
+    /// and with a distance.
+    pub fn summary(&self) -> String {
+        let valid = self
+            .values
+            .iter()
+            .filter(|v| v.distance.is_finite())
+            .count();
+        format!(
+            "{} ({} added around defects, {} measured by defect models, {} with a distance)",
+            self.values.len(),
+            self.added(),
+            self.modelled(),
+            valid
+        )
+    }
 }
 
 /// Data every variant reads: the two clouds and their grids.
