@@ -3,16 +3,15 @@
 //! flattens a narrow defect and at the largest radius trims it as outliers, so the core points
 //! on a defect's flanks (where its boundary at the tolerance lies) read 0.01-0.07 mm off; the
 //! model is fitted to all the scan points of the defect and pins the flank to a few
-//! micrometres where it describes them. A core point takes the model only where the scan
-//! points around it agree with the model (a lack-of-fit test), so a defect of another shape
-//! keeps its cylinder values where the model misses it. docs/ALGORITHMS.md (adaptive step 13)
-//! has the numbers.
+//! micrometres where it describes them. A model counts only when its window's scan points
+//! follow its profile level by level, and a core point takes it only where the scan points
+//! around it agree with it (lack-of-fit tests), so a defect of another shape keeps its
+//! cylinder values. docs/ALGORITHMS.md (adaptive step 13) has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::adaptive::{scan_pairs, tangent_frame, Prepared};
-use super::fit::student_t95;
-use super::fit::Local;
+use super::fit::{student_t95, Local};
 use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow};
 use super::{CompareConfig, Deviation, Reason};
 use crate::cloud::Neighbours;
@@ -24,6 +23,142 @@ const MIN_SHARE: f64 = 0.05;
 /// The mean residual of the scan points around a core point against the model must be within
 /// this many of its standard errors: beyond, the model does not describe the surface there.
 const LACK_OF_FIT: f64 = 3.0;
+
+/// Levels of the defect term (share of its amplitude) that split a window's scan points for
+/// [`follows_profile`].
+const LEVELS: [f64; 7] = [0.05, 0.15, 0.3, 0.5, 0.7, 0.85, 1.01];
+
+/// 99 % quantiles of the chi-square distribution with 0-6 degrees of freedom (one per level
+/// of [`LEVELS`] that holds points).
+const CHI2_99: [f64; 7] = [0.0, 6.63, 9.21, 11.34, 13.28, 15.09, 16.81];
+
+/// Residuals beyond this many noise SD are outliers (the peak fit trims them likewise) and
+/// do not count in the lack-of-fit tests.
+const OUTLIER: f64 = 4.0;
+
+/// Fewest scan points around a core point for the lack-of-fit test (fewer: the model would
+/// extrapolate into a hole, and the cylinder value stays).
+const MIN_LOCAL: usize = 4;
+
+/// An accepted peak model and its frame: the window's origin and normal.
+pub(super) struct Model {
+    /// The window's origin (the model's (u, v) = (0, 0)).
+    pub origin: Point3<f64>,
+    /// The window's normal (the model's heights are along it).
+    pub normal: Vector3<f64>,
+    /// The fitted model.
+    pub fit: PeakFit,
+}
+
+impl Model {
+    /// (u, v) of `x` in the model's tangent frame and its offset along the normal.
+    fn local(&self, x: &Point3<f64>) -> (f64, f64, f64) {
+        let (e1, e2) = tangent_frame(&self.normal);
+        let d = x - self.origin;
+        (d.dot(&e1), d.dot(&e2), d.dot(&self.normal))
+    }
+}
+
+/// Reusable buffers of [`fit_model`].
+#[derive(Default)]
+pub(super) struct ModelScratch {
+    knn: Vec<(f64, u32)>,
+    window: Vec<Local>,
+    peak: PeakScratch,
+}
+
+/// The peak model (`peakfit.rs`) fitted to the scan points of the peak window around
+/// `origin` (outward unit `normal`; heights = their point-pair distances, in the normal's
+/// tangent frame), started from the height `start`; None unless the fit is accepted
+/// ([`PeakFit::accepted`]).
+pub(super) fn fit_model(
+    prep: &Prepared,
+    origin: &Point3<f64>,
+    normal: &Vector3<f64>,
+    start: f64,
+    cfg: &CompareConfig,
+    scratch: &mut ModelScratch,
+) -> Option<Model> {
+    let radius = prep.peak_window();
+    let (e1, e2) = tangent_frame(normal);
+    let window = &mut scratch.window;
+    window.clear();
+    scan_pairs(
+        prep,
+        origin,
+        normal,
+        radius,
+        &mut scratch.knn,
+        |_, d, pair| {
+            window.push([d.dot(&e1), d.dot(&e2), pair]);
+        },
+    );
+    let w = PeakWindow {
+        radius,
+        noise: prep.noise,
+        max_misfit: cfg.adaptive.max_misfit,
+        start,
+    };
+    let fit = fit_peak(window, &w, &mut scratch.peak).filter(|f| f.accepted(&w))?;
+    Some(Model {
+        origin: *origin,
+        normal: *normal,
+        fit,
+    })
+}
+
+/// Replaces the result of every core point (`points`, outward unit `normals`, `values`; rows
+/// already measured by a model are left alone) that lies inside the defect of a model by that
+/// model's height there. The models: `models` and those [`more_models`] fits, each kept when
+/// its window follows its profile ([`follows_profile`]). Inside: the defect term at least
+/// [`MIN_SHARE`] of its amplitude, within the window radius and the cylinders' half-length,
+/// normal within `max_normal_angle`; the model whose origin is nearest when several reach a
+/// point (those of `models` first). A point keeps its cylinder value unless the scan points
+/// within the smallest radius around it pass the lack-of-fit test ([`LACK_OF_FIT`]). The LoD is t95(n - 9) × the height's standard error
+/// from the fit's covariance plus the registration term; rows become [`Reason::PeakModel`]
+/// (`radius` the window, `n_ref` 0, `n_scan` the model's points).
+pub(super) fn fill(
+    prep: &Prepared,
+    points: &[Point3<f64>],
+    normals: &[Vector3<f64>],
+    values: &mut [Deviation],
+    models: Vec<Model>,
+    cfg: &CompareConfig,
+) {
+    let index = Neighbours::new(points);
+    let mut models = shaped(prep, models);
+    // Per core point: the nearest model that reaches it (distance from its origin, model).
+    let mut owner: Vec<Option<(f64, usize)>> = vec![None; points.len()];
+    claim(
+        prep, &index, points, normals, values, &models, 0, &mut owner,
+    );
+    let first = models.len();
+    let extra = more_models(prep, points, normals, values, &owner, cfg);
+    models.extend(shaped(prep, extra));
+    claim(
+        prep, &index, points, normals, values, &models, first, &mut owner,
+    );
+    let filled: Vec<(usize, Deviation)> = owner
+        .par_iter()
+        .enumerate()
+        .filter_map(|(k, o)| o.map(|(_, m)| (k, m)))
+        .map_init(Vec::new, |knn, (k, m)| {
+            let value = modelled_at(prep, &models[m], &points[k], &normals[k], cfg, knn)?;
+            Some((k, value))
+        })
+        .flatten()
+        .collect();
+    for (k, value) in &filled {
+        let peak_fitted = values[*k].peak_fitted;
+        let peak = values[*k].peak;
+        values[*k] = *value;
+        // A summit keeps the fitted peak of its defect.
+        if peak_fitted {
+            values[*k].peak = peak;
+            values[*k].peak_fitted = true;
+        }
+    }
+}
 
 /// Those of `models` whose window follows their profile ([`follows_profile`]).
 fn shaped(prep: &Prepared, models: Vec<Model>) -> Vec<Model> {
@@ -123,141 +258,6 @@ fn more_models(
         })
         .flatten()
         .collect()
-}
-
-/// Levels of the defect term (share of its amplitude) that split a window's scan points for
-/// [`follows_profile`].
-const LEVELS: [f64; 7] = [0.05, 0.15, 0.3, 0.5, 0.7, 0.85, 1.01];
-
-/// 99 % quantiles of the chi-square distribution with 0-6 degrees of freedom (one per level
-/// of [`LEVELS`] that holds points).
-const CHI2_99: [f64; 7] = [0.0, 6.63, 9.21, 11.34, 13.28, 15.09, 16.81];
-
-/// Residuals beyond this many noise SD are outliers (the peak fit trims them likewise) and
-/// do not count in the lack-of-fit tests.
-const OUTLIER: f64 = 4.0;
-
-/// Fewest scan points around a core point for the lack-of-fit test (fewer: the model would
-/// extrapolate into a hole, and the cylinder value stays).
-const MIN_LOCAL: usize = 4;
-
-/// An accepted peak model and its frame: the window's origin and normal.
-pub(super) struct Model {
-    /// The window's origin (the model's (u, v) = (0, 0)).
-    pub origin: Point3<f64>,
-    /// The window's normal (the model's heights are along it).
-    pub normal: Vector3<f64>,
-    /// The fitted model.
-    pub fit: PeakFit,
-}
-
-impl Model {
-    /// (u, v) of `x` in the model's tangent frame and its offset along the normal.
-    fn local(&self, x: &Point3<f64>) -> (f64, f64, f64) {
-        let (e1, e2) = tangent_frame(&self.normal);
-        let d = x - self.origin;
-        (d.dot(&e1), d.dot(&e2), d.dot(&self.normal))
-    }
-}
-
-/// Reusable buffers of [`fit_model`].
-#[derive(Default)]
-pub(super) struct ModelScratch {
-    knn: Vec<(f64, u32)>,
-    window: Vec<Local>,
-    peak: PeakScratch,
-}
-
-/// The peak model (`peakfit.rs`) fitted to the scan points of the peak window around
-/// `origin` (outward unit `normal`; heights = their point-pair distances, in the normal's
-/// tangent frame), started from the height `start`; None unless the fit is accepted
-/// ([`PeakFit::accepted`]).
-pub(super) fn fit_model(
-    prep: &Prepared,
-    origin: &Point3<f64>,
-    normal: &Vector3<f64>,
-    start: f64,
-    cfg: &CompareConfig,
-    scratch: &mut ModelScratch,
-) -> Option<Model> {
-    let radius = prep.peak_window();
-    let (e1, e2) = tangent_frame(normal);
-    let window = &mut scratch.window;
-    window.clear();
-    scan_pairs(
-        prep,
-        origin,
-        normal,
-        radius,
-        &mut scratch.knn,
-        |_, d, pair| {
-            window.push([d.dot(&e1), d.dot(&e2), pair]);
-        },
-    );
-    let w = PeakWindow {
-        radius,
-        noise: prep.noise,
-        max_misfit: cfg.adaptive.max_misfit,
-        start,
-    };
-    let fit = fit_peak(window, &w, &mut scratch.peak).filter(|f| f.accepted(&w))?;
-    Some(Model {
-        origin: *origin,
-        normal: *normal,
-        fit,
-    })
-}
-
-/// Replaces the result of every core point (`points`, outward unit `normals`, `values`; rows
-/// already measured by a model are left alone) that lies inside the defect of one of `models`
-/// whose window follows its profile ([`follows_profile`])
-/// ([`MIN_SHARE`], within the window radius and the cylinders' half-length, normal within
-/// `max_normal_angle`; the model whose origin is nearest when several reach it) by that
-/// model's height there, when the scan points within the smallest radius around it pass the
-/// lack-of-fit test ([`LACK_OF_FIT`]). The LoD is t95(n - 9) × the height's standard error
-/// from the fit's covariance plus the registration term; rows become [`Reason::PeakModel`]
-/// (`radius` the window, `n_ref` 0, `n_scan` the model's points).
-pub(super) fn fill(
-    prep: &Prepared,
-    points: &[Point3<f64>],
-    normals: &[Vector3<f64>],
-    values: &mut [Deviation],
-    models: Vec<Model>,
-    cfg: &CompareConfig,
-) {
-    let index = Neighbours::new(points);
-    let mut models = shaped(prep, models);
-    // Per core point: the nearest model that reaches it (distance from its origin, model).
-    let mut owner: Vec<Option<(f64, usize)>> = vec![None; points.len()];
-    claim(
-        prep, &index, points, normals, values, &models, 0, &mut owner,
-    );
-    let first = models.len();
-    let extra = more_models(prep, points, normals, values, &owner, cfg);
-    models.extend(shaped(prep, extra));
-    claim(
-        prep, &index, points, normals, values, &models, first, &mut owner,
-    );
-    let filled: Vec<(usize, Deviation)> = owner
-        .par_iter()
-        .enumerate()
-        .filter_map(|(k, o)| o.map(|(_, m)| (k, m)))
-        .map_init(Vec::new, |knn, (k, m)| {
-            let value = modelled_at(prep, &models[m], &points[k], &normals[k], cfg, knn)?;
-            Some((k, value))
-        })
-        .flatten()
-        .collect();
-    for (k, value) in &filled {
-        let peak_fitted = values[*k].peak_fitted;
-        let peak = values[*k].peak;
-        values[*k] = *value;
-        // A summit keeps the fitted peak of its defect.
-        if peak_fitted {
-            values[*k].peak = peak;
-            values[*k].peak_fitted = true;
-        }
-    }
 }
 
 /// Whether the scan points of `model`'s window follow its profile: split by the level of the
