@@ -17,7 +17,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::densify::densify;
-use super::fill::{fill, fit_model, Model, ModelScratch};
+use super::fill::{fill, fit_model, Guard, Model, ModelScratch};
 use super::fit::{fit, student_t95, FitScratch, Local};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
@@ -366,7 +366,16 @@ fn fit_peaks(
         .par_iter()
         .map_init(ModelScratch::default, |scratch, &i| {
             let start = values[i].peak;
-            fit_model(prep, &tops[i], &normals[i], start, cfg, scratch).map(|m| (i, m))
+            fit_model(
+                prep,
+                &tops[i],
+                &normals[i],
+                start,
+                Guard::Peak,
+                cfg,
+                scratch,
+            )
+            .map(|m| (i, m))
         })
         .flatten()
         .collect();

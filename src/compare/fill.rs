@@ -36,6 +36,10 @@ const CHI2_99: [f64; 7] = [0.0, 6.63, 9.21, 11.34, 13.28, 15.09, 16.81];
 /// do not count in the lack-of-fit tests.
 const OUTLIER: f64 = 4.0;
 
+/// Fewest scan points where an extra model's Gaussian is at least 10 % of its amplitude (the
+/// peak fit's own floor).
+const MIN_SUPPORT: usize = 8;
+
 /// Fewest scan points around a core point for the lack-of-fit test (fewer: the model would
 /// extrapolate into a hole, and the cylinder value stays).
 const MIN_LOCAL: usize = 4;
@@ -67,15 +71,26 @@ pub(super) struct ModelScratch {
     peak: PeakScratch,
 }
 
+/// How [`fit_model`] judges a fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Guard {
+    /// [`PeakFit::accepted`]: the fit describes the data and pins the peak (its standard
+    /// error within a tenth of it); for peaks.
+    Peak,
+    /// [`PeakFit::describes`] (the same without the bound on the peak's standard error): for
+    /// the fill, whose LoD carries each height's own standard error.
+    Describes,
+}
+
 /// The peak model (`peakfit.rs`) fitted to the scan points of the peak window around
 /// `origin` (outward unit `normal`; heights = their point-pair distances, in the normal's
-/// tangent frame), started from the height `start`; None unless the fit is accepted
-/// ([`PeakFit::accepted`]).
+/// tangent frame), started from the height `start`; None unless the fit passes `guard`.
 pub(super) fn fit_model(
     prep: &Prepared,
     origin: &Point3<f64>,
     normal: &Vector3<f64>,
     start: f64,
+    guard: Guard,
     cfg: &CompareConfig,
     scratch: &mut ModelScratch,
 ) -> Option<Model> {
@@ -99,7 +114,10 @@ pub(super) fn fit_model(
         max_misfit: cfg.adaptive.max_misfit,
         start,
     };
-    let fit = fit_peak(window, &w, &mut scratch.peak).filter(|f| f.accepted(&w))?;
+    let fit = fit_peak(window, &w, &mut scratch.peak).filter(|f| match guard {
+        Guard::Peak => f.accepted(&w),
+        Guard::Describes => f.describes(&w, MIN_SUPPORT),
+    })?;
     Some(Model {
         origin: *origin,
         normal: *normal,
@@ -247,11 +265,13 @@ fn more_models(
     starts
         .par_iter()
         .map_init(ModelScratch::default, |scratch, &k| {
+            let start = values[k].distance;
             fit_model(
                 prep,
                 &points[k],
                 &normals[k],
-                values[k].distance,
+                start,
+                Guard::Describes,
                 cfg,
                 scratch,
             )
