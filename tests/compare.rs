@@ -932,21 +932,11 @@ fn inspect_writes_the_design_files() {
         .collect();
     // 50,000 selected core points (the default for a scan of 90,000 points, see
     // `default_count`), then those added around the defects' tops.
-    let added: usize = stdout
-        .split(" added around defects")
-        .next()
-        .and_then(|head| head.rsplit('(').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("no count of added core points: {stdout}"));
+    let added = count_before(&stdout, " added around defects", '(');
     assert!(added > 0, "{stdout}");
     assert_eq!(rows.len(), 50_000 + added);
     // Rows measured by a defect model have n_ref 0 and a distance; the summary counts them.
-    let modelled: usize = stdout
-        .split(" measured by defect models")
-        .next()
-        .and_then(|head| head.rsplit(", ").next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("no count of modelled core points: {stdout}"));
+    let modelled = count_before(&stdout, " measured by defect models", ' ');
     let n_ref_0 = rows
         .iter()
         .filter(|r| r[10] == 0.0 && r[6].is_finite())
@@ -1039,6 +1029,17 @@ fn inspect(reference: &Path, scan: &Path, out: &Path, extra: &[&str]) {
             .arg("-o")
             .arg(out),
     );
+}
+
+/// The count printed in `stdout` right before `label`, after the last `start` before it
+/// (the summary line's "N (K added around defects, M measured by defect models, ...)").
+fn count_before(stdout: &str, label: &str, start: char) -> usize {
+    stdout
+        .split(label)
+        .next()
+        .and_then(|head| head.rsplit(start).next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count before {label:?}: {stdout}"))
 }
 
 /// IoU, against truth.json, of the error points (significant, beyond the tolerance) that

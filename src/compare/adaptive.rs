@@ -17,7 +17,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::densify::densify;
-use super::fill::{fill, fit_model, Guard, Model, ModelScratch};
+use super::fill::{fill, fit_window, gather_window, Model, ModelScratch};
 use super::fit::{fit, student_t95, FitScratch, Local};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
 use crate::cloud::{Neighbours, PointCloud};
@@ -365,17 +365,10 @@ fn fit_peaks(
     let fitted: Vec<(usize, Model)> = summits
         .par_iter()
         .map_init(ModelScratch::default, |scratch, &i| {
-            let start = values[i].peak;
-            fit_model(
-                prep,
-                &tops[i],
-                &normals[i],
-                start,
-                Guard::Peak,
-                cfg,
-                scratch,
-            )
-            .map(|m| (i, m))
+            gather_window(prep, &tops[i], &normals[i], scratch);
+            let (fit, w) = fit_window(prep, values[i].peak, cfg, scratch)?;
+            fit.accepted(&w)
+                .then(|| (i, Model::new(tops[i], normals[i], fit)))
         })
         .flatten()
         .collect();

@@ -12,10 +12,10 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::adaptive::{at, scan_pairs, summits, tangent_frame, Prepared, Scratch};
-use super::fill::{model_result, Model};
+use super::adaptive::{at, summits, tangent_frame, Prepared, Scratch};
+use super::fill::{fit_window, gather_window, model_result, Model, ModelScratch};
 use super::fit::student_t95;
-use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow};
+use super::peakfit::PeakFit;
 use super::{CompareConfig, Deviation};
 
 /// A summit's cylinder must hold at least this share of the reference points a full disc of
@@ -167,37 +167,21 @@ fn modelled(
     let spacing = c.scan_density.sqrt().recip();
     let mut fits: Vec<(usize, PeakFit)> = tops
         .par_iter()
-        .map_init(
-            || (Vec::new(), Vec::new(), PeakScratch::default()),
-            |(knn, pts, scratch), &j| {
-                let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
-                let caught = prep.nearest_core_id(x).is_some_and(|i| is_candidate[i]);
-                if caught || cluster(prep, j, tolerance, cfg) < MIN_CLUSTER {
-                    return None;
-                }
-                let (e1, e2) = tangent_frame(n);
-                pts.clear();
-                scan_pairs(prep, x, n, window, knn, |_, d, pair| {
-                    pts.push([d.dot(&e1), d.dot(&e2), pair]);
-                });
-                if (pts.len() as f64) < MIN_COVERAGE * full {
-                    return None;
-                }
-                let w = PeakWindow {
-                    radius: window,
-                    noise: prep.noise,
-                    max_misfit: cfg.adaptive.max_misfit,
-                    start: prep.delta[j],
-                };
-                fit_peak(pts, &w, scratch)
-                    .filter(|f| {
-                        f.describes(&w, MODEL_MIN_SUPPORT)
-                            && f.widths[0] >= MIN_WIDTH * spacing
-                            && f.peak.abs() - student_t95(f.dof()) * f.se > tolerance
-                    })
-                    .map(|f| (j, f))
-            },
-        )
+        .map_init(ModelScratch::default, |scratch, &j| {
+            let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
+            let caught = prep.nearest_core_id(x).is_some_and(|i| is_candidate[i]);
+            if caught || cluster(prep, j, tolerance, cfg) < MIN_CLUSTER {
+                return None;
+            }
+            if (gather_window(prep, x, n, scratch) as f64) < MIN_COVERAGE * full {
+                return None;
+            }
+            let (f, w) = fit_window(prep, prep.delta[j], cfg, scratch)?;
+            let measures = f.describes(&w, MODEL_MIN_SUPPORT)
+                && f.widths[0] >= MIN_WIDTH * spacing
+                && f.peak.abs() - student_t95(f.dof()) * f.se > tolerance;
+            measures.then_some((j, f))
+        })
         .flatten()
         .collect();
     fits.sort_by(|a, b| {
@@ -213,11 +197,7 @@ fn modelled(
         .collect();
     let models = fits
         .into_iter()
-        .map(|(j, fit)| Model {
-            origin: c.reference.points[j],
-            normal: prep.ref_normals[j],
-            fit,
-        })
+        .map(|(j, fit)| Model::new(c.reference.points[j], prep.ref_normals[j], fit))
         .collect();
     (values, models)
 }

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use super::adaptive::{scan_pairs, tangent_frame, Prepared};
 use super::fit::{student_t95, Local};
-use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow};
+use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow, MIN_SUPPORT};
 use super::{CompareConfig, Deviation, Reason};
 use crate::cloud::Neighbours;
 
@@ -36,34 +36,46 @@ const CHI2_99: [f64; 7] = [0.0, 6.63, 9.21, 11.34, 13.28, 15.09, 16.81];
 /// do not count in the lack-of-fit tests.
 const OUTLIER: f64 = 4.0;
 
-/// Fewest scan points where an extra model's Gaussian is at least 10 % of its amplitude (the
-/// peak fit's own floor).
-const MIN_SUPPORT: usize = 8;
-
 /// Fewest scan points around a core point for the lack-of-fit test (fewer: the model would
 /// extrapolate into a hole, and the cylinder value stays).
 const MIN_LOCAL: usize = 4;
 
-/// An accepted peak model and its frame: the window's origin and normal.
+/// An accepted peak model and its frame: the window's origin, normal and tangent axes.
 pub(super) struct Model {
     /// The window's origin (the model's (u, v) = (0, 0)).
     pub origin: Point3<f64>,
     /// The window's normal (the model's heights are along it).
     pub normal: Vector3<f64>,
+    /// The tangent axes of (u, v) ([`tangent_frame`] of the normal).
+    axes: (Vector3<f64>, Vector3<f64>),
     /// The fitted model.
     pub fit: PeakFit,
 }
 
 impl Model {
+    /// The model `fit` of the window around `origin` with outward unit `normal`.
+    pub fn new(origin: Point3<f64>, normal: Vector3<f64>, fit: PeakFit) -> Model {
+        let axes = tangent_frame(&normal);
+        Model {
+            origin,
+            normal,
+            axes,
+            fit,
+        }
+    }
+
     /// (u, v) of `x` in the model's tangent frame and its offset along the normal.
     fn local(&self, x: &Point3<f64>) -> (f64, f64, f64) {
-        let (e1, e2) = tangent_frame(&self.normal);
         let d = x - self.origin;
-        (d.dot(&e1), d.dot(&e2), d.dot(&self.normal))
+        (
+            d.dot(&self.axes.0),
+            d.dot(&self.axes.1),
+            d.dot(&self.normal),
+        )
     }
 }
 
-/// Reusable buffers of [`fit_model`].
+/// Reusable buffers of [`fit_window`].
 #[derive(Default)]
 pub(super) struct ModelScratch {
     knn: Vec<(f64, u32)>,
@@ -71,33 +83,19 @@ pub(super) struct ModelScratch {
     peak: PeakScratch,
 }
 
-/// How [`fit_model`] judges a fit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(super) enum Guard {
-    /// [`PeakFit::accepted`]: the fit describes the data and pins the peak (its standard
-    /// error within a tenth of it); for peaks.
-    Peak,
-    /// [`PeakFit::describes`] (the same without the bound on the peak's standard error): for
-    /// the fill, whose LoD carries each height's own standard error.
-    Describes,
-}
-
-/// The peak model (`peakfit.rs`) fitted to the scan points of the peak window around
-/// `origin` (outward unit `normal`; heights = their point-pair distances, in the normal's
-/// tangent frame), started from the height `start`; None unless the fit passes `guard`.
-pub(super) fn fit_model(
+/// Gathers the scan points of the peak window around `origin` (outward unit `normal`) into
+/// `scratch`: (u, v) in the normal's tangent frame and height = the point-pair distance.
+/// Returns how many there are.
+pub(super) fn gather_window(
     prep: &Prepared,
     origin: &Point3<f64>,
     normal: &Vector3<f64>,
-    start: f64,
-    guard: Guard,
-    cfg: &CompareConfig,
     scratch: &mut ModelScratch,
-) -> Option<Model> {
-    let radius = prep.peak_window();
+) -> usize {
     let (e1, e2) = tangent_frame(normal);
     let window = &mut scratch.window;
     window.clear();
+    let radius = prep.peak_window();
     scan_pairs(
         prep,
         origin,
@@ -108,21 +106,26 @@ pub(super) fn fit_model(
             window.push([d.dot(&e1), d.dot(&e2), pair]);
         },
     );
+    window.len()
+}
+
+/// The peak model (`peakfit.rs`) fitted to the window last gathered into `scratch`
+/// ([`gather_window`]), started from the height `start`, with the window's expectations for
+/// the caller's guard; None when the fit does not converge.
+pub(super) fn fit_window(
+    prep: &Prepared,
+    start: f64,
+    cfg: &CompareConfig,
+    scratch: &mut ModelScratch,
+) -> Option<(PeakFit, PeakWindow)> {
     let w = PeakWindow {
-        radius,
+        radius: prep.peak_window(),
         noise: prep.noise,
         max_misfit: cfg.adaptive.max_misfit,
         start,
     };
-    let fit = fit_peak(window, &w, &mut scratch.peak).filter(|f| match guard {
-        Guard::Peak => f.accepted(&w),
-        Guard::Describes => f.describes(&w, MIN_SUPPORT),
-    })?;
-    Some(Model {
-        origin: *origin,
-        normal: *normal,
-        fit,
-    })
+    let fit = fit_peak(&scratch.window, &w, &mut scratch.peak)?;
+    Some((fit, w))
 }
 
 /// Replaces the result of every core point (`points`, outward unit `normals`, `values`; rows
@@ -203,13 +206,12 @@ fn claim(
     owner: &mut [Option<(f64, usize)>],
 ) {
     let window = prep.peak_window();
-    let before: Vec<bool> = owner.iter().map(Option::is_some).collect();
     for (m, model) in models.iter().enumerate().skip(from) {
         for nb in index.within_unsorted(&model.origin, window) {
             let k = nb.index;
             let foreign =
                 values[k].reason != Reason::Ok || normals[k].dot(&model.normal) < prep.cos_limit;
-            if foreign || before[k] {
+            if foreign || owner[k].is_some_and(|(_, earlier)| earlier < from) {
                 continue;
             }
             let (u, v, along) = model.local(&points[k]);
@@ -227,7 +229,8 @@ fn claim(
 /// Models for the error points that no model reaches (beyond `refine_above`, significant,
 /// not `owner`ed): a long ridge holds a few summits whose fits do not all converge, and the
 /// windows of those that do cover a part of it. Larger |distance| first, each at least half
-/// a window radius from those taken before, a model fitted around it ([`fit_model`]).
+/// a window radius from those taken before, a model fitted around it that describes its
+/// window (step 10's guard without the bound on the peak's standard error).
 fn more_models(
     prep: &Prepared,
     points: &[Point3<f64>],
@@ -265,16 +268,12 @@ fn more_models(
     starts
         .par_iter()
         .map_init(ModelScratch::default, |scratch, &k| {
-            let start = values[k].distance;
-            fit_model(
-                prep,
-                &points[k],
-                &normals[k],
-                start,
-                Guard::Describes,
-                cfg,
-                scratch,
-            )
+            // The model need not pin a peak: the fill's LoD carries each height's own
+            // standard error.
+            gather_window(prep, &points[k], &normals[k], scratch);
+            let (fit, w) = fit_window(prep, values[k].distance, cfg, scratch)?;
+            let described = fit.describes(&w, MIN_SUPPORT);
+            described.then(|| Model::new(points[k], normals[k], fit))
         })
         .flatten()
         .collect()

@@ -38,7 +38,7 @@ const MAX_ITERATIONS: usize = 50;
 
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
 /// cannot pin its six shape parameters (a spike through one noisy point).
-const MIN_SUPPORT: usize = 8;
+pub(super) const MIN_SUPPORT: usize = 8;
 
 /// The window and the expectations of a peak fit.
 #[derive(Debug, Clone, Copy)]
