@@ -6,9 +6,9 @@
 //! ([`MIN_COVERAGE`]; the largest |distance| of its sign among them within the refine radius),
 //! each reference point within the refine radius (normal within `max_normal_angle`, not
 //! itself a core point) becomes a core point of its own, evaluated like the others. Defects
-//! too narrow for any cylinder's quadric are found from the scan's own heights instead and
-//! measured by a peak model ([`modelled`]). docs/ALGORITHMS.md (adaptive steps 11 and 12)
-//! has the numbers.
+//! too narrow for any cylinder's quadric are found from the scan's own heights instead, or
+//! from those summits that read within `refine_above`, and measured by a peak model
+//! ([`modelled`]). docs/ALGORITHMS.md (adaptive steps 11 and 12) has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -36,6 +36,16 @@ const MODEL_MIN_SUPPORT: usize = 5;
 /// along a line (seed 24 at 300k: 0.083 mm across a 0.23 mm spacing, 0.14 mm high where the
 /// truth is 0).
 const MIN_WIDTH: f64 = 0.5;
+
+/// Where [`modelled`] fits a peak model.
+struct Top {
+    /// The reference point at the window's origin.
+    at: usize,
+    /// The height the fit starts from, mm.
+    start: f64,
+    /// Found from the scan's own heights (δ), not from a summit of the cylinders' values.
+    from_delta: bool,
+}
 
 /// Core points added by [`densify`].
 pub(super) struct Densified {
@@ -101,7 +111,23 @@ pub(super) fn densify(
     // comes from one model at most).
     let position: std::collections::HashMap<usize, usize> =
         extra.iter().enumerate().map(|(k, &j)| (j, k)).collect();
-    let (values, models) = modelled(prep, &is_candidate, cfg);
+    // Summits whose cylinders read between `densify_above` and `refine_above` are not step
+    // 10's: a defect narrower than the largest radius reads low there, and a model may still
+    // show it beyond the tolerance.
+    let mut knn = Vec::new();
+    let shallow: Vec<Top> = tops
+        .iter()
+        .filter(|&&i| values[i].distance.abs() <= cfg.adaptive.refine_above)
+        .filter_map(|&i| {
+            c.ref_grid.knn(&prep.core[i], 1, f64::INFINITY, &mut knn);
+            knn.first().map(|&(_, j)| Top {
+                at: j as usize,
+                start: values[i].distance,
+                from_delta: false,
+            })
+        })
+        .collect();
+    let (values, models) = modelled(prep, &is_candidate, shallow, cfg);
     for (j, value) in values {
         match position.get(&j) {
             Some(&k) => added[k] = value,
@@ -146,6 +172,7 @@ fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
 fn modelled(
     prep: &Prepared,
     is_candidate: &[bool],
+    shallow: Vec<Top>,
     cfg: &CompareConfig,
 ) -> (Vec<(usize, Deviation)>, Vec<Model>) {
     let above = cfg.adaptive.densify_above;
@@ -157,29 +184,44 @@ fn modelled(
             d > tolerance && d < cfg.max_distance
         })
         .collect();
-    if ids.is_empty() {
-        return (Vec::new(), Vec::new());
-    }
-    let tops = summits(prep, &c.reference.points, &ids, &prep.delta);
+    let mut tops: Vec<Top> = match ids.is_empty() {
+        true => Vec::new(),
+        false => summits(prep, &c.reference.points, &ids, &prep.delta)
+            .into_iter()
+            .map(|j| Top {
+                at: j,
+                start: prep.delta[j],
+                from_delta: true,
+            })
+            .collect(),
+    };
+    tops.extend(shallow);
     let window = prep.peak_window();
     // Scan points a covered window holds, and their spacing (median density).
     let full = std::f64::consts::PI * window * window * c.scan_density;
     let spacing = c.scan_density.sqrt().recip();
     let mut fits: Vec<(usize, PeakFit)> = tops
         .par_iter()
-        .map_init(ModelScratch::default, |scratch, &j| {
+        .map_init(ModelScratch::default, |scratch, top| {
+            let j = top.at;
             let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
-            let caught = prep.nearest_core_id(x).is_some_and(|i| is_candidate[i]);
-            if caught || cluster(prep, j, tolerance, cfg) < MIN_CLUSTER {
-                return None;
+            if top.from_delta {
+                let caught = prep.nearest_core_id(x).is_some_and(|i| is_candidate[i]);
+                if caught || cluster(prep, j, tolerance, cfg) < MIN_CLUSTER {
+                    return None;
+                }
             }
             if (gather_window(prep, x, n, scratch) as f64) < MIN_COVERAGE * full {
                 return None;
             }
-            let (f, w) = fit_window(prep, prep.delta[j], cfg, scratch)?;
+            let (f, w) = fit_window(prep, top.start, cfg, scratch)?;
+            let margin = match top.from_delta {
+                true => student_t95(f.dof()) * f.se,
+                false => 0.0,
+            };
             let measures = f.describes(&w, MODEL_MIN_SUPPORT)
                 && f.widths[0] >= MIN_WIDTH * spacing
-                && f.peak.abs() - student_t95(f.dof()) * f.se > tolerance;
+                && f.peak.abs() - margin > tolerance;
             measures.then_some((j, f))
         })
         .flatten()
