@@ -667,7 +667,7 @@ impl Bump {
     }
 
     /// The default comparison with `densify_above`, and its regions; with `densify_above`
-    /// infinite, the cylinders alone (no densification and no model fill).
+    /// infinite, the cylinders alone (no densification, no peak fit and no model fill).
     fn run(
         &self,
         core: &PointCloud,
@@ -678,6 +678,7 @@ impl Bump {
         let mut cfg = CompareConfig::default();
         cfg.adaptive.densify_above = densify_above;
         cfg.adaptive.model_fill = densify_above.is_finite();
+        cfg.adaptive.peak_fit = densify_above.is_finite();
         let dev = compare(core, reference, scan, &cfg).unwrap();
         let regions = find_regions(&dev, &RegionConfig::default());
         (dev, regions)

@@ -1,7 +1,8 @@
 //! Defect regions: significant core points beyond the tolerance (error points), clustered.
 //!
 //! Error points of the same sign closer than `gap_factor` × the core-point spacing are
-//! connected; each connected set of at least `min_points` is a region. Area is the sum of the
+//! connected; each connected set of at least `min_points` (or with a member whose fitted peak
+//! is beyond the tolerance by more than its LoD) is a region. Area is the sum of the
 //! points' area shares (π d8² / 8, d8 the distance to the 8th nearest core point); volume
 //! above tolerance is Σ share × (|distance| - tolerance). Material in excess (distance > 0)
 //! can be ground away: repairable; pits cannot.
@@ -21,7 +22,10 @@ pub struct RegionConfig {
     pub tolerance: f64,
     /// Error points closer than this many core-point spacings are connected (default 2.5).
     pub gap_factor: f64,
-    /// Fewest error points in a region; smaller clusters are dropped as noise (default 3).
+    /// Fewest error points in a region; smaller clusters are dropped as noise (default 3),
+    /// unless a member carries a peak model's fitted peak beyond the tolerance by more than
+    /// its LoD (a defect too narrow for this many core points to read it beyond the
+    /// tolerance).
     pub min_points: usize,
 }
 
@@ -88,6 +92,15 @@ pub struct Regions {
     pub labels: Vec<i64>,
 }
 
+/// Whether core point `i` carries a fitted peak (a peak model's, whose own guard vouches for
+/// it) beyond the tolerance by more than the point's LoD: evidence of a defect on its own,
+/// when the defect is too narrow for `min_points` core points to read it beyond the
+/// tolerance.
+fn vouched(dev: &Deviations, i: usize, cfg: &RegionConfig) -> bool {
+    let v = &dev.values[i];
+    v.peak_fitted && v.peak.abs() - v.uncertainty > cfg.tolerance
+}
+
 fn find(parent: &mut [usize], mut i: usize) -> usize {
     while parent[i] != i {
         parent[i] = parent[parent[i]];
@@ -137,7 +150,7 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
     }
     let mut regions: Vec<(Region, Vec<usize>)> = groups
         .into_values()
-        .filter(|g| g.len() >= cfg.min_points)
+        .filter(|g| g.len() >= cfg.min_points || g.iter().any(|&i| vouched(dev, i, cfg)))
         .map(|g| (describe(dev, &g, &share, cfg.tolerance), g))
         .collect();
     regions.sort_by(|a, b| b.0.volume.total_cmp(&a.0.volume));
@@ -297,5 +310,29 @@ mod tests {
         let mut dev = patch(&[(12, 0.2, true)]);
         dev.values[12].uncertainty = 0.09;
         assert_eq!(region_peak(&dev), 0.2);
+    }
+
+    #[test]
+    fn a_fitted_peak_beyond_the_tolerance_makes_a_region_of_fewer_points() {
+        // Two error points (the rest within the tolerance): no region without a fitted peak.
+        let pair = |peak: f64, fitted: bool, lod: f64| {
+            let mut dev = patch(&[(12, peak, fitted)]);
+            for (i, v) in dev.values.iter_mut().enumerate() {
+                if i != 12 && i != 13 {
+                    v.distance = 0.03;
+                }
+            }
+            dev.values[12].uncertainty = lod;
+            find_regions(&dev, &RegionConfig::default()).regions
+        };
+        assert!(pair(0.15, false, 0.05).is_empty());
+        // A fitted peak beyond the tolerance by more than its point's LoD: a region.
+        let regions = pair(0.15, true, 0.05);
+        assert_eq!(
+            (regions.len(), regions[0].points, regions[0].peak),
+            (1, 2, 0.15)
+        );
+        // Not by more than the LoD: none.
+        assert!(pair(0.15, true, 0.11).is_empty());
     }
 }
