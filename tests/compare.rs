@@ -457,6 +457,20 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
     }
 }
 
+/// Two cases outside the seeds the method was tuned on (11-34), where 300k missed the RMS
+/// target: seed 36 (0.0106 mm: an elongated-Gaussian model of a 5.6 mm ridge read 0.055 mm
+/// high at the ridge's end, and the lack-of-fit test left out the points that showed it as
+/// outliers) and seed 45 (0.024 mm: a 0.39 mm deep, 0.57 mm wide pit read 0.16 mm, its peak
+/// fit started from a cylinder's 0.16 mm and its top cut off beyond twice that). Now 0.0094
+/// and 0.0037 mm.
+#[test]
+fn cases_beyond_the_tuned_seeds_meet_the_rms_target() {
+    for (seed, ours, _) in scores_of(&[36, 45], 300_000) {
+        assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
+        assert_eq!(ours.false_regions, 0, "seed {seed}");
+    }
+}
+
 /// Narrow faces and the strips beside the box cuts hold a few points of a cylinder, where the
 /// error of a fit is largest. On these five cases at 300,000 scan points main had one region
 /// that truth does not have on seeds 24, 26 and 27 until 2026-12-01, and intermediate versions
