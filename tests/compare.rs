@@ -208,6 +208,8 @@ fn score(
         cloud.set_field("peak", col(&|d| d.peak));
         cloud.set_field("peak_fitted", col(&|d| d.peak_fitted as u8 as f64));
         cloud.set_field("reason", col(&|d| d.reason as u8 as f64));
+        let given = (0..dev.values.len()).map(|i| f64::from(u8::from(i < dev.given)));
+        cloud.set_field("given", given.collect());
         let dump = dump.to_string_lossy();
         let path = format!("{dump}-{seed}-{:?}.csv", dev.method);
         polishbot::cloud::write_csv(Path::new(&path), &cloud).unwrap();
