@@ -365,7 +365,7 @@ fn fit_peaks(
     let fitted: Vec<(usize, Model)> = summits
         .par_iter()
         .map_init(ModelScratch::default, |scratch, &i| {
-            gather_window(prep, &tops[i], &normals[i], scratch);
+            gather_window(prep, &tops[i], &normals[i], prep.peak_window(), scratch);
             let (fit, w) = fit_window(prep, values[i].peak, cfg, scratch)?;
             fit.accepted(&w)
                 .then(|| (i, Model::new(tops[i], normals[i], fit)))

@@ -211,7 +211,7 @@ fn modelled(
                     return None;
                 }
             }
-            if (gather_window(prep, x, n, scratch) as f64) < MIN_COVERAGE * full {
+            if (gather_window(prep, x, n, window, scratch) as f64) < MIN_COVERAGE * full {
                 return None;
             }
             let (f, w) = fit_window(prep, top.start, cfg, scratch)?;
@@ -273,10 +273,7 @@ fn measured(
         if off < nearest_centre.0 {
             nearest_centre = (off, values.len());
         }
-        values.push((
-            k,
-            model_result(prep, fit, height, se, &prep.ref_normals[k], cfg),
-        ));
+        values.push((k, model_result(fit, height, se, &prep.ref_normals[k], cfg)));
     }
     if let Some((_, top)) = values.get_mut(nearest_centre.1) {
         top.peak = fit.peak;

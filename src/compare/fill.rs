@@ -36,6 +36,14 @@ const CHI2_99: [f64; 7] = [0.0, 6.63, 9.21, 11.34, 13.28, 15.09, 16.81];
 /// do not count in the lack-of-fit tests.
 const OUTLIER: f64 = 4.0;
 
+/// A model is refitted over a window of this many of its narrow standard deviations when
+/// that is larger than its own ([`widened`]): 3.5 σ holds the defect's foot (its 5 % level
+/// lies at 2.45 σ) and enough plane beyond it.
+const WIDE_WINDOW: f64 = 3.5;
+
+/// A widened window is at most this many times the model's own.
+const MAX_WIDENING: f64 = 2.0;
+
 /// Fewest scan points around a core point for the lack-of-fit test (fewer: the model would
 /// extrapolate into a hole, and the cylinder value stays).
 const MIN_LOCAL: usize = 4;
@@ -80,22 +88,25 @@ impl Model {
 pub(super) struct ModelScratch {
     knn: Vec<(f64, u32)>,
     window: Vec<Local>,
+    /// Radius of the window last gathered, mm.
+    radius: f64,
     peak: PeakScratch,
 }
 
-/// Gathers the scan points of the peak window around `origin` (outward unit `normal`) into
-/// `scratch`: (u, v) in the normal's tangent frame and height = the point-pair distance.
-/// Returns how many there are.
+/// Gathers the scan points within `radius` (the peak window, [`Prepared::peak_window`], or
+/// a widened one) around `origin` (outward unit `normal`) into `scratch`: (u, v) in the
+/// normal's tangent frame and height = the point-pair distance. Returns how many there are.
 pub(super) fn gather_window(
     prep: &Prepared,
     origin: &Point3<f64>,
     normal: &Vector3<f64>,
+    radius: f64,
     scratch: &mut ModelScratch,
 ) -> usize {
     let (e1, e2) = tangent_frame(normal);
+    scratch.radius = radius;
     let window = &mut scratch.window;
     window.clear();
-    let radius = prep.peak_window();
     scan_pairs(
         prep,
         origin,
@@ -119,7 +130,7 @@ pub(super) fn fit_window(
     scratch: &mut ModelScratch,
 ) -> Option<(PeakFit, PeakWindow)> {
     let w = PeakWindow {
-        radius: prep.peak_window(),
+        radius: scratch.radius,
         noise: prep.noise,
         max_misfit: cfg.adaptive.max_misfit,
         start: supported_start(&scratch.window, start, prep.smallest_radius()),
@@ -166,7 +177,7 @@ pub(super) fn fill(
     cfg: &CompareConfig,
 ) {
     let index = Neighbours::new(points);
-    let mut models = shaped(prep, models);
+    let mut models = shaped(prep, models, cfg);
     // Per core point: the nearest model that reaches it (distance from its origin, model).
     let mut owner: Vec<Option<(f64, usize)>> = vec![None; points.len()];
     claim(
@@ -174,7 +185,7 @@ pub(super) fn fill(
     );
     let first = models.len();
     let extra = more_models(prep, points, normals, values, &owner, cfg);
-    models.extend(shaped(prep, extra));
+    models.extend(shaped(prep, extra, cfg));
     claim(
         prep, &index, points, normals, values, &models, first, &mut owner,
     );
@@ -200,15 +211,44 @@ pub(super) fn fill(
     }
 }
 
-/// Those of `models` whose window follows their profile ([`follows_profile`]).
-fn shaped(prep: &Prepared, models: Vec<Model>) -> Vec<Model> {
+/// Those of `models` ([`widened`] where that applies) whose window follows their profile
+/// ([`follows_profile`]).
+fn shaped(prep: &Prepared, models: Vec<Model>, cfg: &CompareConfig) -> Vec<Model> {
     models
         .into_par_iter()
-        .map_init(Vec::new, |knn, m| {
-            follows_profile(prep, &m, knn).then_some(m)
+        .map_init(ModelScratch::default, |scratch, m| {
+            let m = widened(prep, m, cfg, scratch);
+            follows_profile(prep, &m, &mut scratch.knn).then_some(m)
         })
         .flatten()
         .collect()
+}
+
+/// `model` refitted over a window of [`WIDE_WINDOW`] × its narrow width (at most
+/// [`MAX_WIDENING`] × its own) when that is clearly larger than its own, and the refit
+/// describes its window (step 10's guard without the bound on the peak's standard error);
+/// else `model`. A defect whose tolerance crossing lies near or beyond the window's edge is
+/// otherwise measured there by the cylinders, and its model's plane and amplitude trade off
+/// over a window that holds little of its foot.
+fn widened(
+    prep: &Prepared,
+    model: Model,
+    cfg: &CompareConfig,
+    scratch: &mut ModelScratch,
+) -> Model {
+    let own = model.fit.window();
+    let [narrow, wide] = model.fit.widths;
+    let radius = (WIDE_WINDOW * narrow).min(MAX_WIDENING * own);
+    if radius <= 1.1 * own || wide > 2.0 * narrow {
+        return model;
+    }
+    gather_window(prep, &model.origin, &model.normal, radius, scratch);
+    match fit_window(prep, model.fit.peak, cfg, scratch) {
+        Some((fit, w)) if fit.describes(&w, MIN_SUPPORT) => {
+            Model::new(model.origin, model.normal, fit)
+        }
+        _ => model,
+    }
 }
 
 /// Sets `owner` of the core points inside the defects of `models[from..]` (see [`fill`]) to
@@ -224,8 +264,8 @@ fn claim(
     from: usize,
     owner: &mut [Option<(f64, usize)>],
 ) {
-    let window = prep.peak_window();
     for (m, model) in models.iter().enumerate().skip(from) {
+        let window = model.fit.window();
         for nb in index.within_unsorted(&model.origin, window) {
             let k = nb.index;
             let foreign =
@@ -289,7 +329,7 @@ fn more_models(
         .map_init(ModelScratch::default, |scratch, &k| {
             // The model need not pin a peak: the fill's LoD carries each height's own
             // standard error.
-            gather_window(prep, &points[k], &normals[k], scratch);
+            gather_window(prep, &points[k], &normals[k], prep.peak_window(), scratch);
             let (fit, w) = fit_window(prep, values[k].distance, cfg, scratch)?;
             let described = fit.describes(&w, MIN_SUPPORT);
             described.then(|| Model::new(points[k], normals[k], fit))
@@ -312,7 +352,7 @@ fn follows_profile(prep: &Prepared, model: &Model, knn: &mut Vec<(f64, u32)>) ->
         prep,
         &o,
         &model.normal,
-        prep.peak_window(),
+        model.fit.window(),
         knn,
         |_, d, pair| {
             let (u, v, _) = model.local(&(o + d));
@@ -379,14 +419,13 @@ fn modelled_at(
     if mean.abs() > LACK_OF_FIT * se_mean {
         return None;
     }
-    Some(model_result(prep, fit, height, se, n, cfg))
+    Some(model_result(fit, height, se, n, cfg))
 }
 
 /// The [`Reason::PeakModel`] result of `fit`'s `height` (standard error `se`) at a core point
 /// with outward unit normal `n`: LoD t95(n - 9) × se plus the registration term, `radius` the
 /// window, `n_ref` 0, `n_scan` the model's points.
 pub(super) fn model_result(
-    prep: &Prepared,
     fit: &PeakFit,
     height: f64,
     se: f64,
@@ -397,7 +436,7 @@ pub(super) fn model_result(
         distance: height,
         uncertainty: student_t95(fit.dof()) * se + 1.96 * cfg.registration_error,
         significant: false,
-        radius: prep.peak_window(),
+        radius: fit.window(),
         n_ref: 0,
         n_scan: fit.n,
         direction: Vector3::zeros(),

@@ -113,6 +113,11 @@ impl PeakFit {
             && self.sigma <= w.max_misfit * w.noise
     }
 
+    /// Radius of the window it was fitted over, mm.
+    pub fn window(&self) -> f64 {
+        self.scale
+    }
+
     /// Residual degrees of freedom: points used minus the model's parameters.
     pub fn dof(&self) -> usize {
         self.n - PARAMS
