@@ -189,24 +189,25 @@ pub(super) fn fill(
     claim(
         prep, &index, points, normals, values, &models, first, &mut owner,
     );
-    let filled: Vec<(usize, Deviation)> = owner
+    let filled: Vec<(usize, usize, Deviation)> = owner
         .par_iter()
         .enumerate()
         .filter_map(|(k, o)| o.map(|(_, m)| (k, m)))
         .map_init(Vec::new, |knn, (k, m)| {
             let value = modelled_at(prep, &models[m], &points[k], &normals[k], cfg, knn)?;
-            Some((k, value))
+            Some((k, m, value))
         })
         .flatten()
         .collect();
-    for (k, value) in &filled {
-        let peak_fitted = values[*k].peak_fitted;
-        let peak = values[*k].peak;
-        values[*k] = *value;
-        // A summit keeps the fitted peak of its defect.
+    for &(k, m, value) in &filled {
+        let peak_fitted = values[k].peak_fitted;
+        values[k] = value;
+        // A summit keeps a fitted peak: that of the model that now measures it (a widened
+        // model's refit, not the summit's first fit, else its height at the top could exceed
+        // the peak).
         if peak_fitted {
-            values[*k].peak = peak;
-            values[*k].peak_fitted = true;
+            values[k].peak = models[m].fit.peak;
+            values[k].peak_fitted = true;
         }
     }
 }
