@@ -189,24 +189,23 @@ pub(super) fn fill(
     claim(
         prep, &index, points, normals, values, &models, first, &mut owner,
     );
-    let filled: Vec<(usize, usize, Deviation)> = owner
+    let filled: Vec<(usize, Deviation)> = owner
         .par_iter()
         .enumerate()
         .filter_map(|(k, o)| o.map(|(_, m)| (k, m)))
         .map_init(Vec::new, |knn, (k, m)| {
             let value = modelled_at(prep, &models[m], &points[k], &normals[k], cfg, knn)?;
-            Some((k, m, value))
+            Some((k, value))
         })
         .flatten()
         .collect();
-    for &(k, m, value) in &filled {
-        let peak_fitted = values[k].peak_fitted;
+    for &(k, value) in &filled {
+        let (peak_fitted, peak) = (values[k].peak_fitted, values[k].peak);
         values[k] = value;
-        // A summit keeps a fitted peak: that of the model that now measures it (a widened
-        // model's refit, not the summit's first fit, else its height at the top could exceed
-        // the peak).
+        // A summit keeps its fitted peak, at least the height there (a widened model's refit
+        // may read a little above the first fit's peak at the top).
         if peak_fitted {
-            values[k].peak = models[m].fit.peak;
+            values[k].peak = peak.signum() * peak.abs().max(value.distance.abs());
             values[k].peak_fitted = true;
         }
     }
