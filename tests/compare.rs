@@ -619,6 +619,27 @@ struct Bump {
 }
 
 impl Bump {
+    /// `profile` bump sampled as the 300k synth cases are: 19 scan points/mm² with 0.015 mm
+    /// noise.
+    fn at_300k(
+        top: Point3<f64>,
+        (height, fwhm): (f64, f64),
+        profile: Profile,
+        core_step: f64,
+        seed: u64,
+    ) -> Bump {
+        Bump {
+            top,
+            height,
+            fwhm,
+            profile,
+            scan_density: 19.0,
+            noise: 0.015,
+            core_step,
+            seed,
+        }
+    }
+
     /// Core points, reference and scan.
     fn case(&self) -> (PointCloud, PointCloud, PointCloud) {
         use rand::{Rng, SeedableRng};
@@ -726,16 +747,13 @@ impl Bump {
 fn bumps_narrower_than_the_cylinders_are_measured_by_a_peak_model() {
     let (mut found_by_cylinders, mut within, mut modelled) = (0, 0, 0);
     for seed in 1..=20 {
-        let bump = Bump {
-            top: Point3::new(4.2, 4.2, 0.0),
-            height: 0.3,
-            fwhm: 0.44,
-            profile: Profile::Gaussian,
-            scan_density: 19.0,
-            noise: 0.015,
-            core_step: 0.4,
+        let bump = Bump::at_300k(
+            Point3::new(4.2, 4.2, 0.0),
+            (0.3, 0.44),
+            Profile::Gaussian,
+            0.4,
             seed,
-        };
+        );
         let (core, reference, scan) = bump.case();
         let (_, regions) = bump.run(&core, &reference, &scan, f64::INFINITY);
         let by_cylinders = !regions.regions.is_empty();
@@ -807,16 +825,13 @@ fn model_fill_measures_gaussian_defects_and_spares_other_shapes() {
     for profile in profiles {
         for (height, fwhm) in [(0.1, 1.0), (0.3, 0.8), (0.2, 1.6)] {
             for seed in 1..=4 {
-                let bump = Bump {
-                    top: Point3::new(4.1, 3.9, 0.0),
-                    height,
-                    fwhm,
+                let bump = Bump::at_300k(
+                    Point3::new(4.1, 3.9, 0.0),
+                    (height, fwhm),
                     profile,
-                    scan_density: 19.0,
-                    noise: 0.015,
-                    core_step: 0.2,
+                    0.2,
                     seed,
-                };
+                );
                 let (rms_off, iou_off, none) = bump_scores(&bump, false);
                 let (rms_on, iou_on, modelled) = bump_scores(&bump, true);
                 let case = format!("{profile:?} {height} mm high, {fwhm} mm wide, seed {seed}");
@@ -1186,16 +1201,7 @@ fn small_defect_peaks(defects: &[(f64, f64)], top: Point3<f64>) -> Vec<Option<(f
     let mut peaks = Vec::new();
     for &(height, fwhm) in defects {
         for seed in 1..=20 {
-            let bump = Bump {
-                top,
-                height,
-                fwhm,
-                profile: Profile::Gaussian,
-                scan_density: 19.0,
-                noise: 0.015,
-                core_step: 0.57,
-                seed,
-            };
+            let bump = Bump::at_300k(top, (height, fwhm), Profile::Gaussian, 0.57, seed);
             let (core, reference, scan) = bump.case();
             let (_, regions) = bump.run(&core, &reference, &scan, densify_above());
             peaks.push(bump.found(&regions).map(|peak| (peak, height)));
@@ -1251,16 +1257,13 @@ fn wide_defects_are_measured_by_a_widened_model() {
     let (mut rms, mut iou) = (Vec::new(), Vec::new());
     for (height, fwhm) in [(0.42, 2.75), (0.15, 2.5), (0.1, 2.9)] {
         for seed in 1..=4 {
-            let bump = Bump {
-                top: Point3::new(4.0, 4.0, 0.0),
-                height,
-                fwhm,
-                profile: Profile::Gaussian,
-                scan_density: 19.0,
-                noise: 0.015,
-                core_step: 0.2,
+            let bump = Bump::at_300k(
+                Point3::new(4.0, 4.0, 0.0),
+                (height, fwhm),
+                Profile::Gaussian,
+                0.2,
                 seed,
-            };
+            );
             let (r, i, _) = bump_scores(&bump, true);
             eprintln!("{height} mm, {fwhm} mm wide, seed {seed}: RMS {r:.4}, IoU {i:.3}");
             rms.push(r);
