@@ -249,17 +249,17 @@ impl Grid {
     }
 
     /// The 90th percentile of the k-th neighbour distance (in this grid) of up to 1,000
-    /// evenly spread `queries` (0 when there are none): a halo for [`Grid::knn_each`].
+    /// evenly spread `queries` (0 when there are none; in parallel): a halo for
+    /// [`Grid::knn_each`].
     pub fn typical_kth(&self, queries: &[Point3<f64>], k: usize) -> f64 {
         let step = (queries.len() / 1000).max(1);
-        let mut found = Vec::new();
-        let mut kth: Vec<f64> = queries
-            .iter()
-            .step_by(step)
-            .filter_map(|p| {
-                self.knn(p, k, f64::INFINITY, &mut found);
+        let mut kth: Vec<f64> = (0..queries.len().div_ceil(step))
+            .into_par_iter()
+            .map_init(Vec::new, |found, i| {
+                self.knn(&queries[i * step], k, f64::INFINITY, found);
                 found.last().map(|e| e.0.sqrt())
             })
+            .flatten()
             .collect();
         kth.sort_by(f64::total_cmp);
         kth.get(kth.len() * 9 / 10).copied().unwrap_or(0.0)
