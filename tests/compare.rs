@@ -482,7 +482,7 @@ fn cases_beyond_the_tuned_seeds_meet_the_rms_target() {
 }
 
 /// Narrow faces and the strips beside the box cuts hold a few points of a cylinder, where the
-/// error of a fit is largest. On these five cases at 300,000 scan points main had one region
+/// error of a fit is largest. On the first five cases at 300,000 scan points main had one region
 /// that truth does not have on seeds 24, 26 and 27 until 2026-12-01, and intermediate versions
 /// of the fix one on seeds 25 and 32 (traced in docs/ALGORITHMS.md, adaptive M3C2,
 /// "Precomputed once" and step 5):
@@ -494,10 +494,14 @@ fn cases_beyond_the_tuned_seeds_meet_the_rms_target() {
 /// - seed 25: a 3-point pit region of smallest-radius fits on a narrow face.
 ///
 /// Pairing a scan point at a sharp edge with the face whose patch lies nearest removed all of
-/// them; quadrics that extrapolate now step down to planes.
+/// them; quadrics that extrapolate now step down to planes. Seed 37 (not among the seeds the
+/// method was tuned on) had one until 2026-12-01: a narrow face at a corner, between faces
+/// 23-35° off it (within the normal filter: no sharp edge), read +0.013 to +0.063 mm towards
+/// the corner, 4 core points beyond the tolerance; pairing at such shallow edges with the
+/// upper face's plane at a convex edge and the lower one's at a concave edge removed it.
 #[test]
 fn narrow_faces_raise_no_false_region() {
-    for (seed, ours, _) in scores_of(&[24, 25, 26, 27, 32], 300_000) {
+    for (seed, ours, _) in scores_of(&[24, 25, 26, 27, 32, 37], 300_000) {
         assert_eq!(
             ours.false_regions, 0,
             "seed {seed}: regions truth does not have"
