@@ -169,8 +169,11 @@ fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
 /// standard errors, every reference point within the refine radius of the top (normal within
 /// `max_normal_angle`, not a core point) becomes a core point whose distance is the model's
 /// height there, with LoD t95(n - 9) × its standard error plus the registration term
-/// ([`super::Reason::PeakModel`], [`measured`]). Larger tops first; a reference point goes to the
-/// first top that reaches it.
+/// ([`super::Reason::PeakModel`], [`measured`]). A top from δ whose model follows the scan
+/// points without pinning its top (too few supporting points, or beyond its height limit;
+/// [`PeakFit::fits_data`]) and that has [`MIN_FAR_POINTS`] scan points far beyond the
+/// tolerance is measured by its point pairs instead ([`paired`]). Larger tops first; a
+/// reference point goes to the first top that reaches it.
 fn modelled(
     prep: &Prepared,
     is_candidate: &[bool],
@@ -202,7 +205,7 @@ fn modelled(
     // Scan points a covered window holds, and their spacing (median density).
     let full = std::f64::consts::PI * window * window * c.scan_density;
     let spacing = c.scan_density.sqrt().recip();
-    let mut fits: Vec<(usize, PeakFit)> = tops
+    let mut fits: Vec<(usize, TopMeasure)> = tops
         .par_iter()
         .map_init(ModelScratch::default, |scratch, top| {
             let j = top.at;
@@ -221,29 +224,125 @@ fn modelled(
                 true => student_t95(f.dof()) * f.se,
                 false => 0.0,
             };
-            let measures = f.describes(&w, MODEL_MIN_SUPPORT)
-                && f.widths[0] >= MIN_WIDTH * spacing
-                && f.peak.abs() - margin > tolerance;
-            measures.then_some((j, f))
+            let wide = f.widths[0] >= MIN_WIDTH * spacing;
+            if wide && f.describes(&w, MODEL_MIN_SUPPORT) && f.peak.abs() - margin > tolerance {
+                return Some((j, TopMeasure::Model(Box::new(f))));
+            }
+            let unpinned = top.from_delta && wide && f.fits_data(&w);
+            (unpinned && far_beyond(prep, scratch, top.start, tolerance))
+                .then_some((j, TopMeasure::Pairs(top.start)))
         })
         .flatten()
         .collect();
     fits.sort_by(|a, b| {
-        b.1.peak
+        b.1.peak()
             .abs()
-            .total_cmp(&a.1.peak.abs())
+            .total_cmp(&a.1.peak().abs())
             .then(a.0.cmp(&b.0))
     });
     let mut used = vec![false; c.reference.len()];
     let values = fits
         .iter()
-        .flat_map(|(j, fit)| measured(prep, *j, fit, cfg, &mut used))
+        .flat_map(|(j, measure)| match measure {
+            TopMeasure::Model(fit) => measured(prep, *j, fit, cfg, &mut used),
+            TopMeasure::Pairs(delta) => paired(prep, *j, *delta, tolerance, cfg, &mut used),
+        })
         .collect();
     let models = fits
         .into_iter()
-        .map(|(j, fit)| Model::new(c.reference.points[j], prep.ref_normals[j], fit))
+        .filter_map(|(j, measure)| match measure {
+            TopMeasure::Model(fit) => {
+                Some(Model::new(c.reference.points[j], prep.ref_normals[j], *fit))
+            }
+            TopMeasure::Pairs(_) => None,
+        })
         .collect();
     (values, models)
+}
+
+/// How [`modelled`] measures a top.
+enum TopMeasure {
+    /// By its peak model.
+    Model(Box<PeakFit>),
+    /// By the point pairs under it, [`paired`] (the top's δ): no model describes the data
+    /// there, yet [`MIN_FAR_POINTS`] scan points lie far beyond the tolerance.
+    Pairs(f64),
+}
+
+impl TopMeasure {
+    /// The top's height: the fitted peak, or the top's δ.
+    fn peak(&self) -> f64 {
+        match self {
+            TopMeasure::Model(fit) => fit.peak,
+            TopMeasure::Pairs(delta) => *delta,
+        }
+    }
+}
+
+/// Scan points of a [`paired`] top beyond the tolerance by [`FAR_NOISE`] noise SDs.
+const MIN_FAR_POINTS: usize = 3;
+
+/// How many noise SDs beyond the tolerance a scan point of a [`paired`] top lies.
+const FAR_NOISE: f64 = 3.0;
+
+/// Whether at least [`MIN_FAR_POINTS`] scan points of the window last gathered into
+/// `scratch`, within the smallest candidate radius of its origin, lie beyond `tolerance` by
+/// [`FAR_NOISE`] noise SDs with the sign of `start`: no noise (3 such points among about 12
+/// have a chance of about 1e-7 with Gaussian noise), but a defect narrower than a model can
+/// pin.
+fn far_beyond(prep: &Prepared, scratch: &ModelScratch, start: f64, tolerance: f64) -> bool {
+    let sign = start.signum();
+    let r0 = prep.smallest_radius();
+    let (low, high) = (
+        tolerance + FAR_NOISE * prep.noise,
+        2.0 * start.abs() + 4.0 * prep.noise,
+    );
+    scratch.beyond(r0, sign * low) - scratch.beyond(r0, sign * high) >= MIN_FAR_POINTS
+}
+
+/// The reference points within the smallest candidate radius of top `j` (normal within
+/// `max_normal_angle`, not a core point, not `used`; marked used) whose δ is beyond
+/// `tolerance` with the sign of the top's `delta`, each measured by its own point pair:
+/// distance δ, LoD 1.96 × (noise + registration error), `radius` 0, one reference and one
+/// scan point ([`super::Reason::PointPair`]). For a defect narrower than about two scan
+/// spacings whose top no scan point comes near, no model is pinned by the data (seed 72 at
+/// 300k: a 0.366 mm deep, 0.43 mm wide pit fitted 0.73 ± 0.27 mm), and the largest pair
+/// distance is a lower bound of its height: a region, not a miss.
+fn paired(
+    prep: &Prepared,
+    j: usize,
+    delta: f64,
+    tolerance: f64,
+    cfg: &CompareConfig,
+    used: &mut [bool],
+) -> Vec<(usize, Deviation)> {
+    let c = prep.clouds;
+    let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
+    let mut near = Vec::new();
+    prep.reference_near(x, n, prep.smallest_radius(), cfg.max_distance, &mut near);
+    let sign = delta.signum();
+    let mut values = Vec::new();
+    for k in near {
+        if used[k] || !own_surface(prep, k, n) || prep.delta[k] * sign <= tolerance {
+            continue;
+        }
+        used[k] = true;
+        let value = Deviation {
+            distance: prep.delta[k],
+            uncertainty: 1.96 * (prep.noise + cfg.registration_error),
+            significant: false,
+            radius: 0.0,
+            n_ref: 1,
+            n_scan: 1,
+            direction: Vector3::zeros(),
+            spread: [0.0, prep.noise],
+            peak: f64::NAN,
+            peak_fitted: false,
+            reason: super::Reason::PointPair,
+        };
+        values.push((k, value.finish(&prep.ref_normals[k])));
+    }
+    values
 }
 
 /// The reference points within the refine radius of top `j` (normal within

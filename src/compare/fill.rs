@@ -93,6 +93,17 @@ pub(super) struct ModelScratch {
     peak: PeakScratch,
 }
 
+impl ModelScratch {
+    /// Scan points of the window last gathered ([`gather_window`]) within `radius` of its
+    /// origin whose height is beyond `limit` (above a positive one, below a negative one).
+    pub(super) fn beyond(&self, radius: f64, limit: f64) -> usize {
+        self.window
+            .iter()
+            .filter(|p| p[0].hypot(p[1]) <= radius && p[2] * limit.signum() > limit.abs())
+            .count()
+    }
+}
+
 /// Gathers the scan points within `radius` (the peak window, [`Prepared::peak_window`], or
 /// a widened one) around `origin` (outward unit `normal`) into `scratch`: (u, v) in the
 /// normal's tangent frame and height = the point-pair distance. Returns how many there are.

@@ -180,16 +180,22 @@ pub enum Reason {
     /// whose model follows the scan points (adaptive model fill); `n_ref` 0, `radius` the
     /// model's window, `n_scan` the scan points it used.
     PeakModel,
+    /// The distance is one point pair's, from the reference point's tangent plane to the scan
+    /// point nearest its normal line: under a defect narrower than a peak model can pin
+    /// (adaptive densification); `radius` 0, `n_ref` and `n_scan` 1.
+    PointPair,
 }
 
 impl Reason {
-    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points, 3 peak model.
+    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points, 3 peak model,
+    /// 4 point pair.
     pub fn code(self) -> u8 {
         match self {
             Reason::Ok => 0,
             Reason::FewReference => 1,
             Reason::FewScan => 2,
             Reason::PeakModel => 3,
+            Reason::PointPair => 4,
         }
     }
 }

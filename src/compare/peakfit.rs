@@ -102,14 +102,20 @@ impl PeakFit {
     /// `min_support` points in place of [`MIN_SUPPORT`]: the model describes the data around
     /// a top of the start's sign.
     pub fn describes(&self, w: &PeakWindow, min_support: usize) -> bool {
+        self.fits_data(w) && self.support >= min_support && self.peak.abs() <= height_limit(w)
+    }
+
+    /// The part of [`PeakFit::describes`] that asks whether the model follows the window's
+    /// scan points, not whether they pin its top: at most 1 + 2 % of them trimmed, the centre
+    /// within half the window, the narrow width at most the window radius, A and the peak of
+    /// the start's sign, the residual SD at most `max_misfit` × noise.
+    pub fn fits_data(&self, w: &PeakWindow) -> bool {
         let sign = w.start.signum();
         self.trimmed <= 1 + (self.n + self.trimmed) / 50
             && self.offset <= 0.5 * w.radius
             && self.widths[0] <= w.radius
-            && self.support >= min_support
             && self.amplitude * sign > 0.0
             && self.peak * sign > 0.0
-            && self.peak.abs() <= height_limit(w)
             && self.sigma <= w.max_misfit * w.noise
     }
 
