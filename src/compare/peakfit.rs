@@ -37,8 +37,9 @@ const ELONGATED: f64 = 2.0;
 const MAX_ITERATIONS: usize = 50;
 
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
-/// cannot pin its six shape parameters (a spike through one noisy point).
-pub(super) const MIN_SUPPORT: usize = 8;
+/// cannot pin its six shape parameters (a spike through one noisy point). 7, not 8, since
+/// 2026-12-01 (seed 80 at 300k: a 0.368 mm bump with 7; docs/ALGORITHMS.md, step 10).
+pub(super) const MIN_SUPPORT: usize = 7;
 
 /// The window and the expectations of a peak fit.
 #[derive(Debug, Clone, Copy)]
@@ -79,6 +80,8 @@ pub struct PeakFit {
     pub trimmed: usize,
     /// Points where the Gaussian is at least 10 % of A.
     pub support: usize,
+    /// The largest height of the start's sign among the points used, mm (0 when none).
+    pub top_kept: f64,
     /// The fitted parameters (scaled units), their covariance and the scale (the window
     /// radius), for [`PeakFit::height_at`].
     params: Params,
@@ -93,7 +96,7 @@ impl PeakFit {
     /// [`MIN_SUPPORT`] points, A and the peak of the start's sign, the residual SD at most `max_misfit` × noise and at
     /// most 1 + 2 % of the points trimmed (the model describes the data, not a subset that
     /// suits it), the peak's standard error at most a tenth of its height, and the peak at
-    /// most twice the quadric top plus 4 noise SD.
+    /// most twice the larger of the start and the highest point kept, plus 4 noise SD.
     pub fn accepted(&self, w: &PeakWindow) -> bool {
         self.describes(w, MIN_SUPPORT) && self.se <= 0.1 * self.peak.abs()
     }
@@ -102,7 +105,10 @@ impl PeakFit {
     /// `min_support` points in place of [`MIN_SUPPORT`]: the model describes the data around
     /// a top of the start's sign.
     pub fn describes(&self, w: &PeakWindow, min_support: usize) -> bool {
-        self.fits_data(w) && self.support >= min_support && self.peak.abs() <= height_limit(w)
+        let kept_limit = 2.0 * self.top_kept + 4.0 * w.noise;
+        self.fits_data(w)
+            && self.support >= min_support
+            && self.peak.abs() <= height_limit(w).max(kept_limit)
     }
 
     /// The part of [`PeakFit::describes`] that asks whether the model follows the window's
@@ -146,7 +152,8 @@ impl PeakFit {
 }
 
 /// Heights beyond twice the quadric top plus 4 noise SD are outliers or another surface, and
-/// a fitted peak beyond it is not what the data support.
+/// a fitted peak beyond it (and beyond twice the highest point the fit kept plus 4 noise SD,
+/// [`PeakFit::describes`]) is not what the data support.
 fn height_limit(w: &PeakWindow) -> f64 {
     2.0 * w.start.abs() + 4.0 * w.noise
 }
@@ -405,6 +412,8 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         false => c.norm(),
     };
     let support = support(shape, &t, current);
+    let sign = w.start.signum();
+    let top_kept = current.iter().map(|p| p[2] * sign).fold(0.0, f64::max);
     Some(PeakFit {
         peak,
         se,
@@ -416,6 +425,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         n,
         trimmed: scaled.len() - n,
         support,
+        top_kept,
         params: t,
         cov,
         scale: s,
