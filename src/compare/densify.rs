@@ -264,8 +264,9 @@ fn modelled(
 enum TopMeasure {
     /// By its peak model.
     Model(Box<PeakFit>),
-    /// By the point pairs under it, [`paired`] (the top's δ): no model describes the data
-    /// there, yet [`MIN_FAR_POINTS`] scan points lie far beyond the tolerance.
+    /// By the point pairs under it, [`paired`] (the top's δ): its model follows the scan
+    /// points but they do not pin its top, and [`MIN_FAR_POINTS`] of them lie far beyond the
+    /// tolerance.
     Pairs(f64),
 }
 
