@@ -1269,22 +1269,32 @@ fn deep_narrow_pits_keep_their_depth() {
 /// 72: 0.73 ± 0.27 mm, 4 supporting points) and was refused, and the cylinders read it at a
 /// few hundredths: missed on 11 of 60 runs (seed 72: missed). Measured by its point pairs
 /// when the model follows the points and 3 scan points lie far beyond the tolerance, it is
-/// missed on 5 of 60 (seed 72: found, -0.200 mm, a lower bound of its depth).
+/// missed on 5 of 60 (seed 72: found, -0.200 mm, a lower bound of its depth); 6 runs use
+/// point pairs, and `inspect`'s summary line says so (their peaks are lower bounds).
 #[test]
 fn a_deep_narrow_pit_without_a_scan_point_at_its_bottom_makes_a_region() {
     let top = Point3::new(4.845, 4.845, 0.0);
-    let mut found = 0;
+    let (mut found, mut paired) = (0, 0);
     for hole in [0.1, 0.15, 0.2] {
         for seed in 1..=20 {
             let bump = Bump::at_300k(top, (-0.366, 0.43), Profile::Gaussian, 0.57, seed);
             let (core, reference, mut scan) = bump.case();
             scan.points
                 .retain(|p| (p.x - top.x).hypot(p.y - top.y) > hole);
-            let (_, regions) = bump.run(&core, &reference, &scan, densify_above());
+            let (dev, regions) = bump.run(&core, &reference, &scan, densify_above());
             found += usize::from(bump.found(&regions).is_some());
+            // The summary says when peaks are lower bounds.
+            paired += usize::from(dev.point_pairs() > 0);
+            assert_eq!(
+                dev.point_pairs() > 0,
+                dev.summary().contains("lower bounds"),
+                "{}",
+                dev.summary()
+            );
         }
     }
     assert!(found >= 54, "{found} of 60 found");
+    assert!(paired >= 5, "point pairs measured {paired} of 60 runs");
 }
 
 /// Defects wider than the peak window reaches (2.3 mm at 19 scan points/mm²): the tolerance

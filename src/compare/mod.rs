@@ -295,7 +295,14 @@ impl Deviations {
         self.values.iter().filter(model).count()
     }
 
-    /// One line on the core points: how many, how many added, measured by defect models,
+    /// Core points measured by one point pair each ([`Reason::PointPair`]).
+    pub fn point_pairs(&self) -> usize {
+        let pair = |v: &&Deviation| v.reason == Reason::PointPair;
+        self.values.iter().filter(pair).count()
+    }
+
+    /// One line on the core points: how many, how many added, measured by defect models
+    /// (and by single point pairs, when any: the peaks of those defects are lower bounds),
     /// and with a distance.
     pub fn summary(&self) -> String {
         let valid = self
@@ -303,8 +310,15 @@ impl Deviations {
             .iter()
             .filter(|v| v.distance.is_finite())
             .count();
+        let pairs = match self.point_pairs() {
+            0 => String::new(),
+            n => format!(
+                ", {n} measured by single point pairs under defects too narrow for a model \
+                 (their peaks are lower bounds)"
+            ),
+        };
         format!(
-            "{} ({} added around defects, {} measured by defect models, {} with a distance)",
+            "{} ({} added around defects, {} measured by defect models{pairs}, {} with a distance)",
             self.values.len(),
             self.added(),
             self.modelled(),
