@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use super::adaptive::{at, summits, tangent_frame, Prepared, Scratch};
 use super::fill::{fit_window, gather_window, model_result, Model, ModelScratch};
 use super::fit::student_t95;
-use super::peakfit::PeakFit;
+use super::peakfit::{height_limit, PeakFit};
 use super::{CompareConfig, Deviation};
 
 /// A summit's cylinder must hold at least this share of the reference points a full disc of
@@ -292,13 +292,10 @@ const FAR_NOISE: f64 = 3.0;
 /// have a chance of about 1e-7 with Gaussian noise), but a defect narrower than a model can
 /// pin.
 fn far_beyond(prep: &Prepared, scratch: &ModelScratch, start: f64, tolerance: f64) -> bool {
-    let sign = start.signum();
-    let r0 = prep.smallest_radius();
-    let (low, high) = (
-        tolerance + FAR_NOISE * prep.noise,
-        2.0 * start.abs() + 4.0 * prep.noise,
-    );
-    scratch.beyond(r0, sign * low) - scratch.beyond(r0, sign * high) >= MIN_FAR_POINTS
+    let low = tolerance + FAR_NOISE * prep.noise;
+    let high = height_limit(start.abs(), prep.noise);
+    let far = scratch.heights_between(prep.smallest_radius(), start.signum(), low, high);
+    far >= MIN_FAR_POINTS
 }
 
 /// The reference points within the smallest candidate radius of top `j` (normal within
@@ -317,17 +314,10 @@ fn paired(
     cfg: &CompareConfig,
     used: &mut [bool],
 ) -> Vec<(usize, Deviation)> {
-    let c = prep.clouds;
-    let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
-    let mut near = Vec::new();
-    prep.reference_near(x, n, prep.smallest_radius(), cfg.max_distance, &mut near);
     let sign = delta.signum();
+    let beyond = |k: usize| prep.delta[k] * sign > tolerance;
     let mut values = Vec::new();
-    for k in near {
-        if used[k] || !own_surface(prep, k, n) || prep.delta[k] * sign <= tolerance {
-            continue;
-        }
-        used[k] = true;
+    for k in claim_near(prep, j, prep.smallest_radius(), cfg, used, beyond) {
         let value = Deviation {
             distance: prep.delta[k],
             uncertainty: 1.96 * (prep.noise + cfg.registration_error),
@@ -346,6 +336,27 @@ fn paired(
     values
 }
 
+/// The reference points within `radius` of top `j` (cylinder along its normal, half-length
+/// `max_distance`) on its own surface ([`own_surface`]), not yet `used` and passing `keep`;
+/// marked used: a reference point goes to the first top that reaches it.
+fn claim_near(
+    prep: &Prepared,
+    j: usize,
+    radius: f64,
+    cfg: &CompareConfig,
+    used: &mut [bool],
+    keep: impl Fn(usize) -> bool,
+) -> Vec<usize> {
+    let (x, n) = (&prep.clouds.reference.points[j], &prep.ref_normals[j]);
+    let mut near = Vec::new();
+    prep.reference_near(x, n, radius, cfg.max_distance, &mut near);
+    near.retain(|&k| !used[k] && own_surface(prep, k, n) && keep(k));
+    for &k in &near {
+        used[k] = true;
+    }
+    near
+}
+
 /// The reference points within the refine radius of top `j` (normal within
 /// `max_normal_angle`, not a core point, not `used`; marked used) with the peak model `fit`'s
 /// height at each; the one nearest the fitted centre carries the fitted peak.
@@ -359,15 +370,9 @@ fn measured(
     let c = prep.clouds;
     let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
     let (e1, e2) = tangent_frame(n);
-    let mut near = Vec::new();
-    prep.reference_near(x, n, prep.refine_radius, cfg.max_distance, &mut near);
     let mut values: Vec<(usize, Deviation)> = Vec::new();
     let mut nearest_centre = (f64::INFINITY, 0);
-    for k in near {
-        if used[k] || !own_surface(prep, k, n) {
-            continue;
-        }
-        used[k] = true;
+    for k in claim_near(prep, j, prep.refine_radius, cfg, used, |_| true) {
         let d = c.reference.points[k] - x;
         let (u, v) = (d.dot(&e1), d.dot(&e2));
         let (height, se) = fit.height_at(u, v);

@@ -95,11 +95,11 @@ pub(super) struct ModelScratch {
 
 impl ModelScratch {
     /// Scan points of the window last gathered ([`gather_window`]) within `radius` of its
-    /// origin whose height is beyond `limit` (above a positive one, below a negative one).
-    pub(super) fn beyond(&self, radius: f64, limit: f64) -> usize {
+    /// origin whose height times `sign` lies in (`low`, `high`].
+    pub(super) fn heights_between(&self, radius: f64, sign: f64, low: f64, high: f64) -> usize {
         self.window
             .iter()
-            .filter(|p| p[0].hypot(p[1]) <= radius && p[2] * limit.signum() > limit.abs())
+            .filter(|p| p[0].hypot(p[1]) <= radius && p[2] * sign > low && p[2] * sign <= high)
             .count()
     }
 }

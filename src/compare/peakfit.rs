@@ -105,10 +105,10 @@ impl PeakFit {
     /// `min_support` points in place of [`MIN_SUPPORT`]: the model describes the data around
     /// a top of the start's sign.
     pub fn describes(&self, w: &PeakWindow, min_support: usize) -> bool {
-        let kept_limit = 2.0 * self.top_kept + 4.0 * w.noise;
+        let supported = w.start.abs().max(self.top_kept);
         self.fits_data(w)
             && self.support >= min_support
-            && self.peak.abs() <= height_limit(w).max(kept_limit)
+            && self.peak.abs() <= height_limit(supported, w.noise)
     }
 
     /// The part of [`PeakFit::describes`] that asks whether the model follows the window's
@@ -151,11 +151,11 @@ impl PeakFit {
     }
 }
 
-/// Heights beyond twice the quadric top plus 4 noise SD are outliers or another surface, and
-/// a fitted peak beyond it (and beyond twice the highest point the fit kept plus 4 noise SD,
-/// [`PeakFit::describes`]) is not what the data support.
-fn height_limit(w: &PeakWindow) -> f64 {
-    2.0 * w.start.abs() + 4.0 * w.noise
+/// Heights beyond twice a supported `height` (the start, or the highest point a fit kept)
+/// plus 4 noise SD are outliers or another surface, and a fitted peak beyond it is not what
+/// the data support.
+pub(super) fn height_limit(height: f64, noise: f64) -> f64 {
+    2.0 * height + 4.0 * noise
 }
 
 /// Reusable buffers of [`fit_peak`].
@@ -353,7 +353,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         abs,
     } = scratch;
     let s = w.radius;
-    let limit = height_limit(w);
+    let limit = height_limit(w.start.abs(), w.noise);
     scaled.clear();
     scaled.extend(
         pts.iter()
