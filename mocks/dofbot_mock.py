@@ -23,14 +23,21 @@ joint zero, torque off). The state file then also holds `physical_deg`.
 The state file (--state) holds the servo positions and targets, rewritten in place after every
 frame and at exit (SIGTERM, SIGINT or an injected disconnect): read it once the mock has
 exited (a read while it runs may see a rewrite half done).
+
+Both files are written by a thread of their own (`Recorder`): a board has no disk, and a write
+that waits on a busy disk (an ext4 journal commit after a build, measured here at 61 ms with a
+concurrent `sync` and once above 200 ms in CI) must not hold up a reply. The log is complete
+once the mock has exited; while it runs it may lag the link by the disk's delay.
 """
 import argparse
 import heapq
 import json
 import os
+import queue
 import select
 import signal
 import sys
+import threading
 import time
 import tty
 
@@ -373,6 +380,62 @@ def parse_args(argv):
     return args
 
 
+class Recorder:
+    """Writes the frame log (appended, a line per entry) and the state file (rewritten in
+    place, the latest state only) on a thread of its own, in the order given; `close` writes
+    what is queued and waits for it."""
+
+    def __init__(self, log_path, state_path):
+        self.log = open(log_path, "a", buffering=1) if log_path else None
+        self.state = open(state_path, "w") if state_path else None
+        self.queue = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def log_line(self, entry):
+        if self.log:
+            self.queue.put(("log", json.dumps(entry) + "\n"))
+
+    def write_state(self, state):
+        if self.state:
+            self.queue.put(("state", json.dumps(state)))
+
+    def close(self):
+        self.queue.put(("end", None))
+        self.thread.join()
+        for f in (self.log, self.state):
+            if f:
+                f.close()
+
+    def _run(self):
+        while True:
+            batch = [self.queue.get()]
+            while True:
+                try:
+                    batch.append(self.queue.get_nowait())
+                except queue.Empty:
+                    break
+            # Of the states queued so far only the newest is written (in its place in order).
+            newest = max((i for i, (kind, _) in enumerate(batch) if kind == "state"), default=-1)
+            for i, (kind, text) in enumerate(batch):
+                if kind == "end":
+                    return
+                if kind == "log":
+                    self.log.write(text)
+                elif i == newest:
+                    self._put_state(text)
+
+    def _put_state(self, text):
+        # Rewritten in place, one open file: a new file renamed over the old one freed the old
+        # one's blocks on every frame, and on a disk mounted with `discard` that stalled the
+        # writer for up to 0.5 s now and then (measured: 519 ms worst in 6,000 such rewrites,
+        # 0.2 ms in place).
+        self.state.seek(0)
+        self.state.write(text)
+        self.state.truncate()
+        self.state.flush()
+
+
 def main(argv):
     args = parse_args(argv)
     home = [int(v) for v in args.initial.split(",")] if args.initial else HOME
@@ -380,27 +443,16 @@ def main(argv):
         sys.exit("--initial: need 6 raw values")
     board = Board(home, args)
     link = SerialLink(args.port, args.baud) if args.port else PtyLink()
-    log = open(args.log, "a", buffering=1) if args.log else None
+    recorder = Recorder(args.log, args.state)
     t0 = time.monotonic()
     clock = lambda: time.monotonic() - t0
 
-    state_file = open(args.state, "w") if args.state else None
-
     def write_state():
-        if not state_file:
-            return
         t = clock()
-        state = {"t": t, "positions": board.positions(t), "targets": board.targets(),
-                 "torque": board.torque, "frames": board.frames, "disconnected": board.disconnected,
-                 "physical_deg": board.physical_deg(t)}
-        # Rewritten in place, one open file: a new file renamed over the old one freed the old
-        # one's blocks on every frame, and on a disk mounted with `discard` that stalled the
-        # mock for up to 0.5 s now and then (measured: 519 ms worst in 6,000 such rewrites,
-        # 0.2 ms in place), past the host's 50 ms reply timeout.
-        state_file.seek(0)
-        state_file.write(json.dumps(state))
-        state_file.truncate()
-        state_file.flush()
+        recorder.write_state({"t": t, "positions": board.positions(t), "targets": board.targets(),
+                              "torque": board.torque, "frames": board.frames,
+                              "disconnected": board.disconnected,
+                              "physical_deg": board.physical_deg(t)})
 
     def stop(*_):
         raise SystemExit(0)
@@ -434,14 +486,12 @@ def main(argv):
                 for ev in decoder.feed(bytes([b])):
                     t = start + pos * byte_time
                     if ev[0] == "error":
-                        if log:
-                            log.write(json.dumps({"t": t, "error": ev[1]}) + "\n")
+                        recorder.log_line({"t": t, "error": ev[1]})
                         continue
                     _, kind, payload, raw = ev
                     name, reply, delay = board.handle(kind, payload, t)
-                    if log:
-                        log.write(json.dumps({"t": t, "frame": raw.hex(" ").upper(),
-                                              "func": "0x%02X" % kind, "cmd": name}) + "\n")
+                    recorder.log_line({"t": t, "frame": raw.hex(" ").upper(),
+                                       "func": "0x%02X" % kind, "cmd": name})
                     if reply is not None:
                         heapq.heappush(outbox, (t + delay, seq, reply))
                         seq += 1
@@ -452,11 +502,8 @@ def main(argv):
                     break
     finally:
         write_state()
-        if state_file:
-            state_file.close()
+        recorder.close()
         link.close()
-        if log:
-            log.close()
 
 
 if __name__ == "__main__":

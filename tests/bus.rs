@@ -106,12 +106,11 @@ fn cli_move_then_read_over_pty_returns_the_commanded_joints() {
         .iter()
         .find(|e| e.motion == Some(0))
         .expect("motion frame journalled");
-    let logged = mock.frames_logged();
+    let (state, logged) = mock.finish_logged();
     assert!(logged
         .iter()
         .any(|l| l["frame"].as_str() == tx.frame.as_deref()));
     assert!(entries.iter().any(|e| e.kind == EntryKind::Verified));
-    let state = mock.finish();
     assert_eq!(raw_array(&state["positions"]), got);
 }
 

@@ -497,6 +497,7 @@ fn sim_and_mock_agree_with_hidden_mechanics() {
     let Some(py) = common::oracle_python() else {
         return;
     };
+    let _board = common::take_turns();
     let mock = hidden_mock(&py, 17);
     let cfg = BusConfig::default();
     let mut real = Bus::connect(
@@ -554,6 +555,7 @@ fn mock_chain_through_the_cli_recovers_the_planted_truth() {
     let Some(py) = common::oracle_python() else {
         return;
     };
+    let _board = common::take_turns();
     let mock = hidden_mock(&py, 3);
     let dir = common::tempdir();
     let out = dir.path().join("cell");

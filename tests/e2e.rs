@@ -119,13 +119,15 @@ fn case() -> &'static Case {
     })
 }
 
-/// The mock's received move_all frames, in order.
-fn motion_frames(mock: &Mock) -> Vec<String> {
-    mock.frames_logged()
+/// Stops the mock; its final state and the move_all frames it received, in order.
+fn finish(mock: Mock) -> (Value, Vec<String>) {
+    let (state, logged) = mock.finish_logged();
+    let frames = logged
         .into_iter()
         .filter(|l| l["func"] == "0x1D")
         .map(|l| l["frame"].as_str().unwrap().to_string())
-        .collect()
+        .collect();
+    (state, frames)
 }
 
 fn raw_list(v: &Value) -> Vec<u64> {
@@ -240,12 +242,12 @@ fn whole_run(py: &Path, flags: &[&str]) -> Vec<String> {
     let mock = Mock::start(py, flags);
     let out = succeed(&mut run_on(&mock, &["--journal", path_arg(&journal)]));
     println!("{}", String::from_utf8_lossy(&out.stdout));
+    let (state, frames) = finish(mock);
     assert_eq!(
-        motion_frames(&mock),
-        c.frames,
+        frames, c.frames,
         "{flags:?}: frames received differ from the plan's"
     );
-    assert_at_final_pose(&mock.finish(), c);
+    assert_at_final_pose(&state, c);
     journal_codes(&journal)
 }
 
@@ -292,8 +294,7 @@ fn a_run_cut_off_mid_way_resumes_from_its_journal_to_the_same_final_pose() {
         err.contains("stopped") && err.contains("--resume"),
         "stderr: {err}"
     );
-    let before = motion_frames(&broken);
-    let at_break = broken.finish();
+    let (at_break, before) = finish(broken);
     assert_eq!(at_break["disconnected"], true);
     assert!(
         !before.is_empty() && before.len() < c.frames.len(),
@@ -317,7 +318,7 @@ fn a_run_cut_off_mid_way_resumes_from_its_journal_to_the_same_final_pose() {
     println!("{}", String::from_utf8_lossy(&dry.stdout));
     let out = succeed(&mut run_on(&resumed, &["--resume", path_arg(&journal)]));
     println!("{}", String::from_utf8_lossy(&out.stdout));
-    let after = motion_frames(&resumed);
+    let (resumed_state, after) = finish(resumed);
     let from = c.frames.len() - after.len();
     assert_eq!(
         after[..],
@@ -333,5 +334,5 @@ fn a_run_cut_off_mid_way_resumes_from_its_journal_to_the_same_final_pose() {
         String::from_utf8_lossy(&dry.stdout).contains(&format!("from frame {from}")),
         "the dry run names the resume frame"
     );
-    assert_at_final_pose(&resumed.finish(), c);
+    assert_at_final_pose(&resumed_state, c);
 }

@@ -340,11 +340,9 @@ fn cli_plan_then_run_against_the_mock_board() {
             .arg(&journal),
     );
     println!("{}", String::from_utf8_lossy(&out.stdout));
-    let logged: Vec<serde_json::Value> = mock
-        .frames_logged()
-        .into_iter()
-        .filter(|l| l["func"] == "0x1D")
-        .collect();
+    let (state, logged) = mock.finish_logged();
+    let logged: Vec<serde_json::Value> =
+        logged.into_iter().filter(|l| l["func"] == "0x1D").collect();
     let frames: Vec<&str> = logged
         .iter()
         .map(|l| l["frame"].as_str().unwrap())
@@ -363,7 +361,6 @@ fn cli_plan_then_run_against_the_mock_board() {
     assert!((m - p.period).abs() <= 0.002, "median gap {m}");
     let (robot, _) = dofbot();
     let checked = p.check(&robot, &Default::default()).unwrap();
-    let state = mock.finish();
     let pos: Vec<u16> = state["positions"]
         .as_array()
         .unwrap()

@@ -105,22 +105,26 @@ impl Mock {
     }
 
     /// Stops the mock and returns its final state file.
-    pub fn finish(mut self) -> serde_json::Value {
+    pub fn finish(self) -> serde_json::Value {
+        self.finish_logged().0
+    }
+
+    /// Stops the mock and returns its final state file and every line of its frame log (the
+    /// mock writes both on a thread of its own: they are complete once it has exited).
+    pub fn finish_logged(mut self) -> (serde_json::Value, Vec<serde_json::Value>) {
         let _ = Command::new("kill")
             .arg("-TERM")
             .arg(self.child.id().to_string())
             .status();
         let _ = self.child.wait();
         let text = std::fs::read_to_string(&self.state).expect("mock state");
-        serde_json::from_str(&text).expect("mock state json")
-    }
-
-    /// Every line of the mock's frame log.
-    pub fn frames_logged(&self) -> Vec<serde_json::Value> {
-        let text = std::fs::read_to_string(&self.log).unwrap_or_default();
-        text.lines()
+        let state = serde_json::from_str(&text).expect("mock state json");
+        let log = std::fs::read_to_string(&self.log).unwrap_or_default();
+        let frames = log
+            .lines()
             .map(|l| serde_json::from_str(l).unwrap())
-            .collect()
+            .collect();
+        (state, frames)
     }
 }
 
@@ -134,8 +138,8 @@ impl Drop for Mock {
 /// Tests of one binary that run several Python mock boards take turns through this lock:
 /// the board must answer within the driver's reply timeout (50 ms, 4 attempts), and three
 /// runs with their mocks at once on a 2-core machine load it beyond what the protocol under
-/// test is about. (The mock's own disk stalls, once blamed on load, are fixed in the mock:
-/// see `write_state` in mocks/dofbot_mock.py.)
+/// test is about. (The mock's own disk stalls, once blamed on load, are kept off its replies:
+/// see `Recorder` in mocks/dofbot_mock.py.)
 pub fn take_turns() -> std::sync::MutexGuard<'static, ()> {
     static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
     TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
