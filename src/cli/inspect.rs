@@ -239,23 +239,44 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     times.lap("compare");
     let found = regions::find_regions(&dev, &cfg.regions);
     times.lap("regions");
-    let table = compare::to_cloud(&dev, &found.labels);
-    cloud::write_csv(&args.out.join("deviations.csv"), &table)?;
-    cloud::write_ply(
-        &args.out.join("deviations.ply"),
-        &table,
-        None,
-        PlyPrecision::F64,
-    )?;
-    let text = serde_json::to_string_pretty(&found)?;
-    let path = args.out.join("regions.json");
-    std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
-    times.lap("files");
-    super::inspect_report::write(&args.out, &dev, &found, report_summary)?;
-    times.lap("report");
+    write_outputs(&args.out, &dev, &found, report_summary)?;
+    times.lap("files and report");
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
     println!("times: {}", times.line());
     Ok(())
+}
+
+/// Writes deviations.csv, deviations.ply, regions.json and the report, the three at once
+/// (formatting the rows is most of their time, and each is single-threaded).
+fn write_outputs(
+    out: &Path,
+    dev: &compare::Deviations,
+    found: &Regions,
+    report_summary: Vec<(String, String)>,
+) -> Result<()> {
+    let table = compare::to_cloud(dev, &found.labels);
+    let write_regions = || -> Result<()> {
+        let text = serde_json::to_string_pretty(found)?;
+        let path = out.join("regions.json");
+        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))
+    };
+    let ((csv, ply), (regions, report)) = rayon::join(
+        || {
+            rayon::join(
+                || cloud::write_csv(&out.join("deviations.csv"), &table),
+                || cloud::write_ply(&out.join("deviations.ply"), &table, None, PlyPrecision::F64),
+            )
+        },
+        || {
+            rayon::join(write_regions, || {
+                super::inspect_report::write(out, dev, found, report_summary)
+            })
+        },
+    );
+    csv?;
+    ply?;
+    regions?;
+    report
 }
 
 /// Wall time per stage of `inspect`, for the closing `times:` line.
