@@ -43,6 +43,7 @@ fn inspection() -> Inspection {
         normal: [0.0, -1.0, 0.0],
         area: members.len() as f64 * 0.25,
         peak: 1.01,
+        peak_lower_bound: false,
         mean: 0.5,
         volume: 100.0,
         points: members.len(),

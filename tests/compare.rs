@@ -8,7 +8,7 @@ use polishbot::cloud::{PointCloud, Units};
 use polishbot::compare::{
     compare, core_points, Aggregate, CompareConfig, CoreConfig, Deviations, Method,
 };
-use polishbot::regions::{find_regions, RegionConfig, Regions};
+use polishbot::regions::{find_regions, Region, RegionConfig, Regions};
 use polishbot::synth::{synth, Defect, SynthCase, SynthConfig};
 
 /// A femoral_dm case with the scan moved back into the reference frame by the true pose.
@@ -740,10 +740,13 @@ impl Bump {
 
     /// The peak of the only region when there is one, within 0.2 mm of the top.
     fn found(&self, regions: &Regions) -> Option<f64> {
+        self.region(regions).map(|r| r.peak)
+    }
+
+    /// The one region at the top, if that is what `regions` holds.
+    fn region<'a>(&self, regions: &'a Regions) -> Option<&'a Region> {
         match &regions.regions[..] {
-            [region] if (Point3::from(region.centroid) - self.top).norm() < 0.2 => {
-                Some(region.peak)
-            }
+            [region] if (Point3::from(region.centroid) - self.top).norm() < 0.2 => Some(region),
             _ => None,
         }
     }
@@ -1274,7 +1277,7 @@ fn deep_narrow_pits_keep_their_depth() {
 #[test]
 fn a_deep_narrow_pit_without_a_scan_point_at_its_bottom_makes_a_region() {
     let top = Point3::new(4.845, 4.845, 0.0);
-    let (mut found, mut paired) = (0, 0);
+    let (mut found, mut paired, mut bounded) = (0, 0, 0);
     for hole in [0.1, 0.15, 0.2] {
         for seed in 1..=20 {
             let bump = Bump::at_300k(top, (-0.366, 0.43), Profile::Gaussian, 0.57, seed);
@@ -1282,7 +1285,14 @@ fn a_deep_narrow_pit_without_a_scan_point_at_its_bottom_makes_a_region() {
             scan.points
                 .retain(|p| (p.x - top.x).hypot(p.y - top.y) > hole);
             let (dev, regions) = bump.run(&core, &reference, &scan, densify_above());
-            found += usize::from(bump.found(&regions).is_some());
+            let region = bump.region(&regions);
+            found += usize::from(region.is_some());
+            // A peak flagged as a lower bound is one: within the pit's depth (plus 3 noise
+            // SDs: a point pair is one noisy reading).
+            if let Some(r) = region.filter(|r| r.peak_lower_bound) {
+                bounded += 1;
+                assert!(r.peak < 0.0 && r.peak > -0.366 - 0.045, "{r:?}");
+            }
             // The summary says when peaks are lower bounds.
             paired += usize::from(dev.point_pairs() > 0);
             assert_eq!(
@@ -1295,6 +1305,8 @@ fn a_deep_narrow_pit_without_a_scan_point_at_its_bottom_makes_a_region() {
     }
     assert!(found >= 54, "{found} of 60 found");
     assert!(paired >= 5, "point pairs measured {paired} of 60 runs");
+    eprintln!("found {found}, point pairs in {paired}, peak a lower bound in {bounded} of 60");
+    assert!(bounded >= 5, "peaks flagged as lower bounds in {bounded} of 60 runs");
 }
 
 /// Defects wider than the peak window reaches (2.3 mm at 19 scan points/mm²): the tolerance

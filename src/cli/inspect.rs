@@ -333,9 +333,16 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
             "pit (not repairable)"
         };
         println!(
-            "{:>6} {:>10.4} {:>10.3} {:>11.5} {:>7}  {kind}",
-            r.id, r.peak, r.area, r.volume, r.points
+            "{:>6} {:>10} {:>10.3} {:>11.5} {:>7}  {kind}",
+            r.id,
+            super::inspect_report::peak_text(r),
+            r.area,
+            r.volume,
+            r.points
         );
+    }
+    if found.regions.iter().any(|r| r.peak_lower_bound) {
+        println!("{}", super::inspect_report::LOWER_BOUND_NOTE);
     }
     let verdict = super::inspect_report::verdict_text(found.verdict);
     println!("verdict: {verdict} ({} regions)", found.regions.len());

@@ -4,7 +4,7 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::compare::Deviations;
-use crate::regions::{Regions, Verdict};
+use crate::regions::{Region, Regions, Verdict};
 use crate::report::{self, ReportConfig, ReportInput, Table};
 
 /// The verdict as users read it.
@@ -14,6 +14,20 @@ pub fn verdict_text(v: Verdict) -> &'static str {
         Verdict::Repairable => "repairable",
         Verdict::Reject => "reject",
     }
+}
+
+/// Footnote of a peak marked `*` ([`peak_text`]).
+pub const LOWER_BOUND_NOTE: &str = "* lower bound: read by single point pairs under a defect \
+     too narrow for a model (no scan point near its top); the true peak is at least this large";
+
+/// A region's signed peak with 4 decimals, followed by `*` when it is a lower bound
+/// ([`Region::peak_lower_bound`]), else by a space (so the digits stay in columns).
+pub fn peak_text(r: &Region) -> String {
+    format!(
+        "{:+.4}{}",
+        r.peak,
+        if r.peak_lower_bound { '*' } else { ' ' }
+    )
 }
 
 /// Writes `dir/report.html` with its figures; `summary` lines come first (registration...).
@@ -52,7 +66,7 @@ pub fn write(
                     "pit (not repairable)"
                 }
                 .to_string(),
-                format!("{:+.4}", r.peak),
+                peak_text(r),
                 format!("{:+.4}", r.mean),
                 format!("{:.3}", r.area),
                 format!("{:.5}", r.volume),
@@ -64,6 +78,12 @@ pub fn write(
             ]
         })
         .collect();
+    if found.regions.iter().any(|r| r.peak_lower_bound) {
+        summary.push((
+            "peaks marked *".to_string(),
+            LOWER_BOUND_NOTE[2..].to_string(),
+        ));
+    }
     let header = [
         "id",
         "kind",

@@ -12,7 +12,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::Neighbours;
-use crate::compare::{area_shares, Deviations, PEAK_LOD_RATIO};
+use crate::compare::{area_shares, Deviation, Deviations, Reason, PEAK_LOD_RATIO};
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -52,6 +52,12 @@ pub struct Region {
     pub area: f64,
     /// Signed distance of largest magnitude, mm.
     pub peak: f64,
+    /// The peak was read by a single point pair ([`crate::compare::Reason::PointPair`])
+    /// under a defect too narrow for any model, with no scan point near its top: the true
+    /// peak is at least this large in magnitude (a plan grinds only down to it; inspect
+    /// again after grinding). Absent in files from before 2026-12-01: false.
+    #[serde(default)]
+    pub peak_lower_bound: bool,
     /// Mean signed distance, mm.
     pub mean: f64,
     /// Volume beyond the tolerance, mm³.
@@ -182,13 +188,13 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
 /// (a second, taller top in the region whose fit was refused): the largest of many noisy
 /// quadric estimates on a plateau is biased high, the fit is not. Other members count only
 /// when their LoD is at most [`PEAK_LOD_RATIO`] × the members' median LoD; without a fitted
-/// peak, the largest of those.
-fn peak(dev: &Deviations, members: &[usize]) -> f64 {
+/// peak, the largest of those. Returns the member whose peak it is.
+fn peak<'a>(dev: &'a Deviations, members: &[usize]) -> Option<&'a Deviation> {
     let mut lods: Vec<f64> = members.iter().map(|&i| dev.values[i].uncertainty).collect();
     let mid = lods.len() / 2;
     let cap = PEAK_LOD_RATIO * *lods.select_nth_unstable_by(mid, f64::total_cmp).1;
-    let largest = |peaks: &mut dyn Iterator<Item = f64>| {
-        peaks.max_by(|a: &f64, b: &f64| a.abs().total_cmp(&b.abs()))
+    let largest = |peaks: &mut dyn Iterator<Item = &'a Deviation>| {
+        peaks.max_by(|a, b| a.peak.abs().total_cmp(&b.peak.abs()))
     };
     let eligible = || {
         members
@@ -196,16 +202,13 @@ fn peak(dev: &Deviations, members: &[usize]) -> f64 {
             .map(|&i| &dev.values[i])
             .filter(move |v| v.peak_fitted || v.uncertainty <= cap)
     };
-    let fitted = largest(&mut eligible().filter(|v| v.peak_fitted).map(|v| v.peak));
-    let peak = match fitted {
+    match largest(&mut eligible().filter(|v| v.peak_fitted)) {
         Some(f) => largest(
             &mut eligible()
-                .filter(|v| v.peak_fitted || v.peak.abs() > f.abs() + v.uncertainty)
-                .map(|v| v.peak),
+                .filter(|v| v.peak_fitted || v.peak.abs() > f.peak.abs() + v.uncertainty),
         ),
-        None => largest(&mut eligible().map(|v| v.peak)),
-    };
-    peak.unwrap_or(0.0)
+        None => largest(&mut eligible()),
+    }
 }
 
 fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) -> Region {
@@ -221,13 +224,15 @@ fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) 
         .sum::<Vector3<f64>>();
     let normal = normal.try_normalize(0.0).unwrap_or_else(Vector3::zeros);
     let d = |i: usize| dev.values[i].distance;
-    let peak = peak(dev, members);
+    let top = peak(dev, members);
+    let peak = top.map_or(0.0, |v| v.peak);
     Region {
         id: 0,
         centroid: centroid.into(),
         normal: normal.into(),
         area: members.iter().map(|&i| share[i]).sum(),
         peak,
+        peak_lower_bound: top.is_some_and(|v| v.reason == Reason::PointPair),
         mean: members.iter().map(|&i| d(i)).sum::<f64>() / n,
         volume: members
             .iter()
@@ -310,6 +315,36 @@ mod tests {
         let mut dev = patch(&[(12, 0.2, true)]);
         dev.values[12].uncertainty = 0.09;
         assert_eq!(region_peak(&dev), 0.2);
+    }
+
+    #[test]
+    fn a_peak_read_by_a_point_pair_is_flagged_as_a_lower_bound() {
+        let region =
+            |dev: &Deviations| find_regions(dev, &RegionConfig::default()).regions[0].clone();
+        // The region's peak is a point pair's: a lower bound.
+        let mut dev = patch(&[(12, 0.2, false)]);
+        dev.values[12].reason = Reason::PointPair;
+        let r = region(&dev);
+        assert!(r.peak == 0.2 && r.peak_lower_bound, "{r:?}");
+        // A point pair below the peak (read by a cylinder) flags nothing.
+        dev.values[12].peak = 0.12;
+        dev.values[3].peak = 0.14;
+        let r = region(&dev);
+        assert!(r.peak == 0.14 && !r.peak_lower_bound, "{r:?}");
+        // Nor does a fitted peak above it.
+        dev.values[12].peak = 0.2;
+        dev.values[3] = Deviation {
+            peak: 0.3,
+            peak_fitted: true,
+            ..dev.values[3]
+        };
+        let r = region(&dev);
+        assert!(r.peak == 0.3 && !r.peak_lower_bound, "{r:?}");
+        // Files from before the flag read as false.
+        let mut json = serde_json::to_value(&r).unwrap();
+        json.as_object_mut().unwrap().remove("peak_lower_bound");
+        let old: Region = serde_json::from_value(json).unwrap();
+        assert!(!old.peak_lower_bound);
     }
 
     #[test]
