@@ -1306,7 +1306,10 @@ fn a_deep_narrow_pit_without_a_scan_point_at_its_bottom_makes_a_region() {
     assert!(found >= 54, "{found} of 60 found");
     assert!(paired >= 5, "point pairs measured {paired} of 60 runs");
     eprintln!("found {found}, point pairs in {paired}, peak a lower bound in {bounded} of 60");
-    assert!(bounded >= 5, "peaks flagged as lower bounds in {bounded} of 60 runs");
+    assert!(
+        bounded >= 5,
+        "peaks flagged as lower bounds in {bounded} of 60 runs"
+    );
 }
 
 /// Defects wider than the peak window reaches (2.3 mm at 19 scan points/mm²): the tolerance
