@@ -370,6 +370,58 @@ fn cli_plan_then_run_against_the_mock_board() {
     assert_eq!(pos, checked.raw.last().unwrap().to_vec(), "final pose");
 }
 
+/// A region whose peak regions.json marks as a lower bound (read by single point pairs) is
+/// planned down to that peak, and `plan` says so: in plan.json's reachability and in a
+/// warning line.
+#[test]
+fn a_lower_bound_peak_is_carried_into_the_plan_with_a_warning() {
+    let tmp = common::tempdir();
+    let insp = tmp.path().join("inspection");
+    synthetic_inspection(&insp, 11, 6);
+    let file = insp.join("regions.json");
+    let mut regions: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    let list = regions["regions"].as_array_mut().unwrap();
+    let flagged = list
+        .iter_mut()
+        .find(|r| r["repairable"] == true)
+        .expect("a repairable region");
+    flagged["peak_lower_bound"] = true.into();
+    let id = flagged["id"].as_u64().unwrap() as usize;
+    std::fs::write(&file, regions.to_string()).unwrap();
+    let cfg = tmp.path().join("plan.toml");
+    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+    let plan_path = tmp.path().join("plan.json");
+    let out = common::succeed(
+        common::polishbot()
+            .args(["plan", "--config"])
+            .arg(&cfg)
+            .arg("--inspection")
+            .arg(&insp)
+            .arg("-o")
+            .arg(&plan_path),
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let p = Plan::load(&plan_path).unwrap();
+    for r in &p.reachability.regions {
+        assert_eq!(r.peak_lower_bound, r.id == id, "region {}", r.id);
+        let warned = stdout.contains(&format!("warning: region {}: its peak", r.id));
+        assert_eq!(
+            warned,
+            r.id == id && r.layers > 0,
+            "region {}: {stdout}",
+            r.id
+        );
+    }
+    assert!(
+        p.reachability
+            .regions
+            .iter()
+            .any(|r| r.id == id && r.layers > 0),
+        "the flagged region was not planned: {stdout}"
+    );
+}
+
 #[test]
 fn run_refuses_a_tampered_plan_before_sending_anything() {
     let tmp = common::tempdir();

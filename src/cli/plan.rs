@@ -89,6 +89,14 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
             r.unreachable_path_points,
             r.path_points
         );
+        if r.peak_lower_bound {
+            println!(
+                "plan: warning: region {}: its peak {:+.4} mm is a lower bound (the inspection \
+                 read it by single point pairs under a defect too narrow for a model): the \
+                 layers reach down to it only; inspect again after grinding",
+                r.id, r.peak_mm
+            );
+        }
     }
     if let Some(u) = plan.reachability.unreachable.first() {
         println!(

@@ -142,6 +142,7 @@ pub fn region_report(
         id: region.id,
         repairable: region.repairable,
         peak_mm: region.peak,
+        peak_lower_bound: region.peak_lower_bound,
         area_mm2: region.area,
         layers,
         path_points,

@@ -43,6 +43,11 @@ pub struct RegionReport {
     pub repairable: bool,
     /// Peak distance, mm.
     pub peak_mm: f64,
+    /// regions.json says the peak is a lower bound (read by a single point pair): the layers
+    /// reach down to it, and the defect may stand higher (inspect again after grinding).
+    /// Absent in plans from before 2026-12-01: false.
+    #[serde(default)]
+    pub peak_lower_bound: bool,
     /// Area, mm^2.
     pub area_mm2: f64,
     /// Depth layers planned.
