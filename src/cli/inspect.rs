@@ -246,8 +246,8 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-/// Writes deviations.csv, deviations.ply, regions.json and the report, the three at once
-/// (formatting the rows is most of their time, and each is single-threaded).
+/// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
+/// (formatting is most of their time, and each is single-threaded).
 fn write_outputs(
     out: &Path,
     dev: &compare::Deviations,
@@ -342,7 +342,7 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
         );
     }
     if found.regions.iter().any(|r| r.peak_lower_bound) {
-        println!("{}", super::inspect_report::LOWER_BOUND_NOTE);
+        println!("* {}", super::inspect_report::LOWER_BOUND_NOTE);
     }
     let verdict = super::inspect_report::verdict_text(found.verdict);
     println!("verdict: {verdict} ({} regions)", found.regions.len());

@@ -16,8 +16,8 @@ pub fn verdict_text(v: Verdict) -> &'static str {
     }
 }
 
-/// Footnote of a peak marked `*` ([`peak_text`]).
-pub const LOWER_BOUND_NOTE: &str = "* lower bound: read by single point pairs under a defect \
+/// What a peak marked `*` ([`peak_text`]) means.
+pub const LOWER_BOUND_NOTE: &str = "lower bound: read by single point pairs under a defect \
      too narrow for a model (no scan point near its top); the true peak is at least this large";
 
 /// A region's signed peak with 4 decimals, followed by `*` when it is a lower bound
@@ -79,10 +79,7 @@ pub fn write(
         })
         .collect();
     if found.regions.iter().any(|r| r.peak_lower_bound) {
-        summary.push((
-            "peaks marked *".to_string(),
-            LOWER_BOUND_NOTE[2..].to_string(),
-        ));
+        summary.push(("peaks marked *".to_string(), LOWER_BOUND_NOTE.to_string()));
     }
     let header = [
         "id",
