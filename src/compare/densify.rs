@@ -219,6 +219,12 @@ fn modelled(
             if (gather_window(prep, x, n, window, scratch) as f64) < MIN_COVERAGE * full {
                 return None;
             }
+            let sign = top.start.signum();
+            let near_beyond =
+                || scratch.heights_between(prep.smallest_radius(), sign, tolerance, f64::MAX);
+            if top.from_delta && near_beyond() < MIN_NEAR_BEYOND {
+                return None;
+            }
             let (f, w) = fit_window(prep, top.start, cfg, scratch)?;
             let margin = match top.from_delta {
                 true => student_t95(f.dof()) * f.se,
@@ -279,6 +285,15 @@ impl TopMeasure {
         }
     }
 }
+
+/// Scan points within the smallest candidate radius of a top from δ that must lie beyond the
+/// tolerance (with its sign) for [`modelled`] to fit a model there. A top of noise (a
+/// reference point or two whose pairs read just beyond the tolerance) has none: with
+/// 0.015 mm noise a scan point reads beyond 0.05 mm by chance once in 2,500. Their fits (two
+/// shapes by Levenberg-Marquardt each) were most of step 12's time: on the peer case at 20k
+/// core points 80 of 92 fits started below 0.06 mm, and one model was kept
+/// (docs/ALGORITHMS.md, adaptive step 12).
+const MIN_NEAR_BEYOND: usize = 2;
 
 /// Scan points of a [`paired`] top beyond the tolerance by [`FAR_NOISE`] noise SDs.
 const MIN_FAR_POINTS: usize = 3;
