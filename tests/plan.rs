@@ -301,6 +301,29 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     );
 }
 
+/// `polishbot plan` of the inspection folder `insp` with 1 mm depth layers (a config file
+/// in `dir`) and `extra` arguments, into `dir/plan.json`; its output and that path.
+fn cli_plan(
+    dir: &Path,
+    insp: &Path,
+    extra: &[&std::ffi::OsStr],
+) -> (std::process::Output, PathBuf) {
+    let cfg = dir.join("plan.toml");
+    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+    let plan_path = dir.join("plan.json");
+    let out = common::succeed(
+        common::polishbot()
+            .args(["plan", "--config"])
+            .arg(&cfg)
+            .arg("--inspection")
+            .arg(insp)
+            .arg("-o")
+            .arg(&plan_path)
+            .args(extra),
+    );
+    (out, plan_path)
+}
+
 #[test]
 fn cli_plan_then_run_against_the_mock_board() {
     let Some(py) = common::oracle_python() else {
@@ -309,21 +332,8 @@ fn cli_plan_then_run_against_the_mock_board() {
     let tmp = common::tempdir();
     let insp = tmp.path().join("inspection");
     synthetic_inspection(&insp, 11, 6);
-    let cfg = tmp.path().join("plan.toml");
-    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
-    let plan_path = tmp.path().join("plan.json");
     let yaml = tmp.path().join("traj.yaml");
-    let out = common::succeed(
-        common::polishbot()
-            .args(["plan", "--config"])
-            .arg(&cfg)
-            .arg("--inspection")
-            .arg(&insp)
-            .arg("-o")
-            .arg(&plan_path)
-            .arg("--export-ros")
-            .arg(&yaml),
-    );
+    let (out, plan_path) = cli_plan(tmp.path(), &insp, &["--export-ros".as_ref(), yaml.as_ref()]);
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let p = Plan::load(&plan_path).unwrap();
     let text = std::fs::read_to_string(&yaml).unwrap();
@@ -389,18 +399,7 @@ fn a_lower_bound_peak_is_carried_into_the_plan_with_a_warning() {
     flagged["peak_lower_bound"] = true.into();
     let id = flagged["id"].as_u64().unwrap() as usize;
     std::fs::write(&file, regions.to_string()).unwrap();
-    let cfg = tmp.path().join("plan.toml");
-    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
-    let plan_path = tmp.path().join("plan.json");
-    let out = common::succeed(
-        common::polishbot()
-            .args(["plan", "--config"])
-            .arg(&cfg)
-            .arg("--inspection")
-            .arg(&insp)
-            .arg("-o")
-            .arg(&plan_path),
-    );
+    let (out, plan_path) = cli_plan(tmp.path(), &insp, &[]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     let p = Plan::load(&plan_path).unwrap();
     for r in &p.reachability.regions {

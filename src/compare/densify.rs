@@ -220,9 +220,10 @@ fn modelled(
                 return None;
             }
             let sign = top.start.signum();
-            let near_beyond =
-                || scratch.heights_between(prep.refine_radius, sign, tolerance, f64::MAX);
-            if top.from_delta && near_beyond() < MIN_NEAR_BEYOND {
+            if top.from_delta
+                && scratch.heights_between(prep.refine_radius, sign, tolerance, f64::MAX)
+                    < MIN_NEAR_BEYOND
+            {
                 return None;
             }
             let (f, w) = fit_window(prep, top.start, cfg, scratch)?;

@@ -86,13 +86,13 @@ pub fn mean_spacing_in(grid: &Grid, points: &[Point3<f64>]) -> f64 {
         return 0.0;
     }
     let step = points.len().div_ceil(SPACING_SAMPLE);
-    let sample: Vec<usize> = (0..points.len()).step_by(step).collect();
-    let sample_points: Vec<Point3<f64>> = sample.iter().map(|&i| points[i]).collect();
+    let sample: Vec<Point3<f64>> = points.iter().step_by(step).copied().collect();
     // All queries at once (exactly the single queries' answers, several times faster); a
     // query grid of the searched grid's cell, each query's candidates gathered a cell around.
-    let queries = Grid::new(&sample_points, grid.cell());
+    let queries = Grid::new(&sample, grid.cell());
     let nearest: Vec<f64> = grid.knn_each(&queries, 2, f64::INFINITY, grid.cell(), |q, found| {
-        let i = sample[q];
+        // Sample `q` is point `q × step`.
+        let i = q * step;
         // The point itself is one of the two (a duplicate of it counts at distance 0).
         found
             .iter()
