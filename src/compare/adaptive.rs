@@ -227,12 +227,12 @@ pub fn run(
             }
         })
         .collect();
-    let scan_slots = clouds
-        .scan_grid
-        .slot_ids()
-        .par_iter()
-        .map(|&j| nearest[j as usize])
-        .collect();
+    let scan_slots = match clouds.scan_grid.numbered_in_storage_order() {
+        true => nearest,
+        false => (clouds.scan_grid.slot_ids().par_iter())
+            .map(|&j| nearest[j as usize])
+            .collect(),
+    };
     let core_index = Neighbours::new(&core.points);
     let prep = Prepared {
         clouds,

@@ -410,6 +410,9 @@ impl Grid {
                 out
             })
             .collect();
+        if queries.numbered_in_storage_order() {
+            return stored;
+        }
         let mut slots: Vec<Option<R>> = stored.iter().map(|_| None).collect();
         for (&i, v) in queries.ids.iter().zip(stored) {
             slots[i as usize] = Some(v);

@@ -325,6 +325,12 @@ impl Grid {
         std::mem::replace(&mut self.ids, slots)
     }
 
+    /// Whether every stored point's index is its storage slot (as after
+    /// [`renumber`](Grid::renumber)): results per slot are then results per index.
+    pub fn numbered_in_storage_order(&self) -> bool {
+        self.ids.iter().enumerate().all(|(s, &i)| s == i as usize)
+    }
+
     /// Original index of the point at each storage slot.
     pub fn slot_ids(&self) -> &[u32] {
         &self.ids
