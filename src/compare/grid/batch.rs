@@ -664,6 +664,16 @@ mod tests {
                     let w: f64 = want.iter().map(|e| e.0 + e.1 as f64).sum();
                     assert_eq!(sums[i], w, "query {i}, cell {cell}, k {k}");
                 }
+                // Queries renumbered in storage order: answers per slot.
+                let mut renumbered = Grid::new(&queries, cell * 1.3);
+                let original = renumbered.renumber();
+                assert!(renumbered.numbered_in_storage_order());
+                let slot_sums = grid.knn_each(&renumbered, k, max_radius, halo, |_, n| {
+                    n.iter().map(|e| e.0 + e.1 as f64).sum::<f64>()
+                });
+                for (slot, &i) in original.iter().enumerate() {
+                    assert_eq!(slot_sums[slot], sums[i as usize], "slot {slot}, k {k}");
+                }
             }
         }
     }
