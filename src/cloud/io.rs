@@ -6,6 +6,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::error::{ParseError, Place};
 use super::ply::{write_ply_bytes, PlyPrecision};
 use super::types::{Aabb, Geometry, PointCloud};
 
@@ -74,17 +75,100 @@ pub struct Loaded {
     pub units_assumed: bool,
 }
 
-/// Reads a whole file, with one-line errors for missing files, directories and empty files.
+/// Reads a whole regular file, with one-line errors for missing files, directories, empty
+/// files and anything that is not a regular file (a FIFO, a device such as `/dev/zero`, a
+/// socket): those are refused from their metadata, before a byte is read. The file is opened
+/// non-blocking so that opening a FIFO cannot wait for a writer, and at most the size the
+/// metadata gives is read (a file that grows meanwhile is read as it was).
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>> {
-    let meta = std::fs::metadata(path).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    use std::io::Read;
+    let fail = |e: std::io::Error| anyhow!("{}: {}", path.display(), e);
+    let mut file = open_nonblocking(path).map_err(fail)?;
+    let meta = file.metadata().map_err(fail)?;
     if meta.is_dir() {
         bail!("{}: is a directory, not a file", path.display());
     }
-    let bytes = std::fs::read(path).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
+    if !meta.is_file() {
+        bail!(
+            "{}: not a regular file ({}); geometry is read from regular files only",
+            path.display(),
+            file_kind(&meta)
+        );
+    }
+    let size = usize::try_from(meta.len())
+        .map_err(|_| anyhow!("{}: too large for this machine", path.display()))?;
+    let mut bytes = Vec::with_capacity(size);
+    (&mut file)
+        .take(meta.len())
+        .read_to_end(&mut bytes)
+        .map_err(fail)?;
     if bytes.is_empty() {
         bail!("{}: byte 0: empty file", path.display());
     }
     Ok(bytes)
+}
+
+/// Opens for reading without waiting: on Unix with `O_NONBLOCK`, which returns at once for a
+/// FIFO without a writer (and changes nothing for a regular file).
+fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    options.open(path)
+}
+
+/// What a non-regular file is, for the message.
+fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    let _ = meta;
+    "neither a file nor a directory"
+}
+
+/// Largest coordinate magnitude accepted, mm, after units: a kilometre. The largest thing
+/// polishbot measures or reaches is a workcell under a metre across, so a larger coordinate is
+/// a wrong unit or a broken file; within it a coordinate keeps a resolution of 1.2e-10 mm in
+/// f64, squared distances cannot overflow and grid and voxel indices stay far from integer
+/// limits (coordinates near 1e300 made them saturate or panic).
+pub const MAX_COORD_MM: f64 = 1e6;
+
+/// The first point with a coordinate beyond ±[`MAX_COORD_MM`], as an error naming it.
+fn check_range(points: &[nalgebra::Point3<f64>]) -> Result<(), ParseError> {
+    match points
+        .iter()
+        .position(|p| p.coords.iter().any(|c| c.abs() > MAX_COORD_MM))
+    {
+        None => Ok(()),
+        Some(i) => {
+            let p = points[i];
+            Err(ParseError::new(
+                Place::Point(i),
+                format!(
+                    "coordinate ({:e}, {:e}, {:e}) mm is beyond ±{MAX_COORD_MM:e} mm (wrong --units or a broken file?)",
+                    p.x, p.y, p.z
+                ),
+            ))
+        }
+    }
 }
 
 /// Loads a geometry file into millimetres. `format` overrides the extension. Without `units`,
@@ -120,6 +204,7 @@ pub fn load(path: &Path, format: Option<Format>, units: Option<Units>) -> Result
         }
     };
     geometry.scale(units.to_mm());
+    check_range(geometry.points()).map_err(|e| anyhow!("{}: {}", path.display(), e))?;
     Ok(Loaded {
         geometry,
         units,

@@ -18,7 +18,9 @@ mod types;
 mod xyz;
 
 pub use error::{ParseError, Place};
-pub use io::{load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units};
+pub use io::{
+    load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units, MAX_COORD_MM,
+};
 pub use neighbours::{KnnScratch, Neighbour, Neighbours};
 pub use ply::{write_ply_bytes, PlyPrecision};
 pub use sample::{sample_mesh, MeshSample};

@@ -11,19 +11,19 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
     if bytes.is_empty() {
         return fail(Place::Byte(0), "empty file");
     }
-    let mut lines = Vec::new();
-    for item in text::lines(bytes) {
-        let (n, _, line) = item?;
-        let line = line.split('#').next().unwrap_or("").trim();
-        if !line.is_empty() {
-            lines.push((n, line));
+    // Non-blank lines with comments cut off, read lazily (a list of them all would cost more
+    // memory than the file).
+    let mut it = text::lines(bytes).filter_map(|item| match item {
+        Ok((n, _, line)) => {
+            let line = line.split('#').next().unwrap_or("").trim();
+            (!line.is_empty()).then_some(Ok((n, line)))
         }
-    }
+        Err(e) => Some(Err(e)),
+    });
     let end = Place::Line(bytes.split(|&b| b == b'\n').count());
-    let mut it = lines.into_iter();
     let (l, head) = it
         .next()
-        .ok_or_else(|| ParseError::new(end, "no OFF header"))?;
+        .ok_or_else(|| ParseError::new(end, "no OFF header"))??;
     let mut head_tok = text::tokens(head);
     if !matches!(head_tok.next(), Some("OFF" | "COFF" | "NOFF" | "CNOFF")) {
         return fail(Place::Line(l), "not an OFF file (first word must be OFF)");
@@ -32,7 +32,7 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
     let (l, counts) = if rest.is_empty() {
         let (l, line) = it
             .next()
-            .ok_or_else(|| ParseError::new(end, "file ends before the counts line"))?;
+            .ok_or_else(|| ParseError::new(end, "file ends before the counts line"))??;
         (l, text::tokens(line).collect::<Vec<_>>())
     } else {
         (l, rest)
@@ -46,7 +46,7 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
     for i in 0..nv {
         let (l, line) = it
             .next()
-            .ok_or_else(|| ParseError::new(end, format!("file ends at vertex {i} of {nv}")))?;
+            .ok_or_else(|| ParseError::new(end, format!("file ends at vertex {i} of {nv}")))??;
         let t: Vec<&str> = text::tokens(line).collect();
         if t.len() < 3 {
             return fail(Place::Line(l), "vertex needs 3 coordinates");
@@ -61,11 +61,11 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
     for f in 0..nf {
         let (l, line) = it
             .next()
-            .ok_or_else(|| ParseError::new(end, format!("file ends at face {f} of {nf}")))?;
+            .ok_or_else(|| ParseError::new(end, format!("file ends at face {f} of {nf}")))??;
         let place = Place::Line(l);
         let t: Vec<&str> = text::tokens(line).collect();
         let n = text::count(t.first().copied().unwrap_or(""), place)?;
-        if n < 3 || t.len() < n + 1 {
+        if n < 3 || t.len() <= n {
             return fail(
                 place,
                 format!("face declares {n} vertices, needs at least 3 and that many indices"),
@@ -87,6 +87,12 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
         for k in 1..n - 1 {
             faces.push([idx[0], idx[k], idx[k + 1]]);
         }
+    }
+    if let Some(item) = it.next() {
+        return fail(
+            Place::Line(item?.0),
+            format!("more lines than the header declares ({nv} vertices, {nf} faces)"),
+        );
     }
     let cloud = PointCloud::from_points(points);
     cloud.check_finite()?;

@@ -113,9 +113,13 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
             );
         }
     }
-    let n = points
-        .or(width.map(|w| w * height))
-        .ok_or_else(|| ParseError::new(data_place, "no POINTS or WIDTH"))?;
+    let n = match (points, width) {
+        (Some(n), _) => n,
+        (None, Some(w)) => w
+            .checked_mul(height)
+            .ok_or_else(|| ParseError::new(data_place, "WIDTH × HEIGHT is too large"))?,
+        (None, None) => return fail(data_place, "no POINTS or WIDTH"),
+    };
     // Only single-valued fields become columns.
     let scalar_names: Vec<String> = fields
         .iter()
@@ -129,29 +133,46 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
         "ascii" => {
             let mut lines = text::lines(&bytes[body..])
                 .filter(|l| !matches!(l, Ok((_, _, s)) if s.trim().is_empty()));
-            let width: usize = fields.iter().map(|f| f.count).sum();
+            let width = fields
+                .iter()
+                .try_fold(0usize, |w, f| w.checked_add(f.count))
+                .ok_or_else(|| ParseError::new(data_place, "COUNT total is too large"))?;
             for i in 0..n {
                 let (k, _, line) = match lines.next() {
                     Some(item) => item?,
                     None => return fail(Place::Point(i), format!("file ends at point {i} of {n}")),
                 };
                 let place = Place::Line(body_line + k - 1);
-                let toks: Vec<&str> = text::tokens(line).collect();
-                if toks.len() != width {
-                    return fail(
-                        place,
-                        format!("expected {width} values, found {}", toks.len()),
-                    );
-                }
+                let toks = text::row(text::tokens(line), width, place)?;
                 row.clear();
                 let mut t = 0;
                 for f in &fields {
                     if f.count == 1 {
-                        row.push(text::number(toks[t], place)?);
+                        let v = text::number(toks[t], place)?;
+                        if !fits(f, v) {
+                            return fail(
+                                place,
+                                format!(
+                                    "{}: {} does not fit TYPE {} SIZE {}",
+                                    f.name,
+                                    text::shorten(toks[t]),
+                                    f.kind,
+                                    f.size
+                                ),
+                            );
+                        }
+                        row.push(v);
                     }
                     t += f.count;
                 }
                 layout.push(&mut cloud, &row);
+            }
+            if let Some(item) = lines.next() {
+                let (k, _, _) = item?;
+                return fail(
+                    Place::Line(body_line + k - 1),
+                    format!("more rows than the header's {n} points"),
+                );
             }
         }
         "binary" => {
@@ -170,6 +191,12 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
                 }
                 layout.push(&mut cloud, &row);
             }
+            if !bytes[cur.pos..].iter().all(u8::is_ascii_whitespace) {
+                return fail(
+                    Place::Byte(cur.pos),
+                    format!("{} bytes after the header's {n} points", cur.remaining()),
+                );
+            }
         }
         other => {
             return fail(
@@ -180,6 +207,19 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
     }
     cloud.check_finite()?;
     Ok(Geometry::Cloud(cloud))
+}
+
+/// Whether an ascii value can be stored in the field's type: whole numbers within range for
+/// `I` and `U`, at most `f32::MAX` in magnitude for `F` of size 4 (NaN and infinities pass
+/// here: positions and normals are checked for them with their point index).
+fn fits(f: &Field, v: f64) -> bool {
+    let bits = 8 * f.size as i32;
+    match f.kind {
+        'F' if f.size == 4 => !v.is_finite() || v.abs() <= f32::MAX as f64,
+        'F' => true,
+        'U' => v.fract() == 0.0 && v >= 0.0 && v < 2f64.powi(bits),
+        _ => v.fract() == 0.0 && v >= -(2f64.powi(bits - 1)) && v < 2f64.powi(bits - 1),
+    }
 }
 
 fn decode(b: &[u8], kind: char) -> f64 {

@@ -93,36 +93,84 @@ fn read_binary(bytes: &[u8], n: usize) -> Result<Geometry, ParseError> {
     Ok(welder.finish(faces))
 }
 
+/// Where an ascii STL reader stands: `facet` is the line of the open facet, `corners` the
+/// vertices of its loop so far, `loop_closed` whether its `endloop` was read.
+#[derive(Default)]
+struct Facet {
+    line: Option<usize>,
+    corners: Vec<u32>,
+    loop_closed: bool,
+}
+
 fn read_ascii(bytes: &[u8]) -> Result<Geometry, ParseError> {
     let mut welder = Welder::default();
     let mut faces = Vec::new();
-    let mut corners: Vec<u32> = Vec::with_capacity(3);
+    let mut open = Facet::default();
+    let mut ended = false;
+    let mut last_line = 0;
     for item in text::lines(bytes) {
         let (line_no, _, line) = item?;
+        last_line = line_no;
         let place = Place::Line(line_no);
         let mut tok = text::tokens(line);
-        match tok.next() {
+        let word = tok.next();
+        if ended && !matches!(word, None | Some("solid")) {
+            return fail(
+                place,
+                "text after endsolid (another solid must begin with solid)",
+            );
+        }
+        match word {
+            Some("facet") => {
+                if let Some(l) = open.line {
+                    return fail(place, format!("facet inside the facet begun at line {l}"));
+                }
+                open = Facet {
+                    line: Some(line_no),
+                    ..Facet::default()
+                };
+            }
+            Some("outer") if open.line.is_none() => return fail(place, "loop outside a facet"),
             Some("vertex") => {
                 let mut c = [0.0; 3];
                 for v in &mut c {
                     *v = text::number(tok.next().unwrap_or(""), place)?;
                 }
-                if corners.len() == 3 {
+                if open.line.is_none() || open.loop_closed {
+                    return fail(place, "vertex outside a facet's loop");
+                }
+                if open.corners.len() == 3 {
                     return fail(place, "facet with more than 3 vertices");
                 }
-                corners.push(welder.add(c, place)?);
+                open.corners.push(welder.add(c, place)?);
             }
             Some("endloop") => {
-                if corners.len() != 3 {
+                if open.corners.len() != 3 || open.loop_closed {
                     return fail(
                         place,
-                        format!("facet has {} vertices, needs 3", corners.len()),
+                        format!("facet has {} vertices, needs 3", open.corners.len()),
                     );
                 }
-                faces.push([corners[0], corners[1], corners[2]]);
-                corners.clear();
+                faces.push([open.corners[0], open.corners[1], open.corners[2]]);
+                open.loop_closed = true;
             }
-            Some("solid" | "facet" | "outer" | "endfacet" | "endsolid") | None => {}
+            Some("endfacet") => {
+                if !open.loop_closed {
+                    return fail(place, "endfacet without a complete loop before it");
+                }
+                open = Facet::default();
+            }
+            Some("endsolid") => match open.line {
+                Some(l) => {
+                    return fail(
+                        place,
+                        format!("endsolid inside the facet begun at line {l}"),
+                    )
+                }
+                None => ended = true,
+            },
+            Some("solid") => ended = false,
+            Some("outer") | None => {}
             Some(other) => {
                 return fail(
                     place,
@@ -131,8 +179,18 @@ fn read_ascii(bytes: &[u8]) -> Result<Geometry, ParseError> {
             }
         }
     }
+    let end = Place::Line(last_line);
+    if let Some(l) = open.line {
+        return fail(
+            end,
+            format!("file ends inside the facet begun at line {l} (cut short?)"),
+        );
+    }
     if faces.is_empty() {
         return fail(Place::File, "ascii STL has no facets");
+    }
+    if !ended {
+        return fail(end, "file ends without endsolid (cut short?)");
     }
     Ok(welder.finish(faces))
 }

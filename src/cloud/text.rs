@@ -52,6 +52,32 @@ pub fn shorten(token: &str) -> String {
     token.chars().take(32).collect()
 }
 
+/// Most values in one row of a delimited text file whose width is not declared (XYZ/CSV): a
+/// scanner export has a dozen columns (x y z, normals, colour, intensity, ...). Each column
+/// becomes a scalar field, so without a bound one 20 MB line of ten million numbers made ten
+/// million fields (2.3 GB) before the row was even checked.
+pub const MAX_COLUMNS: usize = 1024;
+
+/// The first `width` tokens of a row that must hold exactly `width`, or an error naming the
+/// place; never looks at more than `width + 1` tokens (a huge line costs no memory).
+pub fn row<'a>(
+    mut tokens: impl Iterator<Item = &'a str>,
+    width: usize,
+    place: Place,
+) -> Result<Vec<&'a str>, ParseError> {
+    let row: Vec<&str> = tokens.by_ref().take(width).collect();
+    if row.len() < width {
+        return fail(
+            place,
+            format!("expected {width} values, found {}", row.len()),
+        );
+    }
+    if tokens.next().is_some() {
+        return fail(place, format!("expected {width} values, found more"));
+    }
+    Ok(row)
+}
+
 /// Splits a line into tokens separated by white space.
 pub fn tokens(line: &str) -> impl Iterator<Item = &str> {
     line.split_ascii_whitespace()

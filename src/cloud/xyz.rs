@@ -25,10 +25,16 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
         if trimmed.is_empty() || trimmed.starts_with('#') || trimmed.starts_with("//") {
             continue;
         }
-        let toks: Vec<&str> = split(trimmed).collect();
         let layout = match &columns {
             Some(c) => c,
             None => {
+                let toks: Vec<&str> = split(trimmed).take(text::MAX_COLUMNS + 1).collect();
+                if toks.len() > text::MAX_COLUMNS {
+                    return fail(
+                        place,
+                        format!("more than {} values in a row", text::MAX_COLUMNS),
+                    );
+                }
                 let is_header = toks.iter().any(|t| t.parse::<f64>().is_err());
                 let c = if is_header {
                     let names: Vec<String> = toks
@@ -47,12 +53,7 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
                 columns.as_ref().expect("just set")
             }
         };
-        if toks.len() != layout.width {
-            return fail(
-                place,
-                format!("expected {} values, found {}", layout.width, toks.len()),
-            );
-        }
+        let toks = text::row(split(trimmed), layout.width, place)?;
         row.clear();
         for t in &toks {
             row.push(text::number(t, place)?);

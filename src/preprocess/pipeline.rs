@@ -6,7 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use super::curvature::{curvature_sample, CurvatureSample, CurvatureSampleConfig};
 use super::sor::{statistical_outlier_filter, SorConfig, SorResult};
-use super::voxel::voxel_downsample;
+use super::voxel::{check_voxel, voxel_downsample};
+
+/// How the voxel edge is set, for messages: `filter --voxel` or `voxel_mm` in a config file.
+const VOXEL_OPTION: &str = "voxel down-sampling (--voxel / voxel_mm)";
 use crate::cloud::PointCloud;
 
 /// Settings of the preprocessing stage (TOML: `filter_outliers`, `voxel_mm`, `[sor]`,
@@ -57,9 +60,7 @@ pub struct Preprocessed {
 pub fn preprocess(cloud: &PointCloud, cfg: &PreprocessConfig) -> Result<Preprocessed> {
     let start = Instant::now();
     if let Some(v) = cfg.voxel_mm {
-        if !(v > 0.0 && v.is_finite()) {
-            bail!("voxel down-sampling: voxel must be a positive number of mm (got {v})");
-        }
+        check_voxel(cloud, v, VOXEL_OPTION)?;
     }
     if cloud.is_empty() {
         bail!("preprocess: the cloud is empty");

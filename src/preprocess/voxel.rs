@@ -5,12 +5,43 @@ use rayon::prelude::*;
 use crate::cloud::{Aabb, PointCloud};
 use crate::compare::grid::Grid;
 
+/// Most voxels along the cloud's longest side. A voxel key is `⌊coordinate / voxel⌋` as an
+/// integer: beyond about 9e18 it saturates and every point falls in one voxel (a voxel of
+/// 1e-300 mm merged the whole cloud), and beyond 2^53 neighbouring keys can no longer be told
+/// apart. A billion voxels across an 80 mm part is 0.08 nm, far below any scanner's noise
+/// (micrometres), so a finer voxel is a slip of the exponent, not a setting.
+pub const MAX_VOXELS_ACROSS: f64 = 1e9;
+
+/// Refuses a voxel edge that is not a positive finite number, finer than
+/// [`MAX_VOXELS_ACROSS`] voxels along the cloud's longest side, or longer than that side (a
+/// handful of points would be left of the whole cloud). The message names `option` (how the
+/// user set it, e.g. `--voxel`).
+pub fn check_voxel(cloud: &PointCloud, voxel_mm: f64, option: &str) -> anyhow::Result<()> {
+    if !(voxel_mm > 0.0 && voxel_mm.is_finite()) {
+        anyhow::bail!("{option}: the voxel must be a positive number of mm (got {voxel_mm})");
+    }
+    let across = Aabb::of(&cloud.points).map_or(0.0, |b| b.extent().max());
+    if across / voxel_mm > MAX_VOXELS_ACROSS {
+        anyhow::bail!(
+            "{option}: a voxel of {voxel_mm:e} mm is absurdly small for a cloud {across:.3} mm across (at most {MAX_VOXELS_ACROSS:e} voxels across it, i.e. at least {:e} mm)",
+            across / MAX_VOXELS_ACROSS
+        );
+    }
+    if across > 0.0 && voxel_mm > across {
+        anyhow::bail!(
+            "{option}: a voxel of {voxel_mm} mm is larger than the whole cloud ({across:.3} mm across): it would merge it into a handful of points"
+        );
+    }
+    Ok(())
+}
+
 /// Replaces the points of each occupied voxel (edge `voxel_mm`) by their centroid; normals are
 /// averaged and renormalised (the first point's normal when they cancel), scalar fields
 /// averaged. The grid is Open3D's: voxel (i, j, l) spans
 /// `min + voxel * ((i, j, l) - 1/2)` to `+ voxel`, `min` being the bounding-box corner.
 /// Output is ordered by voxel (x index, then y, then z). A voxel that is not a positive
-/// finite number returns the cloud unchanged (the stage front [`super::preprocess`] refuses it).
+/// finite number returns the cloud unchanged; [`check_voxel`] refuses that and voxels absurd
+/// for the cloud (the stage front [`super::preprocess`] calls it).
 pub fn voxel_downsample(cloud: &PointCloud, voxel_mm: f64) -> PointCloud {
     let Some(bbox) = Aabb::of(&cloud.points) else {
         return cloud.clone();

@@ -1,10 +1,18 @@
 //! PLY reader (ascii, binary little and big endian; any scalar type; vertex normals, scalar
-//! fields and faces; other elements skipped) and binary PLY writer.
+//! fields and faces; other elements skipped). The writer is in [`write`].
 use nalgebra::{Point3, Vector3};
 
+mod binary;
+mod write;
+
+pub use write::{write_ply_bytes, PlyPrecision};
+
 use super::error::{fail, ParseError, Place};
-use super::text::{self, Cursor};
+use super::text;
 use super::types::{Geometry, Mesh, PointCloud, ScalarField};
+
+/// Longest polygon an ascii list may hold (a sanity bound: a million vertices in one face).
+const MAX_ASCII_LIST: usize = 1_000_000;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Scalar {
@@ -40,6 +48,37 @@ impl Scalar {
             Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
             Scalar::F64 => 8,
         }
+    }
+
+    /// The name used in headers (for messages).
+    fn name(self) -> &'static str {
+        match self {
+            Scalar::I8 => "char",
+            Scalar::U8 => "uchar",
+            Scalar::I16 => "short",
+            Scalar::U16 => "ushort",
+            Scalar::I32 => "int",
+            Scalar::U32 => "uint",
+            Scalar::F32 => "float",
+            Scalar::F64 => "double",
+        }
+    }
+
+    /// Whether an ascii value can be stored in this type: whole numbers within range for the
+    /// integer types, at most `f32::MAX` in magnitude for float (NaN and infinities pass here:
+    /// positions and normals are checked for them with their point index).
+    fn holds(self, v: f64) -> bool {
+        let (lo, hi) = match self {
+            Scalar::I8 => (i8::MIN as f64, i8::MAX as f64),
+            Scalar::U8 => (0.0, u8::MAX as f64),
+            Scalar::I16 => (i16::MIN as f64, i16::MAX as f64),
+            Scalar::U16 => (0.0, u16::MAX as f64),
+            Scalar::I32 => (i32::MIN as f64, i32::MAX as f64),
+            Scalar::U32 => (0.0, u32::MAX as f64),
+            Scalar::F32 => return !v.is_finite() || v.abs() <= f32::MAX as f64,
+            Scalar::F64 => return true,
+        };
+        v.fract() == 0.0 && (lo..=hi).contains(&v)
     }
 
     fn is_integer(self) -> bool {
@@ -309,7 +348,7 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
         .collect();
     match header.encoding {
         Encoding::Ascii => read_ascii(bytes, &header, vi, &layout, &mut sink)?,
-        Encoding::Little | Encoding::Big => read_binary(bytes, &header, vi, &layout, &mut sink)?,
+        Encoding::Little | Encoding::Big => binary::read(bytes, &header, vi, &layout, &mut sink)?,
     }
     let Sink {
         mut cloud,
@@ -349,64 +388,105 @@ fn read_ascii(
     layout: &VertexLayout,
     sink: &mut Sink,
 ) -> Result<(), ParseError> {
-    let mut lines = text::lines(&bytes[h.body..]);
+    // Blank lines are skipped; every other line is one record.
+    let mut lines = text::lines(&bytes[h.body..]).filter_map(|item| match item {
+        Ok((_, _, line)) if line.trim().is_empty() => None,
+        Ok((n, _, line)) => Some(Ok((h.body_line - 1 + n, line))),
+        Err(e) => Some(Err(shift_line(e, h.body_line - 1))),
+    });
     let mut values: Vec<f64> = Vec::new();
     let mut line_no = h.body_line - 1;
     for (ei, el) in h.elements.iter().enumerate() {
         sink.has_faces |=
             el.name == "face" && el.count > 0 && el.props.iter().any(|p| is_face_list(el, p));
         for index in 0..el.count {
-            let line = loop {
-                match lines.next() {
-                    Some(item) => {
-                        let (n, _, line) = item.map_err(|e| shift_line(e, h.body_line - 1))?;
-                        line_no = h.body_line - 1 + n;
-                        if !line.trim().is_empty() {
-                            break line;
-                        }
-                    }
-                    None => {
-                        return fail(
-                            Place::Line(line_no + 1),
-                            format!(
-                                "file ends at {} {index} of {} declared in the header",
-                                el.name, el.count
-                            ),
-                        )
-                    }
-                }
+            let Some(item) = lines.next() else {
+                return fail(
+                    Place::Line(line_no + 1),
+                    format!(
+                        "file ends at {} {index} of {} declared in the header",
+                        el.name, el.count
+                    ),
+                );
             };
-            let place = Place::Line(line_no);
-            let mut tok = text::tokens(line);
-            values.clear();
-            for p in &el.props {
-                let mut next = |what: &str| -> Result<f64, ParseError> {
-                    let t = tok.next().ok_or_else(|| {
-                        ParseError::new(place, format!("missing value for {what}"))
-                    })?;
-                    text::number(t, place)
-                };
-                match p.kind {
-                    Kind::Scalar(_) => values.push(next(&p.name)?),
-                    Kind::List { .. } => {
-                        let n = next(&p.name)?;
-                        if !(0.0..=1e6).contains(&n) || n.fract() != 0.0 {
-                            return fail(place, format!("bad list length {n}"));
-                        }
-                        let items: Vec<f64> = (0..n as usize)
-                            .map(|_| next(&p.name))
-                            .collect::<Result<_, _>>()?;
-                        if is_face_list(el, p) {
-                            sink.polygon(&items, place)?;
-                        }
-                        values.push(f64::NAN);
-                    }
-                }
-            }
+            let (n, line) = item?;
+            line_no = n;
+            ascii_record(el, line, Place::Line(n), sink, &mut values)?;
             if ei == vi {
                 sink.vertex(layout, &values);
             }
         }
+    }
+    if let Some(item) = lines.next() {
+        let (n, _) = item?;
+        let last = h.elements.last().expect("the vertex element exists");
+        return fail(
+            Place::Line(n),
+            format!(
+                "more rows than the header declares (it ends with {} {} rows)",
+                last.count, last.name
+            ),
+        );
+    }
+    Ok(())
+}
+
+/// Reads one ascii record of `el` into `values` (NaN for a list), triangulating face lists.
+/// Every value must fit its declared type, and the line must hold no more values than the
+/// element's properties take.
+fn ascii_record(
+    el: &Element,
+    line: &str,
+    place: Place,
+    sink: &mut Sink,
+    values: &mut Vec<f64>,
+) -> Result<(), ParseError> {
+    let mut tok = text::tokens(line);
+    let mut next = |what: &str, ty: Scalar| -> Result<f64, ParseError> {
+        let t = tok
+            .next()
+            .ok_or_else(|| ParseError::new(place, format!("missing value for {what}")))?;
+        let v = text::number(t, place)?;
+        if !ty.holds(v) {
+            return fail(
+                place,
+                format!(
+                    "{what}: {} does not fit its type {}",
+                    text::shorten(t),
+                    ty.name()
+                ),
+            );
+        }
+        Ok(v)
+    };
+    values.clear();
+    for p in &el.props {
+        match p.kind {
+            Kind::Scalar(ty) => values.push(next(&p.name, ty)?),
+            Kind::List { count, item } => {
+                let n = next(&p.name, count)?;
+                if !(0.0..=MAX_ASCII_LIST as f64).contains(&n) {
+                    return fail(place, format!("bad list length {n}"));
+                }
+                let items: Vec<f64> = (0..n as usize)
+                    .map(|_| next(&p.name, item))
+                    .collect::<Result<_, _>>()?;
+                if is_face_list(el, p) {
+                    sink.polygon(&items, place)?;
+                }
+                values.push(f64::NAN);
+            }
+        }
+    }
+    if tok.next().is_some() {
+        return fail(
+            place,
+            format!(
+                "more values than the {} properties of {} declared in the header",
+                el.props.len(),
+                el.name
+            ),
+        );
     }
     Ok(())
 }
@@ -416,200 +496,4 @@ fn shift_line(mut e: ParseError, by: usize) -> ParseError {
         e.place = Place::Line(n + by);
     }
     e
-}
-
-fn read_binary(
-    bytes: &[u8],
-    h: &Header,
-    vi: usize,
-    layout: &VertexLayout,
-    sink: &mut Sink,
-) -> Result<(), ParseError> {
-    let big = h.encoding == Encoding::Big;
-    let mut cur = Cursor::new(bytes, h.body);
-    let mut values: Vec<f64> = Vec::new();
-    for (ei, el) in h.elements.iter().enumerate() {
-        sink.has_faces |=
-            el.name == "face" && el.count > 0 && el.props.iter().any(|p| is_face_list(el, p));
-        let fixed: Option<Vec<Scalar>> = el
-            .props
-            .iter()
-            .map(|p| match p.kind {
-                Kind::Scalar(s) => Some(s),
-                Kind::List { .. } => None,
-            })
-            .collect();
-        if let Some(types) = fixed {
-            // Fixed-size records: one bounds check for the whole element.
-            let stride: usize = types.iter().map(|s| s.size()).sum();
-            let total = stride
-                .checked_mul(el.count)
-                .ok_or_else(|| ParseError::new(Place::Byte(cur.pos), "element too large"))?;
-            let body = cur.take(
-                total,
-                &format!("{} {} records of {} bytes", el.count, el.name, stride),
-            )?;
-            if ei == vi {
-                read_fixed_vertices(body, &types, el.count, big, layout, sink);
-            }
-            continue;
-        }
-        if ei == vi {
-            reserve(sink, layout, text::capacity(el.count, cur.remaining(), 1));
-        }
-        for _ in 0..el.count {
-            values.clear();
-            let rec_start = cur.pos;
-            for p in &el.props {
-                match p.kind {
-                    Kind::Scalar(s) => values.push(s.decode(cur.take(s.size(), &p.name)?, big)),
-                    Kind::List { count, item } => {
-                        let n = count.decode(cur.take(count.size(), &p.name)?, big);
-                        if n < 0.0 {
-                            return fail(
-                                Place::Byte(rec_start),
-                                format!("negative list length {n}"),
-                            );
-                        }
-                        let raw = cur.take(n as usize * item.size(), &p.name)?;
-                        if is_face_list(el, p) {
-                            let items: Vec<f64> = raw
-                                .chunks_exact(item.size())
-                                .map(|b| item.decode(b, big))
-                                .collect();
-                            sink.polygon(&items, Place::Byte(rec_start))?;
-                        }
-                        values.push(f64::NAN);
-                    }
-                }
-            }
-            if ei == vi {
-                sink.vertex(layout, &values);
-            }
-        }
-    }
-    Ok(())
-}
-
-/// Decodes fixed-size vertex records, reading only the columns in use.
-fn read_fixed_vertices(
-    body: &[u8],
-    types: &[Scalar],
-    count: usize,
-    big: bool,
-    layout: &VertexLayout,
-    sink: &mut Sink,
-) {
-    let offsets: Vec<usize> = types
-        .iter()
-        .scan(0, |off, s| {
-            let here = *off;
-            *off += s.size();
-            Some(here)
-        })
-        .collect();
-    let stride: usize = types.iter().map(|s| s.size()).sum();
-    let column = |i: usize| (offsets[i], types[i]);
-    let xyz = layout.xyz.map(column);
-    let normal = layout.normal.map(|n| n.map(column));
-    let fields: Vec<(usize, Scalar)> = layout.fields.iter().map(|(i, _)| column(*i)).collect();
-    reserve(sink, layout, count);
-    let get = |rec: &[u8], (off, s): (usize, Scalar)| s.decode(&rec[off..off + s.size()], big);
-    for rec in body.chunks_exact(stride.max(1)).take(count) {
-        sink.cloud.points.push(Point3::new(
-            get(rec, xyz[0]),
-            get(rec, xyz[1]),
-            get(rec, xyz[2]),
-        ));
-        if let Some(n) = normal {
-            sink.normals
-                .push(Vector3::new(get(rec, n[0]), get(rec, n[1]), get(rec, n[2])));
-        }
-        for (f, &col) in sink.cloud.fields.iter_mut().zip(&fields) {
-            f.values.push(get(rec, col));
-        }
-    }
-}
-
-fn reserve(sink: &mut Sink, layout: &VertexLayout, n: usize) {
-    sink.cloud.points.reserve(n);
-    if layout.normal.is_some() {
-        sink.normals.reserve(n);
-    }
-    for f in &mut sink.cloud.fields {
-        f.values.reserve(n);
-    }
-}
-
-/// Number type for positions and normals in written PLY files.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum PlyPrecision {
-    /// 32-bit float.
-    F32,
-    /// 64-bit float (default: exact round trip of the in-memory values).
-    #[default]
-    F64,
-}
-
-/// Encodes a cloud (and optional triangles) as binary little-endian PLY. Positions and normals
-/// use `precision`; scalar fields are written as `float` (what CloudCompare-style readers show).
-pub fn write_ply_bytes(
-    cloud: &PointCloud,
-    faces: Option<&[[u32; 3]]>,
-    precision: PlyPrecision,
-) -> Vec<u8> {
-    let ty = match precision {
-        PlyPrecision::F32 => "float",
-        PlyPrecision::F64 => "double",
-    };
-    let mut head =
-        String::from("ply\nformat binary_little_endian 1.0\ncomment written by polishbot\n");
-    head += &format!("element vertex {}\n", cloud.len());
-    for c in ["x", "y", "z"] {
-        head += &format!("property {ty} {c}\n");
-    }
-    if cloud.normals.is_some() {
-        for c in ["nx", "ny", "nz"] {
-            head += &format!("property {ty} {c}\n");
-        }
-    }
-    for f in &cloud.fields {
-        let name: String = f
-            .name
-            .chars()
-            .map(|c| if c.is_whitespace() { '_' } else { c })
-            .collect();
-        head += &format!("property float {name}\n");
-    }
-    if let Some(faces) = faces {
-        head += &format!(
-            "element face {}\nproperty list uchar int vertex_indices\n",
-            faces.len()
-        );
-    }
-    head += "end_header\n";
-    let per_point = 3 * 8 * 2 + 4 * cloud.fields.len();
-    let mut out = Vec::with_capacity(
-        head.len() + cloud.len() * per_point + faces.map_or(0, |f| f.len() * 13),
-    );
-    out.extend_from_slice(head.as_bytes());
-    let put = |out: &mut Vec<u8>, v: f64| match precision {
-        PlyPrecision::F32 => out.extend_from_slice(&(v as f32).to_le_bytes()),
-        PlyPrecision::F64 => out.extend_from_slice(&v.to_le_bytes()),
-    };
-    for (i, p) in cloud.points.iter().enumerate() {
-        p.coords.iter().for_each(|&v| put(&mut out, v));
-        if let Some(n) = &cloud.normals {
-            n[i].iter().for_each(|&v| put(&mut out, v));
-        }
-        for f in &cloud.fields {
-            out.extend_from_slice(&(f.values[i] as f32).to_le_bytes());
-        }
-    }
-    for f in faces.unwrap_or(&[]) {
-        out.push(3);
-        f.iter()
-            .for_each(|&v| out.extend_from_slice(&(v as i32).to_le_bytes()));
-    }
-    out
 }
