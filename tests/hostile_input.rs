@@ -21,6 +21,7 @@ struct Outcome {
 
 /// Runs `cmd` for at most `limit`, killing it then; returns its exit code, stderr and peak
 /// memory (getrusage of exactly this child through wait4).
+#[allow(clippy::zombie_processes)] // reaped by wait4, which also gives its rusage
 fn run_bounded(cmd: &mut Command, limit: Duration) -> Outcome {
     let mut child = cmd
         .stdin(Stdio::null())

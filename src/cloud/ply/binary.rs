@@ -2,24 +2,17 @@
 //! by one; nothing may follow the declared elements.
 use nalgebra::{Point3, Vector3};
 
-use super::{is_face_list, Encoding, Header, Kind, Scalar, Sink, VertexLayout};
+use super::{is_face_list, Body, Encoding, Kind, Scalar, Sink, VertexLayout};
 use crate::cloud::error::{fail, ParseError, Place};
 use crate::cloud::text::{self, Cursor};
 
 /// Reads the body of a binary PLY (either byte order).
-pub(super) fn read(
-    bytes: &[u8],
-    h: &Header,
-    vi: usize,
-    layout: &VertexLayout,
-    sink: &mut Sink,
-) -> Result<(), ParseError> {
+pub(super) fn read(body: &Body, sink: &mut Sink) -> Result<(), ParseError> {
+    let (bytes, h, vi, layout) = (body.bytes, body.header, body.vertex, body.layout);
     let big = h.encoding == Encoding::Big;
     let mut cur = Cursor::new(bytes, h.body);
     let mut values: Vec<f64> = Vec::new();
     for (ei, el) in h.elements.iter().enumerate() {
-        sink.has_faces |=
-            el.name == "face" && el.count > 0 && el.props.iter().any(|p| is_face_list(el, p));
         let fixed: Option<Vec<Scalar>> = el
             .props
             .iter()

@@ -280,6 +280,15 @@ fn vertex_layout(el: &Element, line: usize) -> Result<VertexLayout, ParseError> 
     })
 }
 
+/// What a body reader needs: the file, its header, which element holds the vertices and
+/// where their properties go.
+struct Body<'a> {
+    bytes: &'a [u8],
+    header: &'a Header,
+    vertex: usize,
+    layout: &'a VertexLayout,
+}
+
 /// Collects the parsed body.
 struct Sink {
     cloud: PointCloud,
@@ -346,9 +355,18 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
             values: Vec::new(),
         })
         .collect();
+    sink.has_faces = header.elements.iter().any(|el| {
+        el.name == "face" && el.count > 0 && el.props.iter().any(|p| is_face_list(el, p))
+    });
+    let body = Body {
+        bytes,
+        header: &header,
+        vertex: vi,
+        layout: &layout,
+    };
     match header.encoding {
-        Encoding::Ascii => read_ascii(bytes, &header, vi, &layout, &mut sink)?,
-        Encoding::Little | Encoding::Big => binary::read(bytes, &header, vi, &layout, &mut sink)?,
+        Encoding::Ascii => read_ascii(&body, &mut sink)?,
+        Encoding::Little | Encoding::Big => binary::read(&body, &mut sink)?,
     }
     let Sink {
         mut cloud,
@@ -381,13 +399,8 @@ fn is_face_list(el: &Element, p: &Property) -> bool {
         && (p.name == "vertex_indices" || p.name == "vertex_index")
 }
 
-fn read_ascii(
-    bytes: &[u8],
-    h: &Header,
-    vi: usize,
-    layout: &VertexLayout,
-    sink: &mut Sink,
-) -> Result<(), ParseError> {
+fn read_ascii(body: &Body, sink: &mut Sink) -> Result<(), ParseError> {
+    let (bytes, h, vi, layout) = (body.bytes, body.header, body.vertex, body.layout);
     // Blank lines are skipped; every other line is one record.
     let mut lines = text::lines(&bytes[h.body..]).filter_map(|item| match item {
         Ok((_, _, line)) if line.trim().is_empty() => None,
@@ -397,8 +410,6 @@ fn read_ascii(
     let mut values: Vec<f64> = Vec::new();
     let mut line_no = h.body_line - 1;
     for (ei, el) in h.elements.iter().enumerate() {
-        sink.has_faces |=
-            el.name == "face" && el.count > 0 && el.props.iter().any(|p| is_face_list(el, p));
         for index in 0..el.count {
             let Some(item) = lines.next() else {
                 return fail(
