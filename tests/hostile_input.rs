@@ -237,6 +237,7 @@ fn a_twenty_megabyte_line_is_refused_in_bounded_memory() {
     let line = "1 ".repeat(10_000_000);
     let (path, out) = info_on(dir.path(), "line.xyz", line.as_bytes());
     assert_refused(&out, &path, &["line 1", "more than 1024 values"]);
+    eprintln!("20 MB one-line XYZ: peak {:.1} MB", out.peak_mb);
     assert!(
         out.peak_mb < 120.0,
         "peak {} MB for a 20 MB file",

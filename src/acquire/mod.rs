@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 use crate::cloud::transform::{isometry_to_rows, pose_difference};
 use crate::cloud::PointCloud;
 use crate::preprocess::{
-    estimate_normals, mean_spacing, statistical_outlier_filter, voxel_downsample, NormalConfig,
-    Orientation, SorConfig,
+    check_voxel, estimate_normals, mean_spacing, statistical_outlier_filter, voxel_downsample,
+    NormalConfig, Orientation, SorConfig,
 };
 pub use axis::{estimate_axis, AxisEstimate};
 
@@ -270,7 +270,11 @@ pub fn merge_views(
         joined.extend(views[*i].points.iter().map(|p| pose * p));
     }
     let joined_points = joined.len();
-    let mut cloud = voxel_downsample(&PointCloud::from_points(joined), voxel);
+    let joined = PointCloud::from_points(joined);
+    if cfg.voxel.is_some() {
+        check_voxel(&joined, voxel, "merge voxel (--voxel / voxel)")?;
+    }
+    let mut cloud = voxel_downsample(&joined, voxel);
     cloud.normals = None;
     cloud.fields.clear();
     if cfg.sor {
