@@ -11,5 +11,7 @@ mod voxel;
 pub use curvature::{curvature_sample, CurvatureSample, CurvatureSampleConfig};
 pub use normals::{estimate_normals, pca_normal, NormalConfig, NormalEstimate, Orientation};
 pub use pipeline::{preprocess, PreprocessConfig, Preprocessed};
-pub use sor::{mean_distances, statistical_outlier_filter, SorConfig, SorResult};
+pub use sor::{
+    check_coordinates, mean_distances, statistical_outlier_filter, SorConfig, SorResult,
+};
 pub use voxel::{check_voxel, mean_spacing, mean_spacing_in, voxel_downsample, MAX_VOXELS_ACROSS};

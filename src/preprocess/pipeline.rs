@@ -5,7 +5,7 @@ use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
 use super::curvature::{curvature_sample, CurvatureSample, CurvatureSampleConfig};
-use super::sor::{statistical_outlier_filter, SorConfig, SorResult};
+use super::sor::{check_coordinates, statistical_outlier_filter, SorConfig, SorResult};
 use super::voxel::{check_voxel, voxel_downsample};
 
 /// How the voxel edge is set, for messages: `filter --voxel` or `voxel_mm` in a config file.
@@ -59,6 +59,7 @@ pub struct Preprocessed {
 /// Runs the stage: SOR -> voxel -> curvature-aware sampling, each when configured.
 pub fn preprocess(cloud: &PointCloud, cfg: &PreprocessConfig) -> Result<Preprocessed> {
     let start = Instant::now();
+    check_coordinates(cloud, "preprocess")?;
     if let Some(v) = cfg.voxel_mm {
         check_voxel(cloud, v, VOXEL_OPTION)?;
     }

@@ -3,7 +3,7 @@
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::PointCloud;
+use crate::cloud::{PointCloud, MAX_COORD_MM};
 use crate::compare::grid::Grid;
 
 /// Settings of the statistical outlier filter.
@@ -78,6 +78,20 @@ pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
     Ok(())
 }
 
+/// Refuses a cloud with a coordinate that is not finite or beyond ±[`MAX_COORD_MM`] (the
+/// readers' bound; clouds made in code need not come through a reader), naming the point:
+/// near 1e300 the neighbour grid's extent and the squared distances overflow.
+pub fn check_coordinates(cloud: &PointCloud, stage: &str) -> Result<()> {
+    let beyond = |p: &nalgebra::Point3<f64>| !p.coords.iter().all(|c| c.abs() <= MAX_COORD_MM);
+    match cloud.points.iter().position(beyond) {
+        Some(i) => bail!(
+            "{stage}: point {i} has a coordinate beyond ±{MAX_COORD_MM:e} mm or not finite ({:?})",
+            cloud.points[i].coords.as_slice()
+        ),
+        None => Ok(()),
+    }
+}
+
 /// Mean distance from every point to its k neighbours (eq. 1), in parallel. With `count_self`
 /// the point is one of the k (Open3D); otherwise the k nearest other points (one zero-distance
 /// match, the point itself, is skipped; duplicates of it still count at distance 0).
@@ -94,6 +108,7 @@ pub fn mean_distances(cloud: &PointCloud, k: usize, count_self: bool) -> Vec<f64
 /// The statistical outlier filter, front function: eqs. 1-4 with `cfg`'s k and λ.
 pub fn statistical_outlier_filter(cloud: &PointCloud, cfg: &SorConfig) -> Result<SorResult> {
     check(cfg, cloud.len())?;
+    check_coordinates(cloud, "outlier filter")?;
     let d = mean_distances(cloud, cfg.k, cfg.count_self);
     let (mean, std, kept) = if cfg.count_self {
         open3d_statistics(&d, cfg.std_ratio)
@@ -150,6 +165,16 @@ mod tests {
         let mut pts: Vec<Point3<f64>> = (0..50).map(|i| Point3::new(i as f64, 0.0, 0.0)).collect();
         pts.push(Point3::new(25.0, 40.0, 0.0));
         PointCloud::from_points(pts)
+    }
+
+    #[test]
+    fn coordinates_near_1e300_are_refused_naming_the_point() {
+        let mut cloud = line_with_outlier();
+        cloud.points[7].y = 1e300;
+        let err = statistical_outlier_filter(&cloud, &SorConfig::default()).unwrap_err();
+        assert!(err.to_string().contains("point 7"), "{err}");
+        cloud.points[7].y = f64::NAN;
+        assert!(statistical_outlier_filter(&cloud, &SorConfig::default()).is_err());
     }
 
     #[test]

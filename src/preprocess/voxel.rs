@@ -159,6 +159,19 @@ mod tests {
     }
 
     #[test]
+    fn voxels_absurd_for_the_cloud_are_refused() {
+        // 10 mm across: voxels from 1e-8 mm (1e9 across) to 10 mm are fine.
+        let cloud = PointCloud::from_points(vec![Point3::origin(), Point3::new(10.0, 2.0, 0.0)]);
+        for ok in [2e-8, 0.5, 10.0] {
+            assert!(check_voxel(&cloud, ok, "--voxel").is_ok(), "{ok}");
+        }
+        for bad in [1e-300, 0.9e-8, 10.5, 1e300, 0.0, -1.0, f64::NAN] {
+            let err = check_voxel(&cloud, bad, "--voxel").unwrap_err().to_string();
+            assert!(err.starts_with("--voxel: "), "{bad}: {err}");
+        }
+    }
+
+    #[test]
     fn spacing_of_a_grid() {
         let cloud = PointCloud::from_points(
             (0..100)
