@@ -34,7 +34,8 @@ pub struct FilterArgs {
     /// Skip the outlier filter.
     #[arg(long)]
     pub no_outlier_filter: bool,
-    /// Voxel edge (mm): replace each voxel's points by their centroid.
+    /// Voxel edge (mm): replace each voxel's points by their centroid. At least 1e-9 of the
+    /// cloud's longest side and at most that side.
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     pub voxel: Option<f64>,
     /// Curvature-aware down-sampling to N points.
