@@ -6,6 +6,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use serde::{Deserialize, Serialize};
+
+use super::inspect_checks as checks;
 use serde_json::json;
 
 use super::GeometryInput;
@@ -18,7 +20,11 @@ use crate::register::RegisterConfig;
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
 pub struct InspectArgs {
-    /// Reference: a mesh (sampled area-uniformly with facet normals) or a cloud with normals.
+    /// Reference: a mesh (sampled area-uniformly with its facet normals, turned outward) or a
+    /// cloud. A cloud's own normals must be unit vectors; they are checked against a propagated
+    /// outward orientation (turned round with a notice when they point inward, refused when
+    /// mixed). A cloud without normals gets PCA normals of 20 neighbours oriented by
+    /// propagation, with a notice.
     #[arg(long)]
     pub reference: PathBuf,
     /// Scan point cloud.
@@ -41,7 +47,8 @@ pub struct InspectArgs {
     /// a synth truth.json).
     #[arg(long)]
     pub pose: Option<PathBuf>,
-    /// Core points: a cloud file with outward normals, instead of a sample of the reference.
+    /// Core points: a cloud file with outward unit normals, instead of a sample of the
+    /// reference.
     #[arg(long)]
     pub core: Option<PathBuf>,
     #[command(flatten)]
@@ -67,6 +74,10 @@ pub struct InspectConfig {
     pub register: RegisterConfig,
 }
 
+/// Most points sampled on a mesh reference (`reference_points`): 5 million points and normals
+/// are 240 MB, far denser than any scan the comparison meets.
+const MAX_REFERENCE_POINTS: usize = 5_000_000;
+
 /// The reference as a cloud with outward normals, and where the normals came from.
 fn load_reference(
     path: &Path,
@@ -78,22 +89,26 @@ fn load_reference(
             compare::mesh_reference(&mesh, samples, 1)?,
             format!("{samples} points sampled from the mesh, with its facet normals"),
         )),
-        Geometry::Cloud(c) => compare::cloud_reference(c)
-            .with_context(|| format!("{}: reference normals", path.display())),
+        Geometry::Cloud(mut c) if c.normals.is_some() => {
+            checks::check_unit_normals(path, "reference", &c)?;
+            match checks::orient_outward(path, &mut c)? {
+                Some(note) => {
+                    eprintln!("inspect: notice: {note}");
+                    Ok((c, format!("the reference cloud's own normals, {note}")))
+                }
+                None => Ok((c, "the reference cloud's own normals".into())),
+            }
+        }
+        Geometry::Cloud(c) => {
+            let (c, note) = compare::cloud_reference(c)
+                .with_context(|| format!("{}: reference normals", path.display()))?;
+            eprintln!(
+                "inspect: notice: {}: the reference cloud has no normals: estimated ({note})",
+                path.display()
+            );
+            Ok((c, note))
+        }
     }
-}
-
-fn read_pose(path: &Path) -> Result<nalgebra::Isometry3<f64>> {
-    #[derive(Deserialize)]
-    struct Pose {
-        scan_to_reference: [[f64; 4]; 4],
-    }
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let pose: Pose = serde_json::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))?;
-    transform::isometry_from_rows(&pose.scan_to_reference)
-        .with_context(|| format!("{}: scan_to_reference", path.display()))
 }
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
@@ -103,7 +118,23 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
 
 /// Runs the chain and prints the summary table.
 pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg: InspectConfig = super::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let mut cfg: InspectConfig = file.parse_strict()?;
+    let max = MAX_REFERENCE_POINTS as f64;
+    super::settings::in_range(
+        "reference_points",
+        cfg.reference_points as f64,
+        0.0,
+        max,
+        "points",
+    )
+    .map_err(|m| file.refuse("", &m))?;
+    if let Some(e) = args.registration_error {
+        anyhow::ensure!(
+            e.is_finite() && e >= 0.0,
+            "--registration-error: {e} mm is not a non-negative number of mm"
+        );
+    }
     if let Some(t) = args.tolerance {
         cfg.regions.tolerance = t;
     }
@@ -140,11 +171,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
         .with_context(|| format!("{}", args.scan.display()))?;
     let mut scan = sor.apply(&scan);
+    checks::check_sizes((&args.reference, &reference), (&args.scan, &scan))?;
     times.lap("filter");
     let reg_file = args.out.join("registration.json");
     let (pose, reg_error, reg_line) = match &args.pose {
         Some(pose_file) => {
-            let pose = read_pose(pose_file)?;
+            let pose = checks::read_pose(pose_file)?;
             write_json(
                 &reg_file,
                 &json!({
@@ -205,6 +237,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let core = match &args.core {
         Some(path) => {
             let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
+            checks::check_unit_normals(path, "--core file", &c)?;
             compare::core_points(
                 &c,
                 scan.len(),
