@@ -188,9 +188,17 @@ fn inward_reference_normals_are_turned_round_and_mixed_ones_refused() {
     // A bump stays a bump: the same regions with the same signed peaks as the straight run.
     assert_eq!(peaks(&turned), peaks(&straight));
     assert!(peaks(&straight).iter().any(|p| *p > 0.0));
+    // Half the part (x above its median) inward, half outward.
     let mixed = edited_reference(tmp.path(), "mixed.ply", |c| {
+        let mut xs: Vec<f64> = c.points.iter().map(|p| p.x).collect();
+        let mid = xs.len() / 2;
+        let median = *xs.select_nth_unstable_by(mid, f64::total_cmp).1;
         let n = c.normals.as_mut().unwrap();
-        n.iter_mut().step_by(2).for_each(|n| *n = -*n);
+        for (p, n) in c.points.iter().zip(n.iter_mut()) {
+            if p.x > median {
+                *n = -*n;
+            }
+        }
     });
     refused(
         &mut inspect(&mixed, &tmp.path().join("mixed"), &pose),
@@ -310,8 +318,9 @@ fn config_errors_name_the_file_the_line_and_the_key() {
 #[test]
 fn absurd_arm_move_times_are_refused_without_a_panic() {
     for t in ["1e300", "-1", "NaN"] {
+        let time = format!("--time={t}");
         refused(
-            polishbot().args(["arm", "move", "--sim", "--joints", "0,0,0,0,0", "--time", t]),
+            polishbot().args(["arm", "move", "--sim", "--joints", "0,0,0,0,0", &time]),
             &["--time"],
         );
     }

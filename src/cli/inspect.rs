@@ -129,6 +129,7 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         "points",
     )
     .map_err(|m| file.refuse("", &m))?;
+    super::settings::check_filter(&file, "filter", &cfg.filter, None)?;
     if let Some(e) = args.registration_error {
         anyhow::ensure!(
             e.is_finite() && e >= 0.0,

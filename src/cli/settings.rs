@@ -220,6 +220,38 @@ pub fn check_link(
     Ok(())
 }
 
+/// Most neighbours per point of the statistical outlier filter: its work is points × k, and
+/// Open3D's examples use 20..50.
+const MAX_SOR_K: f64 = 500.0;
+/// Largest |λ| of the outlier filter, standard deviations.
+const MAX_STD_RATIO: f64 = 100.0;
+/// Smallest and largest voxel edge, mm (below a micrometre a voxel holds one point of any
+/// scan; above a metre it holds the whole part).
+const VOXEL_MM: (f64, f64) = (1e-3, 1e3);
+
+/// Checks the outlier filter's settings (`k`, `std_ratio` in `section`) and an optional voxel
+/// edge.
+pub fn check_filter(
+    file: &ConfigFile,
+    section: &str,
+    sor: &crate::preprocess::SorConfig,
+    voxel_mm: Option<f64>,
+) -> anyhow::Result<()> {
+    let k = in_range("k", sor.k as f64, 1.0, MAX_SOR_K, "neighbours");
+    let r = in_range(
+        "std_ratio",
+        sor.std_ratio,
+        -MAX_STD_RATIO,
+        MAX_STD_RATIO,
+        "σ",
+    );
+    k.and(r).map_err(|m| file.refuse(section, &m))?;
+    if let Some(v) = voxel_mm {
+        in_range("voxel_mm", v, VOXEL_MM.0, VOXEL_MM.1, "mm").map_err(|m| file.refuse("", &m))?;
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
