@@ -37,43 +37,16 @@ fn case() -> &'static Case {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile");
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        let d = |f: &str| dir.join(f);
-        succeed(polishbot().args([
-            "synth",
-            "--out",
-            arg(&dir),
-            "--seed",
-            "9",
-            "--defects",
-            "3",
-            "--reference-points",
-            "200000",
-            "--scan-points",
-            "150000",
-            "--height-range",
-            "0.15,0.35",
-            "--width-range",
-            "2,3",
-        ]));
-        succeed(polishbot().args([
-            "inspect",
-            "--reference",
-            arg(&d("reference.ply")),
-            "--scan",
-            arg(&d("scan.ply")),
-            "-o",
-            arg(&d("inspection")),
-        ]));
-        std::fs::write(d("plan.toml"), "[plan]\ndepth_step_mm = 1.0\n").unwrap();
-        succeed(polishbot().args([
-            "plan",
-            "--config",
-            arg(&d("plan.toml")),
-            "--inspection",
-            arg(&d("inspection")),
-            "-o",
-            arg(&d("plan.json")),
-        ]));
+        std::fs::write(dir.join("plan.toml"), "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+        let steps = [
+            "synth --out . --seed 9 --defects 3 --reference-points 200000 --scan-points 150000 \
+             --height-range 0.15,0.35 --width-range 2,3",
+            "inspect --reference reference.ply --scan scan.ply -o inspection",
+            "--config plan.toml plan --inspection inspection -o plan.json",
+        ];
+        for step in steps {
+            succeed(polishbot().current_dir(&dir).args(step.split_whitespace()));
+        }
         Case { dir }
     })
 }

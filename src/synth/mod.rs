@@ -103,72 +103,73 @@ impl SynthConfig {
     /// names the key in backticks.
     pub fn check(&self) -> std::result::Result<(), String> {
         let n = |v: usize| v as f64;
-        let max = n(MAX_POINTS);
         let [h0, h1] = self.height_range;
         let [w0, w1] = self.width_range;
-        let s = &self.shape;
-        let mut bad = [
-            outside(
+        let (s, mm, share) = (&self.shape, "mm", "(share)");
+        let shape = MAX_SHAPE_MM;
+        let table = [
+            (
                 "reference_points",
                 n(self.reference_points),
                 1.0,
-                max,
+                n(MAX_POINTS),
                 "points",
             ),
-            outside("scan_points", n(self.scan_points), 1.0, max, "points"),
-            outside("defects", n(self.defects), 0.0, n(MAX_DEFECTS), "defects"),
-            outside("height_range", h0, 0.0, h1.min(MAX_DEFECT_HEIGHT_MM), "mm"),
-            outside("height_range", h1, h0.max(0.0), MAX_DEFECT_HEIGHT_MM, "mm"),
-            outside("width_range", w0, MIN_DEFECT_WIDTH_MM, w1, "mm"),
-            outside(
+            (
+                "scan_points",
+                n(self.scan_points),
+                1.0,
+                n(MAX_POINTS),
+                "points",
+            ),
+            ("defects", n(self.defects), 0.0, n(MAX_DEFECTS), "defects"),
+            ("height_range", h0, 0.0, h1.min(MAX_DEFECT_HEIGHT_MM), mm),
+            ("height_range", h1, h0.max(0.0), MAX_DEFECT_HEIGHT_MM, mm),
+            ("width_range", w0, MIN_DEFECT_WIDTH_MM, w1, mm),
+            (
                 "width_range",
                 w1,
                 w0.max(MIN_DEFECT_WIDTH_MM),
                 MAX_DEFECT_WIDTH_MM,
-                "mm",
+                mm,
             ),
-            outside(
+            (
                 "pit_share",
                 self.pit_share,
                 0.0,
                 1.0 - self.ridge_share,
-                "(share)",
+                share,
             ),
-            outside("ridge_share", self.ridge_share, 0.0, 1.0, "(share)"),
-            outside("noise", self.noise, 0.0, MAX_NOISE_MM, "mm"),
-            outside("outliers", self.outliers, 0.0, MAX_OUTLIER_SHARE, "(share)"),
-            outside(
+            ("ridge_share", self.ridge_share, 0.0, 1.0, share),
+            ("noise", self.noise, 0.0, MAX_NOISE_MM, mm),
+            ("outliers", self.outliers, 0.0, MAX_OUTLIER_SHARE, share),
+            (
                 "max_translation",
                 self.max_translation,
                 0.0,
                 MAX_TRANSLATION_MM,
-                "mm",
+                mm,
             ),
-            outside("width", s.width, 1.0, MAX_SHAPE_MM, "mm"),
-            outside("thickness", s.thickness, 0.1, MAX_SHAPE_MM, "mm"),
-            outside(
-                "notch_half_width",
-                s.notch_half_width,
-                0.0,
-                MAX_SHAPE_MM,
-                "mm",
-            ),
-            outside("groove_depth", s.groove_depth, 0.0, MAX_SHAPE_MM, "mm"),
-            outside("groove_sigma", s.groove_sigma, 0.1, MAX_SHAPE_MM, "mm"),
-            outside("edge_drop", s.edge_drop, 0.0, MAX_SHAPE_MM, "mm"),
-            outside("edge_band", s.edge_band, 0.1, MAX_SHAPE_MM, "mm"),
-            outside(
+            ("width", s.width, 1.0, shape, mm),
+            ("thickness", s.thickness, 0.1, shape, mm),
+            ("notch_half_width", s.notch_half_width, 0.0, shape, mm),
+            ("groove_depth", s.groove_depth, 0.0, shape, mm),
+            ("groove_sigma", s.groove_sigma, 0.1, shape, mm),
+            ("edge_drop", s.edge_drop, 0.0, shape, mm),
+            ("edge_band", s.edge_band, 0.1, shape, mm),
+            (
                 "profile_samples",
                 n(s.profile_samples),
                 10.0,
                 1e5,
                 "samples",
             ),
-            outside("x_step", s.x_step, 0.01, MAX_SHAPE_MM, "mm"),
-        ]
-        .into_iter()
-        .flatten();
-        if let Some(m) = bad.next() {
+            ("x_step", s.x_step, 0.01, shape, mm),
+        ];
+        if let Some(m) = table
+            .iter()
+            .find_map(|&(key, v, lo, hi, unit)| outside(key, v, lo, hi, unit))
+        {
             return Err(m);
         }
         match &self.turntable {
