@@ -38,14 +38,18 @@ fn case() -> &'static Case {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("plan.toml"), "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+        // Run from the package root, whose calibration/ the plan reads.
+        let d = dir.display();
         let steps = [
-            "synth --out . --seed 9 --defects 3 --reference-points 200000 --scan-points 150000 \
-             --height-range 0.15,0.35 --width-range 2,3",
-            "inspect --reference reference.ply --scan scan.ply -o inspection",
-            "--config plan.toml plan --inspection inspection -o plan.json",
+            format!(
+                "synth --out {d} --seed 9 --defects 3 --reference-points 200000 \
+                 --scan-points 150000 --height-range 0.15,0.35 --width-range 2,3"
+            ),
+            format!("inspect --reference {d}/reference.ply --scan {d}/scan.ply -o {d}/inspection"),
+            format!("--config {d}/plan.toml plan --inspection {d}/inspection -o {d}/plan.json"),
         ];
         for step in steps {
-            succeed(polishbot().current_dir(&dir).args(step.split_whitespace()));
+            succeed(polishbot().args(step.split_whitespace()));
         }
         Case { dir }
     })
