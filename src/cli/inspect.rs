@@ -116,19 +116,15 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// Runs the chain and prints the summary table.
-pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
+/// The settings of a run: the `--config` file (checked: unknown keys, ranges with file, line
+/// and key) with the flags over it.
+fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> {
     let file = super::settings::ConfigFile::read(config)?;
     let mut cfg: InspectConfig = file.parse_strict()?;
+    let points = cfg.reference_points as f64;
     let max = MAX_REFERENCE_POINTS as f64;
-    super::settings::in_range(
-        "reference_points",
-        cfg.reference_points as f64,
-        0.0,
-        max,
-        "points",
-    )
-    .map_err(|m| file.refuse("", &m))?;
+    super::settings::in_range("reference_points", points, 0.0, max, "points")
+        .map_err(|m| file.refuse("", &m))?;
     super::settings::check_filter(&file, "filter", &cfg.filter, None)?;
     if let Some(e) = args.registration_error {
         anyhow::ensure!(
@@ -150,6 +146,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     cfg.compare.adaptive.refine_above = cfg.regions.tolerance;
     // Core points are added around the summits of deviations beyond half the tolerance.
     cfg.compare.adaptive.densify_above = 0.5 * cfg.regions.tolerance;
+    Ok(cfg)
+}
+
+/// Runs the chain and prints the summary table.
+pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
+    let mut cfg = settings(&args, config)?;
     let start = Instant::now();
     let mut times = StageTimes::default();
     std::fs::create_dir_all(&args.out)
@@ -235,39 +237,8 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         .or(reg_error)
         .unwrap_or(cfg.compare.registration_error);
 
-    let core = match &args.core {
-        Some(path) => {
-            let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
-            checks::check_unit_normals(path, "--core file", &c)?;
-            compare::core_points(
-                &c,
-                scan.len(),
-                &CoreConfig {
-                    selection: compare::CoreSelection::All,
-                    ..cfg.core.clone()
-                },
-            )
-            .with_context(|| format!("{}", path.display()))?
-        }
-        None => compare::core_points(&reference, scan.len(), &cfg.core)?,
-    };
-    let every_point = args.core.is_none() && core.len() == reference.len();
-    if every_point && cfg.compare.method == Method::Adaptive {
-        eprintln!(
-            "inspect: warning: every one of the {} reference points is a core point: \
-             densification has none left to add around a defect's top, so defects narrower \
-             than about twice their spacing may be missed; give a denser reference",
-            reference.len()
-        );
-    }
-    report_summary.push((
-        "core point sample".to_string(),
-        match (&args.core, every_point) {
-            (Some(path), _) => format!("{} from {}", core.len(), path.display()),
-            (None, true) => format!("all {} reference points", core.len()),
-            (None, false) => format!("{} of {} reference points", core.len(), reference.len()),
-        },
-    ));
+    let (core, core_line) = select_core(&args, &cfg, &reference, scan.len())?;
+    report_summary.push(("core point sample".to_string(), core_line));
     times.lap("core points");
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
     times.lap("compare");
@@ -278,6 +249,47 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
     println!("times: {}", times.line());
     Ok(())
+}
+
+/// The core points (from `--core`, or a sample of the reference) and the report's line on
+/// them.
+fn select_core(
+    args: &InspectArgs,
+    cfg: &InspectConfig,
+    reference: &PointCloud,
+    scan_points: usize,
+) -> Result<(PointCloud, String)> {
+    let core = match &args.core {
+        Some(path) => {
+            let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
+            checks::check_unit_normals(path, "--core file", &c)?;
+            compare::core_points(
+                &c,
+                scan_points,
+                &CoreConfig {
+                    selection: compare::CoreSelection::All,
+                    ..cfg.core.clone()
+                },
+            )
+            .with_context(|| format!("{}", path.display()))?
+        }
+        None => compare::core_points(reference, scan_points, &cfg.core)?,
+    };
+    let every_point = args.core.is_none() && core.len() == reference.len();
+    if every_point && cfg.compare.method == Method::Adaptive {
+        eprintln!(
+            "inspect: warning: every one of the {} reference points is a core point: \
+             densification has none left to add around a defect's top, so defects narrower \
+             than about twice their spacing may be missed; give a denser reference",
+            reference.len()
+        );
+    }
+    let line = match (&args.core, every_point) {
+        (Some(path), _) => format!("{} from {}", core.len(), path.display()),
+        (None, true) => format!("all {} reference points", core.len()),
+        (None, false) => format!("{} of {} reference points", core.len(), reference.len()),
+    };
+    Ok((core, line))
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once

@@ -72,7 +72,7 @@ pub fn check_unit_normals(path: &Path, what: &str, cloud: &PointCloud) -> Result
     };
     let bad = normals
         .iter()
-        .position(|n| !((n.norm() - 1.0).abs() < UNIT_TOLERANCE));
+        .position(|n| n.norm().is_nan() || (n.norm() - 1.0).abs() >= UNIT_TOLERANCE);
     if let Some(i) = bad {
         let n = normals[i];
         bail!(
@@ -143,7 +143,7 @@ pub fn check_sizes(reference: (&Path, &PointCloud), scan: (&Path, &PointCloud)) 
     let r = robust_extent(&reference.1.points);
     let s = robust_extent(&scan.1.points);
     let ratio = s / r;
-    if !(ratio >= SIZE_RATIO.0 && ratio <= SIZE_RATIO.1) {
+    if !(SIZE_RATIO.0..=SIZE_RATIO.1).contains(&ratio) {
         bail!(
             "{}: the scan spans {s:.3} mm but the reference {} spans {r:.3} mm (ratio {ratio:.3}, \
              outside {}..{}): are the files in the same unit? check --units",

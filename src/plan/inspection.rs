@@ -71,7 +71,7 @@ impl Inspection {
         let known = |id: i64| parsed.regions.iter().any(|r| r.id as i64 == id);
         if let Some(i) = points
             .iter()
-            .position(|p| p.region < -1 || !(p.region < 0 || known(p.region)))
+            .position(|p| p.region < -1 || (p.region >= 0 && !known(p.region)))
         {
             let msg = format!(
                 "region {} is neither -1 nor an id of regions.json",
@@ -161,7 +161,8 @@ impl Inspection {
         }
         let n = rows.len() as f64;
         let mean = rows.iter().map(|p| p.distance).sum::<f64>() / n;
-        if !((mean - r.mean).abs() <= AGREEMENT_MM * (1.0 + mean.abs())) {
+        let diff = (mean - r.mean).abs();
+        if diff.is_nan() || diff > AGREEMENT_MM * (1.0 + mean.abs()) {
             return Err(format!(
                 "mean {} mm, but its rows of deviations.csv average {mean} mm",
                 r.mean
@@ -175,7 +176,7 @@ impl Inspection {
         }
         let centroid = rows.iter().map(|p| p.position.coords).sum::<Vector3<f64>>() / n;
         let off = (centroid - Vector3::from(r.centroid)).norm();
-        if !(off <= AGREEMENT_MM * (1.0 + centroid.norm())) {
+        if off.is_nan() || off > AGREEMENT_MM * (1.0 + centroid.norm()) {
             return Err(format!("centroid lies {off} mm from the mean of its rows"));
         }
         if let Some(gap) = gap.filter(|g| g.is_finite() && *g > 0.0) {
@@ -193,7 +194,7 @@ impl Inspection {
         }
         if let Some(s) = spacing.filter(|s| s.is_finite() && *s > 0.0) {
             let ratio = r.area / (n * s * s);
-            if !(ratio <= AREA_RATIO_LIMIT && ratio >= 1.0 / AREA_RATIO_LIMIT) {
+            if !(1.0 / AREA_RATIO_LIMIT..=AREA_RATIO_LIMIT).contains(&ratio) {
                 return Err(format!(
                     "area {} mm² is {ratio:.3e} × its {n} points × spacing² ({s} mm): \
                      not the area of its rows",
