@@ -350,14 +350,15 @@ fn tampered(
     dir
 }
 
+/// An edit of a region of regions.json.
+type RegionEdit = Box<dyn FnOnce(&mut Value)>;
+/// An edit of deviations.csv's text.
+type CsvEdit = Box<dyn FnOnce(String) -> String>;
+
 #[test]
 fn an_inspection_whose_files_contradict_each_other_is_refused() {
     let keep = |t: String| t;
-    let cases: Vec<(
-        Box<dyn FnOnce(&mut Value)>,
-        Box<dyn FnOnce(String) -> String>,
-        &str,
-    )> = vec![
+    let cases: Vec<(RegionEdit, CsvEdit, &str)> = vec![
         (
             Box::new(|r| r["peak"] = 1e6.into()),
             Box::new(keep),
@@ -413,7 +414,7 @@ fn a_core_point_far_away_in_a_region_is_refused_at_once() {
         .map(|l| match !done && l.ends_with(&format!(",{id}")) {
             true => {
                 done = true;
-                let rest = l.splitn(2, ',').nth(1).unwrap();
+                let rest = l.split_once(',').unwrap().1;
                 format!("5000,{rest}")
             }
             false => l.to_string(),
