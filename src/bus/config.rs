@@ -46,6 +46,57 @@ impl Default for BusConfig {
     }
 }
 
+/// Longest accepted wait setting (`frame_gap_ms`, `settle_ms`), ms: every wait of the driver
+/// is far below this, and a larger value would only stall a run (and overflow a `Duration`
+/// near 1e300).
+pub const MAX_WAIT_MS: f64 = 10_000.0;
+/// Longest accepted reply timeout, ms (the board answers in about 3 ms).
+pub const MAX_TIMEOUT_MS: f64 = 10_000.0;
+/// Shortest accepted reply timeout, ms (below a frame's time on the line no reply can come).
+pub const MIN_TIMEOUT_MS: f64 = 1.0;
+/// Most attempts per request (each costs up to a timeout).
+pub const MAX_ATTEMPTS: u32 = 20;
+/// Largest accepted read-back tolerance, counts (about 40 degrees: beyond it a read-back
+/// verifies nothing).
+pub const MAX_VERIFY_COUNTS: u16 = 500;
+
+impl BusConfig {
+    /// Checks every timing setting against its range (the servo map is checked by
+    /// [`ServoMap::validate`]); the message names the key in backticks.
+    pub fn check(&self) -> Result<(), BusError> {
+        let ms = [
+            ("frame_gap_ms", self.frame_gap_ms, 0.0, MAX_WAIT_MS),
+            (
+                "read_timeout_ms",
+                self.read_timeout_ms,
+                MIN_TIMEOUT_MS,
+                MAX_TIMEOUT_MS,
+            ),
+            ("settle_ms", self.settle_ms, 0.0, MAX_WAIT_MS),
+        ];
+        for (key, v, lo, hi) in ms {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return Err(BusError::Refused(format!(
+                    "`{key}` = {v:?} ms is outside {lo}..={hi} ms"
+                )));
+            }
+        }
+        if !(1..=MAX_ATTEMPTS).contains(&self.attempts) {
+            return Err(BusError::Refused(format!(
+                "`attempts` = {} is outside 1..={MAX_ATTEMPTS}",
+                self.attempts
+            )));
+        }
+        if self.verify_tolerance_counts > MAX_VERIFY_COUNTS {
+            return Err(BusError::Refused(format!(
+                "`verify_tolerance_counts` = {} counts is outside 0..={MAX_VERIFY_COUNTS} counts",
+                self.verify_tolerance_counts
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// Angle <-> raw scale of one servo (DOFBOT.md's table by default).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -362,5 +413,20 @@ mod tests {
         let c: BusConfig = toml::from_str(text).unwrap();
         assert_eq!(c.frame_gap_ms, 2.0);
         assert_eq!(c.servo_map, ServoMap::default());
+    }
+
+    #[test]
+    fn timing_settings_out_of_range_are_refused_by_key() {
+        BusConfig::default().check().unwrap();
+        for (text, key) in [
+            ("settle_ms = 1e300\n", "`settle_ms`"),
+            ("frame_gap_ms = -1.0\n", "`frame_gap_ms`"),
+            ("read_timeout_ms = nan\n", "`read_timeout_ms`"),
+            ("attempts = 0\n", "`attempts`"),
+        ] {
+            let c: BusConfig = toml::from_str(text).unwrap();
+            let e = c.check().unwrap_err().to_string();
+            assert!(e.contains(key), "{text}: {e}");
+        }
     }
 }

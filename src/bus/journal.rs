@@ -2,7 +2,7 @@
 //! every error and each verified pose, flushed line by line so that a crash or a lost port
 //! leaves a consistent file. Format: `docs/FORMATS.md`. [`ResumePoint`] reads one back.
 use std::fs::{File, OpenOptions};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -57,6 +57,9 @@ pub struct Entry {
     /// Raw positions of servos 1..6 (verified).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub raw: Option<Vec<u16>>,
+    /// SHA-256 (lowercase hex) of the plan file this run streams (open lines of `run`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan_sha256: Option<String>,
 }
 
 impl Entry {
@@ -74,6 +77,7 @@ impl Entry {
             code: None,
             message: None,
             raw: None,
+            plan_sha256: None,
         }
     }
 }
@@ -88,12 +92,17 @@ pub fn hex(bytes: &[u8]) -> String {
 pub struct Journal {
     file: Option<(File, PathBuf)>,
     seq: u64,
+    plan_sha256: Option<String>,
 }
 
 impl Journal {
     /// No journal.
     pub fn none() -> Journal {
-        Journal { file: None, seq: 0 }
+        Journal {
+            file: None,
+            seq: 0,
+            plan_sha256: None,
+        }
     }
 
     /// Appends to `path` (created if missing; a resumed run continues the same file).
@@ -106,7 +115,15 @@ impl Journal {
         Ok(Journal {
             file: Some((file, path.to_path_buf())),
             seq: 0,
+            plan_sha256: None,
         })
+    }
+
+    /// Ties the journal to a plan: every open line it writes records `sha256` (the plan
+    /// file's SHA-256, lowercase hex), which `run --resume` compares with the plan it is given.
+    pub fn for_plan(mut self, sha256: &str) -> Journal {
+        self.plan_sha256 = Some(sha256.to_string());
+        self
     }
 
     /// Writes one entry stamped with `t` (s), flushed at once.
@@ -116,6 +133,9 @@ impl Journal {
         };
         entry.seq = self.seq;
         entry.t = t;
+        if entry.kind == EntryKind::Open {
+            entry.plan_sha256.clone_from(&self.plan_sha256);
+        }
         entry.unix_ms = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map(|d| d.as_millis() as u64)
@@ -147,43 +167,68 @@ pub struct ResumePoint {
     pub last_error: Option<(String, String)>,
     /// Lines read.
     pub lines: usize,
+    /// The plan SHA-256 of every open line that has one, in file order, repeats removed.
+    pub plan_sha256: Vec<String>,
 }
 
 impl ResumePoint {
-    /// Reads a journal. A last line cut short by a crash is ignored; any other unreadable
-    /// line is an error naming the file and the line.
+    /// Reads a journal. A last line cut short by a crash (no newline after it) is ignored;
+    /// any other unreadable line, a file that is not a regular file, and a file without one
+    /// journal line are errors naming the file (and the line).
     pub fn from_journal(path: &Path) -> Result<ResumePoint, BusError> {
-        let file = File::open(path).map_err(|e| journal_err(path, e))?;
-        let lines: Vec<String> = BufReader::new(file)
-            .lines()
-            .collect::<Result<_, _>>()
+        let meta = std::fs::metadata(path).map_err(|e| journal_err(path, e))?;
+        if !meta.is_file() {
+            return Err(journal_err(path, "not a regular file"));
+        }
+        let mut bytes = Vec::new();
+        File::open(path)
+            .and_then(|f| f.take(meta.len()).read_to_end(&mut bytes))
             .map_err(|e| journal_err(path, e))?;
+        let complete = bytes.ends_with(b"\n");
+        let lines: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
         let mut rp = ResumePoint::default();
         for (i, line) in lines.iter().enumerate() {
-            if line.trim().is_empty() {
-                continue;
-            }
-            let entry: Entry = match serde_json::from_str(line) {
-                Ok(e) => e,
-                Err(_) if i + 1 == lines.len() => break,
-                Err(e) => {
-                    return Err(journal_err(path, format!("line {}: {e}", i + 1)));
-                }
+            let last = i + 1 == lines.len();
+            let at = |e: &dyn std::fmt::Display| journal_err(path, format!("line {}: {e}", i + 1));
+            let entry = match std::str::from_utf8(line) {
+                Ok(text) if text.trim().is_empty() => continue,
+                Ok(text) => serde_json::from_str::<Entry>(text),
+                Err(_) if last && !complete => break,
+                Err(e) => return Err(at(&e)),
             };
-            rp.lines += 1;
-            match entry.kind {
-                EntryKind::Tx => rp.last_sent = rp.last_sent.max(entry.motion),
-                EntryKind::Verified => rp.last_verified = rp.last_verified.max(entry.motion),
-                EntryKind::Error | EntryKind::Stop => {
-                    rp.last_error = Some((
-                        entry.code.unwrap_or_default(),
-                        entry.message.unwrap_or_default(),
-                    ))
-                }
-                EntryKind::Open | EntryKind::Rx => {}
-            }
+            let entry = match entry {
+                Ok(e) => e,
+                Err(_) if last && !complete => break,
+                Err(e) => return Err(at(&e)),
+            };
+            rp.take(entry);
+        }
+        if rp.lines == 0 {
+            return Err(journal_err(path, "no journal line in the file"));
         }
         Ok(rp)
+    }
+
+    fn take(&mut self, entry: Entry) {
+        self.lines += 1;
+        match entry.kind {
+            EntryKind::Tx => self.last_sent = self.last_sent.max(entry.motion),
+            EntryKind::Verified => self.last_verified = self.last_verified.max(entry.motion),
+            EntryKind::Error | EntryKind::Stop => {
+                self.last_error = Some((
+                    entry.code.unwrap_or_default(),
+                    entry.message.unwrap_or_default(),
+                ))
+            }
+            EntryKind::Open => {
+                if let Some(h) = entry.plan_sha256 {
+                    if !self.plan_sha256.contains(&h) {
+                        self.plan_sha256.push(h);
+                    }
+                }
+            }
+            EntryKind::Rx => {}
+        }
     }
 
     /// First motion index to send when resuming: the last one written (re-sent, since motion

@@ -48,7 +48,8 @@ impl Fixture {
 }
 
 /// Reads a joint target file: one pose per line, five joint angles in radians separated by
-/// commas or spaces; `#` starts a comment, blank lines are skipped.
+/// commas or spaces; `#` starts a comment, blank lines are skipped. A file without a pose is
+/// an error (a check over no poses proves nothing).
 pub fn load_targets(file: &Path) -> Result<Vec<[f64; JOINT_COUNT]>, CalibError> {
     let text = std::fs::read_to_string(file).map_err(|e| CalibError::file(file, e))?;
     let mut out = Vec::new();
@@ -74,6 +75,12 @@ pub fn load_targets(file: &Path) -> Result<Vec<[f64; JOINT_COUNT]>, CalibError> 
             return Err(bad("joint angles must be finite".into()));
         }
         out.push(q);
+    }
+    if out.is_empty() {
+        return Err(CalibError::file(
+            file,
+            "no joint targets (need at least one line of 5 joint angles, rad)",
+        ));
     }
     Ok(out)
 }

@@ -82,6 +82,10 @@ pub fn open_link(
     })
 }
 
+/// Longest move time, s: the board's move command carries the time in milliseconds as a
+/// 16-bit count.
+const MAX_MOVE_TIME_S: f64 = u16::MAX as f64 / 1000.0;
+
 /// The arm actions.
 #[derive(Debug, Subcommand)]
 pub enum ArmAction {
@@ -130,7 +134,9 @@ pub struct ArmConfig {
 
 /// Runs `polishbot arm`.
 pub fn run(args: ArmArgs, config: Option<&Path>) -> anyhow::Result<()> {
-    let cfg: ArmConfig = super::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let cfg: ArmConfig = file.parse()?;
+    super::settings::check_link(&file, &cfg.bus, &cfg.sim)?;
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
     let mut bus_cfg = cfg.bus;
     bus_cfg.servo_map = frames::servo_map(&robot)?;
@@ -172,8 +178,8 @@ fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> 
                 anyhow::anyhow!("--joints: need {JOINT_COUNT} values, got {}", joints.len())
             })?;
             let time = match time {
-                Some(t) if !(t.is_finite() && *t > 0.0) => {
-                    anyhow::bail!("--time: {t} is not a positive number of seconds")
+                Some(t) if !(t.is_finite() && *t > 0.0 && *t <= MAX_MOVE_TIME_S) => {
+                    anyhow::bail!("--time: {t} s is outside 0..={MAX_MOVE_TIME_S} s")
                 }
                 Some(t) => Some(Duration::from_secs_f64(*t)),
                 None => None,

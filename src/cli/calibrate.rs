@@ -102,7 +102,9 @@ fn input(out: &Path, name: &str, fallback: &Path) -> PathBuf {
 
 /// Runs `calibrate`.
 pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
-    let cfg: CalibrateFileConfig = super::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let cfg: CalibrateFileConfig = file.parse()?;
+    super::settings::check_link(&file, &cfg.bus, &cfg.sim)?;
     let out = args
         .out
         .clone()

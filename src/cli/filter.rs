@@ -52,7 +52,8 @@ pub struct FilterArgs {
 
 /// Loads, preprocesses, writes the result and prints the summary.
 pub fn run(args: FilterArgs, config: Option<&std::path::Path>) -> anyhow::Result<()> {
-    let mut cfg: PreprocessConfig = super::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let mut cfg: PreprocessConfig = file.parse()?;
     if let Some(k) = args.k {
         cfg.sor.k = k;
     }
@@ -75,6 +76,7 @@ pub fn run(args: FilterArgs, config: Option<&std::path::Path>) -> anyhow::Result
         c.feature_angle_deg = args.feature_angle.unwrap_or(c.feature_angle_deg);
         c.uniform_ratio = args.uniform_ratio.unwrap_or(c.uniform_ratio);
     }
+    super::settings::check_filter(&file, "sor", &cfg.sor, cfg.voxel_mm)?;
     let input = cloud::load_cloud(&args.input, args.geometry.format, args.geometry.units)?;
     let done = preprocess(&input, &cfg).with_context(|| args.input.display().to_string())?;
     cloud::write_ply(&args.output, &done.cloud, None, PlyPrecision::F64)?;

@@ -6,6 +6,8 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use serde::{Deserialize, Serialize};
+
+use super::inspect_checks as checks;
 use serde_json::json;
 
 use super::GeometryInput;
@@ -18,7 +20,11 @@ use crate::register::RegisterConfig;
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
 pub struct InspectArgs {
-    /// Reference: a mesh (sampled area-uniformly with facet normals) or a cloud with normals.
+    /// Reference: a mesh (sampled area-uniformly with its facet normals, turned outward) or a
+    /// cloud. A cloud's own normals must be unit vectors; they are checked against a propagated
+    /// outward orientation (turned round with a notice when they point inward, refused when
+    /// mixed). A cloud without normals gets PCA normals of 20 neighbours oriented by
+    /// propagation, with a notice.
     #[arg(long)]
     pub reference: PathBuf,
     /// Scan point cloud.
@@ -41,7 +47,8 @@ pub struct InspectArgs {
     /// a synth truth.json).
     #[arg(long)]
     pub pose: Option<PathBuf>,
-    /// Core points: a cloud file with outward normals, instead of a sample of the reference.
+    /// Core points: a cloud file with outward unit normals, instead of a sample of the
+    /// reference.
     #[arg(long)]
     pub core: Option<PathBuf>,
     #[command(flatten)]
@@ -67,6 +74,10 @@ pub struct InspectConfig {
     pub register: RegisterConfig,
 }
 
+/// Most points sampled on a mesh reference (`reference_points`): 5 million points and normals
+/// are 240 MB, far denser than any scan the comparison meets.
+const MAX_REFERENCE_POINTS: usize = 5_000_000;
+
 /// The reference as a cloud with outward normals, and where the normals came from.
 fn load_reference(
     path: &Path,
@@ -78,22 +89,26 @@ fn load_reference(
             compare::mesh_reference(&mesh, samples, 1)?,
             format!("{samples} points sampled from the mesh, with its facet normals"),
         )),
-        Geometry::Cloud(c) => compare::cloud_reference(c)
-            .with_context(|| format!("{}: reference normals", path.display())),
+        Geometry::Cloud(mut c) if c.normals.is_some() => {
+            checks::check_unit_normals(path, "reference", &c)?;
+            match checks::orient_outward(path, &mut c)? {
+                Some(note) => {
+                    eprintln!("inspect: notice: {note}");
+                    Ok((c, format!("the reference cloud's own normals, {note}")))
+                }
+                None => Ok((c, "the reference cloud's own normals".into())),
+            }
+        }
+        Geometry::Cloud(c) => {
+            let (c, note) = compare::cloud_reference(c)
+                .with_context(|| format!("{}: reference normals", path.display()))?;
+            eprintln!(
+                "inspect: notice: {}: the reference cloud has no normals: estimated ({note})",
+                path.display()
+            );
+            Ok((c, note))
+        }
     }
-}
-
-fn read_pose(path: &Path) -> Result<nalgebra::Isometry3<f64>> {
-    #[derive(Deserialize)]
-    struct Pose {
-        scan_to_reference: [[f64; 4]; 4],
-    }
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    let pose: Pose = serde_json::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))?;
-    transform::isometry_from_rows(&pose.scan_to_reference)
-        .with_context(|| format!("{}: scan_to_reference", path.display()))
 }
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
@@ -101,9 +116,22 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// Runs the chain and prints the summary table.
-pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg: InspectConfig = super::load_config(config)?;
+/// The settings of a run: the `--config` file (checked: unknown keys, ranges with file, line
+/// and key) with the flags over it.
+fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> {
+    let file = super::settings::ConfigFile::read(config)?;
+    let mut cfg: InspectConfig = file.parse_strict()?;
+    let points = cfg.reference_points as f64;
+    let max = MAX_REFERENCE_POINTS as f64;
+    super::settings::in_range("reference_points", points, 0.0, max, "points")
+        .map_err(|m| file.refuse("", &m))?;
+    super::settings::check_filter(&file, "filter", &cfg.filter, None)?;
+    if let Some(e) = args.registration_error {
+        anyhow::ensure!(
+            e.is_finite() && e >= 0.0,
+            "--registration-error: {e} mm is not a non-negative number of mm"
+        );
+    }
     if let Some(t) = args.tolerance {
         cfg.regions.tolerance = t;
     }
@@ -118,6 +146,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     cfg.compare.adaptive.refine_above = cfg.regions.tolerance;
     // Core points are added around the summits of deviations beyond half the tolerance.
     cfg.compare.adaptive.densify_above = 0.5 * cfg.regions.tolerance;
+    Ok(cfg)
+}
+
+/// Runs the chain and prints the summary table.
+pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
+    let mut cfg = settings(&args, config)?;
     let start = Instant::now();
     let mut times = StageTimes::default();
     std::fs::create_dir_all(&args.out)
@@ -140,11 +174,12 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
         .with_context(|| format!("{}", args.scan.display()))?;
     let mut scan = sor.apply(&scan);
+    checks::check_sizes((&args.reference, &reference), (&args.scan, &scan))?;
     times.lap("filter");
     let reg_file = args.out.join("registration.json");
     let (pose, reg_error, reg_line) = match &args.pose {
         Some(pose_file) => {
-            let pose = read_pose(pose_file)?;
+            let pose = checks::read_pose(pose_file)?;
             write_json(
                 &reg_file,
                 &json!({
@@ -202,38 +237,8 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
         .or(reg_error)
         .unwrap_or(cfg.compare.registration_error);
 
-    let core = match &args.core {
-        Some(path) => {
-            let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
-            compare::core_points(
-                &c,
-                scan.len(),
-                &CoreConfig {
-                    selection: compare::CoreSelection::All,
-                    ..cfg.core.clone()
-                },
-            )
-            .with_context(|| format!("{}", path.display()))?
-        }
-        None => compare::core_points(&reference, scan.len(), &cfg.core)?,
-    };
-    let every_point = args.core.is_none() && core.len() == reference.len();
-    if every_point && cfg.compare.method == Method::Adaptive {
-        eprintln!(
-            "inspect: warning: every one of the {} reference points is a core point: \
-             densification has none left to add around a defect's top, so defects narrower \
-             than about twice their spacing may be missed; give a denser reference",
-            reference.len()
-        );
-    }
-    report_summary.push((
-        "core point sample".to_string(),
-        match (&args.core, every_point) {
-            (Some(path), _) => format!("{} from {}", core.len(), path.display()),
-            (None, true) => format!("all {} reference points", core.len()),
-            (None, false) => format!("{} of {} reference points", core.len(), reference.len()),
-        },
-    ));
+    let (core, core_line) = select_core(&args, &cfg, &reference, scan.len())?;
+    report_summary.push(("core point sample".to_string(), core_line));
     times.lap("core points");
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
     times.lap("compare");
@@ -244,6 +249,47 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
     println!("times: {}", times.line());
     Ok(())
+}
+
+/// The core points (from `--core`, or a sample of the reference) and the report's line on
+/// them.
+fn select_core(
+    args: &InspectArgs,
+    cfg: &InspectConfig,
+    reference: &PointCloud,
+    scan_points: usize,
+) -> Result<(PointCloud, String)> {
+    let core = match &args.core {
+        Some(path) => {
+            let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
+            checks::check_unit_normals(path, "--core file", &c)?;
+            compare::core_points(
+                &c,
+                scan_points,
+                &CoreConfig {
+                    selection: compare::CoreSelection::All,
+                    ..cfg.core.clone()
+                },
+            )
+            .with_context(|| format!("{}", path.display()))?
+        }
+        None => compare::core_points(reference, scan_points, &cfg.core)?,
+    };
+    let every_point = args.core.is_none() && core.len() == reference.len();
+    if every_point && cfg.compare.method == Method::Adaptive {
+        eprintln!(
+            "inspect: warning: every one of the {} reference points is a core point: \
+             densification has none left to add around a defect's top, so defects narrower \
+             than about twice their spacing may be missed; give a denser reference",
+            reference.len()
+        );
+    }
+    let line = match (&args.core, every_point) {
+        (Some(path), _) => format!("{} from {}", core.len(), path.display()),
+        (None, true) => format!("all {} reference points", core.len()),
+        (None, false) => format!("{} of {} reference points", core.len(), reference.len()),
+    };
+    Ok((core, line))
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once

@@ -12,11 +12,13 @@ mod demo;
 mod filter;
 mod info;
 mod inspect;
+mod inspect_checks;
 mod inspect_report;
 mod merge;
 mod plan;
 mod register;
 mod run;
+mod settings;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
@@ -121,14 +123,10 @@ fn init_tracing() {
         .try_init();
 }
 
-/// Reads an optional TOML config file into `T` (missing file argument: `T::default()`).
+/// Reads an optional TOML config file into `T` (missing file argument: `T::default()`);
+/// errors name the file and the line.
 pub fn load_config<T: serde::de::DeserializeOwned + Default>(
     path: Option<&std::path::Path>,
 ) -> anyhow::Result<T> {
-    let Some(path) = path else {
-        return Ok(T::default());
-    };
-    let text =
-        std::fs::read_to_string(path).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))
+    settings::ConfigFile::read(path)?.parse()
 }

@@ -40,12 +40,17 @@ pub struct PlanFileConfig {
 
 /// Runs `plan`.
 pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
-    let mut cfg: PlanFileConfig = super::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let mut cfg: PlanFileConfig = file.parse()?;
     if let Some(w) = args.workcell {
         cfg.robot.workcell = w;
     }
     cfg.plan.require_full_reach |= args.require_full_reach;
     let (robot, workcell) = robot::load(&cfg.robot)?;
+    cfg.plan.check(&robot).map_err(|e| match e {
+        plan::PlanError::Config(m) => file.refuse("plan", &m),
+        e => e.into(),
+    })?;
     let inspection = Inspection::load(&args.inspection)?;
     let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
     plan.save(&args.out)?;

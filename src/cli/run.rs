@@ -4,6 +4,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use serde::Deserialize;
 
+use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transport};
 use crate::plan::execute::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
@@ -50,35 +51,128 @@ pub struct RunFileConfig {
     pub validation: ValidationConfig,
 }
 
-/// Runs `run`.
+/// Longest accepted `[run] settle_ms`, ms (as the driver's waits).
+const MAX_SETTLE_MS: f64 = crate::bus::config::MAX_WAIT_MS;
+/// Largest `[run] readback_every`, frames (a read-back every 100 s at the 20 ms period).
+const MAX_READBACK_EVERY: usize = 5_000;
+
+/// Checks the `[run]` settings: each named by key and line.
+fn check_run_settings(file: &ConfigFile, r: &RunConfig) -> anyhow::Result<()> {
+    let every = r.readback_every as f64;
+    let counts = r.readback_tolerance_counts as f64;
+    let max_counts = crate::bus::config::MAX_VERIFY_COUNTS as f64;
+    for c in [
+        settings::in_range("settle_ms", r.settle_ms, 0.0, MAX_SETTLE_MS, "ms"),
+        settings::in_range(
+            "readback_every",
+            every,
+            1.0,
+            MAX_READBACK_EVERY as f64,
+            "frames",
+        ),
+        settings::in_range(
+            "readback_tolerance_counts",
+            counts,
+            0.0,
+            max_counts,
+            "counts",
+        ),
+    ] {
+        c.map_err(|m| file.refuse("run", &m))?;
+    }
+    Ok(())
+}
+
+/// The frame to start from: 0, or with `--resume` the journal's resume point, after checking
+/// that the journal belongs to this plan (its SHA-256) and stays within its frames.
+fn start_frame(resume: Option<&Path>, sha: &str, frames: usize) -> anyhow::Result<usize> {
+    let Some(j) = resume else {
+        return Ok(0);
+    };
+    let rp = ResumePoint::from_journal(j)?;
+    match rp.plan_sha256.as_slice() {
+        [h] if h == sha => {}
+        [] => anyhow::bail!(
+            "{}: --resume: the journal records no plan SHA-256 (not written by `run` of this \
+             version): cannot tell which plan it belongs to",
+            j.display()
+        ),
+        hashes => {
+            anyhow::bail!(
+            "{}: --resume: the journal belongs to another plan (SHA-256 {}), this plan's is {sha}",
+            j.display(),
+            hashes.iter().find(|h| *h != sha).map_or("?", |h| h.as_str())
+        )
+        }
+    }
+    let from = rp.resume_from();
+    anyhow::ensure!(
+        from < frames as u64,
+        "{}: --resume: the journal says frame {from} was sent, but the plan has {frames} frames",
+        j.display()
+    );
+    Ok(from as usize)
+}
+
+/// A fresh run refuses to append to a journal of another plan (`--resume` checks its own).
+fn check_fresh_journal(path: &Path, sha: &str) -> anyhow::Result<()> {
+    let used = std::fs::metadata(path).is_ok_and(|m| m.len() > 0);
+    if !used {
+        return Ok(());
+    }
+    let rp = ResumePoint::from_journal(path)?;
+    anyhow::ensure!(
+        rp.plan_sha256.iter().all(|h| h == sha),
+        "{}: the journal holds a run of another plan: give --journal with a new file",
+        path.display()
+    );
+    Ok(())
+}
+
+/// SHA-256 of a file's bytes, lowercase hex.
+fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    let digest = sha2::Sha256::digest(bytes);
+    digest.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Runs `run`. `--dry-run` makes every check of a real run (settings, plan, servo map,
+/// resume point, journal) and stops before opening the link.
 pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
-    let cfg: RunFileConfig = super::load_config(config)?;
+    let file = ConfigFile::read(config)?;
+    let cfg: RunFileConfig = file.parse()?;
+    settings::check_link(&file, &cfg.bus, &cfg.sim)?;
+    check_run_settings(&file, &cfg.run)?;
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
     let plan = Plan::load(&args.plan)?;
+    let sha = std::fs::read(&args.plan)
+        .map(|b| sha256_hex(&b))
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
     let checked = plan
         .check(&robot, &cfg.validation)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
-    let from = match &args.resume {
-        Some(j) => ResumePoint::from_journal(j)?.resume_from() as usize,
-        None => 0,
-    };
+    let from = start_frame(args.resume.as_deref(), &sha, checked.frames.len())?;
+    let journal_path = args
+        .journal
+        .or(args.resume.clone())
+        .unwrap_or_else(|| args.plan.with_file_name("journal.jsonl"));
+    if args.resume.is_none() {
+        check_fresh_journal(&journal_path, &sha)?;
+    }
+    let mut bus_cfg = cfg.bus;
+    bus_cfg.servo_map = frames::servo_map(&robot)?;
+    bus_cfg.servo_map.validate()?;
     if args.dry_run {
         println!(
             "run: dry run: {} passes, {} frames from frame {from}, {:.2} s at {} ms per frame; nothing sent",
             plan.passes.len(),
             checked.frames.len(),
-            (checked.frames.len() - from.min(checked.frames.len())) as f64 * plan.period,
+            (checked.frames.len() - from) as f64 * plan.period,
             checked.time_ms
         );
         return Ok(());
     }
-    let journal_path = args
-        .journal
-        .or(args.resume.clone())
-        .unwrap_or_else(|| args.plan.with_file_name("journal.jsonl"));
-    let journal = Journal::append(&journal_path)?;
-    let mut bus_cfg = cfg.bus;
-    bus_cfg.servo_map = frames::servo_map(&robot)?;
+    let journal = Journal::append(&journal_path)?.for_plan(&sha);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
     let link = super::arm::open_link(

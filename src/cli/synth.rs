@@ -75,7 +75,8 @@ fn parse_range(s: &str) -> Result<[f64; 2], String> {
 
 /// Builds the config from file and flags, makes the case and writes it.
 pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<()> {
-    let mut cfg: SynthConfig = super::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let mut cfg: SynthConfig = file.parse()?;
     macro_rules! set {
         ($($field:ident),*) => {$(if let Some(v) = args.$field { cfg.$field = v; })*};
     }
@@ -104,6 +105,7 @@ pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<
         t.angle_error_deg = args.angle_error.unwrap_or(t.angle_error_deg);
         t.points_per_view = args.view_points.unwrap_or(t.points_per_view);
     }
+    cfg.check().map_err(|m| file.refuse("", &m))?;
     let case = synth(&cfg)?;
     case.write(&args.out)?;
     let t = &case.truth;

@@ -121,7 +121,7 @@ pub fn encode(
             let mut buf = [0u8; 32];
             let n = Command::MoveAll { pose, time_ms }
                 .encode(&mut buf)
-                .map_err(|e| frame_err(format!("sample {i}: {e:?}")))?;
+                .map_err(|e| frame_err(format!("sample {i}: {e}")))?;
             Ok(buf[..n].to_vec())
         })
         .collect()
@@ -143,7 +143,7 @@ pub fn decode(text: &str) -> Result<([u16; SERVO_COUNT], u16), String> {
     let frames: Vec<_> = dec.feed(&bytes).collect();
     match frames.as_slice() {
         [Ok(frame)] if dec.skipped() == 0 && dec.pending() == 0 => {
-            match Command::parse(frame).map_err(|e| format!("{e:?}"))? {
+            match Command::parse(frame).map_err(|e| e.to_string())? {
                 Command::MoveAll { pose, time_ms } => Ok((pose.raw(), time_ms)),
                 other => Err(format!("not a 0x1D frame: {}", other.name())),
             }

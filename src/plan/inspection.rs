@@ -14,8 +14,23 @@ pub use crate::regions::Region as RegionInfo;
 struct RegionsFile {
     #[serde(default)]
     tolerance: Option<f64>,
+    /// Core-point spacing, mm (absent in hand-made files: the area check is skipped).
+    #[serde(default)]
+    spacing: Option<f64>,
+    /// Connection distance of the regions, mm (absent: the extent check is skipped).
+    #[serde(default)]
+    gap: Option<f64>,
     regions: Vec<RegionInfo>,
 }
+
+/// Largest difference between a region's mean (or centroid coordinate) in regions.json and
+/// the value its rows in deviations.csv give, mm: both files carry shortest round-trip
+/// numbers, so only summation order differs (about 1e-15 relative).
+const AGREEMENT_MM: f64 = 1e-6;
+/// Accepted ratio between a region's area and its point count × spacing² (each way): the
+/// area per core point varies with densification near defect tops (down to about 1/16 of the
+/// median) and at sparse borders, never by this much.
+const AREA_RATIO_LIMIT: f64 = 1000.0;
 
 /// One core point of `deviations.csv`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -51,7 +66,19 @@ impl Inspection {
         let text = read(&rfile)?;
         let parsed: RegionsFile = serde_json::from_str(&text)
             .map_err(|e| PlanError::input(&rfile, format!("line {}", e.line()), e.to_string()))?;
-        let points = read_deviations(&dir.join("deviations.csv"))?;
+        let csv = dir.join("deviations.csv");
+        let points = read_deviations(&csv)?;
+        let known = |id: i64| parsed.regions.iter().any(|r| r.id as i64 == id);
+        if let Some(i) = points
+            .iter()
+            .position(|p| p.region < -1 || (p.region >= 0 && !known(p.region)))
+        {
+            let msg = format!(
+                "region {} is neither -1 nor an id of regions.json",
+                points[i].region
+            );
+            return Err(PlanError::input(&csv, format!("row {}", i + 1), msg));
+        }
         let inspection = Inspection {
             dir: dir.to_path_buf(),
             tolerance: parsed.tolerance,
@@ -59,6 +86,11 @@ impl Inspection {
             points,
         };
         inspection.check(&rfile)?;
+        for (i, r) in inspection.regions.iter().enumerate() {
+            inspection
+                .check_against_rows(r, parsed.spacing, parsed.gap)
+                .map_err(|m| PlanError::input(&rfile, format!("regions[{i}] (id {})", r.id), m))?;
+        }
         Ok(inspection)
     }
 
@@ -97,6 +129,77 @@ impl Inspection {
                     r.points, r.id
                 );
                 return Err(PlanError::input(rfile, place, msg));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Inspection {
+    /// What regions.json says of region `r` against its rows of deviations.csv: the sign of
+    /// its peak, `repairable`, its mean distance and centroid, its extent (its rows joined at
+    /// `gap`) and its area (about points × `spacing`²).
+    fn check_against_rows(
+        &self,
+        r: &RegionInfo,
+        spacing: Option<f64>,
+        gap: Option<f64>,
+    ) -> Result<(), String> {
+        if r.repairable != (r.peak > 0.0) {
+            return Err(format!(
+                "repairable is {} but the peak is {} mm (material in excess is a positive peak)",
+                r.repairable, r.peak
+            ));
+        }
+        let rows: Vec<&SurfacePoint> = self
+            .region_points(r.id)
+            .iter()
+            .map(|&i| &self.points[i])
+            .collect();
+        if rows.is_empty() {
+            return Err("no rows of deviations.csv carry its id".into());
+        }
+        let n = rows.len() as f64;
+        let mean = rows.iter().map(|p| p.distance).sum::<f64>() / n;
+        let diff = (mean - r.mean).abs();
+        if diff.is_nan() || diff > AGREEMENT_MM * (1.0 + mean.abs()) {
+            return Err(format!(
+                "mean {} mm, but its rows of deviations.csv average {mean} mm",
+                r.mean
+            ));
+        }
+        if r.mean * r.peak < 0.0 {
+            return Err(format!(
+                "peak {} mm and mean {} mm differ in sign",
+                r.peak, r.mean
+            ));
+        }
+        let centroid = rows.iter().map(|p| p.position.coords).sum::<Vector3<f64>>() / n;
+        let off = (centroid - Vector3::from(r.centroid)).norm();
+        if off.is_nan() || off > AGREEMENT_MM * (1.0 + centroid.norm()) {
+            return Err(format!("centroid lies {off} mm from the mean of its rows"));
+        }
+        if let Some(gap) = gap.filter(|g| g.is_finite() && *g > 0.0) {
+            let reach = n * gap;
+            let far = rows
+                .iter()
+                .map(|p| (p.position.coords - centroid).norm())
+                .fold(0.0, f64::max);
+            if far > reach {
+                return Err(format!(
+                    "a row lies {far} mm from the centroid, farther than its {n} points joined \
+                     at {gap} mm can reach ({reach} mm)"
+                ));
+            }
+        }
+        if let Some(s) = spacing.filter(|s| s.is_finite() && *s > 0.0) {
+            let ratio = r.area / (n * s * s);
+            if !(1.0 / AREA_RATIO_LIMIT..=AREA_RATIO_LIMIT).contains(&ratio) {
+                return Err(format!(
+                    "area {} mm² is {ratio:.3e} × its {n} points × spacing² ({s} mm): \
+                     not the area of its rows",
+                    r.area
+                ));
             }
         }
         Ok(())

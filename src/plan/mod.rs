@@ -114,44 +114,80 @@ impl Default for PlanConfig {
     }
 }
 
+/// Accepted range and unit of every numeric [`PlanConfig`] setting: wide around the defaults,
+/// narrow enough that no setting makes the work grow without bound (a depth step of 1e-9 mm
+/// would mean a billion layers, a spacing of 1e-9 mm a billion points per line).
+const RANGES: [(&str, f64, f64, &str); 13] = [
+    ("stepover", 0.01, 2.0, "× tool radius"),
+    ("footprint", 0.01, 1.0, "× tool radius"),
+    ("spacing_mm", 0.01, 50.0, "mm"),
+    ("depth_step_mm", 0.001, 10.0, "mm"),
+    ("allowance_mm", 0.0, 10.0, "mm"),
+    ("contact_offset_mm", -10.0, 10.0, "mm"),
+    ("feed_mm_s", 0.01, 100.0, "mm/s"),
+    ("path_acceleration", 1e-4, 10.0, "m/s^2"),
+    ("path_jerk", 1e-3, 1000.0, "m/s^3"),
+    ("retract_mm", 0.01, 100.0, "mm"),
+    ("max_joint_step", 1e-4, 1.0, "rad"),
+    ("axis_spread_deg", 0.0, 90.0, "deg"),
+    ("max_path_error_mm", 1e-3, 10.0, "mm"),
+];
+
+/// Most depth layers over one region: 100 layers are 10 mm at the default 0.1 mm step, far
+/// beyond a defect a grinder should remove; more means a bad peak or step.
+pub const MAX_LAYERS: f64 = 100.0;
+/// Most contact points over all regions and layers (estimated from each region's extent
+/// before rastering): at the default 0.5 mm spacing and 5 mm/s feed, 200,000 points grind
+/// for about 5.5 hours.
+pub const MAX_CONTACT_POINTS: f64 = 200_000.0;
+
 impl PlanConfig {
-    fn check(&self, robot: &Robot) -> Result<(), PlanError> {
-        let positive = [
-            ("stepover", self.stepover),
-            ("footprint", self.footprint),
-            ("spacing_mm", self.spacing_mm),
-            ("depth_step_mm", self.depth_step_mm),
-            ("feed_mm_s", self.feed_mm_s),
-            ("path_acceleration", self.path_acceleration),
-            ("path_jerk", self.path_jerk),
-            ("joint_margin", self.joint_margin),
-            ("retract_mm", self.retract_mm),
-            ("max_joint_step", self.max_joint_step),
-            ("max_path_error_mm", self.max_path_error_mm),
+    /// Checks every setting against its range ([`RANGES`]: the message names the key in
+    /// backticks, with the value and unit), the home pose and the period against `robot`.
+    pub fn check(&self, robot: &Robot) -> Result<(), PlanError> {
+        let values = [
+            self.stepover,
+            self.footprint,
+            self.spacing_mm,
+            self.depth_step_mm,
+            self.allowance_mm,
+            self.contact_offset_mm,
+            self.feed_mm_s,
+            self.path_acceleration,
+            self.path_jerk,
+            self.retract_mm,
+            self.max_joint_step,
+            self.axis_spread_deg,
+            self.max_path_error_mm,
         ];
-        for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(PlanError::Config(format!("{name} must be > 0 (got {v})")));
+        for ((name, lo, hi, unit), v) in RANGES.iter().zip(values) {
+            if !(v.is_finite() && (*lo..=*hi).contains(&v)) {
+                return Err(PlanError::Config(format!(
+                    "`{name}` = {v:?} {unit} is outside {lo}..={hi} {unit}"
+                )));
             }
         }
-        if self.joint_margin > 1.0 {
-            return Err(PlanError::Config("joint_margin must be <= 1".into()));
+        if !(self.joint_margin > 0.0 && self.joint_margin <= 1.0) {
+            let m = self.joint_margin;
+            return Err(PlanError::Config(format!(
+                "`joint_margin` = {m} is outside 0 (excluded)..=1"
+            )));
         }
         if self.home.len() != robot.dof() {
             let msg = format!(
-                "home has {} joints, the arm {}",
+                "`home` has {} joints, the arm {}",
                 self.home.len(),
                 robot.dof()
             );
             return Err(PlanError::Config(msg));
         }
         if let Some(i) = robot.limit_violation(&self.home, 0.0) {
-            let msg = format!("home is outside the limits of {}", robot.joints[i].name);
+            let msg = format!("`home` is outside the limits of {}", robot.joints[i].name);
             return Err(PlanError::Config(msg));
         }
         if (self.trajectory.period - robot.servos.period).abs() > 1e-12 {
             let msg = format!(
-                "trajectory.period {} differs from the bus period {} of servos.toml",
+                "`period` {} s of [plan.trajectory] differs from the bus period {} s of servos.toml",
                 self.trajectory.period, robot.servos.period
             );
             return Err(PlanError::Config(msg));
@@ -169,6 +205,44 @@ impl PlanConfig {
             allowance: self.allowance_mm,
         }
     }
+}
+
+/// Refuses an inspection whose planning would exceed [`MAX_LAYERS`] layers on a region or
+/// [`MAX_CONTACT_POINTS`] contact points in all: layers from each repairable region's peak,
+/// points from the extent of its members across the raster (lines × points per line).
+fn check_work(inspection: &Inspection, g: &RasterGeometry) -> Result<(), PlanError> {
+    let file = inspection.dir.join("regions.json");
+    let mut total = 0.0;
+    for r in inspection.regions.iter().filter(|r| r.repairable) {
+        let layers = ((r.peak - g.allowance) / g.depth_step).ceil().max(0.0);
+        if layers > MAX_LAYERS {
+            let msg = format!(
+                "peak {} mm above an allowance of {} mm at a depth step of {} mm needs {layers} \
+                 layers, more than {MAX_LAYERS}",
+                r.peak, g.allowance, g.depth_step
+            );
+            return Err(PlanError::input(&file, format!("region {}", r.id), msg));
+        }
+        let members = inspection.region_points(r.id);
+        let extent = members.iter().fold(0.0f64, |m, &i| {
+            let d = inspection.points[i].position - Point3::from(r.centroid);
+            m.max(d.norm())
+        });
+        let lines = 2.0 * extent / g.stepover + 1.0;
+        let per_line = 2.0 * extent / g.spacing + 1.0;
+        total += layers * lines * per_line;
+    }
+    if total > MAX_CONTACT_POINTS {
+        return Err(PlanError::Config(format!(
+            "the regions of {} would take about {total:.0} contact points, more than \
+             {MAX_CONTACT_POINTS} (`spacing_mm` {} mm, `stepover` {} mm, `depth_step_mm` {} mm)",
+            inspection.dir.display(),
+            g.spacing,
+            g.stepover,
+            g.depth_step
+        )));
+    }
+    Ok(())
 }
 
 /// One joint-trajectory sample.
@@ -226,6 +300,7 @@ pub fn plan(
     let radius_mm = robot.tool.radius * 1e3;
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = config.geometry(radius_mm);
+    check_work(inspection, &geometry)?;
     let surface = surface::Surface::new(&inspection.points);
 
     // visiting order: from the home tool tip over the region centroids (robot frame, mm)

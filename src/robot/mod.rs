@@ -23,8 +23,8 @@ pub use resolution::resolution_error;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RobotConfig {
-    /// The URDF (default `calibration/dofbot.urdf`; every default path is looked up under the
-    /// working directory first, then in the source tree, see [`default_calibration`]).
+    /// The URDF (default `calibration/dofbot.urdf`; every default path is under the working
+    /// directory, see [`default_calibration`]).
     pub urdf: PathBuf,
     /// The tool file (default `calibration/tool.toml`).
     pub tool: PathBuf,
@@ -36,21 +36,11 @@ pub struct RobotConfig {
     pub ik: IkConfig,
 }
 
-/// `calibration/NAME` under the working directory when it exists there, else the cell
-/// calibration shipped in the source tree this binary was built from.
+/// `calibration/NAME` under the working directory: the cell's files are named explicitly
+/// (`--config` with `[robot]` paths) or found in `./calibration/`, never taken from the source
+/// tree the binary was built from (that would run one cell with another's calibration).
 pub fn default_calibration(name: &str) -> PathBuf {
-    let local = PathBuf::from("calibration").join(name);
-    if local.exists() {
-        return local;
-    }
-    let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("calibration")
-        .join(name);
-    if shipped.exists() {
-        shipped
-    } else {
-        local
-    }
+    PathBuf::from("calibration").join(name)
 }
 
 impl Default for RobotConfig {

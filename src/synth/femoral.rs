@@ -12,7 +12,7 @@ use crate::cloud::{Aabb, Mesh};
 
 /// Shape parameters of the parametric part (millimetres).
 #[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct FemoralShape {
     /// Medio-lateral width (default 64).
     pub width: f64,

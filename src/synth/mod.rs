@@ -26,7 +26,7 @@ use crate::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud, Units};
 
 /// Settings of a synthetic case. Every field has a documented default.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct SynthConfig {
     /// Seed of every random choice (default 1).
     pub seed: u64,
@@ -85,6 +85,114 @@ impl Default for SynthConfig {
         }
     }
 }
+
+/// Most points in reference.ply, scan.ply or a turntable view (about 500 MB of points and
+/// normals at once: beyond it a setting is wrong, not the case large).
+pub const MAX_POINTS: usize = 10_000_000;
+/// Most defects planted (placement tries each against all others).
+pub const MAX_DEFECTS: usize = 500;
+
+/// `key = value unit` outside `lo..=hi` (or not finite) as a message naming the key.
+fn outside(key: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Option<String> {
+    (!(v.is_finite() && (lo..=hi).contains(&v)))
+        .then(|| format!("`{key}` = {v:?} {unit} is outside {lo}..={hi} {unit}"))
+}
+
+impl SynthConfig {
+    /// Checks every setting against its range and unit before anything is made; the message
+    /// names the key in backticks.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let n = |v: usize| v as f64;
+        let [h0, h1] = self.height_range;
+        let [w0, w1] = self.width_range;
+        let (s, mm, share) = (&self.shape, "mm", "(share)");
+        let shape = MAX_SHAPE_MM;
+        let table = [
+            (
+                "reference_points",
+                n(self.reference_points),
+                1.0,
+                n(MAX_POINTS),
+                "points",
+            ),
+            (
+                "scan_points",
+                n(self.scan_points),
+                1.0,
+                n(MAX_POINTS),
+                "points",
+            ),
+            ("defects", n(self.defects), 0.0, n(MAX_DEFECTS), "defects"),
+            ("height_range", h0, 0.0, h1.min(MAX_DEFECT_HEIGHT_MM), mm),
+            ("height_range", h1, h0.max(0.0), MAX_DEFECT_HEIGHT_MM, mm),
+            ("width_range", w0, MIN_DEFECT_WIDTH_MM, w1, mm),
+            (
+                "width_range",
+                w1,
+                w0.max(MIN_DEFECT_WIDTH_MM),
+                MAX_DEFECT_WIDTH_MM,
+                mm,
+            ),
+            (
+                "pit_share",
+                self.pit_share,
+                0.0,
+                1.0 - self.ridge_share,
+                share,
+            ),
+            ("ridge_share", self.ridge_share, 0.0, 1.0, share),
+            ("noise", self.noise, 0.0, MAX_NOISE_MM, mm),
+            ("outliers", self.outliers, 0.0, MAX_OUTLIER_SHARE, share),
+            (
+                "max_translation",
+                self.max_translation,
+                0.0,
+                MAX_TRANSLATION_MM,
+                mm,
+            ),
+            ("width", s.width, 1.0, shape, mm),
+            ("thickness", s.thickness, 0.1, shape, mm),
+            ("notch_half_width", s.notch_half_width, 0.0, shape, mm),
+            ("groove_depth", s.groove_depth, 0.0, shape, mm),
+            ("groove_sigma", s.groove_sigma, 0.1, shape, mm),
+            ("edge_drop", s.edge_drop, 0.0, shape, mm),
+            ("edge_band", s.edge_band, 0.1, shape, mm),
+            (
+                "profile_samples",
+                n(s.profile_samples),
+                10.0,
+                1e5,
+                "samples",
+            ),
+            ("x_step", s.x_step, 0.01, shape, mm),
+        ];
+        if let Some(m) = table
+            .iter()
+            .find_map(|&(key, v, lo, hi, unit)| outside(key, v, lo, hi, unit))
+        {
+            return Err(m);
+        }
+        match &self.turntable {
+            Some(t) => t.check(),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Tallest planted defect, mm (a defect of a polished part, not a second part).
+const MAX_DEFECT_HEIGHT_MM: f64 = 10.0;
+/// Narrowest and widest planted defect (FWHM), mm.
+const MIN_DEFECT_WIDTH_MM: f64 = 0.05;
+/// Widest planted defect (FWHM), mm.
+const MAX_DEFECT_WIDTH_MM: f64 = 100.0;
+/// Largest scan noise, mm.
+const MAX_NOISE_MM: f64 = 5.0;
+/// Outlier share of the scan: below one half (the filter needs a majority of surface).
+const MAX_OUTLIER_SHARE: f64 = 0.49;
+/// Largest translation of the scan's pose, mm.
+const MAX_TRANSLATION_MM: f64 = 10_000.0;
+/// Largest dimension of the parametric part's shape settings, mm.
+const MAX_SHAPE_MM: f64 = 1000.0;
 
 /// A generated case.
 #[derive(Debug, Clone)]
@@ -196,18 +304,7 @@ pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
 
 /// Makes a case whose defects sit only where `accept` allows.
 pub fn synth_at(cfg: &SynthConfig, accept: &SiteFilter) -> Result<SynthCase> {
-    anyhow::ensure!(
-        cfg.reference_points > 0 && cfg.scan_points > 0,
-        "point counts must be positive"
-    );
-    anyhow::ensure!(
-        (0.0..0.5).contains(&cfg.outliers),
-        "outlier share must be in [0, 0.5)"
-    );
-    anyhow::ensure!(
-        cfg.noise >= 0.0 && cfg.noise.is_finite(),
-        "noise must be a finite non-negative number"
-    );
+    cfg.check().map_err(anyhow::Error::msg)?;
     let part = load_part(cfg)?;
     let mut rng = ChaCha8Rng::seed_from_u64(cfg.seed);
     let defects =

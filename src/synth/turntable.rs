@@ -15,7 +15,7 @@ use crate::cloud::{sample_mesh, transform::isometry_to_rows, Mesh, PointCloud};
 
 /// Settings of the turntable views.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct TurntableConfig {
     /// Number of views (default 12).
     pub views: usize,
@@ -47,6 +47,56 @@ impl Default for TurntableConfig {
             points_per_view: 100_000,
             occlusion_cell: 0.3,
         }
+    }
+}
+
+/// Most turntable views (one per degree).
+const MAX_VIEWS: usize = 360;
+/// Largest error of a view's true angle, degrees.
+const MAX_ANGLE_ERROR_DEG: f64 = 45.0;
+
+impl TurntableConfig {
+    /// Checks every setting against its range and unit; the message names the key.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let vectors = [
+            ("axis", self.axis),
+            ("centre", self.centre),
+            ("scanner_direction", self.scanner_direction),
+        ];
+        for (key, v) in vectors {
+            let norm = Vector3::from(v).norm();
+            if !(norm.is_finite() && norm <= super::MAX_POINTS as f64)
+                || (key != "centre" && norm == 0.0)
+            {
+                return Err(format!(
+                    "`{key}` = {v:?} must be finite (and not zero for a direction)"
+                ));
+            }
+        }
+        let step = self.step_deg.unwrap_or(1.0);
+        [
+            super::outside("views", self.views as f64, 2.0, MAX_VIEWS as f64, "views"),
+            super::outside("step_deg", step, 1e-3, 360.0, "deg"),
+            super::outside(
+                "angle_error_deg",
+                self.angle_error_deg,
+                0.0,
+                MAX_ANGLE_ERROR_DEG,
+                "deg",
+            ),
+            super::outside(
+                "points_per_view",
+                self.points_per_view as f64,
+                1.0,
+                super::MAX_POINTS as f64,
+                "points",
+            ),
+            super::outside("occlusion_cell", self.occlusion_cell, 1e-3, 100.0, "mm"),
+        ]
+        .into_iter()
+        .flatten()
+        .next()
+        .map_or(Ok(()), Err)
     }
 }
 

@@ -1,0 +1,194 @@
+//! The checks `inspect` makes on its inputs before it measures: a given pose must come from a
+//! registration that succeeded, scan and reference must be of one size once units are applied,
+//! and normals must be unit vectors pointing outward.
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use nalgebra::{Isometry3, Point3};
+use serde::Deserialize;
+
+use crate::cloud::{transform, PointCloud};
+use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
+
+/// Accepted ratio of the scan's to the reference's robust bounding-box diagonal: a scan of
+/// the part (a partial view included) spans about the part; a unit slip (mm read as m) is a
+/// factor of 1000.
+pub const SIZE_RATIO: (f64, f64) = (0.5, 2.0);
+/// Share of the points farthest from the centre left out of the robust extent (stray
+/// outliers left by the filter do not widen it).
+const EXTENT_TRIM: f64 = 0.01;
+/// Points of the reference whose normals are compared with a propagated orientation (a
+/// sample along the file's order; the sign test needs no more).
+const ORIENTATION_SAMPLE: usize = 20_000;
+/// Fewest sampled points for the orientation test (PCA takes 20 neighbours; with fewer the
+/// propagated orientation says nothing).
+const ORIENTATION_MIN_POINTS: usize = 200;
+/// Share of sampled normals that must agree in sign with the propagated orientation for the
+/// normals to be taken as they are (or disagree, for them to be turned round): PCA normals
+/// near sharp edges and on thin walls may disagree with correct normals now and then.
+const ORIENTATION_AGREEMENT: f64 = 0.9;
+/// Largest accepted deviation of a normal's length from 1 (as the comparison's own check).
+const UNIT_TOLERANCE: f64 = 1e-3;
+
+/// Reads `scan_to_reference` from a registration.json or a synth truth.json, refusing a
+/// registration whose status is not "ok" or "given".
+pub fn read_pose(path: &Path) -> Result<Isometry3<f64>> {
+    #[derive(Deserialize)]
+    struct Pose {
+        scan_to_reference: Option<[[f64; 4]; 4]>,
+        status: Option<String>,
+        reason: Option<String>,
+    }
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: --pose: cannot read", path.display()))?;
+    let pose: Pose = serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: --pose: line {}: {e}", path.display(), e.line()))?;
+    if let Some(status) = pose
+        .status
+        .as_deref()
+        .filter(|s| !["ok", "given"].contains(s))
+    {
+        bail!(
+            "{}: --pose: the registration's status is {status:?} ({}): not a pose to measure with",
+            path.display(),
+            pose.reason.as_deref().unwrap_or("no reason given")
+        );
+    }
+    let Some(rows) = pose.scan_to_reference else {
+        bail!("{}: --pose: no `scan_to_reference`", path.display());
+    };
+    transform::isometry_from_rows(&rows)
+        .with_context(|| format!("{}: --pose: scan_to_reference", path.display()))
+}
+
+/// Refuses a cloud without normals or with a normal that is not a unit vector, naming the
+/// file, what it is (`what`: "reference", "--core file") and the point index.
+pub fn check_unit_normals(path: &Path, what: &str, cloud: &PointCloud) -> Result<()> {
+    let Some(normals) = &cloud.normals else {
+        bail!(
+            "{}: the {what} has no normals: give a cloud with outward unit normals",
+            path.display()
+        );
+    };
+    let bad = normals
+        .iter()
+        .position(|n| n.norm().is_nan() || (n.norm() - 1.0).abs() >= UNIT_TOLERANCE);
+    if let Some(i) = bad {
+        let n = normals[i];
+        bail!(
+            "{}: {what} point {i}: normal ({}, {}, {}) is not a unit vector (length {})",
+            path.display(),
+            n.x,
+            n.y,
+            n.z,
+            n.norm()
+        );
+    }
+    Ok(())
+}
+
+/// Compares a reference cloud's own normals with a consistently propagated orientation (PCA
+/// normals of a sample, oriented by [`Orientation::Propagate`]): kept when at least
+/// [`ORIENTATION_AGREEMENT`] agree, turned round (with a note) when as many disagree, refused
+/// otherwise. Returns the note of a turn.
+pub fn orient_outward(path: &Path, cloud: &mut PointCloud) -> Result<Option<String>> {
+    let step = cloud.len().div_ceil(ORIENTATION_SAMPLE).max(1);
+    let picked: Vec<usize> = (0..cloud.len()).step_by(step).collect();
+    if picked.len() < ORIENTATION_MIN_POINTS {
+        return Ok(None);
+    }
+    let Some(normals) = cloud.normals.as_mut() else {
+        return Ok(None);
+    };
+    let sample = PointCloud::from_points(picked.iter().map(|&i| cloud.points[i]).collect());
+    let cfg = NormalConfig {
+        orientation: Orientation::Propagate,
+        ..NormalConfig::default()
+    };
+    let est = estimate_normals(&sample, &cfg)
+        .with_context(|| format!("{}: reference normals: orientation check", path.display()))?;
+    let agree = picked
+        .iter()
+        .zip(&est.normals)
+        .filter(|(&i, e)| normals[i].dot(e) > 0.0)
+        .count() as f64
+        / picked.len() as f64;
+    if agree >= ORIENTATION_AGREEMENT {
+        return Ok(None);
+    }
+    if agree <= 1.0 - ORIENTATION_AGREEMENT {
+        normals.iter_mut().for_each(|n| *n = -*n);
+        return Ok(Some(format!(
+            "{}: the reference normals point inward ({:.0} % of {} sampled normals oppose a \
+             propagated outward orientation): turned round",
+            path.display(),
+            100.0 * (1.0 - agree),
+            picked.len()
+        )));
+    }
+    bail!(
+        "{}: reference normals are not consistently oriented: {:.0} % of {} sampled normals \
+         agree with a propagated outward orientation (need {:.0} % either way)",
+        path.display(),
+        100.0 * agree,
+        picked.len(),
+        100.0 * ORIENTATION_AGREEMENT
+    )
+}
+
+/// Refuses a scan whose robust extent ([`robust_extent`]) is not within [`SIZE_RATIO`] of the
+/// reference's (both in millimetres after `--units`). The scan is still in its own frame, so
+/// the measure is one that turns with the part, not an axis-aligned box.
+pub fn check_sizes(reference: (&Path, &PointCloud), scan: (&Path, &PointCloud)) -> Result<()> {
+    let r = robust_extent(&reference.1.points);
+    let s = robust_extent(&scan.1.points);
+    let ratio = s / r;
+    if !(SIZE_RATIO.0..=SIZE_RATIO.1).contains(&ratio) {
+        bail!(
+            "{}: the scan spans {s:.3} mm but the reference {} spans {r:.3} mm (ratio {ratio:.3}, \
+             outside {}..{}): are the files in the same unit? check --units",
+            scan.0.display(),
+            reference.0.display(),
+            SIZE_RATIO.0,
+            SIZE_RATIO.1
+        );
+    }
+    Ok(())
+}
+
+/// Twice the distance from the per-axis median point within which all but [`EXTENT_TRIM`] of
+/// the points lie: about the part's diameter, unmoved by a few stray points.
+fn robust_extent(points: &[Point3<f64>]) -> f64 {
+    if points.is_empty() {
+        return f64::NAN;
+    }
+    let n = points.len();
+    let mut centre = Point3::origin();
+    for axis in 0..3 {
+        let mut v: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        centre[axis] = *v.select_nth_unstable_by(n / 2, f64::total_cmp).1;
+    }
+    let mut d: Vec<f64> = points.iter().map(|p| (p - centre).norm()).collect();
+    let k = (((n - 1) as f64) * (1.0 - EXTENT_TRIM)) as usize;
+    2.0 * *d.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robust_extent_is_the_diameter_and_ignores_a_stray_point() {
+        // 2,000 points on a circle of radius 10 in a tilted plane: extent 20.
+        let mut pts: Vec<Point3<f64>> = (0..2000)
+            .map(|i| {
+                let a = i as f64 * std::f64::consts::TAU / 2000.0;
+                Point3::new(10.0 * a.cos(), 7.0 * a.sin(), 7.0 * a.sin() + 5.0)
+            })
+            .collect();
+        let d = robust_extent(&pts);
+        assert!((d - 20.0).abs() < 0.05, "{d}");
+        pts.push(Point3::new(1e6, 0.0, 0.0));
+        assert!((robust_extent(&pts) - d).abs() < 0.05);
+    }
+}

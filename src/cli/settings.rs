@@ -1,0 +1,280 @@
+//! Loading and checking the `--config` TOML of a command: syntax and type errors name the file
+//! and the line (toml's spans), keys no setting reads are refused, and a setting out of its
+//! range is reported at the line that sets it. Stage checks name the offending key in
+//! backticks (`` `settle_ms` = 1e300 ms is outside 0..=60000 ms ``); [`ConfigFile::refuse`]
+//! finds that key's line in the file.
+use std::path::{Path, PathBuf};
+
+use anyhow::anyhow;
+
+/// A loaded `--config` file (or none: every setting at its default).
+#[derive(Debug, Default)]
+pub struct ConfigFile {
+    /// The file, when one was given.
+    pub path: Option<PathBuf>,
+    /// Its text ("" without a file).
+    pub text: String,
+}
+
+impl ConfigFile {
+    /// Reads `path` (none: an empty file).
+    pub fn read(path: Option<&Path>) -> anyhow::Result<ConfigFile> {
+        let Some(path) = path else {
+            return Ok(ConfigFile::default());
+        };
+        let meta =
+            std::fs::metadata(path).map_err(|e| anyhow!("{}: --config: {e}", path.display()))?;
+        anyhow::ensure!(
+            meta.is_file() && meta.len() <= MAX_CONFIG_BYTES,
+            "{}: --config: not a regular file of at most {MAX_CONFIG_BYTES} bytes",
+            path.display()
+        );
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow!("{}: --config: {e}", path.display()))?;
+        Ok(ConfigFile {
+            path: Some(path.to_path_buf()),
+            text,
+        })
+    }
+
+    /// Parses the text into `T` (missing keys at their defaults); errors name file and line.
+    pub fn parse<T: serde::de::DeserializeOwned + Default>(&self) -> anyhow::Result<T> {
+        if self.path.is_none() {
+            return Ok(T::default());
+        }
+        toml::from_str(&self.text).map_err(|e| {
+            let place = e
+                .span()
+                .map(|s| format!("line {}: ", line_at(&self.text, s.start)))
+                .unwrap_or_default();
+            anyhow!(
+                "{}: {place}{}",
+                self.name(),
+                e.message().trim().replace('\n', " ")
+            )
+        })
+    }
+
+    /// Like [`ConfigFile::parse`], and refuses keys that no field of `T` holds: `T` is written
+    /// back to TOML and every key of the file must be there (for settings structs that do not
+    /// deny unknown fields themselves).
+    pub fn parse_strict<T>(&self) -> anyhow::Result<T>
+    where
+        T: serde::de::DeserializeOwned + serde::Serialize + Default,
+    {
+        let value: T = self.parse()?;
+        if self.path.is_none() {
+            return Ok(value);
+        }
+        let given: toml::Table = toml::from_str(&self.text)?;
+        let known = toml::Table::try_from(&value).map_err(|e| anyhow!("{}: {e}", self.name()))?;
+        if let Some(key) = unknown_key(&given, &known, "") {
+            return Err(self.refuse("", &format!("unknown key `{key}`")));
+        }
+        Ok(value)
+    }
+
+    /// The error for a setting of `section` (a dotted table path, "" for the top level)
+    /// refused with `message`, which names the key in backticks: "FILE: line N: message".
+    pub fn refuse(&self, section: &str, message: &str) -> anyhow::Error {
+        let key = message.split('`').nth(1).unwrap_or("");
+        let line = match key.is_empty() {
+            true => None,
+            false => line_of_key(&self.text, section, key),
+        };
+        let place = line.map(|l| format!("line {l}: ")).unwrap_or_default();
+        let scope = match section.is_empty() {
+            true => String::new(),
+            false => format!("[{section}] "),
+        };
+        anyhow!("{}: {place}{scope}{message}", self.name())
+    }
+
+    fn name(&self) -> String {
+        match &self.path {
+            Some(p) => p.display().to_string(),
+            None => "settings (flags and defaults)".to_string(),
+        }
+    }
+}
+
+/// Largest `--config` file read, bytes (a settings file is a few kB; this bounds the read).
+const MAX_CONFIG_BYTES: u64 = 1 << 20;
+
+/// 1-based line of byte offset `at` in `text`.
+fn line_at(text: &str, at: usize) -> usize {
+    let at = at.min(text.len());
+    text.as_bytes()[..at]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count()
+        + 1
+}
+
+/// The first key of `given` (dotted path) that `known` lacks.
+fn unknown_key(given: &toml::Table, known: &toml::Table, prefix: &str) -> Option<String> {
+    for (k, v) in given {
+        let path = match prefix.is_empty() {
+            true => k.clone(),
+            false => format!("{prefix}.{k}"),
+        };
+        match (v, known.get(k)) {
+            (_, None) => return Some(path),
+            (toml::Value::Table(g), Some(toml::Value::Table(n))) => {
+                if let Some(p) = unknown_key(g, n, &path) {
+                    return Some(p);
+                }
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
+/// 1-based line where `key` (a name, or a dotted path ending in one) is set inside `section`
+/// or one of its sub-tables.
+pub fn line_of_key(text: &str, section: &str, key: &str) -> Option<usize> {
+    let mut table = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let line = line.split('#').next().unwrap_or("").trim();
+        if let Some(h) = line.strip_prefix('[') {
+            table = h.trim_matches(|c| c == '[' || c == ']').trim().to_string();
+            continue;
+        }
+        let Some((k, _)) = line.split_once('=') else {
+            continue;
+        };
+        let k = k.trim().trim_matches('"');
+        let full = match table.is_empty() {
+            true => k.to_string(),
+            false => format!("{table}.{k}"),
+        };
+        let in_section = section.is_empty() || full.starts_with(&format!("{section}."));
+        if in_section && (full.ends_with(&format!(".{key}")) || full == key) {
+            return Some(i + 1);
+        }
+    }
+    None
+}
+
+/// Checks that `value` (a setting `key` in `unit`) is finite and within `min..=max`; the
+/// message names the key in backticks for [`ConfigFile::refuse`].
+pub fn in_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), String> {
+    match value.is_finite() && (min..=max).contains(&value) {
+        true => Ok(()),
+        false => Err(format!(
+            "`{key}` = {value:?} {unit} is outside {min}..={max} {unit}"
+        )),
+    }
+}
+
+/// Slowest and fastest line speed the simulated board accepts, baud (the DOFBOT runs 115200;
+/// outside this a byte's time is meaningless or overflows a wait).
+const BAUD_RANGE: (f64, f64) = (300.0, 10_000_000.0);
+/// Longest simulated reply latency or injected delay, ms (as the driver's waits).
+const MAX_SIM_DELAY_MS: f64 = crate::bus::config::MAX_WAIT_MS;
+/// Fastest simulated servo, raw counts per second (about 80 times the DOFBOT's no-load
+/// speed).
+const MAX_SERVO_SPEED: f64 = 250_000.0;
+/// Largest simulated mounting offset, degrees (a servo a quarter turn off is not mounted).
+const MAX_MOUNT_OFFSET_DEG: f64 = 90.0;
+
+/// Checks the `[bus]` and `[sim]` settings of `arm`, `run` and `calibrate` before the link
+/// opens: errors name the file, the line and the key.
+pub fn check_link(
+    file: &ConfigFile,
+    bus: &crate::bus::BusConfig,
+    sim: &crate::bus::SimOptions,
+) -> anyhow::Result<()> {
+    bus.check()
+        .map_err(|e| file.refuse("bus", &e.to_string()))?;
+    let t = &sim.timing;
+    let checks = [
+        in_range("baud", t.baud, BAUD_RANGE.0, BAUD_RANGE.1, "baud"),
+        in_range(
+            "reply_latency_ms",
+            t.reply_latency_ms,
+            0.0,
+            MAX_SIM_DELAY_MS,
+            "ms",
+        ),
+        in_range(
+            "max_speed_counts_s",
+            t.max_speed_counts_s,
+            1.0,
+            MAX_SERVO_SPEED,
+            "counts/s",
+        ),
+        in_range("delay_ms", sim.faults.delay_ms, 0.0, MAX_SIM_DELAY_MS, "ms"),
+        in_range("home_gripper_deg", sim.home_gripper_deg, 0.0, 180.0, "deg"),
+    ];
+    let offsets = sim.mechanics.mount_offset_deg.iter().map(|&d| {
+        let m = MAX_MOUNT_OFFSET_DEG;
+        in_range("mount_offset_deg", d, -m, m, "deg")
+    });
+    let start = sim.mechanics.start_physical_deg.iter().flatten();
+    let start = start.map(|&d| in_range("start_physical_deg", d, 0.0, 270.0, "deg"));
+    for c in checks.into_iter().chain(offsets).chain(start) {
+        c.map_err(|m| file.refuse("sim", &m))?;
+    }
+    Ok(())
+}
+
+/// Most neighbours per point of the statistical outlier filter: its work is points × k, and
+/// Open3D's examples use 20..50.
+const MAX_SOR_K: f64 = 500.0;
+/// Largest |λ| of the outlier filter, standard deviations.
+const MAX_STD_RATIO: f64 = 100.0;
+/// Smallest and largest voxel edge, mm (below a micrometre a voxel holds one point of any
+/// scan; above a metre it holds the whole part).
+const VOXEL_MM: (f64, f64) = (1e-3, 1e3);
+
+/// Checks the outlier filter's settings (`k`, `std_ratio` in `section`) and an optional voxel
+/// edge.
+pub fn check_filter(
+    file: &ConfigFile,
+    section: &str,
+    sor: &crate::preprocess::SorConfig,
+    voxel_mm: Option<f64>,
+) -> anyhow::Result<()> {
+    let k = in_range("k", sor.k as f64, 1.0, MAX_SOR_K, "neighbours");
+    let r = in_range(
+        "std_ratio",
+        sor.std_ratio,
+        -MAX_STD_RATIO,
+        MAX_STD_RATIO,
+        "σ",
+    );
+    k.and(r).map_err(|m| file.refuse(section, &m))?;
+    if let Some(v) = voxel_mm {
+        in_range("voxel_mm", v, VOXEL_MM.0, VOXEL_MM.1, "mm").map_err(|m| file.refuse("", &m))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_are_found_in_their_section() {
+        let text = "[robot]\nurdf = \"x\"\n\n[bus]\n# gap\nframe_gap_ms = 2\nsettle_ms = 1e300\n\
+                    [sim.timing]\nbaud = 0\n";
+        assert_eq!(line_of_key(text, "bus", "settle_ms"), Some(7));
+        assert_eq!(line_of_key(text, "sim", "baud"), Some(9));
+        assert_eq!(line_of_key(text, "robot", "settle_ms"), None);
+        assert_eq!(
+            line_of_key("bus.settle_ms = 3\n", "bus", "settle_ms"),
+            Some(1)
+        );
+        assert_eq!(line_at("a\nb\nc", 2), 2);
+    }
+
+    #[test]
+    fn ranges_name_the_key_and_the_unit() {
+        assert!(in_range("settle_ms", 100.0, 0.0, 1e3, "ms").is_ok());
+        let e = in_range("settle_ms", 1e300, 0.0, 1e3, "ms").unwrap_err();
+        assert!(e.starts_with("`settle_ms` = 1e300 ms"), "{e}");
+        assert!(in_range("x", f64::NAN, 0.0, 1.0, "mm").is_err());
+    }
+}
