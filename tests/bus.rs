@@ -521,3 +521,86 @@ fn arm_commands_use_the_calibrated_servo_offsets() {
     let q1 = nominal["joints"][0].as_f64().unwrap();
     assert!((q1 - 5f64.to_radians()).abs() < 0.002, "joint 1 {q1}");
 }
+
+/// `arm ping`, `arm move` (read back and verified) and `arm read` against each kind of board
+/// (no ping reply, as the serial Arm_ping_servo expects; a 1-byte status; id and status), with
+/// a stale reply (another servo's echo) before every third read that must be passed over.
+#[test]
+fn arm_commands_work_whatever_the_board_answers_to_pings() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let both = "ping replies and reads: all six servos answered both";
+    let boards = [
+        ("none", "no ping replies; all six servos answered reads"),
+        ("status", both),
+        ("id-status", both),
+    ];
+    let want = ServoMap::default().pose_raw(&Q, 30.0).unwrap();
+    let joints = Q.map(|q| q.to_string()).join(",");
+    for (ping, evidence) in boards {
+        let mock = Mock::start(&py, &["--ping", ping, "--stale-echo-every", "3"]);
+        let arm = |args: &[&str]| {
+            let out = common::succeed(
+                common::polishbot()
+                    .arg("arm")
+                    .args(args)
+                    .args(["--port", &mock.path]),
+            );
+            serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+        };
+        let v = arm(&["ping"]);
+        assert_eq!(v["evidence"], evidence, "--ping {ping}: {v}");
+        for s in v["servos"].as_array().unwrap() {
+            let status = if ping == "none" {
+                serde_json::Value::Null
+            } else {
+                0xDA.into()
+            };
+            assert_eq!(s["ping_status"], status, "--ping {ping}: {s}");
+            assert!(s["raw"].as_u64().is_some(), "--ping {ping}: {s}");
+        }
+        let moved = arm(&[
+            "move",
+            "--joints",
+            &joints,
+            "--gripper",
+            "30",
+            "--time",
+            "1.2",
+        ]);
+        assert_eq!(raw_array(&moved["raw"]), want, "--ping {ping}");
+        let read = arm(&["read"]);
+        assert_eq!(raw_array(&read["raw"]), want, "--ping {ping}");
+        let (state, logged) = mock.finish_logged();
+        assert_eq!(raw_array(&state["positions"]), want);
+        assert!(logged.iter().any(|l| l["cmd"] == "ping"));
+    }
+}
+
+/// A board whose pings say a servo is absent and whose reads of it get no reply: `arm ping`
+/// names it and fails; with no ping replies at all the read's timeout is the error.
+#[test]
+fn a_servo_that_answers_neither_ping_nor_read_is_an_error() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    for (ping, message) in [
+        ("status", "servo 5 not answering"),
+        ("none", "timeout: no reply to read_position (0x35)"),
+    ] {
+        let mock = Mock::start(&py, &["--ping", ping, "--absent-servo", "5"]);
+        let out = common::polishbot()
+            .args(["arm", "ping", "--port", &mock.path])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(message),
+            "--ping {ping}: {stderr}"
+        );
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["servos"][4]["raw"], serde_json::Value::Null);
+    }
+}

@@ -1,5 +1,6 @@
-//! The bus driver: paced frames, requests with timeout and retries, ping at connect, torque,
-//! motion frames that stop on Ctrl-C, read-back verification, and the journal.
+//! The bus driver: paced frames, requests with timeout and retries, the servo check at connect
+//! (see [`super::alive`]), torque, motion frames that stop on Ctrl-C, read-back verification,
+//! and the journal.
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -32,7 +33,7 @@ type Attempt<R> = Result<R, BusError>;
 
 impl<T: Transport> Bus<T> {
     /// Opens the bus: checks the servo map, flushes input, journals the opening and, unless
-    /// the config says otherwise, pings all six servos.
+    /// the config says otherwise, checks that all six servos answer ([`Bus::check_servos`]).
     pub fn connect(link: T, config: BusConfig, journal: Journal) -> Result<Bus<T>, BusError> {
         config.servo_map.validate()?;
         let mut bus = Bus {
@@ -49,7 +50,7 @@ impl<T: Transport> Bus<T> {
         open.message = Some(bus.link.describe());
         bus.log(open)?;
         if bus.config.ping_at_connect {
-            bus.ping_all()?;
+            bus.check_servos()?;
         }
         Ok(bus)
     }
@@ -84,12 +85,12 @@ impl<T: Transport> Bus<T> {
         self.link.sleep(d);
     }
 
-    fn log(&mut self, entry: Entry) -> Result<(), BusError> {
+    pub(super) fn log(&mut self, entry: Entry) -> Result<(), BusError> {
         let t = self.link.now().as_secs_f64();
         self.journal.write(entry, t)
     }
 
-    fn log_error(
+    pub(super) fn log_error(
         &mut self,
         err: &BusError,
         motion: Option<u64>,
@@ -102,7 +103,11 @@ impl<T: Transport> Bus<T> {
         self.log(e)
     }
 
-    fn write_frame(&mut self, cmd: &Command, motion: Option<u64>) -> Result<(), BusError> {
+    pub(super) fn write_frame(
+        &mut self,
+        cmd: &Command,
+        motion: Option<u64>,
+    ) -> Result<(), BusError> {
         let gap = Duration::from_secs_f64(self.config.frame_gap_ms.max(0.0) / 1000.0);
         if let Some(last) = self.last_write {
             let now = self.link.now();
@@ -126,7 +131,7 @@ impl<T: Transport> Bus<T> {
 
     /// Sends `cmd` and waits for the reply `accept` recognises (`None`: not for us, keep
     /// waiting; `Some(Err)`: a failed attempt, retried), up to `config.attempts` times.
-    fn request<R>(
+    pub(super) fn request<R>(
         &mut self,
         cmd: Command,
         accept: impl Fn(&Reply, u32) -> Option<Attempt<R>>,
@@ -136,9 +141,7 @@ impl<T: Transport> Bus<T> {
         let what = format!("{} (0x{:02X})", cmd.name(), cmd.func());
         let mut last = None;
         for attempt in 1..=attempts {
-            self.link.clear_input()?;
-            self.decoder.reset();
-            self.write_frame(&cmd, None)?;
+            self.begin_request(&cmd)?;
             let outcome = self.await_reply(&what, attempt, timeout, &accept);
             match outcome {
                 Ok(v) => return Ok(v),
@@ -155,7 +158,14 @@ impl<T: Transport> Bus<T> {
         Err(last.expect("at least one attempt"))
     }
 
-    fn await_reply<R>(
+    /// Drops unread input and any partial reply, then sends `cmd`.
+    pub(super) fn begin_request(&mut self, cmd: &Command) -> Result<(), BusError> {
+        self.link.clear_input()?;
+        self.decoder.reset();
+        self.write_frame(cmd, None)
+    }
+
+    pub(super) fn await_reply<R>(
         &mut self,
         what: &str,
         attempt: u32,
@@ -211,27 +221,6 @@ impl<T: Transport> Bus<T> {
         }
     }
 
-    /// Pings bus servo `id`: true when it answers.
-    pub fn ping(&mut self, id: u8) -> Result<bool, BusError> {
-        let bus_id = BusId::new(id).map_err(|e| BusError::Refused(e.to_string()))?;
-        self.request(Command::Ping(bus_id), |r, _| match *r {
-            Reply::Ping { id: got, alive } if got == id => Some(Ok(alive)),
-            _ => None,
-        })
-    }
-
-    /// Pings servos 1..6; the first one that does not answer is an error.
-    pub fn ping_all(&mut self) -> Result<(), BusError> {
-        for id in ServoId::ALL {
-            if !self.ping(id.get())? {
-                let e = BusError::NotAnswering { servo: id.get() };
-                self.log_error(&e, None, EntryKind::Error)?;
-                return Err(e);
-            }
-        }
-        Ok(())
-    }
-
     /// The board's hardware version.
     pub fn version(&mut self) -> Result<u8, BusError> {
         self.request(Command::Version, |r, _| match *r {
@@ -270,7 +259,9 @@ impl<T: Transport> Bus<T> {
     }
 
     /// Reads one servo's raw position; 0 or out-of-range values are retried, then a
-    /// [`BusError::ReadFailure`].
+    /// [`BusError::ReadFailure`]. A reply whose echo names another servo is stale (an answer
+    /// to an earlier request): it is journalled and passed over while the wait goes on, as
+    /// Arm_Lib's `Arm_serial_servo_read` passes over a reply whose echo is not 0x30+id.
     pub fn read_raw(&mut self, id: ServoId) -> Result<u16, BusError> {
         let scale = self.scale(id)?;
         self.request(Command::ReadPosition(id), |r, attempt| match *r {
