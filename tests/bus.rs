@@ -560,15 +560,8 @@ fn arm_commands_work_whatever_the_board_answers_to_pings() {
             assert_eq!(s["ping_status"], status, "--ping {ping}: {s}");
             assert!(s["raw"].as_u64().is_some(), "--ping {ping}: {s}");
         }
-        let moved = arm(&[
-            "move",
-            "--joints",
-            &joints,
-            "--gripper",
-            "30",
-            "--time",
-            "1.2",
-        ]);
+        let move_args = format!("move --joints {joints} --gripper 30 --time 1.2");
+        let moved = arm(&move_args.split(' ').collect::<Vec<_>>());
         assert_eq!(raw_array(&moved["raw"]), want, "--ping {ping}");
         let read = arm(&["read"]);
         assert_eq!(raw_array(&read["raw"]), want, "--ping {ping}");
@@ -594,13 +587,57 @@ fn a_servo_that_answers_neither_ping_nor_read_is_an_error() {
             .args(["arm", "ping", "--port", &mock.path])
             .output()
             .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert!(
-            !out.status.success() && stderr.contains(message),
-            "--ping {ping}: {stderr}"
-        );
-        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        let stderr = common::one_line_failure(&out);
+        assert!(stderr.contains(message), "--ping {ping}: {stderr}");
         let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         assert_eq!(v["servos"][4]["raw"], serde_json::Value::Null);
     }
+}
+
+/// Ctrl-C during `arm move`'s wait for a 30 s move on the real-time simulator: the command
+/// ends within 100 ms of the signal (250 ms allowed here for a loaded machine), fails with the
+/// stop named, and the journal ends on a complete stop line.
+#[test]
+fn ctrl_c_ends_the_wait_of_a_move_at_once_with_the_journal_closed() {
+    let dir = common::tempdir();
+    let config = dir.path().join("cfg.toml");
+    std::fs::write(&config, "[sim]\nrealtime = true\n").unwrap();
+    let journal = dir.path().join("journal.jsonl");
+    let child = common::polishbot()
+        .args([
+            "arm",
+            "move",
+            "--sim",
+            "--joints",
+            "0.2,0,0,0,0",
+            "--time",
+            "30",
+        ])
+        .arg("--config")
+        .arg(&config)
+        .arg("--journal")
+        .arg(&journal)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the motion frame is journalled, then interrupt.
+    let t0 = std::time::Instant::now();
+    while !std::fs::read_to_string(&journal).is_ok_and(|t| t.contains("move_all")) {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no motion frame");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let sent = std::time::Instant::now();
+    std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    println!("Ctrl-C to exit: {} ms", took.as_millis());
+    assert!(took < Duration::from_millis(250), "took {took:?}");
+    let stderr = common::one_line_failure(&out);
+    assert!(stderr.contains("stopped by the operator"), "{stderr}");
+    let entries = read_journal(&journal);
+    assert_eq!(entries.last().unwrap().kind, EntryKind::Stop);
 }

@@ -241,9 +241,7 @@ fn i2c_without_the_device_is_one_line_naming_it() {
         .env_remove(FAKE)
         .output()
         .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
-    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    let stderr = common::one_line_failure(&out);
     assert!(
         stderr.starts_with("polishbot: ") && stderr.contains("/dev/i2c-no-such-bus"),
         "{stderr}"

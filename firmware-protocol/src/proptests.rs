@@ -144,13 +144,7 @@ proptest! {
 fn smoke_fuzz_reply_decoder() {
     let budget = std::time::Duration::from_secs(3);
     let start = std::time::Instant::now();
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
     let mut cases = 0u64;
     while cases < 200_000 && start.elapsed() < budget {
         let len = (next() % 200) as usize;
@@ -182,6 +176,16 @@ fn smoke_fuzz_reply_decoder() {
     }
     assert!(cases >= 1000, "smoke fuzz ran only {cases} cases");
     std::println!("smoke fuzz: {cases} cases in {:?}", start.elapsed());
+}
+
+/// Marsaglia's xorshift64 from `state` (not 0): the smoke fuzzers' input source.
+fn xorshift(mut state: u64) -> impl FnMut() -> u64 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    }
 }
 
 /// Reply TYPEs the crate parses.
@@ -221,13 +225,7 @@ fn some_command(next: &mut impl FnMut() -> u64) -> Command {
 /// corrupted ones and garbage through [`crate::check::i2c_invariants`].
 #[test]
 fn smoke_fuzz_i2c_transactions() {
-    let mut state = 0x2545_F491_4F6C_DD1Du64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut next = xorshift(0x2545_F491_4F6C_DD1D);
     for _ in 0..20_000 {
         let mut data = Vec::new();
         for _ in 0..(next() % 6) {

@@ -16,6 +16,9 @@ use super::transport::Transport;
 
 /// Shortest move time the driver sends for a joint move when none is given, s.
 const MIN_MOVE_S: f64 = 0.2;
+/// Longest single wait while the stop flag is clear: a Ctrl-C ends any wait of the driver
+/// within this (issue 34 asks for 100 ms; reads wait at most their 50 ms timeout per read).
+const STOP_POLL: Duration = Duration::from_millis(20);
 
 /// A connected DOFBOT board over some [`Transport`].
 pub struct Bus<T: Transport> {
@@ -80,9 +83,22 @@ impl<T: Transport> Bus<T> {
         self.next_motion = index;
     }
 
-    /// Waits `d` on the transport's clock.
+    /// Waits `d` on the transport's clock, in steps of at most 20 ms; returns early once the
+    /// stop flag is set (the next motion frame is then refused).
     pub fn sleep(&mut self, d: Duration) {
-        self.link.sleep(d);
+        let end = self.link.now() + d;
+        while !self.stopped() {
+            let now = self.link.now();
+            if now >= end {
+                break;
+            }
+            self.link.sleep((end - now).min(STOP_POLL));
+        }
+    }
+
+    /// True once the stop flag is set (Ctrl-C).
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::SeqCst)
     }
 
     pub(super) fn log(&mut self, entry: Entry) -> Result<(), BusError> {
@@ -145,7 +161,7 @@ impl<T: Transport> Bus<T> {
             let outcome = self.await_reply(&what, attempt, timeout, &accept);
             match outcome {
                 Ok(v) => return Ok(v),
-                Err(e @ BusError::PortLost { .. }) => {
+                Err(e @ (BusError::PortLost { .. } | BusError::Stopped)) => {
                     self.log_error(&e, None, EntryKind::Error)?;
                     return Err(e);
                 }
@@ -175,6 +191,9 @@ impl<T: Transport> Bus<T> {
         let deadline = self.link.now() + timeout;
         let mut buf = [0u8; 64];
         loop {
+            if self.stopped() {
+                return Err(BusError::Stopped);
+            }
             let now = self.link.now();
             if now >= deadline {
                 return Err(BusError::Timeout {
@@ -299,7 +318,7 @@ impl<T: Transport> Bus<T> {
     /// Sends motion frame `index` (a 0x1D frame: all six servos, `time_ms`). Refused once the
     /// stop flag is set; a failed write stops motion. Both leave a stop line in the journal.
     pub fn send_motion(&mut self, index: u64, pose: Pose, time_ms: u16) -> Result<(), BusError> {
-        if self.stop.load(Ordering::SeqCst) {
+        if self.stopped() {
             let e = BusError::Stopped;
             self.log_error(&e, Some(index), EntryKind::Stop)?;
             return Err(e);
@@ -406,8 +425,7 @@ impl<T: Transport> Bus<T> {
         self.send_motion(index, pose, time_ms as u16)?;
         self.next_motion += 1;
         let settle = self.config.settle_ms.max(0.0) / 1000.0;
-        self.link
-            .sleep(Duration::from_secs_f64(time_ms / 1000.0 + settle));
+        self.sleep(Duration::from_secs_f64(time_ms / 1000.0 + settle));
         self.verify(index, target)
     }
 }

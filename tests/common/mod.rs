@@ -145,6 +145,14 @@ pub fn take_turns() -> std::sync::MutexGuard<'static, ()> {
     TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
+/// Checks that a finished command failed with one line on stderr; returns that line.
+pub fn one_line_failure(out: &std::process::Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).trim_end().to_string();
+    assert!(!out.status.success(), "did not fail: {stderr}");
+    assert_eq!(stderr.lines().count(), 1, "not one line: {stderr}");
+    stderr
+}
+
 /// Runs `cmd` and returns its output, failing the test with its stderr when it did not succeed.
 pub fn succeed(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().expect("start the command");
