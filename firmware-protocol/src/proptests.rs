@@ -162,7 +162,7 @@ fn smoke_fuzz_reply_decoder() {
                         _ => next() as u8,
                     };
                     let mut f = encode(&Frame::new(kind, &p).unwrap());
-                    if next() % 3 == 0 {
+                    if next().is_multiple_of(3) {
                         let i = (next() as usize) % f.len();
                         f[i] ^= 1 + (next() % 255) as u8;
                     }
@@ -210,7 +210,7 @@ fn some_command(next: &mut impl FnMut() -> u64) -> Command {
         }
         2 => Command::ReadPosition(id),
         3 => Command::Ping(BusId::new(1 + (next() % 250) as u8).unwrap()),
-        4 => Command::Torque(next() % 2 == 0),
+        4 => Command::Torque(next().is_multiple_of(2)),
         5 => Command::ReadOffsetState,
         6 => Command::Version,
         _ => Command::Rgb {
@@ -231,12 +231,12 @@ fn smoke_fuzz_i2c_transactions() {
         for _ in 0..(next() % 6) {
             let mut buf = [0u8; 32];
             let n = some_command(&mut next).encode(&mut buf).unwrap();
-            if next() % 4 == 0 {
+            if next().is_multiple_of(4) {
                 let i = (next() as usize) % n;
                 buf[i] ^= 1 + (next() % 255) as u8;
             }
             data.extend_from_slice(&buf[..n]);
-            if next() % 3 == 0 {
+            if next().is_multiple_of(3) {
                 data.push(next() as u8);
             }
         }
