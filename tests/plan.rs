@@ -616,7 +616,7 @@ fn plan_from_the_inspect_command_of_a_synth_case() {
     }
 }
 
-/// `run` over the fake I2C board (tests/i2c.rs checks the rest of the I2C link): every frame
+/// `run` over the fake I2C board (tests/link.rs checks the rest of the I2C link): every frame
 /// of the plan goes out as Arm_Lib's six-servo transactions (the time block to 0x1E, the
 /// twelve position bytes to 0x1D), in order, ending on the plan's last frame; `--dry-run`
 /// opens no device.

@@ -1,4 +1,7 @@
-//! The I2C link: every command the driver sends, performed on the in-process fake board, is
+//! The DOFBOT link as the real boards speak it. Serial, against the mock on a pseudo-terminal:
+//! the arm commands on every kind of ping reply (none, status, id and status) with stale
+//! echoes passed over, a servo that answers neither ping nor read, and Ctrl-C ending a wait.
+//! I2C: every command the driver sends, performed on the in-process fake board, is
 //! the transactions of Yahboom's smbus `Arm_Lib.py` byte for byte (written out here from that
 //! library, not from dofbot-protocol); `arm` and `calibrate` run end to end over it from the
 //! CLI (`POLISHBOT_TEST_FAKE_I2C`, test-only); without the device `--i2c` is one line naming
@@ -10,11 +13,17 @@ use std::time::Duration;
 
 use dofbot_protocol::i2c::Transaction as T;
 use dofbot_protocol::{Pose, ServoId};
+use polishbot::bus::EntryKind;
 use polishbot::bus::{Bus, JOINT_COUNT};
 use polishbot::bus::{
     BusConfig, FakeI2c, I2cRecord, I2cTransport, Journal, ServoMap, SimArm, SimOptions,
 };
 use polishbot::robot::Servos;
+
+use common::{raw_array, read_journal, Mock};
+
+/// Joint angles of the serial moves, rad.
+const Q: [f64; JOINT_COUNT] = [0.5, -0.3, 0.2, 0.1, 1.0];
 
 const FAKE: &str = "POLISHBOT_TEST_FAKE_I2C";
 
@@ -262,4 +271,124 @@ fn i2c_without_the_device_is_one_line_naming_it() {
         !out.status.success() && stderr.contains("0x03..0x77"),
         "{stderr}"
     );
+}
+
+/// `arm ping`, `arm move` (read back and verified) and `arm read` against each kind of board
+/// (no ping reply, as the serial Arm_ping_servo expects; a 1-byte status; id and status), with
+/// a stale reply (another servo's echo) before every third read that must be passed over.
+#[test]
+fn arm_commands_work_whatever_the_board_answers_to_pings() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    let both = "ping replies and reads: all six servos answered both";
+    let boards = [
+        ("none", "no ping replies; all six servos answered reads"),
+        ("status", both),
+        ("id-status", both),
+    ];
+    let want = ServoMap::default().pose_raw(&Q, 30.0).unwrap();
+    let joints = Q.map(|q| q.to_string()).join(",");
+    for (ping, evidence) in boards {
+        let mock = Mock::start(&py, &["--ping", ping, "--stale-echo-every", "3"]);
+        let arm = |args: &[&str]| {
+            let out = common::succeed(
+                common::polishbot()
+                    .arg("arm")
+                    .args(args)
+                    .args(["--port", &mock.path]),
+            );
+            serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()
+        };
+        let v = arm(&["ping"]);
+        assert_eq!(v["evidence"], evidence, "--ping {ping}: {v}");
+        for s in v["servos"].as_array().unwrap() {
+            let status = if ping == "none" {
+                serde_json::Value::Null
+            } else {
+                0xDA.into()
+            };
+            assert_eq!(s["ping_status"], status, "--ping {ping}: {s}");
+            assert!(s["raw"].as_u64().is_some(), "--ping {ping}: {s}");
+        }
+        let move_args = format!("move --joints {joints} --gripper 30 --time 1.2");
+        let moved = arm(&move_args.split(' ').collect::<Vec<_>>());
+        assert_eq!(raw_array(&moved["raw"]), want, "--ping {ping}");
+        let read = arm(&["read"]);
+        assert_eq!(raw_array(&read["raw"]), want, "--ping {ping}");
+        let (state, logged) = mock.finish_logged();
+        assert_eq!(raw_array(&state["positions"]), want);
+        assert!(logged.iter().any(|l| l["cmd"] == "ping"));
+    }
+}
+
+/// A board whose pings say a servo is absent and whose reads of it get no reply: `arm ping`
+/// names it and fails; with no ping replies at all the read's timeout is the error.
+#[test]
+fn a_servo_that_answers_neither_ping_nor_read_is_an_error() {
+    let Some(py) = common::oracle_python() else {
+        return;
+    };
+    for (ping, message) in [
+        ("status", "servo 5 not answering"),
+        ("none", "timeout: no reply to read_position (0x35)"),
+    ] {
+        let mock = Mock::start(&py, &["--ping", ping, "--absent-servo", "5"]);
+        let out = common::polishbot()
+            .args(["arm", "ping", "--port", &mock.path])
+            .output()
+            .unwrap();
+        let stderr = common::one_line_failure(&out);
+        assert!(stderr.contains(message), "--ping {ping}: {stderr}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(v["servos"][4]["raw"], serde_json::Value::Null);
+    }
+}
+
+/// Ctrl-C during `arm move`'s wait for a 30 s move on the real-time simulator: the command
+/// ends within 100 ms of the signal (250 ms allowed here for a loaded machine), fails with the
+/// stop named, and the journal ends on a complete stop line.
+#[test]
+fn ctrl_c_ends_the_wait_of_a_move_at_once_with_the_journal_closed() {
+    let dir = common::tempdir();
+    let config = dir.path().join("cfg.toml");
+    std::fs::write(&config, "[sim]\nrealtime = true\n").unwrap();
+    let journal = dir.path().join("journal.jsonl");
+    let child = common::polishbot()
+        .args([
+            "arm",
+            "move",
+            "--sim",
+            "--joints",
+            "0.2,0,0,0,0",
+            "--time",
+            "30",
+        ])
+        .arg("--config")
+        .arg(&config)
+        .arg("--journal")
+        .arg(&journal)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the motion frame is journalled, then interrupt.
+    let t0 = std::time::Instant::now();
+    while !std::fs::read_to_string(&journal).is_ok_and(|t| t.contains("move_all")) {
+        assert!(t0.elapsed() < Duration::from_secs(20), "no motion frame");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let sent = std::time::Instant::now();
+    std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    let took = sent.elapsed();
+    println!("Ctrl-C to exit: {} ms", took.as_millis());
+    assert!(took < Duration::from_millis(250), "took {took:?}");
+    let stderr = common::one_line_failure(&out);
+    assert!(stderr.contains("stopped by the operator"), "{stderr}");
+    let entries = read_journal(&journal);
+    assert_eq!(entries.last().unwrap().kind, EntryKind::Stop);
 }
