@@ -4,8 +4,10 @@
 Creates a pty, prints the device path of its slave side on the first line of stdout, and then
 behaves like the board of shared/DOFBOT.md: parses `FF FC LEN FUNC payload CHK` frames, moves
 six simulated servos at a bounded speed to each commanded raw target over the commanded time,
-answers reads (TYPE 0x0A, payload 0x30+id, pos), pings (TYPE 0x38, id, 0xDA), version (0x01)
-and offset state (0x33), and logs every frame it got to a JSONL file.
+answers reads (TYPE 0x0A, payload pos_H pos_L 0x30+id, as Yahboom's Arm_Lib.py __parse_data
+reads it), pings as --ping says (none: no reply, as the serial Arm_ping_servo never reads one;
+status: TYPE 0x38 with one status byte 0xDA, the default; id-status: TYPE 0x38 with id, 0xDA),
+version (0x01) and offset state (0x33), and logs every frame it got to a JSONL file.
 
 The servo model and fault counters mirror src/bus/model.rs line for line, so the Rust
 in-process simulator (`--sim`) and this mock behave alike. Timing: 10 bit times per byte at
@@ -13,7 +15,9 @@ the baud rate, a reply latency (default 3 ms, Yahboom's), moves that last the co
 longer when the speed bound requires.
 
 Faults: --corrupt-every K, --drop-every K, --delay-ms D, --fail-read-servo S,
---fail-read-every K, --disconnect-after N, --stall-servo S, --absent-servo S.
+--fail-read-every K, --disconnect-after N, --stall-servo S, --absent-servo S,
+--stale-echo-every K (every k-th read reply comes after a position reply of the next servo,
+as an answer to an earlier request would: the host must pass over it by its echo).
 
 Hidden mechanics (model.rs `Mechanics`, for the calibration tests): --mount-offset-deg
 d1,..,d6 (servo i reads and moves to the raw of servo angle physical + d_i), --read-noise-counts
@@ -232,6 +236,12 @@ class Board:
         if reply is None:
             return name, None, 0.0
         out = self.send(*reply)
+        k = self.a.stale_echo_every
+        if out and name == "read_position" and k > 0 and self.reads % k == 0:
+            other = cmd[1] % SERVO_COUNT + 1
+            raw = round_raw(self.servos[other - 1].position(t))
+            stale = frame(0xFB, 0x0A, [raw >> 8, raw & 0xFF, 0x30 + other])
+            out = (stale + out[0], out[1] + len(stale) * 10.0 / self.a.baud)
         return (name,) + (out if out else (None, 0.0))
 
     def execute(self, cmd, t):
@@ -244,7 +254,10 @@ class Board:
         elif name == "ping":
             sid = cmd[1]
             alive = 1 <= sid <= SERVO_COUNT and self.a.absent_servo != sid
-            return (0x38, [sid, PING_ALIVE if alive else 0])
+            status = PING_ALIVE if alive else 0
+            if self.a.ping == "none":
+                return None
+            return (0x38, [status] if self.a.ping == "status" else [sid, status])
         elif name == "torque":
             if not cmd[1]:
                 for i, s in enumerate(self.servos):
@@ -272,7 +285,7 @@ class Board:
         else:
             noise = self.noise()
             raw = max(0, round_raw(self.servos[sid - 1].position(t)) + noise)
-        return (0x0A, [0x30 + sid, raw >> 8, raw & 0xFF])
+        return (0x0A, [raw >> 8, raw & 0xFF, 0x30 + sid])
 
     def noise(self):
         n = self.a.read_noise_counts
@@ -367,6 +380,10 @@ def parse_args(argv):
     ap.add_argument("--disconnect-after", type=int)
     ap.add_argument("--stall-servo", type=int)
     ap.add_argument("--absent-servo", type=int)
+    ap.add_argument("--stale-echo-every", type=int, default=0,
+                    help="every k-th read reply comes after a stale reply of the next servo")
+    ap.add_argument("--ping", choices=["none", "status", "id-status"], default="status",
+                    help="ping reply: none, one status byte, or id and status")
     six = lambda v: [float(x) for x in v.split(",")]
     ap.add_argument("--mount-offset-deg", type=six, default=[0.0] * SERVO_COUNT)
     ap.add_argument("--read-noise-counts", type=int, default=0)

@@ -3,7 +3,7 @@
 //! the journal, and the range guarantee of the public API.
 mod common;
 
-use common::Mock;
+use common::{raw_array, read_journal, Mock};
 
 use std::path::Path;
 use std::time::Duration;
@@ -13,36 +13,6 @@ use polishbot::bus::{
     ServoMap, SimArm, SimOptions, JOINT_COUNT,
 };
 use proptest::prelude::*;
-
-fn raw_array(v: &serde_json::Value) -> [u16; 6] {
-    let a: Vec<u16> = v
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_u64().unwrap() as u16)
-        .collect();
-    a.try_into().unwrap()
-}
-
-/// Every journal line parses, seq counts up by one per run and time never goes back.
-fn read_journal(path: &Path) -> Vec<Entry> {
-    let text = std::fs::read_to_string(path).expect("journal");
-    let entries: Vec<Entry> = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| {
-            serde_json::from_str(l).unwrap_or_else(|e| panic!("journal line {}: {e}: {l}", i + 1))
-        })
-        .collect();
-    assert!(text.ends_with('\n'), "journal ends mid-line");
-    for w in entries.windows(2) {
-        if w[1].kind != EntryKind::Open {
-            assert_eq!(w[1].seq, w[0].seq + 1);
-            assert!(w[1].t >= w[0].t);
-        }
-    }
-    entries
-}
 
 const Q: [f64; JOINT_COUNT] = [0.5, -0.3, 0.2, 0.1, 1.0];
 

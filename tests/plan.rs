@@ -615,3 +615,57 @@ fn plan_from_the_inspect_command_of_a_synth_case() {
         assert!(r.coverage_of_reachable >= 0.95, "{r:?}");
     }
 }
+
+/// `run` over the fake I2C board (tests/link.rs checks the rest of the I2C link): every frame
+/// of the plan goes out as Arm_Lib's six-servo transactions (the time block to 0x1E, the
+/// twelve position bytes to 0x1D), in order, ending on the plan's last frame; `--dry-run`
+/// opens no device.
+#[test]
+fn cli_plan_then_run_over_the_fake_i2c_board() {
+    let tmp = common::tempdir();
+    let insp = tmp.path().join("inspection");
+    synthetic_inspection(&insp, 12, 3);
+    let (_, plan_path) = cli_plan(tmp.path(), &insp, &[]);
+    let p = Plan::load(&plan_path).unwrap();
+    let log = tmp.path().join("i2c.jsonl");
+    let run = |extra: &[&str]| {
+        common::succeed(
+            common::polishbot()
+                .args(["run", "--i2c", "/dev/i2c-1", "--plan"])
+                .arg(&plan_path)
+                .args(extra)
+                .env("POLISHBOT_TEST_FAKE_I2C", &log),
+        )
+    };
+    run(&["--dry-run"]);
+    assert!(!log.exists(), "a dry run opened the device");
+    run(&["--journal", tmp.path().join("j.jsonl").to_str().unwrap()]);
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let sent: Vec<Vec<u64>> = lines
+        .windows(2)
+        .filter(|w| w[1]["reg"] == 0x1D)
+        .map(|w| {
+            assert_eq!(w[0]["reg"], 0x1E, "0x1D block without its time block");
+            let mut v: Vec<u64> = serde_json::from_value(w[1]["data"].clone()).unwrap();
+            v.extend(serde_json::from_value::<Vec<u64>>(w[0]["data"].clone()).unwrap());
+            v
+        })
+        .collect();
+    let planned: Vec<Vec<u64>> = p
+        .frames
+        .iter()
+        .map(|f| {
+            let b: Vec<u64> = f
+                .split(' ')
+                .map(|h| u64::from_str_radix(h, 16).unwrap())
+                .collect();
+            b[4..b.len() - 1].to_vec()
+        })
+        .collect();
+    assert_eq!(sent.len(), planned.len());
+    assert!(sent == planned, "I2C blocks differ from the plan's frames");
+}

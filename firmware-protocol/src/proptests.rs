@@ -3,7 +3,7 @@ use proptest::prelude::*;
 use std::vec::Vec;
 
 use crate::frame::{Direction, Frame, FrameError, MAX_PAYLOAD};
-use crate::{Command, Decoder, ServoId};
+use crate::{BusId, Command, Decoder, Pose, ServoId, ServoScale, Target};
 
 fn encode(frame: &Frame) -> Vec<u8> {
     let mut buf = [0u8; crate::frame::MAX_FRAME];
@@ -144,13 +144,7 @@ proptest! {
 fn smoke_fuzz_reply_decoder() {
     let budget = std::time::Duration::from_secs(3);
     let start = std::time::Instant::now();
-    let mut state = 0x9E37_79B9_7F4A_7C15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
     let mut cases = 0u64;
     while cases < 200_000 && start.elapsed() < budget {
         let len = (next() % 200) as usize;
@@ -161,8 +155,14 @@ fn smoke_fuzz_reply_decoder() {
                 1 => {
                     let n = (next() % 8) as usize;
                     let p: Vec<u8> = (0..n).map(|_| next() as u8).collect();
-                    let mut f = encode(&Frame::new(next() as u8, &p).unwrap());
-                    if next() % 3 == 0 {
+                    // Half the frames take a TYPE the crate knows, so every reply layout
+                    // (position with and without its echo, 1- and 2-byte ping) comes up.
+                    let kind = match next() % 2 {
+                        0 => KNOWN_TYPES[(next() % KNOWN_TYPES.len() as u64) as usize],
+                        _ => next() as u8,
+                    };
+                    let mut f = encode(&Frame::new(kind, &p).unwrap());
+                    if next().is_multiple_of(3) {
                         let i = (next() as usize) % f.len();
                         f[i] ^= 1 + (next() % 255) as u8;
                     }
@@ -176,4 +176,70 @@ fn smoke_fuzz_reply_decoder() {
     }
     assert!(cases >= 1000, "smoke fuzz ran only {cases} cases");
     std::println!("smoke fuzz: {cases} cases in {:?}", start.elapsed());
+}
+
+/// Marsaglia's xorshift64 from `state` (not 0): the smoke fuzzers' input source.
+fn xorshift(mut state: u64) -> impl FnMut() -> u64 {
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    }
+}
+
+/// Reply TYPEs the crate parses.
+const KNOWN_TYPES: [u8; 5] = [0x0A, 0x38, 0x33, 0x01, 0x22];
+
+/// A valid command built from pseudo-random values (raw positions inside each servo's range).
+fn some_command(next: &mut impl FnMut() -> u64) -> Command {
+    let id = ServoId::ALL[(next() % 6) as usize];
+    let raw_in =
+        |s: ServoScale, r: u64| s.raw_min + (r % (s.raw_max - s.raw_min + 1) as u64) as u16;
+    match next() % 8 {
+        0 => Command::MoveServo {
+            target: Target::new(id, raw_in(id.scale(), next())).unwrap(),
+            time_ms: next() as u16,
+        },
+        1 => {
+            let raw = ServoId::ALL.map(|s| raw_in(s.scale(), next()));
+            Command::MoveAll {
+                pose: Pose::new(raw).unwrap(),
+                time_ms: next() as u16,
+            }
+        }
+        2 => Command::ReadPosition(id),
+        3 => Command::Ping(BusId::new(1 + (next() % 250) as u8).unwrap()),
+        4 => Command::Torque(next().is_multiple_of(2)),
+        5 => Command::ReadOffsetState,
+        6 => Command::Version,
+        _ => Command::Rgb {
+            r: next() as u8,
+            g: next() as u8,
+            b: next() as u8,
+        },
+    }
+}
+
+/// Stable stand-in for the I2C half of the fuzz target: byte soups of valid command frames,
+/// corrupted ones and garbage through [`crate::check::i2c_invariants`].
+#[test]
+fn smoke_fuzz_i2c_transactions() {
+    let mut next = xorshift(0x2545_F491_4F6C_DD1D);
+    for _ in 0..20_000 {
+        let mut data = Vec::new();
+        for _ in 0..(next() % 6) {
+            let mut buf = [0u8; 32];
+            let n = some_command(&mut next).encode(&mut buf).unwrap();
+            if next().is_multiple_of(4) {
+                let i = (next() as usize) % n;
+                buf[i] ^= 1 + (next() % 255) as u8;
+            }
+            data.extend_from_slice(&buf[..n]);
+            if next().is_multiple_of(3) {
+                data.push(next() as u8);
+            }
+        }
+        crate::check::i2c_invariants(&data);
+    }
 }

@@ -1,23 +1,27 @@
 //! Typed board-to-host replies, parsed from frames the [`crate::Decoder`] completed.
 //!
-//! Every reply is `FF FB LEN TYPE payload CHK`. Payloads:
+//! Every reply is `FF FB LEN TYPE payload CHK`. Payloads, as Yahboom's serial `Arm_Lib.py`
+//! (`Arm_Device.__receive_data` and `__parse_data`) reads them:
 //!
 //! ```text
 //! TYPE  payload                  reply to            meaning
-//! 0x0A  echo(u8) pos(u16)        0x30+id (read)      raw position; echo = 0x30+id
+//! 0x0A  pos(u16) echo(u8)        0x30+id (read)      raw position; echo = 0x30+id
 //! 0x0A  pos(u16)                 0x30+id (read)      the same without the echo byte
-//! 0x38  id(u8) status(u8)        0x38 (ping)         status 0xDA alive, 0x00 no answer
+//! 0x38  status(u8)               0x38 (ping)         0xDA alive, 0x00 no answer, else a servo error
+//! 0x38  id(u8) status(u8)        0x38 (ping)         the same with the pinged id first
 //! 0x33  state(u8)                0x1B                mid-offset state: 0 not found, 1 ok, 2 failed
 //! 0x01  version(u8)              0x01                hardware version
 //! 0x22  count(u8)                -                   action count
 //! ```
 //!
-//! DOFBOT.md gives TYPE 0x0A with "payload pos(u16), echoed 0x30+id": this crate reads the
-//! echo as a leading payload byte (and also accepts the 2-byte form, with no servo known).
-//! DOFBOT.md gives only the ping status byte (0xDA / 0x00); its frame (TYPE 0x38, id then
-//! status) is this project's reading, shared with the mock and the simulator.
-//! A raw position of 0 or outside the servo's range is a failed read; that judgement is the
-//! driver's (see [`crate::ServoScale::check_raw`]), the reply carries the raw value as sent.
+//! `__parse_data` takes a TYPE 0x0A payload as `servo_H, servo_L, id`: the position first,
+//! the echoed 0x30+id last (`Arm_serial_servo_read` accepts the reply whose echo names the
+//! servo it asked for). The serial `Arm_ping_servo` never reads a reply and no published code
+//! fixes a serial ping frame: the I2C library reads one status byte (0xDA alive), so both a
+//! 1-byte and a 2-byte (id, status) TYPE 0x38 payload are understood, and a board may send
+//! none at all. A raw position of 0 or outside the servo's range is a failed read; that
+//! judgement is the driver's (see [`crate::ServoScale::check_raw`]), the reply carries the raw
+//! value as sent.
 use core::fmt;
 
 use crate::frame::{Direction, EncodeError, Frame};
@@ -59,10 +63,10 @@ pub enum Reply {
     },
     /// Ping answer (TYPE 0x38).
     Ping {
-        /// Bus id pinged.
-        id: u8,
-        /// True when the status byte is 0xDA.
-        alive: bool,
+        /// Bus id pinged, when the reply carries it (2-byte payload).
+        id: Option<u8>,
+        /// Status byte: [`PING_ALIVE`] alive, 0 no answer, anything else a servo error.
+        status: u8,
     },
     /// Mid-offset state (TYPE 0x33).
     OffsetState(OffsetState),
@@ -111,6 +115,17 @@ impl fmt::Display for ReplyError {
 }
 
 impl Reply {
+    /// True for a ping reply whose status is [`PING_ALIVE`].
+    pub fn ping_alive(&self) -> bool {
+        matches!(
+            self,
+            Reply::Ping {
+                status: PING_ALIVE,
+                ..
+            }
+        )
+    }
+
     /// Parses a decoded board frame.
     pub fn parse(frame: &Frame) -> Result<Reply, ReplyError> {
         let kind = frame.kind();
@@ -118,22 +133,26 @@ impl Reply {
         let bad = || ReplyError::BadPayload { kind, len: p.len() };
         match (kind, p.len()) {
             (TYPE_POSITION, 3) => {
-                let servo = p[0]
+                let servo = p[2]
                     .checked_sub(crate::commands::FUNC_READ_BASE)
                     .and_then(|id| ServoId::new(id).ok())
-                    .ok_or(ReplyError::BadValue { kind, value: p[0] })?;
+                    .ok_or(ReplyError::BadValue { kind, value: p[2] })?;
                 Ok(Reply::Position {
                     servo: Some(servo),
-                    raw: u16::from_be_bytes([p[1], p[2]]),
+                    raw: u16::from_be_bytes([p[0], p[1]]),
                 })
             }
             (TYPE_POSITION, 2) => Ok(Reply::Position {
                 servo: None,
                 raw: u16::from_be_bytes([p[0], p[1]]),
             }),
+            (TYPE_PING, 1) => Ok(Reply::Ping {
+                id: None,
+                status: p[0],
+            }),
             (TYPE_PING, 2) => Ok(Reply::Ping {
-                id: p[0],
-                alive: p[1] == PING_ALIVE,
+                id: Some(p[0]),
+                status: p[1],
             }),
             (TYPE_OFFSET_STATE, 1) => Ok(Reply::OffsetState(match p[0] {
                 0 => OffsetState::NotFound,
@@ -161,13 +180,15 @@ impl Reply {
                 let [hi, lo] = raw.to_be_bytes();
                 Frame::new(
                     TYPE_POSITION,
-                    &[crate::commands::FUNC_READ_BASE + id.get(), hi, lo],
+                    &[hi, lo, crate::commands::FUNC_READ_BASE + id.get()],
                 )
             }
             Reply::Position { servo: None, raw } => Frame::new(TYPE_POSITION, &raw.to_be_bytes()),
-            Reply::Ping { id, alive } => {
-                Frame::new(TYPE_PING, &[id, if alive { PING_ALIVE } else { 0 }])
-            }
+            Reply::Ping {
+                id: Some(id),
+                status,
+            } => Frame::new(TYPE_PING, &[id, status]),
+            Reply::Ping { id: None, status } => Frame::new(TYPE_PING, &[status]),
             Reply::OffsetState(s) => Frame::new(
                 TYPE_OFFSET_STATE,
                 &[match s {
@@ -205,10 +226,13 @@ mod tests {
                 servo: None,
                 raw: 0,
             },
-            Reply::Ping { id: 3, alive: true },
             Reply::Ping {
-                id: 4,
-                alive: false,
+                id: Some(3),
+                status: PING_ALIVE,
+            },
+            Reply::Ping {
+                id: None,
+                status: 0,
             },
             Reply::OffsetState(OffsetState::Failed),
             Reply::Version(3),
@@ -222,18 +246,6 @@ mod tests {
             assert_eq!(got.len(), 1);
             assert_eq!(Reply::parse(&got[0].unwrap()), Ok(r));
         }
-    }
-
-    #[test]
-    fn position_reply_layout() {
-        let r = Reply::Position {
-            servo: ServoId::new(1).ok(),
-            raw: 2000,
-        };
-        let mut buf = [0u8; 16];
-        let n = r.encode(&mut buf).unwrap();
-        // FF FB, LEN 6, TYPE 0A, echo 31, 07 D0, CHK = 06+0A+31+07+D0 = 0x118 -> 0x18
-        assert_eq!(&buf[..n], &[0xFF, 0xFB, 0x06, 0x0A, 0x31, 0x07, 0xD0, 0x18]);
     }
 
     #[test]

@@ -26,7 +26,8 @@ pub struct BusConfig {
     /// Largest allowed difference between commanded and read-back raw, counts. Default 12
     /// (about 1 degree: the backlash DOFBOT.md reports).
     pub verify_tolerance_counts: u16,
-    /// Ping all six servos when connecting. Default true.
+    /// Check when connecting that all six servos answer (each is read; a servo is pinged
+    /// only when its read gets no reply: see `bus::alive`). Default true.
     pub ping_at_connect: bool,
     /// Joint and servo mapping.
     pub servo_map: ServoMap,

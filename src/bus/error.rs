@@ -38,11 +38,13 @@ pub enum BusError {
         /// Attempts made.
         attempts: u32,
     },
-    /// A servo did not answer its ping.
-    #[error("servo {servo} not answering")]
+    /// A servo answered neither a read nor a ping.
+    #[error("servo {servo} not answering: {detail}")]
     NotAnswering {
         /// Servo id.
         servo: u8,
+        /// What was tried.
+        detail: String,
     },
     /// A position read returned 0 or a value outside the servo's range, after every retry.
     #[error("read failure: servo {servo} returned raw {raw} (outside {min}..{max}) after {attempts} attempts")]

@@ -1,5 +1,6 @@
-//! The DOFBOT bus: a [`Transport`] (serial port, the Python mock on a pseudo-terminal, or
-//! the in-process [`SimArm`]), the [`Bus`] driver over it, the servo map and the journal.
+//! The DOFBOT bus: a [`Transport`] (serial port, the Python mock on a pseudo-terminal, the
+//! board's I2C interface ([`I2cTransport`] over Linux i2c-dev or the [`FakeI2c`]), or the
+//! in-process [`SimArm`]), the [`Bus`] driver over it, the servo map and the journal.
 //! Frames come only from `dofbot-protocol`'s validated commands.
 //!
 //! ```no_run
@@ -9,9 +10,12 @@
 //! let mut bus = Bus::connect(arm.transport(), config, Journal::none()).unwrap();
 //! let state = bus.move_joints(&[0.1, 0.2, -0.3, 0.0, 0.5], 90.0, None).unwrap();
 //! ```
+pub mod alive;
 pub mod config;
 pub mod driver;
 pub mod error;
+pub mod fake_i2c;
+pub mod i2c;
 pub mod journal;
 pub mod model;
 pub mod serial;
@@ -21,13 +25,18 @@ pub mod transport;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+pub use alive::{Liveness, ServoAnswer};
 pub use config::{
     BusConfig, GripperCalib, JointCalib, JointState, ScaleCalib, ServoMap, JOINT_COUNT,
 };
 pub use driver::Bus;
 pub use error::BusError;
+pub use fake_i2c::{FakeI2c, I2cRecord};
+#[cfg(target_os = "linux")]
+pub use i2c::LinuxI2c;
+pub use i2c::{I2cBus, I2cTransport};
 pub use journal::{Entry, EntryKind, Journal, ResumePoint};
-pub use model::{Faults, Mechanics, SimTiming};
+pub use model::{Faults, Mechanics, PingReply, SimTiming};
 pub use serial::SerialTransport;
 pub use sim::{SimArm, SimOptions, SimTransport};
 pub use transport::Transport;

@@ -14,6 +14,7 @@
 use serde::{Deserialize, Serialize};
 
 use dofbot_protocol::frame::Frame;
+use dofbot_protocol::replies::PING_ALIVE;
 use dofbot_protocol::servo::{ServoId, SERVO_COUNT};
 use dofbot_protocol::{Command, OffsetState, Reply};
 
@@ -48,6 +49,20 @@ impl SimTiming {
     }
 }
 
+/// What the board answers a ping (0x38) with. Yahboom's serial library never reads a ping
+/// reply and none is published, so a real board may send any of these.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PingReply {
+    /// No reply at all.
+    None,
+    /// TYPE 0x38 with one status byte (0xDA alive, 0 not), as the I2C library reads it.
+    #[default]
+    Status,
+    /// TYPE 0x38 with the pinged id, then the status byte.
+    IdStatus,
+}
+
 /// Faults to inject; all off by default. Counters are 1-based: `every = 3` hits the 3rd, 6th ...
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -68,6 +83,9 @@ pub struct Faults {
     pub stall_servo: Option<u8>,
     /// This servo is absent: its ping says no answer, its reads get no reply.
     pub absent_servo: Option<u8>,
+    /// Every k-th read's reply comes after a stale one: the position reply of the next servo
+    /// (id mod 6 + 1), as an answer to an earlier request would (0 = never).
+    pub stale_echo_every: u32,
 }
 
 /// The physical truth of the simulated arm that the host does not know (for calibration tests).
@@ -193,6 +211,7 @@ pub struct Board {
     replies: u64,
     reads: u64,
     disconnected: bool,
+    ping_reply: PingReply,
 }
 
 /// Hardware version the simulated board reports.
@@ -226,19 +245,48 @@ impl Board {
             replies: 0,
             reads: 0,
             disconnected: false,
+            ping_reply: PingReply::default(),
         }
+    }
+
+    /// The same board answering pings with `ping_reply`.
+    pub fn with_ping_reply(mut self, ping_reply: PingReply) -> Board {
+        self.ping_reply = ping_reply;
+        self
     }
 
     /// Handles a frame whose last byte arrived at time `t` (s); returns the reply, if any.
     pub fn handle(&mut self, frame: &Frame, t: f64) -> Option<Outgoing> {
+        let reply = self.handle_command(Command::parse(frame).ok(), t)?;
+        let mut out = self.send(reply)?;
+        let k = self.faults.stale_echo_every as u64;
+        if let Reply::Position {
+            servo: Some(id), ..
+        } = reply
+        {
+            if k > 0 && self.reads.is_multiple_of(k) {
+                let other = ServoId::ALL[id.get() as usize % SERVO_COUNT];
+                let stale = Reply::Position {
+                    servo: Some(other),
+                    raw: round_raw(self.servos[other.index()].position(t)),
+                };
+                let mut buf = [0u8; dofbot_protocol::frame::MAX_FRAME];
+                let n = stale.encode(&mut buf).expect("reply fits");
+                out.bytes.splice(0..0, buf[..n].iter().copied());
+                out.delay += n as f64 * self.timing.byte_time();
+            }
+        }
+        Some(out)
+    }
+
+    /// Handles a command (`None`: a frame that is no valid command) that arrived at time `t`
+    /// without a serial line in between (the fake I2C device's path); returns the answer.
+    pub fn handle_command(&mut self, cmd: Option<Command>, t: f64) -> Option<Reply> {
         if self.disconnected {
             return None;
         }
         self.frames += 1;
-        let reply = match Command::parse(frame) {
-            Ok(cmd) => self.execute(cmd, t),
-            Err(_) => None,
-        };
+        let reply = cmd.and_then(|c| self.execute(c, t));
         if self
             .faults
             .disconnect_after
@@ -247,7 +295,7 @@ impl Board {
             self.disconnected = true;
             return None;
         }
-        self.send(reply?)
+        reply
     }
 
     fn execute(&mut self, cmd: Command, t: f64) -> Option<Reply> {
@@ -273,7 +321,15 @@ impl Board {
                 let id = id.get();
                 let alive =
                     (1..=SERVO_COUNT as u8).contains(&id) && self.faults.absent_servo != Some(id);
-                return Some(Reply::Ping { id, alive });
+                let status = if alive { PING_ALIVE } else { 0 };
+                return match self.ping_reply {
+                    PingReply::None => None,
+                    PingReply::Status => Some(Reply::Ping { id: None, status }),
+                    PingReply::IdStatus => Some(Reply::Ping {
+                        id: Some(id),
+                        status,
+                    }),
+                };
             }
             Command::Torque(on) => {
                 if !on {

@@ -7,11 +7,11 @@ use std::time::Duration;
 use serde::{Deserialize, Serialize};
 
 use dofbot_protocol::servo::SERVO_COUNT;
-use dofbot_protocol::Decoder;
+use dofbot_protocol::{Command, Decoder, Reply};
 
 use super::config::ServoMap;
 use super::error::BusError;
-use super::model::{Board, Faults, Mechanics, SimTiming};
+use super::model::{Board, Faults, Mechanics, PingReply, SimTiming};
 use super::transport::{RealClock, Transport};
 
 /// Settings of the simulated arm.
@@ -29,6 +29,8 @@ pub struct SimOptions {
     pub faults: Faults,
     /// Hidden mechanics (mounting offsets, read noise, a start pose held by hand).
     pub mechanics: Mechanics,
+    /// What the board answers a ping with: "none", "status" (default) or "id-status".
+    pub ping_reply: PingReply,
 }
 
 impl Default for SimOptions {
@@ -39,6 +41,7 @@ impl Default for SimOptions {
             timing: SimTiming::default(),
             faults: Faults::default(),
             mechanics: Mechanics::default(),
+            ping_reply: PingReply::default(),
         }
     }
 }
@@ -86,7 +89,8 @@ impl SimArm {
                 options.timing.clone(),
                 options.faults.clone(),
                 options.mechanics.clone(),
-            ),
+            )
+            .with_ping_reply(options.ping_reply),
             clock: Duration::ZERO,
             decoder: Decoder::commands(),
             link_free_at: 0.0,
@@ -141,6 +145,33 @@ impl SimArm {
     /// Sim clock, seconds.
     pub fn time(&self) -> f64 {
         self.now().as_secs_f64()
+    }
+
+    /// Waits `d`: on the wall clock, or by advancing the virtual one.
+    pub fn advance(&self, d: Duration) {
+        match self.realtime {
+            Some(_) => std::thread::sleep(d),
+            None => self.lock().clock += d,
+        }
+    }
+
+    /// True once an injected disconnect happened.
+    pub fn disconnected(&self) -> bool {
+        self.lock().board.disconnected()
+    }
+
+    /// Hands `cmd` to the board as if its frame had just arrived, with no serial line in
+    /// between (the fake I2C device's path), records it and returns the board's answer.
+    pub fn command(&self, cmd: &Command) -> Option<Reply> {
+        let t = self.time();
+        let frame = cmd.to_frame();
+        let mut g = self.lock();
+        g.received.push(ReceivedFrame {
+            t,
+            func: frame.kind(),
+            payload: frame.payload().to_vec(),
+        });
+        g.board.handle_command(Some(*cmd), t)
     }
 }
 
@@ -239,10 +270,7 @@ impl Transport for SimTransport {
     }
 
     fn sleep(&mut self, d: Duration) {
-        match self.arm.realtime {
-            Some(_) => std::thread::sleep(d),
-            None => self.arm.lock().clock += d,
-        }
+        self.arm.advance(d);
     }
 
     fn describe(&self) -> String {

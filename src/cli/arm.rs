@@ -1,4 +1,5 @@
-//! `polishbot arm (ping | read | move | torque) (--port DEV | --sim)`: direct arm commands.
+//! `polishbot arm (ping | read | move | torque) (--port DEV | --i2c DEV | --sim)`: direct arm
+//! commands.
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -28,20 +29,53 @@ pub struct ArmArgs {
 /// How a command reaches the arm (shared by `arm` and `calibrate`).
 #[derive(Debug, Args)]
 pub struct LinkArgs {
-    /// Serial device of the board (or the mock's pseudo-terminal), e.g. /dev/ttyUSB0.
-    #[arg(long, global = true, value_name = "DEV")]
-    pub port: Option<String>,
-    /// Use the in-process simulated arm instead of a port.
-    #[arg(long, global = true, conflicts_with = "port")]
-    pub sim: bool,
+    /// Which arm.
+    #[command(flatten)]
+    pub device: DeviceArgs,
     /// Append every frame sent and reply received to this journal (JSON lines).
     #[arg(long, global = true, value_name = "FILE")]
     pub journal: Option<PathBuf>,
 }
 
+/// Which arm a command drives: a serial port, an I2C bus or the simulated arm (shared by
+/// `arm`, `calibrate` and `run`).
+#[derive(Debug, Clone, Default, Args)]
+pub struct DeviceArgs {
+    /// Serial device of the board (or the mock's pseudo-terminal), e.g. /dev/ttyUSB0.
+    #[arg(long, global = true, value_name = "DEV", conflicts_with = "i2c")]
+    pub port: Option<String>,
+    /// I2C bus of the board (Linux i2c-dev), e.g. /dev/i2c-1 on the Jetson Nano and
+    /// Raspberry Pi kits.
+    #[arg(long, global = true, value_name = "DEV")]
+    pub i2c: Option<String>,
+    /// The board's I2C address (with --i2c).
+    #[arg(long, global = true, value_name = "ADDR", default_value = "0x15", value_parser = bus::i2c::parse_address)]
+    pub i2c_address: u16,
+    /// Use the in-process simulated arm instead of a port.
+    #[arg(long, global = true, conflicts_with_all = ["port", "i2c"])]
+    pub sim: bool,
+}
+
+impl DeviceArgs {
+    /// The simulated arm.
+    pub fn sim() -> DeviceArgs {
+        DeviceArgs {
+            sim: true,
+            i2c_address: u16::from(dofbot_protocol::I2C_ADDRESS),
+            ..DeviceArgs::default()
+        }
+    }
+}
+
+/// Test-only: with `--i2c`, this variable names a file and the in-process fake I2C board
+/// (the simulated arm behind Arm_Lib's register interface) replaces the device; every
+/// transaction is written to the file as a JSON line.
+pub const FAKE_I2C_ENV: &str = "POLISHBOT_TEST_FAKE_I2C";
+
 impl LinkArgs {
-    /// Opens the bus on the port or on a simulated arm (`sim` settings), journalling to
-    /// `--journal` if given. `command` names the command in the "give --port or --sim" error.
+    /// Opens the bus on the device or on a simulated arm (`sim` settings), journalling to
+    /// `--journal` if given. `command` names the command in the "give --port, --i2c or --sim"
+    /// error.
     pub fn connect(
         &self,
         command: &str,
@@ -52,33 +86,28 @@ impl LinkArgs {
             Some(p) => Journal::append(p)?,
             None => Journal::none(),
         };
-        let link = open_link(
-            self.port.as_deref(),
-            self.sim,
-            sim,
-            &config.servo_map,
-            command,
-        )?;
+        let link = open_link(&self.device, sim, &config.servo_map, command)?;
         Ok(Bus::connect(link, config, journal)?)
     }
 }
 
-/// The transport of a command that reaches the arm: the serial `port`, or with `sim` a
+/// The transport of a command that reaches the arm: the serial port, the I2C bus, or a
 /// simulated arm (`options`, homed through `map`). `command` names the command in the
-/// "give --port or --sim" error.
+/// "give --port, --i2c or --sim" error.
 pub fn open_link(
-    port: Option<&str>,
-    sim: bool,
+    device: &DeviceArgs,
     options: &SimOptions,
     map: &ServoMap,
     command: &str,
 ) -> anyhow::Result<Box<dyn Transport>> {
-    Ok(if let Some(port) = port {
+    Ok(if let Some(port) = &device.port {
         Box::new(SerialTransport::open(port)?)
-    } else if sim {
+    } else if let Some(dev) = &device.i2c {
+        open_i2c(dev, device.i2c_address, options, map)?
+    } else if device.sim {
         Box::new(SimArm::new(options, map)?.transport())
     } else {
-        anyhow::bail!("{command}: give --port DEV or --sim")
+        anyhow::bail!("{command}: give --port DEV, --i2c DEV or --sim")
     })
 }
 
@@ -86,10 +115,37 @@ pub fn open_link(
 /// 16-bit count.
 const MAX_MOVE_TIME_S: f64 = u16::MAX as f64 / 1000.0;
 
+fn open_i2c(
+    dev: &str,
+    address: u16,
+    options: &SimOptions,
+    map: &ServoMap,
+) -> anyhow::Result<Box<dyn Transport>> {
+    if let Some(log) = std::env::var_os(FAKE_I2C_ENV) {
+        // The I2C board always answers a ping with its status byte.
+        let options = SimOptions {
+            ping_reply: bus::PingReply::Status,
+            ..options.clone()
+        };
+        let fake =
+            bus::FakeI2c::new(SimArm::new(&options, map)?, address).logging_to(Path::new(&log))?;
+        return Ok(Box::new(bus::I2cTransport::new(fake)));
+    }
+    #[cfg(target_os = "linux")]
+    {
+        Ok(Box::new(bus::I2cTransport::new(bus::LinuxI2c::open(
+            dev, address,
+        )?)))
+    }
+    #[cfg(not(target_os = "linux"))]
+    anyhow::bail!("--i2c {dev}: I2C needs Linux i2c-dev")
+}
+
 /// The arm actions.
 #[derive(Debug, Subcommand)]
 pub enum ArmAction {
-    /// Ping the six servos and read the board version.
+    /// Ping and read the six servos (alive: the position reads back; boards that do not
+    /// answer pings are reported, not refused) and read the board version.
     Ping,
     /// Read the joints (rad, URDF convention), the gripper angle and the raw positions.
     Read,
@@ -140,7 +196,7 @@ pub fn run(args: ArmArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
     let mut bus_cfg = cfg.bus;
     bus_cfg.servo_map = frames::servo_map(&robot)?;
-    // `arm ping` reports every servo itself instead of failing at the first silent one.
+    // `arm ping` checks every servo itself instead of failing at the first silent one.
     if matches!(args.action, ArmAction::Ping) {
         bus_cfg.ping_at_connect = false;
     }
@@ -151,22 +207,21 @@ fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> 
     let port = bus.transport().describe();
     let out = match action {
         ArmAction::Ping => {
-            let mut servos = Vec::new();
-            for id in 1..=6u8 {
-                servos.push(json!({"id": id, "alive": bus.ping(id)?}));
-            }
-            let version = bus.version()?;
+            let live = bus.liveness(true)?;
+            // Not every board answers the version request either: report it when it does.
+            let version = match bus.version() {
+                Ok(v) => Some(v),
+                Err(bus::BusError::Timeout { .. }) => None,
+                Err(e) => return Err(e.into()),
+            };
             println!(
                 "{}",
-                json!({"port": port, "servos": servos, "version": version})
+                json!({"port": port, "servos": live.servos, "evidence": live.evidence(), "version": version})
             );
-            if let Some(dead) = servos.iter().find(|s| s["alive"] == false) {
-                return Err(bus::BusError::NotAnswering {
-                    servo: dead["id"].as_u64().unwrap_or(0) as u8,
-                }
-                .into());
-            }
-            return Ok(());
+            return match live.first_failure() {
+                Some(e) => Err(e.into()),
+                None => Ok(()),
+            };
         }
         ArmAction::Read => serde_json::to_value(bus.read_joints()?)?,
         ArmAction::Move {

@@ -117,8 +117,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     run_cmd::run(
         run_cmd::RunArgs {
             plan: plan_file.clone(),
-            port: None,
-            sim: true,
+            device: super::arm::DeviceArgs::sim(),
             dry_run: false,
             resume: None,
             journal: Some(out.join("journal.jsonl")),

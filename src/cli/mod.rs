@@ -59,7 +59,7 @@ pub enum Command {
     Inspect(Box<inspect::InspectArgs>),
     /// Plan grinding passes and the joint trajectory from an inspection.
     Plan(plan::PlanArgs),
-    /// Stream a plan to the arm (serial port or simulated arm).
+    /// Stream a plan to the arm (serial port, I2C bus or simulated arm).
     Run(run::RunArgs),
     /// Direct arm commands: ping, read, move, torque.
     Arm(arm::ArmArgs),

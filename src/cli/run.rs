@@ -1,10 +1,12 @@
-//! `polishbot run --plan plan.json (--port DEV | --sim) [--dry-run] [--resume journal.jsonl]`.
+//! `polishbot run --plan plan.json (--port DEV | --i2c DEV | --sim) [--dry-run]
+//! [--resume journal.jsonl]`.
 use std::path::{Path, PathBuf};
 
 use clap::Args;
 use serde::Deserialize;
 
 use super::settings::{self, ConfigFile};
+use super::arm::DeviceArgs;
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transport};
 use crate::plan::execute::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
@@ -17,12 +19,9 @@ pub struct RunArgs {
     /// The plan to stream.
     #[arg(long, value_name = "FILE")]
     pub plan: PathBuf,
-    /// Serial device of the board (or the mock's pseudo-terminal).
-    #[arg(long, value_name = "DEV")]
-    pub port: Option<String>,
-    /// Use the in-process simulated arm.
-    #[arg(long, conflicts_with = "port")]
-    pub sim: bool,
+    /// Which arm: --port DEV, --i2c DEV [--i2c-address ADDR] or --sim.
+    #[command(flatten)]
+    pub device: DeviceArgs,
     /// Check the plan and print what would be sent; send nothing.
     #[arg(long)]
     pub dry_run: bool,
@@ -175,13 +174,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let journal = Journal::append(&journal_path)?.for_plan(&sha);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
-    let link = super::arm::open_link(
-        args.port.as_deref(),
-        args.sim,
-        &cfg.sim,
-        &bus_cfg.servo_map,
-        "run",
-    )?;
+    let link = super::arm::open_link(&args.device, &cfg.sim, &bus_cfg.servo_map, "run")?;
     stream(
         Bus::connect(link, bus_cfg, journal)?,
         &checked,

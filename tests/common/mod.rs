@@ -145,6 +145,14 @@ pub fn take_turns() -> std::sync::MutexGuard<'static, ()> {
     TURN.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
+/// Checks that a finished command failed with one line on stderr; returns that line.
+pub fn one_line_failure(out: &std::process::Output) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).trim_end().to_string();
+    assert!(!out.status.success(), "did not fail: {stderr}");
+    assert_eq!(stderr.lines().count(), 1, "not one line: {stderr}");
+    stderr
+}
+
 /// Runs `cmd` and returns its output, failing the test with its stderr when it did not succeed.
 pub fn succeed(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().expect("start the command");
@@ -154,4 +162,36 @@ pub fn succeed(cmd: &mut Command) -> std::process::Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// The six raw positions of a JSON array.
+pub fn raw_array(v: &serde_json::Value) -> [u16; 6] {
+    let a: Vec<u16> = v
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_u64().unwrap() as u16)
+        .collect();
+    a.try_into().unwrap()
+}
+
+/// Every journal line parses, seq counts up by one per run and time never goes back.
+pub fn read_journal(path: &Path) -> Vec<polishbot::bus::Entry> {
+    let text = std::fs::read_to_string(path).expect("journal");
+    let entries: Vec<polishbot::bus::Entry> = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            serde_json::from_str::<polishbot::bus::Entry>(l)
+                .unwrap_or_else(|e| panic!("journal line {}: {e}: {l}", i + 1))
+        })
+        .collect();
+    assert!(text.ends_with('\n'), "journal ends mid-line");
+    for w in entries.windows(2) {
+        if w[1].kind != polishbot::bus::EntryKind::Open {
+            assert_eq!(w[1].seq, w[0].seq + 1);
+            assert!(w[1].t >= w[0].t);
+        }
+    }
+    entries
 }
