@@ -46,6 +46,8 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     }
     cfg.plan.require_full_reach |= args.require_full_reach;
     let (robot, workcell) = robot::load(&cfg.robot)?;
+    let solids = plan::collide::solids_beside(&cfg.robot.workcell)?;
+    cfg.plan.collision.solids.extend(solids);
     let inspection = Inspection::load(&args.inspection)?;
     let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
     plan.save(&args.out)?;

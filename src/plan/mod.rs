@@ -4,7 +4,10 @@
 //! motion, and the reachability report. Method: docs/ALGORITHMS.md, "Grinding planner".
 //!
 //! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
+mod assemble;
 pub mod check;
+pub mod clearance;
+pub mod collide;
 pub mod error;
 pub mod execute;
 pub mod feed;
@@ -23,6 +26,8 @@ pub mod validate;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+pub use clearance::Collision;
+pub use collide::{CollisionConfig, Solid};
 pub use error::PlanError;
 pub use inspection::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
@@ -83,6 +88,8 @@ pub struct PlanConfig {
     pub trajectory: TrajectoryConfig,
     /// Validation tolerances.
     pub validation: ValidationConfig,
+    /// The collision model: margins, link radii, fixed solids.
+    pub collision: CollisionConfig,
 }
 
 impl Default for PlanConfig {
@@ -110,6 +117,7 @@ impl Default for PlanConfig {
             },
             trajectory: TrajectoryConfig::default(),
             validation: ValidationConfig::default(),
+            collision: CollisionConfig::default(),
         }
     }
 }
@@ -134,6 +142,9 @@ impl PlanConfig {
                 return Err(PlanError::Config(format!("{name} must be > 0 (got {v})")));
             }
         }
+        self.collision
+            .check(robot.dof())
+            .map_err(PlanError::Config)?;
         if self.joint_margin > 1.0 {
             return Err(PlanError::Config("joint_margin must be <= 1".into()));
         }
@@ -227,6 +238,7 @@ pub fn plan(
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = config.geometry(radius_mm);
     let surface = surface::Surface::new(&inspection.points);
+    let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
 
     // visiting order: from the home tool tip over the region centroids (robot frame, mm)
     let planned: Vec<&RegionInfo> = inspection
@@ -259,6 +271,7 @@ pub fn plan(
             workcell,
             config,
             reach,
+            &scene,
             &mut prev,
             &mut reachability.unreachable,
             &mut reachability.jumps,
@@ -267,7 +280,14 @@ pub fn plan(
         let layers = raster::layer_offsets(region.peak, &geometry).len();
         counts.insert(region.id, (layers, total));
     }
-    let mut prog = program::assemble(runs, robot, workcell, config, &mut reachability.unreachable)?;
+    let mut prog = assemble::assemble(
+        runs,
+        robot,
+        workcell,
+        config,
+        &scene,
+        &mut reachability.unreachable,
+    )?;
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability
@@ -296,6 +316,16 @@ pub fn plan(
     let violations = validate(&prog.trajectory, robot, &config.validation);
     if !violations.is_empty() {
         return Err(PlanError::Invalid(violations));
+    }
+    let traj = &prog.trajectory;
+    let collisions = clearance::check_samples(
+        (0..traj.len()).map(|i| traj.sample(i)),
+        &prog.segments,
+        robot,
+        &scene,
+    );
+    if !collisions.is_empty() {
+        return Err(PlanError::Collides(collisions));
     }
     let worst = metrics
         .sample_to_path_max_mm
