@@ -66,8 +66,12 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     collision
         .solids
         .extend(collide::solids_beside(&cfg.robot.workcell)?);
-    let inspection = Inspection::load(Path::new(&plan.inspection))
-        .map_err(|e| anyhow::anyhow!("{}: refused: the part to check collisions against: {e}", args.plan.display()))?;
+    let inspection = Inspection::load(Path::new(&plan.inspection)).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: refused: the part to check collisions against: {e}",
+            args.plan.display()
+        )
+    })?;
     plan.check_clearance(&inspection, &robot, &workcell, &collision)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
     let from = match &args.resume {

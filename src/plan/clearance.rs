@@ -40,34 +40,35 @@ impl fmt::Display for Collision {
     }
 }
 
-/// What sample `i` may touch: the loosest rule of the segments it belongs to (a sample where
-/// a transit meets an approach is the approach's start and may be near the part).
-fn allowance(segments: &[Segment], i: usize) -> (Allow, Option<usize>) {
-    let mut allow = Allow::Free;
-    let mut owner = None;
+/// What each of `n` samples may touch, and the segment it belongs to (the later one at a
+/// joint): the loosest rule of its segments (where a transit meets an approach the sample is
+/// the approach's start and may be near the part).
+fn allowances(segments: &[Segment], n: usize) -> Vec<(Allow, Option<usize>)> {
+    let mut out = vec![(Allow::Free, None); n];
     for (k, s) in segments.iter().enumerate() {
-        if s.first_sample <= i && i <= s.last_sample {
-            owner = Some(k);
-            allow = match (allow, s.kind) {
+        let last = s.last_sample.min(n.saturating_sub(1));
+        for (allow, owner) in out.iter_mut().take(last + 1).skip(s.first_sample) {
+            *owner = Some(k);
+            *allow = match (*allow, s.kind) {
                 (_, SegmentKind::Grind) | (Allow::Grind, _) => Allow::Grind,
-                (_, SegmentKind::Transit) => allow,
+                (_, SegmentKind::Transit) => *allow,
                 _ => Allow::Contact,
             };
         }
     }
-    (allow, owner)
+    out
 }
 
 /// Every sample of `samples` checked against `scene`; empty when all are clear.
 pub fn check_samples<'q>(
-    samples: impl Iterator<Item = &'q [f64]>,
+    samples: impl ExactSizeIterator<Item = &'q [f64]>,
     segments: &[Segment],
     robot: &Robot,
     scene: &Scene,
 ) -> Vec<Collision> {
     let mut out = Vec::new();
-    for (i, q) in samples.enumerate() {
-        let (allow, owner) = allowance(segments, i);
+    let rules = allowances(segments, samples.len());
+    for (i, (q, &(allow, owner))) in samples.zip(&rules).enumerate() {
         if let Some(hit) = scene.check(robot, q, allow) {
             let seg = owner.map(|k| &segments[k]);
             out.push(Collision {

@@ -239,6 +239,16 @@ pub enum Allow {
     Grind,
 }
 
+/// Points closer to the ball's centre than its radius less this count as inside it, mm.
+const INSIDE_MM: f64 = 1e-3;
+
+/// The reference points inside the ball (index, distance from the centre) and the nearest.
+#[derive(Default)]
+struct Inside {
+    points: Vec<(usize, f64)>,
+    nearest: Option<usize>,
+}
+
 /// A capsule: the segment `a`-`b` swept by `radius` (reference frame, mm).
 #[derive(Debug, Clone, Copy)]
 struct Capsule {
@@ -352,7 +362,10 @@ impl<'a> Scene<'a> {
                 (Body::Ball, Allow::Contact | Allow::Grind) => -self.cfg.contact_tolerance_mm,
                 _ => m,
             };
-            if let Some((clear, point)) = self.part_clearance(&c, need) {
+            let grind_ball = c.body == Body::Ball && allow == Allow::Grind;
+            let mut inside = Inside::default();
+            let found = self.part_clearance(&c, need, grind_ball.then_some(&mut inside));
+            if let Some((clear, point)) = found {
                 if clear < need {
                     let at = self.points[point].position;
                     return Some(Hit {
@@ -368,8 +381,8 @@ impl<'a> Scene<'a> {
             if let Some(hit) = self.solid_hit(&c, m) {
                 return Some(hit);
             }
-            if c.body == Body::Ball && allow == Allow::Grind {
-                if let Some(hit) = self.second_face(&c.a, None) {
+            if let Some(n0) = inside.nearest.map(|i| self.points[i].normal) {
+                if let Some(hit) = self.second_face_among(&inside.points, &n0) {
                     return Some(hit);
                 }
             }
@@ -380,23 +393,33 @@ impl<'a> Scene<'a> {
     /// The ball at `centre` (reference frame, mm) touching a face whose normal lies more than
     /// `second_face_deg` from `normal` (default: the nearest reference point's normal).
     pub fn second_face(&self, centre: &Point3<f64>, normal: Option<&Vector3<f64>>) -> Option<Hit> {
-        const INSIDE_MM: f64 = 1e-3; // points this far inside the ball count as touched
-        let inside = self.index.within_unsorted(centre, self.ball - INSIDE_MM);
+        let inside: Vec<(usize, f64)> = self
+            .index
+            .within_unsorted(centre, self.ball - INSIDE_MM)
+            .iter()
+            .map(|nb| (nb.index, nb.dist2.sqrt()))
+            .collect();
         let n0 = match normal {
             Some(n) => *n,
             None => self.points[self.index.nearest(centre)?.index].normal,
         };
-        inside.iter().find_map(|nb| {
-            let p = &self.points[nb.index];
-            let angle = angle_between(&p.normal, &n0).to_degrees();
+        self.second_face_among(&inside, &n0)
+    }
+
+    /// The first of `inside` (points in the ball with their distances from its centre) whose
+    /// normal lies more than `second_face_deg` from `n0`.
+    fn second_face_among(&self, inside: &[(usize, f64)], n0: &Vector3<f64>) -> Option<Hit> {
+        inside.iter().find_map(|&(i, dist)| {
+            let p = &self.points[i];
+            let angle = angle_between(&p.normal, n0).to_degrees();
             (angle > self.cfg.second_face_deg).then(|| Hit {
                 body: Body::Ball,
                 obstacle: Obstacle::SecondFace {
-                    point: nb.index,
+                    point: i,
                     at_mm: [p.position.x, p.position.y, p.position.z],
                     angle_deg: angle,
                 },
-                clearance_mm: nb.dist2.sqrt() - self.ball,
+                clearance_mm: dist - self.ball,
             })
         })
     }
@@ -414,30 +437,65 @@ impl<'a> Scene<'a> {
     }
 
     /// Smallest clearance of `c` from the part and the point it is measured at, over the
-    /// reference points within `need` (plus a little) of the capsule; None when none is near.
-    /// Within the patch of a point (its foot on the tangent plane within the spacing) the
-    /// distance is to the plane (signed: negative inside), else to the point.
-    fn part_clearance(&self, c: &Capsule, need: f64) -> Option<(f64, usize)> {
+    /// reference points within `need` (plus one spacing) of the capsule; None when none is
+    /// near. Within the patch of a point (its foot on the tangent plane within the spacing)
+    /// the distance is to the plane (signed: negative inside), else to the point. Marches
+    /// along the axis: where the nearest point is farther than the reach, the stretch that
+    /// distance clears is skipped (sphere tracing); near the part, one radius query per step.
+    fn part_clearance(
+        &self,
+        c: &Capsule,
+        need: f64,
+        mut inside: Option<&mut Inside>,
+    ) -> Option<(f64, usize)> {
         let reach = c.radius + need.max(0.0) + self.patch;
         let (slo, shi) = (c.a.inf(&c.b), c.a.sup(&c.b));
-        if (0..3).any(|k| slo[k] - reach > self.hi[k] || shi[k] + reach < self.lo[k]) {
+        if c.body != Body::Ball
+            && (0..3).any(|k| slo[k] - reach > self.hi[k] || shi[k] + reach < self.lo[k])
+        {
             return None;
         }
         let d = c.b - c.a;
         let len = d.norm();
-        let n = (len / c.radius.max(1.0)).ceil().max(1.0) as usize;
-        let query = reach + len / (2.0 * n as f64);
+        let dir = if len > 0.0 { d / len } else { Vector3::zeros() };
+        let step = c.radius.max(1.0);
         let mut best: Option<(f64, usize)> = None;
-        for k in 0..=n {
-            let centre = c.a + d * (k as f64 / n as f64);
-            for nb in self.index.within_unsorted(&centre, query) {
+        let mut t = 0.0;
+        while t <= len {
+            let centre = c.a + dir * t;
+            let nearest = self.index.nearest(&centre)?;
+            let gap = nearest.dist2.sqrt();
+            if let Some(found) = inside.as_deref_mut() {
+                found.nearest = Some(nearest.index);
+            }
+            if c.body == Body::Ball {
+                // a centre deep in the part has no point within reach: the nearest says so
+                let p = &self.points[nearest.index];
+                let dn = (centre - p.position).dot(&p.normal);
+                if dn < 0.0 {
+                    best = Some((dn - c.radius, nearest.index));
+                }
+            }
+            if gap > reach {
+                t += gap - reach + 1e-9;
+                continue;
+            }
+            let half = (step / 2.0).min((len - t) / 2.0);
+            let query = reach + half;
+            for nb in self.index.within_unsorted(&(centre + dir * half), query) {
                 let p = &self.points[nb.index];
-                let t = if len > 0.0 {
-                    ((p.position - c.a).dot(&d) / (len * len)).clamp(0.0, 1.0)
+                if let Some(found) = inside.as_deref_mut() {
+                    let d = nb.dist2.sqrt();
+                    if d < c.radius - INSIDE_MM {
+                        found.points.push((nb.index, d));
+                    }
+                }
+                let along = if len > 0.0 {
+                    (p.position - c.a).dot(&dir).clamp(0.0, len)
                 } else {
                     0.0
                 };
-                let v = c.a + d * t - p.position;
+                let v = c.a + dir * along - p.position;
                 let dn = v.dot(&p.normal);
                 let lateral = (v - p.normal * dn).norm();
                 let dist = if lateral <= self.patch { dn } else { v.norm() };
@@ -445,19 +503,10 @@ impl<'a> Scene<'a> {
                     best = Some((dist - c.radius, nb.index));
                 }
             }
-            if n == 0 {
+            if len == 0.0 {
                 break;
             }
-        }
-        if c.body == Body::Ball {
-            // a centre deep inside the part has no point within reach: the nearest says so
-            if let Some(nb) = self.index.nearest(&c.a) {
-                let p = &self.points[nb.index];
-                let dn = (c.a - p.position).dot(&p.normal);
-                if dn < 0.0 && best.is_none_or(|(b, _)| dn - c.radius < b) {
-                    best = Some((dn - c.radius, nb.index));
-                }
-            }
+            t += step;
         }
         best
     }
