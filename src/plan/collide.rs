@@ -432,7 +432,7 @@ impl<'a> Scene<'a> {
             b: *centre,
             radius: self.ball,
         };
-        self.part_clearance(&c, need)
+        self.part_clearance(&c, need, None)
             .map_or(f64::INFINITY, |(d, _)| d)
     }
 
