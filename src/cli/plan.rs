@@ -51,6 +51,8 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
         plan::PlanError::Config(m) => file.refuse("plan", &m),
         e => e.into(),
     })?;
+    let solids = plan::collide::solids_beside(&cfg.robot.workcell)?;
+    cfg.plan.collision.solids.extend(solids);
     let inspection = Inspection::load(&args.inspection)?;
     let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
     plan.save(&args.out)?;

@@ -10,8 +10,8 @@ use super::arm::DeviceArgs;
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transport};
 use crate::plan::execute::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
-use crate::plan::{frames, Plan, ValidationConfig};
-use crate::robot::{Robot, RobotConfig};
+use crate::plan::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
+use crate::robot::{Robot, RobotConfig, Workcell};
 
 /// Arguments of `run`.
 #[derive(Debug, Args)]
@@ -48,6 +48,9 @@ pub struct RunFileConfig {
     pub sim: SimOptions,
     /// Tolerances of the re-validation.
     pub validation: ValidationConfig,
+    /// The collision model of the re-check (solids.toml beside the workcell file adds its
+    /// solids).
+    pub collision: CollisionConfig,
 }
 
 /// Longest accepted `[run] settle_ms`, ms (as the driver's waits).
@@ -149,6 +152,19 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
     let checked = plan
         .check(&robot, &cfg.validation)
+        .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
+    let workcell = Workcell::load(&cfg.robot.workcell)?;
+    let mut collision = cfg.collision.clone();
+    collision
+        .solids
+        .extend(collide::solids_beside(&cfg.robot.workcell)?);
+    let inspection = Inspection::load(Path::new(&plan.inspection)).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: refused: the part to check collisions against: {e}",
+            args.plan.display()
+        )
+    })?;
+    plan.check_clearance(&inspection, &robot, &workcell, &collision)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
     let from = start_frame(args.resume.as_deref(), &sha, checked.frames.len())?;
     let journal_path = args

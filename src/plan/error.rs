@@ -37,6 +37,12 @@ pub enum PlanError {
     /// Targets the arm cannot reach, when the configuration demands full reach.
     #[error("{} unreachable target(s): {}", .0.len(), list(.0))]
     Unreachable(Vec<UnreachablePoint>),
+    /// A free motion cannot be made without a collision.
+    #[error("collision: {0}")]
+    Collision(String),
+    /// Samples bring the tool or the arm into the part or a solid.
+    #[error("plan fails the collision check: {} sample(s): {}", .0.len(), list(.0))]
+    Collides(Vec<super::clearance::Collision>),
     /// The servo command stream cannot be built or does not match the samples.
     #[error("servo frames: {0}")]
     Frames(String),

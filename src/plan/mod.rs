@@ -4,7 +4,10 @@
 //! motion, and the reachability report. Method: docs/ALGORITHMS.md, "Grinding planner".
 //!
 //! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
+mod assemble;
 pub mod check;
+pub mod clearance;
+pub mod collide;
 pub mod error;
 pub mod execute;
 pub mod feed;
@@ -23,6 +26,8 @@ pub mod validate;
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+pub use clearance::Collision;
+pub use collide::{CollisionConfig, Solid};
 pub use error::PlanError;
 pub use inspection::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
@@ -83,6 +88,8 @@ pub struct PlanConfig {
     pub trajectory: TrajectoryConfig,
     /// Validation tolerances.
     pub validation: ValidationConfig,
+    /// The collision model: margins, link radii, fixed solids.
+    pub collision: CollisionConfig,
 }
 
 impl Default for PlanConfig {
@@ -110,6 +117,7 @@ impl Default for PlanConfig {
             },
             trajectory: TrajectoryConfig::default(),
             validation: ValidationConfig::default(),
+            collision: CollisionConfig::default(),
         }
     }
 }
@@ -167,6 +175,9 @@ impl PlanConfig {
                 )));
             }
         }
+        self.collision
+            .check(robot.dof())
+            .map_err(PlanError::Config)?;
         if !(self.joint_margin > 0.0 && self.joint_margin <= 1.0) {
             let m = self.joint_margin;
             return Err(PlanError::Config(format!(
@@ -302,6 +313,7 @@ pub fn plan(
     let geometry = config.geometry(radius_mm);
     check_work(inspection, &geometry)?;
     let surface = surface::Surface::new(&inspection.points);
+    let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
 
     // visiting order: from the home tool tip over the region centroids (robot frame, mm)
     let planned: Vec<&RegionInfo> = inspection
@@ -334,6 +346,7 @@ pub fn plan(
             workcell,
             config,
             reach,
+            &scene,
             &mut prev,
             &mut reachability.unreachable,
             &mut reachability.jumps,
@@ -342,7 +355,14 @@ pub fn plan(
         let layers = raster::layer_offsets(region.peak, &geometry).len();
         counts.insert(region.id, (layers, total));
     }
-    let mut prog = program::assemble(runs, robot, workcell, config, &mut reachability.unreachable)?;
+    let mut prog = assemble::assemble(
+        runs,
+        robot,
+        workcell,
+        config,
+        &scene,
+        &mut reachability.unreachable,
+    )?;
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability
@@ -371,6 +391,16 @@ pub fn plan(
     let violations = validate(&prog.trajectory, robot, &config.validation);
     if !violations.is_empty() {
         return Err(PlanError::Invalid(violations));
+    }
+    let traj = &prog.trajectory;
+    let collisions = clearance::check_samples(
+        (0..traj.len()).map(|i| traj.sample(i)),
+        &prog.segments,
+        robot,
+        &scene,
+    );
+    if !collisions.is_empty() {
+        return Err(PlanError::Collides(collisions));
     }
     let worst = metrics
         .sample_to_path_max_mm

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
 use super::report::UnreachablePoint;
-use super::trajectory::{JointTrajectory, Limits, Move};
+use super::trajectory::JointTrajectory;
 use super::{PlanConfig, PlanError};
 use crate::robot::{IkTarget, Robot, Workcell};
 
@@ -89,8 +89,8 @@ pub struct Program {
     pub slowed: usize,
 }
 
-/// A run: pieces ground one after another without lifting the tool.
-type Run = Vec<PlannedPass>;
+use super::assemble::Run;
+use super::collide::Scene;
 
 /// Tool tip (m) and axis in the robot frame for a contact point, `lift` mm above the contact
 /// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it.
@@ -117,6 +117,7 @@ pub(crate) fn walk(
     wc: &Workcell,
     cfg: &PlanConfig,
     reach: f64,
+    scene: &Scene,
     prev: &mut Vec<f64>,
     unreachable: &mut Vec<UnreachablePoint>,
     jumps: &mut usize,
@@ -135,6 +136,11 @@ pub(crate) fn walk(
             targets.iter_mut().for_each(|t| t.axis = axis);
         }
         let mut solved = solve_stroke(&targets, robot, cfg, prev);
+        for (sol, p) in solved.iter_mut().zip(&stroke.points) {
+            if let Some(why) = misfit(p, reach, scene) {
+                *sol = Err(why);
+            }
+        }
         for (sol, n) in solved.iter_mut().zip(&normals) {
             let Ok((q, _)) = sol else { continue };
             let miss = crate::robot::angle_between(&robot.fk(q).axis, &-n).to_degrees();
@@ -196,6 +202,23 @@ pub(crate) fn walk(
     runs
 }
 
+/// Why the ball cannot sit on contact `p` (`reach` mm off it along the normal): it would
+/// touch a second face of the part or enter it beyond the contact tolerance.
+fn misfit(p: &PathPoint, reach: f64, scene: &Scene) -> Option<String> {
+    let centre = p.surface + p.normal * (p.offset + reach);
+    if let Some(hit) = scene.second_face(&centre, Some(&p.normal)) {
+        return Some(hit.to_string());
+    }
+    let tol = scene.config().contact_tolerance_mm;
+    let clear = scene.ball_clearance(&centre, -tol);
+    (clear < -tol).then(|| {
+        format!(
+            "tool does not fit: the ball would be {:.3} mm inside the part",
+            -clear
+        )
+    })
+}
+
 /// One tool axis for a whole stroke: the mean of its points' axes, when none is more than
 /// `spread_deg` from it (a ball burr grinds the same spot at any axis in its cone, and a fixed
 /// axis keeps the wrist still along the stroke instead of following the surface's noise).
@@ -211,12 +234,7 @@ fn stroke_axis(targets: &[IkTarget], spread_deg: f64) -> Option<Vector3<f64>> {
 /// Joint angles and the tool axis used for one point, or why it is unreachable.
 type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
 
-fn max_step(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-}
+use super::assemble::max_step;
 
 /// IK of one stroke's targets, chained from `prev`: joint angles and the tool axis used, or
 /// why a point is unreachable. Where the IK had to tilt the tool (axis search), the points'
@@ -304,105 +322,9 @@ fn close(piece: &mut PlannedPass, run: &mut Run, runs: &mut Vec<Run>, end_run: b
     }
 }
 
-/// Splices runs into one program from `home` back to `home`.
-pub(crate) fn assemble(
-    runs: Vec<Run>,
-    robot: &Robot,
-    wc: &Workcell,
-    cfg: &PlanConfig,
-    unreachable: &mut Vec<UnreachablePoint>,
-) -> Result<Program, PlanError> {
-    let limits = Limits::from_joints(&robot.joints);
-    let tc = &cfg.trajectory;
-    let mut prog = Program {
-        trajectory: JointTrajectory::starting_at(&cfg.home, tc.period),
-        segments: Vec::new(),
-        passes: Vec::new(),
-        cruise: vec![false],
-        slowed: 0,
-    };
-    for run in runs {
-        let first = &run[0].points[0];
-        let last = run
-            .last()
-            .and_then(|p| p.points.last())
-            .expect("runs hold points");
-        let lifted = |p: &PlannedPoint| -> Result<Vec<f64>, String> {
-            let up = wc.direction_from_reference(&Vector3::from(p.normal));
-            let mut why = String::new();
-            for k in 0..3 {
-                let lift = cfg.retract_mm / f64::from(1 << k) * 1e-3;
-                let target = IkTarget {
-                    position: Vector3::from(p.tip_m) + up * lift,
-                    axis: Vector3::from(p.axis),
-                    roll: None,
-                };
-                match robot.ik(&target, &p.q, &cfg.ik) {
-                    Ok(sol) => return Ok(sol.q),
-                    Err(e) => why = e.to_string(),
-                }
-            }
-            Err(why)
-        };
-        let (above_first, above_last) = match (lifted(first), lifted(last)) {
-            (Ok(a), Ok(b)) => (a, b),
-            (Err(e), _) | (_, Err(e)) => {
-                for (pi, p) in run.iter().flat_map(|piece| piece.points.iter().enumerate()) {
-                    unreachable.push(UnreachablePoint {
-                        region: run[0].region,
-                        layer: run[0].layer,
-                        stroke: usize::MAX,
-                        point: pi,
-                        surface_mm: p.surface_mm,
-                        tip_m: p.tip_m,
-                        reason: format!("no approach or retract pose: {e}"),
-                    });
-                }
-                continue;
-            }
-        };
-        let region = Some(run[0].region);
-        prog.rest_move(&above_first, SegmentKind::Transit, None, &limits, cfg)?;
-        prog.rest_move(&first.q, SegmentKind::Approach, region, &limits, cfg)?;
-        for piece in run {
-            prog.grind(piece, robot, cfg)?;
-        }
-        prog.rest_move(&above_last, SegmentKind::Retract, region, &limits, cfg)?;
-    }
-    prog.rest_move(&cfg.home, SegmentKind::Transit, None, &limits, cfg)?;
-    Ok(prog)
-}
-
 impl Program {
-    fn rest_move(
-        &mut self,
-        to: &[f64],
-        kind: SegmentKind,
-        region: Option<usize>,
-        limits: &Limits,
-        cfg: &PlanConfig,
-    ) -> Result<(), PlanError> {
-        let from = self.trajectory.last().to_vec();
-        let mv = Move::new(&from, to, limits, &cfg.trajectory).map_err(|source| {
-            PlanError::Trajectory {
-                context: format!("{kind:?} move"),
-                source,
-            }
-        })?;
-        let first = self.trajectory.len() - 1;
-        let added = self.trajectory.append_move(&mv);
-        self.cruise.extend(std::iter::repeat_n(false, added));
-        self.segments.push(Segment {
-            kind,
-            region,
-            pass: None,
-            first_sample: first,
-            last_sample: first + added,
-        });
-        Ok(())
-    }
-
-    fn grind(
+    /// Appends one piece ground at constant feed from rest to rest.
+    pub(crate) fn grind(
         &mut self,
         mut piece: PlannedPass,
         robot: &Robot,
@@ -417,22 +339,13 @@ impl Program {
                 q.push(w[1].q.clone());
             }
         }
-        // a new depth layer starts one depth step below, or the tool tilt changes: at rest
-        let start = &piece.points[0].q;
-        let gap = start
-            .iter()
-            .zip(self.trajectory.last())
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        // every piece starts where the trajectory stands (assemble glides or approaches)
+        let gap = super::assemble::max_step(&piece.points[0].q, self.trajectory.last());
         if gap > 1e-12 {
-            let limits = Limits::from_joints(&robot.joints);
-            self.rest_move(
-                start,
-                SegmentKind::Reorient,
-                Some(piece.region),
-                &limits,
-                cfg,
-            )?;
+            return Err(PlanError::Collision(format!(
+                "grinding piece in region {} starts {gap:.3e} rad from the arm's pose",
+                piece.region
+            )));
         }
         let spline = JointSpline::new(s, q);
         let wanted = PathLimits {

@@ -19,9 +19,32 @@ pub struct Tool {
     pub axis: [f64; 3],
     /// Radius of the burr, metres.
     pub radius: f64,
+    /// Radius of the burr's shank (the cylinder from the ball to the flange), metres; absent:
+    /// [`Tool::DEFAULT_SHANK_RADIUS`].
+    #[serde(default)]
+    pub shank_radius: Option<f64>,
+    /// Length of the shank from the ball centre towards the flange, metres; absent: the
+    /// distance from the ball centre to the flange (`|tip_offset|`).
+    #[serde(default)]
+    pub shank_length: Option<f64>,
 }
 
 impl Tool {
+    /// Shank radius when tool.toml gives none, metres: 1.6 mm, the 3.2 mm (1/8 inch) shank of
+    /// rotary-tool burrs with heads up to 6 mm (the default tool's 6 mm ball).
+    pub const DEFAULT_SHANK_RADIUS: f64 = 0.0016;
+
+    /// Shank radius, metres.
+    pub fn shank_radius(&self) -> f64 {
+        self.shank_radius.unwrap_or(Self::DEFAULT_SHANK_RADIUS)
+    }
+
+    /// Shank length from the ball centre towards the flange, metres.
+    pub fn shank_length(&self) -> f64 {
+        self.shank_length
+            .unwrap_or_else(|| Vector3::from(self.tip_offset).norm())
+    }
+
     /// Loads and checks `tool.toml`.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
         let tool: Tool = read_toml(file)?;
@@ -46,6 +69,21 @@ impl Tool {
                 "tip_offset",
                 "must be finite and under 0.5 m",
             ));
+        }
+        if let Some(r) = tool.shank_radius {
+            if !(r > 0.0 && r <= tool.radius) {
+                let msg = "must be in (0, radius] m (the shank is no wider than the ball)";
+                return Err(RobotError::bad(file, "shank_radius", msg));
+            }
+        }
+        if let Some(l) = tool.shank_length {
+            if !(l.is_finite() && (0.0..=0.5).contains(&l)) {
+                return Err(RobotError::bad(
+                    file,
+                    "shank_length",
+                    "must be in [0, 0.5] m",
+                ));
+            }
         }
         Ok(tool)
     }

@@ -1,0 +1,355 @@
+//! Splicing runs into one program whose free motions keep clear of the part: a run is entered
+//! by a transit to a pose above its first contact and an approach down the normal, and left by
+//! a retract up the normal; a transit that is not clear as one joint move climbs along the
+//! normal to a safe height first, travels there (through home when it must) and comes down
+//! along the next normal. Between two pieces of a run the ball glides in task space (a layer
+//! step, a turn about the ball centre) when that is short and clear, else the tool lifts off
+//! and comes down again. Every sample of every free motion is checked before it is kept.
+use nalgebra::{Unit, UnitQuaternion, Vector3};
+
+use super::collide::{Allow, Hit, Scene};
+use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
+use super::program::{PlannedPass, PlannedPoint, Program, Segment, SegmentKind};
+use super::report::UnreachablePoint;
+use super::trajectory::{JointTrajectory, Limits, Move};
+use super::{PlanConfig, PlanError};
+use crate::robot::{IkTarget, Robot, Workcell};
+
+/// A run: pieces ground one after another without lifting the tool.
+pub(crate) type Run = Vec<PlannedPass>;
+
+/// One rest-to-rest leg of a free motion.
+struct Leg {
+    to: Vec<f64>,
+    kind: SegmentKind,
+    region: Option<usize>,
+    allow: Allow,
+}
+
+/// What assembling needs besides the program.
+struct Cell<'a> {
+    robot: &'a Robot,
+    wc: &'a Workcell,
+    cfg: &'a PlanConfig,
+    scene: &'a Scene<'a>,
+    limits: Limits,
+}
+
+impl Cell<'_> {
+    /// Joint solutions with the ball `lift` mm above contact `p` along its normal, same axis:
+    /// at `lift`, then halved twice (the arm may not reach the full height).
+    fn lifted(&self, p: &PlannedPoint, lift: f64) -> Vec<Vec<f64>> {
+        let up = self.wc.direction_from_reference(&Vector3::from(p.normal));
+        (0..3)
+            .filter_map(|k| {
+                let target = IkTarget {
+                    position: Vector3::from(p.tip_m) + up * (lift / f64::from(1 << k) * 1e-3),
+                    axis: Vector3::from(p.axis),
+                    roll: None,
+                };
+                self.robot.ik(&target, &p.q, &self.cfg.ik).ok().map(|s| s.q)
+            })
+            .collect()
+    }
+
+    fn leg(&self, to: &[f64], kind: SegmentKind, region: Option<usize>, allow: Allow) -> Leg {
+        Leg {
+            to: to.to_vec(),
+            kind,
+            region,
+            allow,
+        }
+    }
+}
+
+/// Splices runs into one program from `home` back to `home`; a run the tool cannot enter
+/// without a collision is left out (its points recorded with the reason).
+pub(crate) fn assemble(
+    runs: Vec<Run>,
+    robot: &Robot,
+    wc: &Workcell,
+    cfg: &PlanConfig,
+    scene: &Scene,
+    unreachable: &mut Vec<UnreachablePoint>,
+) -> Result<Program, PlanError> {
+    let cell = Cell {
+        robot,
+        wc,
+        cfg,
+        scene,
+        limits: Limits::from_joints(&robot.joints),
+    };
+    let mut prog = Program {
+        trajectory: JointTrajectory::starting_at(&cfg.home, cfg.trajectory.period),
+        segments: Vec::new(),
+        passes: Vec::new(),
+        cruise: vec![false],
+        slowed: 0,
+    };
+    if let Some(hit) = scene.check(robot, &cfg.home, Allow::Free) {
+        return Err(PlanError::Config(format!("home pose collides: {hit}")));
+    }
+    // the contact the tool is on (None: in the air), and the last one it left
+    let mut on: Option<(PlannedPoint, usize)> = None;
+    let mut left: Option<PlannedPoint> = None;
+    for run in runs {
+        for piece in run {
+            let start = &piece.points[0];
+            let glided = match &on {
+                Some((at, _)) => prog.glide(at, start, piece.region, &cell)?,
+                None => false,
+            };
+            if !glided {
+                if let Some((at, region)) = on.take() {
+                    prog.retract(&at, region, &cell)?;
+                    left = Some(at);
+                }
+                if let Err(reason) = prog.enter(left.as_ref(), start, piece.region, &cell)? {
+                    leave_out(&piece, &reason, unreachable);
+                    continue;
+                }
+            }
+            on = piece.points.last().cloned().map(|p| (p, piece.region));
+            prog.grind(piece, robot, cfg)?;
+        }
+        if let Some((at, region)) = on.take() {
+            prog.retract(&at, region, &cell)?;
+            left = Some(at);
+        }
+    }
+    prog.home(left.as_ref(), &cell)?;
+    Ok(prog)
+}
+
+/// Records every point of `piece` as left out.
+fn leave_out(piece: &PlannedPass, reason: &str, unreachable: &mut Vec<UnreachablePoint>) {
+    for (pi, p) in piece.points.iter().enumerate() {
+        unreachable.push(UnreachablePoint {
+            region: piece.region,
+            layer: piece.layer,
+            stroke: usize::MAX,
+            point: pi,
+            surface_mm: p.surface_mm,
+            tip_m: p.tip_m,
+            reason: reason.to_string(),
+        });
+    }
+}
+
+impl Program {
+    /// Appends `legs` from the last sample when every sample is clear for its leg; otherwise
+    /// leaves the program as it was and returns the first hit.
+    fn try_legs(&mut self, legs: &[Leg], cell: &Cell) -> Result<Option<Hit>, PlanError> {
+        let tc = &cell.cfg.trajectory;
+        let mut trial = JointTrajectory::starting_at(self.trajectory.last(), tc.period);
+        let mut ends = Vec::with_capacity(legs.len());
+        for leg in legs {
+            let from = trial.last().to_vec();
+            let mv = Move::new(&from, &leg.to, &cell.limits, tc).map_err(|source| {
+                PlanError::Trajectory {
+                    context: format!("{:?} move", leg.kind),
+                    source,
+                }
+            })?;
+            trial.append_move(&mv);
+            ends.push(trial.len() - 1);
+        }
+        let mut start = 0;
+        for (leg, &end) in legs.iter().zip(&ends) {
+            for i in start + 1..=end {
+                if let Some(hit) = cell.scene.check(cell.robot, trial.sample(i), leg.allow) {
+                    return Ok(Some(hit));
+                }
+            }
+            start = end;
+        }
+        let base = self.trajectory.len() - 1;
+        let mut first = 0;
+        for (leg, &end) in legs.iter().zip(&ends) {
+            for i in first + 1..=end {
+                self.trajectory.push(trial.sample(i));
+            }
+            self.cruise.extend(std::iter::repeat_n(false, end - first));
+            self.segments.push(Segment {
+                kind: leg.kind,
+                region: leg.region,
+                pass: None,
+                first_sample: base + first,
+                last_sample: base + end,
+            });
+            first = end;
+        }
+        Ok(None)
+    }
+
+    /// From the air (above `left`, or home) down onto contact `p`: a transit to a pose above
+    /// it and an approach along its normal, the first clear of: one joint move; climbing to
+    /// the safe height over `left`, across, and down over `p`; the same through home. The
+    /// inner error is why `p` cannot be entered.
+    fn enter(
+        &mut self,
+        left: Option<&PlannedPoint>,
+        p: &PlannedPoint,
+        region: usize,
+        cell: &Cell,
+    ) -> Result<Result<(), String>, PlanError> {
+        let aboves = cell.lifted(p, cell.cfg.retract_mm);
+        if aboves.is_empty() {
+            return Ok(Err("no approach pose above the contact".into()));
+        }
+        let safe = cell.scene.config().safe_lift_mm;
+        let up_from: Vec<Vec<f64>> = left
+            .and_then(|l| cell.lifted(l, safe).into_iter().next())
+            .into_iter()
+            .collect();
+        let up_to = cell.lifted(p, safe).into_iter().next();
+        let mut why = String::from("no collision-free way in");
+        for above in &aboves {
+            let mut tries = vec![vec![above.clone()]];
+            if let Some(ut) = &up_to {
+                tries.push([up_from.clone(), vec![ut.clone(), above.clone()]].concat());
+            }
+            let down: Vec<Vec<f64>> = up_to.iter().cloned().chain([above.clone()]).collect();
+            tries.push([up_from.clone(), vec![cell.cfg.home.clone()], down].concat());
+            for waypoints in tries {
+                let mut legs: Vec<Leg> = waypoints
+                    .iter()
+                    .map(|q| cell.leg(q, SegmentKind::Transit, None, Allow::Free))
+                    .collect();
+                legs.push(cell.leg(&p.q, SegmentKind::Approach, Some(region), Allow::Contact));
+                match self.try_legs(&legs, cell)? {
+                    None => return Ok(Ok(())),
+                    Some(hit) => why = format!("no collision-free way in: {hit}"),
+                }
+            }
+        }
+        Ok(Err(why))
+    }
+
+    /// Up the normal off contact `p` (at the retract height, halved when the arm cannot).
+    fn retract(&mut self, p: &PlannedPoint, region: usize, cell: &Cell) -> Result<(), PlanError> {
+        let region = Some(region);
+        let mut why = String::from("no retract pose above the contact");
+        for above in cell.lifted(p, cell.cfg.retract_mm) {
+            let leg = cell.leg(&above, SegmentKind::Retract, region, Allow::Contact);
+            match self.try_legs(&[leg], cell)? {
+                None => return Ok(()),
+                Some(hit) => why = hit.to_string(),
+            }
+        }
+        let [x, y, z] = p.surface_mm;
+        Err(PlanError::Collision(format!(
+            "retract from ({x:.2}, {y:.2}, {z:.2}) mm: {why}"
+        )))
+    }
+
+    /// Back home from the air above `left`: directly, or after climbing to the safe height.
+    fn home(&mut self, left: Option<&PlannedPoint>, cell: &Cell) -> Result<(), PlanError> {
+        let home = cell.leg(&cell.cfg.home, SegmentKind::Transit, None, Allow::Free);
+        let mut tries = vec![vec![home]];
+        if let Some(l) = left {
+            for up in cell
+                .lifted(l, cell.scene.config().safe_lift_mm)
+                .into_iter()
+                .take(1)
+            {
+                tries.push(vec![
+                    cell.leg(&up, SegmentKind::Transit, None, Allow::Free),
+                    cell.leg(&cell.cfg.home, SegmentKind::Transit, None, Allow::Free),
+                ]);
+            }
+        }
+        let mut why = String::new();
+        for legs in tries {
+            match self.try_legs(&legs, cell)? {
+                None => return Ok(()),
+                Some(hit) => why = hit.to_string(),
+            }
+        }
+        Err(PlanError::Collision(format!("transit home: {why}")))
+    }
+
+    /// Moves the ball from contact `a` to contact `b` in task space (straight line, tool axis
+    /// turned about the ball centre) when they are at most `glide_mm` apart, the IK follows
+    /// and every sample is clear; returns whether it did.
+    fn glide(
+        &mut self,
+        a: &PlannedPoint,
+        b: &PlannedPoint,
+        region: usize,
+        cell: &Cell,
+    ) -> Result<bool, PlanError> {
+        let (ta, tb) = (Vector3::from(a.tip_m), Vector3::from(b.tip_m));
+        let (ua, ub) = (cell.robot.fk(&a.q).axis, cell.robot.fk(&b.q).axis);
+        let last = self.trajectory.last().to_vec();
+        if (tb - ta).norm() * 1e3 > cell.scene.config().glide_mm || max_step(&last, &a.q) > 1e-12 {
+            return Ok(false);
+        }
+        let turn =
+            UnitQuaternion::rotation_between(&ua, &ub).unwrap_or_else(UnitQuaternion::identity);
+        let steps = (turn.angle().to_degrees() / cell.scene.config().turn_step_deg)
+            .ceil()
+            .max(1.0) as usize;
+        let mut qs = vec![a.q.clone()];
+        let mut s = vec![0.0];
+        for k in 1..=steps {
+            let f = k as f64 / steps as f64;
+            let q = if k == steps {
+                b.q.clone()
+            } else {
+                let axis = UnitQuaternion::identity().slerp(&turn, f) * Unit::new_normalize(ua);
+                let target = IkTarget {
+                    position: ta + (tb - ta) * f,
+                    axis: axis.into_inner(),
+                    roll: None,
+                };
+                match cell.robot.ik(&target, &qs[k - 1], &cell.cfg.ik) {
+                    Ok(sol) => sol.q,
+                    Err(_) => return Ok(false),
+                }
+            };
+            let ds = max_step(&q, &qs[k - 1]);
+            s.push(s[k - 1] + ds.max(1e-9));
+            qs.push(q);
+        }
+        let spline = JointSpline::new(s, qs);
+        let most = |v: Vec<f64>| v.into_iter().fold(0.0, f64::max);
+        let wanted = PathLimits {
+            velocity: most(cell.limits.velocity.clone()),
+            acceleration: most(cell.limits.acceleration.clone()),
+            jerk: most(cell.limits.jerk.clone()),
+        };
+        let lim = path_limits(&spline, &cell.robot.joints, wanted, cell.cfg.joint_margin);
+        let Ok((samples, _)) = sample_stroke(&spline, &lim, &cell.cfg.trajectory) else {
+            return Ok(false);
+        };
+        if samples
+            .iter()
+            .any(|q| cell.scene.check(cell.robot, q, Allow::Contact).is_some())
+        {
+            return Ok(false);
+        }
+        let first = self.trajectory.len() - 1;
+        for q in &samples {
+            self.trajectory.push(q);
+        }
+        self.cruise
+            .extend(std::iter::repeat_n(false, samples.len()));
+        self.segments.push(Segment {
+            kind: SegmentKind::Reorient,
+            region: Some(region),
+            pass: None,
+            first_sample: first,
+            last_sample: first + samples.len(),
+        });
+        Ok(true)
+    }
+}
+
+/// Largest joint difference.
+pub(crate) fn max_step(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}

@@ -1,0 +1,106 @@
+//! The collision check of a whole sampled trajectory, by `plan` before it writes a plan and by
+//! `run` before the first frame: every sample against the scene, with what its segment allows
+//! (transits nothing, approach / retract / re-orientation a touch of the ball, grinding a touch
+//! of the ball on one face).
+use std::fmt;
+
+use serde::{Deserialize, Serialize};
+
+use super::collide::{Allow, CollisionConfig, Hit, Scene};
+use super::program::{Segment, SegmentKind};
+use super::{Inspection, Plan, PlanError};
+use crate::robot::{Robot, Workcell};
+
+/// One sample too near the part or a solid.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Collision {
+    /// Sample index.
+    pub sample: usize,
+    /// Index of the segment it belongs to (the later one at a joint of two).
+    pub segment: Option<usize>,
+    /// That segment's kind.
+    pub kind: Option<SegmentKind>,
+    /// That segment's region.
+    pub region: Option<usize>,
+    /// The colliding pair.
+    pub hit: Hit,
+}
+
+impl fmt::Display for Collision {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "sample {}", self.sample)?;
+        if let (Some(s), Some(k)) = (self.segment, self.kind) {
+            write!(f, " (segment {s}, {k:?}")?;
+            if let Some(r) = self.region {
+                write!(f, ", region {r}")?;
+            }
+            write!(f, ")")?;
+        }
+        write!(f, ": {}", self.hit)
+    }
+}
+
+/// What each of `n` samples may touch, and the segment it belongs to (the later one at a
+/// joint): the loosest rule of its segments (where a transit meets an approach the sample is
+/// the approach's start and may be near the part).
+fn allowances(segments: &[Segment], n: usize) -> Vec<(Allow, Option<usize>)> {
+    let mut out = vec![(Allow::Free, None); n];
+    for (k, s) in segments.iter().enumerate() {
+        let last = s.last_sample.min(n.saturating_sub(1));
+        for (allow, owner) in out.iter_mut().take(last + 1).skip(s.first_sample) {
+            *owner = Some(k);
+            *allow = match (*allow, s.kind) {
+                (_, SegmentKind::Grind) | (Allow::Grind, _) => Allow::Grind,
+                (_, SegmentKind::Transit) => *allow,
+                _ => Allow::Contact,
+            };
+        }
+    }
+    out
+}
+
+/// Every sample of `samples` checked against `scene`; empty when all are clear.
+pub fn check_samples<'q>(
+    samples: impl ExactSizeIterator<Item = &'q [f64]>,
+    segments: &[Segment],
+    robot: &Robot,
+    scene: &Scene,
+) -> Vec<Collision> {
+    let mut out = Vec::new();
+    let rules = allowances(segments, samples.len());
+    for (i, (q, &(allow, owner))) in samples.zip(&rules).enumerate() {
+        if let Some(hit) = scene.check(robot, q, allow) {
+            let seg = owner.map(|k| &segments[k]);
+            out.push(Collision {
+                sample: i,
+                segment: owner,
+                kind: seg.map(|s| s.kind),
+                region: seg.and_then(|s| s.region),
+                hit,
+            });
+        }
+    }
+    out
+}
+
+impl Plan {
+    /// Re-checks every sample of a loaded plan against the part of `inspection` (the one it
+    /// was planned from, read again), placed by `wc`, and `cfg`'s solids.
+    pub fn check_clearance(
+        &self,
+        inspection: &Inspection,
+        robot: &Robot,
+        wc: &Workcell,
+        cfg: &CollisionConfig,
+    ) -> Result<(), PlanError> {
+        cfg.check(robot.dof()).map_err(PlanError::Config)?;
+        let scene = Scene::new(&inspection.points, robot, wc, cfg);
+        let samples = self.samples.iter().map(|s| s.q.as_slice());
+        let found = check_samples(samples, &self.segments, robot, &scene);
+        if found.is_empty() {
+            Ok(())
+        } else {
+            Err(PlanError::Collides(found))
+        }
+    }
+}

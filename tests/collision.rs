@@ -1,0 +1,553 @@
+//! Collision-free plans (issue 35), checked apart from the planner's own model: forward
+//! kinematics written here from the joint table of shared/DOFBOT.md, brute force over every
+//! reference point (no index, no tangent planes), and the tool and cell from their files.
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Matrix4, Point3, Translation3, UnitQuaternion, Vector3};
+use polishbot::plan::{
+    plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind, Solid,
+    SurfacePoint,
+};
+use polishbot::robot::{Robot, Workcell};
+
+fn calib(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("calibration")
+        .join(name)
+}
+
+fn dofbot() -> Robot {
+    Robot::load(
+        &calib("dofbot.urdf"),
+        &calib("tool.toml"),
+        &calib("servos.toml"),
+    )
+    .expect("calibration")
+}
+
+/// The joint table of DOFBOT.md (origin xyz, origin rpy, axis), pi/2 in full precision.
+const JOINTS: [([f64; 3], [f64; 3], [f64; 3]); 5] = {
+    const H: f64 = std::f64::consts::FRAC_PI_2;
+    [
+        ([0.0, 0.0, 0.07], [0.0, 0.0, H], [0.0, 0.0, -1.0]),
+        ([0.0, 0.0, 0.0405], [-H, 0.0, 0.0], [0.0, 0.0, -1.0]),
+        ([0.0, -0.0829, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]),
+        ([0.0, -0.0829, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]),
+        ([-0.00215, -0.17455, 0.0], [H, 0.0, 0.0], [0.0, 0.0, 1.0]),
+    ]
+};
+
+/// The joint origins (robot frame, m) and the ball centre and tool axis at `q`: URDF
+/// composition, origin then rpy (Rz Ry Rx) then the joint's rotation about its axis; the tool
+/// tip sits at tool.toml's `tip_offset` in the last frame, its axis along `axis`.
+fn arm(q: &[f64], robot: &Robot) -> ([Vector3<f64>; 5], Vector3<f64>, Vector3<f64>) {
+    let mut t = Isometry3::identity();
+    let mut origins = [Vector3::zeros(); 5];
+    for (k, (xyz, rpy, axis)) in JOINTS.iter().enumerate() {
+        let origin = Isometry3::from_parts(
+            Translation3::new(xyz[0], xyz[1], xyz[2]),
+            UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
+        );
+        t *= origin;
+        origins[k] = t.translation.vector;
+        let turn = UnitQuaternion::from_axis_angle(
+            &nalgebra::Unit::new_normalize(Vector3::from(*axis)),
+            q[k],
+        );
+        t *= Isometry3::from_parts(Translation3::identity(), turn);
+    }
+    let tip = t * Point3::from(Vector3::from(robot.tool.tip_offset));
+    let axis = t.rotation * Vector3::from(robot.tool.axis);
+    (origins, tip.coords, axis)
+}
+
+/// A robot-frame point (m) in the reference frame (mm).
+fn to_ref(wc: &Workcell, p: &Vector3<f64>) -> Point3<f64> {
+    let inv = wc.robot_from_reference.try_inverse().expect("rigid");
+    Point3::from(inv.transform_point(&Point3::from(*p)).coords * 1e3)
+}
+
+fn segment_distance(p: &Point3<f64>, a: &Point3<f64>, b: &Point3<f64>) -> f64 {
+    let d = b - a;
+    let t = if d.norm_squared() > 0.0 {
+        ((p - a).dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + d * t)).norm()
+}
+
+/// What a safety engineer measures at one sample, brute force over every reference point.
+struct Measured {
+    /// How far the ball is inside the part, mm (negative: its clearance).
+    ball_depth: f64,
+    /// The ball touches two faces whose normals are more than 45 degrees apart.
+    second_face: bool,
+    /// Smallest clearance of the shank and the links from the part, mm.
+    arm_clearance: f64,
+}
+
+fn measure(q: &[f64], robot: &Robot, wc: &Workcell, points: &[SurfacePoint]) -> Measured {
+    let r = robot.tool.radius * 1e3;
+    let (origins, tip, axis) = arm(q, robot);
+    let c = to_ref(wc, &tip);
+    let mut nearest = (f64::INFINITY, 0usize);
+    for (i, p) in points.iter().enumerate() {
+        let d = (c - p.position).norm();
+        if d < nearest.0 {
+            nearest = (d, i);
+        }
+    }
+    let np = &points[nearest.1];
+    let behind = (c - np.position).dot(&np.normal) < 0.0;
+    let ball_depth = if behind { r + nearest.0 } else { r - nearest.0 };
+    let second_face = points.iter().any(|p| {
+        (c - p.position).norm() < r - 1e-3 && p.normal.angle(&np.normal).to_degrees() > 45.0
+    });
+    let radii = CollisionConfig::default().link_radius_mm;
+    let shank_end = tip - axis * robot.tool.shank_length();
+    let mut capsules = vec![(c, to_ref(wc, &shank_end), robot.tool.shank_radius() * 1e3)];
+    for (k, rad) in radii.iter().enumerate().skip(1) {
+        capsules.push((to_ref(wc, &origins[k]), to_ref(wc, &origins[k + 1]), *rad));
+    }
+    let arm_clearance = capsules
+        .iter()
+        .flat_map(|(a, b, rad)| {
+            points
+                .iter()
+                .map(move |p| segment_distance(&p.position, a, b) - rad)
+        })
+        .fold(f64::INFINITY, f64::min);
+    Measured {
+        ball_depth,
+        second_face,
+        arm_clearance,
+    }
+}
+
+/// Kind of every sample (the later segment at a joint).
+fn kinds(plan: &Plan) -> Vec<SegmentKind> {
+    let mut out = vec![SegmentKind::Transit; plan.samples.len()];
+    for s in &plan.segments {
+        for k in out.iter_mut().take(s.last_sample + 1).skip(s.first_sample) {
+            *k = s.kind;
+        }
+    }
+    out
+}
+
+/// Region records for the labelled `points` (peak = largest distance).
+fn inspection(points: Vec<SurfacePoint>) -> Inspection {
+    let ids: std::collections::BTreeSet<i64> = points
+        .iter()
+        .map(|p| p.region)
+        .filter(|r| *r >= 0)
+        .collect();
+    let regions = ids
+        .into_iter()
+        .map(|id| {
+            let m: Vec<&SurfacePoint> = points.iter().filter(|p| p.region == id).collect();
+            let n = m.len() as f64;
+            let c = m
+                .iter()
+                .fold(Vector3::zeros(), |s, p| s + p.position.coords)
+                / n;
+            let nn = m
+                .iter()
+                .fold(Vector3::zeros(), |s, p| s + p.normal)
+                .normalize();
+            RegionInfo {
+                id: id as usize,
+                centroid: [c.x, c.y, c.z],
+                normal: [nn.x, nn.y, nn.z],
+                area: n * 0.25,
+                peak: m.iter().map(|p| p.distance).fold(0.0, f64::max),
+                peak_lower_bound: false,
+                mean: m.iter().map(|p| p.distance).sum::<f64>() / n,
+                volume: 1.0,
+                points: m.len(),
+                repairable: true,
+            }
+        })
+        .collect();
+    Inspection {
+        dir: "collision-test".into(),
+        tolerance: Some(0.05),
+        regions,
+        points,
+    }
+}
+
+fn point(p: Point3<f64>, n: Vector3<f64>, distance: f64, region: i64) -> SurfacePoint {
+    SurfacePoint {
+        position: p,
+        normal: n.normalize(),
+        distance,
+        region,
+    }
+}
+
+/// A grid of `step` over `[-a, a] x [-b, b]` spanned by `u`, `v` about `o`.
+fn grid(
+    o: Point3<f64>,
+    u: Vector3<f64>,
+    v: Vector3<f64>,
+    a: f64,
+    b: f64,
+    step: f64,
+) -> Vec<Point3<f64>> {
+    let (na, nb) = ((a / step).round() as i64, (b / step).round() as i64);
+    (-na..=na)
+        .flat_map(|i| (-nb..=nb).map(move |k| o + u * (i as f64 * step) + v * (k as f64 * step)))
+        .collect()
+}
+
+/// The front face the default workcell turns to the arm (reference y = -35, normal -y) with
+/// a slot 4 mm wide and 3 mm deep across it (narrower than the 6 mm ball): region 0 on the
+/// slot's floor, region 1 a bump on the open face beside it.
+fn slotted_face() -> Inspection {
+    let (x0, half, depth) = (5.0, 2.0, 3.0);
+    let mut pts = Vec::new();
+    let face = grid(
+        Point3::new(0.0, -35.0, -25.0),
+        Vector3::x(),
+        Vector3::z(),
+        20.0,
+        20.0,
+        0.5,
+    );
+    for p in face.into_iter().filter(|p| (p.x - x0).abs() >= half) {
+        let bump = ((p - Point3::new(-8.0, -35.0, -25.0)).norm() <= 4.0).then_some(0.25);
+        pts.push(point(
+            p,
+            -Vector3::y(),
+            bump.unwrap_or(0.0),
+            bump.map_or(-1, |_| 1),
+        ));
+    }
+    let floor = grid(
+        Point3::new(x0, -35.0 + depth, -25.0),
+        Vector3::x(),
+        Vector3::z(),
+        1.5,
+        20.0,
+        0.5,
+    );
+    for p in floor {
+        let inside = (p.z + 25.0).abs() <= 8.0;
+        pts.push(point(
+            p,
+            -Vector3::y(),
+            if inside { 0.3 } else { 0.0 },
+            if inside { 0 } else { -1 },
+        ));
+    }
+    for (x, n) in [(x0 - half, Vector3::x()), (x0 + half, -Vector3::x())] {
+        let wall = grid(
+            Point3::new(x, -35.0 + depth / 2.0, -25.0),
+            Vector3::y(),
+            Vector3::z(),
+            1.0,
+            20.0,
+            0.5,
+        );
+        pts.extend(wall.into_iter().map(|p| point(p, n, 0.0, -1)));
+    }
+    inspection(pts)
+}
+
+#[test]
+fn a_contact_in_a_slot_narrower_than_the_ball_is_left_out_because_the_tool_does_not_fit() {
+    let robot = dofbot();
+    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
+    let insp = slotted_face();
+    let p = plan(&insp, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let slot: Vec<_> = p
+        .reachability
+        .unreachable
+        .iter()
+        .filter(|u| u.region == 0)
+        .collect();
+    assert!(!slot.is_empty(), "the slot's contacts must be left out");
+    assert!(
+        slot.iter().all(|u| u.reason.contains("tool does not fit")),
+        "{}",
+        slot[0].reason
+    );
+    assert!(
+        p.passes.iter().all(|pass| pass.region != 0),
+        "nothing ground in the slot"
+    );
+    assert!(
+        p.passes.iter().any(|pass| pass.region == 1),
+        "the open bump is still ground"
+    );
+    let kinds = kinds(&p);
+    for (i, s) in p.samples.iter().enumerate() {
+        let m = measure(&s.q, &robot, &wc, &insp.points);
+        assert!(
+            !m.second_face,
+            "sample {i} ({:?}): the ball touches a second face",
+            kinds[i]
+        );
+        assert!(
+            m.ball_depth <= 0.1,
+            "sample {i}: ball {:.3} mm inside",
+            m.ball_depth
+        );
+    }
+}
+
+/// A wedge whose nose points at the arm (reference = robot axes in mm, nose along x at the
+/// origin, the faces' normals 30 degrees above and below the horizontal) with a bump on its
+/// upper and its lower face.
+fn wedge() -> (Inspection, Workcell) {
+    let mut pts = Vec::new();
+    let s = 30f64.to_radians();
+    for sign in [1.0, -1.0] {
+        let along = Vector3::new(0.0, s.sin(), sign * s.cos());
+        let normal = Vector3::new(0.0, -s.cos(), sign * s.sin());
+        let centre = Point3::origin() + along * 15.0;
+        for p in grid(centre, Vector3::x(), along, 15.0, 15.0, 0.5) {
+            let bump = (p - (Point3::origin() + along * 14.0)).norm() <= 4.0;
+            let region = if bump { i64::from(sign < 0.0) } else { -1 };
+            pts.push(point(p, normal, if bump { 0.15 } else { 0.0 }, region));
+        }
+    }
+    let wc = Workcell {
+        robot_from_reference: Matrix4::new_translation(&Vector3::new(0.0, 0.24, 0.2)),
+    };
+    (inspection(pts), wc)
+}
+
+#[test]
+fn a_transit_between_the_two_sides_of_a_wedge_goes_around_its_nose_with_the_margin() {
+    let robot = dofbot();
+    let (insp, wc) = wedge();
+    let cfg = PlanConfig::default();
+    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    for id in [0, 1] {
+        let why: Vec<&String> = p
+            .reachability
+            .unreachable
+            .iter()
+            .map(|u| &u.reason)
+            .take(3)
+            .collect();
+        assert!(
+            p.passes.iter().any(|pass| pass.region == id),
+            "region {id} ground: {why:?}"
+        );
+    }
+    let margin = cfg.collision.margin_mm;
+    let kinds = kinds(&p);
+    let mut around = false;
+    for (i, s) in p.samples.iter().enumerate() {
+        let m = measure(&s.q, &robot, &wc, &insp.points);
+        let free = kinds[i] == SegmentKind::Transit;
+        if free {
+            // point sampling (0.5 mm) makes the brute-force distance read up to 0.02 mm long
+            assert!(
+                -m.ball_depth >= margin - 0.02,
+                "sample {i}: ball clearance {:.3}",
+                -m.ball_depth
+            );
+            let tip = to_ref(&wc, &arm(&s.q, &robot).1);
+            around |= tip.y < -5.0;
+        } else {
+            assert!(
+                m.ball_depth <= 0.1,
+                "sample {i} ({:?}): ball {:.3} mm inside",
+                kinds[i],
+                m.ball_depth
+            );
+        }
+        assert!(
+            m.arm_clearance >= margin - 0.02,
+            "sample {i}: arm clearance {:.3}",
+            m.arm_clearance
+        );
+    }
+    assert!(around, "the transit passes in front of the nose");
+    // the straight way between the two regions' approach points runs through the wedge
+    let first = |id: usize| {
+        let pass = p
+            .passes
+            .iter()
+            .find(|pass| pass.region == id)
+            .expect("pass");
+        Point3::from(Vector3::from(pass.points[0].surface_mm))
+            + Vector3::from(pass.points[0].normal) * 8.0
+    };
+    let mid = Point3::from((first(0).coords + first(1).coords) / 2.0);
+    assert!(
+        mid.y > 0.0,
+        "the direct line passes behind the nose ({mid})"
+    );
+}
+
+/// The front of a horizontal cylinder (reference frame = robot axes, mm; axis along x) with
+/// a defect long along the axis: its raster lines run along the axis at different heights with
+/// different normals, so the tool turns at the contacts where one stroke meets the next.
+fn cylinder() -> (Inspection, Workcell) {
+    let radius = 20.0;
+    let mut pts = Vec::new();
+    let step = 0.5 / radius;
+    for i in -50..=50 {
+        let a = f64::from(i) * step;
+        let normal = Vector3::new(0.0, -a.cos(), a.sin());
+        for k in -30..=30 {
+            let p = Point3::origin() + normal * radius + Vector3::x() * (f64::from(k) * 0.5);
+            let bump = (a * radius).abs() <= 5.0 && p.x.abs() <= 12.0;
+            pts.push(point(
+                p,
+                normal,
+                if bump { 0.12 } else { 0.0 },
+                if bump { 0 } else { -1 },
+            ));
+        }
+    }
+    let wc = Workcell {
+        robot_from_reference: Matrix4::new_translation(&Vector3::new(0.0, 0.28, 0.2)),
+    };
+    (inspection(pts), wc)
+}
+
+#[test]
+fn a_turn_of_the_tool_at_a_contact_keeps_the_ball_centre_within_a_tenth_of_a_millimetre() {
+    let robot = dofbot();
+    let (insp, wc) = cylinder();
+    let p = plan(&insp, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let mut turns = 0;
+    for seg in p
+        .segments
+        .iter()
+        .filter(|s| s.kind == SegmentKind::Reorient)
+    {
+        let ends = [seg.first_sample, seg.last_sample].map(|i| arm(&p.samples[i].q, &robot));
+        let turned = ends[0].2.angle(&ends[1].2).to_degrees();
+        if (ends[0].1 - ends[1].1).norm() * 1e3 > 0.01 || turned < 0.5 {
+            continue;
+        }
+        turns += 1;
+        for i in seg.first_sample..=seg.last_sample {
+            let tip = arm(&p.samples[i].q, &robot).1;
+            let off = (tip - ends[0].1).norm() * 1e3;
+            assert!(
+                off <= 0.1,
+                "sample {i}: ball centre {off:.3} mm from the contact"
+            );
+        }
+    }
+    let segs: Vec<(SegmentKind, usize)> = p
+        .segments
+        .iter()
+        .map(|s| (s.kind, s.last_sample - s.first_sample))
+        .collect();
+    assert!(turns > 0, "the plan turns the tool at a contact: {segs:?}");
+    for (i, s) in p.samples.iter().enumerate() {
+        let m = measure(&s.q, &robot, &wc, &insp.points);
+        assert!(
+            m.ball_depth <= 0.1,
+            "sample {i}: ball {:.3} mm inside",
+            m.ball_depth
+        );
+    }
+}
+
+#[test]
+fn a_tall_fixture_in_the_way_of_the_links_keeps_the_arm_out_and_run_refuses_a_plan_made_without_it()
+{
+    let robot = dofbot();
+    let (insp, wc) = cylinder();
+    let open = plan(&insp, &robot, &wc, &PlanConfig::default()).expect("plan");
+    assert!(!open.passes.is_empty());
+    // a post beside the base, up to 0.4 m: the forearm reaches out over where it stands
+    let post = Solid {
+        name: "post".into(),
+        min: [-0.04, 0.09, 0.0],
+        max: [0.04, 0.13, 0.4],
+    };
+    let mut cfg = PlanConfig::default();
+    cfg.collision.solids.push(post.clone());
+    let blocked = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    assert!(
+        blocked.passes.is_empty(),
+        "nothing can be ground past the post"
+    );
+    let why = &blocked.reachability.unreachable[0].reason;
+    assert!(
+        why.contains("link after joint") && why.contains("\"post\""),
+        "{why}"
+    );
+    // independent: every sample's links keep the margin from the box (dense steps)
+    let lo = Vector3::from(post.min);
+    let hi = Vector3::from(post.max);
+    for (i, s) in blocked.samples.iter().enumerate() {
+        let (origins, _, _) = arm(&s.q, &robot);
+        for (k, r) in cfg.collision.link_radius_mm.iter().enumerate().skip(1) {
+            let (a, b) = (origins[k], origins[k + 1]);
+            let d = (0..=1000)
+                .map(|t| {
+                    let p = a + (b - a) * (f64::from(t) / 1000.0);
+                    let out = Vector3::from_fn(|j, _| (lo[j] - p[j]).max(0.0).max(p[j] - hi[j]));
+                    out.norm() * 1e3
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                d - r >= 1.0 - 0.01,
+                "sample {i}: link {} {:.2} mm from the post",
+                k + 1,
+                d - r
+            );
+        }
+    }
+    // run's re-check: the plan made without the post is refused once the post is there
+    let err = open
+        .check_clearance(&insp, &robot, &wc, &cfg.collision)
+        .expect_err("refused");
+    let msg = err.to_string();
+    assert!(matches!(err, PlanError::Collides(_)), "{msg}");
+    assert!(
+        msg.contains("sample ") && msg.contains("\"post\"") && msg.contains("link after joint"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_polishbot"))
+        .args(["demo", "--out"])
+        .arg(dir.path())
+        .output()
+        .expect("demo runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let robot = dofbot();
+    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
+    let insp = Inspection::load(&dir.path().join("inspection")).expect("inspection");
+    let p = Plan::load(&dir.path().join("plan.json")).expect("plan");
+    let kinds = kinds(&p);
+    let (mut free, mut inside, mut second) = (0, 0, 0);
+    for (i, s) in p.samples.iter().enumerate() {
+        let m = measure(&s.q, &robot, &wc, &insp.points);
+        if kinds[i] == SegmentKind::Grind {
+            second += usize::from(m.second_face);
+        } else {
+            free += 1;
+            inside += usize::from(m.ball_depth > 0.1);
+        }
+    }
+    assert!(free > 0);
+    assert_eq!(
+        inside, 0,
+        "{inside} of {free} free samples with the ball over 0.1 mm inside"
+    );
+    assert_eq!(second, 0, "{second} grinding samples touch a second face");
+}
