@@ -428,7 +428,11 @@ pub fn plan(
     Ok(Plan {
         format: "polishbot-plan".into(),
         version: 1,
-        inspection: inspection.dir.display().to_string(),
+        // absolute, so that `run` finds the part for its collision re-check from any folder
+        inspection: std::fs::canonicalize(&inspection.dir)
+            .unwrap_or_else(|_| inspection.dir.clone())
+            .display()
+            .to_string(),
         period: traj.period,
         joint_names: robot.joints.iter().map(|j| j.name.clone()).collect(),
         tool_radius_mm: radius_mm,
