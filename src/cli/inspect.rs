@@ -248,7 +248,11 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
     times.lap("compare");
     let in_area = match &args.inspect_area {
-        Some(path) => Some(super::inspect_area::core_points_in(path, &args.input, &dev)?),
+        Some(path) => Some(super::inspect_area::core_points_in(
+            path,
+            &args.input,
+            &dev,
+        )?),
         None => None,
     };
     let found = regions::find_regions_in(&dev, &cfg.regions, in_area.as_deref());

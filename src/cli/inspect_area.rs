@@ -37,7 +37,12 @@ pub fn core_points_in(path: &Path, input: &GeometryInput, dev: &Deviations) -> R
     Ok(dev
         .points
         .iter()
-        .map(|p| index.knn(p, 1).first().is_some_and(|nb| nb.dist2 <= reach * reach))
+        .map(|p| {
+            index
+                .knn(p, 1)
+                .first()
+                .is_some_and(|nb| nb.dist2 <= reach * reach)
+        })
         .collect())
 }
 

@@ -35,9 +35,10 @@ pub(super) const ONE_SIDED_RUN: usize = 3;
 /// Largest share of a disc's reference points that may be uncovered for the disc to count
 /// as filled. A straight scan border at distance e from the core point (e > 0: the core point
 /// is inside the data) leaves uncovered the segment beyond e + g; it holds 20 % of a disc of
-/// radius r when e + g = 0.4 r. On the turntable cases of tests/coverage.rs every core point
-/// with an error above 0.2 mm had more than a quarter of its chosen disc uncovered (without
-/// the test); 0.2 keeps a margin below that.
+/// radius r when e + g = 0.4 r: with g = r0, the largest radius (2.83 r0) is refused for a
+/// core point within 0.13 r0 of the border, 2 r0 for one outside it. Full scans: a disc of
+/// about 16 reference points with four uncovered does not happen (each is uncovered with
+/// probability e^-12).
 pub(super) const MAX_UNCOVERED: f64 = 0.2;
 
 /// Reference and scan points of the core point's surface per 45° sector of the annulus

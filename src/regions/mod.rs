@@ -257,12 +257,7 @@ fn coverage(dev: &Deviations, share: &[f64], in_area: Option<&[bool]>) -> f64 {
 
 /// Sets each region's `measured_share` and `touches_unmeasured` from its neighbourhood: the
 /// core points within `gap` of a member (`share`: their areas).
-fn neighbourhoods(
-    dev: &Deviations,
-    share: &[f64],
-    gap: f64,
-    regions: &mut [(Region, Vec<usize>)],
-) {
+fn neighbourhoods(dev: &Deviations, share: &[f64], gap: f64, regions: &mut [(Region, Vec<usize>)]) {
     let index = Neighbours::new(&dev.points);
     let mut near = vec![false; dev.points.len()];
     for (region, members) in regions.iter_mut() {
@@ -276,7 +271,11 @@ fn neighbourhoods(
             }
         }
         let total: f64 = hood.iter().map(|&i| share[i]).sum();
-        let seen: f64 = hood.iter().filter(|&&i| measured(dev, i)).map(|&i| share[i]).sum();
+        let seen: f64 = hood
+            .iter()
+            .filter(|&&i| measured(dev, i))
+            .map(|&i| share[i])
+            .sum();
         region.measured_share = if total > 0.0 { seen / total } else { 1.0 };
         region.touches_unmeasured = hood.iter().any(|&i| !measured(dev, i));
         hood.iter().for_each(|&i| near[i] = false);
