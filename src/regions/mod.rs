@@ -212,7 +212,9 @@ pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[b
     }
     let regions: Vec<Region> = regions.into_iter().map(|r| r.0).collect();
     let coverage = coverage(dev, &share, in_area);
-    let verdict = if !(coverage >= cfg.min_coverage) {
+    // A NaN minimum gives no verdict either.
+    let enough = coverage >= cfg.min_coverage;
+    let verdict = if !enough {
         Verdict::Incomplete
     } else if regions.is_empty() {
         Verdict::WithinTolerance
