@@ -527,8 +527,8 @@ impl Pairing<'_> {
 /// within `reach`, paired with a reference point whose normal is within the normal filter's
 /// angle of its own: `nearest` per scan point, [`Pairing`]) closest to its normal line; NaN
 /// when there is none (unscanned surface: left out of the similarity and of the noise
-/// estimate). With it, whether any scan point lies within `cover2` (squared) of the point
-/// (`cover.rs`). Beside a sharp edge the nearest scan points of a reference point are often the
+/// estimate). With it, whether any of those scan points (of any face) lies within `cover2`
+/// (squared) of the point's normal line (`cover.rs`). Beside a sharp edge the nearest scan points of a reference point are often the
 /// other face's, 0.05-0.2 mm off its tangent plane, which would make a perfect match look
 /// like a defect.
 fn one_sided_distances(
@@ -564,7 +564,14 @@ fn one_sided_distances(
                     best = (across, t);
                 }
             }
-            let covered = found.first().is_some_and(|&(d2, _)| d2 <= cover2);
+            // Covered across the normal only: under a defect taller than the cover radius the
+            // scan lies that far off along the normal (dense scans: the 1.2M suite's RMS went
+            // NaN with the 3-D distance).
+            let covered = found.iter().any(|&(_, j)| {
+                let d = scan[j as usize] - x;
+                let t = d.dot(n);
+                d.norm_squared() - t * t <= cover2
+            });
             (best.1, covered)
         },
     )

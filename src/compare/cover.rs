@@ -7,8 +7,9 @@
 //!    the core point: no distance ([`super::Reason::ScanBorder`] when the smallest disc holds
 //!    scan points, else [`super::Reason::FewScan`], inside a hole). The reference's own
 //!    sectors make a face's edge (where the reference ends too) no border.
-//! 2. Fill: a reference point is *covered* when a scan point lies within the cover radius g
-//!    of it, g = sqrt([`COVER_POINTS`] / (π ρ)) with ρ the scan's median surface density; a
+//! 2. Fill: a reference point is *covered* when one of its 3 nearest scan points lies within
+//!    the cover radius g of its normal line (across the normal: a defect lifts the scan off
+//!    along it), g = sqrt([`COVER_POINTS`] / (π ρ)) with ρ the scan's median surface density; a
 //!    radius is *filled* when at most [`MAX_UNCOVERED`] of the reference points in its disc
 //!    are uncovered. The radius is chosen among the filled ones (a prefix of the candidates):
 //!    a cylinder does not reach far over a border into a hole.
