@@ -48,6 +48,8 @@ fn inspection() -> Inspection {
         volume: 100.0,
         points: members.len(),
         repairable: true,
+        measured_share: 1.0,
+        touches_unmeasured: false,
     };
     Inspection {
         dir: "bench".into(),

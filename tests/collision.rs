@@ -169,6 +169,8 @@ fn inspection(points: Vec<SurfacePoint>) -> Inspection {
                 volume: 1.0,
                 points: m.len(),
                 repairable: true,
+                measured_share: 1.0,
+                touches_unmeasured: false,
             }
         })
         .collect();

@@ -94,6 +94,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
             registration_error: None,
             pose: None,
             core: None,
+            inspect_area: None,
             input: GeometryInput {
                 units: Some(crate::cloud::Units::Mm),
                 format: None,

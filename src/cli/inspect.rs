@@ -51,6 +51,11 @@ pub struct InspectArgs {
     /// reference.
     #[arg(long)]
     pub core: Option<PathBuf>,
+    /// The area to inspect: a mesh or cloud in the reference frame (a part of the
+    /// reference); the verdict needs `[regions] min_coverage` (default 95 %) of it measured
+    /// [default: the whole reference].
+    #[arg(long)]
+    pub inspect_area: Option<PathBuf>,
     #[command(flatten)]
     /// Units and format of the inputs.
     pub input: GeometryInput,
@@ -141,6 +146,11 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
     anyhow::ensure!(
         cfg.regions.tolerance.is_finite() && cfg.regions.tolerance >= 0.0,
         "--tolerance must be a non-negative number"
+    );
+    anyhow::ensure!(
+        (0.0..=1.0).contains(&cfg.regions.min_coverage),
+        "[regions] min_coverage must be a share between 0 and 1, not {}",
+        cfg.regions.min_coverage
     );
     // Region peaks are refined around the points that can become error points.
     cfg.compare.adaptive.refine_above = cfg.regions.tolerance;
@@ -242,13 +252,28 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     times.lap("core points");
     let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
     times.lap("compare");
-    let found = regions::find_regions(&dev, &cfg.regions);
+    let in_area = match &args.inspect_area {
+        Some(path) => Some(super::inspect_area::core_points_in(
+            path,
+            &args.input,
+            &dev,
+        )?),
+        None => None,
+    };
+    let found = regions::find_regions_in(&dev, &cfg.regions, in_area.as_deref());
     times.lap("regions");
     write_outputs(&args.out, &dev, &found, report_summary)?;
     times.lap("files and report");
     print_summary(&dev, &found, start.elapsed().as_secs_f64());
     println!("times: {}", times.line());
-    Ok(())
+    match found.verdict {
+        regions::Verdict::Incomplete => Err(super::inspect_report::Incomplete {
+            coverage: found.coverage,
+            min_coverage: found.min_coverage,
+        }
+        .into()),
+        _ => Ok(()),
+    }
 }
 
 /// The core points (from `--core`, or a sample of the reference) and the report's line on
@@ -301,6 +326,9 @@ fn write_outputs(
     report_summary: Vec<(String, String)>,
 ) -> Result<()> {
     let table = compare::to_cloud(dev, &found.labels);
+    // deviations.csv keeps its columns (a contract); the PLY also maps what was measured.
+    let mut ply_table = table.clone();
+    compare::add_coverage_fields(dev, &mut ply_table);
     let write_regions = || -> Result<()> {
         let text = serde_json::to_string_pretty(found)?;
         let path = out.join("regions.json");
@@ -310,7 +338,10 @@ fn write_outputs(
         || {
             rayon::join(
                 || cloud::write_csv(&out.join("deviations.csv"), &table),
-                || cloud::write_ply(&out.join("deviations.ply"), &table, None, PlyPrecision::F64),
+                || {
+                    let path = out.join("deviations.ply");
+                    cloud::write_ply(&path, &ply_table, None, PlyPrecision::F64)
+                },
             )
         },
         || {
@@ -369,8 +400,8 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
         seconds
     );
     println!(
-        "{:>6} {:>10} {:>10} {:>11} {:>7}  kind",
-        "region", "peak mm", "area mm2", "volume mm3", "points"
+        "{:>6} {:>10} {:>10} {:>11} {:>7} {:>9}  kind",
+        "region", "peak mm", "area mm2", "volume mm3", "points", "measured"
     );
     for r in &found.regions {
         let kind = if r.repairable {
@@ -379,17 +410,21 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
             "pit (not repairable)"
         };
         println!(
-            "{:>6} {:>10} {:>10.3} {:>11.5} {:>7}  {kind}",
+            "{:>6} {:>10} {:>10.3} {:>11.5} {:>7} {:>6.1} %{} {kind}",
             r.id,
             super::inspect_report::peak_text(r),
             r.area,
             r.volume,
-            r.points
+            r.points,
+            100.0 * r.measured_share,
+            super::inspect_report::touch_mark(r),
         );
     }
     if found.regions.iter().any(|r| r.peak_lower_bound) {
         println!("* {}", super::inspect_report::LOWER_BOUND_NOTE);
     }
-    let verdict = super::inspect_report::verdict_text(found.verdict);
-    println!("verdict: {verdict} ({} regions)", found.regions.len());
+    if found.regions.iter().any(|r| r.touches_unmeasured) {
+        println!("† {}", super::inspect_report::UNMEASURED_NOTE);
+    }
+    println!("verdict: {}", super::inspect_report::verdict_line(found));
 }

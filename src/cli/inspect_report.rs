@@ -13,6 +13,66 @@ pub fn verdict_text(v: Verdict) -> &'static str {
         Verdict::WithinTolerance => "within tolerance",
         Verdict::Repairable => "repairable",
         Verdict::Reject => "reject",
+        Verdict::Incomplete => "incomplete",
+    }
+}
+
+/// The verdict line: the verdict, the number of regions and the measured share of the area
+/// to inspect beside it ("within tolerance" holds over the measured part only).
+pub fn verdict_line(found: &Regions) -> String {
+    let unmeasured = 100.0 * (1.0 - found.coverage);
+    let why = match found.verdict {
+        Verdict::Incomplete => format!(
+            ", below the {:.1} % needed for a verdict",
+            100.0 * found.min_coverage
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "{} ({} regions; measured {:.1} % of the area to inspect, {unmeasured:.1} % not \
+         measured{why})",
+        verdict_text(found.verdict),
+        found.regions.len(),
+        100.0 * found.coverage,
+    )
+}
+
+/// Exit code of `inspect` when the verdict is incomplete (1 is an error, 2 a usage error).
+pub const INCOMPLETE_EXIT: u8 = 3;
+
+/// The error `inspect` ends with when the verdict is incomplete (exit [`INCOMPLETE_EXIT`]).
+#[derive(Debug)]
+pub struct Incomplete {
+    /// Measured share of the area to inspect.
+    pub coverage: f64,
+    /// Share needed for a verdict.
+    pub min_coverage: f64,
+}
+
+impl std::fmt::Display for Incomplete {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "inspect: verdict incomplete: measured {:.1} % of the area to inspect, below the \
+             {:.1} % needed ([regions] min_coverage)",
+            100.0 * self.coverage,
+            100.0 * self.min_coverage
+        )
+    }
+}
+
+impl std::error::Error for Incomplete {}
+
+/// What a region marked `†` ([`Region::touches_unmeasured`]) means.
+pub const UNMEASURED_NOTE: &str = "touches an unmeasured area (a hole or the border of the \
+     scan): the defect may extend into it, so its peak, area and volume are lower bounds";
+
+/// `†` for a region touching an unmeasured area, else a space.
+pub fn touch_mark(r: &Region) -> char {
+    if r.touches_unmeasured {
+        '†'
+    } else {
+        ' '
     }
 }
 
@@ -41,14 +101,7 @@ pub fn write(
     summary.splice(
         0..0,
         [
-            (
-                "verdict".to_string(),
-                format!(
-                    "{} ({} regions)",
-                    verdict_text(found.verdict),
-                    found.regions.len()
-                ),
-            ),
+            ("verdict".to_string(), verdict_line(found)),
             ("tolerance".to_string(), format!("{} mm", found.tolerance)),
             ("method".to_string(), format!("{:?} M3C2", dev.method)),
             ("core points".to_string(), dev.summary()),
@@ -71,6 +124,7 @@ pub fn write(
                 format!("{:.3}", r.area),
                 format!("{:.5}", r.volume),
                 r.points.to_string(),
+                format!("{:.1} %{}", 100.0 * r.measured_share, touch_mark(r)),
                 format!(
                     "{:.2}, {:.2}, {:.2}",
                     r.centroid[0], r.centroid[1], r.centroid[2]
@@ -81,6 +135,13 @@ pub fn write(
     if found.regions.iter().any(|r| r.peak_lower_bound) {
         summary.push(("peaks marked *".to_string(), LOWER_BOUND_NOTE.to_string()));
     }
+    if found.regions.iter().any(|r| r.touches_unmeasured) {
+        summary.push(("regions marked †".to_string(), UNMEASURED_NOTE.to_string()));
+    }
+    summary.push((
+        "not measured".to_string(),
+        "grey in the colour map: no distance (a hole or the border of the scan)".to_string(),
+    ));
     let header = [
         "id",
         "kind",
@@ -89,6 +150,7 @@ pub fn write(
         "area mm²",
         "volume mm³",
         "points",
+        "measured around",
         "centroid mm",
     ];
     let input = ReportInput {

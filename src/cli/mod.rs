@@ -12,6 +12,7 @@ mod demo;
 mod filter;
 mod info;
 mod inspect;
+mod inspect_area;
 mod inspect_checks;
 mod inspect_report;
 mod merge;
@@ -77,6 +78,10 @@ pub fn main() -> ExitCode {
     init_tracing();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(err) if err.is::<inspect_report::Incomplete>() => {
+            eprintln!("polishbot: {err}");
+            ExitCode::from(inspect_report::INCOMPLETE_EXIT)
+        }
         Err(err) => {
             eprintln!("polishbot: {}", one_line(&err));
             ExitCode::FAILURE

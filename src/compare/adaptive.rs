@@ -16,6 +16,7 @@ use anyhow::{ensure, Result};
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
+use super::cover::{cover_radius2, filled, Sectors};
 use super::densify::densify;
 use super::fill::{fill, fit_window, gather_window, Model, ModelScratch};
 use super::fit::{fit, student_t95, FitScratch, Local};
@@ -121,6 +122,8 @@ struct RefSlot {
     normal: Vector3<f64>,
     /// RWME terms: w = exp(-|δ|/h) and w·|δ| (NaN when δ is: unscanned surface).
     terms: [f64; 2],
+    /// A scan point lies within the cover radius of the point (`cover.rs`).
+    covered: bool,
 }
 
 /// The candidate radii: the configured ones, or r0·√2^k for k = 0..4 with `r0` the radius
@@ -155,6 +158,8 @@ pub(super) struct Scratch {
     knn: Vec<(f64, u32)>,
     /// Reference points around a core point whose peak is refined.
     near: Vec<usize>,
+    /// Both clouds' points per sector of the annulus (`cover.rs`).
+    sectors: Sectors,
 }
 
 /// Reference points within a candidate radius ([`gather`] counts each in the ring between
@@ -163,6 +168,8 @@ pub(super) struct Scratch {
 struct Ring {
     /// Points whose normal agrees with the core point's.
     count: usize,
+    /// Of those, the ones no scan point covers (`cover.rs`).
+    uncovered: usize,
     /// Of those, the scanned ones (finite δ) and the sums of their RWME terms.
     scanned: f64,
     sum_w: f64,
@@ -212,7 +219,11 @@ pub fn run(
         halo,
         |j, found| pairing.pair(&clouds.scan.points[j], found),
     );
-    let delta = one_sided_distances(clouds, ref_normals, &nearest, cos_limit, reach);
+    let cover2 = cover_radius2(clouds.scan_density);
+    let (delta, covered): (Vec<f64>, Vec<bool>) =
+        one_sided_distances(clouds, ref_normals, &nearest, cos_limit, reach, cover2)
+            .into_iter()
+            .unzip();
     let noise = match a.noise {
         Some(s) => s,
         None => robust_sd(&delta),
@@ -227,6 +238,7 @@ pub fn run(
             RefSlot {
                 normal: ref_normals[i as usize],
                 terms: [w, w * d],
+                covered: covered[i as usize],
             }
         })
         .collect();
@@ -515,7 +527,8 @@ impl Pairing<'_> {
 /// within `reach`, paired with a reference point whose normal is within the normal filter's
 /// angle of its own: `nearest` per scan point, [`Pairing`]) closest to its normal line; NaN
 /// when there is none (unscanned surface: left out of the similarity and of the noise
-/// estimate). Beside a sharp edge the nearest scan points of a reference point are often the
+/// estimate). With it, whether any of those scan points (of any face) lies within `cover2`
+/// (squared) of the point's normal line (`cover.rs`). Beside a sharp edge the nearest scan points of a reference point are often the
 /// other face's, 0.05-0.2 mm off its tangent plane, which would make a perfect match look
 /// like a defect.
 fn one_sided_distances(
@@ -524,7 +537,8 @@ fn one_sided_distances(
     nearest: &[Option<(Vector3<f64>, f64)>],
     cos_limit: f64,
     reach: f64,
-) -> Vec<f64> {
+    cover2: f64,
+) -> Vec<(f64, bool)> {
     let scan = &clouds.scan.points;
     let halo = clouds
         .scan_grid
@@ -550,7 +564,15 @@ fn one_sided_distances(
                     best = (across, t);
                 }
             }
-            best.1
+            // Covered across the normal only: under a defect taller than the cover radius the
+            // scan lies that far off along the normal (dense scans: the 1.2M suite's RMS went
+            // NaN with the 3-D distance).
+            let covered = found.iter().any(|&(_, j)| {
+                let d = scan[j as usize] - x;
+                let t = d.dot(n);
+                d.norm_squared() - t * t <= cover2
+            });
+            (best.1, covered)
         },
     )
 }
@@ -621,12 +643,22 @@ fn gather(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, s: &mut Scratch) {
     s.rings.clear();
     s.rings.resize(radii2.len(), Ring::default());
     let rings = &mut s.rings;
+    let (e1, e2) = tangent_frame(n);
+    // The sectors' annulus starts at half the smallest radius.
+    let inner2 = 0.25 * radii2[0];
+    let sectors = &mut s.sectors;
+    *sectors = Sectors::default();
     c.ref_grid
         .near_axis(p, n, r_max, prep.half_length, |slot, _, rho2| {
             let x = &prep.ref_slots[slot];
             if x.normal.dot(n) >= prep.cos_limit {
+                if rho2 >= inner2 {
+                    let d = Vector3::from(*c.ref_grid.slot_point(slot)) - p.coords;
+                    sectors.add(d.dot(&e1), d.dot(&e2), false);
+                }
                 let ring = &mut rings[ring_of(radii2, rho2)];
                 ring.count += 1;
+                ring.uncovered += usize::from(!x.covered);
                 if !x.terms[0].is_nan() {
                     ring.scanned += 1.0;
                     ring.sum_w += x.terms[0];
@@ -638,15 +670,19 @@ fn gather(prep: &Prepared, p: &Point3<f64>, n: &Vector3<f64>, s: &mut Scratch) {
         let below = rings[k - 1];
         let ring = &mut rings[k];
         ring.count += below.count;
+        ring.uncovered += below.uncovered;
         ring.scanned += below.scanned;
         ring.sum_w += below.sum_w;
         ring.sum_wd += below.sum_wd;
     }
-    let (e1, e2) = tangent_frame(n);
     let tagged = &mut s.tagged;
     tagged.clear();
     scan_pairs(prep, p, n, r_max, &mut s.knn, |rho2, d, pair| {
-        tagged.push((ring_of(radii2, rho2), [d.dot(&e1), d.dot(&e2), pair]));
+        let (u, v) = (d.dot(&e1), d.dot(&e2));
+        if rho2 >= inner2 {
+            sectors.add(u, v, true);
+        }
+        tagged.push((ring_of(radii2, rho2), [u, v, pair]));
     });
     s.within.clear();
     s.within.resize(radii2.len(), 0);
@@ -715,10 +751,29 @@ pub(super) fn at(
         pairs,
         within,
         fit: fit_scratch,
+        sectors,
         ..
     } = scratch;
     let radii = &prep.radii;
     let min = cfg.min_points.max(1);
+    // The scan on one side of the core point only (`cover.rs`): no distance.
+    let unscanned = match within[0] {
+        0 => Reason::FewScan,
+        _ => Reason::ScanBorder,
+    };
+    if sectors.one_sided() {
+        return Deviation::missing(unscanned, radii[0], rings[0].count, within[0]);
+    }
+    // Only radii whose disc the scan fills count (`cover.rs`; a disc with fewer than
+    // min_points reference points cannot be judged): a prefix of the radii, as a disc the
+    // scan does not fill is mostly within the next one; none at a scan border.
+    let usable = (0..radii.len())
+        .take_while(|&j| rings[j].count < min || filled(rings[j].count, rings[j].uncovered))
+        .count();
+    if usable == 0 {
+        return Deviation::missing(unscanned, radii[0], rings[0].count, within[0]);
+    }
+    let radii = &radii[..usable];
     // Grow through the radii while every one so far is similar (stay at the smallest when
     // it is not); then further only as far as needed to hold min_points each.
     let mut k = 0;

@@ -16,7 +16,7 @@ use super::adaptive::{at, summits, tangent_frame, Prepared, Scratch};
 use super::fill::{fit_window, gather_window, model_result, Model, ModelScratch};
 use super::fit::student_t95;
 use super::peakfit::{height_limit, PeakFit};
-use super::{CompareConfig, Deviation};
+use super::{CompareConfig, Deviation, Reason};
 
 /// A summit's cylinder must hold at least this share of the reference points a full disc of
 /// its radius holds: fits through the few points of a narrow face or a strip beside an edge
@@ -130,12 +130,18 @@ pub(super) fn densify(
         })
         .collect();
     let (values, models) = modelled(prep, &is_candidate, shallow, cfg);
+    // Where the scan does not fill a cylinder (a scan border: `cover.rs`) the point keeps
+    // its missing value: a model's flank there reaches beyond the data.
+    let mut scratch = Scratch::default();
     for (j, value) in values {
         match position.get(&j) {
+            Some(&k) if unscanned(&added[k]) => {}
             Some(&k) => added[k] = value,
             None => {
+                let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
+                let own = at(prep, x, n, cfg, &mut scratch);
                 extra.push(j);
-                added.push(value);
+                added.push(if unscanned(&own) { own } else { value });
             }
         }
     }
@@ -145,6 +151,12 @@ pub(super) fn densify(
         models,
     };
     (points, added)
+}
+
+/// Whether a cylinder result says the scan does not cover its core point (a hole or a scan
+/// border).
+fn unscanned(v: &Deviation) -> bool {
+    matches!(v.reason, Reason::FewScan | Reason::ScanBorder)
 }
 
 /// Whether reference point `j` may become a core point around a centre with normal `n`: its

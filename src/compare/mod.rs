@@ -7,6 +7,7 @@
 mod adaptive;
 mod classic;
 mod core;
+mod cover;
 mod densify;
 mod fill;
 mod fit;
@@ -173,7 +174,8 @@ pub enum Reason {
     Ok,
     /// Fewer than `min_points` reference points in the cylinder.
     FewReference,
-    /// Fewer than `min_points` scan points in the cylinder.
+    /// Fewer than `min_points` scan points in the cylinder (adaptive: none in the smallest
+    /// disc, which the scan does not fill): a hole in the scan, or surface it did not see.
     FewScan,
     /// The distance is the height of a peak model fitted to a defect: around the top of a
     /// defect that the cylinders cannot resolve (adaptive densification), or inside a defect
@@ -184,11 +186,17 @@ pub enum Reason {
     /// point nearest its normal line: under a defect narrower than a peak model can pin
     /// (adaptive densification); `radius` 0, `n_ref` and `n_scan` 1.
     PointPair,
+    /// Adaptive only: the scan lies on one side of the core point (135° of the annulus
+    /// around it hold reference points but no scan point), or fills not even the smallest
+    /// disc, though that disc holds scan points: the border of the scan or of a hole in it.
+    /// A cylinder there sees the surface on one side only, and its fit extrapolates to the
+    /// core point (`FewScan` when the smallest disc holds no scan point).
+    ScanBorder,
 }
 
 impl Reason {
-    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points, 3 peak model,
-    /// 4 point pair.
+    /// Numeric code for files: 0 ok, 1 few reference points, 2 few scan points (a hole),
+    /// 3 peak model, 4 point pair, 5 scan border.
     pub fn code(self) -> u8 {
         match self {
             Reason::Ok => 0,
@@ -196,6 +204,7 @@ impl Reason {
             Reason::FewScan => 2,
             Reason::PeakModel => 3,
             Reason::PointPair => 4,
+            Reason::ScanBorder => 5,
         }
     }
 }
@@ -533,6 +542,15 @@ pub fn to_cloud(dev: &Deviations, region: &[i64]) -> PointCloud {
     cloud.set_field("n_scan", col(&|d| d.n_scan as f64));
     cloud.set_field("region", region.iter().map(|&r| r as f64).collect());
     cloud
+}
+
+/// Adds deviations.ply's coverage fields to `cloud` (the rows of `dev`): `measured` (1 where
+/// the core point got a distance, 0 where not: a hole, a scan border, no reference) and
+/// `reason` ([`Reason::code`]).
+pub fn add_coverage_fields(dev: &Deviations, cloud: &mut PointCloud) {
+    let col = |f: &dyn Fn(&Deviation) -> f64| dev.values.iter().map(f).collect::<Vec<f64>>();
+    cloud.set_field("measured", col(&|d| d.distance.is_finite() as u8 as f64));
+    cloud.set_field("reason", col(&|d| d.reason.code() as f64));
 }
 
 #[cfg(test)]

@@ -7,7 +7,13 @@
 //! above tolerance is Σ share × (|distance| - tolerance). Material in excess (distance > 0)
 //! can be ground away: repairable; pits cannot.
 //!
-//! Front: [`find_regions`].
+//! Coverage: the share of the area to inspect (by the core points' area shares) whose core
+//! points got a distance; below `min_coverage` the verdict is [`Verdict::Incomplete`]. Per
+//! region, the measured share of its neighbourhood (the core points within the connection
+//! distance of a member) and whether an unmeasured core point lies in it (then its peak and
+//! area are lower bounds).
+//!
+//! Front: [`find_regions_in`] ([`find_regions`]: the whole reference is to be inspected).
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -27,6 +33,9 @@ pub struct RegionConfig {
     /// its LoD (a defect too narrow for this many core points to read it beyond the
     /// tolerance).
     pub min_points: usize,
+    /// Least share of the area to inspect that must be measured for a verdict; below it the
+    /// verdict is `incomplete` (default 0.95).
+    pub min_coverage: f64,
 }
 
 impl Default for RegionConfig {
@@ -35,6 +44,7 @@ impl Default for RegionConfig {
             tolerance: 0.05,
             gap_factor: 2.5,
             min_points: 3,
+            min_coverage: 0.95,
         }
     }
 }
@@ -66,6 +76,21 @@ pub struct Region {
     pub points: usize,
     /// Material in excess (grinding can fix it); false for pits.
     pub repairable: bool,
+    /// Share of the region's neighbourhood (the core points within the connection distance
+    /// `gap` of a member, by area) that was measured. Absent in files from before
+    /// 2026-12-02: 1.
+    #[serde(default = "full")]
+    pub measured_share: f64,
+    /// An unmeasured core point (a hole or scan border) lies in the neighbourhood: the
+    /// defect may extend into it, so `peak`, `area` and `volume` are lower bounds. Absent in
+    /// files from before 2026-12-02: false.
+    #[serde(default)]
+    pub touches_unmeasured: bool,
+}
+
+/// The default of shares that older files do not have: all of it.
+fn full() -> f64 {
+    1.0
 }
 
 /// What the regions mean for the part.
@@ -78,6 +103,9 @@ pub enum Verdict {
     Repairable,
     /// At least one pit.
     Reject,
+    /// Less of the area to inspect was measured than `min_coverage`: no verdict (the
+    /// regions found in the measured part are still listed).
+    Incomplete,
 }
 
 /// The regions of a comparison.
@@ -91,6 +119,13 @@ pub struct Regions {
     pub gap: f64,
     /// Overall verdict.
     pub verdict: Verdict,
+    /// Share of the area to inspect (by area) whose core points got a distance. Absent in
+    /// files from before 2026-12-02: 1.
+    #[serde(default = "full")]
+    pub coverage: f64,
+    /// Least coverage for a verdict (`min_coverage`). Absent in older files: 0.
+    #[serde(default)]
+    pub min_coverage: f64,
     /// The regions, largest volume first.
     pub regions: Vec<Region>,
     /// Region id per core point (-1 = none).
@@ -127,8 +162,15 @@ fn shares(points: &[Point3<f64>]) -> (Vec<f64>, f64) {
     (share, spacing)
 }
 
-/// Clusters the error points of `dev` into regions.
+/// [`find_regions_in`] with the whole reference as the area to inspect.
 pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
+    find_regions_in(dev, cfg, None)
+}
+
+/// Clusters the error points of `dev` into regions, measures the coverage of the area to
+/// inspect (`in_area`: per core point of `dev`, whether it lies in that area; None: all) and
+/// gives the verdict.
+pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[bool]>) -> Regions {
     let (share, spacing) = shares(&dev.points);
     let gap = cfg.gap_factor * spacing;
     let errors: Vec<usize> = (0..dev.values.len())
@@ -165,8 +207,16 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
         region.id = id;
         members.iter().for_each(|&i| labels[i] = id as i64);
     }
+    if !regions.is_empty() {
+        neighbourhoods(dev, &share, gap, &mut regions);
+    }
     let regions: Vec<Region> = regions.into_iter().map(|r| r.0).collect();
-    let verdict = if regions.is_empty() {
+    let coverage = coverage(dev, &share, in_area);
+    // A NaN minimum gives no verdict either.
+    let enough = coverage >= cfg.min_coverage;
+    let verdict = if !enough {
+        Verdict::Incomplete
+    } else if regions.is_empty() {
         Verdict::WithinTolerance
     } else if regions.iter().all(|r| r.repairable) {
         Verdict::Repairable
@@ -178,8 +228,59 @@ pub fn find_regions(dev: &Deviations, cfg: &RegionConfig) -> Regions {
         spacing,
         gap,
         verdict,
+        coverage,
+        min_coverage: cfg.min_coverage,
         regions,
         labels,
+    }
+}
+
+/// Whether core point `i` got a distance.
+fn measured(dev: &Deviations, i: usize) -> bool {
+    dev.values[i].distance.is_finite()
+}
+
+/// The measured share, by area (`share` per core point), of the core points in the area to
+/// inspect (`in_area`; None: all); 0 when the area holds none.
+fn coverage(dev: &Deviations, share: &[f64], in_area: Option<&[bool]>) -> f64 {
+    let inside = |i: &usize| in_area.is_none_or(|a| a[*i]);
+    let (mut total, mut seen) = (0.0, 0.0);
+    for i in (0..dev.values.len()).filter(inside) {
+        total += share[i];
+        if measured(dev, i) {
+            seen += share[i];
+        }
+    }
+    match total > 0.0 {
+        true => seen / total,
+        false => 0.0,
+    }
+}
+
+/// Sets each region's `measured_share` and `touches_unmeasured` from its neighbourhood: the
+/// core points within `gap` of a member (`share`: their areas).
+fn neighbourhoods(dev: &Deviations, share: &[f64], gap: f64, regions: &mut [(Region, Vec<usize>)]) {
+    let index = Neighbours::new(&dev.points);
+    let mut near = vec![false; dev.points.len()];
+    for (region, members) in regions.iter_mut() {
+        let mut hood: Vec<usize> = Vec::new();
+        for &m in members.iter() {
+            for nb in index.within_unsorted(&dev.points[m], gap) {
+                if !near[nb.index] {
+                    near[nb.index] = true;
+                    hood.push(nb.index);
+                }
+            }
+        }
+        let total: f64 = hood.iter().map(|&i| share[i]).sum();
+        let seen: f64 = hood
+            .iter()
+            .filter(|&&i| measured(dev, i))
+            .map(|&i| share[i])
+            .sum();
+        region.measured_share = if total > 0.0 { seen / total } else { 1.0 };
+        region.touches_unmeasured = hood.iter().any(|&i| !measured(dev, i));
+        hood.iter().for_each(|&i| near[i] = false);
     }
 }
 
@@ -240,6 +341,8 @@ fn describe(dev: &Deviations, members: &[usize], share: &[f64], tolerance: f64) 
             .sum(),
         points: members.len(),
         repairable: peak > 0.0,
+        measured_share: 1.0,
+        touches_unmeasured: false,
     }
 }
 

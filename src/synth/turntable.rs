@@ -33,6 +33,10 @@ pub struct TurntableConfig {
     pub points_per_view: usize,
     /// Image-plane cell of the visibility test, mm (default 0.3).
     pub occlusion_cell: f64,
+    /// Noise along the line of sight only (one Gaussian of the case's `noise` per point,
+    /// towards the scanner), as a triangulation or time-of-flight scanner has it, instead of
+    /// the default's independent noise on each coordinate (default false).
+    pub line_of_sight_noise: bool,
 }
 
 impl Default for TurntableConfig {
@@ -46,6 +50,7 @@ impl Default for TurntableConfig {
             scanner_direction: [0.0, -1.0, 0.35],
             points_per_view: 100_000,
             occlusion_cell: 0.3,
+            line_of_sight_noise: false,
         }
     }
 }
@@ -178,7 +183,10 @@ pub fn turntable_views(
         }
         let view_points = keep
             .iter()
-            .map(|&k| points[k] + Vector3::new(gauss(rng), gauss(rng), gauss(rng)) * noise)
+            .map(|&k| match cfg.line_of_sight_noise {
+                true => points[k] + towards_scanner * (gauss(rng) * noise),
+                false => points[k] + Vector3::new(gauss(rng), gauss(rng), gauss(rng)) * noise,
+            })
             .collect();
         views.push(PointCloud::from_points(view_points));
         let first_table = *first.get_or_insert(table);
