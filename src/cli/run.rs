@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use serde::Deserialize;
 
-use super::settings::{self, ConfigFile};
 use super::arm::DeviceArgs;
+use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transport};
 use crate::plan::execute::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
