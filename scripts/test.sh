@@ -13,8 +13,8 @@ cargo build -q -p dofbot-protocol --no-default-features --release
 echo "== fuzz the reply decoder (cargo-fuzz, 30 s)"
 command -v cargo-fuzz >/dev/null 2>&1 || cargo install -q --locked cargo-fuzz
 (cd firmware-protocol && RUSTC_BOOTSTRAP=1 cargo fuzz run reply_decoder -- -max_total_time=30 -seed=1)
-echo "== fuzz the geometry readers (cargo-fuzz, 5 s each)"
-for target in ply stl obj off pcd xyz; do
+echo "== fuzz the geometry readers, the journal and the config loader (cargo-fuzz, 5 s each)"
+for target in ply stl obj off pcd xyz journal config; do
   mkdir -p "fuzz/corpus/$target"
   (cd fuzz && RUSTC_BOOTSTRAP=1 cargo fuzz run -s none -a "$target" "corpus/$target" "seeds/$target" -- -max_total_time=5 -seed=1)
 done

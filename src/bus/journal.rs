@@ -184,6 +184,12 @@ impl ResumePoint {
         File::open(path)
             .and_then(|f| f.take(meta.len()).read_to_end(&mut bytes))
             .map_err(|e| journal_err(path, e))?;
+        ResumePoint::parse(path, &bytes)
+    }
+
+    /// Reads a journal's bytes; `path` names it in errors. The rules of
+    /// [`ResumePoint::from_journal`] (which reads the file and calls this).
+    pub fn parse(path: &Path, bytes: &[u8]) -> Result<ResumePoint, BusError> {
         let complete = bytes.ends_with(b"\n");
         let lines: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
         let mut rp = ResumePoint::default();

@@ -76,7 +76,10 @@ pub fn run(args: FilterArgs, config: Option<&std::path::Path>) -> anyhow::Result
         c.feature_angle_deg = args.feature_angle.unwrap_or(c.feature_angle_deg);
         c.uniform_ratio = args.uniform_ratio.unwrap_or(c.uniform_ratio);
     }
-    super::settings::check_filter(&file, "sor", &cfg.sor, cfg.voxel_mm)?;
+    // a --voxel flag is checked against the cloud it thins (preprocess's check_voxel names
+    // the flag and the file); a config's voxel_mm here, with its line
+    let config_voxel = cfg.voxel_mm.filter(|_| args.voxel.is_none());
+    super::settings::check_filter(&file, "sor", &cfg.sor, config_voxel)?;
     let input = cloud::load_cloud(&args.input, args.geometry.format, args.geometry.units)?;
     let done = preprocess(&input, &cfg).with_context(|| args.input.display().to_string())?;
     cloud::write_ply(&args.output, &done.cloud, None, PlyPrecision::F64)?;

@@ -19,7 +19,7 @@ mod merge;
 mod plan;
 mod register;
 mod run;
-mod settings;
+pub mod settings;
 mod synth;
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.

@@ -104,6 +104,14 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
                 r.id, r.peak_mm
             );
         }
+        if r.touches_unmeasured {
+            println!(
+                "plan: warning: region {}: it touches an unmeasured area of the scan, so its peak \
+                 {:+.4} mm and area are lower bounds and part of it may be unplanned; scan that \
+                 area and inspect again",
+                r.id, r.peak_mm
+            );
+        }
     }
     if let Some(u) = plan.reachability.unreachable.first() {
         println!(

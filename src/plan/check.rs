@@ -143,6 +143,7 @@ pub fn region_report(
         repairable: region.repairable,
         peak_mm: region.peak,
         peak_lower_bound: region.peak_lower_bound,
+        touches_unmeasured: region.touches_unmeasured,
         area_mm2: region.area,
         layers,
         path_points,

@@ -48,6 +48,10 @@ pub struct RegionReport {
     /// Absent in plans from before 2026-12-01: false.
     #[serde(default)]
     pub peak_lower_bound: bool,
+    /// regions.json says the region touches an unmeasured area (a hole or the scan's border):
+    /// its peak and area are lower bounds. Absent in plans from before 2026-12-02: false.
+    #[serde(default)]
+    pub touches_unmeasured: bool,
     /// Area, mm^2.
     pub area_mm2: f64,
     /// Depth layers planned.
