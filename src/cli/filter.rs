@@ -54,6 +54,9 @@ pub struct FilterArgs {
 pub fn run(args: FilterArgs, config: Option<&std::path::Path>) -> anyhow::Result<()> {
     let file = super::settings::ConfigFile::read(config)?;
     let mut cfg: PreprocessConfig = file.parse()?;
+    // the config file's values, with their lines; the flags over them are checked by the
+    // stage against the cloud (sor::check, preprocess's check_voxel, naming the file)
+    super::settings::check_filter(&file, "sor", &cfg.sor, cfg.voxel_mm)?;
     if let Some(k) = args.k {
         cfg.sor.k = k;
     }
@@ -76,10 +79,6 @@ pub fn run(args: FilterArgs, config: Option<&std::path::Path>) -> anyhow::Result
         c.feature_angle_deg = args.feature_angle.unwrap_or(c.feature_angle_deg);
         c.uniform_ratio = args.uniform_ratio.unwrap_or(c.uniform_ratio);
     }
-    // a --voxel flag is checked against the cloud it thins (preprocess's check_voxel names
-    // the flag and the file); a config's voxel_mm here, with its line
-    let config_voxel = cfg.voxel_mm.filter(|_| args.voxel.is_none());
-    super::settings::check_filter(&file, "sor", &cfg.sor, config_voxel)?;
     let input = cloud::load_cloud(&args.input, args.geometry.format, args.geometry.units)?;
     let done = preprocess(&input, &cfg).with_context(|| args.input.display().to_string())?;
     cloud::write_ply(&args.output, &done.cloud, None, PlyPrecision::F64)?;

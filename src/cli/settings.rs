@@ -220,9 +220,8 @@ pub fn check_link(
     Ok(())
 }
 
-/// Most neighbours per point of the statistical outlier filter: its work is points × k, and
-/// Open3D's examples use 20..50.
-const MAX_SOR_K: f64 = 500.0;
+/// Most neighbours per point of the statistical outlier filter (the stage's own bound).
+const MAX_SOR_K: f64 = crate::preprocess::MAX_SOR_K as f64;
 /// Largest |λ| of the outlier filter, standard deviations.
 const MAX_STD_RATIO: f64 = 100.0;
 /// Smallest and largest voxel edge, mm (below a micrometre a voxel holds one point of any

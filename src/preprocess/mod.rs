@@ -13,5 +13,6 @@ pub use normals::{estimate_normals, pca_normal, NormalConfig, NormalEstimate, Or
 pub use pipeline::{preprocess, PreprocessConfig, Preprocessed};
 pub use sor::{
     check_coordinates, mean_distances, statistical_outlier_filter, SorConfig, SorResult,
+    MAX_K as MAX_SOR_K,
 };
 pub use voxel::{check_voxel, mean_spacing, mean_spacing_in, voxel_downsample, MAX_VOXELS_ACROSS};

@@ -55,6 +55,10 @@ impl SorResult {
     }
 }
 
+/// Most neighbours per point: the filter's work and memory grow as points × k, and Open3D's
+/// examples use 20..50; a k of thousands on a million points would allocate gigabytes.
+pub const MAX_K: usize = 500;
+
 /// Checks the settings against a cloud of `n` points, with a one-line reason.
 pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
     if n == 0 {
@@ -66,6 +70,12 @@ pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
     if cfg.k >= n {
         bail!(
             "outlier filter: k = {} needs more points than the cloud's {n}",
+            cfg.k
+        );
+    }
+    if cfg.k > MAX_K {
+        bail!(
+            "outlier filter: k = {} is more than {MAX_K} neighbours (the work and memory grow as points × k)",
             cfg.k
         );
     }
