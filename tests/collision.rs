@@ -3,8 +3,6 @@
 //! reference point (no index, no tangent planes), and the tool and cell from their files.
 mod common;
 
-use std::path::{Path, PathBuf};
-
 use nalgebra::{Isometry3, Matrix4, Point3, Translation3, UnitQuaternion, Vector3};
 use polishbot::plan::{
     plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind, Solid,
@@ -12,20 +10,7 @@ use polishbot::plan::{
 };
 use polishbot::robot::{Robot, Workcell};
 
-fn calib(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("calibration")
-        .join(name)
-}
-
-fn dofbot() -> Robot {
-    Robot::load(
-        &calib("dofbot.urdf"),
-        &calib("tool.toml"),
-        &calib("servos.toml"),
-    )
-    .expect("calibration")
-}
+use common::{calib, dofbot};
 
 /// The joint table of DOFBOT.md (origin xyz, origin rpy, axis), pi/2 in full precision.
 const JOINTS: [([f64; 3], [f64; 3], [f64; 3]); 5] = {

@@ -2,7 +2,7 @@
 //! official ruckig (PyPI), validation and servo-resolution error.
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use polishbot::plan::{
@@ -14,20 +14,7 @@ use polishbot::robot::{
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-fn calib(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("calibration")
-        .join(name)
-}
-
-fn dofbot() -> Robot {
-    Robot::load(
-        &calib("dofbot.urdf"),
-        &calib("tool.toml"),
-        &calib("servos.toml"),
-    )
-    .expect("load calibration")
-}
+use common::{calib, dofbot};
 
 fn random_q(robot: &Robot, rng: &mut ChaCha8Rng) -> Vec<f64> {
     robot

@@ -195,3 +195,20 @@ pub fn read_journal(path: &Path) -> Vec<polishbot::bus::Entry> {
     }
     entries
 }
+
+/// A file of the shipped cell (`calibration/` of the package).
+pub fn calib(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("calibration")
+        .join(name)
+}
+
+/// The shipped DOFBOT cell's robot (URDF, tool, servos).
+pub fn dofbot() -> polishbot::robot::Robot {
+    polishbot::robot::Robot::load(
+        &calib("dofbot.urdf"),
+        &calib("tool.toml"),
+        &calib("servos.toml"),
+    )
+    .expect("load calibration")
+}
