@@ -146,10 +146,11 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     settings::check_link(&file, &cfg.bus, &cfg.sim)?;
     check_run_settings(&file, &cfg.run)?;
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
-    let plan = Plan::load(&args.plan)?;
-    let sha = std::fs::read(&args.plan)
-        .map(|b| sha256_hex(&b))
+    // one read: the plan is parsed from the bytes its SHA-256 is taken of
+    let text = std::fs::read_to_string(&args.plan)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
+    let plan = Plan::parse(&args.plan, &text)?;
+    let sha = sha256_hex(text.as_bytes());
     let checked = plan
         .check(&robot, &cfg.validation)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;

@@ -33,7 +33,13 @@ impl Plan {
     pub fn load(path: &Path) -> Result<Plan, PlanError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| PlanError::input(path, "file", e.to_string()))?;
-        let plan: Plan = serde_json::from_str(&text).map_err(|e| {
+        Plan::parse(path, &text)
+    }
+
+    /// Parses a plan file's text; `path` names it in errors. The rules of [`Plan::load`]
+    /// (which reads the file and calls this), for callers that also need the bytes.
+    pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
+        let plan: Plan = serde_json::from_str(text).map_err(|e| {
             PlanError::input(
                 path,
                 format!("line {} column {}", e.line(), e.column()),
