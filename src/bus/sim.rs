@@ -31,6 +31,8 @@ pub struct SimOptions {
     pub mechanics: Mechanics,
     /// What the board answers a ping with: "none", "status" (default) or "id-status".
     pub ping_reply: PingReply,
+    /// The virtual part's grinding (`run --part`): the true removal law and mounting.
+    pub grinding: crate::grind_sim::GrindConfig,
 }
 
 impl Default for SimOptions {
@@ -42,6 +44,7 @@ impl Default for SimOptions {
             faults: Faults::default(),
             mechanics: Mechanics::default(),
             ping_reply: PingReply::default(),
+            grinding: crate::grind_sim::GrindConfig::default(),
         }
     }
 }

@@ -122,6 +122,8 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
             dry_run: false,
             resume: None,
             journal: Some(out.join("journal.jsonl")),
+            part: None,
+            ground_out: None,
         },
         None,
     )?;
@@ -134,7 +136,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+pub(super) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     serde_json::from_str(&text)

@@ -10,6 +10,7 @@ mod arm;
 mod calibrate;
 mod demo;
 mod filter;
+mod grind;
 mod info;
 mod inspect;
 mod inspect_area;

@@ -31,6 +31,14 @@ pub struct RunArgs {
     /// Journal file [default: journal.jsonl next to the plan, or the --resume file].
     #[arg(long, value_name = "FILE")]
     pub journal: Option<PathBuf>,
+    /// With --sim: the part the simulated arm grinds, a point cloud in the frame of the scan
+    /// the plan's inspection registered (e.g. that scan.ply).
+    #[arg(long, value_name = "FILE", requires = "ground_out")]
+    pub part: Option<PathBuf>,
+    /// With --part: write the ground part's rescan here (a valid `inspect` scan), and its
+    /// removal per point in <stem>_truth.ply beside it.
+    #[arg(long, value_name = "FILE", requires = "part")]
+    pub ground_out: Option<PathBuf>,
 }
 
 /// `--config` TOML of `run`: `[robot]`, `[run]`, `[bus]` (timing; the servo map always comes
@@ -170,6 +178,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let from = start_frame(args.resume.as_deref(), &sha, checked.frames.len())?;
     let journal_path = args
         .journal
+        .clone()
         .or(args.resume.clone())
         .unwrap_or_else(|| args.plan.with_file_name("journal.jsonl"));
     if args.resume.is_none() {
@@ -178,6 +187,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let mut bus_cfg = cfg.bus;
     bus_cfg.servo_map = frames::servo_map(&robot)?;
     bus_cfg.servo_map.validate()?;
+    let ground = ground(&args, &file, &cfg.sim, &inspection)?;
     if args.dry_run {
         println!(
             "run: dry run: {} passes, {} frames from frame {from}, {:.2} s at {} ms per frame; nothing sent",
@@ -191,6 +201,13 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let journal = Journal::append(&journal_path)?.for_plan(&sha);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
+    if let Some(ground) = ground {
+        let map = bus_cfg.servo_map.clone();
+        let arm = ground.arm(&map)?;
+        let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
+        stream(bus, &checked, &plan, from, &cfg.run, stop, &journal_path)?;
+        return ground.finish(&arm, &map, &workcell);
+    }
     let link = super::arm::open_link(&args.device, &cfg.sim, &bus_cfg.servo_map, "run")?;
     stream(
         Bus::connect(link, bus_cfg, journal)?,
@@ -201,6 +218,28 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
         stop,
         &journal_path,
     )
+}
+
+/// The virtual part of `--part` / `--ground-out`, checked and loaded before anything moves;
+/// only the simulated arm grinds one, from the plan's first frame.
+fn ground(
+    args: &RunArgs,
+    file: &ConfigFile,
+    sim: &SimOptions,
+    inspection: &Inspection,
+) -> anyhow::Result<Option<super::grind::Ground>> {
+    let (Some(part), Some(out)) = (&args.part, &args.ground_out) else {
+        return Ok(None);
+    };
+    anyhow::ensure!(
+        args.device.sim,
+        "run: --part and --ground-out need --sim (only the simulated arm grinds a virtual part)"
+    );
+    anyhow::ensure!(
+        args.resume.is_none(),
+        "run: --part cannot --resume: the virtual part's removal lives only in one run"
+    );
+    super::grind::Ground::prepare(file, sim, part, out, inspection).map(Some)
 }
 
 fn stream<T: Transport>(

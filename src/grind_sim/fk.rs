@@ -26,7 +26,8 @@ pub fn chain(q: &[f64; 5]) -> ([Vector3<f64>; 5], Isometry3<f64>) {
             UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
         );
         origins[k] = t.translation.vector;
-        let turn = UnitQuaternion::from_axis_angle(&Unit::new_normalize(Vector3::from(*axis)), q[k]);
+        let turn =
+            UnitQuaternion::from_axis_angle(&Unit::new_normalize(Vector3::from(*axis)), q[k]);
         t *= Isometry3::from_parts(Translation3::identity(), turn);
     }
     (origins, t)
@@ -42,5 +43,8 @@ pub fn joint_of_servo_deg(deg: f64) -> f64 {
 /// ball centre `tip_m` in the last link's frame and the tool axis along that frame's z.
 pub fn tool(q: &[f64; 5], tip_m: &[f64; 3]) -> (Point3<f64>, Vector3<f64>) {
     let (_, t) = chain(q);
-    (t * Point3::from(Vector3::from(*tip_m)), t.rotation * Vector3::z())
+    (
+        t * Point3::from(Vector3::from(*tip_m)),
+        t.rotation * Vector3::z(),
+    )
 }

@@ -59,8 +59,10 @@ pub fn preston_rate(k: f64, pressure_mpa: f64, speed_mm_s: f64, cfg: &GrindConfi
     if pressure_mpa <= 0.0 || speed_mm_s <= 0.0 {
         return 0.0;
     }
-    let p = cfg.reference_pressure_mpa * (pressure_mpa / cfg.reference_pressure_mpa).powf(cfg.pressure_exponent);
-    let v = cfg.reference_speed_mm_s * (speed_mm_s / cfg.reference_speed_mm_s).powf(cfg.speed_exponent);
+    let p = cfg.reference_pressure_mpa
+        * (pressure_mpa / cfg.reference_pressure_mpa).powf(cfg.pressure_exponent);
+    let v =
+        cfg.reference_speed_mm_s * (speed_mm_s / cfg.reference_speed_mm_s).powf(cfg.speed_exponent);
     k * p * v
 }
 

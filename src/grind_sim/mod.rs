@@ -131,7 +131,13 @@ impl GrindConfig {
             positive("k_factor", self.k_factor, ""),
             within("k_noise", self.k_noise, 0.0, 0.99, "(share)"),
             positive("k_noise_wavelength_mm", self.k_noise_wavelength_mm, "mm"),
-            within("pressure_exponent", self.pressure_exponent, 0.0, MAX_EXPONENT, ""),
+            within(
+                "pressure_exponent",
+                self.pressure_exponent,
+                0.0,
+                MAX_EXPONENT,
+                "",
+            ),
             within("speed_exponent", self.speed_exponent, 0.0, MAX_EXPONENT, ""),
             positive("reference_pressure_mpa", self.reference_pressure_mpa, "MPa"),
             positive("reference_speed_mm_s", self.reference_speed_mm_s, "mm/s"),
@@ -140,8 +146,20 @@ impl GrindConfig {
             within("spindle_rpm", self.spindle_rpm, 0.0, 1e6, "rev/min"),
             positive("ball_radius_mm", self.ball_radius_mm, "mm"),
             within("rescan_noise_mm", self.rescan_noise_mm, 0.0, 5.0, "mm"),
-            within("rescan_outliers", self.rescan_outliers, 0.0, 0.49, "(share)"),
-            within("rescan_max_translation_mm", self.rescan_max_translation_mm, 0.0, 1e4, "mm"),
+            within(
+                "rescan_outliers",
+                self.rescan_outliers,
+                0.0,
+                0.49,
+                "(share)",
+            ),
+            within(
+                "rescan_max_translation_mm",
+                self.rescan_max_translation_mm,
+                0.0,
+                1e4,
+                "mm",
+            ),
         ]
         .into_iter()
         .flatten()
@@ -149,11 +167,18 @@ impl GrindConfig {
         let arrays = [
             ("tip_offset_mm", self.tip_offset_mm, 1000.0, "mm"),
             ("mount_offset_mm", self.mount_offset_mm, MAX_MOUNT_MM, "mm"),
-            ("mount_rotation_deg", self.mount_rotation_deg, MAX_MOUNT_DEG, "deg"),
+            (
+                "mount_rotation_deg",
+                self.mount_rotation_deg,
+                MAX_MOUNT_DEG,
+                "deg",
+            ),
         ];
         for (key, v, max, unit) in arrays {
             if let Some(x) = v.iter().find(|x| !(x.is_finite() && x.abs() <= max)) {
-                found.push(format!("`{key}` has {x:?} {unit}, outside -{max}..={max} {unit}"));
+                found.push(format!(
+                    "`{key}` has {x:?} {unit}, outside -{max}..={max} {unit}"
+                ));
             }
         }
         match found.into_iter().next() {
@@ -201,7 +226,9 @@ pub fn grind(
     cfg: &GrindConfig,
 ) -> GrindReport {
     let mount = cfg.true_robot_from_reference(nominal);
-    let reference_from_robot = mount.try_inverse().expect("a rigid transform has an inverse");
+    let reference_from_robot = mount
+        .try_inverse()
+        .expect("a rigid transform has an inverse");
     let tip_m = cfg.tip_offset_mm.map(|v| v * 1e-3);
     let tool_at = |trace: &mut ServoTrace, t: f64| {
         let deg = trace.physical_deg(t);

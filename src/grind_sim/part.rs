@@ -90,7 +90,12 @@ impl VirtualPart {
     /// rate at its pressure and its speed relative to the turning ball. Returns the contact.
     pub fn grind_step(&mut self, tool: &ToolState, dt: f64, cfg: &GrindConfig) -> Option<Contact> {
         let (i, depth) = self.penetration(&tool.centre, cfg.ball_radius_mm)?;
-        let contact = Contact::hertz(depth, cfg.spring_rate_n_mm, cfg.ball_radius_mm, cfg.modulus_mpa)?;
+        let contact = Contact::hertz(
+            depth,
+            cfg.spring_rate_n_mm,
+            cfg.ball_radius_mm,
+            cfg.modulus_mpa,
+        )?;
         let n = self.normals[i];
         let below = self.current(i);
         // patch centre: the ball centre's foot on the tangent plane of the nearest point

@@ -293,6 +293,34 @@ pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
+/// A fresh scan of a surface: synth's scanner model (Gaussian noise of `noise` mm on each
+/// coordinate, outliers as a share of points by [`placement::add_outliers`]) and a new random
+/// rigid pose with a translation up to `max_translation` mm, all from `seed`. `surface` needs
+/// normals. Returns the scan (scan frame), its outliers and its `scan_to_reference`.
+pub fn rescan(
+    surface: &PointCloud,
+    noise: f64,
+    outliers: f64,
+    max_translation: f64,
+    seed: u64,
+) -> Result<(PointCloud, OutlierTruth, Isometry3<f64>)> {
+    anyhow::ensure!(
+        surface.normals.is_some(),
+        "rescan: the surface has no normals"
+    );
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut points: Vec<Point3<f64>> = surface
+        .points
+        .iter()
+        .map(|p| p + Vector3::new(gauss(&mut rng), gauss(&mut rng), gauss(&mut rng)) * noise)
+        .collect();
+    let truth = placement::add_outliers(&mut points, surface, outliers, &mut rng);
+    let pose = random_pose(&mut rng, max_translation);
+    let mut scan = PointCloud::from_points(points);
+    scan.transform(&pose);
+    Ok((scan, truth, pose.inverse()))
+}
+
 /// Decides whether a defect may sit at a surface point (reference frame, outward normal,
 /// footprint radius in mm), e.g. only where the arm can reach.
 pub type SiteFilter = dyn Fn(&Point3<f64>, &Vector3<f64>, f64) -> bool + Sync;

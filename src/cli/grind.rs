@@ -1,0 +1,179 @@
+//! `run --sim --part FILE --ground-out OUT`: the simulated arm grinds a virtual part while it
+//! executes the plan; the ground part is rescanned into OUT (synth's scanner model, a new
+//! random pose) with the removal per point in OUT's `_truth.ply` and `_truth.json` beside it.
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use super::settings::ConfigFile;
+use crate::bus::{ServoMap, SimArm, SimOptions};
+use crate::cloud::{self, Neighbours, PlyPrecision, PointCloud, ScalarField};
+use crate::grind_sim::{grind, GrindReport, ServoTrace, VirtualPart};
+use crate::plan::Inspection;
+use crate::preprocess::{estimate_normals, statistical_outlier_filter, NormalConfig};
+use crate::preprocess::{Orientation, SorConfig};
+use crate::robot::Workcell;
+
+/// A virtual part ready to be ground, and where its rescan goes.
+pub struct Ground {
+    part: VirtualPart,
+    options: SimOptions,
+    out: PathBuf,
+    source: PathBuf,
+}
+
+/// What `<out>_truth.json` holds.
+#[derive(Serialize)]
+struct GroundTruth<'a> {
+    /// The part file ground.
+    part: String,
+    /// Maps the rescan's points (OUT) into the reference frame, 4x4 row-major.
+    scan_to_reference: [[f64; 4]; 4],
+    /// Indices of the rescan's outliers.
+    outliers: Vec<usize>,
+    /// What the grind did.
+    grind: &'a GrindReport,
+    /// The simulated cell's truth used.
+    settings: &'a crate::grind_sim::GrindConfig,
+}
+
+/// The truth files beside `out`: `<stem>_truth.ply` and `<stem>_truth.json`.
+pub fn truth_paths(out: &Path) -> (PathBuf, PathBuf) {
+    let stem = out
+        .file_stem()
+        .map_or("ground".into(), |s| s.to_string_lossy());
+    (
+        out.with_file_name(format!("{stem}_truth.ply")),
+        out.with_file_name(format!("{stem}_truth.json")),
+    )
+}
+
+impl Ground {
+    /// Checks `[sim.grinding]` and loads the part: the file's points without their outliers
+    /// (synth's outlier filter defaults), in the reference frame by the inspection's
+    /// `registration.json`, with PCA normals turned outward as the nearest core point's.
+    pub fn prepare(
+        file: &ConfigFile,
+        options: &SimOptions,
+        part: &Path,
+        out: &Path,
+        inspection: &Inspection,
+    ) -> anyhow::Result<Ground> {
+        options
+            .grinding
+            .check()
+            .map_err(|m| file.refuse("sim.grinding", &m))?;
+        let cloud = cloud::load_cloud(part, None, None)?;
+        let kept = statistical_outlier_filter(&cloud, &SorConfig::default())
+            .with_context(|| format!("{}: --part", part.display()))?;
+        let mut cloud = kept.apply(&cloud);
+        #[derive(serde::Deserialize)]
+        struct Registration {
+            scan_to_reference: [[f64; 4]; 4],
+        }
+        let reg: Registration = super::demo::read_json(&inspection.dir.join("registration.json"))?;
+        let pose = cloud::transform::isometry_from_rows(&reg.scan_to_reference)
+            .with_context(|| format!("{}: scan_to_reference", inspection.dir.display()))?;
+        cloud.transform(&pose);
+        cloud.normals = None;
+        let cfg = NormalConfig {
+            orientation: Orientation::Unoriented,
+            ..NormalConfig::default()
+        };
+        let mut normals = estimate_normals(&cloud, &cfg)?.normals;
+        let core: Vec<_> = inspection.points.iter().map(|p| p.position).collect();
+        let index = Neighbours::new(&core);
+        for (p, n) in cloud.points.iter().zip(&mut normals) {
+            let outward = index
+                .nearest(p)
+                .map_or(Vector3::z(), |nb| inspection.points[nb.index].normal);
+            if n.dot(&outward) < 0.0 {
+                *n = -*n;
+            }
+        }
+        Ok(Ground {
+            part: VirtualPart::new(cloud.points, normals, &options.grinding),
+            options: options.clone(),
+            out: out.to_path_buf(),
+            source: part.to_path_buf(),
+        })
+    }
+
+    /// A simulated arm for the run (the options the replay uses).
+    pub fn arm(&self, map: &ServoMap) -> anyhow::Result<SimArm> {
+        Ok(SimArm::new(&self.options, map)?)
+    }
+
+    /// After the run on `arm`: grinds the part over the run's virtual time, writes the rescan
+    /// and its truth, and prints one line.
+    pub fn finish(
+        mut self,
+        arm: &SimArm,
+        map: &ServoMap,
+        workcell: &Workcell,
+    ) -> anyhow::Result<()> {
+        let g = &self.options.grinding;
+        let home = map.home_raw(self.options.home_gripper_deg)?;
+        let mut trace = ServoTrace::new(&self.options, home, arm.received());
+        let report = grind(
+            &mut self.part,
+            &mut trace,
+            arm.time(),
+            &workcell.robot_from_reference,
+            g,
+        );
+        let normals = self.part.normals().to_vec();
+        let surface = PointCloud {
+            points: self.part.current_points(),
+            normals: Some(normals),
+            fields: vec![
+                ScalarField {
+                    name: "removal".into(),
+                    values: self.part.removal().to_vec(),
+                },
+                ScalarField {
+                    name: "true_k".into(),
+                    values: self.part.true_k().to_vec(),
+                },
+            ],
+        };
+        let (scan, outliers, pose) = crate::synth::rescan(
+            &surface,
+            g.rescan_noise_mm,
+            g.rescan_outliers,
+            g.rescan_max_translation_mm,
+            g.seed,
+        )?;
+        cloud::write_ply(&self.out, &scan, None, PlyPrecision::F64)?;
+        let (ply, json) = truth_paths(&self.out);
+        cloud::write_ply(&ply, &surface, None, PlyPrecision::F64)?;
+        let truth = GroundTruth {
+            part: self.source.display().to_string(),
+            scan_to_reference: cloud::transform::isometry_to_rows(&pose),
+            outliers: outliers
+                .scattered
+                .iter()
+                .chain(&outliers.clustered)
+                .copied()
+                .collect(),
+            grind: &report,
+            settings: g,
+        };
+        let text = serde_json::to_string_pretty(&truth)?;
+        std::fs::write(&json, text).with_context(|| format!("{}: cannot write", json.display()))?;
+        println!(
+            "run: sim ground the part: {} of {} points, peak removal {:.4} mm, peak force {:.2} N, {} of {} steps in contact; rescan {}, truth {}",
+            report.points_ground,
+            surface.points.len(),
+            report.peak_removal_mm,
+            report.peak_force_n,
+            report.contact_steps,
+            report.steps,
+            self.out.display(),
+            ply.display()
+        );
+        Ok(())
+    }
+}
