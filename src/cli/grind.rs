@@ -7,7 +7,6 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use serde::Serialize;
 
-use super::settings::ConfigFile;
 use crate::bus::{ServoMap, SimArm, SimOptions};
 use crate::cloud::{self, Neighbours, PlyPrecision, PointCloud, ScalarField};
 use crate::grind_sim::{grind, GrindReport, ServoTrace, VirtualPart};
@@ -51,20 +50,15 @@ pub fn truth_paths(out: &Path) -> (PathBuf, PathBuf) {
 }
 
 impl Ground {
-    /// Checks `[sim.grinding]` and loads the part: the file's points without their outliers
+    /// Loads the part: the file's points without their outliers
     /// (synth's outlier filter defaults), in the reference frame by the inspection's
     /// `registration.json`, with PCA normals turned outward as the nearest core point's.
     pub fn prepare(
-        file: &ConfigFile,
         options: &SimOptions,
         part: &Path,
         out: &Path,
         inspection: &Inspection,
     ) -> anyhow::Result<Ground> {
-        options
-            .grinding
-            .check()
-            .map_err(|m| file.refuse("sim.grinding", &m))?;
         let cloud = cloud::load_cloud(part, None, None)?;
         let kept = statistical_outlier_filter(&cloud, &SorConfig::default())
             .with_context(|| format!("{}: --part", part.display()))?;

@@ -152,6 +152,10 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let file = ConfigFile::read(config)?;
     let cfg: RunFileConfig = file.parse()?;
     settings::check_link(&file, &cfg.bus, &cfg.sim)?;
+    cfg.sim
+        .grinding
+        .check()
+        .map_err(|m| file.refuse("sim.grinding", &m))?;
     check_run_settings(&file, &cfg.run)?;
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
     // one read: the plan is parsed from the bytes its SHA-256 is taken of
@@ -187,7 +191,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let mut bus_cfg = cfg.bus;
     bus_cfg.servo_map = frames::servo_map(&robot)?;
     bus_cfg.servo_map.validate()?;
-    let ground = ground(&args, &file, &cfg.sim, &inspection)?;
+    let ground = ground(&args, &cfg.sim, &inspection)?;
     if args.dry_run {
         println!(
             "run: dry run: {} passes, {} frames from frame {from}, {:.2} s at {} ms per frame; nothing sent",
@@ -224,7 +228,6 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
 /// only the simulated arm grinds one, from the plan's first frame.
 fn ground(
     args: &RunArgs,
-    file: &ConfigFile,
     sim: &SimOptions,
     inspection: &Inspection,
 ) -> anyhow::Result<Option<super::grind::Ground>> {
@@ -239,7 +242,7 @@ fn ground(
         args.resume.is_none(),
         "run: --part cannot --resume: the virtual part's removal lives only in one run"
     );
-    super::grind::Ground::prepare(file, sim, part, out, inspection).map(Some)
+    super::grind::Ground::prepare(sim, part, out, inspection).map(Some)
 }
 
 fn stream<T: Transport>(

@@ -110,9 +110,15 @@ impl VirtualPart {
             if p <= 0.0 {
                 continue;
             }
-            // surface speed of the ball where it touches point j, plus the feed
-            let on_ball = centre + (d - n * n.dot(&d));
-            let v = (omega.cross(&(on_ball - tool.centre)) + tool.velocity).norm();
+            // surface speed of the ball where it touches point j, plus the feed: the spring
+            // takes the penetration, so the ball keeps its radius (its pole is R below the
+            // centre along the normal, the patch point offset across it)
+            let across = d - n * n.dot(&d);
+            let arm = across
+                - n * (cfg.ball_radius_mm * cfg.ball_radius_mm - across.norm_squared())
+                    .max(0.0)
+                    .sqrt();
+            let v = (omega.cross(&arm) + tool.velocity).norm();
             self.removal[j] += preston_rate(self.k[j], p, v, cfg) * dt;
         }
         Some(contact)

@@ -1,0 +1,291 @@
+//! The simulator's true removal law (issue 29) against closed-form cases written here from
+//! the textbook formulas (Hertz: Johnson, Contact Mechanics 4.22-4.23; Preston), not from the
+//! module: a ball pressed at fixed penetration on a flat plate; its kinematics against k's
+//! chain on the shipped URDF; its servo trace against the simulated arm itself; and the
+//! planner and the simulator kept apart.
+mod common;
+
+use std::f64::consts::PI;
+use std::path::Path;
+
+use nalgebra::{Point3, Vector3};
+use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, SimArm, SimOptions};
+use polishbot::grind_sim::{fk, GrindConfig, ServoTrace, ToolState, VirtualPart};
+
+use common::{dofbot, polishbot};
+
+/// Plate point spacing, mm: 0.02 puts about 30 points across the 0.6 mm patch radius.
+const SPACING: f64 = 0.02;
+/// Half width of the plate, mm (wider than every patch here).
+const HALF: f64 = 1.2;
+
+/// A flat plate z = 0 with outward normal +z, a square grid through the origin.
+fn plate(cfg: &GrindConfig) -> VirtualPart {
+    let n = (HALF / SPACING).round() as i64;
+    let mut points = Vec::new();
+    for i in -n..=n {
+        for j in -n..=n {
+            points.push(Point3::new(i as f64 * SPACING, j as f64 * SPACING, 0.0));
+        }
+    }
+    let normals = vec![Vector3::z(); points.len()];
+    VirtualPart::new(points, normals, cfg)
+}
+
+/// The linear law with a uniform k: exponents 1, no k field.
+fn linear() -> GrindConfig {
+    GrindConfig {
+        pressure_exponent: 1.0,
+        speed_exponent: 1.0,
+        k_noise: 0.0,
+        ..GrindConfig::default()
+    }
+}
+
+/// Presses the ball `depth` mm into the plate with its axis tilted `tilt` rad from the inward
+/// normal (in the x-z plane), standing still, for `time` s in steps of `dt`.
+fn press(part: &mut VirtualPart, cfg: &GrindConfig, depth: f64, tilt: f64, time: f64) {
+    let tool = ToolState {
+        centre: Point3::new(0.0, 0.0, cfg.ball_radius_mm - depth),
+        axis: Vector3::new(tilt.sin(), 0.0, -tilt.cos()),
+        velocity: Vector3::zeros(),
+    };
+    let dt = 1e-4;
+    for _ in 0..(time / dt).round() as usize {
+        part.grind_step(&tool, dt, cfg);
+    }
+}
+
+/// Index of the plate point at grid (i, j).
+fn at(i: i64, j: i64) -> usize {
+    let n = (HALF / SPACING).round() as i64;
+    ((i + n) * (2 * n + 1) + (j + n)) as usize
+}
+
+/// Closed form at the patch centre: F = s d, a = (3 F R / 4 E*)^(1/3), p0 = 3 F / (2 pi a^2),
+/// v = omega R sin(tilt) (the pole of the ball is R from its centre along the normal).
+fn centre_pressure_and_speed(cfg: &GrindConfig, depth: f64, tilt: f64) -> (f64, f64) {
+    let f = cfg.spring_rate_n_mm * depth;
+    let a = (3.0 * f * cfg.ball_radius_mm / (4.0 * cfg.modulus_mpa)).powf(1.0 / 3.0);
+    let p0 = 3.0 * f / (2.0 * PI * a * a);
+    let omega = cfg.spindle_rpm * 2.0 * PI / 60.0;
+    (p0, omega * cfg.ball_radius_mm * tilt.sin())
+}
+
+#[test]
+fn a_ball_pressed_on_a_plate_removes_prestons_depth_at_the_centre() {
+    let cfg = linear();
+    let (depth, tilt, time) = (0.05, 30f64.to_radians(), 0.005);
+    let mut part = plate(&cfg);
+    press(&mut part, &cfg, depth, tilt, time);
+    let (p0, v) = centre_pressure_and_speed(&cfg, depth, tilt);
+    let want = cfg.preston_k * p0 * v * time;
+    let got = part.removal()[at(0, 0)];
+    println!("centre removal {got:.6e} mm, Preston {want:.6e} mm");
+    assert!(((got - want) / want).abs() < 0.02, "{got} vs {want}");
+}
+
+#[test]
+fn the_exponents_bend_the_law_at_the_centre_as_written() {
+    let cfg = GrindConfig {
+        k_noise: 0.0,
+        ..GrindConfig::default()
+    };
+    assert_eq!((cfg.pressure_exponent, cfg.speed_exponent), (1.1, 0.9));
+    let (depth, tilt, time) = (0.08, 20f64.to_radians(), 0.005);
+    let mut part = plate(&cfg);
+    press(&mut part, &cfg, depth, tilt, time);
+    let (p0, v) = centre_pressure_and_speed(&cfg, depth, tilt);
+    let (pr, vr) = (cfg.reference_pressure_mpa, cfg.reference_speed_mm_s);
+    let want = cfg.preston_k * pr * (p0 / pr).powf(1.1) * vr * (v / vr).powf(0.9) * time;
+    let got = part.removal()[at(0, 0)];
+    assert!(((got - want) / want).abs() < 0.02, "{got} vs {want}");
+}
+
+#[test]
+fn no_penetration_removes_nothing() {
+    let cfg = linear();
+    for depth in [0.0, -0.01, -0.4] {
+        let mut part = plate(&cfg);
+        press(&mut part, &cfg, depth, 0.5, 0.01);
+        let most = part.removal().iter().copied().fold(0.0, f64::max);
+        assert_eq!(most, 0.0, "depth {depth}: removal {most}");
+    }
+}
+
+#[test]
+fn the_removal_field_is_symmetric_and_the_untilted_pole_does_not_cut() {
+    let cfg = linear();
+    let n = (HALF / SPACING).round() as i64;
+    // tilted in the x-z plane: mirror-symmetric about y = 0
+    let mut part = plate(&cfg);
+    press(&mut part, &cfg, 0.05, 0.4, 0.005);
+    let r = part.removal();
+    assert!(r[at(0, 0)] > 0.0);
+    for i in -n..=n {
+        for j in 1..=n {
+            let (a, b) = (r[at(i, j)], r[at(i, -j)]);
+            assert!(
+                (a - b).abs() <= 1e-12 * a.max(1e-12),
+                "({i},{j}): {a} vs {b}"
+            );
+        }
+    }
+    // along the normal: a quarter turn maps the field onto itself, the pole stands still
+    let mut part = plate(&cfg);
+    press(&mut part, &cfg, 0.05, 0.0, 0.005);
+    let r = part.removal();
+    assert_eq!(
+        r[at(0, 0)],
+        0.0,
+        "the pole of a ball turning about the normal cuts"
+    );
+    assert!(r[at(5, 0)] > 0.0);
+    for i in -n..=n {
+        for j in -n..=n {
+            let (a, b) = (r[at(i, j)], r[at(-j, i)]);
+            assert!(
+                (a - b).abs() <= 1e-12 * a.max(1e-12),
+                "({i},{j}): {a} vs {b}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_true_k_varies_by_at_most_its_amplitude_around_nominal_times_the_factor() {
+    let cfg = GrindConfig {
+        k_factor: 1.3,
+        ..GrindConfig::default()
+    };
+    let part = plate(&cfg);
+    let base = cfg.preston_k * 1.3;
+    let (lo, hi) = part
+        .true_k()
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(l, h), k| (l.min(*k), h.max(*k)));
+    assert!(
+        lo >= base * 0.9 - 1e-18 && hi <= base * 1.1 + 1e-18,
+        "{lo} {hi}"
+    );
+    assert!(hi - lo > 0.01 * base, "no variation: {lo}..{hi}");
+}
+
+#[test]
+fn the_sims_kinematics_agree_with_ks_chain_on_the_shipped_urdf() {
+    let robot = dofbot();
+    let tip = robot.tool.tip_offset;
+    let mut state = 7u64;
+    for _ in 0..200 {
+        let q: [f64; 5] = std::array::from_fn(|_| {
+            let u =
+                (polishbot::bus::model::splitmix64(&mut state) >> 11) as f64 / (1u64 << 53) as f64;
+            (u - 0.5) * PI
+        });
+        let (c, axis) = fk::tool(&q, &tip);
+        let pose = robot.fk(&q);
+        assert!((c.coords - pose.position).norm() < 1e-9, "{q:?}");
+        assert!((axis - pose.axis).norm() < 1e-9, "{q:?}");
+    }
+}
+
+#[test]
+fn the_replayed_servo_trace_ends_where_the_simulated_arm_is() {
+    let mut options = SimOptions::default();
+    options.mechanics = Mechanics {
+        mount_offset_deg: [1.5, -2.0, 0.7, 0.0, 3.0, 0.0],
+        ..Mechanics::default()
+    };
+    let config = BusConfig::default();
+    let arm = SimArm::new(&options, &config.servo_map).unwrap();
+    let mut bus = Bus::connect(arm.transport(), config.clone(), Journal::none()).unwrap();
+    bus.move_joints(&[0.3, -0.2, 0.4, 0.1, -0.5], 90.0, None)
+        .unwrap();
+    let home = config.servo_map.home_raw(options.home_gripper_deg).unwrap();
+    let mut trace = ServoTrace::new(&options, home, arm.received());
+    let got = trace.physical_deg(arm.time());
+    let want = arm.physical_deg();
+    for k in 0..6 {
+        assert!(
+            (got[k] - want[k]).abs() < 1e-9,
+            "servo {}: {} vs {}",
+            k + 1,
+            got[k],
+            want[k]
+        );
+    }
+}
+
+#[test]
+fn bad_grinding_settings_are_refused_naming_the_key() {
+    let bad = GrindConfig {
+        spring_rate_n_mm: -1.0,
+        ..GrindConfig::default()
+    };
+    assert!(bad.check().unwrap_err().contains("`spring_rate_n_mm`"));
+    let dir = common::tempdir();
+    let cfg = dir.path().join("run.toml");
+    std::fs::write(&cfg, "[sim.grinding]\nmodulus_mpa = nan\n").unwrap();
+    let out = polishbot()
+        .args(["run", "--plan", "nowhere.json", "--sim", "--config"])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("line 2") && err.contains("`modulus_mpa`"),
+        "{err}"
+    );
+}
+
+/// Every Rust file under `dir`, read.
+fn sources(dir: &Path) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(sources(&p));
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push((
+                p.display().to_string(),
+                std::fs::read_to_string(&p).unwrap(),
+            ));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_planner_and_the_simulator_keep_their_parameters_apart() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    for (file, text) in sources(&src.join("plan")) {
+        assert!(
+            !text.contains("grind_sim") && !text.contains("GrindConfig"),
+            "{file}"
+        );
+    }
+    for (file, text) in sources(&src.join("grind_sim")) {
+        for banned in ["crate::plan", "crate::robot", "k::"] {
+            assert!(!text.contains(banned), "{file} uses {banned}");
+        }
+    }
+    // plan's settings have no [sim] section: a [sim.grinding] table cannot reach plan.json
+    let dir = common::tempdir();
+    let cfg = dir.path().join("plan.toml");
+    std::fs::write(&cfg, "[sim.grinding]\nk_factor = 2.0\n").unwrap();
+    let out = polishbot()
+        .args([
+            "plan",
+            "--inspection",
+            "nowhere",
+            "-o",
+            "plan.json",
+            "--config",
+        ])
+        .arg(&cfg)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("sim"), "{err}");
+}
