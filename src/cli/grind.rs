@@ -11,9 +11,14 @@ use crate::bus::{ServoMap, SimArm, SimOptions};
 use crate::cloud::{self, Neighbours, PlyPrecision, PointCloud, ScalarField};
 use crate::grind_sim::{grind, GrindReport, ServoTrace, VirtualPart};
 use crate::plan::Inspection;
-use crate::preprocess::{estimate_normals, statistical_outlier_filter, NormalConfig};
-use crate::preprocess::{Orientation, SorConfig};
+use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
 use crate::robot::Workcell;
+
+/// Farthest a point of the part file may lie from the inspected surface (along the nearest
+/// core point's normal, past its measured deviation), mm: 30 times synth's scan noise, twice
+/// the tallest defect of the issue's cases, and under the 1 mm that synth's nearest outliers
+/// keep from the surface.
+const OFF_SURFACE_MM: f64 = 0.5;
 
 /// A virtual part ready to be ground, and where its rescan goes.
 pub struct Ground {
@@ -50,19 +55,16 @@ pub fn truth_paths(out: &Path) -> (PathBuf, PathBuf) {
 }
 
 impl Ground {
-    /// Loads the part: the file's points without their outliers
-    /// (synth's outlier filter defaults), in the reference frame by the inspection's
-    /// `registration.json`, with PCA normals turned outward as the nearest core point's.
+    /// Loads the part: the file's points in the reference frame by the inspection's
+    /// `registration.json`, those on the inspected surface only (outliers dropped), with PCA
+    /// normals turned outward as the nearest core point's.
     pub fn prepare(
         options: &SimOptions,
         part: &Path,
         out: &Path,
         inspection: &Inspection,
     ) -> anyhow::Result<Ground> {
-        let cloud = cloud::load_cloud(part, None, None)?;
-        let kept = statistical_outlier_filter(&cloud, &SorConfig::default())
-            .with_context(|| format!("{}: --part", part.display()))?;
-        let mut cloud = kept.apply(&cloud);
+        let mut cloud = cloud::load_cloud(part, None, None)?;
         #[derive(serde::Deserialize)]
         struct Registration {
             scan_to_reference: [[f64; 4]; 4],
@@ -71,14 +73,37 @@ impl Ground {
         let pose = cloud::transform::isometry_from_rows(&reg.scan_to_reference)
             .with_context(|| format!("{}: scan_to_reference", inspection.dir.display()))?;
         cloud.transform(&pose);
+        let core: Vec<_> = inspection.points.iter().map(|p| p.position).collect();
+        let index = Neighbours::new(&core);
+        // the part's surface: points within OFF_SURFACE_MM of where the inspection measured
+        // the surface (the core point's plane moved by its deviation); outliers lie farther
+        let on_surface: Vec<usize> = (0..cloud.len())
+            .filter(|&i| {
+                let p = cloud.points[i];
+                index.nearest(&p).is_some_and(|nb| {
+                    let c = &inspection.points[nb.index];
+                    let d = if c.distance.is_finite() {
+                        c.distance
+                    } else {
+                        0.0
+                    };
+                    (c.normal.dot(&(p - c.position)) - d).abs() <= OFF_SURFACE_MM
+                })
+            })
+            .collect();
+        anyhow::ensure!(
+            !on_surface.is_empty(),
+            "{}: --part: no point lies within {OFF_SURFACE_MM} mm of the inspected surface \
+             (is it the scan the plan's inspection registered?)",
+            part.display()
+        );
+        let mut cloud = cloud.select(&on_surface);
         cloud.normals = None;
         let cfg = NormalConfig {
             orientation: Orientation::Unoriented,
             ..NormalConfig::default()
         };
         let mut normals = estimate_normals(&cloud, &cfg)?.normals;
-        let core: Vec<_> = inspection.points.iter().map(|p| p.position).collect();
-        let index = Neighbours::new(&core);
         for (p, n) in cloud.points.iter().zip(&mut normals) {
             let outward = index
                 .nearest(p)
