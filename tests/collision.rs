@@ -1,9 +1,10 @@
 //! Collision-free plans (issue 35), checked apart from the planner's own model: forward
-//! kinematics written here from the joint table of shared/DOFBOT.md, brute force over every
+//! kinematics from the joint table of shared/DOFBOT.md (the simulator's, not `robot/`), brute force over every
 //! reference point (no index, no tangent planes), and the tool and cell from their files.
 mod common;
 
-use nalgebra::{Isometry3, Matrix4, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix4, Point3, Vector3};
+use polishbot::grind_sim::fk::chain;
 use polishbot::plan::{
     plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind, Solid,
     SurfacePoint,
@@ -12,37 +13,12 @@ use polishbot::robot::{Robot, Workcell};
 
 use common::{calib, dofbot};
 
-/// The joint table of DOFBOT.md (origin xyz, origin rpy, axis), pi/2 in full precision.
-const JOINTS: [([f64; 3], [f64; 3], [f64; 3]); 5] = {
-    const H: f64 = std::f64::consts::FRAC_PI_2;
-    [
-        ([0.0, 0.0, 0.07], [0.0, 0.0, H], [0.0, 0.0, -1.0]),
-        ([0.0, 0.0, 0.0405], [-H, 0.0, 0.0], [0.0, 0.0, -1.0]),
-        ([0.0, -0.0829, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]),
-        ([0.0, -0.0829, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]),
-        ([-0.00215, -0.17455, 0.0], [H, 0.0, 0.0], [0.0, 0.0, 1.0]),
-    ]
-};
-
-/// The joint origins (robot frame, m) and the ball centre and tool axis at `q`: URDF
-/// composition, origin then rpy (Rz Ry Rx) then the joint's rotation about its axis; the tool
-/// tip sits at tool.toml's `tip_offset` in the last frame, its axis along `axis`.
+/// The joint origins (robot frame, m) and the ball centre and tool axis at `q`: the
+/// simulator's own chain from the joint table of DOFBOT.md (`grind_sim::fk`, independent of
+/// `robot/` and k); the tool tip sits at tool.toml's `tip_offset` in the last frame, its axis
+/// along `axis`.
 fn arm(q: &[f64], robot: &Robot) -> ([Vector3<f64>; 5], Vector3<f64>, Vector3<f64>) {
-    let mut t = Isometry3::identity();
-    let mut origins = [Vector3::zeros(); 5];
-    for (k, (xyz, rpy, axis)) in JOINTS.iter().enumerate() {
-        let origin = Isometry3::from_parts(
-            Translation3::new(xyz[0], xyz[1], xyz[2]),
-            UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
-        );
-        t *= origin;
-        origins[k] = t.translation.vector;
-        let turn = UnitQuaternion::from_axis_angle(
-            &nalgebra::Unit::new_normalize(Vector3::from(*axis)),
-            q[k],
-        );
-        t *= Isometry3::from_parts(Translation3::identity(), turn);
-    }
+    let (origins, t) = chain(&[q[0], q[1], q[2], q[3], q[4]]);
     let tip = t * Point3::from(Vector3::from(robot.tool.tip_offset));
     let axis = t.rotation * Vector3::from(robot.tool.axis);
     (origins, tip.coords, axis)
