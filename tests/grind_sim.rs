@@ -192,10 +192,12 @@ fn the_sims_kinematics_agree_with_ks_chain_on_the_shipped_urdf() {
 
 #[test]
 fn the_replayed_servo_trace_ends_where_the_simulated_arm_is() {
-    let mut options = SimOptions::default();
-    options.mechanics = Mechanics {
-        mount_offset_deg: [1.5, -2.0, 0.7, 0.0, 3.0, 0.0],
-        ..Mechanics::default()
+    let options = SimOptions {
+        mechanics: Mechanics {
+            mount_offset_deg: [1.5, -2.0, 0.7, 0.0, 3.0, 0.0],
+            ..Mechanics::default()
+        },
+        ..SimOptions::default()
     };
     let config = BusConfig::default();
     let arm = SimArm::new(&options, &config.servo_map).unwrap();
