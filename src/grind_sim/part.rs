@@ -10,6 +10,12 @@ use crate::cloud::Neighbours;
 /// at, mm: the ball is out of contact farther than that, and the query stays cheap.
 const CONTACT_SEARCH_MARGIN_MM: f64 = 0.5;
 
+/// Surface points whose heights under the ball give the penetration (their median): one
+/// stray point (an outlier that lies near the surface, a normal across an edge) among them
+/// cannot press the ball; 9 is a 3 x 3 patch of scan points, 0.15 mm across at synth's
+/// density, far under the smallest contact patch.
+pub const PENETRATION_NEIGHBOURS: usize = 9;
+
 /// A part being ground, reference frame, mm.
 pub struct VirtualPart {
     points: Vec<Point3<f64>>,
@@ -72,16 +78,27 @@ impl VirtualPart {
     }
 
     /// Penetration of the ball into the surface now, mm: the ball radius minus the centre's
-    /// height above the tangent plane of the nearest surface point (negative: no contact);
-    /// None when no point is near. Returns the point's index too.
+    /// height above the surface, the median over the nearest [`PENETRATION_NEIGHBOURS`]
+    /// points of the height above each one's tangent plane (negative: no contact); None when
+    /// no point is near. Returns the index of the median point too (its normal is the
+    /// contact's).
     pub fn penetration(&self, centre: &Point3<f64>, ball_mm: f64) -> Option<(usize, f64)> {
         let near = self.index.nearest(centre)?;
         let reach = ball_mm + CONTACT_SEARCH_MARGIN_MM;
         if near.dist2 > reach * reach {
             return None;
         }
-        let i = near.index;
-        let height = self.normals[i].dot(&(centre - self.current(i)));
+        let mut heights: Vec<(f64, usize)> = self
+            .index
+            .knn(centre, PENETRATION_NEIGHBOURS)
+            .into_iter()
+            .map(|nb| {
+                let i = nb.index;
+                (self.normals[i].dot(&(centre - self.current(i))), i)
+            })
+            .collect();
+        heights.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (height, i) = heights[heights.len() / 2];
         Some((i, ball_mm - height))
     }
 
