@@ -96,7 +96,7 @@ impl CompareConfig {
 
 /// Core points are added around summits beyond this share of the tolerance: a defect narrower
 /// than the cylinders reads at about half its height there, and one just beyond the tolerance
-/// must still be caught (docs/ALGORITHMS.md, adaptive step 11).
+/// must still be caught (docs/ACCURACY.md, step 11).
 const DENSIFY_SHARE: f64 = 0.5;
 
 /// Settings of the adaptive (RWME) variant (`[compare.adaptive]`).
@@ -146,7 +146,7 @@ pub struct AdaptiveConfig {
     /// narrow defects densification measures), the model's height replaces the cylinder
     /// estimate at the core points whose surrounding scan points agree with it (a
     /// lack-of-fit test); those rows become `Reason::PeakModel` (default true;
-    /// docs/ALGORITHMS.md, adaptive step 13).
+    /// docs/ACCURACY.md, step 13).
     pub model_fill: bool,
     /// The peak fit's window (`[compare.adaptive.peak]`).
     pub peak: PeakConfig,
@@ -196,7 +196,7 @@ impl Default for PeakConfig {
 }
 
 /// Settings of densification and of the narrow-defect search (`[compare.adaptive.densify]`;
-/// docs/ALGORITHMS.md, adaptive steps 11 and 12).
+/// docs/ACCURACY.md, steps 11 and 12).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DensifyConfig {
@@ -242,7 +242,7 @@ impl Default for DensifyConfig {
     }
 }
 
-/// Settings of the model fill (`[compare.adaptive.fill]`; docs/ALGORITHMS.md, adaptive
+/// Settings of the model fill (`[compare.adaptive.fill]`; docs/ACCURACY.md,
 /// step 13).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

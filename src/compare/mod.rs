@@ -18,13 +18,13 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub use self::core::{
-    area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
-    CoreConfig, CoreSelection,
-};
 pub use self::config::{
     AdaptiveConfig, Aggregate, CompareConfig, DensifyConfig, FillConfig, Method, PeakConfig,
     DEFAULT_TOLERANCE,
+};
+pub use self::core::{
+    area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
+    CoreConfig, CoreSelection,
 };
 use self::grid::Grid;
 use crate::cloud::PointCloud;

@@ -27,7 +27,7 @@ pub(super) struct Context<'a> {
     pub(super) radii2: Vec<f64>,
     /// Half-length of every cylinder: max(max_distance, smallest radius), py4dgeo's rule
     /// with the smallest candidate radius (not the largest: that reached outlier clusters
-    /// beyond max_distance; docs/ALGORITHMS.md, adaptive step 1).
+    /// beyond max_distance; docs/ACCURACY.md, step 1).
     pub(super) half_length: f64,
     /// The core points and their index: [`super::refine`] evaluates the reference points
     /// whose nearest core point is the one refined (its Voronoi cell on the reference).
@@ -157,7 +157,12 @@ impl Context<'_> {
     /// Those of the points `ids` (of `points`) whose |value| (`values` per point) is the
     /// largest among the points of `ids` of the same sign within the refine radius (ties: the
     /// lower index): one per bump, a few along a ridge.
-    pub(super) fn summits(&self, points: &[Point3<f64>], ids: &[usize], values: &[f64]) -> Vec<usize> {
+    pub(super) fn summits(
+        &self,
+        points: &[Point3<f64>],
+        ids: &[usize],
+        values: &[f64],
+    ) -> Vec<usize> {
         let pts: Vec<Point3<f64>> = ids.iter().map(|&i| points[i]).collect();
         let index = Neighbours::new(&pts);
         let magnitude = |k: usize| values[ids[k]].abs();

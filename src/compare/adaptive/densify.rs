@@ -10,7 +10,7 @@
 //! too narrow for any cylinder's quadric are found from the scan's own heights instead, or
 //! from those summits that read within `refine_above`, and measured by a peak model
 //! ([`modelled`]). Step 6 of the adaptive variant; its settings: [`crate::compare::DensifyConfig`];
-//! docs/ALGORITHMS.md (adaptive steps 11 and 12) has the numbers.
+//! docs/ACCURACY.md (steps 11 and 12) has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 

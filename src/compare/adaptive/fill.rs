@@ -6,7 +6,7 @@
 //! micrometres where it describes them. A model counts only when its window's scan points
 //! follow its profile level by level, and a core point takes it only where the scan points
 //! around it agree with it (lack-of-fit tests), so a defect of another shape keeps its
-//! cylinder values. docs/ALGORITHMS.md (adaptive step 13) has the numbers.
+//! cylinder values. docs/ACCURACY.md (step 13) has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
@@ -124,12 +124,7 @@ fn shaped(prep: &Context, models: Vec<Model>, cfg: &CompareConfig) -> Vec<Model>
 /// else `model`. A defect whose tolerance crossing lies near or beyond the window's edge is
 /// otherwise measured there by the cylinders, and its model's plane and amplitude trade off
 /// over a window that holds little of its foot.
-fn widened(
-    prep: &Context,
-    model: Model,
-    cfg: &CompareConfig,
-    scratch: &mut ModelScratch,
-) -> Model {
+fn widened(prep: &Context, model: Model, cfg: &CompareConfig, scratch: &mut ModelScratch) -> Model {
     let own = model.fit.window();
     let [narrow, wide] = model.fit.widths;
     let f = &cfg.adaptive.fill;
@@ -261,24 +256,18 @@ fn follows_profile(
 ) -> bool {
     let mut bins = [(0usize, 0.0); LEVELS.len() - 1];
     let o = model.origin;
-    prep.scan_pairs(
-        &o,
-        &model.normal,
-        model.fit.window(),
-        knn,
-        |_, d, pair| {
-            let (u, v, _) = model.local(&(o + d));
-            let share = model.fit.defect_share(u, v);
-            let residual = pair - model.fit.height_at(u, v).0;
-            let level = LEVELS
-                .windows(2)
-                .position(|w| share >= w[0] && share < w[1]);
-            if let (Some(b), true) = (level, residual.abs() <= OUTLIER * prep.noise) {
-                bins[b].0 += 1;
-                bins[b].1 += residual;
-            }
-        },
-    );
+    prep.scan_pairs(&o, &model.normal, model.fit.window(), knn, |_, d, pair| {
+        let (u, v, _) = model.local(&(o + d));
+        let share = model.fit.defect_share(u, v);
+        let residual = pair - model.fit.height_at(u, v).0;
+        let level = LEVELS
+            .windows(2)
+            .position(|w| share >= w[0] && share < w[1]);
+        if let (Some(b), true) = (level, residual.abs() <= OUTLIER * prep.noise) {
+            bins[b].0 += 1;
+            bins[b].1 += residual;
+        }
+    });
     // The levels' standardised mean residuals, squared and summed: a chi-square with as
     // many degrees of freedom as levels when the model is right.
     let (mut chi2, mut levels) = (0.0, 0);
@@ -333,4 +322,3 @@ fn modelled_at(
     }
     Some(model_result(fit, height, se, n, cfg))
 }
-

@@ -15,7 +15,7 @@
 //! a0 + a1 c_u + a2 c_v + A: a deviation from the reference like every distance (the plane is
 //! the deviation of the surroundings, e.g. a neighbouring defect's flank), and the height the
 //! data pins best when the window does not reach the defect's foot (a0 and A then trade off,
-//! their sum does not). docs/ALGORITHMS.md has the guard and the measured numbers.
+//! their sum does not). docs/ALGORITHMS.md has the guard, docs/ACCURACY.md the measured numbers.
 use super::peak_shape::{
     levenberg_marquardt, model, principal, support, Normal, Params, Shape, PARAMS,
 };
@@ -27,7 +27,7 @@ const ELONGATED: f64 = 2.0;
 
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
 /// cannot pin its six shape parameters (a spike through one noisy point). 7, not 8, since
-/// 2026-12-01 (seed 80 at 300k: a 0.368 mm bump with 7; docs/ALGORITHMS.md, step 10).
+/// 2026-12-01 (seed 80 at 300k: a 0.368 mm bump with 7; docs/ACCURACY.md, step 10).
 pub(super) const MIN_SUPPORT: usize = 7;
 
 /// An accepted peak's standard error is at most this share of its height (else the data do

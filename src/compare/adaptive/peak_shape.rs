@@ -208,4 +208,3 @@ pub(super) fn support(shape: Shape, t: &Params, pts: &[Local]) -> usize {
         })
         .count()
 }
-

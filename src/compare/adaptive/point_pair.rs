@@ -5,6 +5,7 @@
 //! rules there.
 use nalgebra::{Point3, Vector3};
 
+use crate::compare::grid::Grid;
 use crate::compare::Clouds;
 
 /// Reference points a scan point's pairing looks among ([`Pairing::pair`]).
@@ -49,7 +50,11 @@ impl Pairing<'_> {
     ///   the truth is 0). Not the closest patch there: a defect's height above one face is
     ///   smaller above the other's plane, and the closest patch reads it low (seed 15's
     ///   0.32 mm ridge across a 26° edge: RMS 0.0081 → 0.0287 mm).
-    pub(super) fn pair(&self, y: &Point3<f64>, found: &[(f64, u32)]) -> Option<(Vector3<f64>, f64)> {
+    pub(super) fn pair(
+        &self,
+        y: &Point3<f64>,
+        found: &[(f64, u32)],
+    ) -> Option<(Vector3<f64>, f64)> {
         let (_, first) = *found.first()?;
         let normal = &self.ref_normals[first as usize];
         let at = |i: u32| {
@@ -113,15 +118,29 @@ impl<'a> Pairing<'a> {
     /// (None for the others: looked up when a cylinder meets them).
     pub(super) fn pair_scan_points(&self, reach: f64) -> Vec<Option<(Vector3<f64>, f64)>> {
         let clouds = self.clouds;
-        let halo = clouds
-            .ref_grid
-            .typical_kth(&clouds.scan.points, PAIR_CANDIDATES);
-        clouds.ref_grid.knn_each(
-            &clouds.scan_grid,
+        let (reference, scan) = (&clouds.ref_grid, &clouds.scan_grid);
+        each_nearest(
+            reference,
+            scan,
+            &clouds.scan.points,
             PAIR_CANDIDATES,
             reach,
-            halo,
             |j, found| self.pair(&clouds.scan.points[j], found),
         )
     }
+}
+
+/// `f(i, found)` for every point i of `queries` (its `points`, in file order): `found` its
+/// `k` nearest points of `targets` within `reach` (squared distance, index; nearest first),
+/// searched in one batch over both grids.
+pub(super) fn each_nearest<R: Send>(
+    targets: &Grid,
+    queries: &Grid,
+    points: &[Point3<f64>],
+    k: usize,
+    reach: f64,
+    f: impl Fn(usize, &[(f64, u32)]) -> R + Sync,
+) -> Vec<R> {
+    let halo = targets.typical_kth(points, k);
+    targets.knn_each(queries, k, reach, halo, f)
 }

@@ -7,7 +7,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::context::{Context, RefSlot, Thresholds};
-use super::point_pair::Pairing;
+use super::point_pair::{each_nearest, Pairing};
 use super::quadric::MAD_TO_SD;
 use crate::cloud::{Neighbours, PointCloud};
 use crate::compare::cover::cover_radius2;
@@ -131,14 +131,14 @@ fn one_sided_distances(
     cover2: f64,
 ) -> Vec<(f64, bool)> {
     let scan = &clouds.scan.points;
-    let halo = clouds
-        .scan_grid
-        .typical_kth(&clouds.reference.points, DELTA_NEIGHBOURS);
-    clouds.scan_grid.knn_each(
-        &clouds.ref_grid,
+    let (reference, scan_grid) = (&clouds.ref_grid, &clouds.scan_grid);
+    let points = &clouds.reference.points;
+    each_nearest(
+        scan_grid,
+        reference,
+        points,
         DELTA_NEIGHBOURS,
         reach,
-        halo,
         |i, found| {
             let (x, n) = (&clouds.reference.points[i], &ref_normals[i]);
             let mut best = (f64::INFINITY, f64::NAN);
@@ -200,4 +200,3 @@ fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
     let mid = shares.len() / 2;
     shares.select_nth_unstable_by(mid, f64::total_cmp).1.sqrt()
 }
-

@@ -59,7 +59,7 @@ pub fn student_t95(dof: usize) -> f64 {
 /// leaves the quadric's six terms poorly pinned at the axis (a strip beside it, a ring)
 /// extrapolate: 1 = no better than a single point, where a plane through 12 points spread
 /// over a disc has about 0.1. On the 300k synth cases (seeds 11-34) this raised IoU from
-/// 0.903 to 0.914 on average at the same RMS (docs/ALGORITHMS.md, adaptive step 5).
+/// 0.903 to 0.914 on average at the same RMS (docs/ACCURACY.md, step 5).
 const MAX_LEVERAGE: f64 = 1.0;
 
 /// A quadric (6 terms) needs at least this many points: 4 residual degrees of freedom to

@@ -40,7 +40,6 @@ pub(in crate::compare) fn radii(a: &AdaptiveConfig, r0: f64) -> Result<Vec<f64>>
     Ok(radii)
 }
 
-
 /// Per-chunk scratch buffers of a core point's evaluation ([`gather`], [`super::fit::at`],
 /// [`super::refine`]).
 #[derive(Default)]
@@ -175,7 +174,6 @@ pub(super) fn gather(prep: &Context, p: &Point3<f64>, n: &Vector3<f64>, s: &mut 
     }
 }
 
-
 /// The radius [`rwme_radius`] chose for a gathered cylinder.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Radius {
@@ -205,14 +203,24 @@ pub(super) fn rwme_radius(
         _ => Reason::ScanBorder,
     };
     if s.sectors.one_sided() {
-        return Err(Deviation::missing(unscanned, radii[0], rings[0].count, within[0]));
+        return Err(Deviation::missing(
+            unscanned,
+            radii[0],
+            rings[0].count,
+            within[0],
+        ));
     }
     // A disc the scan does not fill is mostly within the next one; none at a scan border.
     let usable = (0..radii.len())
         .take_while(|&j| rings[j].count < min || filled(rings[j].count, rings[j].uncovered))
         .count();
     if usable == 0 {
-        return Err(Deviation::missing(unscanned, radii[0], rings[0].count, within[0]));
+        return Err(Deviation::missing(
+            unscanned,
+            radii[0],
+            rings[0].count,
+            within[0],
+        ));
     }
     let radii = &radii[..usable];
     let mut k = 0;

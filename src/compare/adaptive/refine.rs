@@ -81,4 +81,3 @@ fn refine(
     scratch.near = near;
     (dev, top)
 }
-
