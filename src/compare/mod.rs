@@ -29,6 +29,32 @@ pub use self::core::{
 use self::grid::Grid;
 use crate::cloud::PointCloud;
 
+/// The normal quantile of a two-sided 95 % level (the LoD's factor on the registration error,
+/// as in Lague et al.).
+pub(crate) const Z95: f64 = 1.96;
+
+/// The classic radius by default holds about this many scan points at the scan's median
+/// density (enough for a mean and a standard deviation per cylinder).
+const CLASSIC_RADIUS_POINTS: f64 = 20.0;
+
+/// The smallest adaptive candidate radius r0 by default holds about this many scan points (a
+/// quadric's six terms with a few residual degrees of freedom).
+const ADAPTIVE_R0_POINTS: f64 = 12.0;
+
+/// Core points are handed to the threads in chunks of this many (speed only: a chunk shares
+/// one scratch buffer).
+const CHUNK: usize = 512;
+
+/// The surface density reads the distance to this many nearest neighbours ...
+const DENSITY_NEIGHBOURS: usize = 12;
+
+/// ... of up to this many evenly spread points (its median moves by less than a per cent).
+const DENSITY_SAMPLES: usize = 1000;
+
+/// Density assumed (points per mm²) when no sampled point has enough neighbours: a few
+/// points, whose radii the caller's checks refuse anyway.
+const FALLBACK_DENSITY: f64 = 1.0;
+
 /// A peak evaluation counts only when its LoD is at most this many times that of what it is
 /// compared with: a refined evaluation against its core point's, a region member against the
 /// region's median (a fit through a few points at a face border or a scan gap is no peak).
@@ -246,7 +272,9 @@ pub fn compare(
     let radius_for = |count: f64| (count / (std::f64::consts::PI * scan_density)).sqrt();
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
-            let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
+            let radius = cfg
+                .radius
+                .unwrap_or_else(|| radius_for(CLASSIC_RADIUS_POINTS));
             ensure!(
                 radius > 0.0 && radius.is_finite(),
                 "radius must be positive"
@@ -255,7 +283,7 @@ pub fn compare(
         }
         Method::Adaptive => {
             let r0 = match cfg.adaptive.radii.is_empty() {
-                true => radius_for(12.0),
+                true => radius_for(ADAPTIVE_R0_POINTS),
                 false => f64::NAN,
             };
             let radii = adaptive::radii(&cfg.adaptive, r0)?;
@@ -339,7 +367,7 @@ where
     let bar = crate::progress::bar(core.len() as u64, "compare");
     let order = grid.spatial_order(&core.points);
     let done: Vec<T> = order
-        .par_chunks(512)
+        .par_chunks(CHUNK)
         .flat_map_iter(|chunk| {
             let mut scratch = S::default();
             let done: Vec<T> = chunk
@@ -371,23 +399,25 @@ pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
 /// in the file).
 fn surface_density(grid: &Grid) -> f64 {
     let n = grid.slot_ids().len();
-    let step = (n / 1000).max(1);
+    let step = (n / DENSITY_SAMPLES).max(1);
     let mut found = Vec::new();
     let mut densities: Vec<f64> = (0..n)
         .step_by(step)
         .filter_map(|s| {
             grid.knn(
                 &Point3::from(*grid.slot_point(s)),
-                13,
+                DENSITY_NEIGHBOURS + 1,
                 f64::INFINITY,
                 &mut found,
             );
             let d2 = found.last()?.0;
-            (found.len() == 13 && d2 > 0.0).then(|| 12.0 / (std::f64::consts::PI * d2))
+            let k = DENSITY_NEIGHBOURS as f64;
+            (found.len() == DENSITY_NEIGHBOURS + 1 && d2 > 0.0)
+                .then(|| k / (std::f64::consts::PI * d2))
         })
         .collect();
     if densities.is_empty() {
-        return 1.0;
+        return FALLBACK_DENSITY;
     }
     densities.sort_by(f64::total_cmp);
     densities[densities.len() / 2]

@@ -15,12 +15,12 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::context::{tangent_frame, Context};
-use super::fit::{at, Z95};
+use super::fit::at;
 use super::model::{fit_window, gather_window, model_result, Model, ModelScratch};
 use super::peak_model::{height_limit, PeakFit};
 use super::quadric::student_t95;
 use super::radius::Scratch;
-use crate::compare::{CompareConfig, DensifyConfig, Deviation, Reason};
+use crate::compare::{CompareConfig, DensifyConfig, Deviation, Reason, Z95};
 
 /// Where [`modelled`] fits a peak model.
 struct Top {

@@ -11,14 +11,10 @@ use nalgebra::{Point3, Vector3};
 use super::context::Context;
 use super::quadric::{fit, student_t95, AxisFit, TRIM_NOISE};
 use super::radius::{gather, rwme_radius, Ring, Scratch};
-use crate::compare::{CompareConfig, Deviation, Reason};
+use crate::compare::{CompareConfig, Deviation, Reason, Z95};
 
 /// Fewest scan points a fit may keep after trimming before the radius grows.
 const FIT_MIN: usize = 6;
-
-/// The normal quantile of a two-sided 95 % level: the registration error's share of the LoD
-/// (as in Lague et al.'s LoD).
-pub(super) const Z95: f64 = 1.96;
 
 /// The adaptive result at core point `p` with outward unit normal `n`.
 pub(super) fn at(

@@ -30,6 +30,10 @@ const ELONGATED: f64 = 2.0;
 /// 2026-12-01 (seed 80 at 300k: a 0.368 mm bump with 7; docs/ACCURACY.md, step 10).
 pub(super) const MIN_SUPPORT: usize = 7;
 
+/// A peak fit needs at least this many points (before and after trimming): two per
+/// parameter, so that the residuals estimate the scatter.
+const MIN_WINDOW_POINTS: usize = 2 * PARAMS;
+
 /// An accepted peak's standard error is at most this share of its height (else the data do
 /// not pin it: the quadric estimates' peak stays).
 const MAX_RELATIVE_SE: f64 = 0.1;
@@ -270,7 +274,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
             .filter(|p| p[2].abs() <= limit && p[0].hypot(p[1]) <= s)
             .map(|p| [p[0] / s, p[1] / s, p[2]]),
     );
-    if scaled.len() < 2 * PARAMS {
+    if scaled.len() < MIN_WINDOW_POINTS {
         return None;
     }
     let ellipse = fit_shape(Shape::Ellipse, scaled, start(scaled, w, abs)?, w, abs, kept)?;
@@ -375,7 +379,7 @@ fn fit_shape(
         let t = fitted.0;
         let model_at = |p: &Local| model(shape, &t, p[0], p[1]).0;
         inliers(scaled, TRIM_NOISE * w.noise, model_at, abs, kept);
-        if kept.len() < 2 * PARAMS {
+        if kept.len() < MIN_WINDOW_POINTS {
             return None;
         }
         fitted = levenberg_marquardt(shape, kept, t)?;
