@@ -9,8 +9,8 @@
 //! itself a core point) becomes a core point of its own, evaluated like the others. Defects
 //! too narrow for any cylinder's quadric are found from the scan's own heights instead, or
 //! from those summits that read within `refine_above`, and measured by a peak model
-//! ([`modelled`]). Step 6 of the adaptive variant; its settings: [`crate::compare::DensifyConfig`];
-//! docs/ACCURACY.md (steps 11 and 12) has the numbers.
+//! ([`modelled`]). Step 5 of the adaptive variant; its settings:
+//! [`crate::compare::DensifyConfig`]; docs/ACCURACY.md (steps 11 and 12) has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 

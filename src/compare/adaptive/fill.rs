@@ -1,4 +1,4 @@
-//! Model fill (adaptive step 13): inside a defect that an accepted peak model describes, the
+//! Step 7, model fill: inside a defect that an accepted peak model describes, the
 //! model's height replaces the cylinder estimate at the core points. A cylinder's quadric
 //! flattens a narrow defect and at the largest radius trims it as outliers, so the core points
 //! on a defect's flanks (where its boundary at the tolerance lies) read 0.01-0.07 mm off; the
@@ -54,9 +54,10 @@ const MODEL_SPACING: f64 = 0.5;
 /// `fill.min_share` of its amplitude, within the window radius and the cylinders' half-length,
 /// normal within `max_normal_angle`; the model whose origin is nearest when several reach a
 /// point (those of `models` first). A point keeps its cylinder value unless the scan points
-/// within the smallest radius around it pass the lack-of-fit test (`fill.lack_of_fit`). The LoD
-/// is t95(n - 9) × the height's standard error from the fit's covariance plus the registration term; rows become [`Reason::PeakModel`]
-/// (`radius` the window, `n_ref` 0, `n_scan` the model's points).
+/// within the smallest radius around it pass the lack-of-fit test (`fill.lack_of_fit`). The
+/// LoD is t95(n - 9) × the height's standard error from the fit's covariance plus the
+/// registration term; rows become [`Reason::PeakModel`] (`radius` the window, `n_ref` 0,
+/// `n_scan` the model's points).
 pub(super) fn fill(
     prep: &Context,
     points: &[Point3<f64>],
@@ -120,7 +121,7 @@ fn shaped(prep: &Context, models: Vec<Model>, cfg: &CompareConfig) -> Vec<Model>
 /// `model` refitted over a window of `fill.wide_window` × its narrow width (at most
 /// `fill.max_widening` × its own) when that is clearly larger than its own ([`MIN_WIDENING`];
 /// not on a ridge, [`RIDGE_ASPECT`]), and the refit
-/// describes its window (step 10's guard without the bound on the peak's standard error);
+/// describes its window (the peak fit's guard without the bound on the peak's standard error);
 /// else `model`. A defect whose tolerance crossing lies near or beyond the window's edge is
 /// otherwise measured there by the cylinders, and its model's plane and amplitude trade off
 /// over a window that holds little of its foot.
@@ -192,7 +193,7 @@ fn claim(
 /// not `owner`ed): a long ridge holds a few summits whose fits do not all converge, and the
 /// windows of those that do cover a part of it. Larger |distance| first, each at least half
 /// a window radius from those taken before, a model fitted around it that describes its
-/// window (step 10's guard without the bound on the peak's standard error).
+/// window (the peak fit's guard without the bound on the peak's standard error).
 fn more_models(
     prep: &Context,
     points: &[Point3<f64>],

@@ -1,4 +1,4 @@
-//! Step 5, peaks (`peak_fit`): the height of each defect's top from a model of its shape
+//! Step 6, peaks (`peak_fit`): the height of each defect's top from a model of its shape
 //! ([`super::peak_model`]) fitted to the scan points around it, in place of the largest of
 //! the cylinders' smoothed values.
 use nalgebra::{Point3, Vector3};
