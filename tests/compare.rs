@@ -584,7 +584,7 @@ fn densification_finds_a_bump_between_core_points() {
     };
     let (core, reference, scan) = bump.case();
     let mut bad = CompareConfig::default();
-    bad.adaptive.densify_above = f64::NAN;
+    bad.adaptive.densify_above = Some(f64::NAN);
     let err = compare(&core, &reference, &scan, &bad)
         .unwrap_err()
         .to_string();
@@ -615,9 +615,9 @@ enum Profile {
     Plateau,
 }
 
-/// The default densification threshold (`inspect`'s: half the default tolerance).
+/// The default densification threshold (half the default tolerance).
 fn densify_above() -> f64 {
-    CompareConfig::default().adaptive.densify_above
+    CompareConfig::default().densify_above()
 }
 
 /// A bump (Gaussian unless `profile` says otherwise) on the plane z = 0 over [0, 8]², sampled:
@@ -730,7 +730,7 @@ impl Bump {
         densify_above: f64,
     ) -> (Deviations, Regions) {
         let mut cfg = CompareConfig::default();
-        cfg.adaptive.densify_above = densify_above;
+        cfg.adaptive.densify_above = Some(densify_above);
         cfg.adaptive.model_fill = densify_above.is_finite();
         cfg.adaptive.peak_fit = densify_above.is_finite();
         let dev = compare(core, reference, scan, &cfg).unwrap();

@@ -152,10 +152,8 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
         "[regions] min_coverage must be a share between 0 and 1, not {}",
         cfg.regions.min_coverage
     );
-    // Region peaks are refined around the points that can become error points.
-    cfg.compare.adaptive.refine_above = cfg.regions.tolerance;
-    // Core points are added around the summits of deviations beyond half the tolerance.
-    cfg.compare.adaptive.densify_above = 0.5 * cfg.regions.tolerance;
+    // The comparison works to the regions' tolerance (peaks, densification, narrow defects).
+    cfg.compare.tolerance = cfg.regions.tolerance;
     Ok(cfg)
 }
 

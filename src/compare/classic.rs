@@ -6,7 +6,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::grid::Member;
-use super::{Aggregate, Clouds, CompareConfig, Deviation, Reason};
+use super::{Aggregate, Clouds, CompareConfig, Deviation, Reason, Z95};
 
 /// Mean and sample variance (n - 1; NaN below two values, as py4dgeo) of the axial offsets.
 fn mean_var(members: &[Member]) -> (f64, f64) {
@@ -73,7 +73,7 @@ pub fn at(
             ([m1, m2], [s1, s2])
         }
     };
-    let lod = 1.96 * ((s1 * s1 / n1 as f64 + s2 * s2 / n2 as f64).sqrt() + cfg.registration_error);
+    let lod = Z95 * ((s1 * s1 / n1 as f64 + s2 * s2 / n2 as f64).sqrt() + cfg.registration_error);
     Deviation {
         distance: m2 - m1,
         uncertainty: lod,

@@ -123,10 +123,10 @@ pub fn core_points(
     let Some(normals) = &reference.normals else {
         bail!("the reference has no normals: give a mesh, or a cloud with outward normals");
     };
-    if let Some(i) = normals
-        .iter()
-        .position(|n| (n.norm() - 1.0).abs().is_nan() || (n.norm() - 1.0).abs() >= 1e-3)
-    {
+    if let Some(i) = normals.iter().position(|n| {
+        let off = (n.norm() - 1.0).abs();
+        off.is_nan() || off >= UNIT_TOLERANCE
+    }) {
         bail!("reference normal {i} is not a unit vector");
     }
     let count = cfg.count.unwrap_or_else(|| default_count(scan_points));
@@ -155,6 +155,10 @@ pub fn core_points(
     };
     Ok(reference.select(&chosen))
 }
+
+/// A reference normal whose length is this far from 1 is not a unit vector (float rounding of
+/// a normalised vector stays far below; a normal left unnormalised is far above).
+const UNIT_TOLERANCE: f64 = 1e-3;
 
 /// Area share of the core point `p` among the core points `index` holds: π r9² / 8, r9 the
 /// distance to its 8th neighbour (the point itself is the first of the 9); None when the

@@ -1,4 +1,4 @@
-//! The border tests of the adaptive variant (docs/ALGORITHMS.md, adaptive step 2b).
+//! The border tests of the adaptive variant (docs/ACCURACY.md, step 2b).
 //!
 //! 1. Sides: the annulus from half the smallest radius r0 to the largest radius around the
 //!    core point is cut into 8 sectors of 45°; a sector is *empty* when it holds at least

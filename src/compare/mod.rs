@@ -6,13 +6,10 @@
 //! Front: [`compare`]; core points and their normals: [`core_points`].
 mod adaptive;
 mod classic;
+mod config;
 mod core;
 mod cover;
-mod densify;
-mod fill;
-mod fit;
 pub(crate) mod grid;
-mod peakfit;
 
 use std::borrow::Cow;
 
@@ -21,6 +18,10 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub use self::config::{
+    AdaptiveConfig, Aggregate, CompareConfig, DensifyConfig, FillConfig, Method, PeakConfig,
+    DEFAULT_TOLERANCE,
+};
 pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
     CoreConfig, CoreSelection,
@@ -28,138 +29,31 @@ pub use self::core::{
 use self::grid::Grid;
 use crate::cloud::PointCloud;
 
-/// Which M3C2 variant to run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "lowercase")]
-pub enum Method {
-    /// Cylinder radius chosen per core point from the RWME similarity; quadric point pairs.
-    #[default]
-    Adaptive,
-    /// One fixed cylinder radius; difference of the cylinder means (py4dgeo's M3C2).
-    Classic,
-}
+/// The normal quantile of a two-sided 95 % level (the LoD's factor on the registration error,
+/// as in Lague et al.).
+pub(crate) const Z95: f64 = 1.96;
 
-/// How classic M3C2 sums up each cylinder's positions along the normal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Aggregate {
-    /// Mean and sample standard deviation (Lague et al.; py4dgeo's default).
-    #[default]
-    Mean,
-    /// Median and interquartile range, robust to outliers in a cylinder (py4dgeo's
-    /// `robust_aggr=True`: its quartiles, and the IQR in place of the standard deviation in
-    /// the LoD, which makes the LoD about 1.35 × the mean's for Gaussian noise).
-    Median,
-}
+/// The classic radius by default holds about this many scan points at the scan's median
+/// density (enough for a mean and a standard deviation per cylinder).
+const CLASSIC_RADIUS_POINTS: f64 = 20.0;
 
-/// Settings of [`compare`].
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
-pub struct CompareConfig {
-    /// Variant (default adaptive).
-    pub method: Method,
-    /// Classic cylinder radius d, mm (default: none = the radius that holds about 20 scan
-    /// points at the scan's median density).
-    pub radius: Option<f64>,
-    /// Half-length L of the cylinder along the normal, mm (py4dgeo's `max_distance`; a value
-    /// below the radius means the radius, as in py4dgeo). Default 1.0.
-    pub max_distance: f64,
-    /// Registration error added to the level of detection, mm (default 0; `inspect` puts the
-    /// registration's `registration_error` here unless given).
-    pub registration_error: f64,
-    /// Classic only: mean or median of each cylinder (default mean).
-    pub aggregate: Aggregate,
-    /// Fewest points each cloud must have in a cylinder; fewer gives NaN with a reason
-    /// (default 3; 1 reproduces py4dgeo, which only fails on empty cylinders).
-    pub min_points: usize,
-    /// Settings of the adaptive variant.
-    pub adaptive: AdaptiveConfig,
-}
+/// The smallest adaptive candidate radius r0 by default holds about this many scan points (a
+/// quadric's six terms with a few residual degrees of freedom).
+const ADAPTIVE_R0_POINTS: f64 = 12.0;
 
-impl Default for CompareConfig {
-    fn default() -> Self {
-        CompareConfig {
-            method: Method::Adaptive,
-            radius: None,
-            max_distance: 1.0,
-            registration_error: 0.0,
-            aggregate: Aggregate::Mean,
-            min_points: 3,
-            adaptive: AdaptiveConfig::default(),
-        }
-    }
-}
+/// Core points are handed to the threads in chunks of this many (speed only: a chunk shares
+/// one scratch buffer).
+const CHUNK: usize = 512;
 
-/// Settings of the adaptive (RWME) variant.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
-pub struct AdaptiveConfig {
-    /// Candidate radii, ascending, mm (default: none = four radii from r0 to 2.83 r0 in steps
-    /// of sqrt 2, r0 holding about 12 scan points at the scan's median density).
-    pub radii: Vec<f64>,
-    /// RWME regulariser lambda (default 0.43, the paper's value).
-    pub lambda: f64,
-    /// Weight scale h of w = exp(-d/h), mm (default 0.05, the default tolerance).
-    pub h: f64,
-    /// A radius is kept while its similarity, relative to a perfect match at the noise
-    /// level, is at least this (default 0.5).
-    pub similarity: f64,
-    /// Reference points whose normal is more than this many degrees off the core point's are
-    /// another surface (across a sharp edge) and are left out, with the scan points nearest
-    /// to them (default 35).
-    pub max_normal_angle: f64,
-    /// Scan noise (one standard deviation along the normal), mm (default: none = estimated
-    /// from the data).
-    pub noise: Option<f64>,
-    /// Beyond the RWME radius the radius keeps growing while the fits' confidence intervals
-    /// t_k ± gamma·se_k all intersect (intersection of confidence intervals); 0 turns this
-    /// off (default 2.0).
-    pub gamma: f64,
-    /// A fit whose residual standard deviation exceeds this many times the noise does not
-    /// describe the surface at its radius (the quadric flattens a narrow peak): the radius
-    /// stops growing before it, and it does not count for a peak (default 1.3).
-    pub max_misfit: f64,
-    /// Significant core points with |distance| above this (mm) get their `peak` from the
-    /// reference points around them (default 0.05, the default tolerance; `inspect` sets the
-    /// tolerance; infinity turns it off).
-    pub refine_above: f64,
-    /// Fit a peak model (an elliptic Gaussian on a plane) to the scan points around the top of
-    /// each defect and report its height as the `peak` of the error point whose cell holds
-    /// the top, when the fit passes its guard (default true; docs/ALGORITHMS.md).
-    pub peak_fit: bool,
-    /// Around each summit of the significant core points with |distance| above this (mm) and
-    /// LoD at most twice this, whose cylinder is mostly covered by the reference surface,
-    /// every reference point within the refine radius becomes a core point too: a defect
-    /// narrower than about twice the core spacing is otherwise sampled by one or two core
-    /// points (default 0.025, half the default tolerance; `inspect` sets half the tolerance;
-    /// infinity turns it off).
-    pub densify_above: f64,
-    /// Inside a defect that an accepted peak model describes (those of `peak_fit` and of the
-    /// narrow defects densification measures), the model's height replaces the cylinder
-    /// estimate at the core points whose surrounding scan points agree with it (a
-    /// lack-of-fit test); those rows become `Reason::PeakModel` (default true;
-    /// docs/ALGORITHMS.md, adaptive step 13).
-    pub model_fill: bool,
-}
+/// The surface density reads the distance to this many nearest neighbours ...
+const DENSITY_NEIGHBOURS: usize = 12;
 
-impl Default for AdaptiveConfig {
-    fn default() -> Self {
-        AdaptiveConfig {
-            radii: Vec::new(),
-            lambda: 0.43,
-            h: 0.05,
-            similarity: 0.5,
-            max_normal_angle: 35.0,
-            noise: None,
-            gamma: 2.0,
-            max_misfit: 1.3,
-            refine_above: 0.05,
-            peak_fit: true,
-            densify_above: 0.025,
-            model_fill: true,
-        }
-    }
-}
+/// ... of up to this many evenly spread points (its median moves by less than a per cent).
+const DENSITY_SAMPLES: usize = 1000;
+
+/// Density assumed (points per mm²) when no sampled point has enough neighbours: a few
+/// points, whose radii the caller's checks refuse anyway.
+const FALLBACK_DENSITY: f64 = 1.0;
 
 /// A peak evaluation counts only when its LoD is at most this many times that of what it is
 /// compared with: a refined evaluation against its core point's, a region member against the
@@ -378,7 +272,9 @@ pub fn compare(
     let radius_for = |count: f64| (count / (std::f64::consts::PI * scan_density)).sqrt();
     let (classic_radius, adaptive_radii) = match cfg.method {
         Method::Classic => {
-            let radius = cfg.radius.unwrap_or_else(|| radius_for(20.0));
+            let radius = cfg
+                .radius
+                .unwrap_or_else(|| radius_for(CLASSIC_RADIUS_POINTS));
             ensure!(
                 radius > 0.0 && radius.is_finite(),
                 "radius must be positive"
@@ -387,7 +283,7 @@ pub fn compare(
         }
         Method::Adaptive => {
             let r0 = match cfg.adaptive.radii.is_empty() {
-                true => radius_for(12.0),
+                true => radius_for(ADAPTIVE_R0_POINTS),
                 false => f64::NAN,
             };
             let radii = adaptive::radii(&cfg.adaptive, r0)?;
@@ -471,7 +367,7 @@ where
     let bar = crate::progress::bar(core.len() as u64, "compare");
     let order = grid.spatial_order(&core.points);
     let done: Vec<T> = order
-        .par_chunks(512)
+        .par_chunks(CHUNK)
         .flat_map_iter(|chunk| {
             let mut scratch = S::default();
             let done: Vec<T> = chunk
@@ -503,23 +399,25 @@ pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
 /// in the file).
 fn surface_density(grid: &Grid) -> f64 {
     let n = grid.slot_ids().len();
-    let step = (n / 1000).max(1);
+    let step = (n / DENSITY_SAMPLES).max(1);
     let mut found = Vec::new();
     let mut densities: Vec<f64> = (0..n)
         .step_by(step)
         .filter_map(|s| {
             grid.knn(
                 &Point3::from(*grid.slot_point(s)),
-                13,
+                DENSITY_NEIGHBOURS + 1,
                 f64::INFINITY,
                 &mut found,
             );
             let d2 = found.last()?.0;
-            (found.len() == 13 && d2 > 0.0).then(|| 12.0 / (std::f64::consts::PI * d2))
+            let k = DENSITY_NEIGHBOURS as f64;
+            (found.len() == DENSITY_NEIGHBOURS + 1 && d2 > 0.0)
+                .then(|| k / (std::f64::consts::PI * d2))
         })
         .collect();
     if densities.is_empty() {
-        return 1.0;
+        return FALLBACK_DENSITY;
     }
     densities.sort_by(f64::total_cmp);
     densities[densities.len() / 2]

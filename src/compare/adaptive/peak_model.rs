@@ -15,31 +15,72 @@
 //! a0 + a1 c_u + a2 c_v + A: a deviation from the reference like every distance (the plane is
 //! the deviation of the surroundings, e.g. a neighbouring defect's flank), and the height the
 //! data pins best when the window does not reach the defect's foot (a0 and A then trade off,
-//! their sum does not). docs/ALGORITHMS.md has the guard and the measured numbers.
-use nalgebra::{Matrix2, SMatrix, SVector};
-
-use super::fit::{inliers, Local};
-
-type Params = SVector<f64, 9>;
-type Normal = SMatrix<f64, 9, 9>;
-
-/// Parameters of the model.
-const PARAMS: usize = 9;
+//! their sum does not). docs/ALGORITHMS.md has the guard, docs/ACCURACY.md the measured numbers.
+use super::peak_shape::{
+    levenberg_marquardt, model, principal, support, Normal, Params, Shape, PARAMS,
+};
+use super::quadric::{inliers, Local, TRIM_NOISE};
 
 /// An ellipse whose wide width is at least this many times its narrow one is a ridge, and the
 /// capsule is tried as well.
 const ELONGATED: f64 = 2.0;
 
-/// Levenberg-Marquardt iterations before a fit counts as not converged. Fits that do
-/// converge take about 16 on average; most of those that reach the cap are windows of noise
-/// that never converge. Against 100: the same results on seeds 11-34 at 300k, and the
-/// narrow-defect search (`densify.rs`) at 20k core points takes 35 ms instead of 68 ms.
-const MAX_ITERATIONS: usize = 50;
-
 /// Fewest points where the fitted Gaussian contributes at least 10 % of its amplitude: fewer
 /// cannot pin its six shape parameters (a spike through one noisy point). 7, not 8, since
-/// 2026-12-01 (seed 80 at 300k: a 0.368 mm bump with 7; docs/ALGORITHMS.md, step 10).
+/// 2026-12-01 (seed 80 at 300k: a 0.368 mm bump with 7; docs/ACCURACY.md, step 10).
 pub(super) const MIN_SUPPORT: usize = 7;
+
+/// A peak fit needs at least this many points (before and after trimming): two per
+/// parameter, so that the residuals estimate the scatter.
+const MIN_WINDOW_POINTS: usize = 2 * PARAMS;
+
+/// An accepted peak's standard error is at most this share of its height (else the data do
+/// not pin it: the quadric estimates' peak stays).
+const MAX_RELATIVE_SE: f64 = 0.1;
+
+/// The fitted centre lies within this share of the window radius from the window's origin
+/// (the top the fit started from): farther, it fitted another bump or the window's edge.
+const MAX_OFFSET_SHARE: f64 = 0.5;
+
+/// At most 1 + n / this of a fit's n points may be trimmed (2 %): the model describes the
+/// data, not a subset that suits it.
+const TRIMMED_PER: usize = 50;
+
+/// [`height_limit`]: heights beyond this many times the supported height ...
+const HEIGHT_LIMIT_FACTOR: f64 = 2.0;
+
+/// ... plus this many noise SDs are outliers or another surface.
+const HEIGHT_LIMIT_NOISE: f64 = 4.0;
+
+/// The start's plane is the median height of the points beyond this share of the window
+/// radius (the defect's top lies near the origin).
+const OUTER_SHARE: f64 = 0.6;
+
+/// The start's centre and width come from the points above this share of the start's
+/// amplitude (the Gaussian's half height: its area is 2π ln 2 σ²).
+const HALF_HEIGHT: f64 = 0.5;
+
+/// The start's width, in units of the window radius, is clamped to this range (a patch of one
+/// point, or the whole window, says little about the width).
+const START_WIDTH: (f64, f64) = (0.05, 0.4);
+
+/// The 95 % quantile of a chi-square with one degree of freedom: the capsule's one extra
+/// freedom must lower the RSS by more than this many residual variances.
+const CHI2_1_95: f64 = 3.84;
+
+/// Relative tolerance of the covariance's pseudo-inverse (singular values below this share
+/// of JᵀJ's norm are a null direction: a ridge longer than the window).
+const PINV_TOLERANCE: f64 = 1e-12;
+
+/// A wide width beyond the window radius (scaled units: 1) makes the centre's offset count
+/// across the wide axis only (the centre slides along a ridge freely).
+const RIDGE_WIDE: f64 = 1.0;
+
+/// The capsule's start segment is at most this long in window radii (the window's diameter).
+const MAX_CAPSULE_WIDE: f64 = 2.0;
+
+/// Smallest narrow width a capsule starts from, scaled units (its inverse is a parameter).
+const MIN_START_WIDTH: f64 = 1e-3;
 
 /// The window and the expectations of a peak fit.
 #[derive(Debug, Clone, Copy)]
@@ -93,12 +134,12 @@ pub struct PeakFit {
 impl PeakFit {
     /// The guard: the centre ([`PeakFit::offset`]) within half the window, the narrow width at
     /// most the window radius (a wider defect is the quadric estimates' case) and supported by
-    /// [`MIN_SUPPORT`] points, A and the peak of the start's sign, the residual SD at most `max_misfit` × noise and at
-    /// most 1 + 2 % of the points trimmed (the model describes the data, not a subset that
+    /// [`MIN_SUPPORT`] points, A and the peak of the start's sign, the residual SD at most
+    /// `max_misfit` × noise and at most 1 + 2 % of the points trimmed (the model describes the data, not a subset that
     /// suits it), the peak's standard error at most a tenth of its height, and the peak at
     /// most twice the larger of the start and the highest point kept, plus 4 noise SD.
     pub fn accepted(&self, w: &PeakWindow) -> bool {
-        self.describes(w, MIN_SUPPORT) && self.se <= 0.1 * self.peak.abs()
+        self.describes(w, MIN_SUPPORT) && self.se <= MAX_RELATIVE_SE * self.peak.abs()
     }
 
     /// The guard of [`PeakFit::accepted`] without its bound on the standard error, with
@@ -117,8 +158,8 @@ impl PeakFit {
     /// the start's sign, the residual SD at most `max_misfit` × noise.
     pub fn fits_data(&self, w: &PeakWindow) -> bool {
         let sign = w.start.signum();
-        self.trimmed <= 1 + (self.n + self.trimmed) / 50
-            && self.offset <= 0.5 * w.radius
+        self.trimmed <= 1 + (self.n + self.trimmed) / TRIMMED_PER
+            && self.offset <= MAX_OFFSET_SHARE * w.radius
             && self.widths[0] <= w.radius
             && self.amplitude * sign > 0.0
             && self.peak * sign > 0.0
@@ -155,7 +196,7 @@ impl PeakFit {
 /// plus 4 noise SD are outliers or another surface, and a fitted peak beyond it is not what
 /// the data support.
 pub(super) fn height_limit(height: f64, noise: f64) -> f64 {
-    2.0 * height + 4.0 * noise
+    HEIGHT_LIMIT_FACTOR * height + HEIGHT_LIMIT_NOISE * noise
 }
 
 /// Reusable buffers of [`fit_peak`].
@@ -165,137 +206,6 @@ pub struct PeakScratch {
     kept: Vec<Local>,
     capsule_kept: Vec<Local>,
     abs: Vec<f64>,
-}
-
-/// The shape of the defect term.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Shape {
-    /// A exp(-½ (x - c)ᵀ LᵀL (x - c)), L = [[t6, t7], [0, t8]]: an elliptic Gaussian.
-    Ellipse,
-    /// A exp(-½ k² d²), d the distance from x to the segment of half-length ℓ = t8² through
-    /// the centre along (cos t6, sin t6), k = t7: a Gaussian cross-section with a flat top
-    /// along its length (a ridge whose ends lie in the window; ℓ = 0 is a round bump).
-    Capsule,
-}
-
-/// The model's value at scaled (u, v) and its gradient in the parameters.
-fn model(shape: Shape, t: &Params, u: f64, v: f64) -> (f64, Params) {
-    match shape {
-        Shape::Ellipse => ellipse(t, u, v),
-        Shape::Capsule => capsule(t, u, v),
-    }
-}
-
-/// [`Shape::Ellipse`]'s value and gradient.
-fn ellipse(t: &Params, u: f64, v: f64) -> (f64, Params) {
-    let (du, dv) = (u - t[4], v - t[5]);
-    let w1 = t[6] * du + t[7] * dv;
-    let w2 = t[8] * dv;
-    let g = (-0.5 * (w1 * w1 + w2 * w2)).exp();
-    let ag = t[3] * g;
-    let value = t[0] + t[1] * u + t[2] * v + ag;
-    let grad = Params::from([
-        1.0,
-        u,
-        v,
-        g,
-        ag * w1 * t[6],
-        ag * (w1 * t[7] + w2 * t[8]),
-        -ag * w1 * du,
-        -ag * w1 * dv,
-        -ag * w2 * dv,
-    ]);
-    (value, grad)
-}
-
-/// [`Shape::Capsule`]'s value and gradient.
-fn capsule(t: &Params, u: f64, v: f64) -> (f64, Params) {
-    let (du, dv) = (u - t[4], v - t[5]);
-    let (sin, cos) = t[6].sin_cos();
-    let (k, half) = (t[7], t[8] * t[8]);
-    // Position along the axis and across it; the nearest point of the segment.
-    let (along, across) = (du * cos + dv * sin, -du * sin + dv * cos);
-    let end = along.clamp(-half, half);
-    let (qa, qc) = (along - end, across);
-    let d2 = qa * qa + qc * qc;
-    let g = (-0.5 * k * k * d2).exp();
-    let ag = t[3] * g;
-    let value = t[0] + t[1] * u + t[2] * v + ag;
-    // d² = |x - c - end·e|²: ∂/∂c = -2q (q the offset from the segment), ∂/∂θ = -2 along·across
-    // inside the segment and -2 end·qc at its caps (∂ along/∂θ = across), ∂/∂ℓ = -2 |qa| at
-    // the caps.
-    let (qu, qv) = (qa * cos - qc * sin, qa * sin + qc * cos);
-    let inside = along.abs() < half;
-    let dd_theta = if inside {
-        -2.0 * along * across
-    } else {
-        -2.0 * end * qc
-    };
-    let dd_half = if inside { 0.0 } else { -2.0 * qa.abs() };
-    let f = -0.5 * k * k * ag;
-    let grad = Params::from([
-        1.0,
-        u,
-        v,
-        g,
-        f * -2.0 * qu,
-        f * -2.0 * qv,
-        f * dd_theta,
-        -k * d2 * ag,
-        f * dd_half * 2.0 * t[8],
-    ]);
-    (value, grad)
-}
-
-/// Residual sum of squares, JᵀJ and Jᵀr over `pts` at `t`.
-fn normal_equations(shape: Shape, pts: &[Local], t: &Params) -> (f64, Normal, Params) {
-    let (mut rss, mut jtj, mut jtr) = (0.0, Normal::zeros(), Params::zeros());
-    for p in pts {
-        let (value, grad) = model(shape, t, p[0], p[1]);
-        let r = p[2] - value;
-        rss += r * r;
-        jtj.ger(1.0, &grad, &grad, 1.0);
-        jtr += grad * r;
-    }
-    (rss, jtj, jtr)
-}
-
-/// Levenberg-Marquardt from `t`: the parameters, the RSS and JᵀJ at the minimum; None when it
-/// does not converge within [`MAX_ITERATIONS`].
-fn levenberg_marquardt(
-    shape: Shape,
-    pts: &[Local],
-    mut t: Params,
-) -> Option<(Params, f64, Normal)> {
-    let (mut rss, mut jtj, mut jtr) = normal_equations(shape, pts, &t);
-    let mut mu = 1e-3;
-    for _ in 0..MAX_ITERATIONS {
-        let mut damped = jtj;
-        for i in 0..PARAMS {
-            damped[(i, i)] += mu * jtj[(i, i)].max(1e-12);
-        }
-        let Some(step) = damped.cholesky().map(|c| c.solve(&jtr)) else {
-            mu *= 10.0;
-            continue;
-        };
-        let next = t + step;
-        let (rss_next, jtj_next, jtr_next) = normal_equations(shape, pts, &next);
-        if rss_next < rss {
-            let done = rss - rss_next <= 1e-10 * rss || step.norm() <= 1e-10 * t.norm();
-            (t, rss, jtj, jtr) = (next, rss_next, jtj_next, jtr_next);
-            mu = (mu / 3.0).max(1e-12);
-            if done {
-                return Some((t, rss, jtj));
-            }
-        } else {
-            mu *= 4.0;
-            // No step lowers the RSS: a minimum.
-            if mu > 1e10 {
-                return Some((t, rss, jtj));
-            }
-        }
-    }
-    None
 }
 
 /// The median of `values` (scratch: reordered).
@@ -309,7 +219,11 @@ fn median(values: &mut [f64]) -> f64 {
 /// above half of A (the width: that patch's area = 2π ln 2 σ²).
 fn start(pts: &[Local], w: &PeakWindow, abs: &mut Vec<f64>) -> Option<Params> {
     abs.clear();
-    abs.extend(pts.iter().filter(|p| p[0].hypot(p[1]) > 0.6).map(|p| p[2]));
+    abs.extend(
+        pts.iter()
+            .filter(|p| p[0].hypot(p[1]) > OUTER_SHARE)
+            .map(|p| p[2]),
+    );
     let base = if abs.is_empty() { 0.0 } else { median(abs) };
     let amplitude = w.start - base;
     if amplitude * w.start <= 0.0 {
@@ -317,7 +231,7 @@ fn start(pts: &[Local], w: &PeakWindow, abs: &mut Vec<f64>) -> Option<Params> {
     }
     let top: Vec<&Local> = pts
         .iter()
-        .filter(|p| (p[2] - base) / amplitude > 0.5)
+        .filter(|p| (p[2] - base) / amplitude > HALF_HEIGHT)
         .collect();
     let (mut cu, mut cv) = (0.0, 0.0);
     if !top.is_empty() {
@@ -328,7 +242,7 @@ fn start(pts: &[Local], w: &PeakWindow, abs: &mut Vec<f64>) -> Option<Params> {
     let area = top.len().max(1) as f64 * std::f64::consts::PI / pts.len() as f64;
     let s = (area / (2.0 * std::f64::consts::PI * std::f64::consts::LN_2))
         .sqrt()
-        .clamp(0.05, 0.4);
+        .clamp(START_WIDTH.0, START_WIDTH.1);
     Some(Params::from([
         base,
         0.0,
@@ -360,7 +274,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
             .filter(|p| p[2].abs() <= limit && p[0].hypot(p[1]) <= s)
             .map(|p| [p[0] / s, p[1] / s, p[2]]),
     );
-    if scaled.len() < 2 * PARAMS {
+    if scaled.len() < MIN_WINDOW_POINTS {
         return None;
     }
     let ellipse = fit_shape(Shape::Ellipse, scaled, start(scaled, w, abs)?, w, abs, kept)?;
@@ -377,7 +291,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
             .iter()
             .map(|p| (p[2] - model(Shape::Capsule, &c.0, p[0], p[1]).0).powi(2))
             .sum();
-        ellipse.1 - rss_ellipse_pts > 3.84 * variance(c)
+        ellipse.1 - rss_ellipse_pts > CHI2_1_95 * variance(c)
     };
     let (shape, (t, rss, jtj, n), current) = match capsule {
         Some(c) if clearly_better(&c) => (Shape::Capsule, c, &*capsule_kept),
@@ -386,7 +300,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
     let var = rss / (n - PARAMS) as f64;
     // Pseudo-inverse: along a ridge longer than the window the centre is undetermined (a
     // null direction of JᵀJ that the peak barely depends on).
-    let cov = jtj.pseudo_inverse(1e-12 * jtj.norm()).ok()? * var;
+    let cov = jtj.pseudo_inverse(PINV_TOLERANCE * jtj.norm()).ok()? * var;
     let (cu, cv) = (t[4], t[5]);
     let peak = t[0] + t[1] * cu + t[2] * cv + t[3];
     let grad = Params::from([1.0, cu, cv, 1.0, t[1], t[2], 0.0, 0.0, 0.0]);
@@ -407,7 +321,7 @@ pub fn fit_peak(pts: &[Local], w: &PeakWindow, scratch: &mut PeakScratch) -> Opt
         }
     };
     let c = nalgebra::Vector2::new(cu, cv) * s;
-    let offset = match wide > 1.0 {
+    let offset = match wide > RIDGE_WIDE {
         true => c.dot(&narrow_axis).abs(),
         false => c.norm(),
     };
@@ -442,9 +356,10 @@ fn capsule_start(t: &Params) -> Option<Params> {
         return None;
     }
     let theta = (-narrow_axis.x).atan2(narrow_axis.y);
-    let half = (widths[1].min(2.0) - widths[0]).max(0.0);
+    let half = (widths[1].min(MAX_CAPSULE_WIDE) - widths[0]).max(0.0);
     let mut start = *t;
-    (start[6], start[7], start[8]) = (theta, 1.0 / widths[0].max(1e-3), half.sqrt());
+    let narrow = 1.0 / widths[0].max(MIN_START_WIDTH);
+    (start[6], start[7], start[8]) = (theta, narrow, half.sqrt());
     Some(start)
 }
 
@@ -463,43 +378,13 @@ fn fit_shape(
     for _ in 0..2 {
         let t = fitted.0;
         let model_at = |p: &Local| model(shape, &t, p[0], p[1]).0;
-        inliers(scaled, 4.0 * w.noise, model_at, abs, kept);
-        if kept.len() < 2 * PARAMS {
+        inliers(scaled, TRIM_NOISE * w.noise, model_at, abs, kept);
+        if kept.len() < MIN_WINDOW_POINTS {
             return None;
         }
         fitted = levenberg_marquardt(shape, kept, t)?;
     }
     Some((fitted.0, fitted.1, fitted.2, kept.len()))
-}
-
-/// An ellipse's narrow axis (unit, scaled frame) and its principal standard deviations
-/// (narrow, wide; scaled units, infinite along a null direction of the precision).
-fn principal(t: &Params) -> (nalgebra::Vector2<f64>, [f64; 2]) {
-    let l = Matrix2::new(t[6], t[7], 0.0, t[8]);
-    let eig = (l.transpose() * l).symmetric_eigen();
-    let (narrow, wide) = match eig.eigenvalues[0] >= eig.eigenvalues[1] {
-        true => (0, 1),
-        false => (1, 0),
-    };
-    let width = |lambda: f64| match lambda > 1e-12 {
-        true => 1.0 / lambda.sqrt(),
-        false => f64::INFINITY,
-    };
-    (
-        eig.eigenvectors.column(narrow).into_owned(),
-        [width(eig.eigenvalues[narrow]), width(eig.eigenvalues[wide])],
-    )
-}
-
-/// Points of `pts` where the defect term is at least 10 % of A.
-fn support(shape: Shape, t: &Params, pts: &[Local]) -> usize {
-    pts.iter()
-        .filter(|p| {
-            let (value, _) = model(shape, t, p[0], p[1]);
-            let plane = t[0] + t[1] * p[0] + t[2] * p[1];
-            (value - plane) / t[3] >= 0.1
-        })
-        .count()
 }
 
 #[cfg(test)]

@@ -5,6 +5,10 @@
 //! standard error comes from the fit's residuals.
 use nalgebra::{Matrix6, Vector6};
 
+/// Residuals beyond this many noise SDs (or 3 robust SDs when more) are trimmed by a fit:
+/// outliers, and the other side of a thin wall.
+pub(super) const TRIM_NOISE: f64 = 4.0;
+
 /// A point in the tangent frame: (u, v) across the axis, t along it (mm).
 pub type Local = [f64; 3];
 
@@ -55,14 +59,30 @@ pub fn student_t95(dof: usize) -> f64 {
 /// leaves the quadric's six terms poorly pinned at the axis (a strip beside it, a ring)
 /// extrapolate: 1 = no better than a single point, where a plane through 12 points spread
 /// over a disc has about 0.1. On the 300k synth cases (seeds 11-34) this raised IoU from
-/// 0.903 to 0.914 on average at the same RMS (docs/ALGORITHMS.md, adaptive step 5).
+/// 0.903 to 0.914 on average at the same RMS (docs/ACCURACY.md, step 5).
 const MAX_LEVERAGE: f64 = 1.0;
 
+/// A quadric (6 terms) needs at least this many points: 4 residual degrees of freedom to
+/// estimate the scatter from.
+const QUADRIC_MIN_POINTS: usize = 10;
+
+/// A plane (3 terms) needs at least this many points (one residual degree of freedom).
+const PLANE_MIN_POINTS: usize = 4;
+
+/// σ = 1.4826 × MAD for Gaussian noise (1 / Φ⁻¹(3/4)).
+pub(super) const MAD_TO_SD: f64 = 1.4826;
+
+/// Residuals beyond this many robust SDs are trimmed (when more than the noise bound).
+const ROBUST_SDS: f64 = 3.0;
+
+/// Terms of the height field a fit through `count` points uses.
 fn terms(count: usize) -> usize {
-    match count {
-        0..=3 => 1,
-        4..=9 => 3,
-        _ => 6,
+    if count >= QUADRIC_MIN_POINTS {
+        6
+    } else if count >= PLANE_MIN_POINTS {
+        3
+    } else {
+        1
     }
 }
 
@@ -141,7 +161,7 @@ pub(super) fn inliers(
     abs.extend_from_within(..n);
     let (residuals, order) = abs.split_at_mut(n);
     let mad = *order.select_nth_unstable_by(n / 2, f64::total_cmp).1;
-    let limit = trim.max(3.0 * 1.4826 * mad);
+    let limit = trim.max(ROBUST_SDS * MAD_TO_SD * mad);
     out.clear();
     out.extend(
         pts.iter()

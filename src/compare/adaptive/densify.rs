@@ -1,43 +1,26 @@
 //! Densification (adaptive variant): extra core points where a defect may lie between the
 //! given ones. A defect narrower than about twice the core-point spacing holds one or two core
 //! points, often off its top, and a region needs `min_points` error points; so at every summit
-//! of the significant core points beyond `densify_above` whose LoD is at most twice that (the
-//! tolerance, in `inspect`) and whose cylinder is mostly covered by the reference surface
-//! ([`MIN_COVERAGE`]; the largest |distance| of its sign among them within the refine radius),
+//! of the significant core points beyond `densify_above` (half the tolerance) whose LoD is at
+//! most the tolerance and whose cylinder is mostly covered by the reference surface
+//! (`densify.min_coverage`; the largest |distance| of its sign among them within the refine
+//! radius),
 //! each reference point within the refine radius (normal within `max_normal_angle`, not
 //! itself a core point) becomes a core point of its own, evaluated like the others. Defects
 //! too narrow for any cylinder's quadric are found from the scan's own heights instead, or
 //! from those summits that read within `refine_above`, and measured by a peak model
-//! ([`modelled`]). docs/ALGORITHMS.md (adaptive steps 11 and 12) has the numbers.
+//! ([`modelled`]). Step 5 of the adaptive variant; its settings:
+//! [`crate::compare::DensifyConfig`]; docs/ACCURACY.md (steps 11 and 12) has the numbers.
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::adaptive::{at, summits, tangent_frame, Prepared, Scratch};
-use super::fill::{fit_window, gather_window, model_result, Model, ModelScratch};
-use super::fit::student_t95;
-use super::peakfit::{height_limit, PeakFit};
-use super::{CompareConfig, Deviation, Reason};
-
-/// A summit's cylinder must hold at least this share of the reference points a full disc of
-/// its radius holds: fits through the few points of a narrow face or a strip beside an edge
-/// (a third or less) give chance error points that densification would turn into regions.
-const MIN_COVERAGE: f64 = 0.6;
-
-/// A top that [`modelled`] fits must have at least this many reference points within the
-/// smallest candidate radius whose δ is beyond the tolerance with its sign: not a stray scan
-/// point. Two, not three: seed 45 at 300k had two under a 0.134 mm deep, 0.51 mm wide pit
-/// (missed with three); one would fit about twice as many tops for one more defect in 48
-/// cases (docs/ALGORITHMS.md, adaptive step 12).
-const MIN_CLUSTER: usize = 2;
-
-/// Fewest scan points where a modelled top's Gaussian is at least 10 % of its height.
-const MODEL_MIN_SUPPORT: usize = 5;
-
-/// A modelled top's Gaussian must be at least this many scan spacings wide (its narrow
-/// standard deviation): a narrower one passes between the points and fits a few noisy ones
-/// along a line (seed 24 at 300k: 0.083 mm across a 0.23 mm spacing, 0.14 mm high where the
-/// truth is 0).
-const MIN_WIDTH: f64 = 0.5;
+use super::context::{tangent_frame, Context};
+use super::fit::at;
+use super::model::{fit_window, gather_window, model_result, Model, ModelScratch};
+use super::peak_model::{height_limit, PeakFit};
+use super::quadric::student_t95;
+use super::radius::Scratch;
+use crate::compare::{CompareConfig, DensifyConfig, Deviation, Reason, Z95};
 
 /// Where [`modelled`] fits a peak model.
 struct Top {
@@ -55,6 +38,8 @@ pub(super) struct Densified {
     pub points: Vec<Point3<f64>>,
     /// Their outward unit normals (the reference's).
     pub normals: Vec<Vector3<f64>>,
+    /// Their results.
+    pub values: Vec<Deviation>,
     /// The peak models that measured narrow defects ([`modelled`]).
     pub models: Vec<Model>,
 }
@@ -63,29 +48,30 @@ pub(super) struct Densified {
 /// `prep`, whose outward unit normals are `normals`), evaluated like the others, then those
 /// that peak models measure ([`modelled`]), and their results.
 pub(super) fn densify(
-    prep: &Prepared,
+    prep: &Context,
     normals: &[Vector3<f64>],
     values: &[Deviation],
     cfg: &CompareConfig,
-) -> (Densified, Vec<Deviation>) {
-    let above = cfg.adaptive.densify_above;
+) -> Densified {
+    let (above, tolerance) = (prep.limits.densify_above, prep.limits.tolerance);
+    let d = &cfg.adaptive.densify;
     // Reference points per mm² (median): a full disc of radius r holds about π r² of them.
-    let density = super::surface_density(&prep.clouds.ref_grid);
+    let density = crate::compare::surface_density(&prep.clouds.ref_grid);
     let is_candidate: Vec<bool> = values
         .iter()
         .map(|v| {
             let disc = std::f64::consts::PI * v.radius * v.radius * density;
             v.significant
                 && v.distance.abs() > above
-                && v.uncertainty <= 2.0 * above
-                && v.n_ref as f64 >= MIN_COVERAGE * disc
+                && v.uncertainty <= tolerance
+                && v.n_ref as f64 >= d.min_coverage * disc
         })
         .collect();
     let candidates: Vec<usize> = (0..values.len()).filter(|&i| is_candidate[i]).collect();
     let distances: Vec<f64> = values.iter().map(|v| v.distance).collect();
     let tops = match candidates.is_empty() {
         true => Vec::new(),
-        false => summits(prep, prep.core, &candidates, &distances),
+        false => prep.summits(prep.core, &candidates, &distances),
     };
     let c = prep.clouds;
     let mut extra: Vec<usize> = tops
@@ -119,7 +105,7 @@ pub(super) fn densify(
     let mut knn = Vec::new();
     let shallow: Vec<Top> = tops
         .iter()
-        .filter(|&&i| values[i].distance.abs() <= cfg.adaptive.refine_above)
+        .filter(|&&i| values[i].distance.abs() <= prep.limits.refine_above)
         .filter_map(|&i| {
             c.ref_grid.knn(&prep.core[i], 1, f64::INFINITY, &mut knn);
             knn.first().map(|&(_, j)| Top {
@@ -145,12 +131,12 @@ pub(super) fn densify(
             }
         }
     }
-    let points = Densified {
+    Densified {
         points: extra.iter().map(|&j| c.reference.points[j]).collect(),
         normals: extra.iter().map(|&j| prep.ref_normals[j]).collect(),
+        values: added,
         models,
-    };
-    (points, added)
+    }
 }
 
 /// Whether a cylinder result says the scan does not cover its core point (a hole or a scan
@@ -161,49 +147,51 @@ fn unscanned(v: &Deviation) -> bool {
 
 /// Whether reference point `j` may become a core point around a centre with normal `n`: its
 /// normal within `max_normal_angle` of `n`, and not already a core point.
-fn own_surface(prep: &Prepared, j: usize, n: &Vector3<f64>) -> bool {
+fn own_surface(prep: &Context, j: usize, n: &Vector3<f64>) -> bool {
     let x = &prep.clouds.reference.points[j];
     prep.ref_normals[j].dot(n) >= prep.cos_limit && prep.nearest_core(x).is_some_and(|c| c != x)
 }
 
 /// Defects narrower than the smallest cylinder, found from the scan's own evidence and
-/// measured by a peak model. A top is a reference point whose δ (one scan point's height above
-/// it) is beyond the tolerance (twice `densify_above`; below `max_distance`) and the largest
+/// measured by a peak model (none while densification is off: `densify_above` infinite). A top
+/// is a reference point whose δ (one scan point's height above it) is beyond the tolerance
+/// (below `max_distance`) and the largest
 /// |δ| of its sign within the refine radius, whose nearest core point is no summit candidate
-/// of [`densify`] (else the summits above cover it), with [`MIN_CLUSTER`] such reference
-/// points within the smallest radius, and a peak window holding at least [`MIN_COVERAGE`] of
+/// of [`densify`] (else the summits above cover it), with `densify.min_cluster` such reference
+/// points within the smallest radius, and a peak window holding at least `min_coverage` of
 /// the scan points a full one holds (at a scan's border or hole a few points let a Gaussian
 /// fit anything). The peak model (`peakfit.rs`) is fitted to the scan points of the peak
 /// window around it; when the model describes them (the peak fit's guard without its bound
 /// on the standard error: at 19 scan points/mm² a 0.44 mm wide bump has about 8 points on it
-/// and its height a standard error of 15 %; [`MODEL_MIN_SUPPORT`] supporting points, at least
-/// [`MIN_WIDTH`] scan spacings wide) and the fitted peak exceeds the tolerance by t95(n - 9)
+/// and its height a standard error of 15 %; `densify.min_support` supporting points, at least
+/// `densify.min_width` scan spacings wide) and the fitted peak exceeds the tolerance by t95(n - 9)
 /// standard errors, every reference point within the refine radius of the top (normal within
 /// `max_normal_angle`, not a core point) becomes a core point whose distance is the model's
 /// height there, with LoD t95(n - 9) × its standard error plus the registration term
-/// ([`super::Reason::PeakModel`], [`measured`]). A top from δ whose model follows the scan
+/// ([`Reason::PeakModel`], [`measured`]). A top from δ whose model follows the scan
 /// points without pinning its top (too few supporting points, or beyond its height limit;
-/// [`PeakFit::fits_data`]) and that has [`MIN_FAR_POINTS`] scan points far beyond the
+/// [`PeakFit::fits_data`]) and that has `densify.min_far_points` scan points far beyond the
 /// tolerance is measured by its point pairs instead ([`paired`]). Larger tops first; a
 /// reference point goes to the first top that reaches it.
 fn modelled(
-    prep: &Prepared,
+    prep: &Context,
     is_candidate: &[bool],
     shallow: Vec<Top>,
     cfg: &CompareConfig,
 ) -> (Vec<(usize, Deviation)>, Vec<Model>) {
-    let above = cfg.adaptive.densify_above;
-    let tolerance = 2.0 * above;
+    let (tolerance, d) = (prep.limits.tolerance, &cfg.adaptive.densify);
     let c = prep.clouds;
+    let on = prep.limits.densify_above.is_finite();
     let ids: Vec<usize> = (0..prep.delta.len())
         .filter(|&j| {
-            let d = prep.delta[j].abs();
-            d > tolerance && d < cfg.max_distance
+            let size = prep.delta[j].abs();
+            on && size > tolerance && size < cfg.max_distance
         })
         .collect();
     let mut tops: Vec<Top> = match ids.is_empty() {
         true => Vec::new(),
-        false => summits(prep, &c.reference.points, &ids, &prep.delta)
+        false => prep
+            .summits(&c.reference.points, &ids, &prep.delta)
             .into_iter()
             .map(|j| Top {
                 at: j,
@@ -224,17 +212,17 @@ fn modelled(
             let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
             if top.from_delta {
                 let caught = prep.nearest_core_id(x).is_some_and(|i| is_candidate[i]);
-                if caught || cluster(prep, j, tolerance, cfg) < MIN_CLUSTER {
+                if caught || cluster(prep, j, tolerance, cfg) < d.min_cluster {
                     return None;
                 }
             }
-            if (gather_window(prep, x, n, window, scratch) as f64) < MIN_COVERAGE * full {
+            if (gather_window(prep, x, n, window, scratch) as f64) < d.min_coverage * full {
                 return None;
             }
             let sign = top.start.signum();
             if top.from_delta
                 && scratch.heights_between(prep.refine_radius, sign, tolerance, f64::MAX)
-                    < MIN_NEAR_BEYOND
+                    < d.min_near_beyond
             {
                 return None;
             }
@@ -243,12 +231,12 @@ fn modelled(
                 true => student_t95(f.dof()) * f.se,
                 false => 0.0,
             };
-            let wide = f.widths[0] >= MIN_WIDTH * spacing;
-            if wide && f.describes(&w, MODEL_MIN_SUPPORT) && f.peak.abs() - margin > tolerance {
+            let wide = f.widths[0] >= d.min_width * spacing;
+            if wide && f.describes(&w, d.min_support) && f.peak.abs() - margin > tolerance {
                 return Some((j, TopMeasure::Model(Box::new(f))));
             }
             let unpinned = top.from_delta && wide && f.fits_data(&w);
-            (unpinned && far_beyond(prep, scratch, top.start, tolerance))
+            (unpinned && far_beyond(prep, scratch, top.start, tolerance, d))
                 .then_some((j, TopMeasure::Pairs(top.start)))
         })
         .flatten()
@@ -284,7 +272,7 @@ enum TopMeasure {
     /// By its peak model.
     Model(Box<PeakFit>),
     /// By the point pairs under it, [`paired`] (the top's δ): its model follows the scan
-    /// points but they do not pin its top, and [`MIN_FAR_POINTS`] of them lie far beyond the
+    /// points but they do not pin its top, and `densify.min_far_points` of them lie far beyond the
     /// tolerance.
     Pairs(f64),
 }
@@ -299,46 +287,34 @@ impl TopMeasure {
     }
 }
 
-/// Scan points within the refine radius of a top from δ (the radius it is the largest δ
-/// within) that must lie beyond the tolerance (with its sign) for [`modelled`] to fit a model
-/// there. A top of noise (a reference point or two whose pairs read just beyond the
-/// tolerance) has at most one: with 0.015 mm noise a scan point reads beyond 0.05 mm by
-/// chance once in 2,500, two of the 100-200 such a radius holds at 300k about once in 500
-/// tops. (Within the smallest radius r0 instead, a 0.3 mm, 0.44 mm wide bump whose nearest
-/// reference point lies 0.4 mm from its centre had 1: missed.) Their fits (two
-/// shapes by Levenberg-Marquardt each) were most of step 12's time: on the peer case at 20k
-/// core points 80 of 92 fits started below 0.06 mm, and one model was kept
-/// (docs/ALGORITHMS.md, adaptive step 12).
-const MIN_NEAR_BEYOND: usize = 2;
-
-/// Scan points of a [`paired`] top beyond the tolerance by [`FAR_NOISE`] noise SDs.
-const MIN_FAR_POINTS: usize = 3;
-
-/// How many noise SDs beyond the tolerance a scan point of a [`paired`] top lies.
-const FAR_NOISE: f64 = 3.0;
-
-/// Whether at least [`MIN_FAR_POINTS`] scan points of the window last gathered into
+/// Whether at least `min_far_points` scan points of the window last gathered into
 /// `scratch`, within the smallest candidate radius of its origin, lie beyond `tolerance` by
-/// [`FAR_NOISE`] noise SDs with the sign of `start`: no noise (3 such points among about 12
+/// `far_noise` noise SDs with the sign of `start`: no noise (3 such points among about 12
 /// have a chance of about 1e-7 with Gaussian noise), but a defect narrower than a model can
 /// pin.
-fn far_beyond(prep: &Prepared, scratch: &ModelScratch, start: f64, tolerance: f64) -> bool {
-    let low = tolerance + FAR_NOISE * prep.noise;
+fn far_beyond(
+    prep: &Context,
+    scratch: &ModelScratch,
+    start: f64,
+    tolerance: f64,
+    d: &DensifyConfig,
+) -> bool {
+    let low = tolerance + d.far_noise * prep.noise;
     let high = height_limit(start.abs(), prep.noise);
     let far = scratch.heights_between(prep.smallest_radius(), start.signum(), low, high);
-    far >= MIN_FAR_POINTS
+    far >= d.min_far_points
 }
 
 /// The reference points within the smallest candidate radius of top `j` (normal within
 /// `max_normal_angle`, not a core point, not `used`; marked used) whose δ is beyond
 /// `tolerance` with the sign of the top's `delta`, each measured by its own point pair:
-/// distance δ, LoD 1.96 × (noise + registration error), `radius` 0, one reference and one
-/// scan point ([`super::Reason::PointPair`]). For a defect narrower than about two scan
+/// distance δ, LoD z95 × (noise + registration error), `radius` 0, one reference and one
+/// scan point ([`Reason::PointPair`]). For a defect narrower than about two scan
 /// spacings whose top no scan point comes near, no model is pinned by the data (seed 72 at
 /// 300k: a 0.366 mm deep, 0.43 mm wide pit fitted 0.73 ± 0.27 mm), and the largest pair
 /// distance is a lower bound of its height: a region, not a miss.
 fn paired(
-    prep: &Prepared,
+    prep: &Context,
     j: usize,
     delta: f64,
     tolerance: f64,
@@ -351,7 +327,7 @@ fn paired(
     for k in claim_near(prep, j, prep.smallest_radius(), cfg, used, beyond) {
         let value = Deviation {
             distance: prep.delta[k],
-            uncertainty: 1.96 * (prep.noise + cfg.registration_error),
+            uncertainty: Z95 * (prep.noise + cfg.registration_error),
             significant: false,
             radius: 0.0,
             n_ref: 1,
@@ -360,7 +336,7 @@ fn paired(
             spread: [0.0, prep.noise],
             peak: f64::NAN,
             peak_fitted: false,
-            reason: super::Reason::PointPair,
+            reason: Reason::PointPair,
         };
         values.push((k, value.finish(&prep.ref_normals[k])));
     }
@@ -371,7 +347,7 @@ fn paired(
 /// `max_distance`) on its own surface ([`own_surface`]), not yet `used` and passing `keep`;
 /// marked used: a reference point goes to the first top that reaches it.
 fn claim_near(
-    prep: &Prepared,
+    prep: &Context,
     j: usize,
     radius: f64,
     cfg: &CompareConfig,
@@ -392,7 +368,7 @@ fn claim_near(
 /// `max_normal_angle`, not a core point, not `used`; marked used) with the peak model `fit`'s
 /// height at each; the one nearest the fitted centre carries the fitted peak.
 fn measured(
-    prep: &Prepared,
+    prep: &Context,
     j: usize,
     fit: &PeakFit,
     cfg: &CompareConfig,
@@ -422,7 +398,7 @@ fn measured(
 
 /// Reference points within the smallest candidate radius of reference point `j` (normal
 /// within `max_normal_angle` of its own) whose δ is beyond `tolerance` with the sign of j's.
-fn cluster(prep: &Prepared, j: usize, tolerance: f64, cfg: &CompareConfig) -> usize {
+fn cluster(prep: &Context, j: usize, tolerance: f64, cfg: &CompareConfig) -> usize {
     let c = prep.clouds;
     let (x, n) = (&c.reference.points[j], &prep.ref_normals[j]);
     let sign = prep.delta[j].signum();
