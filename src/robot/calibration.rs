@@ -27,6 +27,11 @@ pub struct Tool {
     /// distance from the ball centre to the flange (`|tip_offset|`).
     #[serde(default)]
     pub shank_length: Option<f64>,
+    /// The `[removal]` table: the compliant tool's removal model, read and checked by
+    /// `plan::removal::ToolModel::load` (kept here unparsed so this file's other keys stay
+    /// strict).
+    #[serde(default)]
+    pub removal: Option<toml::Value>,
 }
 
 impl Tool {

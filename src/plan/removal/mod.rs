@@ -1,0 +1,180 @@
+//! Removal planning: a compliant abrasive tool, Preston's law as an influence function, the
+//! dwell times that remove each core point's excess above the allowance, and the predicted part
+//! after grinding. Method: docs/ALGORITHMS.md, "Removal planning".
+//!
+//! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`].
+pub mod dwell;
+pub mod influence;
+pub mod tool;
+
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+pub use influence::{Contact, Influence};
+pub use tool::ToolModel;
+
+use super::inspection::SurfacePoint;
+
+/// Settings of the dwell solve.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RemovalConfig {
+    /// Tikhonov weight lambda as a share of the mean diagonal of A^T A (1e-4): damps the
+    /// oscillating dwell maps of an ill-conditioned A while changing the removal by about
+    /// that share.
+    pub regularization: f64,
+    /// Fastest feed along a stroke, mm/s (20): sets the shortest dwell, t_min = piece / feed.
+    /// Four times the rigid planner's 5 mm/s: the joints' 1 rad/s limit moves the tip at
+    /// 100 mm/s or more, so the limit is the tool's spin-up of the contact, not the arm.
+    pub feed_max_mm_s: f64,
+    /// Slowest feed, mm/s (0.05): sets the longest dwell, t_max = piece / feed (4 s over a
+    /// 0.2 mm piece, 0.055 mm at the default tool's peak rate).
+    pub feed_min_mm_s: f64,
+    /// Spacing of contact points along a stroke as a share of the patch radius (0.33): the
+    /// influence is sampled finely enough that the removal between points varies under 1 %.
+    pub spacing_share: f64,
+    /// Distance between strokes as a share of the patch radius (0.5).
+    pub stepover_share: f64,
+}
+
+impl Default for RemovalConfig {
+    fn default() -> Self {
+        RemovalConfig {
+            regularization: 1e-4,
+            feed_max_mm_s: 20.0,
+            feed_min_mm_s: 0.05,
+            spacing_share: 0.33,
+            stepover_share: 0.5,
+        }
+    }
+}
+
+impl RemovalConfig {
+    /// Checks each setting; the message names the key.
+    pub fn check(&self) -> Result<(), String> {
+        let ranges = [
+            ("regularization", self.regularization, 0.0, 1.0),
+            ("feed_max_mm_s", self.feed_max_mm_s, 0.01, 1000.0),
+            ("feed_min_mm_s", self.feed_min_mm_s, 1e-4, 1000.0),
+            ("spacing_share", self.spacing_share, 0.01, 2.0),
+            ("stepover_share", self.stepover_share, 0.01, 2.0),
+        ];
+        for (name, v, lo, hi) in ranges {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return Err(format!("`removal.{name}` = {v:?} is outside {lo}..={hi}"));
+            }
+        }
+        if self.feed_min_mm_s >= self.feed_max_mm_s {
+            return Err(format!(
+                "`removal.feed_min_mm_s` {} is not below `removal.feed_max_mm_s` {}",
+                self.feed_min_mm_s, self.feed_max_mm_s
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Peak, RMS and volume above the tolerance of a deviation field over a region.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Stats {
+    /// Largest deviation, mm (+ = material in excess).
+    pub peak_mm: f64,
+    /// Root mean square of the deviation, mm.
+    pub rms_mm: f64,
+    /// Material above the tolerance, mm^3 (sum of (d - tolerance)+ x area per point).
+    pub volume_above_tolerance_mm3: f64,
+    /// Lowest deviation, mm (below -tolerance: over-ground).
+    pub lowest_mm: f64,
+}
+
+impl Stats {
+    /// Statistics of `d` (mm) with `area` mm^2 per point.
+    pub fn of(d: &[f64], tolerance: f64, area: f64) -> Stats {
+        if d.is_empty() {
+            return Stats::default();
+        }
+        Stats {
+            peak_mm: d.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            rms_mm: (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt(),
+            volume_above_tolerance_mm3: d.iter().map(|v| (v - tolerance).max(0.0)).sum::<f64>()
+                * area,
+            lowest_mm: d.iter().copied().fold(f64::INFINITY, f64::min),
+        }
+    }
+}
+
+/// The removal planned over one region.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionRemoval {
+    /// Dwell time per contact point, s.
+    pub dwell: Vec<f64>,
+    /// Predicted removal depth per core point, mm.
+    pub removal: Vec<f64>,
+    /// Deviation before grinding at the core points, mm.
+    pub before: Vec<f64>,
+}
+
+impl RegionRemoval {
+    /// Predicted deviation after grinding per core point, mm: deviation - A t.
+    pub fn residual(&self) -> Vec<f64> {
+        self.before
+            .iter()
+            .zip(&self.removal)
+            .map(|(d, r)| d - r)
+            .collect()
+    }
+}
+
+/// Target removal at a core point: its excess above the allowance, never below nominal (0
+/// where the deviation is under the allowance or unknown).
+pub fn target(distance: f64, allowance: f64) -> f64 {
+    if distance.is_finite() {
+        (distance - allowance).max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// Plans the dwell at every contact of `contacts` so that the removal at the core points
+/// `cores` (the region's and its neighbours' in reach of the tool) matches their excess above
+/// `allowance` mm: A from `influence`, dwell bounds from the feed limits of `config`.
+pub fn solve_region(
+    influence: &Influence,
+    contacts: &[Contact],
+    cores: &[SurfacePoint],
+    allowance: f64,
+    config: &RemovalConfig,
+) -> Result<RegionRemoval, String> {
+    let geometry: Vec<(Point3<f64>, Vector3<f64>)> =
+        cores.iter().map(|c| (c.position, c.normal)).collect();
+    let a = influence::matrix(influence, contacts, &geometry);
+    let r: Vec<f64> = cores
+        .iter()
+        .map(|c| target(c.distance, allowance))
+        .collect();
+    let lower: Vec<f64> = contacts
+        .iter()
+        .map(|c| c.length / config.feed_max_mm_s)
+        .collect();
+    let upper: Vec<f64> = contacts
+        .iter()
+        .map(|c| c.length / config.feed_min_mm_s)
+        .collect();
+    let dwell = dwell::solve(&a, cores.len(), &r, &lower, &upper, config.regularization)?;
+    let removal = influence::apply(&a, &dwell, cores.len());
+    let before = cores
+        .iter()
+        .map(|c| {
+            if c.distance.is_finite() {
+                c.distance
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    Ok(RegionRemoval {
+        dwell,
+        removal,
+        before,
+    })
+}
