@@ -133,6 +133,10 @@ pub struct Servo {
     /// Servo degrees a servo without a joint (the gripper) is held at.
     #[serde(default)]
     pub hold_deg: Option<f64>,
+    /// Rated torque, N m: the removal model's force check keeps the static joint torque of
+    /// the contact force within a share of it (joint servos only).
+    #[serde(default)]
+    pub rated_torque_nm: Option<f64>,
 }
 
 fn default_zero_offset() -> f64 {
@@ -197,6 +201,12 @@ impl Servos {
             }
             if servo.direction != 1 && servo.direction != -1 {
                 return Err(RobotError::bad(file, key("direction"), "must be 1 or -1"));
+            }
+            if let Some(t) = servo.rated_torque_nm {
+                if !(t > 0.0 && t <= 100.0) {
+                    let msg = format!("{t} must be in (0, 100] N m");
+                    return Err(RobotError::bad(file, key("rated_torque_nm"), msg));
+                }
             }
             if !less(servo.degree_range[0], servo.degree_range[1]) {
                 return Err(RobotError::bad(

@@ -138,44 +138,62 @@ pub struct Contact {
 /// pairs it reaches.
 pub type Columns = Vec<Vec<(usize, f64)>>;
 
+/// Core points (positions and outward normals, mm) indexed for the columns of A.
+pub struct Reach<'a> {
+    cores: &'a [(Point3<f64>, Vector3<f64>)],
+    index: Neighbours,
+}
+
+impl<'a> Reach<'a> {
+    /// Indexes `cores`.
+    pub fn new(cores: &'a [(Point3<f64>, Vector3<f64>)]) -> Self {
+        let positions: Vec<Point3<f64>> = cores.iter().map(|c| c.0).collect();
+        Reach {
+            cores,
+            index: Neighbours::new(&positions),
+        }
+    }
+
+    /// One column of A: the removal depth per second of dwell at contact `c` at every core
+    /// point in reach, the influence averaged over the contact's piece of stroke.
+    pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {
+        let n = c.normal;
+        let tx = (c.tilt_dir - n * n.dot(&c.tilt_dir)).normalize();
+        let ty = n.cross(&tx);
+        let reach = influence.patch_radius() + 0.5 * c.length;
+        let mut column = Vec::new();
+        for nb in self.index.knn_within(&c.point, self.cores.len(), reach) {
+            let (p, pn) = self.cores[nb.index];
+            if pn.dot(&n) < SAME_FACE_COS {
+                continue;
+            }
+            let mean = (0..SUBSAMPLES)
+                .map(|s| {
+                    let f = (s as f64 + 0.5) / SUBSAMPLES as f64 - 0.5;
+                    let d = p - (c.point + c.along * (f * c.length));
+                    influence.rate(d.dot(&tx), d.dot(&ty))
+                })
+                .sum::<f64>()
+                / SUBSAMPLES as f64;
+            if mean > 0.0 {
+                column.push((nb.index, mean));
+            }
+        }
+        column
+    }
+}
+
 /// The matrix A: column i holds the removal depth per second of dwell at contact i at every
-/// core point in reach (`cores`: positions and outward normals, mm), the influence averaged
-/// over the contact's piece of stroke.
+/// core point in reach (`cores`: positions and outward normals, mm).
 pub fn matrix(
     influence: &Influence,
     contacts: &[Contact],
     cores: &[(Point3<f64>, Vector3<f64>)],
 ) -> Columns {
-    let positions: Vec<Point3<f64>> = cores.iter().map(|c| c.0).collect();
-    let index = Neighbours::new(&positions);
-    let a = influence.patch_radius();
+    let reach = Reach::new(cores);
     contacts
         .iter()
-        .map(|c| {
-            let n = c.normal;
-            let tx = (c.tilt_dir - n * n.dot(&c.tilt_dir)).normalize();
-            let ty = n.cross(&tx);
-            let reach = a + 0.5 * c.length;
-            let mut column = Vec::new();
-            for nb in index.knn_within(&c.point, cores.len(), reach) {
-                let (p, pn) = cores[nb.index];
-                if pn.dot(&n) < SAME_FACE_COS {
-                    continue;
-                }
-                let mean = (0..SUBSAMPLES)
-                    .map(|s| {
-                        let f = (s as f64 + 0.5) / SUBSAMPLES as f64 - 0.5;
-                        let d = p - (c.point + c.along * (f * c.length));
-                        influence.rate(d.dot(&tx), d.dot(&ty))
-                    })
-                    .sum::<f64>()
-                    / SUBSAMPLES as f64;
-                if mean > 0.0 {
-                    column.push((nb.index, mean));
-                }
-            }
-            column
-        })
+        .map(|c| reach.column(influence, c))
         .collect()
 }
 

@@ -4,7 +4,9 @@
 //!
 //! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`].
 pub mod dwell;
+pub mod force;
 pub mod influence;
+pub mod montecarlo;
 pub mod tool;
 
 use nalgebra::{Point3, Vector3};
@@ -128,8 +130,13 @@ impl RegionRemoval {
 /// Target removal at a core point: its excess above the allowance, never below nominal (0
 /// where the deviation is under the allowance or unknown).
 pub fn target(distance: f64, allowance: f64) -> f64 {
+    (known(distance) - allowance).max(0.0)
+}
+
+/// A deviation, 0 where unknown (NaN: too few points to compare).
+fn known(distance: f64) -> f64 {
     if distance.is_finite() {
-        (distance - allowance).max(0.0)
+        distance
     } else {
         0.0
     }
@@ -162,19 +169,98 @@ pub fn solve_region(
         .collect();
     let dwell = dwell::solve(&a, cores.len(), &r, &lower, &upper, config.regularization)?;
     let removal = influence::apply(&a, &dwell, cores.len());
-    let before = cores
-        .iter()
-        .map(|c| {
-            if c.distance.is_finite() {
-                c.distance
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let before = cores.iter().map(|c| known(c.distance)).collect();
     Ok(RegionRemoval {
         dwell,
         removal,
         before,
     })
+}
+
+/// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the
+/// tolerance (0.5): small enough that the plan still removes all it safely can.
+const ALLOWANCE_STEP_SHARE: f64 = 0.5;
+
+/// One region's removal problem with the arm's error model.
+pub struct Problem<'a> {
+    /// The compliant tool.
+    pub tool: &'a ToolModel,
+    /// Ball radius, mm.
+    pub ball_mm: f64,
+    /// Raster contact points.
+    pub contacts: &'a [Contact],
+    /// The error model of each contact's joints.
+    pub joints: &'a [montecarlo::JointError],
+    /// Core points in reach.
+    pub cores: &'a [SurfacePoint],
+    /// Tolerance, mm: over-grind is a residual below -tolerance.
+    pub tolerance: f64,
+}
+
+/// A removal plan whose predicted over-grind at the Monte Carlo's quantile is zero.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Robust {
+    /// The plan at the allowance finally used.
+    pub plan: RegionRemoval,
+    /// The allowance used, mm.
+    pub allowance: f64,
+    /// Low quantile of the residual per core point, mm.
+    pub low: Vec<f64>,
+}
+
+/// Solves `problem` at `allowance`, then raises the allowance by half the tolerance until the
+/// Monte Carlo's low quantile of the residual stays above -tolerance everywhere; refuses (with
+/// the deepest predicted cut) once the allowance passes the highest deviation.
+pub fn solve_robust(
+    problem: &Problem,
+    mut allowance: f64,
+    config: &RemovalConfig,
+    mc: &montecarlo::MonteCarloConfig,
+) -> Result<Robust, String> {
+    let influence = Influence::new(problem.tool, problem.ball_mm);
+    let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = problem
+        .cores
+        .iter()
+        .map(|c| (c.position, c.normal, known(c.distance)))
+        .collect();
+    let highest = cores.iter().map(|c| c.2).fold(0.0, f64::max);
+    loop {
+        let plan = solve_region(
+            &influence,
+            problem.contacts,
+            problem.cores,
+            allowance,
+            config,
+        )?;
+        let spread = montecarlo::spread(
+            problem.tool,
+            problem.ball_mm,
+            problem.contacts,
+            problem.joints,
+            &plan.dwell,
+            &cores,
+            mc,
+        );
+        let low = spread.low(mc.quantile);
+        let (j, deepest) = low
+            .iter()
+            .copied()
+            .enumerate()
+            .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+        if deepest >= -problem.tolerance {
+            return Ok(Robust {
+                plan,
+                allowance,
+                low,
+            });
+        }
+        if allowance > highest {
+            return Err(format!(
+                "predicted over-grind at core point {j}: {deepest:.3} mm at the {} quantile \
+                 even with an allowance of {allowance:.3} mm above the highest deviation",
+                mc.quantile
+            ));
+        }
+        allowance += ALLOWANCE_STEP_SHARE * problem.tolerance;
+    }
 }
