@@ -162,7 +162,7 @@ impl<'a> Reach<'a> {
         let ty = n.cross(&tx);
         let reach = influence.patch_radius() + 0.5 * c.length;
         let mut column = Vec::new();
-        for nb in self.index.knn_within(&c.point, self.cores.len(), reach) {
+        for nb in self.index.within(&c.point, reach) {
             let (p, pn) = self.cores[nb.index];
             if pn.dot(&n) < SAME_FACE_COS {
                 continue;

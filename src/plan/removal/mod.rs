@@ -55,16 +55,21 @@ impl RemovalConfig {
     /// Checks each setting; the message names the key.
     pub fn check(&self) -> Result<(), String> {
         let ranges = [
-            ("regularization", self.regularization, 0.0, 1.0),
-            ("feed_max_mm_s", self.feed_max_mm_s, 0.01, 1000.0),
-            ("feed_min_mm_s", self.feed_min_mm_s, 1e-4, 1000.0),
-            ("spacing_share", self.spacing_share, 0.01, 2.0),
-            ("stepover_share", self.stepover_share, 0.01, 2.0),
+            ("regularization", 0.0, 1.0, ""),
+            ("feed_max_mm_s", 0.01, 1000.0, "mm/s"),
+            ("feed_min_mm_s", 1e-4, 1000.0, "mm/s"),
+            ("spacing_share", 0.01, 2.0, "x patch radius"),
+            ("stepover_share", 0.01, 2.0, "x patch radius"),
         ];
-        for (name, v, lo, hi) in ranges {
-            if !(v.is_finite() && (lo..=hi).contains(&v)) {
-                return Err(format!("`removal.{name}` = {v:?} is outside {lo}..={hi}"));
-            }
+        let values = [
+            self.regularization,
+            self.feed_max_mm_s,
+            self.feed_min_mm_s,
+            self.spacing_share,
+            self.stepover_share,
+        ];
+        if let Some((name, msg)) = out_of_range(&ranges, &values) {
+            return Err(format!("`removal.{name}` {msg}"));
         }
         if self.feed_min_mm_s >= self.feed_max_mm_s {
             return Err(format!(
@@ -74,6 +79,21 @@ impl RemovalConfig {
         }
         Ok(())
     }
+}
+
+/// The first value outside its `(name, low, high, unit)` range (inclusive; NaN is outside):
+/// its name and a message with the value, the range and the unit.
+fn out_of_range(ranges: &[(&str, f64, f64, &str)], values: &[f64]) -> Option<(String, String)> {
+    ranges
+        .iter()
+        .zip(values)
+        .find(|((_, lo, hi, _), v)| !(v.is_finite() && (*lo..=*hi).contains(*v)))
+        .map(|((name, lo, hi, unit), v)| {
+            (
+                name.to_string(),
+                format!("{v:?} is outside {lo}..={hi} {unit}"),
+            )
+        })
 }
 
 /// Peak, RMS and volume above the tolerance of a deviation field over a region.
@@ -262,5 +282,33 @@ pub fn solve_robust(
             ));
         }
         allowance += ALLOWANCE_STEP_SHARE * problem.tolerance;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_errors_name_the_key_and_stats_are_by_hand() {
+        assert_eq!(RemovalConfig::default().check(), Ok(()));
+        let bad = RemovalConfig {
+            feed_max_mm_s: f64::NAN,
+            ..RemovalConfig::default()
+        };
+        assert!(bad.check().unwrap_err().contains("`removal.feed_max_mm_s`"));
+        let crossed = RemovalConfig {
+            feed_min_mm_s: 30.0,
+            ..RemovalConfig::default()
+        };
+        assert!(crossed.check().unwrap_err().contains("feed_min_mm_s"));
+        // d = [0.2, -0.1, 0.05], tolerance 0.05, 2 mm^2 per point: volume (0.15 + 0 + 0) x 2
+        let s = Stats::of(&[0.2, -0.1, 0.05], 0.05, 2.0);
+        assert!((s.peak_mm - 0.2).abs() < 1e-15 && (s.lowest_mm + 0.1).abs() < 1e-15);
+        assert!((s.rms_mm - (0.0525f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert!((s.volume_above_tolerance_mm3 - 0.3).abs() < 1e-12);
+        assert_eq!(target(f64::NAN, 0.0), 0.0);
+        assert_eq!(target(-0.2, 0.0), 0.0);
+        assert!((target(0.3, 0.1) - 0.2).abs() < 1e-15);
     }
 }

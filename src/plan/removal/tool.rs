@@ -96,13 +96,8 @@ impl ToolModel {
             self.preston_k_mm2_n,
             self.preston_k_rel_sd,
         ];
-        for ((name, lo, hi, unit), v) in RANGES.iter().zip(values) {
-            if !(v.is_finite() && (*lo..=*hi).contains(&v)) {
-                return Err((
-                    format!("removal.{name}"),
-                    format!("{v:?} is outside {lo}..={hi} {unit}"),
-                ));
-            }
+        if let Some((name, msg)) = super::out_of_range(&RANGES, &values) {
+            return Err((format!("removal.{name}"), msg));
         }
         if let Some(table) = &self.influence_table {
             check_table(table).map_err(|m| ("removal.influence_table".to_string(), m))?;
