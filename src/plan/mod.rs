@@ -17,6 +17,7 @@ pub mod inspection;
 pub mod order;
 pub mod program;
 pub mod raster;
+pub mod removal;
 pub mod report;
 pub mod ros;
 pub mod surface;

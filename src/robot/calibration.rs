@@ -27,6 +27,11 @@ pub struct Tool {
     /// distance from the ball centre to the flange (`|tip_offset|`).
     #[serde(default)]
     pub shank_length: Option<f64>,
+    /// The `[removal]` table: the compliant tool's removal model, read and checked by
+    /// `plan::removal::ToolModel::load` (kept here unparsed so this file's other keys stay
+    /// strict).
+    #[serde(default)]
+    pub removal: Option<toml::Value>,
 }
 
 impl Tool {
@@ -128,6 +133,10 @@ pub struct Servo {
     /// Servo degrees a servo without a joint (the gripper) is held at.
     #[serde(default)]
     pub hold_deg: Option<f64>,
+    /// Rated torque, N m: the removal model's force check keeps the static joint torque of
+    /// the contact force within a share of it (joint servos only).
+    #[serde(default)]
+    pub rated_torque_nm: Option<f64>,
 }
 
 fn default_zero_offset() -> f64 {
@@ -192,6 +201,12 @@ impl Servos {
             }
             if servo.direction != 1 && servo.direction != -1 {
                 return Err(RobotError::bad(file, key("direction"), "must be 1 or -1"));
+            }
+            if let Some(t) = servo.rated_torque_nm {
+                if !(t > 0.0 && t <= 100.0) {
+                    let msg = format!("{t} must be in (0, 100] N m");
+                    return Err(RobotError::bad(file, key("rated_torque_nm"), msg));
+                }
             }
             if !less(servo.degree_range[0], servo.degree_range[1]) {
                 return Err(RobotError::bad(

@@ -1,0 +1,314 @@
+//! Removal planning: a compliant abrasive tool, Preston's law as an influence function, the
+//! dwell times that remove each core point's excess above the allowance, and the predicted part
+//! after grinding. Method: docs/ALGORITHMS.md, "Removal planning".
+//!
+//! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`].
+pub mod dwell;
+pub mod force;
+pub mod influence;
+pub mod montecarlo;
+pub mod tool;
+
+use nalgebra::{Point3, Vector3};
+use serde::{Deserialize, Serialize};
+
+pub use influence::{Contact, Influence};
+pub use tool::ToolModel;
+
+use super::inspection::SurfacePoint;
+
+/// Settings of the dwell solve.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RemovalConfig {
+    /// Tikhonov weight lambda as a share of the mean diagonal of A^T A (1e-4): damps the
+    /// oscillating dwell maps of an ill-conditioned A while changing the removal by about
+    /// that share.
+    pub regularization: f64,
+    /// Fastest feed along a stroke, mm/s (20): sets the shortest dwell, t_min = piece / feed.
+    /// Four times the rigid planner's 5 mm/s: the joints' 1 rad/s limit moves the tip at
+    /// 100 mm/s or more, so the limit is the tool's spin-up of the contact, not the arm.
+    pub feed_max_mm_s: f64,
+    /// Slowest feed, mm/s (0.05): sets the longest dwell, t_max = piece / feed (4 s over a
+    /// 0.2 mm piece, 0.055 mm at the default tool's peak rate).
+    pub feed_min_mm_s: f64,
+    /// Spacing of contact points along a stroke as a share of the patch radius (0.33): the
+    /// influence is sampled finely enough that the removal between points varies under 1 %.
+    pub spacing_share: f64,
+    /// Distance between strokes as a share of the patch radius (0.5).
+    pub stepover_share: f64,
+}
+
+impl Default for RemovalConfig {
+    fn default() -> Self {
+        RemovalConfig {
+            regularization: 1e-4,
+            feed_max_mm_s: 20.0,
+            feed_min_mm_s: 0.05,
+            spacing_share: 0.33,
+            stepover_share: 0.5,
+        }
+    }
+}
+
+impl RemovalConfig {
+    /// Checks each setting; the message names the key.
+    pub fn check(&self) -> Result<(), String> {
+        let ranges = [
+            ("regularization", 0.0, 1.0, ""),
+            ("feed_max_mm_s", 0.01, 1000.0, "mm/s"),
+            ("feed_min_mm_s", 1e-4, 1000.0, "mm/s"),
+            ("spacing_share", 0.01, 2.0, "x patch radius"),
+            ("stepover_share", 0.01, 2.0, "x patch radius"),
+        ];
+        let values = [
+            self.regularization,
+            self.feed_max_mm_s,
+            self.feed_min_mm_s,
+            self.spacing_share,
+            self.stepover_share,
+        ];
+        if let Some((name, msg)) = out_of_range(&ranges, &values) {
+            return Err(format!("`removal.{name}` {msg}"));
+        }
+        if self.feed_min_mm_s >= self.feed_max_mm_s {
+            return Err(format!(
+                "`removal.feed_min_mm_s` {} is not below `removal.feed_max_mm_s` {}",
+                self.feed_min_mm_s, self.feed_max_mm_s
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The first value outside its `(name, low, high, unit)` range (inclusive; NaN is outside):
+/// its name and a message with the value, the range and the unit.
+fn out_of_range(ranges: &[(&str, f64, f64, &str)], values: &[f64]) -> Option<(String, String)> {
+    ranges
+        .iter()
+        .zip(values)
+        .find(|((_, lo, hi, _), v)| !(v.is_finite() && (*lo..=*hi).contains(*v)))
+        .map(|((name, lo, hi, unit), v)| {
+            (
+                name.to_string(),
+                format!("{v:?} is outside {lo}..={hi} {unit}"),
+            )
+        })
+}
+
+/// Peak, RMS and volume above the tolerance of a deviation field over a region.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Stats {
+    /// Largest deviation, mm (+ = material in excess).
+    pub peak_mm: f64,
+    /// Root mean square of the deviation, mm.
+    pub rms_mm: f64,
+    /// Material above the tolerance, mm^3 (sum of (d - tolerance)+ x area per point).
+    pub volume_above_tolerance_mm3: f64,
+    /// Lowest deviation, mm (below -tolerance: over-ground).
+    pub lowest_mm: f64,
+}
+
+impl Stats {
+    /// Statistics of `d` (mm) with `area` mm^2 per point.
+    pub fn of(d: &[f64], tolerance: f64, area: f64) -> Stats {
+        if d.is_empty() {
+            return Stats::default();
+        }
+        Stats {
+            peak_mm: d.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            rms_mm: (d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt(),
+            volume_above_tolerance_mm3: d.iter().map(|v| (v - tolerance).max(0.0)).sum::<f64>()
+                * area,
+            lowest_mm: d.iter().copied().fold(f64::INFINITY, f64::min),
+        }
+    }
+}
+
+/// The removal planned over one region.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionRemoval {
+    /// Dwell time per contact point, s.
+    pub dwell: Vec<f64>,
+    /// Predicted removal depth per core point, mm.
+    pub removal: Vec<f64>,
+    /// Deviation before grinding at the core points, mm.
+    pub before: Vec<f64>,
+}
+
+impl RegionRemoval {
+    /// Predicted deviation after grinding per core point, mm: deviation - A t.
+    pub fn residual(&self) -> Vec<f64> {
+        self.before
+            .iter()
+            .zip(&self.removal)
+            .map(|(d, r)| d - r)
+            .collect()
+    }
+}
+
+/// Target removal at a core point: its excess above the allowance, never below nominal (0
+/// where the deviation is under the allowance or unknown).
+pub fn target(distance: f64, allowance: f64) -> f64 {
+    (known(distance) - allowance).max(0.0)
+}
+
+/// A deviation, 0 where unknown (NaN: too few points to compare).
+fn known(distance: f64) -> f64 {
+    if distance.is_finite() {
+        distance
+    } else {
+        0.0
+    }
+}
+
+/// Plans the dwell at every contact of `contacts` so that the removal at the core points
+/// `cores` (the region's and its neighbours' in reach of the tool) matches their excess above
+/// `allowance` mm: A from `influence`, dwell bounds from the feed limits of `config`.
+pub fn solve_region(
+    influence: &Influence,
+    contacts: &[Contact],
+    cores: &[SurfacePoint],
+    allowance: f64,
+    config: &RemovalConfig,
+) -> Result<RegionRemoval, String> {
+    let geometry: Vec<(Point3<f64>, Vector3<f64>)> =
+        cores.iter().map(|c| (c.position, c.normal)).collect();
+    let a = influence::matrix(influence, contacts, &geometry);
+    let r: Vec<f64> = cores
+        .iter()
+        .map(|c| target(c.distance, allowance))
+        .collect();
+    let lower: Vec<f64> = contacts
+        .iter()
+        .map(|c| c.length / config.feed_max_mm_s)
+        .collect();
+    let upper: Vec<f64> = contacts
+        .iter()
+        .map(|c| c.length / config.feed_min_mm_s)
+        .collect();
+    let dwell = dwell::solve(&a, cores.len(), &r, &lower, &upper, config.regularization)?;
+    let removal = influence::apply(&a, &dwell, cores.len());
+    let before = cores.iter().map(|c| known(c.distance)).collect();
+    Ok(RegionRemoval {
+        dwell,
+        removal,
+        before,
+    })
+}
+
+/// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the
+/// tolerance (0.5): small enough that the plan still removes all it safely can.
+const ALLOWANCE_STEP_SHARE: f64 = 0.5;
+
+/// One region's removal problem with the arm's error model.
+pub struct Problem<'a> {
+    /// The compliant tool.
+    pub tool: &'a ToolModel,
+    /// Ball radius, mm.
+    pub ball_mm: f64,
+    /// Raster contact points.
+    pub contacts: &'a [Contact],
+    /// The error model of each contact's joints.
+    pub joints: &'a [montecarlo::JointError],
+    /// Core points in reach.
+    pub cores: &'a [SurfacePoint],
+    /// Tolerance, mm: over-grind is a residual below -tolerance.
+    pub tolerance: f64,
+}
+
+/// A removal plan whose predicted over-grind at the Monte Carlo's quantile is zero.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Robust {
+    /// The plan at the allowance finally used.
+    pub plan: RegionRemoval,
+    /// The allowance used, mm.
+    pub allowance: f64,
+    /// Low quantile of the residual per core point, mm.
+    pub low: Vec<f64>,
+}
+
+/// Solves `problem` at `allowance`, then raises the allowance by half the tolerance until the
+/// Monte Carlo's low quantile of the residual stays above -tolerance everywhere; refuses (with
+/// the deepest predicted cut) once the allowance passes the highest deviation.
+pub fn solve_robust(
+    problem: &Problem,
+    mut allowance: f64,
+    config: &RemovalConfig,
+    mc: &montecarlo::MonteCarloConfig,
+) -> Result<Robust, String> {
+    let influence = Influence::new(problem.tool, problem.ball_mm);
+    let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = problem
+        .cores
+        .iter()
+        .map(|c| (c.position, c.normal, known(c.distance)))
+        .collect();
+    let highest = cores.iter().map(|c| c.2).fold(0.0, f64::max);
+    loop {
+        let plan = solve_region(
+            &influence,
+            problem.contacts,
+            problem.cores,
+            allowance,
+            config,
+        )?;
+        let spread = montecarlo::spread(
+            problem.tool,
+            problem.ball_mm,
+            problem.contacts,
+            problem.joints,
+            &plan.dwell,
+            &cores,
+            mc,
+        );
+        let low = spread.low(mc.quantile);
+        let (j, deepest) = low
+            .iter()
+            .copied()
+            .enumerate()
+            .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+        if deepest >= -problem.tolerance {
+            return Ok(Robust {
+                plan,
+                allowance,
+                low,
+            });
+        }
+        if allowance > highest {
+            return Err(format!(
+                "predicted over-grind at core point {j}: {deepest:.3} mm at the {} quantile \
+                 even with an allowance of {allowance:.3} mm above the highest deviation",
+                mc.quantile
+            ));
+        }
+        allowance += ALLOWANCE_STEP_SHARE * problem.tolerance;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn config_errors_name_the_key_and_stats_are_by_hand() {
+        assert_eq!(RemovalConfig::default().check(), Ok(()));
+        let bad = RemovalConfig {
+            feed_max_mm_s: f64::NAN,
+            ..RemovalConfig::default()
+        };
+        assert!(bad.check().unwrap_err().contains("`removal.feed_max_mm_s`"));
+        let crossed = RemovalConfig {
+            feed_min_mm_s: 30.0,
+            ..RemovalConfig::default()
+        };
+        assert!(crossed.check().unwrap_err().contains("feed_min_mm_s"));
+        // d = [0.2, -0.1, 0.05], tolerance 0.05, 2 mm^2 per point: volume (0.15 + 0 + 0) x 2
+        let s = Stats::of(&[0.2, -0.1, 0.05], 0.05, 2.0);
+        assert!((s.peak_mm - 0.2).abs() < 1e-15 && (s.lowest_mm + 0.1).abs() < 1e-15);
+        assert!((s.rms_mm - (0.0525f64 / 3.0).sqrt()).abs() < 1e-15);
+        assert!((s.volume_above_tolerance_mm3 - 0.3).abs() < 1e-12);
+        assert_eq!(target(f64::NAN, 0.0), 0.0);
+        assert_eq!(target(-0.2, 0.0), 0.0);
+        assert!((target(0.3, 0.1) - 0.2).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,129 @@
+//! The arm's position error propagated into the predicted residual by Monte Carlo: every draw
+//! displaces each contact by its servo quantisation (per contact), backlash and a tool-tip
+//! error (both systematic within a draw) and scales Preston's k; a displacement along the
+//! normal changes the preload, hence the force and the Hertz patch; along the surface it moves
+//! the patch.
+use nalgebra::{DMatrix, DVector, Point3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::influence::{Contact, Influence, Reach};
+use super::tool::ToolModel;
+
+/// Settings of the Monte Carlo.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MonteCarloConfig {
+    /// Draws (50).
+    pub draws: usize,
+    /// Seed of the draws (28): a plan is reproducible.
+    pub seed: u64,
+    /// Backlash per servo, degrees (1.0: "backlash up to 1 deg per servo", DOFBOT.md); each
+    /// draw puts every joint uniformly within +-half of it.
+    pub backlash_deg: f64,
+    /// Tool-tip error after calibration, mm per axis (0.5; replace with the RMS residual of
+    /// `calibrate verify`); each draw shifts the tip uniformly within +-this on every axis.
+    pub tip_error_mm: f64,
+    /// Share of the 95th percentile taken as the verdict (0.95).
+    pub quantile: f64,
+}
+
+impl Default for MonteCarloConfig {
+    fn default() -> Self {
+        MonteCarloConfig {
+            draws: 50,
+            seed: 28,
+            backlash_deg: 1.0,
+            tip_error_mm: 0.5,
+            quantile: 0.95,
+        }
+    }
+}
+
+/// How one contact's joints move its tip: `sensitivity` (3 x dof, mm per rad, the frame of
+/// the contact points) and each joint's quantisation half-step, rad (half a raw count).
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointError {
+    /// Tip displacement per joint angle, mm/rad.
+    pub sensitivity: DMatrix<f64>,
+    /// Half a raw count per joint, rad.
+    pub half_count: Vec<f64>,
+}
+
+/// The predicted residual's spread per core point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spread {
+    /// Residual per draw and core point, mm: `draws[d][j]`.
+    pub draws: Vec<Vec<f64>>,
+}
+
+impl Spread {
+    /// The `1 - quantile` low quantile of the residual at every core point, mm (the deepest
+    /// cut that `quantile` of the draws stay above).
+    pub fn low(&self, quantile: f64) -> Vec<f64> {
+        let n = self.draws.first().map_or(0, Vec::len);
+        (0..n)
+            .map(|j| {
+                let mut v: Vec<f64> = self.draws.iter().map(|d| d[j]).collect();
+                v.sort_by(f64::total_cmp);
+                let k = ((1.0 - quantile) * (v.len() - 1) as f64).round() as usize;
+                v[k]
+            })
+            .collect()
+    }
+}
+
+/// Residuals of `dwell` over `cores` (positions, normals, deviations) under `config`'s draws:
+/// `tool` on a ball of `ball_mm`, `joints[i]` the error model of contact i.
+pub fn spread(
+    tool: &ToolModel,
+    ball_mm: f64,
+    contacts: &[Contact],
+    joints: &[JointError],
+    dwell: &[f64],
+    cores: &[(Point3<f64>, Vector3<f64>, f64)],
+    config: &MonteCarloConfig,
+) -> Spread {
+    let geometry: Vec<(Point3<f64>, Vector3<f64>)> = cores.iter().map(|c| (c.0, c.1)).collect();
+    let reach = Reach::new(&geometry);
+    let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
+    let dof = joints.first().map_or(0, |j| j.half_count.len());
+    let half_backlash = 0.5 * config.backlash_deg.to_radians();
+    // Preston's k uniform with the model's standard deviation: half-width sqrt(3) sd
+    let k_half = 3f64.sqrt() * tool.preston_k_rel_sd;
+    let draws = (0..config.draws)
+        .map(|_| {
+            let backlash = DVector::from_fn(dof, |_, _| rng.gen_range(-1.0..=1.0) * half_backlash);
+            let tip = Vector3::from_fn(|_, _| rng.gen_range(-1.0..=1.0) * config.tip_error_mm);
+            let k_scale = 1.0 + k_half * rng.gen_range(-1.0..=1.0);
+            let mut removal = vec![0.0; cores.len()];
+            for ((c, je), t) in contacts.iter().zip(joints).zip(dwell) {
+                let quant =
+                    DVector::from_fn(dof, |i, _| rng.gen_range(-1.0..=1.0) * je.half_count[i]);
+                let d = &je.sensitivity * (&backlash + quant);
+                let shift = Vector3::new(d[0], d[1], d[2]) + tip;
+                let along_normal = shift.dot(&c.normal);
+                // the tool moved outward by `along_normal` presses that much less
+                let preload = (tool.preload_mm - along_normal).max(0.0);
+                if preload <= 0.0 {
+                    continue;
+                }
+                let model = ToolModel {
+                    preload_mm: preload,
+                    preston_k_mm2_n: tool.preston_k_mm2_n * k_scale.max(0.0),
+                    ..tool.clone()
+                };
+                let moved = Contact {
+                    point: c.point + (shift - c.normal * along_normal),
+                    ..*c
+                };
+                for (j, v) in reach.column(&Influence::new(&model, ball_mm), &moved) {
+                    removal[j] += v * t;
+                }
+            }
+            cores.iter().zip(removal).map(|(c, r)| c.2 - r).collect()
+        })
+        .collect();
+    Spread { draws }
+}
