@@ -81,7 +81,7 @@ fn offsets_from(
 ) -> Result<Vec<ServoOffset>, CalibError> {
     let mut out = Vec::new();
     for (i, j) in map.joints.iter().enumerate() {
-        let scale = j.scale.to_scale(j.servo)?;
+        let scale = j.servo_scale().map_err(BusError::from)?;
         let deg = at_fractional_raw(read.raw[i], |r| {
             scale
                 .deg_from_raw(r)

@@ -9,7 +9,6 @@ pub mod check;
 pub mod clearance;
 pub mod collide;
 pub mod error;
-pub mod execute;
 pub mod feed;
 pub mod file;
 pub mod frames;
