@@ -12,6 +12,7 @@ pub mod calibration;
 pub mod error;
 pub mod ik;
 pub mod model;
+mod planar;
 pub mod resolution;
 pub mod servo_map;
 
