@@ -2,7 +2,7 @@
 //! too far, averaged to a fractional raw position and converted through the servo map.
 use dofbot_protocol::servo::SERVO_COUNT;
 
-use super::CalibError;
+use super::config::CalibError;
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
 
 /// The mean of several reads of the six servos.

@@ -4,8 +4,8 @@
 use dofbot_protocol::servo::ServoId;
 use dofbot_protocol::OffsetState;
 
+use super::config::{CalibError, CalibrationConfig};
 use super::read::{at_fractional_raw, read_mean, MeanRead};
-use super::{CalibError, CalibrationConfig};
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
 
 /// One joint servo's result.

@@ -8,6 +8,7 @@ mod assemble;
 pub mod check;
 pub mod clearance;
 pub mod collide;
+pub mod contact;
 pub mod error;
 pub mod feed;
 pub mod file;
