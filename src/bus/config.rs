@@ -107,6 +107,24 @@ mod tests {
     }
 
     #[test]
+    fn servo_map_keys_are_unchanged_and_round_trip() {
+        // A scale's keys are `deg_max`, `raw_min`, `raw_max`, `inverted` (DOFBOT.md's servo 6).
+        let text = "[servo_map.gripper]\nservo = 6\noffset_deg = 0.0\nmin_deg = 0.0\n\
+                    max_deg = 180.0\nscale = { deg_max = 180.0, raw_min = 900, raw_max = 3100, \
+                    inverted = false }\n";
+        let c: BusConfig = toml::from_str(text).unwrap();
+        assert_eq!(c.servo_map, ServoMap::default());
+        // DOFBOT.md: servo 6 at 90 deg is raw 900 + 2200 * 90 / 180 = 2000.
+        assert_eq!(c.servo_map.gripper_raw(90.0).unwrap(), 2000);
+        let written = toml::to_string(&BusConfig::default()).unwrap();
+        let back: BusConfig = toml::from_str(&written).unwrap();
+        assert_eq!(back, BusConfig::default());
+        let bad = text.replace("inverted = false", "inverted = false, id = 6");
+        let e = toml::from_str::<BusConfig>(&bad).unwrap_err().to_string();
+        assert!(e.contains("unknown field `id`"), "{e}");
+    }
+
+    #[test]
     fn timing_settings_out_of_range_are_refused_by_key() {
         BusConfig::default().check().unwrap();
         for (text, key) in [

@@ -53,10 +53,28 @@ impl GripperCalib {
 }
 
 /// The TOML/JSON keys of a scale in a map (`deg_max`, `raw_min`, `raw_max`, `inverted`; the id
-/// is the joint's `servo`).
+/// is the joint's `servo`, set when the map is read).
 mod scale_keys {
     use dofbot_protocol::servo::ServoScale;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    use super::{GripperCalib, JointCalib};
+
+    /// The joints with each scale's id set to the joint's servo.
+    pub fn joints<'de, D: Deserializer<'de>>(de: D) -> Result<Vec<JointCalib>, D::Error> {
+        let mut joints = Vec::<JointCalib>::deserialize(de)?;
+        for j in &mut joints {
+            j.scale.id = j.servo;
+        }
+        Ok(joints)
+    }
+
+    /// The gripper with its scale's id set to its servo.
+    pub fn gripper<'de, D: Deserializer<'de>>(de: D) -> Result<GripperCalib, D::Error> {
+        let mut g = GripperCalib::deserialize(de)?;
+        g.scale.id = g.servo;
+        Ok(g)
+    }
 
     #[derive(Serialize, Deserialize)]
     #[serde(deny_unknown_fields)]
@@ -110,8 +128,8 @@ pub struct JointCalib {
     pub upper_rad: f64,
     /// Velocity limit, rad/s (URDF: 1.0).
     pub max_velocity_rad_s: f64,
-    /// Servo scale (its `id` is taken from `servo` when the map is used; a config file gives
-    /// `deg_max`, `raw_min`, `raw_max`, `inverted`).
+    /// Servo scale (a config file gives `deg_max`, `raw_min`, `raw_max`, `inverted`; its `id`
+    /// is `servo`).
     #[serde(with = "scale_keys")]
     pub scale: ServoScale,
 }
@@ -128,8 +146,8 @@ pub struct GripperCalib {
     pub min_deg: f64,
     /// Largest commandable angle, degrees.
     pub max_deg: f64,
-    /// Servo scale (its `id` is taken from `servo` when the map is used; a config file gives
-    /// `deg_max`, `raw_min`, `raw_max`, `inverted`).
+    /// Servo scale (a config file gives `deg_max`, `raw_min`, `raw_max`, `inverted`; its `id`
+    /// is `servo`).
     #[serde(with = "scale_keys")]
     pub scale: ServoScale,
 }
@@ -139,8 +157,10 @@ pub struct GripperCalib {
 #[serde(default, deny_unknown_fields)]
 pub struct ServoMap {
     /// The five arm joints, in chain order.
+    #[serde(deserialize_with = "scale_keys::joints")]
     pub joints: Vec<JointCalib>,
     /// The gripper.
+    #[serde(deserialize_with = "scale_keys::gripper")]
     pub gripper: GripperCalib,
 }
 
