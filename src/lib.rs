@@ -4,6 +4,7 @@
 pub mod acquire;
 pub mod bus;
 pub mod calibrate;
+pub mod cell;
 pub mod cli;
 pub mod cloud;
 pub mod compare;

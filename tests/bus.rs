@@ -57,12 +57,7 @@ fn cli_move_then_read_over_pty_returns_the_commanded_joints() {
         );
     }
     for (i, q) in Q.iter().enumerate() {
-        let per_count = 1.0
-            / map.joints[i]
-                .scale
-                .to_scale(i as u8 + 1)
-                .unwrap()
-                .counts_per_deg();
+        let per_count = 1.0 / map.joints[i].servo_scale().unwrap().counts_per_deg();
         let got_q = read["joints"][i].as_f64().unwrap();
         assert!(
             (got_q - q).abs() <= per_count.to_radians(),
@@ -438,7 +433,7 @@ proptest! {
             };
             let state = map.state_from_raw(pose.raw()).unwrap();
             for (i, j) in map.joints.iter().enumerate() {
-                let half_count = (0.5 / j.scale.to_scale(i as u8 + 1).unwrap().counts_per_deg()).to_radians();
+                let half_count = (0.5 / j.servo_scale().unwrap().counts_per_deg()).to_radians();
                 prop_assert!(state.joints[i] >= j.lower_rad - half_count && state.joints[i] <= j.upper_rad + half_count);
             }
             prop_assert!(within);

@@ -277,9 +277,8 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).expect("sim");
     let journal = Journal::append(&tmp.path().join("journal.jsonl")).expect("journal");
     let mut bus = Bus::connect(arm.transport(), cfg, journal).expect("connect");
-    let report =
-        polishbot::plan::execute::execute(&mut bus, &checked, p.period, 0, &Default::default())
-            .expect("run");
+    let report = polishbot::cell::execute(&mut bus, &checked, p.period, 0, &Default::default())
+        .expect("run");
     let moves: Vec<_> = arm
         .received()
         .into_iter()

@@ -326,3 +326,35 @@ impl Iterator for Feed<'_> {
         }
     }
 }
+
+/// A frame's bytes as upper-case hex pairs separated by single spaces (`FF FC 07 11 ...`): the
+/// text form that journal.jsonl, plan.json's `frames` and the mock's log write.
+#[derive(Debug, Clone, Copy)]
+pub struct Hex<'a>(pub &'a [u8]);
+
+impl fmt::Display for Hex<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, b) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{b:02X}")?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Hex;
+    use std::string::ToString;
+
+    #[test]
+    fn hex_is_dofbot_md_worked_example() {
+        // DOFBOT.md: servo 1 to raw 2000 in 500 ms.
+        let frame = [0xFF, 0xFC, 0x07, 0x11, 0x07, 0xD0, 0x01, 0xF4, 0xE4];
+        assert_eq!(Hex(&frame).to_string(), "FF FC 07 11 07 D0 01 F4 E4");
+        assert_eq!(Hex(&[]).to_string(), "");
+        assert_eq!(Hex(&[0x0A]).to_string(), "0A");
+    }
+}

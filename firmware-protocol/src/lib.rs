@@ -6,6 +6,7 @@
 //!   `FF FB LEN TYPE payload CHK` (board to host), the checksum and a streaming [`Decoder`]
 //!   that takes bytes in any chunking and resynchronises after garbage.
 //! * [`commands`]: typed host commands encoded into a caller's buffer.
+//! * [`values`]: the checked values commands carry (targets, poses, ids, buzzer).
 //! * [`replies`]: typed board replies parsed from decoded frames.
 //! * [`servo`]: servo ids, raw ranges and the angle <-> raw conversion per servo.
 //! * [`i2c`]: each command as the SMBus transactions of the board's I2C interface.
@@ -26,6 +27,7 @@ pub mod frame;
 pub mod i2c;
 pub mod replies;
 pub mod servo;
+pub mod values;
 
 #[cfg(test)]
 mod armlib_tests;
@@ -33,7 +35,7 @@ mod armlib_tests;
 mod proptests;
 
 pub use commands::{AnyTarget, BusId, Buzzer, Command, EveryRaw, ParseError, Pose, Target};
-pub use frame::{checksum, Decoder, Direction, EncodeError, Frame, FrameError};
+pub use frame::{checksum, Decoder, Direction, EncodeError, Frame, FrameError, Hex};
 pub use i2c::{i2c_reply, Transaction, Transactions, I2C_ADDRESS};
 pub use replies::{OffsetState, Reply, ReplyError};
 pub use servo::{RangeError, ServoId, ServoScale};

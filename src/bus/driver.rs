@@ -271,9 +271,9 @@ impl<T: Transport> Bus<T> {
     fn scale(&self, id: ServoId) -> Result<ServoScale, BusError> {
         let map = &self.config.servo_map;
         if id.index() < JOINT_COUNT {
-            map.joints[id.index()].scale.to_scale(id.get())
+            Ok(map.joints[id.index()].servo_scale()?)
         } else {
-            map.gripper.scale.to_scale(id.get())
+            Ok(map.gripper.servo_scale()?)
         }
     }
 
@@ -312,7 +312,7 @@ impl<T: Transport> Bus<T> {
     /// Joint angles (rad, URDF) and gripper angle read from the servos.
     pub fn read_joints(&mut self) -> Result<JointState, BusError> {
         let raw = self.read_pose_raw()?;
-        self.config.servo_map.state_from_raw(raw)
+        Ok(self.config.servo_map.state_from_raw(raw)?)
     }
 
     /// Sends motion frame `index` (a 0x1D frame: all six servos, `time_ms`). Refused once the
@@ -357,7 +357,7 @@ impl<T: Transport> Bus<T> {
         v.motion = Some(index);
         v.raw = Some(raw.to_vec());
         self.log(v)?;
-        self.config.servo_map.state_from_raw(raw)
+        Ok(self.config.servo_map.state_from_raw(raw)?)
     }
 
     /// Reads servo `id` back during motion `index` and checks it against `expected` within

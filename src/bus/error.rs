@@ -88,6 +88,12 @@ pub enum BusError {
     },
 }
 
+impl From<crate::robot::MapRefused> for BusError {
+    fn from(e: crate::robot::MapRefused) -> Self {
+        BusError::Refused(e.0)
+    }
+}
+
 impl BusError {
     /// Short stable code of the error kind, as written in the journal.
     pub fn code(&self) -> &'static str {

@@ -84,8 +84,7 @@ impl Entry {
 
 /// Hex form of frame bytes used in the journal: `FF FC 07 11 ...`.
 pub fn hex(bytes: &[u8]) -> String {
-    let parts: Vec<String> = bytes.iter().map(|b| format!("{b:02X}")).collect();
-    parts.join(" ")
+    dofbot_protocol::Hex(bytes).to_string()
 }
 
 /// Appends entries to a journal file (or discards them when there is none).

@@ -1,6 +1,7 @@
 //! The DOFBOT bus: a [`Transport`] (serial port, the Python mock on a pseudo-terminal, the
 //! board's I2C interface ([`I2cTransport`] over Linux i2c-dev or the [`FakeI2c`]), or the
-//! in-process [`SimArm`]), the [`Bus`] driver over it, the servo map and the journal.
+//! in-process [`SimArm`]), the [`Bus`] driver over it and the journal; the servo map is robot's
+//! ([`crate::robot::ServoMap`], re-exported here).
 //! Frames come only from `dofbot-protocol`'s validated commands.
 //!
 //! ```no_run
@@ -26,9 +27,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 pub use alive::{Liveness, ServoAnswer};
-pub use config::{
-    BusConfig, GripperCalib, JointCalib, JointState, ScaleCalib, ServoMap, JOINT_COUNT,
-};
+pub use config::{BusConfig, GripperCalib, JointCalib, JointState, ServoMap, JOINT_COUNT};
 pub use driver::Bus;
 pub use error::BusError;
 pub use fake_i2c::{FakeI2c, I2cRecord};

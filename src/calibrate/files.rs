@@ -7,7 +7,7 @@ use std::path::Path;
 use nalgebra::Matrix4;
 use serde::Deserialize;
 
-use super::CalibError;
+use super::config::CalibError;
 use crate::bus::JOINT_COUNT;
 use crate::robot::error::read_toml;
 use crate::robot::{Servos, Tool, Workcell};

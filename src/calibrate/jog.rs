@@ -6,8 +6,8 @@ use std::io::{Read, Write};
 
 use nalgebra::Vector3;
 
+use super::config::{CalibError, CalibrationConfig};
 use super::read::{joints_of, read_mean};
-use super::{CalibError, CalibrationConfig};
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
 use crate::robot::Robot;
 

@@ -12,11 +12,7 @@
 //!
 //! Touches come from a [`TouchSource`]: the interactive jog terminal ([`jog::JogTerminal`])
 //! or a list of joint targets ([`jog::Scripted`]). All settings: [`CalibrationConfig`].
-use serde::{Deserialize, Serialize};
-
-use crate::bus::BusError;
-use crate::robot::RobotError;
-
+pub mod config;
 pub mod files;
 pub mod jog;
 pub mod pivot;
@@ -25,96 +21,10 @@ pub mod servos;
 pub mod verify;
 pub mod workcell;
 
+pub use config::{CalibError, CalibrationConfig};
 pub use files::{load_targets, Fiducial, Fixture};
 pub use jog::{JogTerminal, Scripted, Touch, TouchSource};
 pub use pivot::{tool_tip, PivotFit};
 pub use servos::{servo_offsets, ServoOffset, ServoOffsets};
 pub use verify::{verify, VerifyReport};
 pub use workcell::{workcell, WorkcellFit};
-
-/// Settings of the calibration routines.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct CalibrationConfig {
-    /// Reads per servo at the zero pose. Default 8.
-    pub reads_per_servo: usize,
-    /// Largest spread (max - min) of one servo's reads, counts; more is refused (the arm
-    /// moved, or the servo jitters). Default 2.
-    pub max_spread_counts: u16,
-    /// Largest change of a servo's zero against the current servos.toml, degrees; more means
-    /// the arm is not in the zero pose and is refused. Default 20.
-    pub max_zero_change_deg: f64,
-    /// Reads averaged per touch (tool and workcell) and per verify pose. Default 5.
-    pub touch_reads: usize,
-    /// Fewest pivot touches and fewest fiducials. Default 4.
-    pub min_touches: usize,
-    /// Smallest orientation spread of the pivot touches, degrees: `acos(s1 / n)`, s1 the
-    /// largest singular value of the sum of the n flange rotations (0 when all are alike, about
-    /// the half-range of the tilt about the least-varied axis). Default 10.
-    pub min_pivot_spread_deg: f64,
-    /// Largest RMS pivot residual, mm. Default 1.
-    pub max_pivot_rms_mm: f64,
-    /// Largest RMS fiducial residual of the workcell fit, mm. Default 1.
-    pub max_workcell_rms_mm: f64,
-    /// Smallest spread of the fiducials off their best-fit line, as the ratio of the second
-    /// to the first singular value of the centred coordinates; less is "collinear". Default 0.1.
-    pub min_fiducial_spread: f64,
-    /// Largest tool-tip error `verify` accepts, mm. Default 1.
-    pub max_verify_tip_error_mm: f64,
-    /// Initial jog step, degrees. Default 1.
-    pub jog_step_deg: f64,
-}
-
-impl Default for CalibrationConfig {
-    fn default() -> Self {
-        CalibrationConfig {
-            reads_per_servo: 8,
-            max_spread_counts: 2,
-            max_zero_change_deg: 20.0,
-            touch_reads: 5,
-            min_touches: 4,
-            min_pivot_spread_deg: 10.0,
-            max_pivot_rms_mm: 1.0,
-            max_workcell_rms_mm: 1.0,
-            min_fiducial_spread: 0.1,
-            max_verify_tip_error_mm: 1.0,
-            jog_step_deg: 1.0,
-        }
-    }
-}
-
-/// What can stop a calibration routine; each displays as one line.
-#[derive(Debug, thiserror::Error)]
-pub enum CalibError {
-    /// The bus failed (a servo that does not answer, a lost port, a failed read).
-    #[error(transparent)]
-    Bus(#[from] BusError),
-    /// A calibration file is bad.
-    #[error(transparent)]
-    Robot(#[from] RobotError),
-    /// The input cannot give a sound calibration (too few or degenerate touches, residuals
-    /// too large); nothing was written.
-    #[error("{0}")]
-    Refused(String),
-    /// The operator aborted the routine.
-    #[error("aborted by the operator; nothing written")]
-    Aborted,
-    /// A file could not be read or written.
-    #[error("{file}: {message}")]
-    File {
-        /// The file.
-        file: String,
-        /// What failed, with the place (`line N`, a key).
-        message: String,
-    },
-}
-
-impl CalibError {
-    /// A file error naming `file`.
-    pub fn file(file: &std::path::Path, message: impl std::fmt::Display) -> CalibError {
-        CalibError::File {
-            file: file.display().to_string(),
-            message: message.to_string(),
-        }
-    }
-}

@@ -5,8 +5,8 @@
 //! (then `t` and `c` cannot be told apart along the shared rotation axis).
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3};
 
+use super::config::{CalibError, CalibrationConfig};
 use super::jog::{Cell, Touch, TouchSource};
-use super::{CalibError, CalibrationConfig};
 use crate::bus::{Bus, Transport};
 use crate::robot::Robot;
 

@@ -2,7 +2,7 @@
 //! too far, averaged to a fractional raw position and converted through the servo map.
 use dofbot_protocol::servo::SERVO_COUNT;
 
-use super::CalibError;
+use super::config::CalibError;
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
 
 /// The mean of several reads of the six servos.
@@ -73,7 +73,7 @@ pub fn at_fractional_raw(
 pub fn joints_of(map: &ServoMap, read: &MeanRead) -> Result<[f64; JOINT_COUNT], BusError> {
     let mut q = [0.0; JOINT_COUNT];
     for (i, qi) in q.iter_mut().enumerate() {
-        *qi = at_fractional_raw(read.raw[i], |r| map.joint_from_raw(i, r))?;
+        *qi = at_fractional_raw(read.raw[i], |r| Ok(map.joint_from_raw(i, r)?))?;
     }
     Ok(q)
 }

@@ -4,8 +4,8 @@
 use dofbot_protocol::servo::ServoId;
 use dofbot_protocol::OffsetState;
 
+use super::config::{CalibError, CalibrationConfig};
 use super::read::{at_fractional_raw, read_mean, MeanRead};
-use super::{CalibError, CalibrationConfig};
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
 
 /// One joint servo's result.
@@ -81,7 +81,7 @@ fn offsets_from(
 ) -> Result<Vec<ServoOffset>, CalibError> {
     let mut out = Vec::new();
     for (i, j) in map.joints.iter().enumerate() {
-        let scale = j.scale.to_scale(j.servo)?;
+        let scale = j.servo_scale().map_err(BusError::from)?;
         let deg = at_fractional_raw(read.raw[i], |r| {
             scale
                 .deg_from_raw(r)

@@ -5,8 +5,9 @@
 //! workcell.toml puts that fiducial.
 use nalgebra::Point3;
 
+use super::config::CalibError;
+use super::files::Fixture;
 use super::jog::{record, Cell};
-use super::{CalibError, Fixture};
 use crate::bus::{Bus, Transport, JOINT_COUNT};
 use crate::robot::Workcell;
 

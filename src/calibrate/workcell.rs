@@ -5,9 +5,10 @@
 //! RMS residual exceeds the threshold.
 use nalgebra::{Matrix3, Matrix4, Point3, Vector3};
 
+use super::config::{CalibError, CalibrationConfig};
+use super::files::Fixture;
 use super::jog::{Cell, Touch, TouchSource};
 use super::pivot::rms;
-use super::{CalibError, CalibrationConfig, Fixture};
 use crate::bus::{Bus, Transport};
 use crate::register::mac::pose::weighted_svd;
 

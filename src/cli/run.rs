@@ -8,7 +8,7 @@ use serde::Deserialize;
 use super::arm::DeviceArgs;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transport};
-use crate::plan::execute::{execute, RunConfig};
+use crate::cell::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
 use crate::plan::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
 use crate::robot::{Robot, RobotConfig, Workcell};

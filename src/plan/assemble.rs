@@ -9,14 +9,11 @@ use nalgebra::{Unit, UnitQuaternion, Vector3};
 
 use super::collide::{Allow, Hit, Scene};
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
-use super::program::{PlannedPass, PlannedPoint, Program, Segment, SegmentKind};
+use super::program::{max_step, PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
 use super::report::UnreachablePoint;
 use super::trajectory::{JointTrajectory, Limits, Move};
 use super::{PlanConfig, PlanError};
 use crate::robot::{IkTarget, Robot, Workcell};
-
-/// A run: pieces ground one after another without lifting the tool.
-pub(crate) type Run = Vec<PlannedPass>;
 
 /// One rest-to-rest leg of a free motion.
 struct Leg {
@@ -344,12 +341,4 @@ impl Program {
         });
         Ok(true)
     }
-}
-
-/// Largest joint difference.
-pub(crate) fn max_step(a: &[f64], b: &[f64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
 }

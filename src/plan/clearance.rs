@@ -2,43 +2,11 @@
 //! `run` before the first frame: every sample against the scene, with what its segment allows
 //! (transits nothing, approach / retract / re-orientation a touch of the ball, grinding a touch
 //! of the ball on one face).
-use std::fmt;
-
-use serde::{Deserialize, Serialize};
-
-use super::collide::{Allow, CollisionConfig, Hit, Scene};
+use super::collide::{Allow, CollisionConfig, Scene};
+pub use super::contact::Collision;
 use super::program::{Segment, SegmentKind};
 use super::{Inspection, Plan, PlanError};
 use crate::robot::{Robot, Workcell};
-
-/// One sample too near the part or a solid.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Collision {
-    /// Sample index.
-    pub sample: usize,
-    /// Index of the segment it belongs to (the later one at a joint of two).
-    pub segment: Option<usize>,
-    /// That segment's kind.
-    pub kind: Option<SegmentKind>,
-    /// That segment's region.
-    pub region: Option<usize>,
-    /// The colliding pair.
-    pub hit: Hit,
-}
-
-impl fmt::Display for Collision {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "sample {}", self.sample)?;
-        if let (Some(s), Some(k)) = (self.segment, self.kind) {
-            write!(f, " (segment {s}, {k:?}")?;
-            if let Some(r) = self.region {
-                write!(f, ", region {r}")?;
-            }
-            write!(f, ")")?;
-        }
-        write!(f, ": {}", self.hit)
-    }
-}
 
 /// What each of `n` samples may touch, and the segment it belongs to (the later one at a
 /// joint): the loosest rule of its segments (where a transit meets an approach the sample is

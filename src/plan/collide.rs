@@ -3,11 +3,10 @@
 //! robot frame), and the moving bodies at a joint sample: the tool's ball, its shank and the
 //! arm's links as capsules between the URDF joint origins. Method: docs/ALGORITHMS.md,
 //! "Collision model".
-use std::fmt;
-
 use nalgebra::{Matrix4, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+pub use super::contact::{Body, Hit, Obstacle};
 use super::inspection::SurfacePoint;
 use crate::cloud::Neighbours;
 use crate::robot::{angle_between, Robot, Workcell};
@@ -146,85 +145,6 @@ pub struct Solid {
     pub min: [f64; 3],
     /// Highest corner, m.
     pub max: [f64; 3],
-}
-
-/// A moving body.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Body {
-    /// The burr's ball.
-    Ball,
-    /// The burr's shank.
-    Shank,
-    /// The link after actuated joint `i` (0-based).
-    Link(usize),
-}
-
-impl fmt::Display for Body {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Body::Ball => write!(f, "tool ball"),
-            Body::Shank => write!(f, "tool shank"),
-            Body::Link(i) => write!(f, "link after joint {}", i + 1),
-        }
-    }
-}
-
-/// What a body came too near.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Obstacle {
-    /// The part at a reference point (index into deviations.csv's rows, position mm).
-    Part {
-        /// Row index.
-        point: usize,
-        /// Position, reference frame, mm.
-        at_mm: [f64; 3],
-    },
-    /// A second face of the part inside the ball, its normal `angle_deg` from the first.
-    SecondFace {
-        /// Row index.
-        point: usize,
-        /// Position, reference frame, mm.
-        at_mm: [f64; 3],
-        /// Angle between the two faces' normals, degrees.
-        angle_deg: f64,
-    },
-    /// A fixed solid.
-    Solid(String),
-}
-
-/// A body nearer an obstacle than allowed.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Hit {
-    /// The moving body.
-    pub body: Body,
-    /// What it came near.
-    pub obstacle: Obstacle,
-    /// Its clearance, mm (negative: inside).
-    pub clearance_mm: f64,
-}
-
-impl fmt::Display for Hit {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match &self.obstacle {
-            Obstacle::Part { point, at_mm: [x, y, z] } => write!(
-                f,
-                "{} and the part at reference point {point} ({x:.2}, {y:.2}, {z:.2}) mm: clearance {:.3} mm",
-                self.body, self.clearance_mm
-            ),
-            Obstacle::SecondFace { point, at_mm: [x, y, z], angle_deg } => write!(
-                f,
-                "{} touches a second face at reference point {point} ({x:.2}, {y:.2}, {z:.2}) mm, normals {angle_deg:.0} deg apart: tool does not fit",
-                self.body
-            ),
-            Obstacle::Solid(name) => write!(
-                f,
-                "{} and solid {name:?}: clearance {:.3} mm",
-                self.body, self.clearance_mm
-            ),
-        }
-    }
 }
 
 /// What a sample may touch.

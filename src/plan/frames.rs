@@ -1,85 +1,26 @@
-//! The servo command stream: every joint sample as one 0x1D six-servo frame (time = the bus
-//! period) built by dofbot-protocol through the bus's servo map, which is made from the same
-//! `servos.toml` the planner uses; and the reverse check of a stream read from a file.
+//! The servo command stream as data: every joint sample as one 0x1D six-servo frame (time =
+//! the bus period) built by dofbot-protocol through robot's servo map, which is made from the
+//! same `servos.toml` the planner uses; and the reverse check of a stream read from a file.
 use dofbot_protocol::servo::{ServoId, SERVO_COUNT};
-use dofbot_protocol::{Command, Decoder, Pose};
+use dofbot_protocol::{Command, Decoder, Hex, Pose};
 
 use super::PlanError;
-use crate::bus::journal::hex;
-use crate::bus::{GripperCalib, JointCalib, ScaleCalib, ServoMap, JOINT_COUNT};
-use crate::robot::{Robot, Servo};
+use crate::robot::servo_map::NO_GRIPPER;
+use crate::robot::{Robot, Servo, ServoMap, JOINT_COUNT};
 
 fn frame_err(msg: impl Into<String>) -> PlanError {
     PlanError::Frames(msg.into())
 }
 
-fn scale(servo: &Servo) -> Result<ScaleCalib, PlanError> {
-    if servo.degree_range[0] != 0.0 {
-        return Err(frame_err(format!(
-            "servo {}: the bus needs degree_range to start at 0 (got {})",
-            servo.id, servo.degree_range[0]
-        )));
-    }
-    Ok(ScaleCalib {
-        deg_max: servo.degree_range[1],
-        raw_min: servo.raw_range[0],
-        raw_max: servo.raw_range[1],
-        inverted: servo.raw_inverted,
-    })
-}
-
-/// The bus's servo map from the robot's `servos.toml` and joint limits (one calibration for
-/// planner and bus).
+/// The servo map from the robot's `servos.toml` and joint limits (one calibration for planner
+/// and bus): [`ServoMap::from_robot`].
 pub fn servo_map(robot: &Robot) -> Result<ServoMap, PlanError> {
-    if robot.dof() != JOINT_COUNT {
-        return Err(frame_err(format!(
-            "the bus drives {JOINT_COUNT} joints, the robot has {}",
-            robot.dof()
-        )));
-    }
-    let mut joints = Vec::new();
-    for spec in &robot.joints {
-        let servo = robot
-            .servos
-            .servos
-            .iter()
-            .find(|s| s.id == spec.servo_id)
-            .ok_or_else(|| frame_err(format!("no servo {}", spec.servo_id)))?;
-        joints.push(JointCalib {
-            name: spec.name.clone(),
-            servo: servo.id,
-            zero_deg: servo.zero_offset_deg,
-            direction: f64::from(servo.direction),
-            offset_deg: 0.0,
-            lower_rad: spec.lower,
-            upper_rad: spec.upper,
-            max_velocity_rad_s: spec.velocity,
-            scale: scale(servo)?,
-        });
-    }
-    let g = gripper(robot)?;
-    let map = ServoMap {
-        joints,
-        gripper: GripperCalib {
-            servo: g.id,
-            offset_deg: 0.0,
-            min_deg: g.degree_range[0],
-            max_deg: g.degree_range[1],
-            scale: scale(g)?,
-        },
-    };
-    map.validate().map_err(|e| frame_err(e.to_string()))?;
-    Ok(map)
+    ServoMap::from_robot(robot).map_err(|e| frame_err(e.to_string()))
 }
 
 /// The servo without a joint (the gripper), held at its `hold_deg`.
 pub fn gripper(robot: &Robot) -> Result<&Servo, PlanError> {
-    robot
-        .servos
-        .servos
-        .iter()
-        .find(|s| s.joint.is_none())
-        .ok_or_else(|| frame_err("servos.toml has no gripper servo (one without a joint)"))
+    robot.servos.gripper().ok_or_else(|| frame_err(NO_GRIPPER))
 }
 
 /// Move time of every frame, ms: the period.
@@ -129,7 +70,7 @@ pub fn encode(
 
 /// Hex form of a frame as journal.jsonl and the mock log write it (`FF FC 11 1D ...`).
 pub fn to_hex(frame: &[u8]) -> String {
-    hex(frame)
+    Hex(frame).to_string()
 }
 
 /// Parses a hex frame back: it must decode as one whole 0x1D command within every servo's

@@ -8,8 +8,8 @@ mod assemble;
 pub mod check;
 pub mod clearance;
 pub mod collide;
+pub mod contact;
 pub mod error;
-pub mod execute;
 pub mod feed;
 pub mod file;
 pub mod frames;
@@ -389,43 +389,12 @@ pub fn plan(
         return Err(PlanError::Unreachable(reachability.unreachable));
     }
     let metrics = check::measure(&prog, robot, config);
-    let violations = validate(&prog.trajectory, robot, &config.validation);
-    if !violations.is_empty() {
-        return Err(PlanError::Invalid(violations));
-    }
-    let traj = &prog.trajectory;
-    let collisions = clearance::check_samples(
-        (0..traj.len()).map(|i| traj.sample(i)),
-        &prog.segments,
-        robot,
-        &scene,
-    );
-    if !collisions.is_empty() {
-        return Err(PlanError::Collides(collisions));
-    }
-    let worst = metrics
-        .sample_to_path_max_mm
-        .max(metrics.path_to_samples_max_mm);
-    if worst > config.max_path_error_mm {
-        return Err(PlanError::Config(format!(
-            "modelled tool tip strays {worst:.3} mm from the planned path (max_path_error_mm {})",
-            config.max_path_error_mm
-        )));
-    }
+    check_program(&prog, &metrics, robot, &scene, config)?;
     let traj = std::mem::replace(
         &mut prog.trajectory,
         JointTrajectory::starting_at(&config.home, config.trajectory.period),
     );
-    let samples: Vec<Sample> = (0..traj.len())
-        .map(|i| Sample {
-            t: i as f64 * traj.period,
-            q: traj.sample(i).to_vec(),
-        })
-        .collect();
-    let map = frames::servo_map(robot)?;
-    let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
-    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
-    let stream = frames::encode(&qs, &map, hold, traj.period)?;
+    let (samples, stream) = samples_and_frames(&traj, robot)?;
     Ok(Plan {
         format: "polishbot-plan".into(),
         version: 1,
@@ -447,4 +416,58 @@ pub fn plan(
         reachability,
         metrics,
     })
+}
+
+/// The whole sampled program against the limits (validation), the scene (collisions) and the
+/// planned path (`max_path_error_mm`); the first failing check is the error.
+fn check_program(
+    prog: &program::Program,
+    metrics: &Metrics,
+    robot: &Robot,
+    scene: &collide::Scene,
+    config: &PlanConfig,
+) -> Result<(), PlanError> {
+    let violations = validate(&prog.trajectory, robot, &config.validation);
+    if !violations.is_empty() {
+        return Err(PlanError::Invalid(violations));
+    }
+    let traj = &prog.trajectory;
+    let collisions = clearance::check_samples(
+        (0..traj.len()).map(|i| traj.sample(i)),
+        &prog.segments,
+        robot,
+        scene,
+    );
+    if !collisions.is_empty() {
+        return Err(PlanError::Collides(collisions));
+    }
+    let worst = metrics
+        .sample_to_path_max_mm
+        .max(metrics.path_to_samples_max_mm);
+    if worst > config.max_path_error_mm {
+        return Err(PlanError::Config(format!(
+            "modelled tool tip strays {worst:.3} mm from the planned path (max_path_error_mm {})",
+            config.max_path_error_mm
+        )));
+    }
+    Ok(())
+}
+
+/// The trajectory's samples and the servo command stream they make (one frame per sample,
+/// through the robot's servo map, the gripper held at its `hold_deg`).
+fn samples_and_frames(
+    traj: &JointTrajectory,
+    robot: &Robot,
+) -> Result<(Vec<Sample>, Vec<Vec<u8>>), PlanError> {
+    let samples: Vec<Sample> = (0..traj.len())
+        .map(|i| Sample {
+            t: i as f64 * traj.period,
+            q: traj.sample(i).to_vec(),
+        })
+        .collect();
+    let map = frames::servo_map(robot)?;
+    let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
+    let stream = frames::encode(&qs, &map, hold, traj.period)?;
+    Ok((samples, stream))
 }

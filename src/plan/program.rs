@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+pub use super::contact::SegmentKind;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
 use super::report::UnreachablePoint;
@@ -43,22 +44,6 @@ pub struct PlannedPass {
     pub points: Vec<PlannedPoint>,
 }
 
-/// What a stretch of samples does.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SegmentKind {
-    /// Rest-to-rest move between home and approach / retract points.
-    Transit,
-    /// Down the normal onto the first contact point.
-    Approach,
-    /// Along a pass at constant feed.
-    Grind,
-    /// Up the normal off the last contact point.
-    Retract,
-    /// At rest between strokes: down one depth step, or a change of tool tilt.
-    Reorient,
-}
-
 /// A stretch of the sampled trajectory.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Segment {
@@ -89,8 +74,18 @@ pub struct Program {
     pub slowed: usize,
 }
 
-use super::assemble::Run;
 use super::collide::Scene;
+
+/// A run: pieces ground one after another without lifting the tool.
+pub(crate) type Run = Vec<PlannedPass>;
+
+/// Largest joint difference.
+pub(crate) fn max_step(a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
 
 /// Tool tip (m) and axis in the robot frame for a contact point, `lift` mm above the contact
 /// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it.
@@ -234,8 +229,6 @@ fn stroke_axis(targets: &[IkTarget], spread_deg: f64) -> Option<Vector3<f64>> {
 /// Joint angles and the tool axis used for one point, or why it is unreachable.
 type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
 
-use super::assemble::max_step;
-
 /// IK of one stroke's targets, chained from `prev`: joint angles and the tool axis used, or
 /// why a point is unreachable. Where the IK had to tilt the tool (axis search), the points'
 /// own smallest tilts differ from point to point and make the joints jitter; the stroke is
@@ -340,7 +333,7 @@ impl Program {
             }
         }
         // every piece starts where the trajectory stands (assemble glides or approaches)
-        let gap = super::assemble::max_step(&piece.points[0].q, self.trajectory.last());
+        let gap = max_step(&piece.points[0].q, self.trajectory.last());
         if gap > 1e-12 {
             return Err(PlanError::Collision(format!(
                 "grinding piece in region {} starts {gap:.3e} rad from the arm's pose",

@@ -2,6 +2,7 @@
 //! (formats documented in the files under `calibration/`).
 use std::path::Path;
 
+use dofbot_protocol::ServoScale;
 use nalgebra::{Matrix4, Point3, Vector3};
 use serde::Deserialize;
 
@@ -164,6 +165,25 @@ impl Servo {
         raw.abs() / (self.degree_range[1] - self.degree_range[0])
     }
 
+    /// The servo's angle <-> raw scale on the wire (dofbot-protocol's [`ServoScale`]):
+    /// `degree_range` `[0, max]` onto `raw_range`; refused (the message names the servo) when
+    /// the range does not start at 0, which the protocol's scale cannot express.
+    pub fn scale(&self) -> Result<ServoScale, String> {
+        if self.degree_range[0] != 0.0 {
+            return Err(format!(
+                "servo {}: the bus needs degree_range to start at 0 (got {})",
+                self.id, self.degree_range[0]
+            ));
+        }
+        Ok(ServoScale {
+            id: self.id,
+            deg_max: self.degree_range[1],
+            raw_min: self.raw_range[0],
+            raw_max: self.raw_range[1],
+            inverted: self.raw_inverted,
+        })
+    }
+
     /// The joint range the servo's degree range allows, `[lower, upper]` radians.
     pub fn joint_range(&self) -> [f64; 2] {
         let a = self.joint_from_deg(self.degree_range[0]);
@@ -254,6 +274,11 @@ impl Servos {
             }
         }
         Ok(s)
+    }
+
+    /// The servo without a joint (the gripper), if any.
+    pub fn gripper(&self) -> Option<&Servo> {
+        self.servos.iter().find(|s| s.joint.is_none())
     }
 
     /// The servo driving URDF joint `joint`.

@@ -8,6 +8,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::model::Robot;
+use super::planar::Planar;
 
 /// Settings of the inverse kinematics.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -111,86 +112,7 @@ pub enum Unreachable {
     },
 }
 
-/// Geometry of a DOFBOT-structured chain, read from k's chain at the zero pose: everything in
-/// the arm plane as (r, z), r horizontal from the base axis along the plane direction.
-#[derive(Debug, Clone, PartialEq)]
-pub(crate) struct Planar {
-    base: Vector2<f64>,
-    phi0: f64,
-    s1: f64,
-    sigma: [f64; 3],
-    p2: Vector2<f64>,
-    l23: f64,
-    beta23: f64,
-    l34: f64,
-    beta34: f64,
-    tip4: Vector2<f64>,
-    alpha0: f64,
-}
-
-const STRUCTURE_TOL: f64 = 1e-12;
-
 impl Planar {
-    /// The closed-form parameters, or `None` when the chain is not DOFBOT-shaped.
-    pub(crate) fn from_robot(robot: &Robot) -> Option<Planar> {
-        if robot.dof() != 5 {
-            return None;
-        }
-        let zero = [0.0; 5];
-        let (frames, axes) = robot.joint_frames(&zero);
-        let tool = robot.fk(&zero);
-        let z = Vector3::z();
-        let a1 = axes[0].normalize();
-        if a1.xy().norm() > STRUCTURE_TOL {
-            return None;
-        }
-        let n0 = axes[1].normalize();
-        if n0.z.abs() > STRUCTURE_TOL
-            || axes[2..4]
-                .iter()
-                .any(|a| a.normalize().cross(&n0).norm() > STRUCTURE_TOL)
-        {
-            return None;
-        }
-        let b = frames[0].translation.vector;
-        let u0 = z.cross(&n0);
-        let pos = |i: usize| frames[i].translation.vector;
-        let lateral = |p: Vector3<f64>| ((p - b).dot(&n0)).abs();
-        let points = [pos(1), pos(2), pos(3), pos(4), tool.position];
-        if points.iter().any(|p| lateral(*p) > STRUCTURE_TOL)
-            || tool.axis.dot(&n0).abs() > STRUCTURE_TOL
-        {
-            return None;
-        }
-        let a5 = axes[4].normalize();
-        if a5.cross(&tool.axis).norm() > STRUCTURE_TOL
-            || (tool.position - pos(4)).cross(&a5).norm() > STRUCTURE_TOL
-        {
-            return None;
-        }
-        let plane = |p: Vector3<f64>| Vector2::new((p - b).dot(&u0), p.z);
-        let (p2, p3, p4, t) = (
-            plane(pos(1)),
-            plane(pos(2)),
-            plane(pos(3)),
-            plane(tool.position),
-        );
-        let angle = |v: Vector2<f64>| v.y.atan2(v.x);
-        Some(Planar {
-            base: b.xy(),
-            phi0: u0.y.atan2(u0.x),
-            s1: a1.z.signum(),
-            sigma: [1, 2, 3].map(|i| axes[i].dot(&n0).signum()),
-            p2,
-            l23: (p3 - p2).norm(),
-            beta23: angle(p3 - p2),
-            l34: (p4 - p3).norm(),
-            beta34: angle(p4 - p3),
-            tip4: t - p4,
-            alpha0: tool.axis.z.atan2(tool.axis.dot(&u0)),
-        })
-    }
-
     /// Every closed-form branch for `target` (joint 5 left at 0): joint angles and, for
     /// branches that miss, why. Also returns the axis miss in radians.
     fn branches(&self, target: &IkTarget) -> (Vec<Result<[f64; 4], Unreachable>>, f64) {

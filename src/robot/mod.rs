@@ -1,6 +1,7 @@
 //! The robot: the DOFBOT's URDF chain (k), the calibration files of the cell (tool, servos,
 //! workcell), forward kinematics, inverse kinematics (closed form for the DOFBOT, k's Jacobian
-//! solver otherwise) and the tool-tip error that servo resolution causes.
+//! solver otherwise), the tool-tip error that servo resolution causes, and the joint <-> servo
+//! map that plan and bus share.
 //!
 //! Front function: [`load`] with a [`RobotConfig`].
 use std::path::PathBuf;
@@ -11,13 +12,18 @@ pub mod calibration;
 pub mod error;
 pub mod ik;
 pub mod model;
+mod planar;
 pub mod resolution;
+pub mod servo_map;
 
 pub use calibration::{Servo, Servos, Tool, Workcell};
 pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
 pub use model::{JointSpec, Robot, ToolPose};
 pub use resolution::resolution_error;
+pub use servo_map::{
+    GripperCalib, JointCalib, JointState, MapRefused, ServoMap, ServoMapError, JOINT_COUNT,
+};
 
 /// Where the robot description and the cell's calibration files are, and the IK settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -7,7 +7,7 @@ use nalgebra::{DMatrix, Isometry3, Vector3};
 
 use super::calibration::{Servos, Tool};
 use super::error::RobotError;
-use super::ik::Planar;
+use super::planar::Planar;
 
 /// One actuated joint: its name, servo and limits (the intersection of the URDF limits, the
 /// optional `joint_limits` of servos.toml and the servo's degree range).
@@ -142,8 +142,19 @@ impl Robot {
             servos,
             planar: None,
         };
-        robot.planar = Planar::from_robot(&robot);
+        robot.planar = robot.planar_geometry();
         Ok(robot)
+    }
+
+    /// The closed-form IK parameters, when the chain has five joints in the DOFBOT structure.
+    fn planar_geometry(&self) -> Option<Planar> {
+        if self.dof() != 5 {
+            return None;
+        }
+        let zero = [0.0; 5];
+        let (frames, axes) = self.joint_frames(&zero);
+        let tool = self.fk(&zero);
+        Planar::from_zero_pose(&frames, &axes, tool.position, tool.axis)
     }
 
     /// Number of actuated joints.

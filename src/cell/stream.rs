@@ -7,8 +7,8 @@ use dofbot_protocol::servo::{ServoId, SERVO_COUNT};
 use dofbot_protocol::Pose;
 use serde::{Deserialize, Serialize};
 
-use super::file::CheckedPlan;
 use crate::bus::{Bus, BusError, Transport};
+use crate::plan::file::CheckedPlan;
 
 /// Settings of `run`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,0 +1,8 @@
+//! The cell: a checked plan streamed to the arm. It sits above `plan` (which makes the plan and
+//! its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
+//! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
+//!
+//! Front function: [`execute`] with a [`RunConfig`]; result: [`RunReport`].
+mod stream;
+
+pub use stream::{execute, RunConfig, RunReport};
