@@ -14,4 +14,5 @@ pub mod regions;
 pub mod register;
 pub mod report;
 pub mod robot;
+pub mod spatial;
 pub mod synth;

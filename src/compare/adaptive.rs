@@ -21,7 +21,8 @@ use super::densify::densify;
 use super::fill::{fill, fit_window, gather_window, Model, ModelScratch};
 use super::fit::{fit, student_t95, FitScratch, Local};
 use super::{area_share, AdaptiveConfig, Clouds, CompareConfig, Deviation, Reason, PEAK_LOD_RATIO};
-use crate::cloud::{Neighbours, PointCloud};
+use crate::cloud::PointCloud;
+use crate::spatial::Neighbours;
 
 /// δ_i looks among this many nearest scan points of a reference point. 3 instead of 4 (until
 /// 2026-12-01): every IoU, peak and false-region count of seeds 11-82 at 300k and 11-58 at
@@ -91,7 +92,7 @@ impl Prepared<'_> {
 
     /// Indices of the reference points within `radius` of the axis through `p` along `n` and
     /// within max(`max_distance`, `radius`) of `p` along it, in storage order: a plain
-    /// cylinder (py4dgeo's slabs, [`super::grid::Grid::cylinder`], leave out a plane through
+    /// cylinder (py4dgeo's slabs, [`crate::spatial::Grid::cylinder`], leave out a plane through
     /// `p` when the cylinder has two: it lies on their common boundary).
     pub(super) fn reference_near(
         &self,

@@ -14,7 +14,7 @@ use super::adaptive::{scan_pairs, tangent_frame, Prepared};
 use super::fit::{student_t95, Local};
 use super::peakfit::{fit_peak, PeakFit, PeakScratch, PeakWindow, MIN_SUPPORT};
 use super::{CompareConfig, Deviation, Reason};
-use crate::cloud::Neighbours;
+use crate::spatial::Neighbours;
 
 /// A core point is inside a model's defect where the defect term is at least this share of
 /// its amplitude (5 %: about 2.4 standard deviations of a Gaussian from its core).

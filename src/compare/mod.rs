@@ -11,7 +11,6 @@ mod cover;
 mod densify;
 mod fill;
 mod fit;
-pub(crate) mod grid;
 mod peakfit;
 
 use std::borrow::Cow;
@@ -25,8 +24,8 @@ pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
     CoreConfig, CoreSelection,
 };
-use self::grid::Grid;
 use crate::cloud::PointCloud;
+use crate::spatial::Grid;
 
 /// Which M3C2 variant to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]

@@ -9,8 +9,8 @@ use nalgebra::{Matrix4, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::inspection::SurfacePoint;
-use crate::cloud::Neighbours;
 use crate::robot::{angle_between, Robot, Workcell};
+use crate::spatial::Neighbours;
 
 /// Settings of the collision model. Lengths in millimetres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
