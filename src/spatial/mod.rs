@@ -53,6 +53,27 @@ fn in_index_order<R>(order: impl Iterator<Item = usize>, values: Vec<R>) -> Vec<
         .collect()
 }
 
+/// Point sets the index tests share.
+#[cfg(test)]
+mod fixtures {
+    use nalgebra::Point3;
+    use rand::Rng;
+
+    /// The 7 × 7 × 7 lattice of unit spacing from the origin (many exact distance ties).
+    pub fn lattice() -> Vec<Point3<f64>> {
+        (0..343)
+            .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64))
+            .collect()
+    }
+
+    /// `n` points drawn uniformly from the cube [0, `scale`)³.
+    pub fn uniform(rng: &mut impl Rng, n: usize, scale: f64) -> Vec<Point3<f64>> {
+        (0..n)
+            .map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * scale)
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -51,29 +51,30 @@ impl SparseGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
+    use crate::spatial::fixtures::uniform;
+    use nalgebra::Vector3;
+    use rand::SeedableRng;
 
     #[test]
     fn any_within_matches_brute_force() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let points: Vec<Point3<f64>> = (0..400)
-            .map(|_| {
-                Point3::new(rng.gen(), rng.gen(), rng.gen()) * 20.0
-                    - nalgebra::Vector3::repeat(10.0)
-            })
+        // Both signs of every coordinate (cells below zero floor away from it).
+        let shift = |p: Point3<f64>, by: f64| p - Vector3::repeat(by);
+        let points: Vec<Point3<f64>> = uniform(&mut rng, 400, 20.0)
+            .into_iter()
+            .map(|p| shift(p, 10.0))
             .collect();
+        let queries = uniform(&mut rng, 300, 24.0);
         for cell in [0.5, 2.0, 7.0] {
             let grid = SparseGrid::new(cell, points.iter().copied());
-            for _ in 0..300 {
-                let q = Point3::new(rng.gen(), rng.gen(), rng.gen()) * 24.0
-                    - nalgebra::Vector3::repeat(12.0);
+            for q in queries.iter().map(|&q| shift(q, 12.0)) {
                 for r in [0.3, 1.0, 2.5] {
                     let want = points.iter().any(|p| (p - q).norm() <= r);
                     assert_eq!(grid.any_within(&q, r), want, "cell {cell} r {r} q {q}");
                 }
             }
             // A point exactly at the radius counts.
-            let q = points[0] + nalgebra::Vector3::new(1.0, 0.0, 0.0);
+            let q = points[0] + Vector3::new(1.0, 0.0, 0.0);
             assert!(grid.any_within(&q, (q - points[0]).norm()));
         }
         assert!(!SparseGrid::new(1.0, []).any_within(&Point3::origin(), 5.0));

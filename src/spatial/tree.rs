@@ -212,7 +212,8 @@ impl Neighbours {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
+    use crate::spatial::fixtures::{lattice, uniform};
+    use rand::SeedableRng;
 
     fn brute(points: &[Point3<f64>], q: &Point3<f64>) -> Vec<Neighbour> {
         let all = points
@@ -230,10 +231,8 @@ mod tests {
     fn knn_and_radius_match_brute_force_with_ties() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         // A grid (many exact ties) plus random points.
-        let mut points: Vec<Point3<f64>> = (0..343)
-            .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64))
-            .collect();
-        points.extend((0..300).map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 7.0));
+        let mut points = lattice();
+        points.extend(uniform(&mut rng, 300, 7.0));
         let index = Neighbours::new(&points);
         for q in points.iter().step_by(5) {
             let all = brute(&points, q);

@@ -201,14 +201,13 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
+    use crate::spatial::fixtures::uniform;
+    use rand::SeedableRng;
 
     #[test]
     fn cylinder_matches_a_brute_force_cylinder() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let points: Vec<Point3<f64>> = (0..5000)
-            .map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 4.0)
-            .collect();
+        let points = uniform(&mut rng, 5000, 4.0);
         let core = Point3::new(2.0, 2.0, 2.0);
         let axes = [
             Vector3::new(1.0, 2.0, 2.0).normalize(),

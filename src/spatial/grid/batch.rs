@@ -363,15 +363,14 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spatial::fixtures::{lattice, uniform};
     use rand::{Rng, SeedableRng};
 
     #[test]
     fn batch_knn_equals_single_queries() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
         // A lattice (exact ties, duplicates) plus a noisy sheet and scattered points.
-        let mut points: Vec<Point3<f64>> = (0..343)
-            .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64) * 0.5)
-            .collect();
+        let mut points: Vec<Point3<f64>> = lattice().into_iter().map(|p| p * 0.5).collect();
         points.extend_from_within(..40);
         points.extend((0..3000).map(|_| {
             let (u, v): (f64, f64) = (rng.gen(), rng.gen());
@@ -381,10 +380,8 @@ mod tests {
                 0.3 * (u * 5.0).sin() + rng.gen::<f64>() * 0.01,
             )
         }));
-        points.extend((0..60).map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 9.0));
-        let queries: Vec<Point3<f64>> = (0..800)
-            .map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 8.0)
-            .collect();
+        points.extend(uniform(&mut rng, 60, 9.0));
+        let queries = uniform(&mut rng, 800, 8.0);
         for cell in [0.05, 0.2, 0.7] {
             let grid = Grid::new(&points, cell);
             let other = Grid::new(&queries, cell * 1.3);

@@ -286,17 +286,16 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::spatial::fixtures::{lattice, uniform};
     use crate::spatial::Neighbours;
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
 
     #[test]
     fn knn_matches_the_kd_tree() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         // A grid (exact ties) plus random points, and queries inside and far outside.
-        let mut points: Vec<Point3<f64>> = (0..343)
-            .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64))
-            .collect();
-        points.extend((0..700).map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 7.0));
+        let mut points = lattice();
+        points.extend(uniform(&mut rng, 700, 7.0));
         let index = Neighbours::new(&points);
         let grid = Grid::new(&points, 0.6);
         let mut out = Vec::new();
