@@ -57,13 +57,21 @@ fn in_index_order<R>(order: impl Iterator<Item = usize>, values: Vec<R>) -> Vec<
 #[cfg(test)]
 mod fixtures {
     use nalgebra::Point3;
-    use rand::Rng;
+    use rand::{Rng, SeedableRng};
 
     /// The 7 × 7 × 7 lattice of unit spacing from the origin (many exact distance ties).
     pub fn lattice() -> Vec<Point3<f64>> {
         (0..343)
             .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64))
             .collect()
+    }
+
+    /// The [`lattice`] and then `n` [`uniform`] points in its cube [0, 7)³ (ChaCha8, `seed`).
+    pub fn lattice_and_noise(seed: u64, n: usize) -> Vec<Point3<f64>> {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let mut points = lattice();
+        points.extend(uniform(&mut rng, n, 7.0));
+        points
     }
 
     /// `n` points drawn uniformly from the cube [0, `scale`)³.

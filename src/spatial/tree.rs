@@ -212,8 +212,7 @@ impl Neighbours {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spatial::fixtures::{lattice, uniform};
-    use rand::SeedableRng;
+    use crate::spatial::fixtures::lattice_and_noise;
 
     fn brute(points: &[Point3<f64>], q: &Point3<f64>) -> Vec<Neighbour> {
         let all = points
@@ -229,10 +228,8 @@ mod tests {
 
     #[test]
     fn knn_and_radius_match_brute_force_with_ties() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         // A grid (many exact ties) plus random points.
-        let mut points = lattice();
-        points.extend(uniform(&mut rng, 300, 7.0));
+        let points = lattice_and_noise(7, 300);
         let index = Neighbours::new(&points);
         for q in points.iter().step_by(5) {
             let all = brute(&points, q);

@@ -286,16 +286,13 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spatial::fixtures::{lattice, uniform};
+    use crate::spatial::fixtures::lattice_and_noise;
     use crate::spatial::Neighbours;
-    use rand::SeedableRng;
 
     #[test]
     fn knn_matches_the_kd_tree() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         // A grid (exact ties) plus random points, and queries inside and far outside.
-        let mut points = lattice();
-        points.extend(uniform(&mut rng, 700, 7.0));
+        let points = lattice_and_noise(5, 700);
         let index = Neighbours::new(&points);
         let grid = Grid::new(&points, 0.6);
         let mut out = Vec::new();
