@@ -16,4 +16,5 @@ pub mod regions;
 pub mod register;
 pub mod report;
 pub mod robot;
+pub mod spatial;
 pub mod synth;

@@ -136,7 +136,7 @@ fn synthetic_turntable(n: usize, step: &str, seed: &str, axis: Option<[f64; 3]>)
     let first = isometry_from_rows(&rows(&truth["first_from_reference"])).expect("pose");
     let ref_pts: Vec<_> = reference.points.iter().map(|p| first * p).collect();
     let ref_nrm = reference.normals.as_ref().expect("reference normals");
-    let tree = polishbot::cloud::Neighbours::new(&ref_pts);
+    let tree = polishbot::spatial::Neighbours::new(&ref_pts);
     let cloud = polishbot::cloud::load_cloud(&merged, None, None).unwrap();
     let mut dist: Vec<f64> = cloud
         .points

@@ -574,11 +574,11 @@ fn turntable_views_are_consistent_with_their_truth() {
     let first_from_ref = isometry_from_rows(&truth.first_from_reference).unwrap();
     let mut surface = cloud::sample_mesh(&case.mesh, 300_000, 4).unwrap().cloud;
     surface.transform(&first_from_ref);
-    let index = polishbot::cloud::Neighbours::new(&surface.points);
+    let index = polishbot::spatial::Neighbours::new(&surface.points);
     let normals = surface.normals.clone().unwrap();
     let mut coarse = cloud::sample_mesh(&case.mesh, 5_000, 6).unwrap().cloud;
     coarse.transform(&first_from_ref);
-    let coarse_index = polishbot::cloud::Neighbours::new(&coarse.points);
+    let coarse_index = polishbot::spatial::Neighbours::new(&coarse.points);
     let mut seen = vec![false; coarse.len()];
     for (view, t) in views.iter().zip(&truth.views) {
         assert!((t.true_deg - t.nominal_deg).abs() <= 3.0 + 1e-9);

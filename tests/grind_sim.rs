@@ -10,8 +10,8 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, SimArm, SimOptions};
-use polishbot::cloud::Neighbours;
 use polishbot::grind_sim::{fk, GrindConfig, ServoTrace, ToolState, VirtualPart};
+use polishbot::spatial::Neighbours;
 
 use common::{dofbot, polishbot};
 

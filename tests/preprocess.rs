@@ -6,11 +6,12 @@ mod common;
 use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::cloud::{self, Geometry, Mesh, Neighbours, PlyPrecision, PointCloud, Units};
+use polishbot::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud, Units};
 use polishbot::preprocess::{
     curvature_sample, estimate_normals, statistical_outlier_filter, CurvatureSampleConfig,
     NormalConfig, Orientation, SorConfig,
 };
+use polishbot::spatial::Neighbours;
 use polishbot::synth::{synth, SynthCase, SynthConfig};
 use rand::{Rng, SeedableRng};
 

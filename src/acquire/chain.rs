@@ -4,10 +4,10 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use super::MergeConfig;
 use crate::cloud::PointCloud;
-use crate::compare::grid::Grid;
 use crate::preprocess::{estimate_normals, mean_spacing, NormalConfig, Orientation};
 use crate::register::icp::{fitness, icp, IcpParams};
 use crate::register::{register, RegisterConfig};
+use crate::spatial::Grid;
 
 /// A view the chain could align.
 pub(super) struct ChainPose {

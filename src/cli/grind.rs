@@ -8,11 +8,12 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::bus::{ServoMap, SimArm, SimOptions};
-use crate::cloud::{self, Neighbours, PlyPrecision, PointCloud, ScalarField};
+use crate::cloud::{self, PlyPrecision, PointCloud, ScalarField};
 use crate::grind_sim::{grind, GrindReport, ServoTrace, VirtualPart};
 use crate::plan::Inspection;
 use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
 use crate::robot::Workcell;
+use crate::spatial::Neighbours;
 
 /// Farthest a point of the part file may lie from the inspected surface (along the nearest
 /// core point's normal, past its measured deviation), mm: 30 times synth's scan noise, twice

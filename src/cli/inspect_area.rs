@@ -5,8 +5,9 @@ use anyhow::{Context, Result};
 use nalgebra::Point3;
 
 use super::GeometryInput;
-use crate::cloud::{self, Geometry, Neighbours};
+use crate::cloud::{self, Geometry};
 use crate::compare::{self, Deviations};
+use crate::spatial::Neighbours;
 
 /// Points sampled on an area given as a mesh: about 0.1 mm apart on 2,000 mm² (a femoral
 /// component's articular surface), well under the default core-point spacing (about 0.5 mm),

@@ -5,7 +5,6 @@
 mod columns;
 mod error;
 mod io;
-mod neighbours;
 mod obj;
 mod off;
 mod pcd;
@@ -21,7 +20,6 @@ pub use error::{ParseError, Place};
 pub use io::{
     load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units, MAX_COORD_MM,
 };
-pub use neighbours::{KnnScratch, Neighbour, Neighbours};
 pub use ply::{write_ply_bytes, PlyPrecision};
 pub use sample::{sample_mesh, MeshSample};
 pub use types::{Aabb, Geometry, Mesh, PointCloud, ScalarField};

@@ -5,8 +5,8 @@
 //! `robust_aggr`.
 use nalgebra::{Point3, Vector3};
 
-use super::grid::Member;
 use super::{Aggregate, Clouds, CompareConfig, Deviation, Reason, Z95};
+use crate::spatial::Member;
 
 /// Mean and sample variance (n - 1; NaN below two values, as py4dgeo) of the axial offsets.
 fn mean_var(members: &[Member]) -> (f64, f64) {

@@ -12,11 +12,11 @@ use serde::{Deserialize, Serialize};
 
 use nalgebra::Point3;
 
-use super::grid::Grid;
-use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
+use crate::cloud::{sample_mesh, Mesh, PointCloud};
 use crate::preprocess::{
     curvature_sample, estimate_normals, CurvatureSampleConfig, NormalConfig, Orientation,
 };
+use crate::spatial::{Grid, Neighbours};
 
 /// Which reference points become core points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

@@ -9,7 +9,6 @@ mod classic;
 mod config;
 mod core;
 mod cover;
-pub(crate) mod grid;
 
 use std::borrow::Cow;
 
@@ -26,8 +25,8 @@ pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
     CoreConfig, CoreSelection,
 };
-use self::grid::Grid;
 use crate::cloud::PointCloud;
+use crate::spatial::Grid;
 
 /// The normal quantile of a two-sided 95 % level (the LoD's factor on the registration error,
 /// as in Lague et al.).

@@ -4,7 +4,7 @@ use nalgebra::{Point3, Vector3};
 
 use super::law::{preston_rate, Contact, KField};
 use super::GrindConfig;
-use crate::cloud::Neighbours;
+use crate::spatial::Neighbours;
 
 /// Extra distance beyond the ball radius at which the nearest surface point is still looked
 /// at, mm: the ball is out of contact farther than that, and the query stays cheap.

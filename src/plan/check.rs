@@ -7,8 +7,8 @@ use super::program::{PlannedPass, Program, SegmentKind};
 use super::raster::PathPoint;
 use super::report::{Metrics, RegionReport};
 use super::PlanConfig;
-use crate::cloud::Neighbours;
 use crate::robot::{resolution_error, IkTarget, Robot, Workcell};
+use crate::spatial::Neighbours;
 
 /// Distance from `p` to the polyline `line`.
 pub fn polyline_distance(p: &Vector3<f64>, line: &[Vector3<f64>]) -> f64 {

@@ -8,8 +8,8 @@ use serde::{Deserialize, Serialize};
 
 pub use super::contact::{Body, Hit, Obstacle};
 use super::inspection::SurfacePoint;
-use crate::cloud::Neighbours;
 use crate::robot::{angle_between, Robot, Workcell};
+use crate::spatial::Neighbours;
 
 /// Settings of the collision model. Lengths in millimetres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -3,7 +3,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::inspection::SurfacePoint;
-use crate::cloud::Neighbours;
+use crate::spatial::Neighbours;
 
 /// Core points and their k-d tree (reference frame, mm).
 pub struct Surface<'a> {

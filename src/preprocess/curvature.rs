@@ -8,7 +8,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::normals::{estimate_normals, NormalConfig, Orientation};
-use crate::cloud::{Neighbours, PointCloud};
+use crate::cloud::PointCloud;
+use crate::spatial::Neighbours;
 
 /// Settings of curvature-aware sampling.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

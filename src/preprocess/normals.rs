@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use rayon::prelude::*;
 
 use crate::cloud::PointCloud;
-use crate::compare::grid::Grid;
+use crate::spatial::Grid;
 
 /// How the sign of each normal is chosen (PCA gives an axis, not a direction).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -4,7 +4,7 @@ use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::{PointCloud, MAX_COORD_MM};
-use crate::compare::grid::Grid;
+use crate::spatial::Grid;
 
 /// Settings of the statistical outlier filter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

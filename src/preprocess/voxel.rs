@@ -3,7 +3,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use crate::cloud::{Aabb, PointCloud};
-use crate::compare::grid::Grid;
+use crate::spatial::Grid;
 
 /// Most voxels along the cloud's longest side. A voxel key is `⌊coordinate / voxel⌋` as an
 /// integer: beyond about 9e18 it saturates and every point falls in one voxel (a voxel of

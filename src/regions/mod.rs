@@ -17,8 +17,8 @@
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::cloud::Neighbours;
 use crate::compare::{area_shares, Deviation, Deviations, Reason, PEAK_LOD_RATIO};
+use crate::spatial::Neighbours;
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]

@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use crate::compare::grid::Grid;
+use crate::spatial::Grid;
 
 /// Number of histogram bins of one feature.
 pub const FPFH_BINS: usize = 33;

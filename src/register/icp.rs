@@ -4,7 +4,7 @@ use nalgebra::{Isometry3, Matrix6, Point3, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::compare::grid::Grid;
+use crate::spatial::Grid;
 
 /// Settings of one ICP run (lengths in mm).
 #[derive(Debug, Clone, Copy)]

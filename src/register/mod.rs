@@ -21,10 +21,10 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::cloud::PointCloud;
-use crate::compare::grid::Grid;
 use crate::preprocess::{
     estimate_normals, mean_spacing_in, voxel_downsample, NormalConfig, Orientation,
 };
+use crate::spatial::Grid;
 use icp::{IcpParams, IcpResult};
 use mac::{MacParams, MacStats};
 

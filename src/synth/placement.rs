@@ -10,47 +10,8 @@ use rand_chacha::ChaCha8Rng;
 use super::defects::{Defect, DefectKind};
 use super::truth::OutlierTruth;
 use super::{gauss, SiteFilter, SynthConfig};
-use crate::cloud::{sample_mesh, Mesh, Neighbours, PointCloud};
-
-/// A uniform grid of points for "anything within r?" queries.
-struct Grid {
-    cell: f64,
-    cells: HashMap<[i64; 3], Vec<Point3<f64>>>,
-}
-
-impl Grid {
-    fn new(cell: f64, points: impl IntoIterator<Item = Point3<f64>>) -> Grid {
-        let mut g = Grid {
-            cell,
-            cells: HashMap::new(),
-        };
-        for p in points {
-            g.cells.entry(g.key(&p)).or_default().push(p);
-        }
-        g
-    }
-
-    fn key(&self, p: &Point3<f64>) -> [i64; 3] {
-        [0, 1, 2].map(|i| (p[i] / self.cell).floor() as i64)
-    }
-
-    fn any_within(&self, p: &Point3<f64>, r: f64) -> bool {
-        let reach = (r / self.cell).ceil() as i64;
-        let k = self.key(p);
-        for dx in -reach..=reach {
-            for dy in -reach..=reach {
-                for dz in -reach..=reach {
-                    if let Some(pts) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
-                        if pts.iter().any(|q| (q - p).norm() <= r) {
-                            return true;
-                        }
-                    }
-                }
-            }
-        }
-        false
-    }
-}
+use crate::cloud::{sample_mesh, Mesh, PointCloud};
+use crate::spatial::{Neighbours, SparseGrid};
 
 /// Points every `step` mm along the mesh's sharp edges (dihedral angle over 25 degrees) and
 /// its open boundary edges.
@@ -102,14 +63,14 @@ pub fn place_defects(
     let on_articular = match articular {
         Some(a) => {
             sharp.extend(sharp_edge_points(a, 0.5));
-            Some(Grid::new(
+            Some(SparseGrid::new(
                 1.0,
                 sample_mesh(a, 200_000, rng.gen())?.cloud.points,
             ))
         }
         None => None,
     };
-    let sharp = Grid::new(2.0, sharp);
+    let sharp = SparseGrid::new(2.0, sharp);
     let candidates = sample_mesh(mesh, 20_000, rng.gen())?.cloud;
     let normals = candidates.normals.as_ref().expect("sampled normals");
     let mut defects: Vec<Defect> = Vec::new();

@@ -6,8 +6,8 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::point_pair::{Pairing, PAIR_CANDIDATES};
-use crate::cloud::Neighbours;
 use crate::compare::Clouds;
+use crate::spatial::Neighbours;
 
 /// Per-cloud data shared by all core points (built by [`super::prepare::prepare`]).
 pub(super) struct Context<'a> {
@@ -97,7 +97,7 @@ impl Context<'_> {
 
     /// Indices of the reference points within `radius` of the axis through `p` along `n` and
     /// within max(`max_distance`, `radius`) of `p` along it, in storage order: a plain
-    /// cylinder (py4dgeo's slabs, [`crate::compare::grid::Grid::cylinder`], leave out a
+    /// cylinder (py4dgeo's slabs, [`crate::spatial::Grid::cylinder`], leave out a
     /// plane through `p` when the cylinder has two: it lies on their common boundary).
     pub(super) fn reference_near(
         &self,

@@ -5,8 +5,8 @@
 //! rules there.
 use nalgebra::{Point3, Vector3};
 
-use crate::compare::grid::Grid;
 use crate::compare::Clouds;
+use crate::spatial::Grid;
 
 /// Reference points a scan point's pairing looks among ([`Pairing::pair`]).
 pub(super) const PAIR_CANDIDATES: usize = 4;

@@ -9,9 +9,10 @@ use rayon::prelude::*;
 use super::context::{Context, RefSlot, Thresholds};
 use super::point_pair::{each_nearest, Pairing};
 use super::quadric::MAD_TO_SD;
-use crate::cloud::{Neighbours, PointCloud};
+use crate::cloud::PointCloud;
 use crate::compare::cover::cover_radius2;
 use crate::compare::{area_share, Clouds, CompareConfig};
+use crate::spatial::Neighbours;
 
 /// δ_i looks among this many nearest scan points of a reference point. 3 instead of 4 (until
 /// 2026-12-01): every IoU, peak and false-region count of seeds 11-82 at 300k and 11-58 at

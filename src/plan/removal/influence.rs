@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::tool::ToolModel;
-use crate::cloud::Neighbours;
+use crate::spatial::Neighbours;
 
 /// Sub-samples along a contact point's piece of stroke when A is built: the tool moves over
 /// the piece during its dwell, so its column is the influence averaged over the piece. 8 keeps

@@ -10,6 +10,8 @@ use kiddo::{Eytzinger, ImmutableKdTree, QueryScratch, SquaredEuclidean};
 use nalgebra::Point3;
 use rayon::prelude::*;
 
+use super::{dist2, in_index_order};
+
 /// One neighbour: its index in the indexed points and its squared distance to the query.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Neighbour {
@@ -37,13 +39,6 @@ impl std::fmt::Debug for Neighbours {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Neighbours({} points)", self.points.len())
     }
-}
-
-/// Squared distance in FLANN's summation order.
-#[inline]
-pub fn dist2(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    dx * dx + dy * dy + dz * dz
 }
 
 fn ordered(mut found: Vec<Neighbour>) -> Vec<Neighbour> {
@@ -129,15 +124,7 @@ impl Neighbours {
     {
         let order = self.spatial_order();
         let values: Vec<R> = order.par_iter().map_init(init, |s, &i| f(s, i)).collect();
-        let mut slots: Vec<Option<R>> = values.into_iter().map(Some).collect();
-        let mut position = vec![0; order.len()];
-        for (j, &i) in order.iter().enumerate() {
-            position[i] = j;
-        }
-        position
-            .iter()
-            .map(|&j| slots[j].take().expect("a permutation"))
-            .collect()
+        in_index_order(order.into_iter(), values)
     }
 
     /// The indexed point `i`.
@@ -225,7 +212,7 @@ impl Neighbours {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{Rng, SeedableRng};
+    use crate::spatial::fixtures::lattice_and_noise;
 
     fn brute(points: &[Point3<f64>], q: &Point3<f64>) -> Vec<Neighbour> {
         let all = points
@@ -241,12 +228,8 @@ mod tests {
 
     #[test]
     fn knn_and_radius_match_brute_force_with_ties() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         // A grid (many exact ties) plus random points.
-        let mut points: Vec<Point3<f64>> = (0..343)
-            .map(|i| Point3::new((i % 7) as f64, ((i / 7) % 7) as f64, (i / 49) as f64))
-            .collect();
-        points.extend((0..300).map(|_| Point3::new(rng.gen(), rng.gen(), rng.gen()) * 7.0));
+        let points = lattice_and_noise(7, 300);
         let index = Neighbours::new(&points);
         for q in points.iter().step_by(5) {
             let all = brute(&points, q);
