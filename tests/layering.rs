@@ -140,11 +140,8 @@ fn no_stage_below_the_comparison_imports_compare() {
     );
 }
 
-// Enabled by the lead after the cell merge: today src/plan/frames.rs and src/plan/execute.rs
-// import bus (issue 30's cell part moves streaming to src/cell and frames onto
-// dofbot-protocol).
+// A plan is data: its frames are made through dofbot-protocol and streamed by src/cell.
 #[test]
-#[ignore]
 fn the_plan_does_not_import_bus() {
     let found = violations(&["plan"], "bus");
     assert!(found.is_empty(), "imports of bus by the plan: {found:?}");
