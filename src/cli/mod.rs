@@ -12,8 +12,6 @@ mod demo;
 mod filter;
 mod info;
 mod inspect;
-mod inspect_area;
-mod inspect_checks;
 mod inspect_report;
 mod merge;
 mod plan;
