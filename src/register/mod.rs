@@ -266,6 +266,9 @@ fn fail(
     })
 }
 
+/// Points of a voxel cloud and their normals.
+type VoxelCloud = (Vec<Point3<f64>>, Vec<Vector3<f64>>);
+
 /// Both clouds down-sampled on the coarse voxel grid with normals, and the lengths derived
 /// from the cloud resolution.
 struct Prepared {
@@ -280,9 +283,9 @@ struct Prepared {
     /// FPFH radius (mm).
     feature_radius: f64,
     /// Voxel scan points and normals.
-    scan: (Vec<Point3<f64>>, Vec<Vector3<f64>>),
+    scan: VoxelCloud,
     /// Voxel reference points and normals.
-    reference: (Vec<Point3<f64>>, Vec<Vector3<f64>>),
+    reference: VoxelCloud,
     /// Index of the voxel reference (the ranking ICP's searches).
     reference_voxel_index: Grid,
     /// Index of the full reference (its resolution here, the fine ICP's searches).
@@ -338,7 +341,7 @@ fn voxel_with_normals(
     voxel: f64,
     radius: f64,
     keep_normals: bool,
-) -> Result<(Vec<Point3<f64>>, Vec<Vector3<f64>>), RegisterError> {
+) -> Result<VoxelCloud, RegisterError> {
     let d = voxel_downsample(c, voxel);
     let normals = match d.normals {
         Some(n) if keep_normals => n,
