@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod cli;
 pub mod cloud;
 pub mod compare;
+mod defaults;
 pub mod inspect;
 pub mod plan;
 pub mod preprocess;

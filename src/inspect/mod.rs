@@ -21,7 +21,7 @@ use crate::register::{self, RegisterConfig, Registration};
 
 /// Settings of an inspection (TOML `--config` of `inspect`), one section per stage.
 #[derive(Debug, Clone, Default, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct InspectConfig {
     /// Points sampled on a mesh reference (default [`DEFAULT_REFERENCE_POINTS`] when 0).
     pub reference_points: usize,
