@@ -56,17 +56,25 @@ fn default_in(doc: &str) -> Option<String> {
     (!token.is_empty()).then_some(token)
 }
 
-/// Whether the stated `text` is the default `value`: numbers within 1e-12 (relative), bools and
-/// strings (quotes and backticks dropped, case ignored) equal.
+/// Whether the stated `text` is the default `value`: numbers within 1e-12 (relative), a range
+/// "a..b" the pair [a, b], bools equal, an enum variant ("[`Orientation::Auto`]", "auto") its
+/// serialised name (case and `_` ignored).
 fn agrees(text: &str, value: &toml::Value) -> bool {
-    let plain = text.trim_matches(|c| c == '"' || c == '`');
-    let number = plain.replace([',', '_'], "").parse::<f64>().ok();
+    let plain: String = text.chars().filter(|c| !"[]`\"".contains(*c)).collect();
+    let number = |t: &str| t.replace([',', '_'], "").parse::<f64>().ok();
     let close = |x: f64, n: f64| (x - n).abs() <= 1e-12 * x.abs().max(n.abs());
-    match (value, number) {
-        (toml::Value::Integer(i), Some(n)) => close(*i as f64, n),
-        (toml::Value::Float(x), Some(n)) => close(*x, n),
-        (toml::Value::Boolean(b), _) => plain == b.to_string(),
-        (toml::Value::String(s), _) => plain.eq_ignore_ascii_case(s),
+    match value {
+        toml::Value::Integer(i) => number(&plain).is_some_and(|n| close(*i as f64, n)),
+        toml::Value::Float(x) => number(&plain).is_some_and(|n| close(*x, n)),
+        toml::Value::Boolean(b) => plain == b.to_string(),
+        toml::Value::String(s) => {
+            let variant = plain.rsplit("::").next().unwrap_or("").to_lowercase();
+            variant == s.replace('_', "").to_lowercase()
+        }
+        toml::Value::Array(items) => {
+            let parts: Vec<&str> = plain.split("..").collect();
+            parts.len() == items.len() && parts.iter().zip(items).all(|(p, v)| agrees(p, v))
+        }
         _ => false,
     }
 }
@@ -127,6 +135,13 @@ fn stated_defaults_are_parsed_as_written() {
     assert!(agrees("30,000", &toml::Value::Integer(30_000)));
     assert!(!agrees("0.5", &toml::Value::Float(0.6)));
     assert!(agrees("false", &toml::Value::Boolean(false)));
+    assert!(agrees(
+        "[`Orientation::FromExisting`]",
+        &"from_existing".into()
+    ));
+    let pair = toml::Value::Array(vec![0.04.into(), 3.0.into()]);
+    assert!(agrees("0.04..3", &pair));
+    assert!(!agrees("0.04..2", &pair));
 }
 
 #[test]

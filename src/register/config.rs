@@ -21,7 +21,7 @@ pub struct RegisterConfig {
     pub normal_radius: Option<f64>,
     /// FPFH radius (default 5 voxel), at most `feature_max_nn` neighbours.
     pub feature_radius: Option<f64>,
-    /// Neighbour cap of the FPFH search (Open3D tutorial: 100).
+    /// Neighbour cap of the FPFH search (default 100, as Open3D's tutorial).
     pub feature_max_nn: usize,
     /// Most scan points that get a descriptor (evenly strided over the voxel cloud; the
     /// reference is described everywhere; default 8,000).
