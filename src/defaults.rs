@@ -39,7 +39,7 @@ fn stated_defaults(source: &str, struct_name: &str) -> Vec<(String, String)> {
 }
 
 /// The token after the first "default" (or "Default", "default:") in `doc`: up to a space,
-/// `;`, `:`, `)` or a `,` that does not go on with a number ("30,000", "4, -3, 0" stay whole,
+/// `;`, `)`, a `:` ending a word or a `,` that does not go on with a number ("30,000", "4, -3, 0" stay whole,
 /// spaces dropped); a closing `.` dropped.
 fn default_in(doc: &str) -> Option<String> {
     let at = doc.find("default ").or_else(|| doc.find("Default "))?;
@@ -59,7 +59,8 @@ fn default_in(doc: &str) -> Option<String> {
             i += 1 + (chars.len() - i - 1 - next.chars().count());
             continue;
         }
-        if c.is_whitespace() || c == ';' || c == ')' || c == ':' {
+        let colon = c == ':' && chars.get(i + 1).is_none_or(|n| n.is_whitespace());
+        if c.is_whitespace() || c == ';' || c == ')' || colon {
             break;
         }
         token.push(c);
