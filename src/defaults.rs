@@ -210,8 +210,7 @@ fn every_stated_default_is_the_default_impl() {
         crate::bus::Faults => "src/bus/model.rs",
         crate::bus::Mechanics => "src/bus/model.rs",
         crate::bus::SimOptions => "src/bus/sim.rs",
-        crate::calibrate::CalibrationConfig => "src/calibrate/mod.rs",
     );
     assert!(bad.is_empty(), "{}", bad.join("\n"));
-    assert!(checked >= 60, "only {checked} stated defaults found");
+    assert!(checked >= 50, "only {checked} stated defaults found");
 }
