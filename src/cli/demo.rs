@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use nalgebra::{Point3, Vector3};
 
-use super::{inspect, plan, run as run_cmd, GeometryInput};
+use super::{inspect, plan, run as run_cmd};
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::plan::Plan;
 use crate::regions::Regions;
@@ -84,23 +84,21 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     case.write(&out)?;
     let inspection = out.join("inspection");
     step("inspect: filter, register, compare, regions, report");
-    inspect::run(
-        inspect::InspectArgs {
+    inspect::inspect_into(
+        &crate::inspect::InspectConfig::default(),
+        &crate::inspect::Inputs {
             reference: out.join("reference.ply"),
             scan: out.join("scan.ply"),
-            out: inspection.clone(),
-            tolerance: None,
-            method: None,
-            registration_error: None,
-            pose: None,
-            core: None,
-            inspect_area: None,
-            input: GeometryInput {
+            files: crate::inspect::FileInput {
                 units: Some(crate::cloud::Units::Mm),
                 format: None,
             },
+            pose: None,
+            core: None,
+            inspect_area: None,
+            registration_error: None,
         },
-        None,
+        &inspection,
     )?;
     step("plan: grinding passes and the joint trajectory");
     let plan_file = out.join("plan.json");

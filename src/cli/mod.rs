@@ -13,8 +13,6 @@ mod filter;
 mod grind;
 mod info;
 mod inspect;
-mod inspect_area;
-mod inspect_checks;
 mod inspect_report;
 mod merge;
 mod plan;
