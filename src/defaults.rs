@@ -213,7 +213,7 @@ fn every_stated_default_is_the_default_impl() {
         crate::calibrate::CalibrationConfig => "src/calibrate/config.rs",
         crate::cell::RunConfig => "src/cell/stream.rs",
         crate::plan::removal::RemovalConfig => "src/plan/removal/mod.rs",
-        crate::grind_sim::GrindConfig => "src/grind_sim/mod.rs",
+        crate::bus::GrindConfig => "src/bus/grinding.rs",
     );
     assert!(bad.is_empty(), "{}", bad.join("\n"));
     assert!(checked >= 50, "only {checked} stated defaults found");

@@ -146,3 +146,24 @@ fn the_plan_does_not_import_bus() {
     let found = violations(&["plan"], "bus");
     assert!(found.is_empty(), "imports of bus by the plan: {found:?}");
 }
+
+/// The motion half's floors, lowest first, as DESIGN.md's flow has them: the board's driver
+/// and simulator (`bus`) and the arm's model (`robot`) know nothing of a plan, the cell that
+/// streams it or the simulated grind that runs above the simulator.
+const MOTION_RULES: [(&str, &[&str]); 4] = [
+    ("robot", &["bus", "plan", "cell", "grind_sim", "inspect"]),
+    ("bus", &["plan", "cell", "grind_sim", "inspect"]),
+    ("plan", &["cell", "grind_sim", "inspect"]),
+    ("grind_sim", &["plan", "cell"]),
+];
+
+#[test]
+fn the_motion_floors_import_only_downwards() {
+    let mut found = Vec::new();
+    for (folder, above) in MOTION_RULES {
+        for module in above {
+            found.extend(violations(&[folder], module));
+        }
+    }
+    assert!(found.is_empty(), "imports against the flow: {found:?}");
+}
