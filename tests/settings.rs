@@ -2,7 +2,7 @@
 //! line and the key with its table (every config denies unknown fields).
 mod common;
 
-use common::{one_line_failure, polishbot, tempdir};
+use common::{one_line_failure, pair_args, polishbot, tempdir};
 
 /// Runs `args` with `text` as the `--config` file and checks the one-line refusal holds every
 /// needle and the file's name.
@@ -25,15 +25,7 @@ fn refused_with(text: &str, args: &[&str], needles: &[&str]) {
 
 #[test]
 fn a_typo_in_a_stage_section_names_the_file_the_line_and_the_key() {
-    let inspect = [
-        "inspect",
-        "--reference",
-        "r.ply",
-        "--scan",
-        "s.ply",
-        "-o",
-        "x",
-    ];
+    let inspect = pair_args("inspect");
     // regions (a stage config inside inspect's settings)
     refused_with(
         "[regions]\ntolerance = 0.05\ntolerence = 0.1\n",
@@ -47,15 +39,7 @@ fn a_typo_in_a_stage_section_names_the_file_the_line_and_the_key() {
         &["line 2", "unknown key `filter.kk`"],
     );
     // registration, its own command's config (top level)
-    let register = [
-        "register",
-        "--reference",
-        "r.ply",
-        "--scan",
-        "s.ply",
-        "-o",
-        "x",
-    ];
+    let register = pair_args("register");
     refused_with(
         "voxel = 1.0\nfeature_max_n = 50\n",
         &register,
