@@ -26,7 +26,7 @@ const OVERLAP_EVERY: usize = 8;
 const ITERATIONS: usize = 15;
 
 /// The joint solve has converged when no pose moves by more than this (degrees and mm).
-const CONVERGED: f64 = 1e-5;
+const CONVERGED: f64 = 1e-4;
 
 /// Damping of the normal equations relative to their mean diagonal: keeps a view that is
 /// tied down in fewer than six directions from blowing up, far below any real constraint.

@@ -9,16 +9,16 @@ use super::MergeConfig;
 use crate::cloud::transform::pose_difference;
 use crate::cloud::PointCloud;
 
-/// Share of a new view's sample points within the middle ICP distance of a placed view (at the
-/// predicted pose) for that view to join the model the new one is aligned against. Low: the
-/// bunny's 90 degree neighbours share 20-35 % of their points, a 45 degree error halves that.
+/// Share of a new view's sample points within the final ICP distance of a placed view (once
+/// pulled in) for that view to join the model the new one is refined against. Low: the
+/// bunny's 90 degree neighbours share 20-35 % of their points, opposite views a few percent
+/// along their rims.
 const MIN_MODEL_OVERLAP: f64 = 0.05;
 
 /// Every how many sample points the overlap test uses (it only needs a share, not a fit).
 const OVERLAP_EVERY: usize = 8;
 
-/// How many overlapping placed views (nearest in angle first) coarse registration is tried
-/// against when ICP gives no match within the bound (each costs a full `register()`).
+/// How many placed views (nearest in angle first) coarse registration is tried against when ICP gives no match within the bound (each costs a full `register()`).
 const COARSE_TRIES: usize = 2;
 
 /// Largest union a new view is aligned against, in multiples of `icp_target_points`.
@@ -139,31 +139,53 @@ fn nearest_placed(inp: &Inputs, placed: &[Placed], i: usize) -> usize {
 
 /// The matches tried for one view: those beyond the bound are kept for the report.
 struct Trials<'a> {
-    src: &'a Prepared,
-    model: &'a Prepared,
-    nominal: Isometry3<f64>,
+    inp: &'a Inputs<'a>,
+    placed: &'a [Placed],
+    /// The view being placed.
+    i: usize,
     cfg: &'a MergeConfig,
     rejected: Vec<Rejected>,
     any_fit: bool,
 }
 
+/// A match: pose, fitness onto its model, the model's members (positions in `placed`).
+type Match = (Isometry3<f64>, f64, Vec<usize>);
+
 impl Trials<'_> {
-    /// ICP onto the model from `start` (short range only with `short`): the pose and fitness
-    /// when it fits within the bound; recorded as rejected when it fits beyond it.
+    /// The match from `start`: pulled in by the full ICP onto the placed view at position
+    /// `onto` (None: `start` is already pulled in), then refined by a short-range ICP onto the
+    /// union of the placed views it then overlaps. Returned when it fits within the bound;
+    /// recorded as rejected when it fits beyond it.
     fn try_start(
         &mut self,
         name: &str,
         start: &Isometry3<f64>,
-        short: bool,
-    ) -> Option<(Isometry3<f64>, f64)> {
-        let (pose, f) = pair_icp(self.src, self.model, start, self.cfg, short);
+        onto: Option<usize>,
+    ) -> Option<Match> {
+        let src = &self.inp.prepared[self.i];
+        let pulled = match onto {
+            Some(k) => {
+                let p = &self.placed[k];
+                let dst = &self.inp.prepared[p.index];
+                p.pose * pair_icp(src, dst, &(p.pose.inverse() * start), self.cfg, false).0
+            }
+            None => *start,
+        };
+        let members = model_members(self.inp, self.placed, self.i, &pulled, self.cfg);
+        let (pose, f) = pair_icp(
+            src,
+            &model(self.inp, self.placed, &members, self.cfg),
+            &pulled,
+            self.cfg,
+            true,
+        );
         if f < self.cfg.min_fitness {
             return None;
         }
         self.any_fit = true;
-        let correction = pose_difference(&self.nominal, &pose).0;
+        let correction = pose_difference(&self.inp.nominal[self.i], &pose).0;
         if correction <= self.cfg.angle_tolerance {
-            return Some((pose, f));
+            return Some((pose, f, members));
         }
         self.rejected.push(Rejected {
             start: name.to_string(),
@@ -174,25 +196,38 @@ impl Trials<'_> {
     }
 }
 
-/// Positions in `placed` of the placed views that overlap view `i` at `predicted`, nearest in
-/// angle first (the nearest placed view alone when none does).
+/// The union of the placed views at `members` (positions in `placed`) at their poses.
+fn model(inp: &Inputs, placed: &[Placed], members: &[usize], cfg: &MergeConfig) -> Prepared {
+    let parts: Vec<(&Prepared, Isometry3<f64>)> = members
+        .iter()
+        .map(|&k| (&inp.prepared[placed[k].index], placed[k].pose))
+        .collect();
+    union(&parts, MODEL_TARGETS * cfg.icp_target_points)
+}
+
+/// Positions in `placed` of the placed views (not held) that view `i` overlaps at `pose`
+/// (within the final ICP distance), nearest in angle first; the nearest placed view alone
+/// when none does.
 fn model_members(
     inp: &Inputs,
     placed: &[Placed],
     i: usize,
-    predicted: &Isometry3<f64>,
+    pose: &Isometry3<f64>,
     cfg: &MergeConfig,
 ) -> Vec<usize> {
-    let mid = 0.5 * (cfg.start_distance + cfg.final_distance);
     let src = &inp.prepared[i];
     let mut members: Vec<usize> = (0..placed.len())
         .filter(|&k| {
             let p = &placed[k];
-            if p.placement == Placement::Held {
-                return false;
-            }
-            let rel = p.pose.inverse() * predicted;
-            overlap(src, &inp.prepared[p.index], &rel, mid, OVERLAP_EVERY) >= MIN_MODEL_OVERLAP
+            let rel = p.pose.inverse() * pose;
+            p.placement != Placement::Held
+                && overlap(
+                    src,
+                    &inp.prepared[p.index],
+                    &rel,
+                    cfg.final_distance,
+                    OVERLAP_EVERY,
+                ) >= MIN_MODEL_OVERLAP
         })
         .collect();
     if members.is_empty() {
@@ -203,75 +238,78 @@ fn model_members(
     members
 }
 
-/// Places view `i`: ICP onto the model from the predicted pose, then from the nominal one, then
-/// from coarse registrations onto the nearest members; the first fit within the bound counts.
-/// None when no match fits at all.
+/// Places view `i`. Starts, in turn: the predicted pose (the nearest placed view's correction
+/// carried over) and the nominal pose, each pulled in by ICP onto the nearest placed view;
+/// then coarse registrations onto the nearest placed views. Each is refined against the
+/// placed views it overlaps; the first fit within the bound counts. None when no match fits.
 fn place_one(inp: &Inputs, placed: &[Placed], i: usize, cfg: &MergeConfig) -> Option<Placed> {
     let nominal = inp.nominal[i];
-    // The nearest placed view carries its correction over to the new one.
-    let near = &placed[nearest_placed(inp, placed, i)];
+    let near_k = nearest_placed(inp, placed, i);
+    let near = &placed[near_k];
     let predicted = near.pose * inp.nominal[near.index].inverse() * nominal;
-    let members = model_members(inp, placed, i, &predicted, cfg);
-    let parts: Vec<(&Prepared, Isometry3<f64>)> = members
-        .iter()
-        .map(|&k| (&inp.prepared[placed[k].index], placed[k].pose))
-        .collect();
-    let model = union(&parts, MODEL_TARGETS * cfg.icp_target_points);
     let mut trials = Trials {
-        src: &inp.prepared[i],
-        model: &model,
-        nominal,
+        inp,
+        placed,
+        i,
         cfg,
         rejected: Vec::new(),
         any_fit: false,
     };
-    let make = |pose, fitness, coarse, placement, rejected| Placed {
+    let make = |(pose, fitness, members): Match, coarse, placement, rejected| Placed {
         index: i,
         pose,
         fitness,
         coarse,
         placement,
         rejected,
-        model: members.iter().map(|&k| placed[k].index).collect(),
+        model: members.iter().map(|&k: &usize| placed[k].index).collect(),
     };
     let mut starts = vec![("predicted", predicted)];
     if pose_difference(&predicted, &nominal).0 > 1e-9 {
         starts.push(("nominal", nominal));
     }
     for (n, (name, start)) in starts.iter().enumerate() {
-        if let Some((pose, f)) = trials.try_start(name, start, false) {
+        if let Some(m) = trials.try_start(name, start, Some(near_k)) {
             let how = if n == 0 && trials.rejected.is_empty() {
                 Placement::Aligned
             } else {
                 Placement::Realigned
             };
-            return Some(make(pose, f, false, how, trials.rejected));
+            return Some(make(m, false, how, trials.rejected));
         }
     }
-    for &m in members.iter().take(COARSE_TRIES) {
-        let j = placed[m].index;
+    let mut nearest: Vec<usize> = (0..placed.len())
+        .filter(|&k| placed[k].placement != Placement::Held)
+        .collect();
+    nearest.sort_by(|&a, &b| {
+        let gap = |k: usize| angle_gap(inp.angles[placed[k].index], inp.angles[i]);
+        gap(a).total_cmp(&gap(b))
+    });
+    for &k in nearest.iter().take(COARSE_TRIES) {
+        let j = placed[k].index;
         let Some((rel, _)) = coarse_pair(inp.views, inp.prepared, (i, j), cfg) else {
             continue;
         };
         let name = format!("coarse onto {}", inp.names[j]);
-        if let Some((pose, f)) = trials.try_start(&name, &(placed[m].pose * rel), true) {
-            return Some(make(pose, f, true, Placement::Realigned, trials.rejected));
+        if let Some(m) = trials.try_start(&name, &(placed[k].pose * rel), None) {
+            return Some(make(m, true, Placement::Realigned, trials.rejected));
         }
     }
     if !trials.any_fit {
         return None;
     }
     // Held: the predicted pose refined by a short-range ICP, or unrefined beyond the bound.
-    let (pose, f) = pair_icp(trials.src, &model, &predicted, cfg, true);
-    let (pose, f) = if pose_difference(&nominal, &pose).0 <= cfg.angle_tolerance {
-        (pose, f)
+    let members = model_members(inp, placed, i, &predicted, cfg);
+    let target = model(inp, placed, &members, cfg);
+    let src = &inp.prepared[i];
+    let (pose, f) = pair_icp(src, &target, &predicted, cfg, true);
+    let held = if pose_difference(&nominal, &pose).0 <= cfg.angle_tolerance {
+        (pose, f, members)
     } else {
-        (
-            predicted,
-            overlap(trials.src, &model, &predicted, cfg.final_distance, 1),
-        )
+        let f = overlap(src, &target, &predicted, cfg.final_distance, 1);
+        (predicted, f, members)
     };
-    Some(make(pose, f, false, Placement::Held, trials.rejected))
+    Some(make(held, false, Placement::Held, trials.rejected))
 }
 
 /// True when the views make a full turn: the next step after the last view reaches 360.
