@@ -176,15 +176,9 @@ impl Trials<'_> {
             }
             None => *start,
         };
-        // The fit is judged against the whole overlapping model; the pose itself is refined
-        // jointly by the global step (a short-range ICP onto the model here let the poses of
-        // a 36-view turn drift: 0.01 degrees at view 16, 30 degrees at view 32).
         let members = model_members(self.inp, self.placed, self.i, &pulled, self.cfg);
         let target = model(self.inp, self.placed, &members, self.cfg);
-        let (pose, f) = (
-            pulled,
-            overlap(src, &target, &pulled, self.cfg.final_distance, 1),
-        );
+        let (pose, f) = pair_icp(src, &target, &pulled, self.cfg, true);
         if f < self.cfg.min_fitness {
             return None;
         }
