@@ -27,6 +27,17 @@ fn merge(args: &[&str]) -> std::process::Output {
         .expect("run polishbot")
 }
 
+/// Runs `merge` with `args`, asserts it succeeded and returns its stdout.
+fn merge_ok(args: &[&str]) -> String {
+    let out = merge(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).to_string()
+}
+
 #[test]
 fn synthetic_turntable_12_views_match_truth() {
     synthetic_turntable(12, "30", "7", None);
@@ -93,13 +104,7 @@ fn synthetic_turntable(n: usize, step: &str, seed: &str, axis: Option<[f64; 3]>)
     let m = merged.display().to_string();
     // Each true angle is off by up to 3 degrees, so a view's turn from the first by up to 6.
     args.extend(["--step", step, "--angle-tolerance", "6", "-o", &m]);
-    let out = merge(&args);
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = merge_ok(&args);
     assert!(
         stdout.contains("loop closure") && stdout.contains("axis ("),
         "{stdout}"
@@ -346,13 +351,7 @@ fn merge_bunny(names: &[&str], angles: &str, extra: &[&str]) -> (Value, Vec<Poin
         "--angles", angles, "--axis", "0,-1,0", "--units", "m", "-o", &out_ply,
     ]);
     args.extend(extra);
-    let out = merge(&args);
-    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = merge_ok(&args);
     let report = read_json(&dir.path().join("bun.json"));
     let cloud = polishbot::cloud::load_cloud(Path::new(&out_ply), None, None).unwrap();
     (report, cloud.points, stdout)
