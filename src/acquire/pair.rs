@@ -5,10 +5,10 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::MergeConfig;
 use crate::cloud::PointCloud;
-use crate::spatial::Grid;
 use crate::preprocess::{estimate_normals, mean_spacing, NormalConfig, Orientation};
 use crate::register::icp::{fitness, icp, IcpParams};
 use crate::register::{register, RegisterConfig};
+use crate::spatial::Grid;
 
 /// A view prepared as an ICP target and as a source.
 pub(super) struct Prepared {

@@ -158,7 +158,10 @@ type Match = (Isometry3<f64>, f64, Vec<usize>);
 
 impl Trials<'_> {
     /// The match from `start`: pulled in by the full ICP onto the placed view at position
-    /// `onto` (None: `start` is already pulled in), then refined by a short-range ICP onto the
+    /// `onto` (`start` then relative to that view, as the chain of main computed it: composing
+    /// the placed pose in and out again changed the pull on weakly constrained pairs; None:
+    /// `start` is a view-to-first pose already pulled in), then (`model_refine`) refined by a
+    /// short-range ICP onto the
     /// union of the placed views it then overlaps. Returned when it fits within the bound;
     /// recorded as rejected when it fits beyond it.
     fn try_start(
@@ -168,17 +171,21 @@ impl Trials<'_> {
         onto: Option<usize>,
     ) -> Option<Match> {
         let src = &self.inp.prepared[self.i];
-        let pulled = match onto {
+        let (pulled, pull_fit) = match onto {
             Some(k) => {
                 let p = &self.placed[k];
                 let dst = &self.inp.prepared[p.index];
-                p.pose * pair_icp(src, dst, &(p.pose.inverse() * start), self.cfg, false).0
+                let (rel, f) = pair_icp(src, dst, start, self.cfg, false);
+                (p.pose * rel, Some(f))
             }
-            None => *start,
+            None => (*start, None),
         };
         let members = model_members(self.inp, self.placed, self.i, &pulled, self.cfg);
         let target = model(self.inp, self.placed, &members, self.cfg);
-        let (pose, f) = pair_icp(src, &target, &pulled, self.cfg, true);
+        let (pose, f) = match pull_fit {
+            Some(f) if !self.cfg.model_refine => (pulled, f),
+            _ => pair_icp(src, &target, &pulled, self.cfg, true),
+        };
         if f < self.cfg.min_fitness {
             return None;
         }
@@ -265,9 +272,10 @@ fn place_one(inp: &Inputs, placed: &[Placed], i: usize, cfg: &MergeConfig) -> Op
         rejected,
         model: members.iter().map(|&k: &usize| placed[k].index).collect(),
     };
-    let mut starts = vec![("predicted", predicted)];
+    // Starts relative to the nearest placed view.
+    let mut starts = vec![("predicted", inp.nominal[near.index].inverse() * nominal)];
     if pose_difference(&predicted, &nominal).0 > 1e-9 {
-        starts.push(("nominal", nominal));
+        starts.push(("nominal", near.pose.inverse() * nominal));
     }
     for (n, (name, start)) in starts.iter().enumerate() {
         if let Some(m) = trials.try_start(name, start, Some(near_k)) {
