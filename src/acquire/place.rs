@@ -181,10 +181,13 @@ impl Trials<'_> {
             None => (*start, None),
         };
         let members = model_members(self.inp, self.placed, self.i, &pulled, self.cfg);
-        let target = model(self.inp, self.placed, &members, self.cfg);
+        // The union is only built when the pull is refined onto it.
         let (pose, f) = match pull_fit {
             Some(f) if !self.cfg.model_refine => (pulled, f),
-            _ => pair_icp(src, &target, &pulled, self.cfg, true),
+            _ => {
+                let target = model(self.inp, self.placed, &members, self.cfg);
+                pair_icp(src, &target, &pulled, self.cfg, true)
+            }
         };
         if f < self.cfg.min_fitness {
             return None;
