@@ -4,10 +4,11 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use nalgebra::{Point3, Vector3};
 
+use super::common::read_json;
 use super::{inspect, plan, run as run_cmd};
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::plan::Plan;
@@ -132,13 +133,6 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         out.display()
     );
     Ok(())
-}
-
-pub(super) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    serde_json::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
 }
 
 /// Scores the run against the truth and prints it.

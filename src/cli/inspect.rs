@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
 
-use super::GeometryInput;
+use super::common::GeometryInput;
 use crate::cloud::{self, transform, PlyPrecision};
 use crate::compare::{self, Method};
 use crate::inspect::{self, InspectConfig, PoseSource, MAX_REFERENCE_POINTS};

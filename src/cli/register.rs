@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::{json, Value};
 
-use super::GeometryInput;
+use super::common::GeometryInput;
 use crate::cloud::{self, Geometry, PointCloud};
 use crate::register::{RegisterConfig, RegisterError, Registration};
 
@@ -55,7 +55,7 @@ fn write_json(path: &Path, value: &Value) -> Result<()> {
 
 /// Registers and writes registration.json (also on failure, with `"status": "failed"`).
 pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg: RegisterConfig = super::load_config(config)?;
+    let mut cfg: RegisterConfig = super::common::load_config(config)?;
     if args.voxel.is_some() {
         cfg.voxel = args.voxel;
     }
