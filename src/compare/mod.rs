@@ -26,7 +26,7 @@ pub use self::core::{
     CoreConfig, CoreSelection,
 };
 use crate::cloud::PointCloud;
-use crate::spatial::Grid;
+use crate::spatial::{in_index_order, Grid};
 
 /// The normal quantile of a two-sided 95 % level (the LoD's factor on the registration error,
 /// as in Lague et al.).
@@ -378,18 +378,7 @@ where
         })
         .collect();
     bar.finish_and_clear();
-    scatter(&order, done)
-}
-
-/// `values[k]` belongs to item `order[k]`: the values in item order.
-pub(crate) fn scatter<T: Copy>(order: &[usize], values: Vec<T>) -> Vec<T> {
-    let mut out: Vec<Option<T>> = vec![None; values.len()];
-    for (&i, v) in order.iter().zip(values) {
-        out[i] = Some(v);
-    }
-    out.into_iter()
-        .map(|v| v.expect("order is a permutation"))
-        .collect()
+    in_index_order(order.iter().copied(), done)
 }
 
 /// The median surface density (points per mm²) of the points of `grid` (the scan's, or the

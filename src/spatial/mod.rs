@@ -42,7 +42,7 @@ fn ifloor(x: f64) -> isize {
 /// `values` (the answer for each of some points, in a visiting order) put back in index
 /// order: `order[j]` is the index of the point whose answer is `values[j]`; `order` must be a
 /// permutation of `0..values.len()`.
-fn in_index_order<R>(order: impl Iterator<Item = usize>, values: Vec<R>) -> Vec<R> {
+pub fn in_index_order<R>(order: impl Iterator<Item = usize>, values: Vec<R>) -> Vec<R> {
     let mut slots: Vec<Option<R>> = values.iter().map(|_| None).collect();
     for (i, v) in order.zip(values) {
         slots[i] = Some(v);
