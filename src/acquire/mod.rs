@@ -266,13 +266,8 @@ fn refine_globally(
     (poses, Some(summary), residuals)
 }
 
-/// Merges `views` (with `names` for messages and nominal `angles` in degrees).
-pub fn merge_views(
-    views: &[PointCloud],
-    names: &[String],
-    angles: &[f64],
-    cfg: &MergeConfig,
-) -> Result<Merged> {
+/// Refuses view lists whose lengths differ, an empty list and views of under 10 points.
+fn check_views(views: &[PointCloud], names: &[String], angles: &[f64]) -> Result<()> {
     if views.len() != angles.len() || views.len() != names.len() {
         bail!("{} views but {} angles", views.len(), angles.len());
     }
@@ -284,6 +279,17 @@ pub fn merge_views(
             bail!("{n}: {} points; at least 10 are needed", v.len());
         }
     }
+    Ok(())
+}
+
+/// Merges `views` (with `names` for messages and nominal `angles` in degrees).
+pub fn merge_views(
+    views: &[PointCloud],
+    names: &[String],
+    angles: &[f64],
+    cfg: &MergeConfig,
+) -> Result<Merged> {
+    check_views(views, names, angles)?;
     let prepared: Vec<pair::Prepared> = views
         .iter()
         .zip(names)
