@@ -33,7 +33,9 @@ pub use global::GlobalRefinement;
 pub use place::{Placement, Rejected};
 
 /// Default angle tolerance, degrees: a turntable's angles are known to a few degrees at
-/// worst (the synthetic table errs by up to 3); a match needing more is a wrong match.
+/// worst (the synthetic table errs by up to 3); a match needing more is a wrong match. Views
+/// are corrected against the first view, whose angle errs too: corrections may reach twice
+/// the tolerance and span twice it about the axis.
 pub const DEFAULT_ANGLE_TOLERANCE: f64 = 5.0;
 
 /// Settings of the merge stage (lengths in mm, angles in degrees).
@@ -63,8 +65,11 @@ pub struct MergeConfig {
     pub min_fitness: f64,
     /// Skip a view that cannot be aligned instead of failing (default false).
     pub skip_bad: bool,
-    /// The table's stated angle accuracy, degrees (default 5): a match whose rotation against
-    /// the nominal pose exceeds it is rejected.
+    /// The table's stated angle accuracy a, degrees (default 5): each true table angle is
+    /// within a of its nominal one. A view's pose is its turn from the first view, so a match
+    /// is rejected when its rotation against the nominal pose exceeds 2a, or when the accepted
+    /// views' corrections about the axis (the first view's 0 among them) would span more
+    /// than 2a with it.
     pub angle_tolerance: f64,
     /// Refine all poses jointly over every overlapping pair after placing them (default true).
     pub global: bool,
@@ -329,6 +334,7 @@ pub fn merge_views(
         names,
         angles,
         nominal: &nominal,
+        axis: &axis,
     };
     let placed = place::place_views(&inputs, cfg)?;
     let loop_closure = place::loop_closure(&inputs, &placed.placed, cfg);

@@ -1,7 +1,7 @@
 //! Placing the views one by one against the growing model (every placed view that overlaps
 //! the new one), with each correction bounded by the table's stated accuracy.
 use anyhow::{bail, Result};
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Unit, Vector3};
 use serde::Serialize;
 
 use super::pair::{coarse_pair, overlap, pair_icp, union, Prepared};
@@ -29,6 +29,14 @@ const MODEL_TARGETS: usize = 4;
 /// view 32; the four nearest overlapping views hold the bunny's 45-90 degree neighbours.
 const MAX_MODEL_VIEWS: usize = 4;
 
+/// How many tolerances the table's corrections may span. The tolerance is the table's
+/// accuracy a: each true angle is within a of its nominal one, the first view's too. A pose is
+/// a view's turn against the first view, so its correction carries both errors and reaches 2a
+/// (the synthetic table, angles within 3 degrees, corrects view 7 of seed 3 by 5.12 degrees),
+/// and all corrections about the axis (the first view's 0 among them) lie in one window 2a
+/// wide: a set of true angles within a exists exactly when they do.
+const SPAN_TOLERANCES: f64 = 2.0;
+
 /// How a view's pose was found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
@@ -52,6 +60,9 @@ pub struct Rejected {
     pub start: String,
     /// Its rotation against the nominal pose, degrees.
     pub correction_deg: f64,
+    /// The span of the accepted views' corrections about the table axis (the first view's 0
+    /// among them) with this one added, degrees.
+    pub span_deg: f64,
     /// Its fitness onto the model.
     pub fitness: f64,
 }
@@ -72,6 +83,8 @@ pub(super) struct Placed {
     pub rejected: Vec<Rejected>,
     /// The placed views (input indices) it was aligned against.
     pub model: Vec<usize>,
+    /// Its signed correction about the table axis, degrees (0 for the first view).
+    pub turn: f64,
 }
 
 /// The inputs of [`place_views`].
@@ -81,6 +94,8 @@ pub(super) struct Inputs<'a> {
     pub names: &'a [String],
     pub angles: &'a [f64],
     pub nominal: &'a [Isometry3<f64>],
+    /// The table axis (first view's frame).
+    pub axis: &'a Unit<Vector3<f64>>,
 }
 
 /// Result of [`place_views`].
@@ -97,6 +112,32 @@ fn angle_gap(a: f64, b: f64) -> f64 {
     d.min(360.0 - d)
 }
 
+/// Signed correction of view `i` at `pose` about the table axis against its nominal pose,
+/// degrees.
+fn turn_of(inp: &Inputs, i: usize, pose: &Isometry3<f64>) -> f64 {
+    let d = pose.rotation * inp.nominal[i].rotation.inverse();
+    d.scaled_axis().dot(inp.axis).to_degrees()
+}
+
+/// The bound check of view `i` at `pose`: its rotation against the nominal pose (degrees),
+/// the span of the accepted views' corrections about the axis with it added (degrees), and
+/// whether both are within [`SPAN_TOLERANCES`] tolerances.
+fn within_bound(
+    inp: &Inputs,
+    placed: &[Placed],
+    i: usize,
+    pose: &Isometry3<f64>,
+    cfg: &MergeConfig,
+) -> (f64, f64, bool) {
+    let correction = pose_difference(&inp.nominal[i], pose).0;
+    let turn = turn_of(inp, i, pose);
+    let accepted = placed.iter().filter(|p| p.placement != Placement::Held);
+    let (lo, hi) = accepted.fold((turn, turn), |(lo, hi), p| (lo.min(p.turn), hi.max(p.turn)));
+    let span = hi - lo;
+    let bound = SPAN_TOLERANCES * cfg.angle_tolerance;
+    (correction, span, correction <= bound && span <= bound)
+}
+
 /// Places every view after the first against the placed views it overlaps.
 pub(super) fn place_views(inp: &Inputs, cfg: &MergeConfig) -> Result<Placements> {
     let mut placed = vec![Placed {
@@ -107,6 +148,7 @@ pub(super) fn place_views(inp: &Inputs, cfg: &MergeConfig) -> Result<Placements>
         placement: Placement::First,
         rejected: Vec::new(),
         model: Vec::new(),
+        turn: 0.0,
     }];
     let mut skipped = Vec::new();
     for i in 1..inp.views.len() {
@@ -193,13 +235,14 @@ impl Trials<'_> {
             return None;
         }
         self.any_fit = true;
-        let correction = pose_difference(&self.inp.nominal[self.i], &pose).0;
-        if correction <= self.cfg.angle_tolerance {
+        let (correction, span, ok) = within_bound(self.inp, self.placed, self.i, &pose, self.cfg);
+        if ok {
             return Some((pose, f, members));
         }
         self.rejected.push(Rejected {
             start: name.to_string(),
             correction_deg: correction,
+            span_deg: span,
             fitness: f,
         });
         None
@@ -274,6 +317,7 @@ fn place_one(inp: &Inputs, placed: &[Placed], i: usize, cfg: &MergeConfig) -> Op
         placement,
         rejected,
         model: members.iter().map(|&k: &usize| placed[k].index).collect(),
+        turn: turn_of(inp, i, &pose),
     };
     // Starts relative to the nearest placed view.
     let mut starts = vec![("predicted", inp.nominal[near.index].inverse() * nominal)];
@@ -315,7 +359,7 @@ fn place_one(inp: &Inputs, placed: &[Placed], i: usize, cfg: &MergeConfig) -> Op
     let target = model(inp, placed, &members, cfg);
     let src = &inp.prepared[i];
     let (pose, f) = pair_icp(src, &target, &predicted, cfg, true);
-    let held = if pose_difference(&nominal, &pose).0 <= cfg.angle_tolerance {
+    let held = if within_bound(inp, placed, i, &pose, cfg).2 {
         (pose, f, members)
     } else {
         let f = overlap(src, &target, &predicted, cfg.final_distance, 1);
@@ -335,25 +379,30 @@ fn full_turn(angles: &[f64]) -> bool {
     (next.abs() - 360.0).abs() < 0.5 * step.abs()
 }
 
-/// Loop closure of a full turn whose last view was placed: the last view aligned directly onto
-/// the first from its placed pose, against that pose (rotation deg, translation mm). None
-/// without a full turn, or when the direct match does not fit or is half a step or more off
-/// (a wrong match, not drift). A diagnostic: the global step closes the loop.
+/// Loop closure of a full turn whose last two views were placed: the last view pulled onto
+/// its predecessor (the chain's pose: the placement may have pulled it onto the first view,
+/// which would measure the closure against itself) and then aligned directly onto the first
+/// from there; the direct pose against the chain's (rotation deg, translation mm). None
+/// without a full turn, or when either match does not fit or the direct one is half a step or
+/// more off (a wrong match, not drift). A diagnostic: the global step closes the loop.
 pub(super) fn loop_closure(inp: &Inputs, placed: &[Placed], cfg: &MergeConfig) -> Option<[f64; 2]> {
-    let last = placed.last()?;
     let n = inp.angles.len();
-    if !full_turn(inp.angles) || placed.len() < 3 || last.index != n - 1 {
+    if !full_turn(inp.angles) || placed.len() < 3 || placed.last()?.index != n - 1 {
         return None;
     }
+    let prev = placed
+        .iter()
+        .find(|p| p.index == n - 2 && p.placement != Placement::Held)?;
+    let last = &inp.prepared[n - 1];
+    let start = inp.nominal[n - 2].inverse() * inp.nominal[n - 1];
+    let (rel, f) = pair_icp(last, &inp.prepared[n - 2], &start, cfg, false);
+    if f < cfg.min_fitness {
+        return None;
+    }
+    let chain = prev.pose * rel;
     let half_step = 0.5 * (inp.angles[n - 1] - inp.angles[0]).abs() / (n - 1) as f64;
-    let (rel, f) = pair_icp(
-        &inp.prepared[last.index],
-        &inp.prepared[0],
-        &last.pose,
-        cfg,
-        false,
-    );
-    let e = rel * last.pose.inverse();
+    let (direct, f) = pair_icp(last, &inp.prepared[0], &chain, cfg, false);
+    let e = direct * chain.inverse();
     let deg = e.rotation.angle().to_degrees();
     (f >= cfg.min_fitness && deg < half_step).then_some([deg, e.translation.vector.norm()])
 }

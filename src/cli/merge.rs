@@ -43,8 +43,10 @@ pub struct MergeArgs {
     /// earlier merge report).
     #[arg(long)]
     pub calibration: Option<PathBuf>,
-    /// The table's angle accuracy, degrees: a match that corrects a view's nominal rotation by
-    /// more is rejected [default: the calibration file's, else 5].
+    /// The table's angle accuracy, degrees (each angle within it of nominal): a match that
+    /// corrects a view's rotation from the first view by more than twice it, or spreads the
+    /// views' corrections over more than twice it, is rejected [default: the calibration
+    /// file's, else 5].
     #[arg(long)]
     pub angle_tolerance: Option<f64>,
     /// Leave out views that cannot be aligned (named in the output) instead of failing.
@@ -197,15 +199,21 @@ fn print_views(merged: &crate::acquire::Merged) {
     for v in &merged.views {
         for r in &v.rejected {
             println!(
-                "merge: {}: rejected the match from the {} start (correction {:.2} deg > \
-                 tolerance {} deg, fitness {:.2})",
-                v.name, r.start, r.correction_deg, merged.angle_tolerance, r.fitness
+                "merge: {}: rejected the match from the {} start (correction {:.2} deg, \
+                 corrections spanning {:.2} deg; beyond twice the tolerance {} deg; fitness \
+                 {:.2})",
+                v.name,
+                r.start,
+                r.correction_deg,
+                r.span_deg,
+                merged.angle_tolerance,
+                r.fitness
             );
         }
         if v.placement == Placement::Held {
             println!(
-                "merge: {}: no match within {} deg; held at its predicted pose (correction \
-                 {:.2} deg, fitness {:.2})",
+                "merge: {}: no match within twice the tolerance {} deg; held at its predicted \
+                 pose (correction {:.2} deg, fitness {:.2})",
                 v.name, merged.angle_tolerance, v.correction_deg, v.fitness
             );
         }
