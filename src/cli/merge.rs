@@ -202,12 +202,7 @@ fn print_views(merged: &crate::acquire::Merged) {
                 "merge: {}: rejected the match from the {} start (correction {:.2} deg, \
                  corrections spanning {:.2} deg; beyond twice the tolerance {} deg; fitness \
                  {:.2})",
-                v.name,
-                r.start,
-                r.correction_deg,
-                r.span_deg,
-                merged.angle_tolerance,
-                r.fitness
+                v.name, r.start, r.correction_deg, r.span_deg, merged.angle_tolerance, r.fitness
             );
         }
         if v.placement == Placement::Held {
