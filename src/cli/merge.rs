@@ -8,7 +8,7 @@ use serde::Deserialize;
 use serde_json::json;
 
 use super::common::GeometryInput;
-use crate::acquire::{merge_views, MergeConfig};
+use crate::acquire::{merge_views, MergeConfig, Placement};
 use crate::cloud::{self, PlyPrecision};
 
 /// Arguments of `merge` (flags override the `--config` file's values).
@@ -39,9 +39,16 @@ pub struct MergeArgs {
     /// point at the height of the first view's centroid].
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true, num_args = 1)]
     pub centre: Option<Vec<f64>>,
-    /// A saved axis: JSON with `axis` and `centre` (e.g. an earlier merge report).
+    /// A saved axis: JSON with `axis` and `centre`, optionally `angle_tolerance` (e.g. an
+    /// earlier merge report).
     #[arg(long)]
     pub calibration: Option<PathBuf>,
+    /// The table's angle accuracy, degrees (each angle within it of nominal): a match that
+    /// corrects a view's rotation from the first view by more than twice it, or spreads the
+    /// views' corrections over more than twice it, is rejected [default: the calibration
+    /// file's, else 5].
+    #[arg(long)]
+    pub angle_tolerance: Option<f64>,
     /// Leave out views that cannot be aligned (named in the output) instead of failing.
     #[arg(long)]
     pub skip_bad: bool,
@@ -61,6 +68,7 @@ pub struct MergeArgs {
 struct Calibration {
     axis: [f64; 3],
     centre: [f64; 3],
+    angle_tolerance: Option<f64>,
 }
 
 fn triple(v: &[f64], what: &str) -> Result<[f64; 3]> {
@@ -73,6 +81,14 @@ fn triple(v: &[f64], what: &str) -> Result<[f64; 3]> {
     }
 }
 
+/// A tolerance must be a positive number of degrees below a half turn.
+fn check_tolerance(t: f64, place: &str) -> Result<()> {
+    if !(t > 0.0 && t < 180.0) {
+        bail!("{place}: angle tolerance {t} deg is not in (0, 180)");
+    }
+    Ok(())
+}
+
 fn read_calibration(path: &Path) -> Result<Calibration> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
@@ -82,10 +98,24 @@ fn read_calibration(path: &Path) -> Result<Calibration> {
 /// Merges the views and writes the cloud and the report.
 pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
     let mut cfg: MergeConfig = super::common::load_config(config)?;
+    if let Some(c) = config {
+        check_tolerance(
+            cfg.angle_tolerance,
+            &format!("{}: angle_tolerance", c.display()),
+        )?;
+    }
     if let Some(path) = &args.calibration {
         let c = read_calibration(path)?;
         cfg.axis = Some(c.axis);
         cfg.centre = Some(c.centre);
+        if let Some(t) = c.angle_tolerance {
+            cfg.angle_tolerance = t;
+            check_tolerance(t, &format!("{}: angle_tolerance", path.display()))?;
+        }
+    }
+    if let Some(t) = args.angle_tolerance {
+        check_tolerance(t, "--angle-tolerance")?;
+        cfg.angle_tolerance = t;
     }
     if let Some(a) = &args.axis {
         cfg.axis = Some(triple(a, "axis")?);
@@ -124,6 +154,8 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
         "axis_estimate": axis,
         "axis_seed": merged.axis_seed,
         "loop_closure": merged.loop_closure.map(|[r, t]| json!({"rotation_deg": r, "translation_mm": t})),
+        "angle_tolerance": merged.angle_tolerance,
+        "global": merged.global,
         "skipped": merged.skipped,
         "voxel": merged.voxel,
         "joined_points": merged.joined_points,
@@ -158,5 +190,39 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
     for s in &merged.skipped {
         println!("merge: skipped {s} (could not be aligned)");
     }
+    print_views(&merged);
     Ok(())
+}
+
+/// One line per view whose match was rejected or that was held, and the global step.
+fn print_views(merged: &crate::acquire::Merged) {
+    for v in &merged.views {
+        for r in &v.rejected {
+            println!(
+                "merge: {}: rejected the match from the {} start (correction {:.2} deg, \
+                 corrections spanning {:.2} deg; beyond twice the tolerance {} deg; fitness \
+                 {:.2})",
+                v.name, r.start, r.correction_deg, r.span_deg, merged.angle_tolerance, r.fitness
+            );
+        }
+        if v.placement == Placement::Held {
+            println!(
+                "merge: {}: no match within twice the tolerance {} deg; held at its predicted \
+                 pose (correction {:.2} deg, fitness {:.2})",
+                v.name, merged.angle_tolerance, v.correction_deg, v.fitness
+            );
+        }
+    }
+    if let Some(g) = &merged.global {
+        println!(
+            "merge: global step over {} view pairs, {} iterations: RMS {:.4} -> {:.4} mm, \
+             largest move {:.4} deg {:.4} mm",
+            g.pairs,
+            g.iterations,
+            g.rms_before_mm,
+            g.rms_after_mm,
+            g.largest_move[0],
+            g.largest_move[1]
+        );
+    }
 }
