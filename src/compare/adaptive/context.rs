@@ -45,6 +45,9 @@ pub(super) struct Context<'a> {
     pub(super) limits: Thresholds,
     /// Smallest radius of a peak fit's window (`peak.min_window`), mm.
     pub(super) min_peak_window: f64,
+    /// Scan points per reference point at the two clouds' median surface densities: how many
+    /// scan points a disc's reference points predict (`cover.rs`).
+    pub(super) scan_per_reference: f64,
 }
 
 /// The thresholds the steps after the cylinders work to, mm: the tolerance given to the

@@ -11,12 +11,14 @@ use nalgebra::{Point3, Vector3};
 use super::context::Context;
 use super::quadric::{fit, student_t95, AxisFit, TRIM_NOISE};
 use super::radius::{gather, rwme_radius, Ring, Scratch};
+use crate::compare::cover::Support;
 use crate::compare::{CompareConfig, Deviation, Reason, Z95};
 
 /// Fewest scan points a fit may keep after trimming before the radius grows.
 const FIT_MIN: usize = 6;
 
 /// The adaptive result at core point `p` with outward unit normal `n`.
+#[inline]
 pub(super) fn at(
     prep: &Context,
     p: &Point3<f64>,
@@ -24,10 +26,21 @@ pub(super) fn at(
     cfg: &CompareConfig,
     scratch: &mut Scratch,
 ) -> Deviation {
+    at_supported(prep, p, n, cfg, scratch).0
+}
+
+/// [`at`], and what its fit stood on (all zero without a fit).
+pub(super) fn at_supported(
+    prep: &Context,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    cfg: &CompareConfig,
+    scratch: &mut Scratch,
+) -> (Deviation, Support) {
     gather(prep, p, n, scratch);
     let radius = match rwme_radius(prep, scratch, cfg) {
         Ok(radius) => radius,
-        Err(missing) => return missing,
+        Err(missing) => return (missing, Support::default()),
     };
     let radii = &prep.radii[..radius.usable];
     let Scratch {
@@ -53,24 +66,39 @@ pub(super) fn at(
         let r = radii[k];
         let (n_ref, n_scan) = (rings[k].count, within[k]);
         let last = k + 1 == radii.len();
+        let missing = |reason| {
+            (
+                Deviation::missing(reason, r, n_ref, n_scan),
+                Support::default(),
+            )
+        };
         if n_ref < min {
-            return Deviation::missing(Reason::FewReference, r, n_ref, n_scan);
+            return missing(Reason::FewReference);
         }
         if n_scan < min {
-            return Deviation::missing(Reason::FewScan, r, n_ref, n_scan);
+            return missing(Reason::FewScan);
         }
         match fit_at(k) {
             Some(fs) if fs.n >= FIT_MIN || last => break (r, n_ref, fs),
-            _ if last => return Deviation::missing(Reason::FewScan, r, n_ref, n_scan),
+            _ if last => return missing(Reason::FewScan),
             _ => k += 1,
         }
     };
-    let grown = Grown { r, n_ref, fs };
-    let Grown { r, n_ref, fs } = grow(prep, cfg, grown, k, radii, rings, &mut fit_at);
+    let grown = Grown { k, r, n_ref, fs };
+    let Grown { k, r, n_ref, fs } = grow(prep, cfg, grown, radii, rings, &mut fit_at);
+    // Beside a border (a candidate disc the scan does not fill) the fit must stand on enough
+    // of its disc's scan points (`cover.rs`); else the scan's border, not a distance.
+    let support = Support { kept: fs.n, n_ref };
+    if radius.usable < prep.radii.len() && !support.enough(prep.scan_per_reference) {
+        return (
+            Deviation::missing(Reason::ScanBorder, r, n_ref, within[k]),
+            support,
+        );
+    }
     // The fit's standard error comes from its own residuals: Student's t at their degrees of
     // freedom (a handful of points on a narrow face estimate their scatter poorly).
     let lod = student_t95(fs.dof) * fs.se + Z95 * cfg.registration_error;
-    Deviation {
+    let value = Deviation {
         distance: fs.t0,
         uncertainty: lod,
         significant: false,
@@ -82,18 +110,19 @@ pub(super) fn at(
         peak: f64::NAN,
         peak_fitted: false,
         reason: Reason::Ok,
-    }
-    .finish(n)
+    };
+    (value.finish(n), support)
 }
 
-/// A fit and the radius and reference count it was made at.
+/// A fit and the radius (index and value) and reference count it was made at.
 struct Grown {
+    k: usize,
     r: f64,
     n_ref: usize,
     fs: AxisFit,
 }
 
-/// The fit `first` (at radius index `k`) grown through the larger of `radii` while the
+/// The fit `first` grown through the larger of `radii` while the
 /// quadric describes the surface (residual SD within `max_misfit` × noise) and every fit's
 /// interval t0 ± gamma·se so far intersects (ICI; `gamma` 0: no growth). `rings`: the
 /// reference points within each radius.
@@ -101,7 +130,6 @@ fn grow(
     prep: &Context,
     cfg: &CompareConfig,
     first: Grown,
-    k: usize,
     radii: &[f64],
     rings: &[Ring],
     fit_at: &mut impl FnMut(usize) -> Option<AxisFit>,
@@ -115,7 +143,7 @@ fn grow(
     );
     // Not `gamma <= 0.0`: a NaN gamma, like 0, grows nothing.
     let growing = gamma > 0.0;
-    for j in (k + 1..radii.len()).filter(|_| growing) {
+    for j in (best.k + 1..radii.len()).filter(|_| growing) {
         let Some(next) = fit_at(j).filter(|f| f.sigma <= a.max_misfit * prep.noise) else {
             break;
         };
@@ -125,6 +153,7 @@ fn grow(
             break;
         }
         best = Grown {
+            k: j,
             r: radii[j],
             n_ref: rings[j].count,
             fs: next,

@@ -17,8 +17,11 @@
 //! 6. [`peaks`]: the peak model ([`peak_model`], [`peak_shape`], in its window: [`model`]) at
 //!    each summit gives its peak.
 //! 7. [`fill`]: inside a defect a model describes, its height at the core points.
+//! 8. [`border`]: beside core points without scan, cylinder values their disc's scan points
+//!    do not support are withdrawn.
 //!
 //! Settings: [`crate::compare::AdaptiveConfig`]; docs/ALGORITHMS.md has the method.
+mod border;
 mod context;
 mod densify;
 mod fill;
@@ -74,6 +77,7 @@ pub(super) fn run(
     if a.model_fill {
         fill::fill(&ctx, &points, &normals, &mut values, models, cfg);
     }
+    border::withdraw_unsupported(&ctx, &points, &normals, &mut values, cfg);
     Ok(Evaluated {
         values,
         noise: ctx.noise,

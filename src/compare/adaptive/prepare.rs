@@ -11,7 +11,7 @@ use super::point_pair::{each_nearest, Pairing};
 use super::quadric::MAD_TO_SD;
 use crate::cloud::PointCloud;
 use crate::compare::cover::cover_radius2;
-use crate::compare::{area_share, Clouds, CompareConfig};
+use crate::compare::{area_share, surface_density, Clouds, CompareConfig};
 use crate::spatial::Neighbours;
 
 /// δ_i looks among this many nearest scan points of a reference point. 3 instead of 4 (until
@@ -111,6 +111,7 @@ pub(super) fn prepare<'a>(
             densify_above: cfg.densify_above(),
         },
         min_peak_window: a.peak.min_window,
+        scan_per_reference: clouds.scan_density / surface_density(&clouds.ref_grid),
     })
 }
 

@@ -118,11 +118,23 @@ pub(super) fn gather(prep: &Context, p: &Point3<f64>, n: &Vector3<f64>, s: &mut 
     let inner2 = INNER_SHARE * INNER_SHARE * radii2[0];
     let sectors = &mut s.sectors;
     *sectors = Sectors::default();
+    let tagged = &mut s.tagged;
+    tagged.clear();
+    prep.scan_pairs(p, n, r_max, &mut s.knn, |rho2, d, pair| {
+        let (u, v) = (d.dot(&e1), d.dot(&e2));
+        if rho2 >= inner2 {
+            sectors.add(u, v, true);
+        }
+        tagged.push((ring_of(radii2, rho2), [u, v, pair]));
+    });
+    // Reference points only matter to the sectors when the scan leaves a run of them empty
+    // (`cover.rs`): else no sector is empty, whatever the reference holds.
+    let in_doubt = sectors.scan_gap();
     c.ref_grid
         .near_axis(p, n, r_max, prep.half_length, |slot, _, rho2| {
             let x = &prep.ref_slots[slot];
             if x.normal.dot(n) >= prep.cos_limit {
-                if rho2 >= inner2 {
+                if in_doubt && rho2 >= inner2 {
                     let d = Vector3::from(*c.ref_grid.slot_point(slot)) - p.coords;
                     sectors.add(d.dot(&e1), d.dot(&e2), false);
                 }
@@ -145,15 +157,6 @@ pub(super) fn gather(prep: &Context, p: &Point3<f64>, n: &Vector3<f64>, s: &mut 
         ring.sum_w += below.sum_w;
         ring.sum_wd += below.sum_wd;
     }
-    let tagged = &mut s.tagged;
-    tagged.clear();
-    prep.scan_pairs(p, n, r_max, &mut s.knn, |rho2, d, pair| {
-        let (u, v) = (d.dot(&e1), d.dot(&e2));
-        if rho2 >= inner2 {
-            sectors.add(u, v, true);
-        }
-        tagged.push((ring_of(radii2, rho2), [u, v, pair]));
-    });
     s.within.clear();
     s.within.resize(radii2.len(), 0);
     for &(k, _) in tagged.iter() {
