@@ -40,6 +40,9 @@ fn make_report(dir: &std::path::Path) {
             header: vec!["id".into(), "peak mm".into()],
             rows: vec![vec!["0".into(), "0.31".into()]],
         }],
+        labels: &[],
+        regions: Vec::new(),
+        provenance: None,
     };
     let files = write_report(dir, &input, &ReportConfig::default()).unwrap();
     assert_eq!(files.figures.len(), 2);

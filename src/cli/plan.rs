@@ -56,6 +56,8 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let inspection = Inspection::load(&args.inspection)?;
     let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
     plan.save(&args.out)?;
+    super::plan_report::provenance(&args.inspection, &cfg.robot, &cfg.plan)?
+        .stamp_json(&args.out)?;
     if let Some(yaml) = &args.export_ros {
         std::fs::write(yaml, ros::joint_trajectory_yaml(&plan, "base_link"))
             .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;

@@ -1,10 +1,10 @@
 //! The report page: plain HTML with inline CSS, figures referenced by relative file names.
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use super::ReportInput;
+use super::{Figure, ReportInput};
 
 /// A table for the report.
 #[derive(Debug, Clone, Default)]
@@ -17,7 +17,8 @@ pub struct Table {
     pub rows: Vec<Vec<String>>,
 }
 
-fn escape(s: &str) -> String {
+/// `s` with HTML's special characters escaped.
+pub fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -25,7 +26,7 @@ fn escape(s: &str) -> String {
 }
 
 /// Writes the page.
-pub fn write(path: &Path, input: &ReportInput, figures: &[PathBuf]) -> Result<()> {
+pub fn write(path: &Path, input: &ReportInput, figures: &[Figure]) -> Result<()> {
     let mut s = String::new();
     let _ = write!(
         s,
@@ -33,6 +34,9 @@ pub fn write(path: &Path, input: &ReportInput, figures: &[PathBuf]) -> Result<()
 body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;margin:8px 0 24px}}\
 td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}} th{{background:#eee}}\
 td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px solid #ddd;margin:8px 0}}\
+figure{{margin:8px 0 16px}} figcaption{{font-size:90%;color:#444}}\
+.provenance td{{text-align:left;word-break:break-all;font-family:monospace;font-size:85%}}\
+.closeups{{display:flex;flex-wrap:wrap;gap:12px}} .closeups figure{{flex:0 0 auto;max-width:600px}}\
 </style></head><body>\n<h1>{t}</h1>\n",
         t = escape(&input.title)
     );
@@ -41,9 +45,31 @@ td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px 
         let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", escape(k), escape(v));
     }
     s += "</table>\n";
-    for f in figures {
-        let name = f.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-        let _ = writeln!(s, "<div><img src=\"{0}\" alt=\"{0}\"></div>", escape(name));
+    let (whole, closeups): (Vec<_>, Vec<_>) = figures.iter().enumerate().partition(|(k, _)| *k < 2);
+    let fig = |s: &mut String, f: &Figure| {
+        let name = f
+            .path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default();
+        let ids: Vec<String> = f.regions.iter().map(|i| i.to_string()).collect();
+        let _ = writeln!(
+            s,
+            "<figure data-regions=\"{}\"><img src=\"{n}\" alt=\"{n}\"><figcaption>{}</figcaption></figure>",
+            ids.join(" "),
+            escape(&f.caption),
+            n = escape(name),
+        );
+    };
+    for (_, f) in whole {
+        fig(&mut s, f);
+    }
+    if !closeups.is_empty() {
+        s += "<h2>defect regions, close up</h2>\n<div class=\"closeups\">\n";
+        for (_, f) in closeups {
+            fig(&mut s, f);
+        }
+        s += "</div>\n";
     }
     for t in &input.tables {
         let _ = writeln!(s, "<h2>{}</h2>\n<table>", escape(&t.title));
@@ -58,6 +84,13 @@ td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px 
                 let _ = write!(s, "<td>{}</td>", escape(c));
             }
             s += "</tr>\n";
+        }
+        s += "</table>\n";
+    }
+    if let Some(p) = input.provenance {
+        s += "<h2>provenance</h2>\n<table class=\"provenance\">\n";
+        for (k, v) in p.lines() {
+            let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", escape(&k), escape(&v));
         }
         s += "</table>\n";
     }
