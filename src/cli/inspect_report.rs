@@ -127,6 +127,7 @@ fn region_mark(r: &Region) -> RegionMark {
     let kind = if r.repairable { "excess" } else { "pit" };
     RegionMark {
         id: r.id,
+        centroid: r.centroid,
         normal: nalgebra::Vector3::from(r.normal),
         caption: format!(
             "{kind}, peak {} mm, area {:.3} mm², {} points{}",
@@ -147,6 +148,7 @@ pub fn write(
     provenance: &Provenance,
 ) -> Result<()> {
     let distances: Vec<f64> = dev.values.iter().map(|v| v.distance).collect();
+    let uncertainties: Vec<f64> = dev.values.iter().map(|v| v.uncertainty).collect();
     summary.splice(
         0..0,
         [
@@ -207,6 +209,7 @@ pub fn write(
         points: &dev.points,
         normals: &dev.normals,
         distances: &distances,
+        uncertainties: &uncertainties,
         tolerance: found.tolerance,
         summary,
         tables: vec![Table {

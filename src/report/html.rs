@@ -25,8 +25,9 @@ pub fn escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
-/// Writes the page.
-pub fn write(path: &Path, input: &ReportInput, figures: &[Figure]) -> Result<()> {
+/// Writes the page: summary, overview and histogram, close-ups, `viewer` (HTML of the 3D
+/// viewer's section), tables, provenance.
+pub fn write(path: &Path, input: &ReportInput, figures: &[Figure], viewer: &str) -> Result<()> {
     let mut s = String::new();
     let _ = write!(
         s,
@@ -37,6 +38,11 @@ td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px 
 figure{{margin:8px 0 16px}} figcaption{{font-size:90%;color:#444}}\
 .provenance td{{text-align:left;word-break:break-all;font-family:monospace;font-size:85%}}\
 .closeups{{display:flex;flex-wrap:wrap;gap:12px}} .closeups figure{{flex:0 0 auto;max-width:600px}}\
+.viewer canvas{{border:1px solid #bbb;max-width:100%;cursor:grab}} .viewer input{{width:6em}}\
+#viewer-check{{font-size:85%;color:#555}}\
+@page{{size:A4;margin:12mm}}\
+@media print{{body{{margin:0;font-size:10pt}} .viewer{{display:none}} figure,tr{{break-inside:avoid}}\
+img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeups img{{width:100%}}}}\
 </style></head><body>\n<h1>{t}</h1>\n",
         t = escape(&input.title)
     );
@@ -71,6 +77,7 @@ figure{{margin:8px 0 16px}} figcaption{{font-size:90%;color:#444}}\
         }
         s += "</div>\n";
     }
+    s += viewer;
     for t in &input.tables {
         let _ = writeln!(s, "<h2>{}</h2>\n<table>", escape(&t.title));
         s += "<tr>";

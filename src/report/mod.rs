@@ -9,6 +9,7 @@ mod html;
 mod marks;
 pub mod provenance;
 mod raster;
+mod viewer;
 mod views;
 
 use std::path::{Path, PathBuf};
@@ -54,6 +55,8 @@ pub struct ReportInput<'a> {
     pub normals: &'a [Vector3<f64>],
     /// Signed deviation per core point (mm).
     pub distances: &'a [f64],
+    /// Uncertainty (LoD95) per core point (mm), read out by the viewer; empty: unknown.
+    pub uncertainties: &'a [f64],
     /// Tolerance (mm), marked on the colour bar and histogram.
     pub tolerance: f64,
     /// Key-value lines shown first (verdict, registration summary, ...).
@@ -74,6 +77,8 @@ pub struct ReportInput<'a> {
 pub struct RegionMark {
     /// Region id (the value of its points in [`ReportInput::labels`]).
     pub id: usize,
+    /// Mean position of its points, mm (the viewer's label).
+    pub centroid: [f64; 3],
     /// Mean outward normal (the close-up looks against it).
     pub normal: Vector3<f64>,
     /// One line under its close-up (kind, peak, area...).
@@ -130,6 +135,11 @@ pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Resu
         input.labels.len()
     );
     anyhow::ensure!(
+        input.uncertainties.is_empty() || input.uncertainties.len() == n,
+        "report: {} uncertainties for {n} points",
+        input.uncertainties.len()
+    );
+    anyhow::ensure!(
         input.regions.is_empty() || !input.labels.is_empty(),
         "report: regions without labels"
     );
@@ -175,8 +185,9 @@ pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Resu
         },
     ];
     figures.extend(closeups?.into_iter().flatten());
+    let viewer = viewer::write(dir, input, range)?;
     let html = dir.join("report.html");
-    html::write(&html, input, &figures)?;
+    html::write(&html, input, &figures, &viewer)?;
     Ok(ReportFiles {
         html,
         figures: figures.into_iter().map(|f| f.path).collect(),
