@@ -329,6 +329,7 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
         assert!(dom.contains(&format!("<figcaption>region {id}: ")), "{id}");
     }
     assert_local_only(&dom, &netlog);
+    plan_page_loads(&browser, &out, &ids);
     // The viewer alone on screen: the part is drawn and its defects are coloured.
     let only_viewer = page.replacen(
         "</head>",
@@ -472,4 +473,53 @@ fn a_million_point_report_stays_under_30_mb_and_opens_in_under_3_s() {
         attr(&dom, check, "data-ms")
     );
     assert!(load_ms < 3000.0, "the report took {load_ms} ms to open");
+}
+
+/// The demo's plan.html: linked from the inspection report and back, a tool-path figure per
+/// planned region (every image decodes), no script error, nothing but relative links.
+fn plan_page_loads(browser: &str, out: &std::path::Path, ids: &[u64]) {
+    let report = std::fs::read_to_string(out.join("inspection/report.html")).unwrap();
+    assert!(
+        report.contains("<a href=\"../plan.html\">"),
+        "no link to the plan"
+    );
+    let page = std::fs::read_to_string(out.join("plan.html")).unwrap();
+    assert!(
+        page.contains("<a href=\"inspection/report.html\">"),
+        "no link back"
+    );
+    std::fs::write(out.join("plan-probe.html"), probe(&page)).unwrap();
+    let netlog = out.join("plan-netlog.json");
+    let dom = chromium_run(
+        browser,
+        &[
+            format!("--log-net-log={}", netlog.display()),
+            "--virtual-time-budget=10000".into(),
+            "--dump-dom".into(),
+            format!("file://{}", out.join("plan-probe.html").display()),
+        ],
+    );
+    let dom = String::from_utf8_lossy(&dom.stdout).to_string();
+    assert_eq!(attr(&dom, "<body", "data-errors"), "0", "{dom}");
+    let figures = dom.matches("<figure").count();
+    assert_eq!(
+        figures,
+        ids.len(),
+        "one tool-path figure per planned region"
+    );
+    assert_eq!(attr(&dom, "<body", "data-loaded"), figures.to_string());
+    for id in ids {
+        assert!(
+            dom.contains(&format!("<figure data-regions=\"{id}\">")),
+            "{id}"
+        );
+    }
+    for table in [
+        "reach and time per region",
+        "time per kind of motion",
+        "provenance",
+    ] {
+        assert!(dom.contains(table), "plan.html has no {table}");
+    }
+    assert_local_only(&dom, &netlog);
 }

@@ -123,7 +123,7 @@ pub fn peak_text(r: &Region) -> String {
 }
 
 /// A region as the report's figures show it: its kind, peak, area and marks in the caption.
-fn region_mark(r: &Region) -> RegionMark {
+pub fn region_mark(r: &Region) -> RegionMark {
     let kind = if r.repairable { "excess" } else { "pit" };
     RegionMark {
         id: r.id,

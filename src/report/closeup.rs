@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{anyhow, Result};
-use nalgebra::Vector3;
+use nalgebra::{Point3, Vector3};
 use plotters::prelude::*;
 
 use super::marks::{self, BAR_W};
@@ -63,9 +63,29 @@ fn frame(input: &ReportInput, region: &RegionMark, mine: &[usize]) -> (Camera, f
     (cam, side)
 }
 
+/// What a page draws over a close-up (the plan's tool path), in the reference frame, mm.
+#[derive(Debug, Clone, Default)]
+pub struct Overlay {
+    /// Polylines: points, colour, width px.
+    pub lines: Vec<(Vec<Point3<f64>>, RGBColor, u32)>,
+    /// Crosses: point, colour.
+    pub crosses: Vec<(Point3<f64>, RGBColor)>,
+}
+
 /// Renders region `region`'s close-up into `path`; false when the region has no member point
 /// (nothing drawn).
 pub fn draw(path: &Path, input: &ReportInput, region: &RegionMark, range: f64) -> Result<bool> {
+    draw_with(path, input, region, range, &Overlay::default())
+}
+
+/// [`draw`] with `overlay` drawn over the surface, under the marks.
+pub fn draw_with(
+    path: &Path,
+    input: &ReportInput,
+    region: &RegionMark,
+    range: f64,
+    overlay: &Overlay,
+) -> Result<bool> {
     font::register();
     let (mine, peak) = members(input, region.id);
     if mine.is_empty() {
@@ -101,6 +121,25 @@ pub fn draw(path: &Path, input: &ReportInput, region: &RegionMark, range: f64) -
     let y0 = TITLE_H as i32;
     marks::panel(&root, (0, y0), &colours, CLOSE_PX).map_err(err)?;
     outline(&root, &r.idx, input.labels, region.id, y0).map_err(err)?;
+    // The overlay is clipped to the panel.
+    let panel = root
+        .clone()
+        .shrink((0, y0), (CLOSE_PX as u32, CLOSE_PX as u32));
+    let at = |p: &Point3<f64>| {
+        let (x, y) = cam.pixel(p);
+        (x as i32, y as i32)
+    };
+    for (line, colour, width) in &overlay.lines {
+        let px: Vec<(i32, i32)> = line.iter().map(at).collect();
+        panel
+            .draw(&PathElement::new(px, colour.stroke_width(*width)))
+            .map_err(err)?;
+    }
+    for (p, colour) in &overlay.crosses {
+        panel
+            .draw(&Cross::new(at(p), 6, colour.stroke_width(3)))
+            .map_err(err)?;
+    }
     let title = TextStyle::from((font::FAMILY, 20).into_font()).color(&BLACK);
     let name = format!("region {}: along its normal", region.id);
     root.draw_text(&name, &title, (10, 10)).map_err(err)?;

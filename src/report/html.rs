@@ -25,9 +25,27 @@ pub fn escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
-/// Writes the page: summary, overview and histogram, close-ups, `viewer` (HTML of the 3D
-/// viewer's section), tables, provenance.
-pub fn write(path: &Path, input: &ReportInput, figures: &[Figure], viewer: &str) -> Result<()> {
+/// The id of the paragraph that holds links to other pages (`plan` adds its own there).
+pub const LINKS_ID: &str = "links";
+
+/// How a page is laid out besides its [`ReportInput`].
+#[derive(Debug, Clone, Copy)]
+pub struct Layout<'p> {
+    /// Figures at full width, after the summary.
+    pub whole: &'p [Figure],
+    /// Heading of the close-ups.
+    pub closeup_title: &'p str,
+    /// Figures side by side under that heading.
+    pub closeups: &'p [Figure],
+    /// HTML of the 3D viewer's section (empty: none).
+    pub viewer: &'p str,
+    /// Links to other pages: (text, relative href).
+    pub links: &'p [(String, String)],
+}
+
+/// Writes the page: title, links, summary, whole figures, close-ups, viewer, tables,
+/// provenance.
+pub fn write(path: &Path, input: &ReportInput, layout: &Layout) -> Result<()> {
     let mut s = String::new();
     let _ = write!(
         s,
@@ -43,15 +61,18 @@ figure{{margin:8px 0 16px}} figcaption{{font-size:90%;color:#444}}\
 @page{{size:A4;margin:12mm}}\
 @media print{{body{{margin:0;font-size:10pt}} .viewer{{display:none}} figure,tr{{break-inside:avoid}}\
 img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeups img{{width:100%}}}}\
-</style></head><body>\n<h1>{t}</h1>\n",
+</style></head><body>\n<h1>{t}</h1>\n<p id=\"{LINKS_ID}\">",
         t = escape(&input.title)
     );
+    for (text, href) in layout.links {
+        let _ = write!(s, "<a href=\"{}\">{}</a> ", escape(href), escape(text));
+    }
+    s += "</p>\n";
     s += "<table>\n";
     for (k, v) in &input.summary {
         let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", escape(k), escape(v));
     }
     s += "</table>\n";
-    let (whole, closeups): (Vec<_>, Vec<_>) = figures.iter().enumerate().partition(|(k, _)| *k < 2);
     let fig = |s: &mut String, f: &Figure| {
         let name = f
             .path
@@ -67,17 +88,21 @@ img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeu
             n = escape(name),
         );
     };
-    for (_, f) in whole {
+    for f in layout.whole {
         fig(&mut s, f);
     }
-    if !closeups.is_empty() {
-        s += "<h2>defect regions, close up</h2>\n<div class=\"closeups\">\n";
-        for (_, f) in closeups {
+    if !layout.closeups.is_empty() {
+        let _ = writeln!(
+            s,
+            "<h2>{}</h2>\n<div class=\"closeups\">",
+            escape(layout.closeup_title)
+        );
+        for f in layout.closeups {
             fig(&mut s, f);
         }
         s += "</div>\n";
     }
-    s += viewer;
+    s += layout.viewer;
     for t in &input.tables {
         let _ = writeln!(s, "<h2>{}</h2>\n<table>", escape(&t.title));
         s += "<tr>";

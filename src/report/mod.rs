@@ -7,6 +7,7 @@ mod font;
 mod histogram;
 mod html;
 mod marks;
+pub mod plan_page;
 pub mod provenance;
 mod raster;
 mod viewer;
@@ -172,7 +173,7 @@ pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Resu
     );
     let overview = overview?;
     hist_done?;
-    let mut figures = vec![
+    let whole = vec![
         Figure {
             path: views,
             caption: overview_caption(&overview),
@@ -184,13 +185,20 @@ pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Resu
             regions: Vec::new(),
         },
     ];
-    figures.extend(closeups?.into_iter().flatten());
+    let closeups: Vec<Figure> = closeups?.into_iter().flatten().collect();
     let viewer = viewer::write(dir, input, range)?;
     let html = dir.join("report.html");
-    html::write(&html, input, &figures, &viewer)?;
+    let layout = html::Layout {
+        whole: &whole,
+        closeup_title: "defect regions, close up",
+        closeups: &closeups,
+        viewer: &viewer,
+        links: &[],
+    };
+    html::write(&html, input, &layout)?;
     Ok(ReportFiles {
         html,
-        figures: figures.into_iter().map(|f| f.path).collect(),
+        figures: whole.into_iter().chain(closeups).map(|f| f.path).collect(),
     })
 }
 
