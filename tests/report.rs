@@ -176,21 +176,34 @@ fn attr<'a>(dom: &'a str, after: &str, name: &str) -> &'a str {
     &dom[at..at + dom[at..].find('"').unwrap()]
 }
 
-/// Chromium with the suite's flags and a fresh profile, on `args`.
-fn chromium_run(browser: &str, args: &[String]) -> std::process::Output {
+/// Chromium with the suite's flags, a fresh profile and `flags` on the page `page`; with
+/// `settle` the page gets 10 s of virtual time to load (off where its load time is measured).
+fn chromium_run(
+    browser: &str,
+    flags: &[String],
+    page: &std::path::Path,
+    settle: bool,
+) -> std::process::Output {
     let profile = tempdir();
-    let out = Command::new(browser)
-        .args(FLAGS.iter().filter(|f| !f.starts_with("--virtual-time")))
-        .arg(format!("--user-data-dir={}", profile.path().display()))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
+    let mut cmd = Command::new(browser);
+    cmd.args(
+        FLAGS
+            .iter()
+            .filter(|f| settle || !f.starts_with("--virtual-time")),
+    )
+    .arg(format!("--user-data-dir={}", profile.path().display()))
+    .args(flags)
+    .arg(format!("file://{}", page.display()));
+    common::succeed(&mut cmd)
+}
+
+/// The DOM of `page` after load, with the browser's net log written to `netlog`.
+fn dump_dom(browser: &str, page: &std::path::Path, netlog: &std::path::Path) -> String {
+    let flags = [
+        format!("--log-net-log={}", netlog.display()),
+        "--dump-dom".into(),
+    ];
+    String::from_utf8_lossy(&chromium_run(browser, &flags, page, true).stdout).to_string()
 }
 
 /// Nothing the page asked for left the file system: every `src` and `href` of the DOM is a
@@ -256,16 +269,11 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
     let Some(browser) = chromium() else { return };
     let dir = tempdir();
     let out = dir.path().join("demo");
-    let run = common::polishbot()
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["demo", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    common::succeed(
+        common::polishbot()
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["demo", "--out"])
+            .arg(&out),
     );
     let insp = out.join("inspection");
     let regions: serde_json::Value =
@@ -285,16 +293,7 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
     let page = std::fs::read_to_string(insp.join("report.html")).unwrap();
     std::fs::write(insp.join("probe.html"), probe(&page)).unwrap();
     let netlog = dir.path().join("netlog.json");
-    let dom = chromium_run(
-        &browser,
-        &[
-            format!("--log-net-log={}", netlog.display()),
-            "--virtual-time-budget=10000".into(),
-            "--dump-dom".into(),
-            format!("file://{}", insp.join("probe.html").display()),
-        ],
-    );
-    let dom = String::from_utf8_lossy(&dom.stdout).to_string();
+    let dom = dump_dom(&browser, &insp.join("probe.html"), &netlog);
     assert_eq!(
         attr(&dom, "id=\"viewer-check\"", "data-ok"),
         "true",
@@ -338,15 +337,11 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
     );
     std::fs::write(insp.join("viewer.html"), only_viewer).unwrap();
     let shot = dir.path().join("viewer.png");
-    chromium_run(
-        &browser,
-        &[
-            "--virtual-time-budget=10000".into(),
-            "--window-size=1000,800".into(),
-            format!("--screenshot={}", shot.display()),
-            format!("file://{}", insp.join("viewer.html").display()),
-        ],
-    );
+    let flags = [
+        "--window-size=1000,800".into(),
+        format!("--screenshot={}", shot.display()),
+    ];
+    chromium_run(&browser, &flags, &insp.join("viewer.html"), true);
     let (drawn, strong) = screenshot_shares(&shot);
     assert!(
         drawn > 0.15,
@@ -356,15 +351,11 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
     assert!(strong >= 100, "only {strong} px show a defect's colour");
     // Print to PDF: A4 pages, every figure inside.
     let pdf = dir.path().join("report.pdf");
-    chromium_run(
-        &browser,
-        &[
-            "--virtual-time-budget=10000".into(),
-            "--no-pdf-header-footer".into(),
-            format!("--print-to-pdf={}", pdf.display()),
-            format!("file://{}", insp.join("report.html").display()),
-        ],
-    );
+    let flags = [
+        "--no-pdf-header-footer".into(),
+        format!("--print-to-pdf={}", pdf.display()),
+    ];
+    chromium_run(&browser, &flags, &insp.join("report.html"), true);
     let bytes = std::fs::read(&pdf).unwrap();
     assert!(bytes.starts_with(b"%PDF"));
     let pages = count(&bytes, b"/Type /Page") - count(&bytes, b"/Type /Pages");
@@ -456,10 +447,9 @@ fn a_million_point_report_stays_under_30_mb_and_opens_in_under_3_s() {
     let start = std::time::Instant::now();
     let out = chromium_run(
         &browser,
-        &[
-            "--dump-dom".into(),
-            format!("file://{}", dir.path().join("probe.html").display()),
-        ],
+        &["--dump-dom".into()],
+        &dir.path().join("probe.html"),
+        false,
     );
     let wall = start.elapsed().as_secs_f64();
     let dom = String::from_utf8_lossy(&out.stdout).to_string();
@@ -490,16 +480,7 @@ fn plan_page_loads(browser: &str, out: &std::path::Path, ids: &[u64]) {
     );
     std::fs::write(out.join("plan-probe.html"), probe(&page)).unwrap();
     let netlog = out.join("plan-netlog.json");
-    let dom = chromium_run(
-        browser,
-        &[
-            format!("--log-net-log={}", netlog.display()),
-            "--virtual-time-budget=10000".into(),
-            "--dump-dom".into(),
-            format!("file://{}", out.join("plan-probe.html").display()),
-        ],
-    );
-    let dom = String::from_utf8_lossy(&dom.stdout).to_string();
+    let dom = dump_dom(browser, &out.join("plan-probe.html"), &netlog);
     assert_eq!(attr(&dom, "<body", "data-errors"), "0", "{dom}");
     let figures = dom.matches("<figure").count();
     assert_eq!(
