@@ -129,6 +129,7 @@ pub fn region_mark(r: &Region) -> RegionMark {
         id: r.id,
         centroid: r.centroid,
         normal: nalgebra::Vector3::from(r.normal),
+        peak: r.peak,
         caption: format!(
             "{kind}, peak {} mm, area {:.3} mm², {} points{}",
             peak_text(r).trim_end(),

@@ -170,7 +170,9 @@ pub fn write_page(
         ),
     ];
     let report = inspection.dir.join("report.html");
-    let dir = html.parent().unwrap_or(Path::new("."));
+    let dir = (html.parent())
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let back = report
         .is_file()
         .then(|| plan_page::relative(dir, &report))
@@ -214,9 +216,19 @@ pub fn write_page(
             .collect(),
     };
     plan_page::write_plan_page(&html, &page, &ReportConfig::default())?;
+    // The link from the inspection's report is a convenience: a report it cannot edit (an
+    // older one, a read-only folder) is said on stderr and left as it is.
     if report.is_file() {
-        if let Some(href) = plan_page::relative(&inspection.dir, &html) {
-            plan_page::add_link(&report, "grinding plan", &href)?;
+        let linked = plan_page::relative(&inspection.dir, &html)
+            .map(|href| plan_page::add_link(&report, "grinding plan", &href));
+        match linked {
+            Some(Ok(true)) => {}
+            Some(Err(e)) => eprintln!("plan: notice: {e:#}; not linked to {}", html.display()),
+            _ => eprintln!(
+                "plan: notice: {} has no links paragraph (an older report); not linked to {}",
+                report.display(),
+                html.display()
+            ),
         }
     }
     Ok(html)

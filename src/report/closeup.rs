@@ -150,7 +150,7 @@ pub fn draw_with(
             .map_err(err)?;
         root.draw(&Cross::new(at, 5, BLACK.stroke_width(2)))
             .map_err(err)?;
-        let label = format!("peak {:+.4} mm", input.distances[p]);
+        let label = peak_label(region.peak, input.distances[p]);
         let style = TextStyle::from((font::FAMILY, 17).into_font()).color(&BLACK);
         let width = 10 * label.len() as i32;
         let (tx, ty) = ((at.0 + 14).min(CLOSE_PX as i32 - width).max(2), at.1 - 30);
@@ -185,4 +185,22 @@ fn outline<DB: DrawingBackend>(
         }
     }
     Ok(())
+}
+
+/// Agreement below which the region's peak and its summit point's distance read as one number
+/// at the label's 4 decimals, mm.
+const SAME_PEAK_MM: f64 = 5e-5;
+
+/// The label at the summit point (the member of largest |distance|): the region's peak
+/// (regions.json: a fitted peak where a model vouches for one), with the point's own distance
+/// beside it when the two differ at 4 decimals; the point's distance alone when the peak is
+/// not known (NaN).
+fn peak_label(peak: f64, point: f64) -> String {
+    if !peak.is_finite() {
+        format!("max {point:+.4} mm")
+    } else if (peak - point).abs() < SAME_PEAK_MM {
+        format!("peak {peak:+.4} mm")
+    } else {
+        format!("peak {peak:+.4} mm (point {point:+.4})")
+    }
 }

@@ -82,6 +82,9 @@ pub struct RegionMark {
     pub centroid: [f64; 3],
     /// Mean outward normal (the close-up looks against it).
     pub normal: Vector3<f64>,
+    /// The region's peak distance, mm (regions.json `peak`; NaN: not known, the close-up then
+    /// labels its largest member distance).
+    pub peak: f64,
     /// One line under its close-up (kind, peak, area...).
     pub caption: String,
 }

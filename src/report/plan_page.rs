@@ -108,20 +108,22 @@ pub fn relative(from: &Path, to: &Path) -> Option<String> {
     Some(parts.join("/"))
 }
 
-/// Adds a link `text` -> `href` to the links paragraph of the page `report` (once).
-pub fn add_link(report: &Path, text: &str, href: &str) -> Result<()> {
+/// Adds a link `text` -> `href` to the links paragraph of the page `report` (once); false
+/// when the page has no such paragraph (a report from before 2026-12-02), left as it is.
+pub fn add_link(report: &Path, text: &str, href: &str) -> Result<bool> {
     let page = std::fs::read_to_string(report)
         .with_context(|| format!("{}: cannot read", report.display()))?;
     let anchor = format!("<a href=\"{}\">", html::escape(href));
     if page.contains(&anchor) {
-        return Ok(());
+        return Ok(true);
     }
     let marker = format!("<p id=\"{LINKS_ID}\">");
     let Some(at) = page.find(&marker) else {
-        anyhow::bail!("{}: no links paragraph (an older report)", report.display());
+        return Ok(false);
     };
     let at = at + marker.len();
     let link = format!("{anchor}{}</a> ", html::escape(text));
     let out = format!("{}{link}{}", &page[..at], &page[at..]);
-    std::fs::write(report, out).with_context(|| format!("{}: cannot write", report.display()))
+    std::fs::write(report, out).with_context(|| format!("{}: cannot write", report.display()))?;
+    Ok(true)
 }
