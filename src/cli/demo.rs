@@ -114,13 +114,20 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         None,
     )?;
     step("run: stream the plan to the simulated arm");
+    // The demo overwrites its files: run refuses a journal of an earlier demo's plan (no two
+    // plans are alike: plan.json records when it was made).
+    let journal = out.join("journal.jsonl");
+    if journal.exists() {
+        std::fs::remove_file(&journal)
+            .with_context(|| format!("{}: cannot remove", journal.display()))?;
+    }
     run_cmd::run(
         run_cmd::RunArgs {
             plan: plan_file.clone(),
             device: super::arm::DeviceArgs::sim(),
             dry_run: false,
             resume: None,
-            journal: Some(out.join("journal.jsonl")),
+            journal: Some(journal),
             part: None,
             ground_out: None,
         },

@@ -14,6 +14,7 @@ use crate::compare::{self, Method};
 use crate::inspect::{self, InspectConfig, PoseSource, MAX_REFERENCE_POINTS};
 use crate::regions::{self, Regions};
 use crate::register::RegisterError;
+use crate::report::provenance::Provenance;
 
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -127,13 +128,27 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let reg_file = out.join("registration.json");
     let files = (inputs.scan.as_path(), inputs.reference.as_path());
-    let mut found = match inspect::run(cfg, inputs) {
+    let (found, provenance) = rayon::join(
+        || inspect::run(cfg, inputs),
+        || super::inspect_report::provenance(cfg, inputs),
+    );
+    let mut found = match found {
         Ok(found) => found,
         Err(e) => match e.downcast::<RegisterError>() {
-            Ok(failed) => return Err(super::register::record_failure(failed, &reg_file, files)),
+            Ok(failed) => {
+                let e = super::register::record_failure(failed, &reg_file, files);
+                if let Ok(p) = &provenance {
+                    // The failure is the error to report; a record without provenance is
+                    // still a record.
+                    let _ = p.stamp_json(&reg_file);
+                }
+                return Err(e);
+            }
             Err(e) => return Err(e),
         },
     };
+    // After the inspection's own errors: it names a missing or unreadable input first.
+    let provenance = provenance?;
     for notice in &found.notices {
         eprintln!("{notice}");
     }
@@ -152,8 +167,9 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
             }),
         )?,
     }
-    let provenance = std::mem::take(&mut found.provenance);
-    write_outputs(out, &found.deviations, &found.regions, provenance)?;
+    provenance.stamp_json(&reg_file)?;
+    let lines = std::mem::take(&mut found.provenance);
+    write_outputs(out, &found.deviations, &found.regions, lines, &provenance)?;
     found.times.lap("files and report");
     print_summary(
         &found.deviations,
@@ -178,6 +194,7 @@ fn write_outputs(
     dev: &compare::Deviations,
     found: &Regions,
     report_summary: Vec<(String, String)>,
+    provenance: &Provenance,
 ) -> Result<()> {
     let table = compare::to_cloud(dev, &found.labels);
     // deviations.csv keeps its columns (a contract); the PLY also maps what was measured.
@@ -186,7 +203,8 @@ fn write_outputs(
     let write_regions = || -> Result<()> {
         let text = serde_json::to_string_pretty(found)?;
         let path = out.join("regions.json");
-        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))
+        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+        provenance.stamp_json(&path)
     };
     let ((csv, ply), (regions, report)) = rayon::join(
         || {
@@ -200,7 +218,7 @@ fn write_outputs(
         },
         || {
             rayon::join(write_regions, || {
-                super::inspect_report::write(out, dev, found, report_summary)
+                super::inspect_report::write(out, dev, found, report_summary, provenance)
             })
         },
     );

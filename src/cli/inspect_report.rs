@@ -4,8 +4,10 @@ use std::path::Path;
 use anyhow::Result;
 
 use crate::compare::Deviations;
+use crate::inspect::{Inputs, InspectConfig};
 use crate::regions::{Region, Regions, Verdict};
-use crate::report::{self, ReportConfig, ReportInput, Table};
+use crate::report::provenance::Provenance;
+use crate::report::{self, RegionMark, ReportConfig, ReportInput, Table};
 
 /// The verdict as users read it.
 pub fn verdict_text(v: Verdict) -> &'static str {
@@ -35,6 +37,36 @@ pub fn verdict_line(found: &Regions) -> String {
         found.regions.len(),
         100.0 * found.coverage,
     )
+}
+
+/// The provenance of an inspection: its input files, units and effective settings.
+pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
+    let mut files = vec![
+        ("reference", inputs.reference.as_path()),
+        ("scan", inputs.scan.as_path()),
+    ];
+    let optional = [
+        ("pose", &inputs.pose),
+        ("core points", &inputs.core),
+        ("area to inspect", &inputs.inspect_area),
+    ];
+    files.extend(
+        optional
+            .iter()
+            .filter_map(|(r, p)| p.as_deref().map(|p| (*r, p))),
+    );
+    let units = match inputs.files.units {
+        Some(u) => format!("results in mm, reference frame; inputs read as {u:?}"),
+        None => "results in mm, reference frame; inputs in mm (no --units)".to_string(),
+    };
+    let config = serde_json::json!({
+        "inspect": cfg,
+        "input_units": inputs.files.units,
+        "input_format": inputs.files.format.map(|f| format!("{f:?}")),
+        "registration_error": inputs.registration_error,
+        "report": ReportConfig::default(),
+    });
+    Provenance::new("inspect", &units, &files, &config)
 }
 
 /// Exit code of `inspect` when the verdict is incomplete (1 is an error, 2 a usage error).
@@ -90,14 +122,34 @@ pub fn peak_text(r: &Region) -> String {
     )
 }
 
+/// A region as the report's figures show it: its kind, peak, area and marks in the caption.
+pub fn region_mark(r: &Region) -> RegionMark {
+    let kind = if r.repairable { "excess" } else { "pit" };
+    RegionMark {
+        id: r.id,
+        centroid: r.centroid,
+        normal: nalgebra::Vector3::from(r.normal),
+        peak: r.peak,
+        caption: format!(
+            "{kind}, peak {} mm, area {:.3} mm², {} points{}",
+            peak_text(r).trim_end(),
+            r.area,
+            r.points,
+            if r.touches_unmeasured { " †" } else { "" }
+        ),
+    }
+}
+
 /// Writes `dir/report.html` with its figures; `summary` lines come first (registration...).
 pub fn write(
     dir: &Path,
     dev: &Deviations,
     found: &Regions,
     mut summary: Vec<(String, String)>,
+    provenance: &Provenance,
 ) -> Result<()> {
     let distances: Vec<f64> = dev.values.iter().map(|v| v.distance).collect();
+    let uncertainties: Vec<f64> = dev.values.iter().map(|v| v.uncertainty).collect();
     summary.splice(
         0..0,
         [
@@ -158,6 +210,7 @@ pub fn write(
         points: &dev.points,
         normals: &dev.normals,
         distances: &distances,
+        uncertainties: &uncertainties,
         tolerance: found.tolerance,
         summary,
         tables: vec![Table {
@@ -165,6 +218,9 @@ pub fn write(
             header: header.iter().map(|s| s.to_string()).collect(),
             rows,
         }],
+        labels: &found.labels,
+        regions: found.regions.iter().map(region_mark).collect(),
+        provenance: Some(provenance),
     };
     report::write_report(dir, &input, &ReportConfig::default())?;
     Ok(())

@@ -15,6 +15,7 @@ mod inspect;
 mod inspect_report;
 mod merge;
 mod plan;
+mod plan_report;
 mod register;
 mod run;
 pub mod settings;

@@ -56,6 +56,9 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let inspection = Inspection::load(&args.inspection)?;
     let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
     plan.save(&args.out)?;
+    let provenance = super::plan_report::provenance(&args.inspection, &cfg.robot, &cfg.plan)?;
+    provenance.stamp_json(&args.out)?;
+    let page = super::plan_report::write_page(&args.out, &inspection, &plan, &provenance)?;
     if let Some(yaml) = &args.export_ros {
         std::fs::write(yaml, ros::joint_trajectory_yaml(&plan, "base_link"))
             .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
@@ -67,6 +70,7 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
         .iter()
         .filter(|r| r.layers > 0)
         .collect();
+    println!("plan: report {}", page.display());
     println!(
         "plan: {} -> {}: {} region(s) planned, {} passes, {} path points, {} samples, predicted duration {:.2} s",
         args.inspection.display(),

@@ -1,10 +1,10 @@
 //! The report page: plain HTML with inline CSS, figures referenced by relative file names.
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use super::ReportInput;
+use super::{Figure, ReportInput};
 
 /// A table for the report.
 #[derive(Debug, Clone, Default)]
@@ -17,15 +17,35 @@ pub struct Table {
     pub rows: Vec<Vec<String>>,
 }
 
-fn escape(s: &str) -> String {
+/// `s` with HTML's special characters escaped.
+pub fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
 }
 
-/// Writes the page.
-pub fn write(path: &Path, input: &ReportInput, figures: &[PathBuf]) -> Result<()> {
+/// The id of the paragraph that holds links to other pages (`plan` adds its own there).
+pub const LINKS_ID: &str = "links";
+
+/// How a page is laid out besides its [`ReportInput`].
+#[derive(Debug, Clone, Copy)]
+pub struct Layout<'p> {
+    /// Figures at full width, after the summary.
+    pub whole: &'p [Figure],
+    /// Heading of the close-ups.
+    pub closeup_title: &'p str,
+    /// Figures side by side under that heading.
+    pub closeups: &'p [Figure],
+    /// HTML of the 3D viewer's section (empty: none).
+    pub viewer: &'p str,
+    /// Links to other pages: (text, relative href).
+    pub links: &'p [(String, String)],
+}
+
+/// Writes the page: title, links, summary, whole figures, close-ups, viewer, tables,
+/// provenance.
+pub fn write(path: &Path, input: &ReportInput, layout: &Layout) -> Result<()> {
     let mut s = String::new();
     let _ = write!(
         s,
@@ -33,18 +53,56 @@ pub fn write(path: &Path, input: &ReportInput, figures: &[PathBuf]) -> Result<()
 body{{font-family:sans-serif;margin:24px;color:#222}} table{{border-collapse:collapse;margin:8px 0 24px}}\
 td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}} th{{background:#eee}}\
 td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px solid #ddd;margin:8px 0}}\
-</style></head><body>\n<h1>{t}</h1>\n",
+figure{{margin:8px 0 16px}} figcaption{{font-size:90%;color:#444}}\
+.provenance td{{text-align:left;word-break:break-all;font-family:monospace;font-size:85%}}\
+.closeups{{display:flex;flex-wrap:wrap;gap:12px}} .closeups figure{{flex:0 0 auto;max-width:600px}}\
+.viewer canvas{{border:1px solid #bbb;max-width:100%;cursor:grab}} .viewer input{{width:6em}}\
+#viewer-check{{font-size:85%;color:#555}}\
+@page{{size:A4;margin:12mm}}\
+@media print{{body{{margin:0;font-size:10pt}} .viewer{{display:none}} figure,tr{{break-inside:avoid}}\
+img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeups img{{width:100%}}}}\
+</style></head><body>\n<h1>{t}</h1>\n<p id=\"{LINKS_ID}\">",
         t = escape(&input.title)
     );
+    for (text, href) in layout.links {
+        let _ = write!(s, "<a href=\"{}\">{}</a> ", escape(href), escape(text));
+    }
+    s += "</p>\n";
     s += "<table>\n";
     for (k, v) in &input.summary {
         let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", escape(k), escape(v));
     }
     s += "</table>\n";
-    for f in figures {
-        let name = f.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-        let _ = writeln!(s, "<div><img src=\"{0}\" alt=\"{0}\"></div>", escape(name));
+    let fig = |s: &mut String, f: &Figure| {
+        let name = f
+            .path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default();
+        let ids: Vec<String> = f.regions.iter().map(|i| i.to_string()).collect();
+        let _ = writeln!(
+            s,
+            "<figure data-regions=\"{}\"><img src=\"{n}\" alt=\"{n}\"><figcaption>{}</figcaption></figure>",
+            ids.join(" "),
+            escape(&f.caption),
+            n = escape(name),
+        );
+    };
+    for f in layout.whole {
+        fig(&mut s, f);
     }
+    if !layout.closeups.is_empty() {
+        let _ = writeln!(
+            s,
+            "<h2>{}</h2>\n<div class=\"closeups\">",
+            escape(layout.closeup_title)
+        );
+        for f in layout.closeups {
+            fig(&mut s, f);
+        }
+        s += "</div>\n";
+    }
+    s += layout.viewer;
     for t in &input.tables {
         let _ = writeln!(s, "<h2>{}</h2>\n<table>", escape(&t.title));
         s += "<tr>";
@@ -58,6 +116,13 @@ td:first-child,th:first-child{{text-align:left}} img{{max-width:100%;border:1px 
                 let _ = write!(s, "<td>{}</td>", escape(c));
             }
             s += "</tr>\n";
+        }
+        s += "</table>\n";
+    }
+    if let Some(p) = input.provenance {
+        s += "<h2>provenance</h2>\n<table class=\"provenance\">\n";
+        for (k, v) in p.lines() {
+            let _ = writeln!(s, "<tr><th>{}</th><td>{}</td></tr>", escape(&k), escape(&v));
         }
         s += "</table>\n";
     }

@@ -1,10 +1,16 @@
-//! The inspection report: `report.html` with PNG figures beside it (deviation colour map from
-//! three views with a colour bar and the tolerance marked, histogram of deviations, tables).
-//! Works offline: no scripts, no CDN, a shipped font.
+//! The inspection report: `report.html` with PNG figures beside it (an overview from the
+//! standard views that show every defect region, numbered; a close-up per region along its
+//! normal; the histogram of deviations; tables). Works offline: no CDN, a shipped font.
+mod closeup;
 mod colour;
 mod font;
 mod histogram;
 mod html;
+mod marks;
+pub mod plan_page;
+pub mod provenance;
+mod raster;
+mod viewer;
 mod views;
 
 use std::path::{Path, PathBuf};
@@ -50,12 +56,48 @@ pub struct ReportInput<'a> {
     pub normals: &'a [Vector3<f64>],
     /// Signed deviation per core point (mm).
     pub distances: &'a [f64],
+    /// Uncertainty (LoD95) per core point (mm), read out by the viewer; empty: unknown.
+    pub uncertainties: &'a [f64],
     /// Tolerance (mm), marked on the colour bar and histogram.
     pub tolerance: f64,
     /// Key-value lines shown first (verdict, registration summary, ...).
     pub summary: Vec<(String, String)>,
     /// Tables shown after the figures (regions, ...).
     pub tables: Vec<Table>,
+    /// Region id per core point (-1: none); empty when there are no regions.
+    pub labels: &'a [i64],
+    /// The defect regions (ids index `labels`): each gets a close-up and a number on the
+    /// overview.
+    pub regions: Vec<RegionMark>,
+    /// Where the result came from (files, settings, version), shown as its own section.
+    pub provenance: Option<&'a provenance::Provenance>,
+}
+
+/// A defect region as the figures show it.
+#[derive(Debug, Clone)]
+pub struct RegionMark {
+    /// Region id (the value of its points in [`ReportInput::labels`]).
+    pub id: usize,
+    /// Mean position of its points, mm (the viewer's label).
+    pub centroid: [f64; 3],
+    /// Mean outward normal (the close-up looks against it).
+    pub normal: Vector3<f64>,
+    /// The region's peak distance, mm (regions.json `peak`; NaN: not known, the close-up then
+    /// labels its largest member distance).
+    pub peak: f64,
+    /// One line under its close-up (kind, peak, area...).
+    pub caption: String,
+}
+
+/// A figure of the page: its file, caption and the region ids labelled on it.
+#[derive(Debug, Clone)]
+pub struct Figure {
+    /// The PNG.
+    pub path: PathBuf,
+    /// The caption under it.
+    pub caption: String,
+    /// Region ids numbered or shown on it.
+    pub regions: Vec<usize>,
 }
 
 /// Files the report wrote.
@@ -63,7 +105,7 @@ pub struct ReportInput<'a> {
 pub struct ReportFiles {
     /// The page.
     pub html: PathBuf,
-    /// The figures.
+    /// The figures: overview, histogram, then one close-up per region.
     pub figures: Vec<PathBuf>,
 }
 
@@ -86,18 +128,95 @@ pub fn colour_range(distances: &[f64], tolerance: f64, cfg: &ReportConfig) -> f6
 
 /// Writes report.html and its figures into `dir`.
 pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Result<ReportFiles> {
+    let n = input.points.len();
     anyhow::ensure!(
-        input.points.len() == input.normals.len() && input.points.len() == input.distances.len(),
+        n == input.normals.len() && n == input.distances.len(),
         "report: points, normals and distances differ in length"
+    );
+    anyhow::ensure!(
+        input.labels.is_empty() || input.labels.len() == n,
+        "report: {} region labels for {n} points",
+        input.labels.len()
+    );
+    anyhow::ensure!(
+        input.uncertainties.is_empty() || input.uncertainties.len() == n,
+        "report: {} uncertainties for {n} points",
+        input.uncertainties.len()
+    );
+    anyhow::ensure!(
+        input.regions.is_empty() || !input.labels.is_empty(),
+        "report: regions without labels"
     );
     std::fs::create_dir_all(dir)?;
     let range = colour_range(input.distances, input.tolerance, cfg);
     let views = dir.join("deviation_views.png");
-    views::draw(&views, input, range, cfg)?;
     let hist = dir.join("deviation_histogram.png");
-    histogram::draw(&hist, input.distances, input.tolerance, range, cfg)?;
-    let figures = vec![views, hist];
+    let ((overview, hist_done), closeups) = rayon::join(
+        || {
+            rayon::join(
+                || views::draw(&views, input, range, cfg),
+                || histogram::draw(&hist, input.distances, input.tolerance, range, cfg),
+            )
+        },
+        || {
+            use rayon::prelude::*;
+            input
+                .regions
+                .par_iter()
+                .map(|r| {
+                    let path = dir.join(format!("region_{}.png", r.id));
+                    Ok(closeup::draw(&path, input, r, range)?.then(|| Figure {
+                        path,
+                        caption: format!("region {}: {}", r.id, r.caption),
+                        regions: vec![r.id],
+                    }))
+                })
+                .collect::<Result<Vec<_>>>()
+        },
+    );
+    let overview = overview?;
+    hist_done?;
+    let whole = vec![
+        Figure {
+            path: views,
+            caption: overview_caption(&overview),
+            regions: overview.panels.iter().flat_map(|p| p.1.clone()).collect(),
+        },
+        Figure {
+            path: hist,
+            caption: "histogram of signed deviations, tolerance band marked".into(),
+            regions: Vec::new(),
+        },
+    ];
+    let closeups: Vec<Figure> = closeups?.into_iter().flatten().collect();
+    let viewer = viewer::write(dir, input, range)?;
     let html = dir.join("report.html");
-    html::write(&html, input, &figures)?;
-    Ok(ReportFiles { html, figures })
+    let layout = html::Layout {
+        whole: &whole,
+        closeup_title: "defect regions, close up",
+        closeups: &closeups,
+        viewer: &viewer,
+        links: &[],
+    };
+    html::write(&html, input, &layout)?;
+    Ok(ReportFiles {
+        html,
+        figures: whole.into_iter().chain(closeups).map(|f| f.path).collect(),
+    })
+}
+
+/// "views: anterior (+y) (regions 0, 2); ..." for the overview.
+fn overview_caption(o: &views::Overview) -> String {
+    let panels: Vec<String> = o
+        .panels
+        .iter()
+        .map(|(name, ids)| match ids.as_slice() {
+            [] => name.clone(),
+            ids => {
+                let ids: Vec<String> = ids.iter().map(|i| i.to_string()).collect();
+                format!("{name}: regions {}", ids.join(", "))
+            }
+        })
+        .collect();
+    format!("deviation colour map; {}", panels.join("; "))
 }
