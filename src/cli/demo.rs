@@ -111,6 +111,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
             out: plan_file.clone(),
             export_ros: Some(out.join("trajectory.yaml")),
             require_full_reach: false,
+            mode: None,
         },
         None,
     )?;

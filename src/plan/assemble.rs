@@ -93,6 +93,8 @@ pub(crate) fn assemble(
         for piece in run {
             let start = &piece.points[0];
             let glided = match &on {
+                // removal mode: the next piece of the same stroke starts where this one ended
+                Some((at, _)) if piece.dwell_s.is_some() && at.q == start.q => true,
                 Some((at, _)) => prog.glide(at, start, piece.region, &cell)?,
                 None => false,
             };
