@@ -208,12 +208,7 @@ pub fn set_dwell(
     inspection: &Inspection,
     setup: &Setup,
 ) -> Result<Dwelled, PlanError> {
-    let Setup {
-        tool,
-        robot,
-        workcell,
-        config,
-    } = *setup;
+    let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
     let mut runs = split(runs);
     let back = reference_from_robot(workcell);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
@@ -355,12 +350,7 @@ pub fn predict(
     allowances: &[(usize, f64)],
     setup: &Setup,
 ) -> Result<RemovalReport, PlanError> {
-    let Setup {
-        tool,
-        robot,
-        workcell,
-        config,
-    } = *setup;
+    let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
     let back = reference_from_robot(workcell);
     let ball_mm = robot.tool.radius * 1e3;
     let influence = Influence::new(tool, ball_mm);
