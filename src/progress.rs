@@ -28,3 +28,15 @@ pub fn spinner(label: &str) -> ProgressBar {
     pb.enable_steady_tick(std::time::Duration::from_millis(120));
     pb
 }
+
+/// Runs `work` under a bar of `len` named steps labelled `label`: each call of the callback
+/// `work` gets names the step that starts and advances the bar.
+pub fn stepped<T>(len: u64, label: &str, work: impl FnOnce(&dyn Fn(&str)) -> T) -> T {
+    let pb = bar(len, label);
+    let out = work(&|step| {
+        pb.set_message(step.to_string());
+        pb.inc(1);
+    });
+    pb.finish_and_clear();
+    out
+}

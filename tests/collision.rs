@@ -514,3 +514,45 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
     );
     assert_eq!(second, 0, "{second} grinding samples touch a second face");
 }
+
+/// `Scene::check` remembers the samples it found clear (so `plan`'s final check skips the
+/// free-motion samples it checked while building): asked again, in any order of the rules, a
+/// scene answers every sample exactly as a fresh scene does, refusals included.
+#[test]
+fn a_scene_answers_a_sample_it_has_seen_as_a_fresh_scene_does() {
+    use polishbot::plan::collide::{Allow, Scene};
+    let robot = dofbot();
+    let (insp, wc) = wedge();
+    let cfg = PlanConfig::default();
+    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let seen = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
+    let rules = [Allow::Free, Allow::Contact, Allow::Grind];
+    let (mut clear, mut hits) = (0, 0);
+    for s in p.samples.iter().step_by(7) {
+        // a new scene per sample, asked Contact first: none of its answers is a look-up
+        let fresh = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
+        let want: Vec<String> = [Allow::Contact, Allow::Grind, Allow::Free]
+            .map(|allow| format!("{:?}", fresh.check(&robot, &s.q, allow)))
+            .into();
+        for round in 0..2 {
+            for allow in rules {
+                let want = match allow {
+                    Allow::Contact => &want[0],
+                    Allow::Grind => &want[1],
+                    Allow::Free => &want[2],
+                };
+                let got = format!("{:?}", seen.check(&robot, &s.q, allow));
+                assert_eq!(&got, want, "sample at {} s, {allow:?}, round {round}", s.t);
+                if round == 0 {
+                    if want == "None" {
+                        clear += 1;
+                    } else {
+                        hits += 1;
+                    }
+                }
+            }
+        }
+    }
+    // both answers occur (grinding samples touch the part: clear for Grind, hits for Free)
+    assert!(clear > 0 && hits > 0, "clear {clear}, hits {hits}");
+}

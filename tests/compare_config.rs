@@ -47,7 +47,9 @@ fn a_typo_under_compare_adaptive_is_a_one_line_error_naming_the_key() {
         assert_eq!(lines.len(), 1, "{err}");
         let want = format!("{}: line {line}: ", config.display());
         assert!(lines[0].contains(&want), "{err}");
-        assert!(lines[0].contains(&format!("`{key}`")), "{err}");
+        // the key with its table path: `compare.adaptive.refine_abov`
+        assert!(lines[0].contains("`compare."), "{err}");
+        assert!(lines[0].contains(&format!(".{key}`")), "{err}");
     }
 }
 

@@ -9,7 +9,7 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use common::{polishbot, succeed};
+use common::{pair_args, polishbot, succeed};
 use polishbot::cloud::{self, PlyPrecision, PointCloud};
 use serde_json::Value;
 
@@ -270,15 +270,7 @@ fn config_errors_name_the_file_the_line_and_the_key() {
         ),
         (
             "reference_points = 7\n[compare]\nmethd = \"classic\"\n",
-            &[
-                "inspect",
-                "--reference",
-                "r.ply",
-                "--scan",
-                "s.ply",
-                "-o",
-                "x",
-            ],
+            &pair_args("inspect"),
             &["line 3", "unknown key `compare.methd`"],
         ),
     ];

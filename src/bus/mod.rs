@@ -16,6 +16,7 @@ pub mod config;
 pub mod driver;
 pub mod error;
 pub mod fake_i2c;
+pub mod grinding;
 pub mod i2c;
 pub mod journal;
 pub mod model;
@@ -31,6 +32,7 @@ pub use config::{BusConfig, GripperCalib, JointCalib, JointState, ServoMap, JOIN
 pub use driver::Bus;
 pub use error::BusError;
 pub use fake_i2c::{FakeI2c, I2cRecord};
+pub use grinding::GrindConfig;
 #[cfg(target_os = "linux")]
 pub use i2c::LinuxI2c;
 pub use i2c::{I2cBus, I2cTransport};

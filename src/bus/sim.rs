@@ -32,7 +32,7 @@ pub struct SimOptions {
     /// What the board answers a ping with: "none", "status" (default) or "id-status".
     pub ping_reply: PingReply,
     /// The virtual part's grinding (`run --part`): the true removal law and mounting.
-    pub grinding: crate::grind_sim::GrindConfig,
+    pub grinding: super::grinding::GrindConfig,
 }
 
 impl Default for SimOptions {
@@ -44,7 +44,7 @@ impl Default for SimOptions {
             faults: Faults::default(),
             mechanics: Mechanics::default(),
             ping_reply: PingReply::default(),
-            grinding: crate::grind_sim::GrindConfig::default(),
+            grinding: super::grinding::GrindConfig::default(),
         }
     }
 }

@@ -144,7 +144,7 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
     };
     let prefix = format!("calibrate {name}");
     let mut bus = args.link.connect(&prefix, bus_cfg, &cfg.sim).map_err(|e| {
-        let line = super::one_line(&e);
+        let line = super::common::one_line(&e);
         match line.starts_with(&prefix) {
             true => anyhow::anyhow!(line),
             false => anyhow::anyhow!("{prefix}: {line}"),

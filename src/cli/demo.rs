@@ -4,11 +4,12 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use nalgebra::{Point3, Vector3};
 
-use super::{inspect, plan, run as run_cmd, GeometryInput};
+use super::common::read_json;
+use super::{inspect, plan, run as run_cmd};
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::plan::Plan;
 use crate::regions::Regions;
@@ -84,23 +85,21 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     case.write(&out)?;
     let inspection = out.join("inspection");
     step("inspect: filter, register, compare, regions, report");
-    inspect::run(
-        inspect::InspectArgs {
+    inspect::inspect_into(
+        &crate::inspect::InspectConfig::default(),
+        &crate::inspect::Inputs {
             reference: out.join("reference.ply"),
             scan: out.join("scan.ply"),
-            out: inspection.clone(),
-            tolerance: None,
-            method: None,
-            registration_error: None,
-            pose: None,
-            core: None,
-            inspect_area: None,
-            input: GeometryInput {
+            files: crate::inspect::FileInput {
                 units: Some(crate::cloud::Units::Mm),
                 format: None,
             },
+            pose: None,
+            core: None,
+            inspect_area: None,
+            registration_error: None,
         },
-        None,
+        &inspection,
     )?;
     step("plan: grinding passes and the joint trajectory");
     let plan_file = out.join("plan.json");
@@ -135,13 +134,6 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         out.display()
     );
     Ok(())
-}
-
-pub(super) fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
-    serde_json::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
 }
 
 /// Scores the run against the truth and prints it.

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::Args;
 
-use super::GeometryInput;
+use super::common::GeometryInput;
 use crate::cloud::{self, PlyPrecision};
 use crate::preprocess::{preprocess, CurvatureSampleConfig, PreprocessConfig};
 

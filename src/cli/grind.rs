@@ -70,7 +70,8 @@ impl Ground {
         struct Registration {
             scan_to_reference: [[f64; 4]; 4],
         }
-        let reg: Registration = super::demo::read_json(&inspection.dir.join("registration.json"))?;
+        let reg: Registration =
+            super::common::read_json(&inspection.dir.join("registration.json"))?;
         let pose = cloud::transform::isometry_from_rows(&reg.scan_to_reference)
             .with_context(|| format!("{}: scan_to_reference", inspection.dir.display()))?;
         cloud.transform(&pose);

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use clap::Args;
 use serde_json::json;
 
-use super::GeometryInput;
+use super::common::GeometryInput;
 use crate::cloud::{self, Aabb, Geometry};
 
 /// Arguments of `info`.

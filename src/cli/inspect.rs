@@ -1,21 +1,19 @@
-//! `polishbot inspect`: load -> filter -> register -> compare -> regions; writes
-//! registration.json, deviations.csv, deviations.ply and regions.json (docs/FORMATS.md).
+//! `polishbot inspect`: parses the flags and the `--config` file, runs [`inspect::run`] and
+//! writes its files: registration.json, deviations.csv, deviations.ply, regions.json and the
+//! report (docs/FORMATS.md).
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use serde::{Deserialize, Serialize};
-
-use super::inspect_checks as checks;
 use serde_json::json;
 
-use super::GeometryInput;
-use crate::cloud::{self, transform, Geometry, PlyPrecision, PointCloud};
-use crate::compare::{self, CompareConfig, CoreConfig, Method};
-use crate::preprocess::{self, SorConfig};
-use crate::regions::{self, RegionConfig, Regions};
-use crate::register::RegisterConfig;
+use super::common::GeometryInput;
+use crate::cloud::{self, transform, PlyPrecision};
+use crate::compare::{self, Method};
+use crate::inspect::{self, InspectConfig, PoseSource, MAX_REFERENCE_POINTS};
+use crate::regions::{self, Regions};
+use crate::register::RegisterError;
 
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -61,61 +59,6 @@ pub struct InspectArgs {
     pub input: GeometryInput,
 }
 
-/// Settings of `inspect` (TOML `--config`), one section per stage.
-#[derive(Debug, Clone, Default, Serialize, Deserialize)]
-#[serde(default)]
-pub struct InspectConfig {
-    /// Points sampled on a mesh reference (default 400,000 when 0).
-    pub reference_points: usize,
-    /// Core points.
-    pub core: CoreConfig,
-    /// Comparison.
-    pub compare: CompareConfig,
-    /// Regions.
-    pub regions: RegionConfig,
-    /// Statistical outlier filter of the scan.
-    pub filter: SorConfig,
-    /// Registration (skipped when --pose is given).
-    pub register: RegisterConfig,
-}
-
-/// Most points sampled on a mesh reference (`reference_points`): 5 million points and normals
-/// are 240 MB, far denser than any scan the comparison meets.
-const MAX_REFERENCE_POINTS: usize = 5_000_000;
-
-/// The reference as a cloud with outward normals, and where the normals came from.
-fn load_reference(
-    path: &Path,
-    input: &GeometryInput,
-    samples: usize,
-) -> Result<(PointCloud, String)> {
-    match cloud::load(path, input.format, input.units)?.geometry {
-        Geometry::Mesh { mesh, .. } => Ok((
-            compare::mesh_reference(&mesh, samples, 1)?,
-            format!("{samples} points sampled from the mesh, with its facet normals"),
-        )),
-        Geometry::Cloud(mut c) if c.normals.is_some() => {
-            checks::check_unit_normals(path, "reference", &c)?;
-            match checks::orient_outward(path, &mut c)? {
-                Some(note) => {
-                    eprintln!("inspect: notice: {note}");
-                    Ok((c, format!("the reference cloud's own normals, {note}")))
-                }
-                None => Ok((c, "the reference cloud's own normals".into())),
-            }
-        }
-        Geometry::Cloud(c) => {
-            let (c, note) = compare::cloud_reference(c)
-                .with_context(|| format!("{}: reference normals", path.display()))?;
-            eprintln!(
-                "inspect: notice: {}: the reference cloud has no normals: estimated ({note})",
-                path.display()
-            );
-            Ok((c, note))
-        }
-    }
-}
-
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
@@ -152,167 +95,80 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
         "[regions] min_coverage must be a share between 0 and 1, not {}",
         cfg.regions.min_coverage
     );
-    // The comparison works to the regions' tolerance (peaks, densification, narrow defects).
-    cfg.compare.tolerance = cfg.regions.tolerance;
     Ok(cfg)
 }
 
-/// Runs the chain and prints the summary table.
-pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg = settings(&args, config)?;
-    let start = Instant::now();
-    let mut times = StageTimes::default();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
-    let spin = crate::progress::spinner("load");
-    let samples = if cfg.reference_points == 0 {
-        400_000
-    } else {
-        cfg.reference_points
-    };
-    // Both files at once: parsing is single-threaded.
-    let (reference, scan) = rayon::join(
-        || load_reference(&args.reference, &args.input, samples),
-        || cloud::load_cloud(&args.scan, args.input.format, args.input.units),
-    );
-    let ((reference, reference_note), scan) = (reference?, scan?);
-    spin.finish_and_clear();
-    times.lap("load");
-    // Statistical outlier filter of the scan, then registration (unless the pose is given).
-    let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
-        .with_context(|| format!("{}", args.scan.display()))?;
-    let mut scan = sor.apply(&scan);
-    checks::check_sizes((&args.reference, &reference), (&args.scan, &scan))?;
-    times.lap("filter");
-    let reg_file = args.out.join("registration.json");
-    let (pose, reg_error, reg_line) = match &args.pose {
-        Some(pose_file) => {
-            let pose = checks::read_pose(pose_file)?;
-            write_json(
-                &reg_file,
-                &json!({
-                    "status": "given",
-                    "scan_to_reference": transform::isometry_to_rows(&pose),
-                    "source": pose_file.display().to_string(),
-                    "fitness": null,
-                    "inlier_rmse": null,
-                    "coarse": null,
-                    "fine": null,
-                }),
-            )?;
-            (pose, None, format!("pose given in {}", pose_file.display()))
-        }
-        None => {
-            let reg = super::register::register_and_record(
-                &scan,
-                &reference,
-                &cfg.register,
-                &reg_file,
-                &args.scan,
-                &args.reference,
-            )?;
-            let line = format!(
-                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, registration error {:.5} mm, {:.2} s",
-                reg.fitness,
-                reg.inlier_rmse,
-                reg.fine.map_or(f64::NAN, |f| f.plane_rmse),
-                reg.registration_error,
-                reg.times.total
-            );
-            // The registration error of the level of detection is the pose's own
-            // uncertainty on the surface (`Registration::registration_error`), not a residual
-            // RMSE: those hold the scan noise, which the LoD already counts, and the
-            // reference's sampling spacing.
-            (reg.pose, Some(reg.registration_error), line)
-        }
-    };
-    scan.transform(&pose);
-    times.lap("register");
-    let mut report_summary = vec![
-        ("reference normals".to_string(), reference_note),
-        ("registration".to_string(), reg_line),
-        (
-            "outlier filter".to_string(),
-            format!(
-                "{} of {} scan points removed",
-                sor.removed,
-                sor.removed + sor.kept.len()
-            ),
-        ),
-    ];
-    cfg.compare.registration_error = args
-        .registration_error
-        .or(reg_error)
-        .unwrap_or(cfg.compare.registration_error);
+/// The library's inputs from the flags.
+fn inputs(args: &InspectArgs) -> inspect::Inputs {
+    inspect::Inputs {
+        reference: args.reference.clone(),
+        scan: args.scan.clone(),
+        files: inspect::FileInput {
+            format: args.input.format,
+            units: args.input.units,
+        },
+        pose: args.pose.clone(),
+        core: args.core.clone(),
+        inspect_area: args.inspect_area.clone(),
+        registration_error: args.registration_error,
+    }
+}
 
-    let (core, core_line) = select_core(&args, &cfg, &reference, scan.len())?;
-    report_summary.push(("core point sample".to_string(), core_line));
-    times.lap("core points");
-    let dev = compare::compare(&core, &reference, &scan, &cfg.compare)?;
-    times.lap("compare");
-    let in_area = match &args.inspect_area {
-        Some(path) => Some(super::inspect_area::core_points_in(
-            path,
-            &args.input,
-            &dev,
-        )?),
-        None => None,
+/// Runs the inspection, writes its files and prints the summary table.
+pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
+    let cfg = settings(&args, config)?;
+    inspect_into(&cfg, &inputs(&args), &args.out)
+}
+
+/// Runs [`inspect::run`] and writes its files into `out` (created), then prints the summary
+/// table; an incomplete verdict is the error [`super::inspect_report::Incomplete`].
+pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -> Result<()> {
+    let start = Instant::now();
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let reg_file = out.join("registration.json");
+    let files = (inputs.scan.as_path(), inputs.reference.as_path());
+    let mut found = match inspect::run(cfg, inputs) {
+        Ok(found) => found,
+        Err(e) => match e.downcast::<RegisterError>() {
+            Ok(failed) => return Err(super::register::record_failure(failed, &reg_file, files)),
+            Err(e) => return Err(e),
+        },
     };
-    let found = regions::find_regions_in(&dev, &cfg.regions, in_area.as_deref());
-    times.lap("regions");
-    write_outputs(&args.out, &dev, &found, report_summary)?;
-    times.lap("files and report");
-    print_summary(&dev, &found, start.elapsed().as_secs_f64());
-    println!("times: {}", times.line());
-    match found.verdict {
+    for notice in &found.notices {
+        eprintln!("{notice}");
+    }
+    match &found.pose {
+        PoseSource::Registered(reg) => super::register::record_ok(reg, &reg_file, files)?,
+        PoseSource::Given { pose, source } => write_json(
+            &reg_file,
+            &json!({
+                "status": "given",
+                "scan_to_reference": transform::isometry_to_rows(pose),
+                "source": source.display().to_string(),
+                "fitness": null,
+                "inlier_rmse": null,
+                "coarse": null,
+                "fine": null,
+            }),
+        )?,
+    }
+    let provenance = std::mem::take(&mut found.provenance);
+    write_outputs(out, &found.deviations, &found.regions, provenance)?;
+    found.times.lap("files and report");
+    print_summary(
+        &found.deviations,
+        &found.regions,
+        start.elapsed().as_secs_f64(),
+    );
+    println!("times: {}", found.times.line());
+    match found.regions.verdict {
         regions::Verdict::Incomplete => Err(super::inspect_report::Incomplete {
-            coverage: found.coverage,
-            min_coverage: found.min_coverage,
+            coverage: found.regions.coverage,
+            min_coverage: found.regions.min_coverage,
         }
         .into()),
         _ => Ok(()),
     }
-}
-
-/// The core points (from `--core`, or a sample of the reference) and the report's line on
-/// them.
-fn select_core(
-    args: &InspectArgs,
-    cfg: &InspectConfig,
-    reference: &PointCloud,
-    scan_points: usize,
-) -> Result<(PointCloud, String)> {
-    let core = match &args.core {
-        Some(path) => {
-            let c = cloud::load_cloud(path, args.input.format, args.input.units)?;
-            checks::check_unit_normals(path, "--core file", &c)?;
-            compare::core_points(
-                &c,
-                scan_points,
-                &CoreConfig {
-                    selection: compare::CoreSelection::All,
-                    ..cfg.core.clone()
-                },
-            )
-            .with_context(|| format!("{}", path.display()))?
-        }
-        None => compare::core_points(reference, scan_points, &cfg.core)?,
-    };
-    let every_point = args.core.is_none() && core.len() == reference.len();
-    if every_point && cfg.compare.method == Method::Adaptive {
-        eprintln!(
-            "inspect: warning: every one of the {} reference points is a core point: \
-             densification has none left to add around a defect's top, so defects narrower \
-             than about twice their spacing may be missed; give a denser reference",
-            reference.len()
-        );
-    }
-    let line = match (&args.core, every_point) {
-        (Some(path), _) => format!("{} from {}", core.len(), path.display()),
-        (None, true) => format!("all {} reference points", core.len()),
-        (None, false) => format!("{} of {} reference points", core.len(), reference.len()),
-    };
-    Ok((core, line))
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
@@ -352,41 +208,6 @@ fn write_outputs(
     ply?;
     regions?;
     report
-}
-
-/// Wall time per stage of `inspect`, for the closing `times:` line.
-struct StageTimes {
-    last: Instant,
-    laps: Vec<(&'static str, f64)>,
-}
-
-impl Default for StageTimes {
-    fn default() -> Self {
-        StageTimes {
-            last: Instant::now(),
-            laps: Vec::new(),
-        }
-    }
-}
-
-impl StageTimes {
-    /// Ends the stage `name` now.
-    fn lap(&mut self, name: &'static str) {
-        let now = Instant::now();
-        self.laps
-            .push((name, now.duration_since(self.last).as_secs_f64()));
-        self.last = now;
-    }
-
-    /// "load 0.12 s, filter 0.30 s, ...".
-    fn line(&self) -> String {
-        let parts: Vec<String> = self
-            .laps
-            .iter()
-            .map(|(name, s)| format!("{name} {s:.2} s"))
-            .collect();
-        parts.join(", ")
-    }
 }
 
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {

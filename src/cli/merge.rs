@@ -7,7 +7,7 @@ use clap::Args;
 use serde::Deserialize;
 use serde_json::json;
 
-use super::GeometryInput;
+use super::common::GeometryInput;
 use crate::acquire::{merge_views, MergeConfig};
 use crate::cloud::{self, PlyPrecision};
 
@@ -81,7 +81,7 @@ fn read_calibration(path: &Path) -> Result<Calibration> {
 
 /// Merges the views and writes the cloud and the report.
 pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg: MergeConfig = super::load_config(config)?;
+    let mut cfg: MergeConfig = super::common::load_config(config)?;
     if let Some(path) = &args.calibration {
         let c = read_calibration(path)?;
         cfg.axis = Some(c.axis);

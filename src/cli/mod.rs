@@ -2,19 +2,16 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Args, Parser, Subcommand};
-
-use crate::cloud::{Format, Units};
+use clap::{Parser, Subcommand};
 
 mod arm;
 mod calibrate;
+mod common;
 mod demo;
 mod filter;
 mod grind;
 mod info;
 mod inspect;
-mod inspect_area;
-mod inspect_checks;
 mod inspect_report;
 mod merge;
 mod plan;
@@ -22,6 +19,8 @@ mod register;
 mod run;
 pub mod settings;
 mod synth;
+
+pub use common::{load_config, one_line, GeometryInput};
 
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
 #[derive(Debug, Parser)]
@@ -33,17 +32,6 @@ pub struct Cli {
     /// The command to run.
     #[command(subcommand)]
     pub command: Command,
-}
-
-/// Options every command that reads geometry takes.
-#[derive(Debug, Clone, Args, Default)]
-pub struct GeometryInput {
-    /// Length unit of the input files (m or mm). Required when a file looks like metres.
-    #[arg(long, value_enum)]
-    pub units: Option<Units>,
-    /// File format, overriding the file's extension.
-    #[arg(long, value_enum)]
-    pub format: Option<Format>,
 }
 
 /// The subcommands of DESIGN.md's CLI contract.
@@ -107,32 +95,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-/// Joins an error chain into one line: "outer: inner: root".
-pub fn one_line(err: &anyhow::Error) -> String {
-    let parts: Vec<String> = err.chain().map(|e| e.to_string()).collect();
-    let mut line = String::new();
-    for part in parts {
-        if !line.contains(&part) {
-            if !line.is_empty() {
-                line.push_str(": ");
-            }
-            line.push_str(&part);
-        }
-    }
-    line.replace('\n', " ")
-}
-
 fn init_tracing() {
     let _ = tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_max_level(tracing::Level::WARN)
         .try_init();
-}
-
-/// Reads an optional TOML config file into `T` (missing file argument: `T::default()`);
-/// errors name the file and the line.
-pub fn load_config<T: serde::de::DeserializeOwned + Default>(
-    path: Option<&std::path::Path>,
-) -> anyhow::Result<T> {
-    settings::ConfigFile::read(path)?.parse()
 }

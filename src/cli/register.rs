@@ -5,11 +5,9 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::{json, Value};
 
-use super::GeometryInput;
+use super::common::GeometryInput;
 use crate::cloud::{self, Geometry, PointCloud};
-use crate::register::{
-    register_with_progress, RegisterConfig, RegisterError, Registration, PROGRESS_STEPS,
-};
+use crate::register::{RegisterConfig, RegisterError, Registration};
 
 /// Arguments of `register` (flags override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -57,7 +55,7 @@ fn write_json(path: &Path, value: &Value) -> Result<()> {
 
 /// Registers and writes registration.json (also on failure, with `"status": "failed"`).
 pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg: RegisterConfig = super::load_config(config)?;
+    let mut cfg: RegisterConfig = super::common::load_config(config)?;
     if args.voxel.is_some() {
         cfg.voxel = args.voxel;
     }
@@ -66,7 +64,10 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
     let out = args.out.join("registration.json");
-    let reg = register_and_record(&scan, &reference, &cfg, &out, &args.scan, &args.reference)?;
+    let files = (args.scan.as_path(), args.reference.as_path());
+    let reg = crate::inspect::register_scan(&scan, &reference, &cfg)
+        .map_err(|e| record_failure(e, &out, files))?;
+    record_ok(&reg, &out, files)?;
     println!(
         "register: fitness {:.4}, inlier RMSE {:.4} mm, {} ICP iterations, {:.2} s -> {}",
         reg.fitness,
@@ -78,51 +79,48 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-/// Registers `scan` onto `reference` with a progress bar and records the outcome in `out`
-/// (registration.json, `"status"` ok or failed with the diagnostics); a failure is also the
-/// returned one-line error.
-pub fn register_and_record(
-    scan: &PointCloud,
-    reference: &PointCloud,
-    cfg: &RegisterConfig,
-    out: &Path,
-    scan_path: &Path,
-    reference_path: &Path,
-) -> Result<Registration> {
-    let bar = crate::progress::bar(PROGRESS_STEPS, "register");
-    let result = register_with_progress(scan, reference, cfg, &|step| {
-        bar.set_message(step.to_string());
-        bar.inc(1);
-    });
-    bar.finish_and_clear();
-    let with_status = |reg, status: &str, reason: Option<&str>| -> Result<Value> {
-        let mut v = serde_json::to_value(reg)?;
-        v["status"] = json!(status);
-        v["reason"] = json!(reason);
-        v["scan"] = json!(scan_path.display().to_string());
-        v["reference"] = json!(reference_path.display().to_string());
-        Ok(v)
+/// registration.json of a registration with `"status"`, `"reason"` and the two files.
+fn with_status<T: serde::Serialize>(
+    reg: &T,
+    status: &str,
+    reason: Option<&str>,
+    files: (&Path, &Path),
+) -> Result<Value> {
+    let mut v = serde_json::to_value(reg)?;
+    v["status"] = json!(status);
+    v["reason"] = json!(reason);
+    v["scan"] = json!(files.0.display().to_string());
+    v["reference"] = json!(files.1.display().to_string());
+    Ok(v)
+}
+
+/// Records a registration that succeeded in `out` (registration.json, `"status": "ok"`);
+/// `files` are the scan's and the reference's.
+pub fn record_ok(reg: &Registration, out: &Path, files: (&Path, &Path)) -> Result<()> {
+    write_json(out, &with_status(reg, "ok", None, files)?)
+}
+
+/// Records a registration that failed in `out` (`"status": "failed"` with the diagnostics)
+/// and returns the one-line error that says so.
+pub fn record_failure(err: RegisterError, out: &Path, files: (&Path, &Path)) -> anyhow::Error {
+    let RegisterError::Failed {
+        reason,
+        diagnostics,
+    } = err
+    else {
+        return err.into();
     };
-    match result {
-        Ok(reg) => {
-            write_json(out, &with_status(&reg, "ok", None)?)?;
-            Ok(reg)
-        }
-        Err(RegisterError::Failed {
-            reason,
-            diagnostics,
-        }) => {
-            write_json(out, &with_status(&*diagnostics, "failed", Some(&reason))?)?;
-            anyhow::bail!(
-                "registration failed: {reason} (correspondences {}, inlier ratio {:.3}, cliques {}, hypotheses {}, fitness {:.3}; diagnostics in {})",
-                diagnostics.coarse.correspondences,
-                diagnostics.coarse.inlier_ratio,
-                diagnostics.coarse.mac.cliques_found,
-                diagnostics.coarse.mac.hypotheses,
-                diagnostics.fitness,
-                out.display()
-            )
-        }
-        Err(e) => Err(e.into()),
+    let value = with_status(&*diagnostics, "failed", Some(&reason), files);
+    if let Err(e) = value.and_then(|v| write_json(out, &v)) {
+        return e;
     }
+    anyhow::anyhow!(
+        "registration failed: {reason} (correspondences {}, inlier ratio {:.3}, cliques {}, hypotheses {}, fitness {:.3}; diagnostics in {})",
+        diagnostics.coarse.correspondences,
+        diagnostics.coarse.inlier_ratio,
+        diagnostics.coarse.mac.cliques_found,
+        diagnostics.coarse.mac.hypotheses,
+        diagnostics.fitness,
+        out.display()
+    )
 }

@@ -47,11 +47,12 @@ impl ConfigFile {
                 .span()
                 .map(|s| format!("line {}: ", line_at(&self.text, s.start)))
                 .unwrap_or_default();
-            anyhow!(
-                "{}: {place}{}",
-                self.name(),
-                e.message().trim().replace('\n', " ")
-            )
+            let message = e.message().trim().replace('\n', " ");
+            let message = match e.span() {
+                Some(s) => unknown_key_message(&self.text, s.start, &message),
+                None => message,
+            };
+            anyhow!("{}: {place}{message}", self.name())
         })
     }
 
@@ -109,6 +110,30 @@ fn line_at(text: &str, at: usize) -> usize {
         .filter(|&&b| b == b'\n')
         .count()
         + 1
+}
+
+/// serde's "unknown field `k`, expected one of ..." (a struct that denies unknown fields) as
+/// "unknown key `table.k`" with the table of the line at byte `at`, as
+/// [`ConfigFile::parse_strict`] names it; any other message as it is.
+fn unknown_key_message(text: &str, at: usize, message: &str) -> String {
+    let Some(rest) = message.strip_prefix("unknown field `") else {
+        return message.to_string();
+    };
+    let Some((key, expected)) = rest.split_once('`') else {
+        return message.to_string();
+    };
+    let line = line_at(text, at);
+    let table = text
+        .lines()
+        .take(line)
+        .filter_map(|l| l.split('#').next()?.trim().strip_prefix('['))
+        .last()
+        .map(|h| h.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    let path = match table {
+        Some(t) if !t.is_empty() => format!("{t}.{key}"),
+        _ => key.to_string(),
+    };
+    format!("unknown key `{path}`{expected}")
 }
 
 /// The first key of `given` (dotted path) that `known` lacks.
@@ -220,33 +245,21 @@ pub fn check_link(
     Ok(())
 }
 
-/// Most neighbours per point of the statistical outlier filter (the stage's own bound).
-const MAX_SOR_K: f64 = crate::preprocess::MAX_SOR_K as f64;
-/// Largest |λ| of the outlier filter, standard deviations.
-const MAX_STD_RATIO: f64 = 100.0;
-/// Smallest and largest voxel edge, mm (below a micrometre a voxel holds one point of any
-/// scan; above a metre it holds the whole part).
-const VOXEL_MM: (f64, f64) = (1e-3, 1e3);
-
 /// Checks the outlier filter's settings (`k`, `std_ratio` in `section`) and an optional voxel
-/// edge.
+/// edge (`voxel_mm`, top level) by the stage's own checks, naming the line that sets them.
+/// What needs the cloud (k against its size, the voxel against its extent) the stage checks
+/// when it runs.
 pub fn check_filter(
     file: &ConfigFile,
     section: &str,
     sor: &crate::preprocess::SorConfig,
     voxel_mm: Option<f64>,
 ) -> anyhow::Result<()> {
-    let k = in_range("k", sor.k as f64, 1.0, MAX_SOR_K, "neighbours");
-    let r = in_range(
-        "std_ratio",
-        sor.std_ratio,
-        -MAX_STD_RATIO,
-        MAX_STD_RATIO,
-        "σ",
-    );
-    k.and(r).map_err(|m| file.refuse(section, &m))?;
+    crate::preprocess::check_sor_settings(sor)
+        .map_err(|(key, why)| file.refuse(section, &format!("`{key}`: {why}")))?;
     if let Some(v) = voxel_mm {
-        in_range("voxel_mm", v, VOXEL_MM.0, VOXEL_MM.1, "mm").map_err(|m| file.refuse("", &m))?;
+        crate::preprocess::check_voxel_value(v, "voxel down-sampling")
+            .map_err(|e| file.refuse("", &format!("`voxel_mm`: {e}")))?;
     }
     Ok(())
 }
@@ -267,6 +280,22 @@ mod tests {
             Some(1)
         );
         assert_eq!(line_at("a\nb\nc", 2), 2);
+    }
+
+    #[test]
+    fn unknown_fields_are_named_with_their_table() {
+        let text = "k = 3\n[compare.adaptive]\nrefine = 2\n";
+        let at = text.find("refine").unwrap();
+        let m = "unknown field `refine`, expected one of `a`, `b`";
+        assert_eq!(
+            unknown_key_message(text, at, m),
+            "unknown key `compare.adaptive.refine`, expected one of `a`, `b`"
+        );
+        assert_eq!(
+            unknown_key_message(text, 0, "unknown field `k`, expected `x`"),
+            "unknown key `k`, expected `x`"
+        );
+        assert_eq!(unknown_key_message(text, 0, "invalid type"), "invalid type");
     }
 
     #[test]

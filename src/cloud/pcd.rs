@@ -12,11 +12,53 @@ struct Field {
     count: usize,
 }
 
+/// The header of a PCD file: its fields, point count, data mode and where the data starts.
+struct Header {
+    fields: Vec<Field>,
+    /// Points the header declares.
+    n: usize,
+    /// "ascii", "binary" or what else the DATA line says.
+    mode: String,
+    /// Byte offset of the data.
+    body: usize,
+    /// Line number of the data's first line.
+    body_line: usize,
+    /// The DATA line (for header errors found after it).
+    data_place: Place,
+}
+
 /// Parses a PCD file.
 pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
     if bytes.is_empty() {
         return fail(Place::Byte(0), "empty file");
     }
+    let h = header(bytes)?;
+    // Only single-valued fields become columns.
+    let scalar_names: Vec<String> = h
+        .fields
+        .iter()
+        .filter(|f| f.count == 1)
+        .map(|f| f.name.clone())
+        .collect();
+    let layout = Columns::from_names(&scalar_names, h.data_place)?;
+    let mut cloud = layout.empty_cloud(text::capacity(h.n, bytes.len() - h.body, 3));
+    let mut rows = |row: &[f64]| layout.push(&mut cloud, row);
+    match h.mode.as_str() {
+        "ascii" => read_ascii(bytes, &h, scalar_names.len(), &mut rows)?,
+        "binary" => read_binary(bytes, &h, scalar_names.len(), &mut rows)?,
+        other => {
+            return fail(
+                h.data_place,
+                format!("DATA {other:?} is not supported (ascii or binary only)"),
+            )
+        }
+    }
+    cloud.check_finite()?;
+    Ok(Geometry::Cloud(cloud))
+}
+
+/// Reads the header lines up to DATA and checks the fields.
+fn header(bytes: &[u8]) -> Result<Header, ParseError> {
     let (mut names, mut sizes, mut kinds, mut counts) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut points: Option<usize> = None;
@@ -120,93 +162,103 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
             .ok_or_else(|| ParseError::new(data_place, "WIDTH × HEIGHT is too large"))?,
         (None, None) => return fail(data_place, "no POINTS or WIDTH"),
     };
-    // Only single-valued fields become columns.
-    let scalar_names: Vec<String> = fields
+    Ok(Header {
+        fields,
+        n,
+        mode,
+        body,
+        body_line,
+        data_place,
+    })
+}
+
+/// The ascii data: `n` rows of the fields' values, each checked against its type.
+fn read_ascii(
+    bytes: &[u8],
+    h: &Header,
+    columns: usize,
+    push: &mut dyn FnMut(&[f64]),
+) -> Result<(), ParseError> {
+    let (fields, n, body, body_line) = (&h.fields, h.n, h.body, h.body_line);
+    let data_place = h.data_place;
+    let mut row = Vec::with_capacity(columns);
+    let mut lines =
+        text::lines(&bytes[body..]).filter(|l| !matches!(l, Ok((_, _, s)) if s.trim().is_empty()));
+    let width = fields
         .iter()
-        .filter(|f| f.count == 1)
-        .map(|f| f.name.clone())
-        .collect();
-    let layout = Columns::from_names(&scalar_names, data_place)?;
-    let mut cloud = layout.empty_cloud(text::capacity(n, bytes.len() - body, 3));
-    let mut row = Vec::with_capacity(scalar_names.len());
-    match mode.as_str() {
-        "ascii" => {
-            let mut lines = text::lines(&bytes[body..])
-                .filter(|l| !matches!(l, Ok((_, _, s)) if s.trim().is_empty()));
-            let width = fields
-                .iter()
-                .try_fold(0usize, |w, f| w.checked_add(f.count))
-                .ok_or_else(|| ParseError::new(data_place, "COUNT total is too large"))?;
-            for i in 0..n {
-                let (k, _, line) = match lines.next() {
-                    Some(item) => item?,
-                    None => return fail(Place::Point(i), format!("file ends at point {i} of {n}")),
-                };
-                let place = Place::Line(body_line + k - 1);
-                let toks = text::row(text::tokens(line), width, place)?;
-                row.clear();
-                let mut t = 0;
-                for f in &fields {
-                    if f.count == 1 {
-                        let v = text::number(toks[t], place)?;
-                        if !fits(f, v) {
-                            return fail(
-                                place,
-                                format!(
-                                    "{}: {} does not fit TYPE {} SIZE {}",
-                                    f.name,
-                                    text::shorten(toks[t]),
-                                    f.kind,
-                                    f.size
-                                ),
-                            );
-                        }
-                        row.push(v);
-                    }
-                    t += f.count;
+        .try_fold(0usize, |w, f| w.checked_add(f.count))
+        .ok_or_else(|| ParseError::new(data_place, "COUNT total is too large"))?;
+    for i in 0..n {
+        let (k, _, line) = match lines.next() {
+            Some(item) => item?,
+            None => return fail(Place::Point(i), format!("file ends at point {i} of {n}")),
+        };
+        let place = Place::Line(body_line + k - 1);
+        let toks = text::row(text::tokens(line), width, place)?;
+        row.clear();
+        let mut t = 0;
+        for f in fields {
+            if f.count == 1 {
+                let v = text::number(toks[t], place)?;
+                if !fits(f, v) {
+                    return fail(
+                        place,
+                        format!(
+                            "{}: {} does not fit TYPE {} SIZE {}",
+                            f.name,
+                            text::shorten(toks[t]),
+                            f.kind,
+                            f.size
+                        ),
+                    );
                 }
-                layout.push(&mut cloud, &row);
+                row.push(v);
             }
-            if let Some(item) = lines.next() {
-                let (k, _, _) = item?;
-                return fail(
-                    Place::Line(body_line + k - 1),
-                    format!("more rows than the header's {n} points"),
-                );
-            }
+            t += f.count;
         }
-        "binary" => {
-            let mut cur = Cursor::new(bytes, body);
-            for _ in 0..n {
-                row.clear();
-                for f in &fields {
-                    let len = f
-                        .size
-                        .checked_mul(f.count)
-                        .ok_or_else(|| ParseError::new(data_place, "field too large"))?;
-                    let raw = cur.take(len, &f.name)?;
-                    if f.count == 1 {
-                        row.push(decode(raw, f.kind));
-                    }
-                }
-                layout.push(&mut cloud, &row);
-            }
-            if !bytes[cur.pos..].iter().all(u8::is_ascii_whitespace) {
-                return fail(
-                    Place::Byte(cur.pos),
-                    format!("{} bytes after the header's {n} points", cur.remaining()),
-                );
-            }
-        }
-        other => {
-            return fail(
-                data_place,
-                format!("DATA {other:?} is not supported (ascii or binary only)"),
-            )
-        }
+        push(&row);
     }
-    cloud.check_finite()?;
-    Ok(Geometry::Cloud(cloud))
+    if let Some(item) = lines.next() {
+        let (k, _, _) = item?;
+        return fail(
+            Place::Line(body_line + k - 1),
+            format!("more rows than the header's {n} points"),
+        );
+    }
+    Ok(())
+}
+
+/// The binary data: `n` packed records of the fields.
+fn read_binary(
+    bytes: &[u8],
+    h: &Header,
+    columns: usize,
+    push: &mut dyn FnMut(&[f64]),
+) -> Result<(), ParseError> {
+    let (fields, n, body, data_place) = (&h.fields, h.n, h.body, h.data_place);
+    let mut row = Vec::with_capacity(columns);
+    let mut cur = Cursor::new(bytes, body);
+    for _ in 0..n {
+        row.clear();
+        for f in fields {
+            let len = f
+                .size
+                .checked_mul(f.count)
+                .ok_or_else(|| ParseError::new(data_place, "field too large"))?;
+            let raw = cur.take(len, &f.name)?;
+            if f.count == 1 {
+                row.push(decode(raw, f.kind));
+            }
+        }
+        push(&row);
+    }
+    if !bytes[cur.pos..].iter().all(u8::is_ascii_whitespace) {
+        return fail(
+            Place::Byte(cur.pos),
+            format!("{} bytes after the header's {n} points", cur.remaining()),
+        );
+    }
+    Ok(())
 }
 
 /// Whether an ascii value can be stored in the field's type: whole numbers within range for

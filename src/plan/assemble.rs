@@ -8,11 +8,12 @@
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 
 use super::collide::{Allow, Hit, Scene};
+use super::config::PlanConfig;
+use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::program::{max_step, PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
 use super::report::UnreachablePoint;
 use super::trajectory::{JointTrajectory, Limits, Move};
-use super::{PlanConfig, PlanError};
 use crate::robot::{IkTarget, Robot, Workcell};
 
 /// One rest-to-rest leg of a free motion.

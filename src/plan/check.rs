@@ -2,11 +2,11 @@
 //! resolution error, and each region's reach and coverage.
 use nalgebra::{Point3, Vector3};
 
+use super::config::PlanConfig;
 use super::inspection::{Inspection, RegionInfo};
 use super::program::{PlannedPass, Program, SegmentKind};
 use super::raster::PathPoint;
 use super::report::{Metrics, RegionReport};
-use super::PlanConfig;
 use crate::robot::{resolution_error, IkTarget, Robot, Workcell};
 use crate::spatial::Neighbours;
 

@@ -3,6 +3,9 @@
 //! robot frame), and the moving bodies at a joint sample: the tool's ball, its shank and the
 //! arm's links as capsules between the URDF joint origins. Method: docs/ALGORITHMS.md,
 //! "Collision model".
+use std::collections::HashSet;
+use std::sync::Mutex;
+
 use nalgebra::{Matrix4, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -148,7 +151,7 @@ pub struct Solid {
 }
 
 /// What a sample may touch.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Allow {
     /// Nothing: every body keeps the margin (transits, home).
     Free,
@@ -191,6 +194,10 @@ pub struct Scene<'a> {
     ball: f64,
     shank: (f64, f64),
     cfg: CollisionConfig,
+    /// Samples already found clear (joint values bit for bit, and the rule): `plan` checks
+    /// every free-motion sample while it builds the program and all samples again at the end;
+    /// the answer is a function of the two, so the second check of these is a look-up.
+    clear: Mutex<HashSet<(Vec<u64>, Allow)>>,
 }
 
 impl<'a> Scene<'a> {
@@ -228,6 +235,7 @@ impl<'a> Scene<'a> {
                 robot.tool.shank_length() * 1e3,
             ),
             cfg: cfg.clone(),
+            clear: Mutex::new(HashSet::new()),
         }
     }
 
@@ -274,8 +282,34 @@ impl<'a> Scene<'a> {
         out
     }
 
-    /// The first body at `q` nearer the part or a solid than `allow` permits.
+    /// The first body at `q` nearer the part or a solid than `allow` permits. A sample found
+    /// clear before under the same rule is clear again without a new search; so is one found
+    /// clear under `Free` when `Contact` is asked (`Free` asks every body for the margin and
+    /// searches at least the points `Contact` does, so its smallest clearance is no larger).
     pub fn check(&self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
+        let key: Vec<u64> = q.iter().map(|v| v.to_bits()).collect();
+        let mut known = self.clear.lock().unwrap_or_else(|e| e.into_inner());
+        let mut key = (key, allow);
+        if known.contains(&key) {
+            return None;
+        }
+        if allow == Allow::Contact {
+            key.1 = Allow::Free;
+            let found = known.contains(&key);
+            key.1 = Allow::Contact;
+            if found {
+                return None;
+            }
+        }
+        let hit = self.search(robot, q, allow);
+        if hit.is_none() {
+            known.insert(key);
+        }
+        hit
+    }
+
+    /// `check` without the look-up.
+    fn search(&self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
         let m = self.cfg.margin_mm;
         for c in self.bodies(robot, q) {
             let need = match (c.body, allow) {

@@ -4,11 +4,61 @@ use std::path::Path;
 
 use dofbot_protocol::servo::SERVO_COUNT;
 
+use super::error::PlanError;
 use super::frames;
+use super::program::{PlannedPass, Segment};
+use super::report::{Metrics, Reachability};
 use super::trajectory::JointTrajectory;
 use super::validate::{validate, ValidationConfig};
-use super::{Plan, PlanError};
 use crate::robot::Robot;
+use serde::{Deserialize, Serialize};
+
+/// One joint-trajectory sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// Time, s (index x period).
+    pub t: f64,
+    /// Joint angles, rad, URDF order.
+    pub q: Vec<f64>,
+}
+
+/// A grinding plan: the contents of plan.json (docs/FORMATS.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// "polishbot-plan".
+    pub format: String,
+    /// Format version (1).
+    pub version: u32,
+    /// The inspection folder planned from.
+    pub inspection: String,
+    /// Bus period, s: one sample and one frame per period.
+    pub period: f64,
+    /// URDF joint names, the order of every `q`.
+    pub joint_names: Vec<String>,
+    /// Tool (ball) radius, mm.
+    pub tool_radius_mm: f64,
+    /// The raster geometry used, mm.
+    pub stepover_mm: f64,
+    /// Footprint radius used for coverage, mm.
+    pub footprint_mm: f64,
+    /// Predicted duration of the motion, s.
+    pub predicted_duration_s: f64,
+    /// Reachable pieces of the passes with their tool poses and joint solutions.
+    pub passes: Vec<PlannedPass>,
+    /// What each stretch of samples does.
+    pub segments: Vec<Segment>,
+    /// The joint trajectory at the bus period.
+    pub samples: Vec<Sample>,
+    /// The servo command stream: one 0x1D frame per sample after the first (hex).
+    pub frames: Vec<String>,
+    /// Reach and coverage per region, every point left out and why.
+    pub reachability: Reachability,
+    /// Measured quality of the plan.
+    pub metrics: Metrics,
+    /// Removal mode: the dwell map and the predicted part per region (absent in rigid mode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub removal: Option<super::preston::RemovalReport>,
+}
 
 /// A plan that passed [`Plan::check`]: its frames as bytes and their raw poses.
 #[derive(Debug, Clone)]

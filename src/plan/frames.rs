@@ -4,7 +4,7 @@
 use dofbot_protocol::servo::{ServoId, SERVO_COUNT};
 use dofbot_protocol::{Command, Decoder, Hex, Pose};
 
-use super::PlanError;
+use super::error::PlanError;
 use crate::robot::servo_map::NO_GRIPPER;
 use crate::robot::{Robot, Servo, ServoMap, JOINT_COUNT};
 

@@ -6,13 +6,15 @@
 use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
+use super::config::PlanConfig;
+use super::error::PlanError;
 use super::feed::PathLimits;
+use super::inspection::RegionInfo;
 use super::inspection::{Inspection, SurfacePoint};
 use super::program::{PlannedPass, Program, Run};
 use super::removal::montecarlo::{spread, JointError};
 use super::removal::{self, force, Contact, Influence, Problem, Stats, ToolModel};
 use super::trajectory::{Limits, Move};
-use super::{PlanConfig, PlanError, RegionInfo};
 use crate::robot::{Robot, Workcell};
 
 /// Bisection steps of the piece speed that makes a rest-to-rest move last its dwell: 50

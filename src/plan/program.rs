@@ -4,12 +4,13 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use super::config::PlanConfig;
 pub use super::contact::SegmentKind;
+use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
 use super::report::UnreachablePoint;
 use super::trajectory::JointTrajectory;
-use super::{PlanConfig, PlanError};
 use crate::robot::{IkTarget, Robot, Workcell};
 
 /// A contact point with its tool pose and joint solution.

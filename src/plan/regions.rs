@@ -2,12 +2,12 @@
 //! their dwell.
 use nalgebra::Point3;
 
+use super::config::PlanConfig;
+use super::error::PlanError;
+use super::inspection::{Inspection, RegionInfo, SurfacePoint};
+use super::raster::RasterGeometry;
 use super::report::Reachability;
-use super::PlanConfig;
-use super::{
-    collide, order, preston, program, raster, removal, surface, Inspection, PlanError,
-    RasterGeometry, RegionInfo, SurfacePoint,
-};
+use super::{collide, order, preston, program, raster, removal, surface};
 
 /// The regions planned, their runs and per region (layers, contact points); in removal mode
 /// also the allowance each region's robust solve settled on.

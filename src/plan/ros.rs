@@ -2,7 +2,7 @@
 //! form `rostopic pub` / `ros2 topic pub` take), with the URDF joint names.
 use std::fmt::Write;
 
-use super::Plan;
+use super::file::Plan;
 
 /// The YAML text: header, joint_names, and per sample positions, velocities (central
 /// differences, zero at the ends) and time_from_start.

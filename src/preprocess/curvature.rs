@@ -28,7 +28,7 @@ pub struct CurvatureSampleConfig {
     /// Optional search radius (mm) bounding those neighbours. Default none.
     pub radius: Option<f64>,
     /// PCA neighbourhood of the normals (their sign is not used: angles are between axes).
-    /// Default k 20, no radius.
+    /// Default 20 neighbours, no radius.
     pub normal_k: usize,
     /// Seed of the uniform draws. Default 0.
     pub seed: u64,

@@ -64,26 +64,38 @@ pub fn check(cfg: &SorConfig, n: usize) -> Result<()> {
     if n == 0 {
         bail!("outlier filter: the cloud is empty");
     }
-    if cfg.k == 0 {
-        bail!("outlier filter: k must be at least 1 (got 0)");
-    }
-    if cfg.k >= n {
+    if cfg.k != 0 && cfg.k >= n {
         bail!(
             "outlier filter: k = {} needs more points than the cloud's {n}",
             cfg.k
         );
     }
+    check_settings(cfg).map_err(|(_, why)| anyhow::anyhow!(why))
+}
+
+/// Checks the settings alone (no cloud): `k` within 1..=[`MAX_K`], `std_ratio` finite and
+/// at least 0. A refusal names the setting's key (for a config file's line) and why.
+pub fn check_settings(cfg: &SorConfig) -> Result<(), (&'static str, String)> {
+    if cfg.k == 0 {
+        return Err(("k", "outlier filter: k must be at least 1 (got 0)".into()));
+    }
     if cfg.k > MAX_K {
-        bail!(
-            "outlier filter: k = {} is more than {MAX_K} neighbours (the work and memory grow as points × k)",
-            cfg.k
-        );
+        return Err((
+            "k",
+            format!(
+                "outlier filter: k = {} is more than {MAX_K} neighbours (the work and memory grow as points × k)",
+                cfg.k
+            ),
+        ));
     }
     if !cfg.std_ratio.is_finite() || cfg.std_ratio < 0.0 {
-        bail!(
-            "outlier filter: std ratio must be a finite number >= 0 (got {})",
-            cfg.std_ratio
-        );
+        return Err((
+            "std_ratio",
+            format!(
+                "outlier filter: std ratio must be a finite number >= 0 (got {})",
+                cfg.std_ratio
+            ),
+        ));
     }
     Ok(())
 }

@@ -17,9 +17,7 @@ pub const MAX_VOXELS_ACROSS: f64 = 1e9;
 /// handful of points would be left of the whole cloud). The message names `option` (how the
 /// user set it, e.g. `--voxel`).
 pub fn check_voxel(cloud: &PointCloud, voxel_mm: f64, option: &str) -> anyhow::Result<()> {
-    if !(voxel_mm > 0.0 && voxel_mm.is_finite()) {
-        anyhow::bail!("{option}: the voxel must be a positive number of mm (got {voxel_mm})");
-    }
+    check_voxel_value(voxel_mm, option)?;
     let across = Aabb::of(&cloud.points).map_or(0.0, |b| b.extent().max());
     if across / voxel_mm > MAX_VOXELS_ACROSS {
         anyhow::bail!(
@@ -31,6 +29,15 @@ pub fn check_voxel(cloud: &PointCloud, voxel_mm: f64, option: &str) -> anyhow::R
         anyhow::bail!(
             "{option}: a voxel of {voxel_mm} mm is larger than the whole cloud ({across:.3} mm across): it would merge it into a handful of points"
         );
+    }
+    Ok(())
+}
+
+/// The part of [`check_voxel`] that needs no cloud: the edge is a positive finite number of
+/// mm. The message names `option`.
+pub fn check_voxel_value(voxel_mm: f64, option: &str) -> anyhow::Result<()> {
+    if !(voxel_mm > 0.0 && voxel_mm.is_finite()) {
+        anyhow::bail!("{option}: the voxel must be a positive number of mm (got {voxel_mm})");
     }
     Ok(())
 }

@@ -22,7 +22,7 @@ use crate::spatial::Neighbours;
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct RegionConfig {
     /// Tolerance on |distance|, mm (default 0.05).
     pub tolerance: f64,

@@ -14,11 +14,14 @@ pub mod fpfh;
 pub mod icp;
 pub mod mac;
 
+mod config;
+pub use config::{RegisterConfig, VOXEL_SPACINGS};
+
 use crate::cloud::transform::isometry_to_rows;
 use std::time::{Duration, Instant};
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use crate::cloud::PointCloud;
 use crate::preprocess::{
@@ -27,107 +30,6 @@ use crate::preprocess::{
 use crate::spatial::Grid;
 use icp::{IcpParams, IcpResult};
 use mac::{MacParams, MacStats};
-
-/// Default coarse voxel in units of the cloud resolution mr. 15 mr leaves about 6k / 7.6k
-/// points of a 400k / 300k femoral case. Against 10 mr (the fine ICP on 40,000 points both
-/// times), on the 20 synth cases of tests/register.rs: the final poses are as close to the
-/// truth (worst 0.0014 deg / 0.0009 mm), the coarse ones stay well inside the fine ICP's
-/// reach (worst 0.64 deg / 0.36 mm against 0.23 deg / 0.18 mm), and registration of the
-/// 400k / 300k bench case takes 0.57-0.59 s instead of 0.70-0.71 s (FPFH 0.10 s instead of
-/// 0.18 s). 5 mr took 1.6-2.2 s on an older machine where 10 mr took 1.0-1.4 s.
-pub const VOXEL_SPACINGS: f64 = 15.0;
-
-/// Settings of the registration stage. Lengths in mm; `None` lengths derive from the cloud
-/// resolution `mr` (mean nearest-neighbour spacing, the larger of the two clouds').
-#[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RegisterConfig {
-    /// Voxel size of the coarse stage (default [`VOXEL_SPACINGS`] mr).
-    pub voxel: Option<f64>,
-    /// Normal estimation radius on the voxel clouds (default 2 voxel), at most 30 neighbours.
-    pub normal_radius: Option<f64>,
-    /// FPFH radius (default 5 voxel), at most `feature_max_nn` neighbours.
-    pub feature_radius: Option<f64>,
-    /// Neighbour cap of the FPFH search (Open3D tutorial: 100).
-    pub feature_max_nn: usize,
-    /// Most scan points that get a descriptor (evenly strided over the voxel cloud; the
-    /// reference is described everywhere; default 8,000).
-    pub max_keypoints: usize,
-    /// Keep only mutual nearest feature matches (default true).
-    pub mutual: bool,
-    /// Cap on correspondences, smallest feature distance first (default 3000).
-    pub max_correspondences: usize,
-    /// Compatibility scale d_cs (default 1 voxel).
-    pub compat_sigma: Option<f64>,
-    /// First-order graph cut on exp(-d²/(2 d_cs²)) (default 0.6, i.e. d ≤ 1.01 d_cs).
-    pub compat_min_score: f64,
-    /// Inlier threshold tau of the hypothesis score (default 1.5 voxel).
-    pub inlier_threshold: Option<f64>,
-    /// Smallest clique (default 3).
-    pub min_clique: usize,
-    /// Cap on maximal cliques enumerated (default 30,000; each start vertex gets at least
-    /// an equal share, and no more than max(share, 64)). Against 100,000: the clique search
-    /// of the bench case 0.10 s instead of 0.14 s; on tests/register.rs the same final poses,
-    /// the worst coarse one 0.67 deg / 0.38 mm instead of 0.64 deg / 0.36 mm.
-    pub max_cliques: usize,
-    /// Time budget of the clique search in seconds (default 2).
-    pub clique_time_budget: f64,
-    /// Cliques kept after node-guided selection (default 200).
-    pub top_k: usize,
-    /// Distinct hypotheses ranked by a short ICP (default 5).
-    pub rank_candidates: usize,
-    /// Most scan points used by the fine ICP (evenly strided; default 40,000). Against
-    /// 100,000, on the 20 synth cases of tests/register.rs: worst final error 0.0014 deg /
-    /// 0.0009 mm instead of 0.0010 deg / 0.0008 mm, in half the time (bench case: 0.11 s
-    /// instead of 0.21 s); `pose_std`, and so the registration error, grows as 1/√n (0.0005
-    /// → 0.0007 mm there), still covering the actual error on every case.
-    pub icp_max_points: usize,
-    /// Fine ICP correspondence distance (default 2 voxel).
-    pub icp_max_distance: Option<f64>,
-    /// Fine ICP iteration cap (default 100).
-    pub icp_max_iterations: usize,
-    /// Fine ICP relative tolerance on fitness and inlier RMSE (default 1e-7).
-    pub icp_relative_tolerance: f64,
-    /// Fixed Geman–McClure scale of the fine ICP; default adaptive (3 × robust sigma).
-    pub icp_kernel_scale: Option<f64>,
-    /// Distance within which a scan point counts as fitting the reference in the reported
-    /// fitness and inlier RMSE (default 3 x the reference's mean spacing).
-    pub fitness_distance: Option<f64>,
-    /// Below this final fitness the registration fails (default 0.2).
-    pub min_fitness: f64,
-    /// Below this many inlying correspondences the coarse stage fails (default 8).
-    pub min_inliers: usize,
-}
-
-impl Default for RegisterConfig {
-    fn default() -> Self {
-        RegisterConfig {
-            voxel: None,
-            normal_radius: None,
-            feature_radius: None,
-            feature_max_nn: 100,
-            max_keypoints: 8_000,
-            mutual: true,
-            max_correspondences: 3000,
-            compat_sigma: None,
-            compat_min_score: 0.6,
-            inlier_threshold: None,
-            min_clique: 3,
-            max_cliques: 30_000,
-            clique_time_budget: 2.0,
-            top_k: 200,
-            rank_candidates: 5,
-            icp_max_points: 40_000,
-            icp_max_distance: None,
-            icp_max_iterations: 100,
-            icp_relative_tolerance: 1e-7,
-            icp_kernel_scale: None,
-            fitness_distance: None,
-            min_fitness: 0.2,
-            min_inliers: 8,
-        }
-    }
-}
 
 /// A hypothesis ranked by the short ICP.
 #[derive(Debug, Clone, Serialize)]
@@ -265,7 +167,8 @@ pub fn register(
 /// Number of steps reported through the progress callback.
 pub const PROGRESS_STEPS: u64 = 6;
 
-/// [`register`], calling `progress(step name)` as each of [`PROGRESS_STEPS`] steps starts.
+/// [`register`], calling `progress(step name)` as each of [`PROGRESS_STEPS`] steps starts:
+/// down-sampling and normals -> FPFH -> correspondences -> MAC -> ranking -> fine ICP.
 pub fn register_with_progress(
     scan: &PointCloud,
     reference: &PointCloud,
@@ -273,19 +176,128 @@ pub fn register_with_progress(
     progress: &dyn Fn(&str),
 ) -> Result<Registration, RegisterError> {
     let start = Instant::now();
+    check_sizes(scan, reference)?;
+    let mut times = Times::default();
+    progress("down-sampling and normals");
+    let t = Instant::now();
+    let prep = prepare(scan, reference, cfg)?;
+    times.prepare = t.elapsed().as_secs_f64();
+
+    progress("FPFH features");
+    let t = Instant::now();
+    let features = describe(&prep, cfg);
+    times.fpfh = t.elapsed().as_secs_f64();
+
+    progress("feature matching");
+    let t = Instant::now();
+    let pairs = match_pairs(&prep, &features, cfg);
+    times.correspondences = t.elapsed().as_secs_f64();
+
+    progress("MAC coarse alignment");
+    let t = Instant::now();
+    let (hyps, mut coarse) = coarse_hypotheses(&prep, &pairs, cfg);
+    coarse.scan_keypoints = features.keypoints.len();
+    times.mac = t.elapsed().as_secs_f64();
+
+    progress("ranking hypotheses");
+    let t = Instant::now();
+    let ranked = rank_hypotheses(&prep, &hyps, &mut coarse);
+    times.ranking = t.elapsed().as_secs_f64();
+
+    let mut out = Registration {
+        scan_to_reference: isometry_to_rows(&Isometry3::identity()),
+        fitness: 0.0,
+        inlier_rmse: 0.0,
+        registration_error: f64::NAN,
+        fitness_distance: cfg.fitness_distance.unwrap_or(3.0 * prep.mr_ref),
+        coarse,
+        fine: None,
+        fine_max_distance: cfg.icp_max_distance.unwrap_or(2.0 * prep.voxel),
+        fine_points: 0,
+        times,
+        pose: Isometry3::identity(),
+    };
+    let start_pose = match choose(&ranked, &hyps, pairs.count, cfg, &mut out) {
+        Ok(pose) => pose,
+        Err(reason) => return fail(out, reason, start),
+    };
+
+    progress("fine ICP");
+    let t = Instant::now();
+    fine_icp(scan, reference, &prep, &start_pose, cfg, &mut out)?;
+    out.times.icp = t.elapsed().as_secs_f64();
+    out.times.total = start.elapsed().as_secs_f64();
+    if out.fitness < cfg.min_fitness {
+        let reason = format!(
+            "final fitness {:.3} (scan points within {:.3} mm of the reference) is below {:.3}",
+            out.fitness, out.fitness_distance, cfg.min_fitness
+        );
+        return fail(out, reason, start);
+    }
+    Ok(out)
+}
+
+/// Fewest points of either cloud that registration takes.
+const MIN_POINTS: usize = 10;
+
+/// Refuses a cloud with fewer than [`MIN_POINTS`] points.
+fn check_sizes(scan: &PointCloud, reference: &PointCloud) -> Result<(), RegisterError> {
     for (name, c) in [("scan", scan), ("reference", reference)] {
-        if c.len() < 10 {
+        if c.len() < MIN_POINTS {
             return Err(RegisterError::Input(format!(
-                "{name} has {} points; at least 10 are needed",
+                "{name} has {} points; at least {MIN_POINTS} are needed",
                 c.len()
             )));
         }
     }
-    let mut times = Times::default();
-    let mut coarse = Coarse::default();
+    Ok(())
+}
 
-    progress("down-sampling and normals");
-    let t = Instant::now();
+/// The failure `reason`, with everything computed so far as its diagnostics.
+fn fail(
+    mut out: Registration,
+    reason: String,
+    start: Instant,
+) -> Result<Registration, RegisterError> {
+    out.times.total = start.elapsed().as_secs_f64();
+    Err(RegisterError::Failed {
+        reason,
+        diagnostics: Box::new(out),
+    })
+}
+
+/// Points of a voxel cloud and their normals.
+type VoxelCloud = (Vec<Point3<f64>>, Vec<Vector3<f64>>);
+
+/// Both clouds down-sampled on the coarse voxel grid with normals, and the lengths derived
+/// from the cloud resolution.
+struct Prepared {
+    /// Cloud resolution mr: the larger mean spacing of the two clouds (mm).
+    mr: f64,
+    /// The reference's own mean spacing (mm).
+    mr_ref: f64,
+    /// Coarse voxel edge (mm).
+    voxel: f64,
+    /// Normal estimation radius on the voxel clouds (mm).
+    normal_radius: f64,
+    /// FPFH radius (mm).
+    feature_radius: f64,
+    /// Voxel scan points and normals.
+    scan: VoxelCloud,
+    /// Voxel reference points and normals.
+    reference: VoxelCloud,
+    /// Index of the voxel reference (the ranking ICP's searches).
+    reference_voxel_index: Grid,
+    /// Index of the full reference (its resolution here, the fine ICP's searches).
+    reference_index: Grid,
+}
+
+/// Cloud resolution, voxel grid and normals (the step "down-sampling and normals").
+fn prepare(
+    scan: &PointCloud,
+    reference: &PointCloud,
+    cfg: &RegisterConfig,
+) -> Result<Prepared, RegisterError> {
     // The reference's grid serves its resolution here and the fine ICP's searches.
     let (ref_index, scan_index) = rayon::join(
         || Grid::for_points(&reference.points),
@@ -303,99 +315,167 @@ pub fn register_with_progress(
     let normal_radius = cfg.normal_radius.unwrap_or(2.0 * voxel);
     let feature_radius = cfg.feature_radius.unwrap_or(5.0 * voxel);
     let use_input_normals = scan.normals.is_some() && reference.normals.is_some();
-    let down = |c: &PointCloud| -> Result<PointCloud, RegisterError> {
-        let d = voxel_downsample(c, voxel);
-        let normals = match d.normals {
-            Some(n) if use_input_normals => n,
-            _ => {
-                let ncfg = NormalConfig {
-                    k: 30,
-                    radius: Some(normal_radius),
-                    orientation: Orientation::Outward,
-                    ..NormalConfig::default()
-                };
-                estimate_normals(&PointCloud::from_points(d.points.clone()), &ncfg)
-                    .map_err(|e| RegisterError::Input(e.to_string()))?
-                    .normals
-            }
-        };
-        Ok(PointCloud {
-            normals: Some(normals),
-            ..d
-        })
-    };
+    let down = |c: &PointCloud| voxel_with_normals(c, voxel, normal_radius, use_input_normals);
     let (s_down, r_down) = rayon::join(|| down(scan), || down(reference));
     let (s_down, r_down) = (s_down?, r_down?);
-    let (s_pts, r_pts) = (s_down.points, r_down.points);
-    let s_nrm = s_down.normals.unwrap_or_default();
-    let r_nrm = r_down.normals.unwrap_or_default();
-    let r_index = Grid::for_points(&r_pts);
-    coarse.resolution = mr;
-    coarse.voxel = voxel;
-    coarse.normal_radius = normal_radius;
-    coarse.feature_radius = feature_radius;
-    coarse.scan_points = s_pts.len();
-    coarse.reference_points = r_pts.len();
-    times.prepare = t.elapsed().as_secs_f64();
+    Ok(Prepared {
+        mr,
+        mr_ref,
+        voxel,
+        normal_radius,
+        feature_radius,
+        reference_voxel_index: Grid::for_points(&r_down.0),
+        scan: s_down,
+        reference: r_down,
+        reference_index: ref_index,
+    })
+}
 
-    progress("FPFH features");
-    let t = Instant::now();
+/// Neighbours of the normal estimate on the voxel clouds (within the normal radius).
+const VOXEL_NORMAL_K: usize = 30;
+
+/// `c` down-sampled on voxels of edge `voxel`, with its own normals (when `keep_normals`) or
+/// normals estimated within `radius`, oriented outward.
+fn voxel_with_normals(
+    c: &PointCloud,
+    voxel: f64,
+    radius: f64,
+    keep_normals: bool,
+) -> Result<VoxelCloud, RegisterError> {
+    let d = voxel_downsample(c, voxel);
+    let normals = match d.normals {
+        Some(n) if keep_normals => n,
+        _ => {
+            let ncfg = NormalConfig {
+                k: VOXEL_NORMAL_K,
+                radius: Some(radius),
+                orientation: Orientation::Outward,
+                ..NormalConfig::default()
+            };
+            estimate_normals(&PointCloud::from_points(d.points.clone()), &ncfg)
+                .map_err(|e| RegisterError::Input(e.to_string()))?
+                .normals
+        }
+    };
+    Ok((d.points, normals))
+}
+
+/// FPFH descriptors: of evenly strided scan keypoints and of every voxel reference point.
+struct Features {
+    /// Indices of the described voxel scan points.
+    keypoints: Vec<usize>,
+    /// Their descriptors.
+    scan: Vec<fpfh::Fpfh>,
+    /// The voxel reference's descriptors.
+    reference: Vec<fpfh::Fpfh>,
+}
+
+/// FPFH on both voxel clouds (the step "FPFH features").
+fn describe(prep: &Prepared, cfg: &RegisterConfig) -> Features {
+    let ((s_pts, s_nrm), (r_pts, r_nrm)) = (&prep.scan, &prep.reference);
     let stride = s_pts.len().div_ceil(cfg.max_keypoints.max(1));
     let keypoints: Vec<usize> = (0..s_pts.len()).step_by(stride).collect();
-    coarse.scan_keypoints = keypoints.len();
-    let (s_f, r_f) = rayon::join(
-        || {
-            fpfh::compute_fpfh_at(
-                &s_pts,
-                &s_nrm,
-                feature_radius,
-                cfg.feature_max_nn,
-                &keypoints,
-            )
-        },
-        || fpfh::compute_fpfh(&r_pts, &r_nrm, feature_radius, cfg.feature_max_nn),
+    let (radius, max_nn) = (prep.feature_radius, cfg.feature_max_nn);
+    let (scan, reference) = rayon::join(
+        || fpfh::compute_fpfh_at(s_pts, s_nrm, radius, max_nn, &keypoints),
+        || fpfh::compute_fpfh(r_pts, r_nrm, radius, max_nn),
     );
-    times.fpfh = t.elapsed().as_secs_f64();
+    Features {
+        keypoints,
+        scan,
+        reference,
+    }
+}
 
-    progress("feature matching");
-    let t = Instant::now();
-    let corr = correspondences::match_features(&s_f, &r_f, cfg.mutual, cfg.max_correspondences);
-    coarse.correspondences = corr.len();
-    let src: Vec<Point3<f64>> = corr.iter().map(|c| s_pts[keypoints[c.scan]]).collect();
-    let dst: Vec<Point3<f64>> = corr.iter().map(|c| r_pts[c.reference]).collect();
-    times.correspondences = t.elapsed().as_secs_f64();
+/// Putative point pairs of the feature matches.
+struct Pairs {
+    /// Matches found.
+    count: usize,
+    /// Their scan points.
+    src: Vec<Point3<f64>>,
+    /// Their reference points.
+    dst: Vec<Point3<f64>>,
+}
 
-    progress("MAC coarse alignment");
-    let t = Instant::now();
+/// Feature matching (the step "feature matching").
+fn match_pairs(prep: &Prepared, f: &Features, cfg: &RegisterConfig) -> Pairs {
+    let corr =
+        correspondences::match_features(&f.scan, &f.reference, cfg.mutual, cfg.max_correspondences);
+    Pairs {
+        count: corr.len(),
+        src: corr
+            .iter()
+            .map(|c| prep.scan.0[f.keypoints[c.scan]])
+            .collect(),
+        dst: corr.iter().map(|c| prep.reference.0[c.reference]).collect(),
+    }
+}
+
+/// Cap on the compatibility graph's work (pair evaluations) in MAC.
+const MAX_GRAPH_WORK: u64 = 30_000_000;
+
+/// MAC hypotheses from the pairs, and the coarse diagnostics so far (the step "MAC coarse
+/// alignment").
+fn coarse_hypotheses(
+    prep: &Prepared,
+    pairs: &Pairs,
+    cfg: &RegisterConfig,
+) -> (Vec<mac::Hypothesis>, Coarse) {
     let params = MacParams {
-        compat_sigma: cfg.compat_sigma.unwrap_or(voxel),
+        compat_sigma: cfg.compat_sigma.unwrap_or(prep.voxel),
         compat_min_score: cfg.compat_min_score,
-        inlier_threshold: cfg.inlier_threshold.unwrap_or(1.5 * voxel),
+        inlier_threshold: cfg.inlier_threshold.unwrap_or(1.5 * prep.voxel),
         min_clique: cfg.min_clique,
         max_cliques: cfg.max_cliques,
         time_budget: Duration::from_secs_f64(cfg.clique_time_budget),
         top_k: cfg.top_k,
-        max_graph_work: 30_000_000,
+        max_graph_work: MAX_GRAPH_WORK,
         hypotheses_out: cfg.rank_candidates.max(1),
     };
-    coarse.compat_sigma = params.compat_sigma;
-    coarse.inlier_threshold = params.inlier_threshold;
-    let (hyps, stats) = mac::mac(&src, &dst, &params);
-    coarse.mac = stats;
-    times.mac = t.elapsed().as_secs_f64();
+    let (hyps, stats) = mac::mac(&pairs.src, &pairs.dst, &params);
+    let coarse = Coarse {
+        resolution: prep.mr,
+        voxel: prep.voxel,
+        normal_radius: prep.normal_radius,
+        feature_radius: prep.feature_radius,
+        compat_sigma: params.compat_sigma,
+        inlier_threshold: params.inlier_threshold,
+        scan_points: prep.scan.0.len(),
+        reference_points: prep.reference.0.len(),
+        correspondences: pairs.count,
+        mac: stats,
+        ..Coarse::default()
+    };
+    (hyps, coarse)
+}
 
-    progress("ranking hypotheses");
-    let t = Instant::now();
+/// Each hypothesis refined by a short ICP on the voxel clouds, recorded in `coarse.candidates`
+/// (the step "ranking hypotheses").
+fn rank_hypotheses(
+    prep: &Prepared,
+    hyps: &[mac::Hypothesis],
+    coarse: &mut Coarse,
+) -> Vec<IcpResult> {
     let short = IcpParams {
-        max_distance: voxel,
+        max_distance: prep.voxel,
         max_iterations: 30,
         relative_tolerance: 1e-6,
-        kernel_scale: Some(0.5 * voxel),
+        kernel_scale: Some(0.5 * prep.voxel),
         min_kernel_scale: 0.0,
     };
+    let (s_pts, (r_pts, r_nrm)) = (&prep.scan.0, &prep.reference);
     let ranked: Vec<IcpResult> = hyps
         .iter()
-        .map(|h| icp::icp(&s_pts, &r_pts, &r_nrm, &r_index, &h.pose, &short))
+        .map(|h| {
+            icp::icp(
+                s_pts,
+                r_pts,
+                r_nrm,
+                &prep.reference_voxel_index,
+                &h.pose,
+                &short,
+            )
+        })
         .collect();
     coarse.candidates = hyps
         .iter()
@@ -407,6 +487,19 @@ pub fn register_with_progress(
             icp_plane_rmse: r.plane_rmse,
         })
         .collect();
+    ranked
+}
+
+/// The best ranked hypothesis (highest short-ICP fitness; within 1 % of it, the lowest
+/// point-to-plane RMS) recorded in `out.coarse`; its short-ICP pose starts the fine ICP. The
+/// reason when there is none, or it has too few inliers.
+fn choose(
+    ranked: &[IcpResult],
+    hyps: &[mac::Hypothesis],
+    correspondences: usize,
+    cfg: &RegisterConfig,
+    out: &mut Registration,
+) -> Result<Isometry3<f64>, String> {
     let chosen = (0..ranked.len()).max_by(|&a, &b| {
         let (ra, rb) = (&ranked[a], &ranked[b]);
         let close = (ra.fitness - rb.fitness).abs() < 0.01 * ra.fitness.max(rb.fitness);
@@ -416,52 +509,34 @@ pub fn register_with_progress(
             ra.fitness.total_cmp(&rb.fitness)
         }
     });
-    times.ranking = t.elapsed().as_secs_f64();
-
-    let fine_max_distance = cfg.icp_max_distance.unwrap_or(2.0 * voxel);
-    let mut out = Registration {
-        scan_to_reference: isometry_to_rows(&Isometry3::identity()),
-        fitness: 0.0,
-        inlier_rmse: 0.0,
-        registration_error: f64::NAN,
-        fitness_distance: cfg.fitness_distance.unwrap_or(3.0 * mr_ref),
-        coarse,
-        fine: None,
-        fine_max_distance,
-        fine_points: 0,
-        times,
-        pose: Isometry3::identity(),
-    };
-    let fail = |mut out: Registration, reason: String| {
-        out.times.total = start.elapsed().as_secs_f64();
-        Err(RegisterError::Failed {
-            reason,
-            diagnostics: Box::new(out),
-        })
-    };
     let Some(chosen) = chosen else {
-        return fail(
-            out,
-            "no pose hypothesis (no consistent correspondences)".into(),
-        );
+        return Err("no pose hypothesis (no consistent correspondences)".into());
     };
     let h = hyps[chosen];
     out.coarse.chosen = chosen;
     out.coarse.chosen_score = h.score;
-    out.coarse.inlier_ratio = h.inliers as f64 / corr.len().max(1) as f64;
+    out.coarse.inlier_ratio = h.inliers as f64 / correspondences.max(1) as f64;
     out.coarse.scan_to_reference = isometry_to_rows(&h.pose);
     if h.inliers < cfg.min_inliers {
-        return fail(
-            out,
-            format!(
-                "best hypothesis has {} inlying correspondences (at least {} needed)",
-                h.inliers, cfg.min_inliers
-            ),
-        );
+        return Err(format!(
+            "best hypothesis has {} inlying correspondences (at least {} needed)",
+            h.inliers, cfg.min_inliers
+        ));
     }
+    Ok(ranked[chosen].pose)
+}
 
-    progress("fine ICP");
-    let t = Instant::now();
+/// Robust point-to-plane ICP of a strided sample of the full scan onto the full reference
+/// from `start`, with the fitness, the registration error and the pose written into `out`
+/// (the step "fine ICP").
+fn fine_icp(
+    scan: &PointCloud,
+    reference: &PointCloud,
+    prep: &Prepared,
+    start: &Isometry3<f64>,
+    cfg: &RegisterConfig,
+    out: &mut Registration,
+) -> Result<(), RegisterError> {
     let stride = scan.len().div_ceil(cfg.icp_max_points.max(1));
     let src_fine: Vec<Point3<f64>> = scan.points.iter().step_by(stride).copied().collect();
     let ref_normals: Vec<Vector3<f64>> = match &reference.normals {
@@ -480,21 +555,24 @@ pub fn register_with_progress(
         &src_fine,
         &reference.points,
         &ref_normals,
-        &ref_index,
-        &ranked[chosen].pose,
+        &prep.reference_index,
+        start,
         &IcpParams {
-            max_distance: fine_max_distance,
+            max_distance: out.fine_max_distance,
             max_iterations: cfg.icp_max_iterations,
             relative_tolerance: cfg.icp_relative_tolerance,
             kernel_scale: cfg.icp_kernel_scale,
-            min_kernel_scale: 1e-3 * mr,
+            min_kernel_scale: 1e-3 * prep.mr,
         },
     );
-    out.times.icp = t.elapsed().as_secs_f64();
     out.fine_points = src_fine.len();
     out.fine = Some(fine);
-    (out.fitness, out.inlier_rmse) =
-        icp::fitness(&src_fine, &ref_index, &fine.pose, out.fitness_distance);
+    (out.fitness, out.inlier_rmse) = icp::fitness(
+        &src_fine,
+        &prep.reference_index,
+        &fine.pose,
+        out.fitness_distance,
+    );
     out.registration_error = if fine.pose_std.is_finite() {
         POSE_STD_FACTOR * fine.pose_std
     } else {
@@ -502,13 +580,5 @@ pub fn register_with_progress(
     };
     out.pose = fine.pose;
     out.scan_to_reference = isometry_to_rows(&fine.pose);
-    out.times.total = start.elapsed().as_secs_f64();
-    if out.fitness < cfg.min_fitness {
-        let reason = format!(
-            "final fitness {:.3} (scan points within {:.3} mm of the reference) is below {:.3}",
-            out.fitness, out.fitness_distance, cfg.min_fitness
-        );
-        return fail(out, reason);
-    }
-    Ok(out)
+    Ok(())
 }

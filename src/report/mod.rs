@@ -18,7 +18,7 @@ pub use html::Table;
 
 /// Settings of the figures.
 #[derive(Debug, Clone, Serialize, Deserialize)]
-#[serde(default)]
+#[serde(default, deny_unknown_fields)]
 pub struct ReportConfig {
     /// Width of one view panel in pixels (default 520).
     pub panel_px: u32,

@@ -7,7 +7,7 @@
 use nalgebra::{Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::profile::{Piece, Polyline, Profile};
+use super::profile::{Piece, Polyline, Profile, Station};
 use crate::cloud::{Aabb, Mesh};
 
 /// Shape parameters of the parametric part (millimetres).
@@ -86,24 +86,8 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
     let half = shape.width / 2.0;
     let nh = shape.notch_half_width;
 
-    // x grid containing the side and notch edges exactly.
-    let mut xs: Vec<f64> = Vec::new();
-    let steps = (shape.width / shape.x_step).round() as usize;
-    for j in 0..=steps {
-        xs.push(-half + shape.width * j as f64 / steps as f64);
-    }
-    xs.extend([-nh, nh]);
-    xs.sort_by(f64::total_cmp);
-    xs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let (xs, j_nl, j_nr) = x_grid(shape);
     let nx = xs.len();
-    let j_nl = xs
-        .iter()
-        .position(|&x| (x + nh).abs() < 1e-9)
-        .expect("notch edge in grid");
-    let j_nr = xs
-        .iter()
-        .position(|&x| (x - nh).abs() < 1e-9)
-        .expect("notch edge in grid");
 
     let stations: Vec<_> = (0..=m)
         .map(|i| profile.at(len * i as f64 / m as f64))
@@ -154,16 +138,79 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
             vertices.push(Point3::new(x, yz.x, yz.y));
         }
     }
-    let outer_id = |i: usize, j: usize| (i * nx + j) as u32;
-    let inner_id = |i: usize, j: usize| ((m + 1) * nx + i * nx + j) as u32;
-    let to3 = |v: Vector2<f64>| Vector3::new(0.0, v.x, v.y);
-    let in_notch = |i: usize, j: usize| i >= i_notch && j >= j_nl && j < j_nr;
-
     let mut builder = Builder {
         vertices: &vertices,
         faces: Vec::new(),
         articular: Vec::new(),
     };
+    let topology = Topology {
+        m,
+        nx,
+        i_notch,
+        j_nl,
+        j_nr,
+    };
+    add_faces(&mut builder, &topology, &stations);
+    let Builder {
+        faces, articular, ..
+    } = builder;
+    let mut mesh = Mesh { vertices, faces };
+    let centre = Aabb::of(&mesh.vertices).expect("vertices").centre();
+    mesh.vertices.iter_mut().for_each(|p| *p -= centre.coords);
+    FemoralPart { mesh, articular }
+}
+
+/// The medio-lateral grid: `width / x_step` steps with the notch edges added exactly, and the
+/// indices of the two notch edges.
+fn x_grid(shape: &FemoralShape) -> (Vec<f64>, usize, usize) {
+    let half = shape.width / 2.0;
+    let nh = shape.notch_half_width;
+    // x grid containing the side and notch edges exactly.
+    let mut xs: Vec<f64> = Vec::new();
+    let steps = (shape.width / shape.x_step).round() as usize;
+    for j in 0..=steps {
+        xs.push(-half + shape.width * j as f64 / steps as f64);
+    }
+    xs.extend([-nh, nh]);
+    xs.sort_by(f64::total_cmp);
+    xs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let j_nl = xs
+        .iter()
+        .position(|&x| (x + nh).abs() < 1e-9)
+        .expect("notch edge in grid");
+    let j_nr = xs
+        .iter()
+        .position(|&x| (x - nh).abs() < 1e-9)
+        .expect("notch edge in grid");
+
+    (xs, j_nl, j_nr)
+}
+
+/// How the vertex grid is laid out: `m + 1` stations of `nx` outer vertices, then as many
+/// inner ones; the notch spans columns `j_nl..j_nr` from station `i_notch` on.
+#[derive(Clone, Copy)]
+struct Topology {
+    m: usize,
+    nx: usize,
+    i_notch: usize,
+    j_nl: usize,
+    j_nr: usize,
+}
+
+/// The faces of the part: outer (articular) and inner quads per station, side and notch walls,
+/// end caps and the notch roof.
+fn add_faces(builder: &mut Builder, t: &Topology, stations: &[Station]) {
+    let Topology {
+        m,
+        nx,
+        i_notch,
+        j_nl,
+        j_nr,
+    } = *t;
+    let outer_id = |i: usize, j: usize| (i * nx + j) as u32;
+    let inner_id = |i: usize, j: usize| ((m + 1) * nx + i * nx + j) as u32;
+    let to3 = |v: Vector2<f64>| Vector3::new(0.0, v.x, v.y);
+    let in_notch = |i: usize, j: usize| i >= i_notch && j >= j_nl && j < j_nr;
     for i in 0..m {
         let n_out = to3(stations[i].normal + stations[i + 1].normal);
         for j in 0..nx - 1 {
@@ -247,13 +294,6 @@ pub fn build(shape: &FemoralShape) -> FemoralPart {
             );
         }
     }
-    let Builder {
-        faces, articular, ..
-    } = builder;
-    let mut mesh = Mesh { vertices, faces };
-    let centre = Aabb::of(&mesh.vertices).expect("vertices").centre();
-    mesh.vertices.iter_mut().for_each(|p| *p -= centre.coords);
-    FemoralPart { mesh, articular }
 }
 
 struct Builder<'a> {

@@ -7,9 +7,10 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
+use super::config::{SiteFilter, SynthConfig};
 use super::defects::{Defect, DefectKind};
+use super::random::gauss;
 use super::truth::OutlierTruth;
-use super::{gauss, SiteFilter, SynthConfig};
 use crate::cloud::{sample_mesh, Mesh, PointCloud};
 use crate::spatial::{Neighbours, SparseGrid};
 

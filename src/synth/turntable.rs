@@ -10,7 +10,8 @@ use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::defects::{deviation_at, Defect};
-use super::gauss;
+use super::limits::{outside, MAX_POINTS};
+use super::random::gauss;
 use crate::cloud::{sample_mesh, transform::isometry_to_rows, Mesh, PointCloud};
 
 /// Settings of the turntable views.
@@ -70,8 +71,7 @@ impl TurntableConfig {
         ];
         for (key, v) in vectors {
             let norm = Vector3::from(v).norm();
-            if !(norm.is_finite() && norm <= super::MAX_POINTS as f64)
-                || (key != "centre" && norm == 0.0)
+            if !(norm.is_finite() && norm <= MAX_POINTS as f64) || (key != "centre" && norm == 0.0)
             {
                 return Err(format!(
                     "`{key}` = {v:?} must be finite (and not zero for a direction)"
@@ -80,23 +80,23 @@ impl TurntableConfig {
         }
         let step = self.step_deg.unwrap_or(1.0);
         [
-            super::outside("views", self.views as f64, 2.0, MAX_VIEWS as f64, "views"),
-            super::outside("step_deg", step, 1e-3, 360.0, "deg"),
-            super::outside(
+            outside("views", self.views as f64, 2.0, MAX_VIEWS as f64, "views"),
+            outside("step_deg", step, 1e-3, 360.0, "deg"),
+            outside(
                 "angle_error_deg",
                 self.angle_error_deg,
                 0.0,
                 MAX_ANGLE_ERROR_DEG,
                 "deg",
             ),
-            super::outside(
+            outside(
                 "points_per_view",
                 self.points_per_view as f64,
                 1.0,
-                super::MAX_POINTS as f64,
+                MAX_POINTS as f64,
                 "points",
             ),
-            super::outside("occlusion_cell", self.occlusion_cell, 1e-3, 100.0, "mm"),
+            outside("occlusion_cell", self.occlusion_cell, 1e-3, 100.0, "mm"),
         ]
         .into_iter()
         .flatten()

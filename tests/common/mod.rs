@@ -212,3 +212,9 @@ pub fn dofbot() -> polishbot::robot::Robot {
     )
     .expect("load calibration")
 }
+
+/// Arguments of `cmd` (`inspect` or `register`) on a reference and a scan that need not exist:
+/// for settings that are refused before any file is read.
+pub fn pair_args(cmd: &'static str) -> [&'static str; 7] {
+    [cmd, "--reference", "r.ply", "--scan", "s.ply", "-o", "x"]
+}

@@ -2,7 +2,7 @@
 //! by one; nothing may follow the declared elements.
 use nalgebra::{Point3, Vector3};
 
-use super::{is_face_list, Body, Encoding, Kind, Scalar, Sink, VertexLayout};
+use super::header::{is_face_list, Body, Encoding, Kind, Scalar, Sink, VertexLayout};
 use crate::cloud::error::{fail, ParseError, Place};
 use crate::cloud::text::{self, Cursor};
 

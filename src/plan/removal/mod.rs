@@ -68,7 +68,7 @@ impl RemovalConfig {
             self.spacing_share,
             self.stepover_share,
         ];
-        if let Some((name, msg)) = out_of_range(&ranges, &values) {
+        if let Some((name, msg)) = tool::out_of_range(&ranges, &values) {
             return Err(format!("`removal.{name}` {msg}"));
         }
         if self.feed_min_mm_s >= self.feed_max_mm_s {
@@ -79,21 +79,6 @@ impl RemovalConfig {
         }
         Ok(())
     }
-}
-
-/// The first value outside its `(name, low, high, unit)` range (inclusive; NaN is outside):
-/// its name and a message with the value, the range and the unit.
-fn out_of_range(ranges: &[(&str, f64, f64, &str)], values: &[f64]) -> Option<(String, String)> {
-    ranges
-        .iter()
-        .zip(values)
-        .find(|((_, lo, hi, _), v)| !(v.is_finite() && (*lo..=*hi).contains(*v)))
-        .map(|((name, lo, hi, unit), v)| {
-            (
-                name.to_string(),
-                format!("{v:?} is outside {lo}..={hi} {unit}"),
-            )
-        })
 }
 
 /// Peak, RMS and volume above the tolerance of a deviation field over a region.

@@ -96,7 +96,7 @@ impl ToolModel {
             self.preston_k_mm2_n,
             self.preston_k_rel_sd,
         ];
-        if let Some((name, msg)) = super::out_of_range(&RANGES, &values) {
+        if let Some((name, msg)) = out_of_range(&RANGES, &values) {
             return Err((format!("removal.{name}"), msg));
         }
         if let Some(table) = &self.influence_table {
@@ -143,6 +143,24 @@ fn check_table(table: &[[f64; 2]]) -> Result<(), String> {
         return Err("every pressure is zero".into());
     }
     Ok(())
+}
+
+/// The first value outside its `(name, low, high, unit)` range (inclusive; NaN is outside):
+/// its name and a message with the value, the range and the unit.
+pub(super) fn out_of_range(
+    ranges: &[(&str, f64, f64, &str)],
+    values: &[f64],
+) -> Option<(String, String)> {
+    ranges
+        .iter()
+        .zip(values)
+        .find(|((_, lo, hi, _), v)| !(v.is_finite() && (*lo..=*hi).contains(*v)))
+        .map(|((name, lo, hi, unit), v)| {
+            (
+                name.to_string(),
+                format!("{v:?} is outside {lo}..={hi} {unit}"),
+            )
+        })
 }
 
 #[cfg(test)]

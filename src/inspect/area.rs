@@ -1,10 +1,11 @@
-//! `inspect --inspect-area FILE`: which core points lie in the area the user asks to inspect.
+//! The inspect area (`inspect --inspect-area FILE`): which core points lie in the area the user
+//! asks to inspect.
 use std::path::Path;
 
 use anyhow::{Context, Result};
 use nalgebra::Point3;
 
-use super::GeometryInput;
+use super::FileInput;
 use crate::cloud::{self, Geometry};
 use crate::compare::{self, Deviations};
 use crate::spatial::Neighbours;
@@ -22,7 +23,7 @@ const AREA_REACH: f64 = 1.5;
 
 /// Per core point of `dev`, whether it lies in the area of `path` (a mesh, sampled, or a
 /// cloud, reference frame, the units of `input`).
-pub fn core_points_in(path: &Path, input: &GeometryInput, dev: &Deviations) -> Result<Vec<bool>> {
+pub fn core_points_in(path: &Path, input: FileInput, dev: &Deviations) -> Result<Vec<bool>> {
     let what = || format!("{}: inspect area", path.display());
     let points: Vec<Point3<f64>> = match cloud::load(path, input.format, input.units)?.geometry {
         Geometry::Mesh { mesh, .. } => {

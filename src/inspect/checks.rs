@@ -1,4 +1,4 @@
-//! The checks `inspect` makes on its inputs before it measures: a given pose must come from a
+//! The checks inspection makes on its inputs before it measures: a given pose must come from a
 //! registration that succeeded, scan and reference must be of one size once units are applied,
 //! and normals must be unit vectors pointing outward.
 use std::path::Path;

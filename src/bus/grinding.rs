@@ -1,0 +1,175 @@
+//! The simulated cell's grinding settings (`[sim.grinding]` of `run`'s config): the true tool,
+//! removal law and part mounting that `crate::grind_sim` grinds a virtual part with. They live
+//! with the simulated board's other settings ([`crate::bus::SimOptions`]) so that the flow runs
+//! one way: `grind_sim` (above the bus) reads them; nothing under `plan/` does.
+use nalgebra::{Isometry3, Matrix4, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// The true tool, removal law and part mounting of the simulated cell (`[sim.grinding]`).
+/// Numbers are the simulated cell's truth, chosen, not measured: `calibrate removal` is what
+/// measures a real cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GrindConfig {
+    /// The planner's nominal Preston coefficient, mm^2/N (= 1/MPa): the removal rate in mm/s
+    /// is k x pressure (MPa) x speed (mm/s) for exponents 1. Default 1e-4: about 0.05 mm per
+    /// second of dwell at 1 MPa and 500 mm/s.
+    pub preston_k: f64,
+    /// True k / nominal k (default 1.0: the true k equals the nominal on average).
+    pub k_factor: f64,
+    /// Amplitude of the local variation of the true k, share (default 0.10: +-10 %).
+    pub k_noise: f64,
+    /// Wavelength of that variation over the part, mm (default 8: a few patches per defect).
+    pub k_noise_wavelength_mm: f64,
+    /// Seed of the variation field and of the rescan (default 29).
+    pub seed: u64,
+    /// Preston exponent on pressure (default 1.1).
+    pub pressure_exponent: f64,
+    /// Preston exponent on speed (default 0.9).
+    pub speed_exponent: f64,
+    /// Pressure at which the law with exponents equals the linear one, MPa (default 1).
+    pub reference_pressure_mpa: f64,
+    /// Speed at which the law with exponents equals the linear one, mm/s (default 500).
+    pub reference_speed_mm_s: f64,
+    /// Spring rate of the compliant tool mount, N/mm: force = rate x penetration (default 20).
+    pub spring_rate_n_mm: f64,
+    /// Effective (Hertz) modulus of the abrasive ball against the part, MPa (default 10: a
+    /// rubber-bonded abrasive; patch radius 0.6 mm at 1 N on a 3 mm ball).
+    pub modulus_mpa: f64,
+    /// Spindle speed, rev/min (default 5000: a rotary tool at its low setting).
+    pub spindle_rpm: f64,
+    /// Radius of the ball, mm (default 3, the shipped tool.toml's).
+    pub ball_radius_mm: f64,
+    /// Ball centre in the last link's frame (arm_link5), mm; the spindle turns about that
+    /// frame's z (default [0, 0, 19.3], the shipped tool.toml's).
+    pub tip_offset_mm: [f64; 3],
+    /// Hidden offset of the part on its fixture, reference frame, mm (default 0).
+    pub mount_offset_mm: [f64; 3],
+    /// Hidden rotation of the part on its fixture, roll pitch yaw about the reference frame's
+    /// x, y, z, degrees (default 0).
+    pub mount_rotation_deg: [f64; 3],
+    /// Scanner noise of the rescan (after.ply), mm per coordinate (default 0.015, synth's).
+    pub rescan_noise_mm: f64,
+    /// Outliers of the rescan, share of points (default 0.01, synth's).
+    pub rescan_outliers: f64,
+    /// Largest translation of the rescan's random pose, mm (default 60, synth's).
+    pub rescan_max_translation_mm: f64,
+}
+
+impl Default for GrindConfig {
+    fn default() -> Self {
+        GrindConfig {
+            preston_k: 1e-4,
+            k_factor: 1.0,
+            k_noise: 0.10,
+            k_noise_wavelength_mm: 8.0,
+            seed: 29,
+            pressure_exponent: 1.1,
+            speed_exponent: 0.9,
+            reference_pressure_mpa: 1.0,
+            reference_speed_mm_s: 500.0,
+            spring_rate_n_mm: 20.0,
+            modulus_mpa: 10.0,
+            spindle_rpm: 5000.0,
+            ball_radius_mm: 3.0,
+            tip_offset_mm: [0.0, 0.0, 19.3],
+            mount_offset_mm: [0.0; 3],
+            mount_rotation_deg: [0.0; 3],
+            rescan_noise_mm: 0.015,
+            rescan_outliers: 0.01,
+            rescan_max_translation_mm: 60.0,
+        }
+    }
+}
+
+/// Largest hidden mounting offset, mm, and rotation, degrees: a part misplaced by more is
+/// not on the fixture.
+const MAX_MOUNT_MM: f64 = 50.0;
+const MAX_MOUNT_DEG: f64 = 45.0;
+/// Largest exponent accepted: Preston exponents seen in the literature lie within 0.5..2.
+const MAX_EXPONENT: f64 = 3.0;
+
+impl GrindConfig {
+    /// Checks every setting; the message names the key in backticks.
+    pub fn check(&self) -> Result<(), String> {
+        let positive = |key: &str, v: f64, unit: &str| {
+            (!(v.is_finite() && v > 0.0))
+                .then(|| format!("`{key}` = {v:?} {unit} must be a positive number"))
+        };
+        let within = |key: &str, v: f64, lo: f64, hi: f64, unit: &str| {
+            (!(v.is_finite() && (lo..=hi).contains(&v)))
+                .then(|| format!("`{key}` = {v:?} {unit} is outside {lo}..={hi} {unit}"))
+        };
+        let mut found = [
+            positive("preston_k", self.preston_k, "mm^2/N"),
+            positive("k_factor", self.k_factor, ""),
+            within("k_noise", self.k_noise, 0.0, 0.99, "(share)"),
+            positive("k_noise_wavelength_mm", self.k_noise_wavelength_mm, "mm"),
+            within(
+                "pressure_exponent",
+                self.pressure_exponent,
+                0.0,
+                MAX_EXPONENT,
+                "",
+            ),
+            within("speed_exponent", self.speed_exponent, 0.0, MAX_EXPONENT, ""),
+            positive("reference_pressure_mpa", self.reference_pressure_mpa, "MPa"),
+            positive("reference_speed_mm_s", self.reference_speed_mm_s, "mm/s"),
+            positive("spring_rate_n_mm", self.spring_rate_n_mm, "N/mm"),
+            positive("modulus_mpa", self.modulus_mpa, "MPa"),
+            within("spindle_rpm", self.spindle_rpm, 0.0, 1e6, "rev/min"),
+            positive("ball_radius_mm", self.ball_radius_mm, "mm"),
+            within("rescan_noise_mm", self.rescan_noise_mm, 0.0, 5.0, "mm"),
+            within(
+                "rescan_outliers",
+                self.rescan_outliers,
+                0.0,
+                0.49,
+                "(share)",
+            ),
+            within(
+                "rescan_max_translation_mm",
+                self.rescan_max_translation_mm,
+                0.0,
+                1e4,
+                "mm",
+            ),
+        ]
+        .into_iter()
+        .flatten()
+        .collect::<Vec<_>>();
+        let arrays = [
+            ("tip_offset_mm", self.tip_offset_mm, 1000.0, "mm"),
+            ("mount_offset_mm", self.mount_offset_mm, MAX_MOUNT_MM, "mm"),
+            (
+                "mount_rotation_deg",
+                self.mount_rotation_deg,
+                MAX_MOUNT_DEG,
+                "deg",
+            ),
+        ];
+        for (key, v, max, unit) in arrays {
+            if let Some(x) = v.iter().find(|x| !(x.is_finite() && x.abs() <= max)) {
+                found.push(format!(
+                    "`{key}` has {x:?} {unit}, outside -{max}..={max} {unit}"
+                ));
+            }
+        }
+        match found.into_iter().next() {
+            Some(m) => Err(m),
+            None => Ok(()),
+        }
+    }
+
+    /// The part's true pose on the fixture: the nominal `robot_from_reference` (metres)
+    /// moved by the hidden offsets, as a matrix on reference points in metres.
+    pub fn true_robot_from_reference(&self, nominal: &Matrix4<f64>) -> Matrix4<f64> {
+        let [rx, ry, rz] = self.mount_rotation_deg.map(f64::to_radians);
+        let t = Vector3::from(self.mount_offset_mm) * 1e-3;
+        let offset = Isometry3::from_parts(
+            Translation3::from(t),
+            UnitQuaternion::from_euler_angles(rx, ry, rz),
+        );
+        nominal * offset.to_homogeneous()
+    }
+}

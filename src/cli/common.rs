@@ -1,0 +1,52 @@
+//! What several subcommands share: the geometry input options, the settings file reader and
+//! the one-line error form and the reader of the JSON files the tool wrote.
+use std::path::Path;
+
+use anyhow::Context;
+use clap::Args;
+
+use super::settings;
+use crate::cloud::{Format, Units};
+
+/// Options every command that reads geometry takes.
+#[derive(Debug, Clone, Args, Default)]
+pub struct GeometryInput {
+    /// Length unit of the input files (m or mm). Required when a file looks like metres.
+    #[arg(long, value_enum)]
+    pub units: Option<Units>,
+    /// File format, overriding the file's extension.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
+}
+
+/// Joins an error chain into one line: "outer: inner: root".
+pub fn one_line(err: &anyhow::Error) -> String {
+    let parts: Vec<String> = err.chain().map(|e| e.to_string()).collect();
+    let mut line = String::new();
+    for part in parts {
+        if !line.contains(&part) {
+            if !line.is_empty() {
+                line.push_str(": ");
+            }
+            line.push_str(&part);
+        }
+    }
+    line.replace('\n', " ")
+}
+
+/// Reads an optional TOML config file into `T` (missing file argument: `T::default()`);
+/// errors name the file and the line.
+pub fn load_config<T: serde::de::DeserializeOwned + Default>(
+    path: Option<&std::path::Path>,
+) -> anyhow::Result<T> {
+    settings::ConfigFile::read(path)?.parse()
+}
+
+/// Reads a JSON file the tool wrote (an inspection's registration.json or regions.json);
+/// errors name the file and the line.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    serde_json::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
+}

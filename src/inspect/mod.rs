@@ -1,0 +1,266 @@
+//! Inspection as a library function: a scan measured against its reference, from the files to
+//! the verdict. [`run`] reads top to bottom: load and check -> outlier filter -> register (or a
+//! given pose) -> core points -> compare -> regions and verdict. It prints nothing and writes
+//! nothing; `polishbot inspect` (and `demo`) write its [`Inspection`] to files.
+pub mod area;
+pub mod checks;
+mod load;
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use nalgebra::Isometry3;
+use serde::{Deserialize, Serialize};
+
+use crate::cloud::{self, Format, Units};
+use crate::compare::{self, CompareConfig, CoreConfig, Deviations};
+use crate::preprocess::{self, SorConfig};
+use crate::regions::{self, RegionConfig, Regions};
+use crate::register::{self, RegisterConfig, Registration};
+
+/// Settings of an inspection (TOML `--config` of `inspect`), one section per stage.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InspectConfig {
+    /// Points sampled on a mesh reference (default [`DEFAULT_REFERENCE_POINTS`] when 0).
+    pub reference_points: usize,
+    /// Core points.
+    pub core: CoreConfig,
+    /// Comparison.
+    pub compare: CompareConfig,
+    /// Regions.
+    pub regions: RegionConfig,
+    /// Statistical outlier filter of the scan.
+    pub filter: SorConfig,
+    /// Registration (skipped when a pose is given).
+    pub register: RegisterConfig,
+}
+
+/// Points sampled on a mesh reference when `reference_points` is 0: about 0.07 mm apart on a
+/// femoral component, denser than the scans the comparison meets.
+pub const DEFAULT_REFERENCE_POINTS: usize = 400_000;
+
+/// Most points sampled on a mesh reference (`reference_points`): 5 million points and normals
+/// are 240 MB, far denser than any scan the comparison meets.
+pub const MAX_REFERENCE_POINTS: usize = 5_000_000;
+
+/// How the input files are read.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FileInput {
+    /// File format (default: from the extension).
+    pub format: Option<Format>,
+    /// Length unit (required when a file looks like metres).
+    pub units: Option<Units>,
+}
+
+/// What an inspection measures: the files and the choices that are not settings.
+#[derive(Debug, Clone)]
+pub struct Inputs {
+    /// Reference: a mesh (sampled with its facet normals) or a cloud (with or without normals).
+    pub reference: PathBuf,
+    /// Scan point cloud.
+    pub scan: PathBuf,
+    /// Format and units of every input file.
+    pub files: FileInput,
+    /// Skip registration: `scan_to_reference` from this registration.json or truth.json.
+    pub pose: Option<PathBuf>,
+    /// Core points with outward unit normals, instead of a sample of the reference.
+    pub core: Option<PathBuf>,
+    /// The area to inspect (reference frame); default the whole reference.
+    pub inspect_area: Option<PathBuf>,
+    /// Registration error of the level of detection, mm (default the registration's own).
+    pub registration_error: Option<f64>,
+}
+
+/// Where the pose came from.
+#[derive(Debug, Clone)]
+pub enum PoseSource {
+    /// Found by registration (its diagnostics).
+    Registered(Box<Registration>),
+    /// Read from a file.
+    Given {
+        /// The pose, scan to reference.
+        pose: Isometry3<f64>,
+        /// The file it came from.
+        source: PathBuf,
+    },
+}
+
+/// The outcome of [`run`].
+#[derive(Debug)]
+pub struct Inspection {
+    /// The pose of the scan and where it came from.
+    pub pose: PoseSource,
+    /// Per core point: distance, uncertainty, significance.
+    pub deviations: Deviations,
+    /// Defect regions and the verdict.
+    pub regions: Regions,
+    /// Lines for the report's provenance (label, text): reference normals, registration...
+    pub provenance: Vec<(String, String)>,
+    /// Notices and warnings for the user, in the order they arose.
+    pub notices: Vec<String>,
+    /// Wall time per stage.
+    pub times: StageTimes,
+}
+
+/// Inspects `inputs` with `cfg`. A registration failure is returned as the
+/// [`register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
+pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
+    let mut times = StageTimes::default();
+    let mut notices = Vec::new();
+    let spin = crate::progress::spinner("load");
+    let (reference, scan) = load::inputs(cfg, inputs, &mut notices)?;
+    spin.finish_and_clear();
+    times.lap("load");
+
+    let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
+        .with_context(|| format!("{}", inputs.scan.display()))?;
+    let mut scan_cloud = sor.apply(&scan);
+    checks::check_sizes(
+        (&inputs.reference, &reference.cloud),
+        (&inputs.scan, &scan_cloud),
+    )?;
+    times.lap("filter");
+
+    let pose = match &inputs.pose {
+        Some(file) => PoseSource::Given {
+            pose: checks::read_pose(file)?,
+            source: file.clone(),
+        },
+        None => PoseSource::Registered(Box::new(register_scan(
+            &scan_cloud,
+            &reference.cloud,
+            &cfg.register,
+        )?)),
+    };
+    scan_cloud.transform(&pose.pose());
+    times.lap("register");
+
+    let removed = format!(
+        "{} of {} scan points removed",
+        sor.removed,
+        sor.removed + sor.kept.len()
+    );
+    let mut provenance = vec![
+        ("reference normals".to_string(), reference.note),
+        ("registration".to_string(), pose.line()),
+        ("outlier filter".to_string(), removed),
+    ];
+    let (core, core_line) = load::core(cfg, inputs, &reference.cloud, scan_cloud.len())?;
+    notices.extend(core.notice);
+    provenance.push(("core point sample".to_string(), core_line));
+    times.lap("core points");
+
+    let compare_cfg = compare_settings(cfg, inputs, &pose);
+    let deviations = compare::compare(&core.cloud, &reference.cloud, &scan_cloud, &compare_cfg)?;
+    times.lap("compare");
+
+    let in_area = match &inputs.inspect_area {
+        Some(path) => Some(area::core_points_in(path, inputs.files, &deviations)?),
+        None => None,
+    };
+    let regions = regions::find_regions_in(&deviations, &cfg.regions, in_area.as_deref());
+    times.lap("regions");
+    Ok(Inspection {
+        pose,
+        deviations,
+        regions,
+        provenance,
+        notices,
+        times,
+    })
+}
+
+/// Registers the filtered scan onto the reference with a progress bar.
+pub fn register_scan(
+    scan: &cloud::PointCloud,
+    reference: &cloud::PointCloud,
+    cfg: &RegisterConfig,
+) -> Result<Registration, register::RegisterError> {
+    crate::progress::stepped(register::PROGRESS_STEPS, "register", |step| {
+        register::register_with_progress(scan, reference, cfg, step)
+    })
+}
+
+/// The comparison's settings for this run: the registration error of the level of detection
+/// (the flag's, else the pose's own uncertainty, else the setting's) and the tolerance's
+/// thresholds.
+fn compare_settings(cfg: &InspectConfig, inputs: &Inputs, pose: &PoseSource) -> CompareConfig {
+    let mut c = cfg.compare.clone();
+    // The registration error of the level of detection is the pose's own uncertainty on the
+    // surface (`Registration::registration_error`), not a residual RMSE: those hold the scan
+    // noise, which the LoD already counts, and the reference's sampling spacing.
+    let registered = match pose {
+        PoseSource::Registered(reg) => Some(reg.registration_error),
+        PoseSource::Given { .. } => None,
+    };
+    c.registration_error = inputs
+        .registration_error
+        .or(registered)
+        .unwrap_or(c.registration_error);
+    // The comparison works to the regions' tolerance (peaks, densification, narrow defects).
+    c.tolerance = cfg.regions.tolerance;
+    c
+}
+
+impl PoseSource {
+    /// Scan to reference.
+    pub fn pose(&self) -> Isometry3<f64> {
+        match self {
+            PoseSource::Registered(reg) => reg.pose,
+            PoseSource::Given { pose, .. } => *pose,
+        }
+    }
+
+    /// The report's line on the pose.
+    fn line(&self) -> String {
+        match self {
+            PoseSource::Registered(reg) => format!(
+                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, registration error {:.5} mm, {:.2} s",
+                reg.fitness,
+                reg.inlier_rmse,
+                reg.fine.map_or(f64::NAN, |f| f.plane_rmse),
+                reg.registration_error,
+                reg.times.total
+            ),
+            PoseSource::Given { source, .. } => format!("pose given in {}", source.display()),
+        }
+    }
+}
+
+/// Wall time per stage of an inspection, for the closing `times:` line.
+#[derive(Debug)]
+pub struct StageTimes {
+    last: Instant,
+    laps: Vec<(&'static str, f64)>,
+}
+
+impl Default for StageTimes {
+    fn default() -> Self {
+        StageTimes {
+            last: Instant::now(),
+            laps: Vec::new(),
+        }
+    }
+}
+
+impl StageTimes {
+    /// Ends the stage `name` now.
+    pub fn lap(&mut self, name: &'static str) {
+        let now = Instant::now();
+        self.laps
+            .push((name, now.duration_since(self.last).as_secs_f64()));
+        self.last = now;
+    }
+
+    /// "load 0.12 s, filter 0.30 s, ...".
+    pub fn line(&self) -> String {
+        let parts: Vec<String> = self
+            .laps
+            .iter()
+            .map(|(name, s)| format!("{name} {s:.2} s"))
+            .collect();
+        parts.join(", ")
+    }
+}

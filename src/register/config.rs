@@ -1,0 +1,108 @@
+//! The registration stage's settings.
+use serde::{Deserialize, Serialize};
+
+/// Default coarse voxel in units of the cloud resolution mr. 15 mr leaves about 6k / 7.6k
+/// points of a 400k / 300k femoral case. Against 10 mr (the fine ICP on 40,000 points both
+/// times), on the 20 synth cases of tests/register.rs: the final poses are as close to the
+/// truth (worst 0.0014 deg / 0.0009 mm), the coarse ones stay well inside the fine ICP's
+/// reach (worst 0.64 deg / 0.36 mm against 0.23 deg / 0.18 mm), and registration of the
+/// 400k / 300k bench case takes 0.57-0.59 s instead of 0.70-0.71 s (FPFH 0.10 s instead of
+/// 0.18 s). 5 mr took 1.6-2.2 s on an older machine where 10 mr took 1.0-1.4 s.
+pub const VOXEL_SPACINGS: f64 = 15.0;
+
+/// Settings of the registration stage. Lengths in mm; `None` lengths derive from the cloud
+/// resolution `mr` (mean nearest-neighbour spacing, the larger of the two clouds').
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RegisterConfig {
+    /// Voxel size of the coarse stage (default [`VOXEL_SPACINGS`] mr).
+    pub voxel: Option<f64>,
+    /// Normal estimation radius on the voxel clouds (default 2 voxel), at most 30 neighbours.
+    pub normal_radius: Option<f64>,
+    /// FPFH radius (default 5 voxel), at most `feature_max_nn` neighbours.
+    pub feature_radius: Option<f64>,
+    /// Neighbour cap of the FPFH search (default 100, as Open3D's tutorial).
+    pub feature_max_nn: usize,
+    /// Most scan points that get a descriptor (evenly strided over the voxel cloud; the
+    /// reference is described everywhere; default 8,000).
+    pub max_keypoints: usize,
+    /// Keep only mutual nearest feature matches (default true).
+    pub mutual: bool,
+    /// Cap on correspondences, smallest feature distance first (default 3000).
+    pub max_correspondences: usize,
+    /// Compatibility scale d_cs (default 1 voxel).
+    pub compat_sigma: Option<f64>,
+    /// First-order graph cut on exp(-d²/(2 d_cs²)) (default 0.6, i.e. d ≤ 1.01 d_cs).
+    pub compat_min_score: f64,
+    /// Inlier threshold tau of the hypothesis score (default 1.5 voxel).
+    pub inlier_threshold: Option<f64>,
+    /// Smallest clique (default 3).
+    pub min_clique: usize,
+    /// Cap on maximal cliques enumerated (default 30,000; each start vertex gets at least
+    /// an equal share, and no more than max(share, 64)). Against 100,000: the clique search
+    /// of the bench case 0.10 s instead of 0.14 s; on tests/register.rs the same final poses,
+    /// the worst coarse one 0.67 deg / 0.38 mm instead of 0.64 deg / 0.36 mm.
+    pub max_cliques: usize,
+    /// Time budget of the clique search in seconds (default 30): a guard against a
+    /// pathological graph, not a tuning. The clique cap (`max_cliques`) is what bounds the
+    /// search: about 0.1 s on the bench case on an idle machine. The old default of 2 s was
+    /// reached at a load of 15 on 2 cores (0.8x to 1x the cap's cliques found), so the coarse
+    /// pose, and on synth seed 3 the deviations, depended on the machine's load; 30 s leaves a
+    /// 300x margin.
+    pub clique_time_budget: f64,
+    /// Cliques kept after node-guided selection (default 200).
+    pub top_k: usize,
+    /// Distinct hypotheses ranked by a short ICP (default 5).
+    pub rank_candidates: usize,
+    /// Most scan points used by the fine ICP (evenly strided; default 40,000). Against
+    /// 100,000, on the 20 synth cases of tests/register.rs: worst final error 0.0014 deg /
+    /// 0.0009 mm instead of 0.0010 deg / 0.0008 mm, in half the time (bench case: 0.11 s
+    /// instead of 0.21 s); `pose_std`, and so the registration error, grows as 1/√n (0.0005
+    /// → 0.0007 mm there), still covering the actual error on every case.
+    pub icp_max_points: usize,
+    /// Fine ICP correspondence distance (default 2 voxel).
+    pub icp_max_distance: Option<f64>,
+    /// Fine ICP iteration cap (default 100).
+    pub icp_max_iterations: usize,
+    /// Fine ICP relative tolerance on fitness and inlier RMSE (default 1e-7).
+    pub icp_relative_tolerance: f64,
+    /// Fixed Geman–McClure scale of the fine ICP; default adaptive (3 × robust sigma).
+    pub icp_kernel_scale: Option<f64>,
+    /// Distance within which a scan point counts as fitting the reference in the reported
+    /// fitness and inlier RMSE (default 3 x the reference's mean spacing).
+    pub fitness_distance: Option<f64>,
+    /// Below this final fitness the registration fails (default 0.2).
+    pub min_fitness: f64,
+    /// Below this many inlying correspondences the coarse stage fails (default 8).
+    pub min_inliers: usize,
+}
+
+impl Default for RegisterConfig {
+    fn default() -> Self {
+        RegisterConfig {
+            voxel: None,
+            normal_radius: None,
+            feature_radius: None,
+            feature_max_nn: 100,
+            max_keypoints: 8_000,
+            mutual: true,
+            max_correspondences: 3000,
+            compat_sigma: None,
+            compat_min_score: 0.6,
+            inlier_threshold: None,
+            min_clique: 3,
+            max_cliques: 30_000,
+            clique_time_budget: 30.0,
+            top_k: 200,
+            rank_candidates: 5,
+            icp_max_points: 40_000,
+            icp_max_distance: None,
+            icp_max_iterations: 100,
+            icp_relative_tolerance: 1e-7,
+            icp_kernel_scale: None,
+            fitness_distance: None,
+            min_fitness: 0.2,
+            min_inliers: 8,
+        }
+    }
+}
