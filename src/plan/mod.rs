@@ -54,11 +54,11 @@ pub fn plan(
         PlanMode::Rigid => None,
         PlanMode::Removal => Some(preston::tool_model(robot)?),
     };
-    // the compliant ball is commanded `preload` inside the surface: the contact rule of the
-    // collision model accepts that much more penetration of the ball while grinding
+    // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
+    // collision model (grinding, pressing in and out) accepts that much more penetration
     let mut adjusted = config.clone();
     if let Some(t) = &tool {
-        adjusted.collision.contact_tolerance_mm += t.preload_mm;
+        adjusted.collision.press_mm = t.preload_mm;
     }
     let config = &adjusted;
     let radius_mm = robot.tool.radius * 1e3;

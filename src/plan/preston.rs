@@ -56,6 +56,9 @@ pub struct RegionPrediction {
 pub struct RemovalReport {
     /// Contact force at the preload, N.
     pub force_n: f64,
+    /// The preload: how far the ball is pressed inside the surface while it grinds, mm
+    /// (`run` re-checks the grinding samples with it).
+    pub preload_mm: f64,
     /// Tolerance, mm: over-grind is a residual below -tolerance.
     pub tolerance_mm: f64,
     /// Per planned region.
@@ -359,6 +362,7 @@ pub fn predict(
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let mut report = RemovalReport {
         force_n: tool.force_n(),
+        preload_mm: tool.preload_mm,
         tolerance_mm: tolerance,
         regions: Vec::new(),
         rows: Vec::new(),

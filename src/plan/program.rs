@@ -211,7 +211,7 @@ fn misfit(p: &PathPoint, reach: f64, scene: &Scene) -> Option<String> {
     if let Some(hit) = scene.second_face(&centre, Some(&p.normal)) {
         return Some(hit.to_string());
     }
-    let tol = scene.config().contact_tolerance_mm;
+    let tol = scene.config().contact_tolerance_mm + scene.config().press_mm;
     let clear = scene.ball_clearance(&centre, -tol);
     (clear < -tol).then(|| {
         format!(
