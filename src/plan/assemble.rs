@@ -251,11 +251,7 @@ impl Program {
                 }
                 match self.try_legs(&legs, cell)? {
                     None => return Ok(Ok(())),
-                    // the first refusal (full height, direct move) says most
-                    Some(hit) if why.ends_with(" in") => {
-                        why = format!("no collision-free way in: {hit}");
-                    }
-                    Some(_) => {}
+                    Some(hit) => why = format!("no collision-free way in: {hit}"),
                 }
             }
         }

@@ -18,10 +18,11 @@ use crate::robot::{IkConfig, Robot};
 pub enum PlanMode {
     /// A compliant tool pressed at its preload, one raster per region, the dwell of every
     /// contact from Preston's law (`--mode removal`; not yet the default: on the demo part
-    /// every region is still left out, see docs/ALGORITHMS.md "Removal mode").
+    /// its predicted residual stays above the tolerance, see docs/ALGORITHMS.md "Removal
+    /// mode").
     Removal,
     /// Depth layers of `depth_step_mm` at one feed: a rigid burr on a stiff machine (the
-    /// default until removal mode plans the demo part).
+    /// default until removal mode meets the tolerance on the demo part).
     #[default]
     Rigid,
 }
