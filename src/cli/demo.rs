@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use nalgebra::{Point3, Vector3};
 
@@ -110,6 +110,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
             out: plan_file.clone(),
             export_ros: Some(out.join("trajectory.yaml")),
             require_full_reach: false,
+            mode: None,
         },
         None,
     )?;

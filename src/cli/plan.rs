@@ -25,6 +25,10 @@ pub struct PlanArgs {
     /// Fail when any planned contact point is unreachable.
     #[arg(long)]
     pub require_full_reach: bool,
+    /// Rigid (depth layers) or removal (a compliant tool's dwell map)
+    /// [default: `mode` of [plan], else rigid].
+    #[arg(long, value_enum)]
+    pub mode: Option<plan::PlanMode>,
 }
 
 /// `--config` TOML of `plan` and `run`: `[robot]` (RobotConfig: urdf, tool, servos, workcell,
@@ -46,6 +50,9 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
         cfg.robot.workcell = w;
     }
     cfg.plan.require_full_reach |= args.require_full_reach;
+    if let Some(mode) = args.mode {
+        cfg.plan.mode = mode;
+    }
     let (robot, workcell) = robot::load(&cfg.robot)?;
     cfg.plan.check(&robot).map_err(|e| match e {
         plan::PlanError::Config(m) => file.refuse("plan", &m),
@@ -59,6 +66,30 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let provenance = super::plan_report::provenance(&args.inspection, &cfg.robot, &cfg.plan)?;
     provenance.stamp_json(&args.out)?;
     let page = super::plan_report::write_page(&args.out, &inspection, &plan, &provenance)?;
+    if let Some(removal) = &plan.removal {
+        let csv = args.out.with_file_name("predicted.csv");
+        std::fs::write(
+            &csv,
+            plan::preston::predicted_csv(removal, &cfg.plan.monte_carlo),
+        )
+        .map_err(|e| anyhow::anyhow!("{}: {e}", csv.display()))?;
+        for r in &removal.regions {
+            println!(
+                "plan: region {}: predicted peak {:+.4} -> {:+.4} mm, RMS {:.4} -> {:.4} mm, \
+                 lowest {:+.4} mm (Monte Carlo low quantile {:+.4} mm), allowance {:.3} mm, {} \
+                 contacts",
+                r.region,
+                r.before.peak_mm,
+                r.after.peak_mm,
+                r.before.rms_mm,
+                r.after.rms_mm,
+                r.after.lowest_mm,
+                r.after_low_p95_mm,
+                r.allowance_mm,
+                r.dwell.len()
+            );
+        }
+    }
     if let Some(yaml) = &args.export_ros {
         std::fs::write(yaml, ros::joint_trajectory_yaml(&plan, "base_link"))
             .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;

@@ -17,6 +17,7 @@ use super::trajectory::{JointTrajectory, Limits, Move};
 use crate::robot::{IkTarget, Robot, Workcell};
 
 /// One rest-to-rest leg of a free motion.
+#[derive(Clone)]
 struct Leg {
     to: Vec<f64>,
     kind: SegmentKind,
@@ -94,6 +95,10 @@ pub(crate) fn assemble(
         for piece in run {
             let start = &piece.points[0];
             let glided = match &on {
+                // removal mode: the next piece of the same stroke starts where this one ended
+                Some((at, _)) if piece.dwell_s.is_some() && at.q == start.q => true,
+                // a pressed ball does not slide to another stroke: it would grind off the plan
+                Some(_) if pressed(start) > 0.0 => false,
                 Some((at, _)) => prog.glide(at, start, piece.region, &cell)?,
                 None => false,
             };
@@ -117,6 +122,12 @@ pub(crate) fn assemble(
     }
     prog.home(left.as_ref(), &cell)?;
     Ok(prog)
+}
+
+/// How far contact `p` is pressed inside the surface, mm (removal mode's preload; 0 in rigid
+/// mode, whose layers sit on or above nominal).
+fn pressed(p: &PlannedPoint) -> f64 {
+    (-p.offset_mm).max(0.0)
 }
 
 /// Records every point of `piece` as left out.
@@ -191,10 +202,20 @@ impl Program {
         region: usize,
         cell: &Cell,
     ) -> Result<Result<(), String>, PlanError> {
-        let aboves = cell.lifted(p, cell.cfg.retract_mm);
+        let press = pressed(p);
+        let aboves = cell.lifted(p, cell.cfg.retract_mm + press);
         if aboves.is_empty() {
             return Ok(Err("no approach pose above the contact".into()));
         }
+        // removal mode: the approach ends with the ball touching the surface (contact rule),
+        // the press-in goes on to the preload depth (grinding rule)
+        let touch = match press > 0.0 {
+            false => None,
+            true => match cell.lifted(p, press).into_iter().next() {
+                Some(q) => Some(q),
+                None => return Ok(Err("no pose touching the surface above the contact".into())),
+            },
+        };
         let safe = cell.scene.config().safe_lift_mm;
         let up_from: Vec<Vec<f64>> = left
             .and_then(|l| cell.lifted(l, safe).into_iter().next())
@@ -214,7 +235,20 @@ impl Program {
                     .iter()
                     .map(|q| cell.leg(q, SegmentKind::Transit, None, Allow::Free))
                     .collect();
-                legs.push(cell.leg(&p.q, SegmentKind::Approach, Some(region), Allow::Contact));
+                match &touch {
+                    None => {
+                        legs.push(cell.leg(
+                            &p.q,
+                            SegmentKind::Approach,
+                            Some(region),
+                            Allow::Contact,
+                        ));
+                    }
+                    Some(t) => {
+                        legs.push(cell.leg(t, SegmentKind::Approach, Some(region), Allow::Contact));
+                        legs.push(cell.leg(&p.q, SegmentKind::Press, Some(region), Allow::Grind));
+                    }
+                }
                 match self.try_legs(&legs, cell)? {
                     None => return Ok(Ok(())),
                     Some(hit) => why = format!("no collision-free way in: {hit}"),
@@ -228,9 +262,19 @@ impl Program {
     fn retract(&mut self, p: &PlannedPoint, region: usize, cell: &Cell) -> Result<(), PlanError> {
         let region = Some(region);
         let mut why = String::from("no retract pose above the contact");
-        for above in cell.lifted(p, cell.cfg.retract_mm) {
-            let leg = cell.leg(&above, SegmentKind::Retract, region, Allow::Contact);
-            match self.try_legs(&[leg], cell)? {
+        let press = pressed(p);
+        // removal mode: out to touching the surface under the grinding rule, then up
+        let out: Vec<Leg> = match press > 0.0 {
+            false => Vec::new(),
+            true => match cell.lifted(p, press).into_iter().next() {
+                Some(t) => vec![cell.leg(&t, SegmentKind::Press, region, Allow::Grind)],
+                None => Vec::new(),
+            },
+        };
+        for above in cell.lifted(p, cell.cfg.retract_mm + press) {
+            let mut legs = out.clone();
+            legs.push(cell.leg(&above, SegmentKind::Retract, region, Allow::Contact));
+            match self.try_legs(&legs, cell)? {
                 None => return Ok(()),
                 Some(hit) => why = hit.to_string(),
             }

@@ -20,7 +20,7 @@ fn allowances(segments: &[Segment], n: usize) -> Vec<(Allow, Option<usize>)> {
         for (allow, owner) in out.iter_mut().take(last + 1).skip(s.first_sample) {
             *owner = Some(k);
             *allow = match (*allow, s.kind) {
-                (_, SegmentKind::Grind) | (Allow::Grind, _) => Allow::Grind,
+                (_, SegmentKind::Grind | SegmentKind::Press) | (Allow::Grind, _) => Allow::Grind,
                 (_, SegmentKind::Transit) => *allow,
                 _ => Allow::Contact,
             };
@@ -64,7 +64,10 @@ impl Plan {
         cfg: &CollisionConfig,
     ) -> Result<(), PlanError> {
         cfg.check(robot.dof()).map_err(PlanError::Config)?;
-        let scene = Scene::new(&inspection.points, robot, wc, cfg);
+        // a removal plan presses the ball its preload in where it grinds
+        let mut cfg = cfg.clone();
+        cfg.press_mm = self.removal.as_ref().map_or(0.0, |r| r.preload_mm);
+        let scene = Scene::new(&inspection.points, robot, wc, &cfg);
         let samples = self.samples.iter().map(|s| s.q.as_slice());
         let found = check_samples(samples, &self.segments, robot, &scene);
         if found.is_empty() {

@@ -46,6 +46,11 @@ pub struct CollisionConfig {
     /// Fixed solids of the cell (table, fixture), robot frame; `solids.toml` beside the
     /// workcell file adds its `[[solid]]` entries.
     pub solids: Vec<Solid>,
+    /// How much deeper than `contact_tolerance_mm` the ball may be while grinding (and
+    /// pressing in or out), mm: the compliant tool's preload in removal mode, set by the
+    /// planner from tool.toml and by `run` from plan.json; 0 in rigid mode. Not a user key.
+    #[serde(skip)]
+    pub press_mm: f64,
 }
 
 impl Default for CollisionConfig {
@@ -58,6 +63,7 @@ impl Default for CollisionConfig {
             safe_lift_mm: 30.0,
             glide_mm: 0.5,
             turn_step_deg: 1.0,
+            press_mm: 0.0,
             solids: Vec::new(),
         }
     }
@@ -179,6 +185,24 @@ struct Capsule {
     a: Point3<f64>,
     b: Point3<f64>,
     radius: f64,
+}
+
+/// Capsule `shank` from where it leaves a ball of radius `ball` at its end `a` (the shank's
+/// axis meets the sphere `sqrt(ball^2 - r^2)` up; its end cap stays inside shank and ball).
+fn outside_ball(shank: Capsule, ball: f64) -> Capsule {
+    let d = shank.b - shank.a;
+    let len = d.norm();
+    if len <= 0.0 {
+        return shank;
+    }
+    let h = (ball * ball - shank.radius * shank.radius)
+        .max(0.0)
+        .sqrt()
+        .min(len);
+    Capsule {
+        a: shank.a + d * (h / len),
+        ..shank
+    }
 }
 
 /// The scene a plan moves in.
@@ -312,8 +336,14 @@ impl<'a> Scene<'a> {
     fn search(&self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
         let m = self.cfg.margin_mm;
         for c in self.bodies(robot, q) {
+            // grinding: the stretch of the shank inside the ball is the ball, which may touch
+            let c = match (c.body, allow) {
+                (Body::Shank, Allow::Grind) => outside_ball(c, self.ball),
+                _ => c,
+            };
             let need = match (c.body, allow) {
-                (Body::Ball, Allow::Contact | Allow::Grind) => -self.cfg.contact_tolerance_mm,
+                (Body::Ball, Allow::Contact) => -self.cfg.contact_tolerance_mm,
+                (Body::Ball, Allow::Grind) => -(self.cfg.contact_tolerance_mm + self.cfg.press_mm),
                 _ => m,
             };
             let grind_ball = c.body == Body::Ball && allow == Allow::Grind;

@@ -7,9 +7,25 @@ use super::collide::CollisionConfig;
 use super::error::PlanError;
 use super::inspection::Inspection;
 use super::raster::RasterGeometry;
+use super::removal;
 use super::trajectory::TrajectoryConfig;
 use super::validate::ValidationConfig;
 use crate::robot::{IkConfig, Robot};
+
+/// How `plan` removes material.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum PlanMode {
+    /// A compliant tool pressed at its preload, one raster per region, the dwell of every
+    /// contact from Preston's law (`--mode removal`; not yet the default: on the demo part
+    /// its predicted residual stays above the tolerance, see docs/ALGORITHMS.md "Removal
+    /// mode").
+    Removal,
+    /// Depth layers of `depth_step_mm` at one feed: a rigid burr on a stiff machine (the
+    /// default until removal mode meets the tolerance on the demo part).
+    #[default]
+    Rigid,
+}
 
 /// Settings of the grinding planner. Lengths on the part in millimetres.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -63,6 +79,16 @@ pub struct PlanConfig {
     pub validation: ValidationConfig,
     /// The collision model: margins, link radii, fixed solids.
     pub collision: CollisionConfig,
+    /// Rigid depth layers (default) or removal.
+    pub mode: PlanMode,
+    /// The dwell solve of removal mode.
+    pub removal: removal::RemovalConfig,
+    /// The Monte Carlo of the arm's error in removal mode.
+    pub monte_carlo: removal::montecarlo::MonteCarloConfig,
+    /// Share of each servo's rated torque the contact force may take (0.5, issue 28).
+    pub force_share: f64,
+    /// Tolerance of the removal mode when the inspection names none, mm (0.05, issue 28).
+    pub tolerance_mm: f64,
 }
 
 impl Default for PlanConfig {
@@ -91,6 +117,25 @@ impl Default for PlanConfig {
             trajectory: TrajectoryConfig::default(),
             validation: ValidationConfig::default(),
             collision: CollisionConfig::default(),
+            mode: PlanMode::Rigid,
+            removal: removal::RemovalConfig::default(),
+            monte_carlo: removal::montecarlo::MonteCarloConfig::default(),
+            force_share: removal::force::DEFAULT_FORCE_SHARE,
+            tolerance_mm: DEFAULT_TOLERANCE_MM,
+        }
+    }
+}
+
+/// Tolerance of removal mode when the inspection names none, mm: the issue's acceptance
+/// tolerance.
+pub const DEFAULT_TOLERANCE_MM: f64 = 0.05;
+
+impl PlanConfig {
+    /// The defaults in rigid mode (today's depth layers).
+    pub fn rigid() -> Self {
+        PlanConfig {
+            mode: PlanMode::Rigid,
+            ..PlanConfig::default()
         }
     }
 }
@@ -151,6 +196,28 @@ impl PlanConfig {
         self.collision
             .check(robot.dof())
             .map_err(PlanError::Config)?;
+        self.removal.check().map_err(PlanError::Config)?;
+        let mc = &self.monte_carlo;
+        let mc_ok = (1..=10_000).contains(&mc.draws)
+            && (0.0..=10.0).contains(&mc.backlash_deg)
+            && (0.0..=50.0).contains(&mc.tip_error_mm)
+            && (0.5..1.0).contains(&mc.quantile);
+        if !mc_ok {
+            return Err(PlanError::Config(format!(
+                "`monte_carlo` {mc:?} is outside draws 1..=10000, backlash_deg 0..=10, \
+                 tip_error_mm 0..=50, quantile 0.5..1"
+            )));
+        }
+        for (name, v) in [
+            ("force_share", self.force_share),
+            ("tolerance_mm", self.tolerance_mm),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= 10.0) {
+                return Err(PlanError::Config(format!(
+                    "`{name}` = {v:?} is outside 0 (excluded)..=10"
+                )));
+            }
+        }
         if !(self.joint_margin > 0.0 && self.joint_margin <= 1.0) {
             let m = self.joint_margin;
             return Err(PlanError::Config(format!(

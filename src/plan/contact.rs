@@ -19,6 +19,9 @@ pub enum SegmentKind {
     Retract,
     /// At rest between strokes: down one depth step, or a change of tool tilt.
     Reorient,
+    /// Removal mode: along the normal between touching the surface and the preload depth
+    /// (in before the first contact of a run, out after its last), under the grinding rule.
+    Press,
 }
 
 /// A moving body.

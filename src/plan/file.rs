@@ -55,6 +55,9 @@ pub struct Plan {
     pub reachability: Reachability,
     /// Measured quality of the plan.
     pub metrics: Metrics,
+    /// Removal mode: the dwell map and the predicted part per region (absent in rigid mode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub removal: Option<super::preston::RemovalReport>,
 }
 
 /// A plan that passed [`Plan::check`]: its frames as bytes and their raw poses.

@@ -16,8 +16,10 @@ pub mod file;
 pub mod frames;
 pub mod inspection;
 pub mod order;
+pub mod preston;
 pub mod program;
 pub mod raster;
+mod regions;
 pub mod removal;
 pub mod report;
 pub mod ros;
@@ -25,11 +27,9 @@ pub mod surface;
 pub mod trajectory;
 pub mod validate;
 
-use nalgebra::Point3;
-
 pub use clearance::Collision;
 pub use collide::{CollisionConfig, Solid};
-pub use config::{PlanConfig, MAX_CONTACT_POINTS, MAX_LAYERS};
+pub use config::{PlanConfig, PlanMode, DEFAULT_TOLERANCE_MM, MAX_CONTACT_POINTS, MAX_LAYERS};
 pub use error::PlanError;
 pub use file::{Plan, Sample};
 pub use inspection::{Inspection, RegionInfo, SurfacePoint};
@@ -50,53 +50,38 @@ pub fn plan(
     config: &PlanConfig,
 ) -> Result<Plan, PlanError> {
     config.check(robot)?;
+    let tool = match config.mode {
+        PlanMode::Rigid => None,
+        PlanMode::Removal => Some(preston::tool_model(robot)?),
+    };
+    // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
+    // collision model (grinding, pressing in and out) accepts that much more penetration
+    let mut adjusted = config.clone();
+    if let Some(t) = &tool {
+        adjusted.collision.press_mm = t.preload_mm;
+    }
+    let config = &adjusted;
     let radius_mm = robot.tool.radius * 1e3;
     let reach = radius_mm + config.contact_offset_mm;
-    let geometry = config.geometry(radius_mm);
+    let geometry = match &tool {
+        None => config.geometry(radius_mm),
+        Some(t) => regions::removal_geometry(t, radius_mm, config),
+    };
     check_work(inspection, &geometry)?;
-    let surface = surface::Surface::new(&inspection.points);
     let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
-
-    // visiting order: from the home tool tip over the region centroids (robot frame, mm)
-    let planned: Vec<&RegionInfo> = inspection
-        .regions
-        .iter()
-        .filter(|r| r.repairable && !raster::layer_offsets(r.peak, &geometry).is_empty())
-        .collect();
-    let centroids: Vec<Point3<f64>> = planned
-        .iter()
-        .map(|r| workcell.point_from_reference_mm(&r.centroid.into()) * 1e3)
-        .collect();
-    let start = Point3::from(robot.fk(&config.home).position * 1e3);
-    let visit = order::order(&start, &centroids);
-
+    let fallback = removal::ToolModel::default();
+    let ctx = preston::Setup {
+        tool: tool.as_ref().unwrap_or(&fallback),
+        robot,
+        workcell,
+        config,
+    };
     let mut reachability = Reachability::default();
-    let mut runs = Vec::new();
-    let mut prev = config.home.clone();
-    let mut counts = std::collections::HashMap::new();
-    for &k in &visit {
-        let region = planned[k];
-        let members: Vec<SurfacePoint> = inspection
-            .region_points(region.id)
-            .into_iter()
-            .map(|i| inspection.points[i])
-            .collect();
-        let strokes = raster::raster(region, &members, &surface, &geometry);
-        runs.extend(program::walk(
-            &strokes,
-            robot,
-            workcell,
-            config,
-            reach,
-            &scene,
-            &mut prev,
-            &mut reachability.unreachable,
-            &mut reachability.jumps,
-        ));
-        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
-        let layers = raster::layer_offsets(region.peak, &geometry).len();
-        counts.insert(region.id, (layers, total));
-    }
+    let regions::Planned {
+        runs,
+        counts,
+        allowances,
+    } = regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
     let mut prog = assemble::assemble(
         runs,
         robot,
@@ -105,6 +90,10 @@ pub fn plan(
         &scene,
         &mut reachability.unreachable,
     )?;
+    let removal = match &tool {
+        None => None,
+        Some(_) => Some(preston::predict(&prog, inspection, &allowances, &ctx)?),
+    };
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability
@@ -156,6 +145,7 @@ pub fn plan(
         frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
         reachability,
         metrics,
+        removal,
     })
 }
 

@@ -41,6 +41,11 @@ pub struct PlannedPass {
     pub kind: StrokeKind,
     /// Cruise speed planned, mm/s (the feed unless the joints need less).
     pub feed_mm_s: f64,
+    /// Removal mode: time the trajectory takes over this piece, s (the dwell solved for its
+    /// contact, rounded up to whole bus periods; the shortest rest-to-rest move where the
+    /// solve asked for less). Absent in rigid mode.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dwell_s: Option<f64>,
     /// The points.
     pub points: Vec<PlannedPoint>,
 }
@@ -152,6 +157,7 @@ pub(crate) fn walk(
             layer: stroke.layer,
             kind: stroke.kind,
             feed_mm_s: cfg.feed_mm_s,
+            dwell_s: None,
             points: Vec::new(),
         };
         for (pi, ((p, target), sol)) in stroke.points.iter().zip(&targets).zip(solved).enumerate() {
@@ -205,7 +211,7 @@ fn misfit(p: &PathPoint, reach: f64, scene: &Scene) -> Option<String> {
     if let Some(hit) = scene.second_face(&centre, Some(&p.normal)) {
         return Some(hit.to_string());
     }
-    let tol = scene.config().contact_tolerance_mm;
+    let tol = scene.config().contact_tolerance_mm + scene.config().press_mm;
     let clear = scene.ball_clearance(&centre, -tol);
     (clear < -tol).then(|| {
         format!(
@@ -343,13 +349,16 @@ impl Program {
         }
         let spline = JointSpline::new(s, q);
         let wanted = PathLimits {
-            velocity: cfg.feed_mm_s * 1e-3,
+            velocity: piece.feed_mm_s * 1e-3,
             acceleration: cfg.path_acceleration,
             jerk: cfg.path_jerk,
         };
-        let lim = path_limits(&spline, &robot.joints, wanted, cfg.joint_margin);
+        let mut lim = path_limits(&spline, &robot.joints, wanted, cfg.joint_margin);
         if lim.velocity < wanted.velocity * (1.0 - 1e-9) {
             self.slowed += 1;
+        }
+        if let Some(dwell) = piece.dwell_s {
+            lim.velocity = super::preston::speed_for_dwell(spline.length(), &lim, dwell, cfg)?;
         }
         piece.feed_mm_s = lim.velocity * 1e3;
         let first = self.trajectory.len() - 1;
@@ -367,6 +376,9 @@ impl Program {
                 self.trajectory.push(sample);
             }
             self.cruise.extend(cruise);
+        }
+        if piece.dwell_s.is_some() {
+            piece.dwell_s = Some(added as f64 * cfg.trajectory.period);
         }
         self.segments.push(Segment {
             kind: SegmentKind::Grind,

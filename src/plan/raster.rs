@@ -76,6 +76,19 @@ pub fn raster(
     surface: &Surface,
     g: &RasterGeometry,
 ) -> Vec<Stroke> {
+    raster_at(region, members, surface, g, &layer_offsets(region.peak, g))
+}
+
+/// Strokes over `region` as [`raster`] does, one layer per contact height of `offsets` (mm
+/// above the nominal surface; the removal planner's single layer sits below it by the
+/// preload).
+pub fn raster_at(
+    region: &RegionInfo,
+    members: &[SurfacePoint],
+    surface: &Surface,
+    g: &RasterGeometry,
+    offsets: &[f64],
+) -> Vec<Stroke> {
     let lines = raster_lines(region, members, g);
     let mut out = Vec::new();
     let project = |uv: &[Point3<f64>], offset: f64| -> Vec<PathPoint> {
@@ -92,7 +105,7 @@ pub fn raster(
     };
     let mut order: Vec<usize> = (0..lines.len()).collect();
     let mut forward = true;
-    for (layer, offset) in layer_offsets(region.peak, g).into_iter().enumerate() {
+    for (layer, &offset) in offsets.iter().enumerate() {
         let mut previous_end: Option<Point3<f64>> = None;
         for &i in &order {
             let mut line = lines[i].clone();

@@ -19,11 +19,15 @@ pub struct MonteCarloConfig {
     pub draws: usize,
     /// Seed of the draws (28): a plan is reproducible.
     pub seed: u64,
-    /// Backlash per servo, degrees (1.0: "backlash up to 1 deg per servo", DOFBOT.md); each
-    /// draw puts every joint uniformly within +-half of it.
+    /// Backlash per servo not already in `tip_error_mm`, degrees (0: `calibrate verify`
+    /// moves to its poses the way a plan does and measures the tip there, so what backlash
+    /// the cell shows is in its tip error; DOFBOT.md's "up to 1 deg per servo" is a
+    /// worst case kept for a cell that was not verified); each draw puts every joint
+    /// uniformly within +-half of it.
     pub backlash_deg: f64,
-    /// Tool-tip error after calibration, mm per axis (0.5; replace with the RMS residual of
-    /// `calibrate verify`); each draw shifts the tip uniformly within +-this on every axis.
+    /// Tool-tip error after calibration, mm per axis: the worst tool tip `calibrate verify`
+    /// reports (0.12: 0.119 mm from `calibrate verify --sim` on the simulated cell; set the
+    /// real cell's value); each draw shifts the tip uniformly within +-this on every axis.
     pub tip_error_mm: f64,
     /// Share of the 95th percentile taken as the verdict (0.95).
     pub quantile: f64,
@@ -34,8 +38,8 @@ impl Default for MonteCarloConfig {
         MonteCarloConfig {
             draws: 50,
             seed: 28,
-            backlash_deg: 1.0,
-            tip_error_mm: 0.5,
+            backlash_deg: 0.0,
+            tip_error_mm: 0.12,
             quantile: 0.95,
         }
     }

@@ -1,0 +1,113 @@
+//! The regions of a plan in visiting order: rastered, walked and, in removal mode, given
+//! their dwell.
+use nalgebra::Point3;
+
+use super::config::PlanConfig;
+use super::error::PlanError;
+use super::inspection::{Inspection, RegionInfo, SurfacePoint};
+use super::raster::RasterGeometry;
+use super::report::Reachability;
+use super::{collide, order, preston, program, raster, removal, surface};
+
+/// The regions planned, their runs and per region (layers, contact points); in removal mode
+/// also the allowance each region's robust solve settled on.
+pub(crate) struct Planned {
+    pub(crate) runs: Vec<program::Run>,
+    pub(crate) counts: std::collections::HashMap<usize, (usize, usize)>,
+    pub(crate) allowances: Vec<(usize, f64)>,
+}
+
+/// Rasters, solves and (in removal mode) sets the dwell of every repairable region in
+/// visiting order, from the home tool tip over the region centroids.
+pub(crate) fn plan_regions(
+    inspection: &Inspection,
+    ctx: &preston::Setup,
+    tool: Option<&removal::ToolModel>,
+    scene: &collide::Scene,
+    reachability: &mut Reachability,
+) -> Result<Planned, PlanError> {
+    let (robot, workcell, config) = (ctx.robot, ctx.workcell, ctx.config);
+    let radius_mm = robot.tool.radius * 1e3;
+    let reach = radius_mm + config.contact_offset_mm;
+    let geometry = match tool {
+        None => config.geometry(radius_mm),
+        Some(t) => removal_geometry(t, radius_mm, config),
+    };
+    let surface = surface::Surface::new(&inspection.points);
+    let planned: Vec<&RegionInfo> = inspection
+        .regions
+        .iter()
+        .filter(|r| r.repairable && !raster::layer_offsets(r.peak, &geometry).is_empty())
+        .collect();
+    let centroids: Vec<Point3<f64>> = planned
+        .iter()
+        .map(|r| workcell.point_from_reference_mm(&r.centroid.into()) * 1e3)
+        .collect();
+    let start = Point3::from(robot.fk(&config.home).position * 1e3);
+    let visit = order::order(&start, &centroids);
+    let mut out = Planned {
+        runs: Vec::new(),
+        counts: std::collections::HashMap::new(),
+        allowances: Vec::new(),
+    };
+    let mut prev = config.home.clone();
+    for &k in &visit {
+        let region = planned[k];
+        let members: Vec<SurfacePoint> = inspection
+            .region_points(region.id)
+            .into_iter()
+            .map(|i| inspection.points[i])
+            .collect();
+        let offsets = match tool {
+            None => raster::layer_offsets(region.peak, &geometry),
+            Some(t) => vec![-t.preload_mm],
+        };
+        let strokes = raster::raster_at(region, &members, &surface, &geometry, &offsets);
+        let runs = program::walk(
+            &strokes,
+            robot,
+            workcell,
+            config,
+            reach,
+            scene,
+            &mut prev,
+            &mut reachability.unreachable,
+            &mut reachability.jumps,
+        );
+        let runs = match tool {
+            None => runs,
+            Some(_) => match preston::set_dwell(runs, region, inspection, ctx)? {
+                Ok((runs, allowance)) => {
+                    out.allowances.push((region.id, allowance));
+                    runs
+                }
+                Err(reason) => {
+                    preston::leave_out(&strokes, &reason, workcell, &mut reachability.unreachable);
+                    Vec::new()
+                }
+            },
+        };
+        out.runs.extend(runs);
+        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
+        out.counts.insert(region.id, (offsets.len(), total));
+    }
+    Ok(out)
+}
+
+/// Raster geometry of removal mode: lines and contacts spaced as shares of the tool's contact
+/// patch radius (`removal.stepover_share`, `removal.spacing_share`), the patch as footprint;
+/// one layer (the depth step spans any peak).
+pub(crate) fn removal_geometry(
+    tool: &removal::ToolModel,
+    radius_mm: f64,
+    config: &PlanConfig,
+) -> RasterGeometry {
+    let patch = removal::Influence::new(tool, radius_mm).patch_radius();
+    RasterGeometry {
+        stepover: config.removal.stepover_share * patch,
+        footprint: patch,
+        spacing: config.removal.spacing_share * patch,
+        depth_step: f64::MAX,
+        allowance: config.allowance_mm,
+    }
+}
