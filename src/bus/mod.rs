@@ -56,7 +56,11 @@ pub fn install_ctrlc(flag: Arc<AtomicBool>) -> Result<(), BusError> {
         return Ok(());
     }
     ctrlc::set_handler(|| {
-        if let Some(f) = CTRLC_FLAG.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
+        if let Some(f) = CTRLC_FLAG
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+        {
             f.store(true, Ordering::SeqCst);
         }
     })

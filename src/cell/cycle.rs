@@ -81,11 +81,7 @@ pub struct Measured {
 impl Measured {
     /// Summary of an inspection: its verdict (regions.json) and its regions and core points.
     pub fn of(verdict: Verdict, inspection: &Inspection) -> Measured {
-        let repairable: Vec<&Region> = inspection
-            .regions
-            .iter()
-            .filter(|r| r.repairable)
-            .collect();
+        let repairable: Vec<&Region> = inspection.regions.iter().filter(|r| r.repairable).collect();
         let ids: Vec<i64> = repairable.iter().map(|r| r.id as i64).collect();
         let d: Vec<f64> = inspection
             .points
@@ -301,7 +297,9 @@ impl Outcome {
         match self {
             Outcome::Continue => "continue",
             Outcome::WithinTolerance => "within tolerance",
-            Outcome::NothingToGrind => "not finished: no repairable region left to grind",
+            Outcome::NothingToGrind => {
+                "not finished: no repairable region left (pits remain: the part is rejected)"
+            }
             Outcome::NothingPlanned => "not finished: the plan reaches none of the regions",
             Outcome::NoProgress => "not finished: no progress (less removed than --min-progress)",
             Outcome::MaxIterations => "not finished: --max-iterations reached",
@@ -381,7 +379,8 @@ pub fn table_row(r: &IterationRecord) -> [String; 9] {
             opt(r.predicted_residual_mm, 4),
             opt(r.achieved_residual_mm, 4)
         ),
-        r.k_fitted.map_or("not fitted".into(), |k| format!("{k:.3e}")),
+        r.k_fitted
+            .map_or("not fitted".into(), |k| format!("{k:.3e}")),
     ]
 }
 
@@ -428,7 +427,10 @@ pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
          td,th{border:1px solid #999;padding:4px 8px;text-align:right}</style></head><body>\n\
          <h1>polishbot cycle</h1>\n<table>\n",
     );
-    html += &format!("<tr>{}</tr>\n", cells(&TABLE_HEADER.map(str::to_string), "th"));
+    html += &format!(
+        "<tr>{}</tr>\n",
+        cells(&TABLE_HEADER.map(str::to_string), "th")
+    );
     for r in records {
         html += &format!("<tr>{}</tr>\n", cells(&table_row(r), "td"));
     }

@@ -5,6 +5,8 @@
 //! Front functions: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the closed
 //! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`].
 pub mod cycle;
+mod reach;
 mod stream;
 
+pub use reach::reachable_sites;
 pub use stream::{execute, RunConfig, RunReport};

@@ -96,9 +96,10 @@ impl Configs {
             );
         }
         let mut files = Configs::default();
-        for (name, slot) in SECTIONS
-            .iter()
-            .zip([&mut files.inspect, &mut files.plan, &mut files.run])
+        for (name, slot) in
+            SECTIONS
+                .iter()
+                .zip([&mut files.inspect, &mut files.plan, &mut files.run])
         {
             let Some(section) = table.get(*name) else {
                 continue;
@@ -246,7 +247,8 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
     let mut scan = l.scan.clone();
     for k in 1.. {
         let dir = l.out.join(format!("iter-{k}"));
-        std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
         println!("== cycle: iteration {k}: inspect {}", scan.display());
         let (inspection_dir, plan_file) = match (&l.first, k) {
             (Some((i, p)), 1) => (i.clone(), p.clone()),

@@ -6,14 +6,13 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 
 use super::common::read_json;
 use super::{inspect, plan, run as run_cmd};
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::plan::Plan;
 use crate::regions::Regions;
-use crate::robot::{self as robot_model, IkConfig, IkTarget, RobotConfig};
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
 /// Arguments of `demo`.
@@ -40,41 +39,10 @@ fn demo_config(seed: u64) -> SynthConfig {
     }
 }
 
-/// A site filter: the defect's centre and four points on its rim must be reachable with the
-/// tool against the surface (the default cell calibration), so the demo can grind them.
-fn reachable_sites() -> Result<impl Fn(&Point3<f64>, &Vector3<f64>, f64) -> bool + Sync> {
-    let robot_cfg = RobotConfig::default();
-    let (robot, workcell) = robot_model::load(&robot_cfg)?;
-    let ik = IkConfig {
-        limit_margin: 0.02,
-        ..robot_cfg.ik
-    };
-    let ball_mm = robot.tool.radius * 1000.0;
-    let home = vec![0.0; robot.dof()];
-    Ok(move |p: &Point3<f64>, n: &Vector3<f64>, radius: f64| {
-        let t1 = n
-            .cross(&Vector3::x())
-            .try_normalize(1e-6)
-            .unwrap_or_else(|| n.cross(&Vector3::y()).normalize());
-        let t2 = n.cross(&t1);
-        [Vector3::zeros(), t1, -t1, t2, -t2].iter().all(|t| {
-            let contact = p + t * radius;
-            let target = IkTarget {
-                position: workcell
-                    .point_from_reference_mm(&(contact + n * ball_mm))
-                    .coords,
-                axis: -workcell.direction_from_reference(n),
-                roll: None,
-            };
-            robot.ik(&target, &home, &ik).is_ok()
-        })
-    })
-}
-
-/// Grinding iterations of the demo's loop: two fit the 60 s the demo may take (one
-/// inspection of the demo part takes about 10 s on the 2-core test machine) and show a
-/// second plan made from a rescan.
-const DEMO_ITERATIONS: usize = 2;
+/// Grinding iterations of the demo's loop: one grind, rescan and re-inspection adds about
+/// 20 s on the 2-core machine under load (a second added 34 s more: the demo took 71 s,
+/// over its 60 s); `polishbot cycle` runs the full loop.
+const DEMO_ITERATIONS: usize = 1;
 
 fn step(name: &str) {
     println!("== {name}");
@@ -85,7 +53,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let start = Instant::now();
     let out = args.out;
     step("synth: parametric femoral component with defects planted where the arm reaches");
-    let reachable = reachable_sites()?;
+    let reachable = crate::cell::reachable_sites()?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
     case.write(&out)?;
     let inspection = out.join("inspection");
