@@ -135,9 +135,15 @@ fn an_unknown_table_in_the_cycle_settings_is_refused_naming_file_and_line() {
     );
 }
 
-/// The case: 5 defects (0.08-0.5 mm) where the arm reaches, a fifth of them pits.
+/// Seeds tried from the one given until synth places all 5 defects (some seeds place only 4
+/// clear of the edges and of each other where the arm reaches).
+const SEED_TRIES: u64 = 20;
+
+/// The case: 5 defects (0.08-0.5 mm) where the arm reaches, a fifth of them pits;
+/// the first seed from `seed` on that places all five.
 fn case(seed: u64, dir: &Path) -> Truth {
-    let cfg = SynthConfig {
+    let reachable = polishbot::cell::reachable_sites().unwrap();
+    let make = |seed| SynthConfig {
         seed,
         defects: 5,
         height_range: [0.08, 0.5],
@@ -147,8 +153,10 @@ fn case(seed: u64, dir: &Path) -> Truth {
         scan_points: 150_000,
         ..SynthConfig::default()
     };
-    let reachable = polishbot::cell::reachable_sites().unwrap();
-    let case = synth_at(&cfg, &reachable).unwrap();
+    let case = (seed..seed + SEED_TRIES)
+        .find_map(|s| synth_at(&make(s), &reachable).ok())
+        .expect("a seed that places 5 defects");
+    println!("synth seed {}", case.truth.seed);
     case.write(dir).unwrap();
     case.truth
 }

@@ -92,7 +92,7 @@ impl Configs {
                 "{}: line {}: unknown table `{k}` (cycle's settings have [inspect], [plan] and \
                  [run], each holding that command's settings)",
                 path.display(),
-                super::settings::line_of_key(&text, "", k).unwrap_or(1)
+                table_line(&text, k)
             );
         }
         let mut files = Configs::default();
@@ -113,6 +113,17 @@ impl Configs {
         }
         Ok(files)
     }
+}
+
+/// 1-based line where the top-level key `k` first appears (`[k]`, `[k.x]`, `k = ` or
+/// `k.x = `); 1 when not found.
+fn table_line(text: &str, k: &str) -> usize {
+    let starts = |l: &str| {
+        let l = l.trim_start().trim_start_matches('[');
+        l.strip_prefix(k)
+            .is_some_and(|r| r.trim_start().starts_with(['.', ']', '=']))
+    };
+    text.lines().position(starts).map_or(1, |i| i + 1)
 }
 
 /// One loop to run: `demo` builds it with its own first inspection and plan.
