@@ -224,6 +224,19 @@ const FIRST_DROP_MM: f64 = 0.01;
 /// few hundred points with 0.015 mm scanner noise moves by about this much between rescans.
 const RESCAN_MARGIN_MM: f64 = 0.01;
 
+/// `cycle` on the case in `dir` (reference.ply, scan.ply) into `dir/out`.
+fn cycle(dir: &Path, out: &str) -> std::process::Command {
+    let mut cmd = polishbot();
+    cmd.arg("cycle")
+        .arg("--reference")
+        .arg(dir.join("reference.ply"))
+        .arg("--scan")
+        .arg(dir.join("scan.ply"))
+        .arg("-o")
+        .arg(dir.join(out));
+    cmd
+}
+
 #[test]
 fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pits() {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cycle");
@@ -233,15 +246,9 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
     // the simulator's true k 1.3 x the planner's (issue 29's "30 % off")
     let cfg = dir.join("cycle.toml");
     std::fs::write(&cfg, "[run.sim.grinding]\nk_factor = 1.3\n").unwrap();
-    let out = polishbot()
-        .args(["cycle", "--sim", "--max-iterations", "2", "--config"])
+    let out = cycle(&dir, "cycle")
+        .args(["--sim", "--max-iterations", "2", "--config"])
         .arg(&cfg)
-        .arg("--reference")
-        .arg(dir.join("reference.ply"))
-        .arg("--scan")
-        .arg(dir.join("scan.ply"))
-        .arg("-o")
-        .arg(dir.join("cycle"))
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -329,15 +336,9 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
 
     // a real arm: the next scan's path comes on stdin (here the fake I2C board of the
     // link tests, and the sim's rescan as "the next scan")
-    let mut child = polishbot()
-        .args(["cycle", "--i2c", "/dev/i2c-fake", "--max-iterations", "1"])
+    let mut child = cycle(&dir, "real")
+        .args(["--i2c", "/dev/i2c-fake", "--max-iterations", "1"])
         .env("POLISHBOT_TEST_FAKE_I2C", dir.join("i2c.log"))
-        .arg("--reference")
-        .arg(dir.join("reference.ply"))
-        .arg("--scan")
-        .arg(dir.join("scan.ply"))
-        .arg("-o")
-        .arg(dir.join("real"))
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
