@@ -42,9 +42,27 @@ pub use serial::SerialTransport;
 pub use sim::{SimArm, SimOptions, SimTransport};
 pub use transport::Transport;
 
-/// Sets `flag` on Ctrl-C (SIGINT) so the bus sends no further motion frames. Call once per
-/// process.
+/// The flag the Ctrl-C handler sets: the last one given to [`install_ctrlc`].
+static CTRLC_FLAG: std::sync::Mutex<Option<Arc<AtomicBool>>> = std::sync::Mutex::new(None);
+
+/// Sets `flag` on Ctrl-C (SIGINT) so the bus sends no further motion frames. The handler is
+/// installed once per process; a later call (the next run of `cycle`) points it at its flag.
 pub fn install_ctrlc(flag: Arc<AtomicBool>) -> Result<(), BusError> {
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-        .map_err(|e| BusError::Refused(format!("cannot install the Ctrl-C handler: {e}")))
+    let first = {
+        let mut current = CTRLC_FLAG.lock().unwrap_or_else(|e| e.into_inner());
+        current.replace(flag).is_none()
+    };
+    if !first {
+        return Ok(());
+    }
+    ctrlc::set_handler(|| {
+        if let Some(f) = CTRLC_FLAG
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+        {
+            f.store(true, Ordering::SeqCst);
+        }
+    })
+    .map_err(|e| BusError::Refused(format!("cannot install the Ctrl-C handler: {e}")))
 }

@@ -2,7 +2,11 @@
 //! its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
 //! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
 //!
-//! Front function: [`execute`] with a [`RunConfig`]; result: [`RunReport`].
+//! Front functions: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the closed
+//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`].
+pub mod cycle;
+mod reach;
 mod stream;
 
+pub use reach::reachable_sites;
 pub use stream::{execute, RunConfig, RunReport};

@@ -6,14 +6,13 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 
 use super::common::read_json;
 use super::{inspect, plan, run as run_cmd};
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::plan::Plan;
 use crate::regions::Regions;
-use crate::robot::{self as robot_model, IkConfig, IkTarget, RobotConfig};
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
 /// Arguments of `demo`.
@@ -40,36 +39,10 @@ fn demo_config(seed: u64) -> SynthConfig {
     }
 }
 
-/// A site filter: the defect's centre and four points on its rim must be reachable with the
-/// tool against the surface (the default cell calibration), so the demo can grind them.
-fn reachable_sites() -> Result<impl Fn(&Point3<f64>, &Vector3<f64>, f64) -> bool + Sync> {
-    let robot_cfg = RobotConfig::default();
-    let (robot, workcell) = robot_model::load(&robot_cfg)?;
-    let ik = IkConfig {
-        limit_margin: 0.02,
-        ..robot_cfg.ik
-    };
-    let ball_mm = robot.tool.radius * 1000.0;
-    let home = vec![0.0; robot.dof()];
-    Ok(move |p: &Point3<f64>, n: &Vector3<f64>, radius: f64| {
-        let t1 = n
-            .cross(&Vector3::x())
-            .try_normalize(1e-6)
-            .unwrap_or_else(|| n.cross(&Vector3::y()).normalize());
-        let t2 = n.cross(&t1);
-        [Vector3::zeros(), t1, -t1, t2, -t2].iter().all(|t| {
-            let contact = p + t * radius;
-            let target = IkTarget {
-                position: workcell
-                    .point_from_reference_mm(&(contact + n * ball_mm))
-                    .coords,
-                axis: -workcell.direction_from_reference(n),
-                roll: None,
-            };
-            robot.ik(&target, &home, &ik).is_ok()
-        })
-    })
-}
+/// Grinding iterations of the demo's loop: one grind, rescan and re-inspection adds about
+/// 20 s on the 2-core machine under load (a second added 34 s more: the demo took 71 s,
+/// over its 60 s); `polishbot cycle` runs the full loop.
+const DEMO_ITERATIONS: usize = 1;
 
 fn step(name: &str) {
     println!("== {name}");
@@ -80,7 +53,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let start = Instant::now();
     let out = args.out;
     step("synth: parametric femoral component with defects planted where the arm reaches");
-    let reachable = reachable_sites()?;
+    let reachable = crate::cell::reachable_sites()?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
     case.write(&out)?;
     let inspection = out.join("inspection");
@@ -135,6 +108,24 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         None,
     )?;
     summary(&out, &inspection, &plan_file, &case.truth)?;
+    step("cycle: grind the virtual part, rescan, inspect, plan again (the closed loop)");
+    let outcome = super::cycle::run_loop(&super::cycle::Loop {
+        reference: out.join("reference.ply"),
+        scan: out.join("scan.ply"),
+        out: out.join("cycle"),
+        config: crate::cell::cycle::CycleConfig {
+            max_iterations: DEMO_ITERATIONS,
+            ..Default::default()
+        },
+        device: super::arm::DeviceArgs::sim(),
+        input: super::common::GeometryInput {
+            units: Some(crate::cloud::Units::Mm),
+            format: None,
+        },
+        configs: super::cycle::Configs::default(),
+        first: Some((inspection.clone(), plan_file.clone())),
+    })?;
+    println!("demo: the loop ended: {}", outcome.describe());
     println!(
         "demo: done in {:.1} s; everything is in {}",
         start.elapsed().as_secs_f64(),

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod arm;
 mod calibrate;
 mod common;
+mod cycle;
 mod demo;
 mod filter;
 mod grind;
@@ -60,6 +61,8 @@ pub enum Command {
     Synth(Box<synth::SynthArgs>),
     /// The whole chain on a built-in part against the simulated arm.
     Demo(demo::DemoArgs),
+    /// The closed loop: inspect, plan, run, rescan, until within tolerance.
+    Cycle(Box<cycle::CycleArgs>),
 }
 
 /// Parses the command line, runs the command and maps errors to a one-line message and exit 1.
@@ -71,6 +74,10 @@ pub fn main() -> ExitCode {
         Err(err) if err.is::<inspect_report::Incomplete>() => {
             eprintln!("polishbot: {err}");
             ExitCode::from(inspect_report::INCOMPLETE_EXIT)
+        }
+        Err(err) if err.is::<cycle::NotFinished>() => {
+            eprintln!("polishbot: {err}");
+            ExitCode::from(cycle::NOT_FINISHED_EXIT)
         }
         Err(err) => {
             eprintln!("polishbot: {}", one_line(&err));
@@ -93,6 +100,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Arm(args) => arm::run(args, config),
         Command::Calibrate(args) => calibrate::run(args, config),
         Command::Demo(args) => demo::run(args, config),
+        Command::Cycle(args) => cycle::run(*args, config),
     }
 }
 

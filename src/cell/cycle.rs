@@ -1,0 +1,444 @@
+//! The closed scan-grind-rescan loop (`polishbot cycle`) as data: what one inspection of the
+//! loop measured, what its plan set out to remove, and the rule that ends the loop. The
+//! command line (src/cli/cycle.rs) runs inspect, plan and run and feeds these types; nothing
+//! here touches a file or the arm.
+//!
+//! Front function: [`decide`] with a [`CycleConfig`]; one [`IterationRecord`] per inspection.
+use serde::{Deserialize, Serialize};
+
+use crate::plan::Inspection;
+use crate::regions::{Region, Verdict};
+use crate::spatial::Neighbours;
+
+/// Default least share of the planned excess volume an iteration must remove to go on: a
+/// rigid depth-layer pass at the nominal k takes about 0.03 mm off a 0.14 mm region's mean
+/// (20 % of its excess, measured in tests/grind_sim.rs), while a rescan and a new
+/// registration alone move a region's volume by a few per cent; 5 % separates an iteration
+/// that ground from one that only re-measured the same part.
+pub const DEFAULT_MIN_PROGRESS: f64 = 0.05;
+
+/// Default number of grinding iterations (issue 29: "after `--max-iterations` (3)").
+pub const DEFAULT_MAX_ITERATIONS: usize = 3;
+
+/// Largest distance between a core point of two inspections for them to count as the same
+/// point, mm: core points are sampled from the same reference with the same seed, so equal
+/// points agree to the last bit; densified points of one inspection have no partner.
+const SAME_POINT_MM: f64 = 1e-6;
+
+/// Settings of the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CycleConfig {
+    /// Most grinding iterations (default [`DEFAULT_MAX_ITERATIONS`]).
+    pub max_iterations: usize,
+    /// Least share of the planned excess volume an iteration must remove (default
+    /// [`DEFAULT_MIN_PROGRESS`]).
+    pub min_progress: f64,
+}
+
+impl Default for CycleConfig {
+    fn default() -> Self {
+        CycleConfig {
+            max_iterations: DEFAULT_MAX_ITERATIONS,
+            min_progress: DEFAULT_MIN_PROGRESS,
+        }
+    }
+}
+
+impl CycleConfig {
+    /// Checks the settings; the message names the flag.
+    pub fn check(&self) -> Result<(), String> {
+        if self.max_iterations == 0 {
+            return Err("--max-iterations must be at least 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.min_progress) {
+            return Err(format!(
+                "--min-progress must be a share between 0 and 1, not {}",
+                self.min_progress
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What one inspection of the loop measured (over the repairable regions: pits are never
+/// ground and are only counted).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Measured {
+    /// The inspection's verdict.
+    pub verdict: Verdict,
+    /// Repairable regions (material in excess).
+    pub repairable: usize,
+    /// Pits (not repairable).
+    pub pits: usize,
+    /// Largest peak of a repairable region, mm (None: no repairable region).
+    pub peak_mm: Option<f64>,
+    /// RMS of the distance over the core points of repairable regions, mm.
+    pub rms_mm: Option<f64>,
+    /// Volume above the tolerance of the repairable regions, mm^3.
+    pub volume_mm3: f64,
+}
+
+impl Measured {
+    /// Summary of an inspection: its verdict (regions.json) and its regions and core points.
+    pub fn of(verdict: Verdict, inspection: &Inspection) -> Measured {
+        let repairable: Vec<&Region> = inspection.regions.iter().filter(|r| r.repairable).collect();
+        let ids: Vec<i64> = repairable.iter().map(|r| r.id as i64).collect();
+        let d: Vec<f64> = inspection
+            .points
+            .iter()
+            .filter(|p| ids.contains(&p.region) && p.distance.is_finite())
+            .map(|p| p.distance)
+            .collect();
+        Measured {
+            verdict,
+            repairable: repairable.len(),
+            pits: inspection.regions.len() - repairable.len(),
+            peak_mm: repairable.iter().map(|r| r.peak).reduce(f64::max),
+            rms_mm: rms(&d),
+            volume_mm3: repairable.iter().map(|r| r.volume).sum(),
+        }
+    }
+}
+
+/// Root mean square (None for no values).
+fn rms(d: &[f64]) -> Option<f64> {
+    (!d.is_empty()).then(|| (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt())
+}
+
+/// What plan.json says about the removal it plans, read with optional fields so that rigid
+/// plans (no `removal` object) and removal plans both read.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct PlanSummary {
+    /// Reach per region.
+    pub reachability: PlanReach,
+    /// Removal mode's prediction (absent in rigid plans).
+    #[serde(default)]
+    pub removal: Option<PlanRemoval>,
+}
+
+/// plan.json's `reachability`, the part the loop reads.
+#[derive(Debug, Clone, Default, Deserialize)]
+pub struct PlanReach {
+    /// Per region.
+    pub regions: Vec<PlanRegion>,
+}
+
+/// One region of plan.json's `reachability.regions`.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PlanRegion {
+    /// Region id.
+    pub id: usize,
+    /// Depth layers planned (0: not ground). Absent in removal plans: planned when the region
+    /// has a prediction.
+    #[serde(default)]
+    pub layers: usize,
+}
+
+/// plan.json's `removal` object (removal mode), the part the loop reads.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PlanRemoval {
+    /// Per planned region.
+    pub regions: Vec<RegionPrediction>,
+}
+
+/// One region's prediction.
+#[derive(Debug, Clone, Deserialize)]
+pub struct RegionPrediction {
+    /// Region id.
+    pub region: usize,
+    /// Core points the prediction covers.
+    pub core_points: usize,
+    /// Predicted deviation after grinding.
+    pub after: PredictedStats,
+}
+
+/// Predicted statistics of a region after grinding.
+#[derive(Debug, Clone, Deserialize)]
+pub struct PredictedStats {
+    /// RMS of the predicted residual, mm.
+    pub rms_mm: f64,
+}
+
+impl PlanSummary {
+    /// Ids of the regions the plan grinds: layers > 0, or a removal prediction.
+    pub fn planned(&self) -> Vec<usize> {
+        let mut ids: Vec<usize> = self
+            .reachability
+            .regions
+            .iter()
+            .filter(|r| r.layers > 0)
+            .map(|r| r.id)
+            .collect();
+        if let Some(rem) = &self.removal {
+            ids.extend(rem.regions.iter().map(|r| r.region));
+        }
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
+    /// The predicted RMS residual over the planned regions' points (weighted by their core
+    /// points), mm; None for a rigid plan.
+    pub fn predicted_rms(&self) -> Option<f64> {
+        let rem = self.removal.as_ref()?;
+        let n: usize = rem.regions.iter().map(|r| r.core_points).sum();
+        (n > 0).then(|| {
+            let s: f64 = rem
+                .regions
+                .iter()
+                .map(|r| r.core_points as f64 * r.after.rms_mm * r.after.rms_mm)
+                .sum();
+            (s / n as f64).sqrt()
+        })
+    }
+}
+
+/// One inspection of the loop and, when it was followed by a grind, what was planned and
+/// what the next inspection found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IterationRecord {
+    /// 1-based iteration (the folder iter-k).
+    pub iteration: usize,
+    /// What the inspection measured.
+    pub measured: Measured,
+    /// Ids of the regions the plan grinds.
+    pub planned_regions: Vec<usize>,
+    /// Excess volume of the regions the plan grinds, mm^3 (None: not planned).
+    pub planned_volume_mm3: Option<f64>,
+    /// The plan's predicted RMS residual over its regions, mm (removal plans only).
+    pub predicted_residual_mm: Option<f64>,
+    /// RMS of the next inspection's distance over the core points of the planned regions, mm.
+    pub achieved_residual_mm: Option<f64>,
+    /// Share of the planned excess volume that the next inspection found removed.
+    pub progress: Option<f64>,
+    /// Preston's k fitted after this iteration's grind, mm^2/N (None: not fitted).
+    pub k_fitted: Option<f64>,
+}
+
+impl IterationRecord {
+    /// A record of a fresh inspection (nothing planned yet).
+    pub fn new(iteration: usize, measured: Measured) -> IterationRecord {
+        IterationRecord {
+            iteration,
+            measured,
+            planned_regions: Vec::new(),
+            planned_volume_mm3: None,
+            predicted_residual_mm: None,
+            achieved_residual_mm: None,
+            progress: None,
+            k_fitted: None,
+        }
+    }
+
+    /// Records the plan made from this inspection.
+    pub fn planned(&mut self, inspection: &Inspection, plan: &PlanSummary) {
+        let ids = plan.planned();
+        let volume = inspection
+            .regions
+            .iter()
+            .filter(|r| r.repairable && ids.contains(&r.id))
+            .map(|r| r.volume)
+            .sum();
+        self.planned_volume_mm3 = Some(volume);
+        self.planned_regions = ids;
+        self.predicted_residual_mm = plan.predicted_rms();
+    }
+
+    /// Records what the next inspection found: the progress share of the planned excess
+    /// volume and the achieved residual over the planned regions' core points.
+    pub fn followed_by(&mut self, next: &Measured, before: &Inspection, after: &Inspection) {
+        if let Some(planned) = self.planned_volume_mm3.filter(|v| *v > 0.0) {
+            self.progress = Some((self.measured.volume_mm3 - next.volume_mm3) / planned);
+        }
+        let ids: Vec<i64> = self.planned_regions.iter().map(|&i| i as i64).collect();
+        self.achieved_residual_mm = achieved_residual(before, after, &ids);
+    }
+}
+
+/// RMS of `after`'s distance over `before`'s core points of the regions `ids`, matched by
+/// position ([`SAME_POINT_MM`]); None when no point matched.
+pub fn achieved_residual(before: &Inspection, after: &Inspection, ids: &[i64]) -> Option<f64> {
+    let pos: Vec<_> = after.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&pos);
+    let d: Vec<f64> = before
+        .points
+        .iter()
+        .filter(|p| ids.contains(&p.region))
+        .filter_map(|p| index.nearest(&p.position))
+        .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
+        .map(|nb| after.points[nb.index].distance)
+        .filter(|d| d.is_finite())
+        .collect();
+    rms(&d)
+}
+
+/// How the loop ended, or that it goes on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// Grind again.
+    Continue,
+    /// The last inspection's verdict is "within tolerance".
+    WithinTolerance,
+    /// No repairable region is left but the part is not within tolerance (pits, or an
+    /// incomplete verdict): grinding cannot help.
+    NothingToGrind,
+    /// The plan grinds none of the repairable regions (all out of the arm's reach).
+    NothingPlanned,
+    /// The last grind removed less than `min_progress` of the planned excess volume.
+    NoProgress,
+    /// `max_iterations` grinds were made and the part is not within tolerance.
+    MaxIterations,
+}
+
+impl Outcome {
+    /// One line for the user.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Outcome::Continue => "continue",
+            Outcome::WithinTolerance => "within tolerance",
+            Outcome::NothingToGrind => {
+                "not finished: no repairable region left (pits remain: the part is rejected)"
+            }
+            Outcome::NothingPlanned => "not finished: the plan reaches none of the regions",
+            Outcome::NoProgress => "not finished: no progress (less removed than --min-progress)",
+            Outcome::MaxIterations => "not finished: --max-iterations reached",
+        }
+    }
+}
+
+/// The stop rule, applied after each inspection. `records` are the loop's inspections in
+/// order; every record but the last was planned and ground (and followed by the next).
+/// Order: within tolerance; nothing repairable left; the last grind's progress under
+/// `min_progress`; `max_iterations` grinds made; else grind again.
+pub fn decide(records: &[IterationRecord], cfg: &CycleConfig) -> Outcome {
+    let Some(last) = records.last() else {
+        return Outcome::Continue;
+    };
+    if last.measured.verdict == Verdict::WithinTolerance {
+        return Outcome::WithinTolerance;
+    }
+    if last.measured.repairable == 0 {
+        return Outcome::NothingToGrind;
+    }
+    let grinds = records.len() - 1;
+    if let Some(prev) = grinds.checked_sub(1).map(|i| &records[i]) {
+        if prev.progress.is_none_or(|p| p < cfg.min_progress) {
+            return Outcome::NoProgress;
+        }
+    }
+    if grinds >= cfg.max_iterations {
+        return Outcome::MaxIterations;
+    }
+    Outcome::Continue
+}
+
+/// After planning the last record: [`Outcome::NothingPlanned`] when the plan grinds no
+/// excess volume, else [`Outcome::Continue`].
+pub fn decide_plan(record: &IterationRecord) -> Outcome {
+    match record.planned_volume_mm3 {
+        Some(v) if v > 0.0 => Outcome::Continue,
+        _ => Outcome::NothingPlanned,
+    }
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |x| format!("{x:.digits$}"))
+}
+
+/// The table's header cells.
+pub const TABLE_HEADER: [&str; 9] = [
+    "iter",
+    "verdict",
+    "regions (pits)",
+    "peak mm",
+    "RMS mm",
+    "volume mm3",
+    "removed %",
+    "residual pred/achieved mm",
+    "k mm2/N",
+];
+
+/// The table's cells of one record.
+pub fn table_row(r: &IterationRecord) -> [String; 9] {
+    let m = &r.measured;
+    let verdict = serde_json::to_value(m.verdict)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    [
+        r.iteration.to_string(),
+        verdict,
+        format!("{} ({})", m.repairable, m.pits),
+        opt(m.peak_mm, 4),
+        opt(m.rms_mm, 4),
+        format!("{:.4}", m.volume_mm3),
+        opt(r.progress.map(|p| 100.0 * p), 1),
+        format!(
+            "{} / {}",
+            opt(r.predicted_residual_mm, 4),
+            opt(r.achieved_residual_mm, 4)
+        ),
+        r.k_fitted
+            .map_or("not fitted".into(), |k| format!("{k:.3e}")),
+    ]
+}
+
+/// The table as aligned text, one line per record.
+pub fn table_text(records: &[IterationRecord]) -> String {
+    let rows: Vec<[String; 9]> = records.iter().map(table_row).collect();
+    let mut width = TABLE_HEADER.map(str::len);
+    for row in &rows {
+        for (w, c) in width.iter_mut().zip(row) {
+            *w = (*w).max(c.len());
+        }
+    }
+    let line = |cells: &[String]| {
+        let padded: Vec<String> = cells
+            .iter()
+            .zip(&width)
+            .map(|(c, w)| format!("{c:>w$}"))
+            .collect();
+        padded.join("  ") + "\n"
+    };
+    let mut text = line(&TABLE_HEADER.map(str::to_string));
+    for row in &rows {
+        text.push_str(&line(row));
+    }
+    text
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// `cycle.html`: the table and the outcome, plain HTML without scripts.
+pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
+    let cells = |row: &[String], tag: &str| {
+        row.iter()
+            .map(|c| format!("<{tag}>{}</{tag}>", escape(c)))
+            .collect::<String>()
+    };
+    let mut html = String::from(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>polishbot cycle</title>\n\
+         <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}\
+         td,th{border:1px solid #999;padding:4px 8px;text-align:right}</style></head><body>\n\
+         <h1>polishbot cycle</h1>\n<table>\n",
+    );
+    html += &format!(
+        "<tr>{}</tr>\n",
+        cells(&TABLE_HEADER.map(str::to_string), "th")
+    );
+    for r in records {
+        html += &format!("<tr>{}</tr>\n", cells(&table_row(r), "td"));
+    }
+    html += &format!(
+        "</table>\n<p>Outcome: {}.</p>\n<p>Each row is the inspection that began iteration k \
+         (folder iter-k); removed % and the achieved residual come from the next inspection.</p>\n\
+         </body></html>\n",
+        escape(outcome.describe())
+    );
+    html
+}

@@ -1,0 +1,312 @@
+//! `polishbot cycle --reference R --scan S (--sim | --port DEV | --i2c DEV) -o DIR
+//! [--max-iterations 3] [--min-progress SHARE]`: inspect, plan, run, rescan, until the part
+//! is within tolerance, an iteration makes no progress, or the iterations run out. This file
+//! wires folders and files; the records and the stop rule are `cell::cycle`'s.
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+
+use super::arm::DeviceArgs;
+use super::common::{read_json, GeometryInput};
+use super::{inspect, plan, run as run_cmd};
+use crate::cell::cycle::{
+    decide, decide_plan, table_html, table_text, CycleConfig, IterationRecord, Measured, Outcome,
+    PlanSummary, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
+};
+use crate::plan::Inspection;
+use crate::regions::Regions;
+
+/// Exit code of a loop that ended without the part within tolerance (no progress, iterations
+/// used up, nothing left the arm can grind); an inspection's incomplete verdict keeps its 3.
+pub const NOT_FINISHED_EXIT: u8 = 4;
+
+/// The loop ended without the part within tolerance (exit [`NOT_FINISHED_EXIT`]).
+#[derive(Debug)]
+pub struct NotFinished(pub Outcome);
+
+impl std::fmt::Display for NotFinished {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "cycle: {}", self.0.describe())
+    }
+}
+
+impl std::error::Error for NotFinished {}
+
+/// Arguments of `cycle`.
+#[derive(Debug, Args)]
+pub struct CycleArgs {
+    /// Reference mesh or cloud (as `inspect --reference`).
+    #[arg(long)]
+    pub reference: PathBuf,
+    /// The first scan of the part.
+    #[arg(long)]
+    pub scan: PathBuf,
+    /// Output folder: iter-1, iter-2, ... and cycle.html.
+    #[arg(short = 'o', long = "out")]
+    pub out: PathBuf,
+    /// Most grinding iterations.
+    #[arg(long, default_value_t = DEFAULT_MAX_ITERATIONS)]
+    pub max_iterations: usize,
+    /// Least share of the planned excess volume an iteration must remove to go on.
+    #[arg(long, default_value_t = DEFAULT_MIN_PROGRESS)]
+    pub min_progress: f64,
+    /// Which arm: --sim (grinds a virtual part and rescans it), or --port DEV / --i2c DEV
+    /// (after each run, asks for the next scan file on stdin).
+    #[command(flatten)]
+    pub device: DeviceArgs,
+    /// Units and format of the inputs.
+    #[command(flatten)]
+    pub input: GeometryInput,
+}
+
+/// The per-command settings files cut from `cycle --config`: its `[inspect]`, `[plan]` and
+/// `[run]` tables, each written to DIR/<name>.toml and given to that command.
+#[derive(Debug, Default, Clone)]
+pub struct Configs {
+    /// `inspect`'s settings file.
+    pub inspect: Option<PathBuf>,
+    /// `plan`'s settings file.
+    pub plan: Option<PathBuf>,
+    /// `run`'s settings file.
+    pub run: Option<PathBuf>,
+}
+
+const SECTIONS: [&str; 3] = ["inspect", "plan", "run"];
+
+impl Configs {
+    /// Splits `config` into DIR/inspect.toml, plan.toml and run.toml; any other top-level
+    /// key is refused with the file and its name.
+    pub fn split(config: Option<&Path>, out: &Path) -> anyhow::Result<Configs> {
+        let Some(path) = config else {
+            return Ok(Configs::default());
+        };
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let table: toml::Table = text
+            .parse()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        if let Some(k) = table.keys().find(|k| !SECTIONS.contains(&k.as_str())) {
+            anyhow::bail!(
+                "{}: line {}: unknown table `{k}` (cycle's settings have [inspect], [plan] and \
+                 [run], each holding that command's settings)",
+                path.display(),
+                table_line(&text, k)
+            );
+        }
+        let mut files = Configs::default();
+        for (name, slot) in
+            SECTIONS
+                .iter()
+                .zip([&mut files.inspect, &mut files.plan, &mut files.run])
+        {
+            let Some(section) = table.get(*name) else {
+                continue;
+            };
+            let file = out.join(format!("{name}.toml"));
+            let body = toml::to_string(section)
+                .with_context(|| format!("{}: [{name}]", path.display()))?;
+            std::fs::write(&file, body)
+                .with_context(|| format!("{}: cannot write", file.display()))?;
+            *slot = Some(file);
+        }
+        Ok(files)
+    }
+}
+
+/// 1-based line where the top-level key `k` first appears (`[k]`, `[k.x]`, `k = ` or
+/// `k.x = `); 1 when not found.
+fn table_line(text: &str, k: &str) -> usize {
+    let starts = |l: &str| {
+        let l = l.trim_start().trim_start_matches('[');
+        l.strip_prefix(k)
+            .is_some_and(|r| r.trim_start().starts_with(['.', ']', '=']))
+    };
+    text.lines().position(starts).map_or(1, |i| i + 1)
+}
+
+/// One loop to run: `demo` builds it with its own first inspection and plan.
+pub struct Loop {
+    /// Reference file.
+    pub reference: PathBuf,
+    /// The first scan.
+    pub scan: PathBuf,
+    /// Output folder.
+    pub out: PathBuf,
+    /// Stop rule settings.
+    pub config: CycleConfig,
+    /// The arm.
+    pub device: DeviceArgs,
+    /// Input units and format.
+    pub input: GeometryInput,
+    /// Per-command settings files.
+    pub configs: Configs,
+    /// Iteration 1's inspection folder and plan file when already made (demo).
+    pub first: Option<(PathBuf, PathBuf)>,
+}
+
+/// Runs `cycle`.
+pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
+    let cfg = CycleConfig {
+        max_iterations: args.max_iterations,
+        min_progress: args.min_progress,
+    };
+    cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    let configs = Configs::split(config, &args.out)?;
+    let outcome = run_loop(&Loop {
+        reference: args.reference,
+        scan: args.scan,
+        out: args.out,
+        config: cfg,
+        device: args.device,
+        input: args.input,
+        configs,
+        first: None,
+    })?;
+    match outcome {
+        Outcome::WithinTolerance => Ok(()),
+        o => Err(NotFinished(o).into()),
+    }
+}
+
+/// Inspects `scan` into `dir` with `inspect`'s settings and reads the result; an incomplete
+/// verdict ends the loop with `inspect`'s error.
+fn inspect_scan(l: &Loop, scan: &Path, dir: &Path) -> anyhow::Result<()> {
+    inspect::run(
+        inspect::InspectArgs {
+            reference: l.reference.clone(),
+            scan: scan.to_path_buf(),
+            out: dir.to_path_buf(),
+            tolerance: None,
+            method: None,
+            registration_error: None,
+            pose: None,
+            core: None,
+            inspect_area: None,
+            input: l.input.clone(),
+        },
+        l.configs.inspect.as_deref(),
+    )
+}
+
+/// An inspection folder read: its summary and its core points.
+fn measure(dir: &Path) -> anyhow::Result<(Measured, Inspection)> {
+    let regions: Regions = read_json(&dir.join("regions.json"))?;
+    let inspection = Inspection::load(dir)?;
+    Ok((Measured::of(regions.verdict, &inspection), inspection))
+}
+
+/// Streams `plan` to the arm, journalling into `dir`; with the simulator the part `scan` is
+/// ground and its rescan written to DIR/after.ply, with a real arm the next scan's path is
+/// read from stdin.
+fn grind(l: &Loop, plan: &Path, scan: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+    let after = dir.join("after.ply");
+    let sim = l.device.sim;
+    run_cmd::run(
+        run_cmd::RunArgs {
+            plan: plan.to_path_buf(),
+            device: l.device.clone(),
+            dry_run: false,
+            resume: None,
+            journal: Some(dir.join("journal.jsonl")),
+            part: sim.then(|| scan.to_path_buf()),
+            ground_out: sim.then(|| after.to_path_buf()),
+        },
+        l.configs.run.as_deref(),
+    )?;
+    if sim {
+        return Ok(after);
+    }
+    println!("cycle: scan the part and enter the scan file's path:");
+    let mut line = String::new();
+    std::io::stdin()
+        .lock()
+        .read_line(&mut line)
+        .context("cycle: reading the next scan's path from stdin")?;
+    let next = PathBuf::from(line.trim());
+    anyhow::ensure!(
+        !line.trim().is_empty(),
+        "cycle: no next scan given on stdin (the journal of {} is complete)",
+        plan.display()
+    );
+    anyhow::ensure!(
+        next.is_file(),
+        "{}: the next scan (read from stdin) is not a file",
+        next.display()
+    );
+    Ok(next)
+}
+
+/// Writes the table to stdout and DIR/cycle.html.
+fn report(l: &Loop, records: &[IterationRecord], outcome: Outcome) -> anyhow::Result<()> {
+    println!("== cycle: {}", outcome.describe());
+    print!("{}", table_text(records));
+    let html = l.out.join("cycle.html");
+    std::fs::write(&html, table_html(records, outcome))
+        .with_context(|| format!("{}: cannot write", html.display()))?;
+    println!("cycle: table in {}", html.display());
+    Ok(())
+}
+
+/// Runs the loop and returns how it ended (the table printed and written either way).
+pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
+    let mut records: Vec<IterationRecord> = Vec::new();
+    let mut previous: Option<Inspection> = None;
+    let mut scan = l.scan.clone();
+    for k in 1.. {
+        let dir = l.out.join(format!("iter-{k}"));
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        println!("== cycle: iteration {k}: inspect {}", scan.display());
+        let (inspection_dir, plan_file) = match (&l.first, k) {
+            (Some((i, p)), 1) => (i.clone(), p.clone()),
+            _ => (dir.join("inspection"), dir.join("plan.json")),
+        };
+        if l.first.is_none() || k > 1 {
+            inspect_scan(l, &scan, &inspection_dir)?;
+        }
+        let (measured, inspection) = measure(&inspection_dir)?;
+        if let (Some(last), Some(before)) = (records.last_mut(), &previous) {
+            last.followed_by(&measured, before, &inspection);
+        }
+        records.push(IterationRecord::new(k, measured));
+        let mut outcome = decide(&records, &l.config);
+        if outcome == Outcome::Continue {
+            if l.first.is_none() || k > 1 {
+                plan_into(l, &inspection_dir, &plan_file)?;
+            }
+            let summary: PlanSummary = read_json(&plan_file)?;
+            let last = records.last_mut().expect("pushed above");
+            last.planned(&inspection, &summary);
+            outcome = decide_plan(last);
+        }
+        if outcome != Outcome::Continue {
+            report(l, &records, outcome)?;
+            return Ok(outcome);
+        }
+        println!("== cycle: iteration {k}: grind");
+        scan = grind(l, &plan_file, &scan, &dir)?;
+        previous = Some(inspection);
+        print!("{}", table_text(&records));
+    }
+    unreachable!("the loop returns")
+}
+
+/// Plans from `inspection` into `plan_file` with `plan`'s settings.
+fn plan_into(l: &Loop, inspection: &Path, plan_file: &Path) -> anyhow::Result<()> {
+    println!("== cycle: plan");
+    plan::run(
+        plan::PlanArgs {
+            inspection: inspection.to_path_buf(),
+            workcell: None,
+            out: plan_file.to_path_buf(),
+            export_ros: None,
+            require_full_reach: false,
+            mode: None,
+        },
+        l.configs.plan.as_deref(),
+    )
+}
