@@ -8,7 +8,6 @@ use serde::{Deserialize, Serialize};
 
 use super::config::PlanConfig;
 use super::error::PlanError;
-use super::feed::PathLimits;
 use super::inspection::RegionInfo;
 use super::inspection::{Inspection, SurfacePoint};
 use super::program::{PlannedPass, Program, Run};
@@ -16,10 +15,6 @@ use super::removal::montecarlo::{spread, JointError};
 use super::removal::{self, force, Contact, Influence, Problem, Stats, ToolModel};
 use super::trajectory::{Limits, Move};
 use crate::robot::{Robot, Workcell};
-
-/// Bisection steps of the piece speed that makes a rest-to-rest move last its dwell: 50
-/// halvings bring the speed to 1e-15 of its range, below a bus period of time.
-const SPEED_BISECTIONS: usize = 50;
 
 /// One contact of the dwell map in plan.json.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -308,44 +303,6 @@ fn solve_config(
     Ok(solve)
 }
 
-/// The cruise speed, m/s, at which a rest-to-rest move over `length` m within `lim` takes
-/// `dwell` s: `lim.velocity` when even that takes longer, else found by bisection (the
-/// duration falls as the speed rises).
-pub(crate) fn speed_for_dwell(
-    length: f64,
-    lim: &PathLimits,
-    dwell: f64,
-    cfg: &PlanConfig,
-) -> Result<f64, PlanError> {
-    let duration = |v: f64| -> Result<f64, PlanError> {
-        let limits = Limits {
-            velocity: vec![v],
-            acceleration: vec![lim.acceleration],
-            jerk: vec![lim.jerk],
-        };
-        Move::new(&[0.0], &[length], &limits, &cfg.trajectory)
-            .map(|m| m.duration())
-            .map_err(|source| PlanError::Trajectory {
-                context: "removal piece".into(),
-                source,
-            })
-    };
-    if length <= 0.0 || duration(lim.velocity)? >= dwell {
-        return Ok(lim.velocity);
-    }
-    // at length / dwell the ramps make the move longer than the dwell
-    let (mut lo, mut hi) = (length / dwell, lim.velocity);
-    for _ in 0..SPEED_BISECTIONS {
-        let mid = 0.5 * (lo + hi);
-        if duration(mid)? > dwell {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    Ok(hi)
-}
-
 /// The part predicted after `prog`: per region, the removal of the dwell the trajectory
 /// spends on each piece actually in the program, before/after statistics and the Monte Carlo
 /// spread; refuses a region whose low quantile over-grinds by more than the tolerance.
@@ -490,36 +447,5 @@ pub fn leave_out(
                 reason: reason.to_string(),
             });
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The speed found makes Ruckig's rest-to-rest move last the dwell; a dwell shorter than
-    /// the fastest move keeps the cap.
-    #[test]
-    fn speed_for_dwell_gives_a_move_of_that_duration() {
-        let cfg = PlanConfig::default();
-        let lim = PathLimits {
-            velocity: 0.02,
-            acceleration: 0.05,
-            jerk: 1.0,
-        };
-        let length = 2e-4;
-        let v = speed_for_dwell(length, &lim, 1.5, &cfg).unwrap();
-        let limits = Limits {
-            velocity: vec![v],
-            acceleration: vec![0.05],
-            jerk: vec![1.0],
-        };
-        let t = Move::new(&[0.0], &[length], &limits, &cfg.trajectory)
-            .unwrap()
-            .duration();
-        assert!((t - 1.5).abs() < 1e-6, "{t}");
-        // a cruise at length / dwell would be shorter: the ramps cost time
-        assert!(v > length / 1.5 && v < 0.02);
-        assert_eq!(speed_for_dwell(length, &lim, 1e-3, &cfg).unwrap(), 0.02);
     }
 }

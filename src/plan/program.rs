@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::config::PlanConfig;
 pub use super::contact::SegmentKind;
 use super::error::PlanError;
-use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
+use super::feed::{path_limits, sample_stroke, speed_for_dwell, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
 use super::report::UnreachablePoint;
 use super::trajectory::JointTrajectory;
@@ -358,7 +358,12 @@ impl Program {
             self.slowed += 1;
         }
         if let Some(dwell) = piece.dwell_s {
-            lim.velocity = super::preston::speed_for_dwell(spline.length(), &lim, dwell, cfg)?;
+            lim.velocity = speed_for_dwell(spline.length(), &lim, dwell, &cfg.trajectory).map_err(
+                |source| PlanError::Trajectory {
+                    context: "removal piece".into(),
+                    source,
+                },
+            )?;
         }
         piece.feed_mm_s = lim.velocity * 1e3;
         let first = self.trajectory.len() - 1;
