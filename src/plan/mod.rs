@@ -22,6 +22,8 @@ pub mod removal;
 pub mod report;
 pub mod ros;
 pub mod surface;
+pub mod table;
+pub mod table_file;
 pub mod trajectory;
 pub mod validate;
 
@@ -35,6 +37,8 @@ pub use file::{Plan, Sample};
 pub use inspection::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
 pub use raster::{RasterGeometry, StrokeKind};
+pub use table::plan_cell;
+pub use table_file::TablePlan;
 pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
@@ -156,6 +160,7 @@ pub fn plan(
         frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
         reachability,
         metrics,
+        turntable: None,
     })
 }
 

@@ -15,12 +15,14 @@ pub mod model;
 mod planar;
 pub mod resolution;
 pub mod servo_map;
+pub mod turntable;
 
 pub use calibration::{Servo, Servos, Tool, Workcell};
 pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
 pub use model::{JointSpec, Robot, ToolPose};
 pub use resolution::resolution_error;
+pub use turntable::Turntable;
 pub use servo_map::{
     GripperCalib, JointCalib, JointState, MapRefused, ServoMap, ServoMapError, JOINT_COUNT,
 };
@@ -58,6 +60,17 @@ impl Default for RobotConfig {
             workcell: default_calibration("workcell.toml"),
             ik: IkConfig::default(),
         }
+    }
+}
+
+impl RobotConfig {
+    /// Takes the urdf, tool, servos and workcell files from the cell folder `dir` (the layout
+    /// of `calibration/`, e.g. `calibration/turntable/`).
+    pub fn use_cell(&mut self, dir: &std::path::Path) {
+        self.urdf = dir.join("dofbot.urdf");
+        self.tool = dir.join("tool.toml");
+        self.servos = dir.join("servos.toml");
+        self.workcell = dir.join("workcell.toml");
     }
 }
 
