@@ -88,10 +88,19 @@ fn inspection(seed: u64, defects: usize) -> Inspection {
 /// regions.json's entry for the core points `m` of region `id`.
 fn region(id: usize, m: &[usize], points: &[SurfacePoint], per_point: f64) -> Region {
     let n = m.len() as f64;
-    let c = m.iter().fold(Vector3::zeros(), |s, &i| s + points[i].position.coords) / n;
-    let nn = m.iter().fold(Vector3::zeros(), |s, &i| s + points[i].normal).normalize();
+    let c = m
+        .iter()
+        .fold(Vector3::zeros(), |s, &i| s + points[i].position.coords)
+        / n;
+    let nn = m
+        .iter()
+        .fold(Vector3::zeros(), |s, &i| s + points[i].normal)
+        .normalize();
     let d: Vec<f64> = m.iter().map(|&i| points[i].distance).collect();
-    let peak = d.iter().copied().fold(0.0, |a: f64, b| if b.abs() > a.abs() { b } else { a });
+    let peak = d
+        .iter()
+        .copied()
+        .fold(0.0, |a: f64, b| if b.abs() > a.abs() { b } else { a });
     Region {
         id,
         centroid: c.into(),
@@ -144,9 +153,6 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
         };
         let (c, t) = covered(&turned);
         assert!((t - t0).abs() < 1e-9);
-        for r in &turned.reachability.regions {
-            println!("  region {}: area {:.2} unreachable {:.2} cov_all {:.2} cov_reach {:.2} pts {} left {}", r.id, r.area_mm2, r.unreachable_share, r.coverage_of_all, r.coverage_of_reachable, r.path_points, r.unreachable_path_points);
-        }
         let tp = turned.turntable.as_ref().expect("table part");
         println!(
             "case {seed}: repairable {t:.1} mm^2, covered {:.1} % with the table ({} moves, angles {:?} deg), {:.1} % without",
@@ -158,10 +164,16 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
         table_file::check(tp, &table, turned.samples.len(), turned.period).expect("table moves");
         for m in &tp.moves {
             let (a, b) = (m.samples[0], *m.samples.last().unwrap());
-            assert!(m.samples.windows(2).all(|w| (w[1] - w[0]) * (b - a) >= -1e-12));
+            assert!(m
+                .samples
+                .windows(2)
+                .all(|w| (w[1] - w[0]) * (b - a) >= -1e-12));
             let q = &turned.samples[m.at_sample].q;
             let off = q.iter().zip(&config.home).map(|(a, b)| (a - b).abs());
-            assert!(off.fold(0.0, f64::max) < 1e-9, "the arm rests at home while the table turns: {q:?}");
+            assert!(
+                off.fold(0.0, f64::max) < 1e-9,
+                "the arm rests at home while the table turns: {q:?}"
+            );
         }
         with += c;
         without += c0;
@@ -202,36 +214,4 @@ fn table_motion_and_raw_counts_match_closed_form() {
     assert_eq!(table.raw(0.0), Ok(2040));
     assert_eq!(table.raw(-135f64.to_radians()), Ok(380));
     assert!(table.raw(136f64.to_radians()).is_err());
-}
-
-#[test]
-#[ignore]
-fn explore_axes() {
-    let (robot, wc, table, config) = cell("turntable/");
-    let base = table.unwrap();
-    let cases: Vec<Inspection> = (0..10).map(|s| inspection(1000 + s, 6)).collect();
-    for (name, axis, centre) in [
-        ("z", [0.0, 0.0, 1.0], [0.0, 0.28, 0.0]),
-        ("x", [1.0, 0.0, 0.0], [0.0, 0.28, 0.26]),
-        ("y", [0.0, 1.0, 0.0], [0.0, 0.28, 0.26]),
-        ("xz", [1.0, 0.0, 1.0], [0.0, 0.28, 0.26]),
-        ("yz", [0.0, 1.0, 1.0], [0.0, 0.28, 0.26]),
-        ("xy", [1.0, 1.0, 0.0], [0.0, 0.28, 0.26]),
-    ] {
-        let mut t = base.clone();
-        t.axis = nalgebra::Unit::new_normalize(Vector3::from(axis));
-        t.centre = Point3::from(centre);
-        let (mut a, mut z, mut tot) = (0.0, 0.0, 0.0);
-        for insp in &cases {
-            let ch = polishbot::plan::table::choose_angles(insp, &robot, &wc, &t, &config);
-            for (r, c) in insp.regions.iter().zip(&ch) {
-                if r.repairable {
-                    a += r.area * c.reachable_share;
-                    z += r.area * c.reachable_share_at_zero;
-                    tot += r.area;
-                }
-            }
-        }
-        println!("axis {name}: reachable {:.1} % (at zero {:.1} %)", 100.0 * a / tot, 100.0 * z / tot);
-    }
 }

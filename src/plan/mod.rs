@@ -37,9 +37,9 @@ pub use file::{Plan, Sample};
 pub use inspection::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
 pub use raster::{RasterGeometry, StrokeKind};
+pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
 pub use table::plan_cell;
 pub use table_file::TablePlan;
-pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
 

@@ -28,9 +28,12 @@ const SAMPLE_POINTS: usize = 150;
 /// angle nearest the calibrated placement (0) wins (least table motion).
 const TIE_SHARE: f64 = 0.02;
 /// Candidate angles tried, best first, for a region its group leaves short (a refused free
-/// move, strokes split): the next ones differ by a few steps and usually avoid the trouble;
-/// more only repeat the same approach at six plans per region.
+/// move, a link against the part): six plans per region at most.
 const FALLBACK_ANGLES: usize = 6;
+/// Least difference between the candidate angles tried for one region, degrees: the arm's
+/// links clear the part or hit it over tens of degrees, so neighbouring 5-degree steps would
+/// repeat the same failure (seen on the posterior condyle in tests/turntable.rs).
+const FALLBACK_SPREAD_DEG: f64 = 20.0;
 /// Share of a region's core points a plan should cover: a region its group leaves below this
 /// is tried alone at its next candidate angles (the reach estimate samples single points; the
 /// strokes can still split or be refused at the chosen angle).
@@ -205,7 +208,11 @@ impl Cell<'_> {
         ranked: &[Ranked],
         skip: Option<f64>,
     ) -> Option<(f64, Plan, usize)> {
-        let k = self.inspection.regions.iter().position(|r| r.id == region.id)?;
+        let k = self
+            .inspection
+            .regions
+            .iter()
+            .position(|r| r.id == region.id)?;
         let mut best: Option<(f64, Plan, usize)> = None;
         for &angle in ranked[k].candidates.iter().take(FALLBACK_ANGLES) {
             if skip.is_some_and(|s| (s - angle).abs() < 1e-9) {
@@ -215,7 +222,10 @@ impl Cell<'_> {
                 continue;
             };
             let c = coverage(Some(&sub), region.id);
-            if best.as_ref().is_none_or(|b| c > coverage(Some(&b.1), region.id)) {
+            if best
+                .as_ref()
+                .is_none_or(|b| c > coverage(Some(&b.1), region.id))
+            {
                 best = Some((angle, sub, k));
             }
             if c >= GOOD_COVERAGE {
@@ -295,7 +305,11 @@ fn rank_angles(
             let at_zero = share(&zero);
             let mut order = vec![(0.0, at_zero)];
             if planned(region, config, robot) {
-                order = candidates.iter().copied().zip(cells.iter().map(share)).collect();
+                order = candidates
+                    .iter()
+                    .copied()
+                    .zip(cells.iter().map(share))
+                    .collect();
                 let tier = |s: f64| (s / TIE_SHARE).floor();
                 order.sort_by(|x, y| {
                     tier(y.1)
@@ -310,10 +324,26 @@ fn rank_angles(
                     reachable_share: order[0].1,
                     reachable_share_at_zero: at_zero,
                 },
-                candidates: order.iter().map(|o| o.0).collect(),
+                candidates: spread(&order),
             }
         })
         .collect()
+}
+
+/// The ranked angles `order` (radians, best first) thinned so that each differs from every
+/// earlier one by at least [`FALLBACK_SPREAD_DEG`]: the alternatives then approach the region
+/// from clearly different sides instead of repeating the best one's approach.
+fn spread(order: &[(f64, f64)]) -> Vec<f64> {
+    let mut out: Vec<f64> = Vec::new();
+    for &(a, _) in order {
+        if out
+            .iter()
+            .all(|b| (a - b).abs() >= FALLBACK_SPREAD_DEG.to_radians() - 1e-9)
+        {
+            out.push(a);
+        }
+    }
+    out
 }
 
 /// The regions grouped by table angle (radians) in visiting order: one sweep from 0 over the
@@ -380,7 +410,9 @@ fn concat(mut a: Plan, b: Plan) -> Plan {
     a.passes.extend(b.passes);
     a.predicted_duration_s += b.predicted_duration_s;
     a.reachability.regions.extend(b.reachability.regions);
-    a.reachability.unreachable.extend(b.reachability.unreachable);
+    a.reachability
+        .unreachable
+        .extend(b.reachability.unreachable);
     a.reachability.jumps += b.reachability.jumps;
     a.metrics = combine(&a.metrics, &b.metrics);
     a

@@ -152,12 +152,17 @@ pub fn check(
             ));
         }
         if (m.samples[0] - angle).abs() > 1e-9 {
-            return bad(format!("move {k}: starts at {} rad, the table is at {angle} rad", m.samples[0]));
+            return bad(format!(
+                "move {k}: starts at {} rad, the table is at {angle} rad",
+                m.samples[0]
+            ));
         }
         let mut bytes = Vec::with_capacity(m.frames.len());
         for (i, q) in m.samples.iter().enumerate() {
             if !(q.is_finite() && *q >= lo - 1e-12 && *q <= hi + 1e-12) {
-                return bad(format!("move {k} sample {i}: {q} rad outside {lo}..={hi} rad"));
+                return bad(format!(
+                    "move {k} sample {i}: {q} rad outside {lo}..={hi} rad"
+                ));
             }
             if i == 0 {
                 continue;

@@ -22,10 +22,10 @@ pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
 pub use model::{JointSpec, Robot, ToolPose};
 pub use resolution::resolution_error;
-pub use turntable::Turntable;
 pub use servo_map::{
     GripperCalib, JointCalib, JointState, MapRefused, ServoMap, ServoMapError, JOINT_COUNT,
 };
+pub use turntable::Turntable;
 
 /// Where the robot description and the cell's calibration files are, and the IK settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -147,11 +147,17 @@ fn check_servo(file: &Path, s: &Servo, arm: &[Servo]) -> Result<(), RobotError> 
     if s.id < BUS_IDS.0 || s.id > BUS_IDS.1 || arm.iter().any(|a| a.id == s.id) {
         return bad(
             "id",
-            format!("{} must be in {}..={} and not an arm servo's", s.id, BUS_IDS.0, BUS_IDS.1),
+            format!(
+                "{} must be in {}..={} and not an arm servo's",
+                s.id, BUS_IDS.0, BUS_IDS.1
+            ),
         );
     }
     if s.joint.is_some() || s.hold_deg.is_some() {
-        return bad("joint", "the table has no URDF joint and no hold_deg".into());
+        return bad(
+            "joint",
+            "the table has no URDF joint and no hold_deg".into(),
+        );
     }
     if s.direction != 1 && s.direction != -1 {
         return bad("direction", "must be 1 or -1".into());
@@ -169,7 +175,9 @@ fn check_servo(file: &Path, s: &Servo, arm: &[Servo]) -> Result<(), RobotError> 
         return bad("degree_range", "must be [0, max]".into());
     }
     let [lo, hi] = s.raw_accepted;
-    if lo >= hi || s.raw_range.iter().any(|r| *r < lo || *r > hi) || s.raw_range[0] >= s.raw_range[1]
+    if lo >= hi
+        || s.raw_range.iter().any(|r| *r < lo || *r > hi)
+        || s.raw_range[0] >= s.raw_range[1]
     {
         return bad(
             "raw_range",
@@ -183,7 +191,10 @@ fn check_servo(file: &Path, s: &Servo, arm: &[Servo]) -> Result<(), RobotError> 
     }
     let zero = s.zero_offset_deg;
     if !(zero >= s.degree_range[0] && zero <= s.degree_range[1]) {
-        return bad("zero_offset_deg", format!("{zero} lies outside degree_range"));
+        return bad(
+            "zero_offset_deg",
+            format!("{zero} lies outside degree_range"),
+        );
     }
     Ok(())
 }
