@@ -5,11 +5,10 @@ mod common;
 use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::cloud::Units;
 use polishbot::plan::{plan_cell, table_file, Inspection, PlanConfig, SurfacePoint};
 use polishbot::regions::Region;
 use polishbot::robot::{Robot, Turntable, Workcell};
-use polishbot::synth::{synth, SynthConfig};
+use polishbot::synth::synth;
 
 /// Deviation beyond which a core point belongs to a defect region, mm (regions' default).
 const TOLERANCE: f64 = 0.05;
@@ -32,17 +31,7 @@ fn cell(dir: &str) -> (Robot, Workcell, Option<Turntable>, PlanConfig) {
 /// arm's reach): core points are the reference samples, distances the true deviations, a
 /// region per defect of the points beyond the tolerance it dominates.
 fn inspection(seed: u64, defects: usize) -> Inspection {
-    let cfg = SynthConfig {
-        seed,
-        mesh: Some(common::shared_data("femoral_dm.stl")),
-        surface: Some(common::shared_data("femoral_dm_contact.stl")),
-        units: Some(Units::M),
-        reference_points: 60_000,
-        scan_points: 1_000,
-        defects,
-        ..SynthConfig::default()
-    };
-    let case = synth(&cfg).expect("synth");
+    let case = synth(&common::femoral_synth(seed, defects)).expect("synth");
     let area: f64 = (0..case.mesh.faces.len())
         .map(|i| case.mesh.face_normal_area(i).1)
         .sum();
