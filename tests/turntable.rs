@@ -151,6 +151,10 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
             100.0 * c0 / t0.max(1e-9)
         );
         table_file::check(tp, &table, turned.samples.len(), turned.period).expect("table moves");
+        if !tp.moves.is_empty() {
+            let refused = turned.check(&robot, &Default::default()).unwrap_err();
+            assert!(refused.to_string().contains("turntable"), "{refused}");
+        }
         for m in &tp.moves {
             let (a, b) = (m.samples[0], *m.samples.last().unwrap());
             assert!(m
