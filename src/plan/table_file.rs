@@ -55,10 +55,13 @@ pub struct TablePlan {
 impl TablePlan {
     /// Total duration of the table moves, s.
     pub fn duration(&self, period: f64) -> f64 {
-        self.moves
+        let total: f64 = self
+            .moves
             .iter()
             .map(|m| (m.samples.len().saturating_sub(1)) as f64 * period)
-            .sum()
+            .sum();
+        // an empty sum is -0.0: printed as "-0.00 s"
+        total + 0.0
     }
 
     /// The table angle after the last move, radians.
