@@ -5,10 +5,9 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use polishbot::cloud::Units;
 use polishbot::plan::{plan, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
-use polishbot::synth::{synth, SynthConfig};
+use polishbot::synth::synth;
 
 fn calib(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -31,17 +30,7 @@ fn dofbot() -> (Robot, Workcell) {
 /// of the real femoral component: core points are the reference samples, distances the true
 /// deviations, regions the points beyond `tolerance` grouped by the defect that dominates them.
 fn synthetic_inspection(dir: &Path, seed: u64, defects: usize) -> polishbot::synth::Truth {
-    let cfg = SynthConfig {
-        seed,
-        mesh: Some(common::shared_data("femoral_dm.stl")),
-        surface: Some(common::shared_data("femoral_dm_contact.stl")),
-        units: Some(Units::M),
-        reference_points: 60_000,
-        scan_points: 1_000,
-        defects,
-        ..SynthConfig::default()
-    };
-    let case = synth(&cfg).expect("synth");
+    let case = synth(&common::femoral_synth(seed, defects)).expect("synth");
     let tolerance = 0.05;
     let area: f64 = (0..case.mesh.faces.len())
         .map(|i| case.mesh.face_normal_area(i).1)

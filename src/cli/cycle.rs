@@ -306,6 +306,7 @@ fn plan_into(l: &Loop, inspection: &Path, plan_file: &Path) -> anyhow::Result<()
             export_ros: None,
             require_full_reach: false,
             mode: None,
+            cell: None,
         },
         l.configs.plan.as_deref(),
     )

@@ -79,6 +79,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     plan::run(
         plan::PlanArgs {
             inspection: inspection.clone(),
+            cell: None,
             workcell: None,
             out: plan_file.clone(),
             export_ros: Some(out.join("trajectory.yaml")),

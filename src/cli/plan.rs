@@ -13,6 +13,11 @@ pub struct PlanArgs {
     /// Inspection folder holding deviations.csv and regions.json.
     #[arg(long, value_name = "DIR")]
     pub inspection: PathBuf,
+    /// Cell folder: its dofbot.urdf, tool.toml, servos.toml and workcell.toml (and
+    /// solids.toml) replace the `[robot]` files; a `[turntable]` in it turns the part between
+    /// regions (e.g. calibration/turntable) [default: calibration].
+    #[arg(long, value_name = "DIR")]
+    pub cell: Option<PathBuf>,
     /// Workcell file (part placement in the robot frame) [default: calibration/workcell.toml].
     #[arg(long, value_name = "FILE")]
     pub workcell: Option<PathBuf>,
@@ -46,6 +51,9 @@ pub struct PlanFileConfig {
 pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let file = super::settings::ConfigFile::read(config)?;
     let mut cfg: PlanFileConfig = file.parse()?;
+    if let Some(dir) = &args.cell {
+        cfg.robot.use_cell(dir);
+    }
     if let Some(w) = args.workcell {
         cfg.robot.workcell = w;
     }
@@ -61,7 +69,8 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let solids = plan::collide::solids_beside(&cfg.robot.workcell)?;
     cfg.plan.collision.solids.extend(solids);
     let inspection = Inspection::load(&args.inspection)?;
-    let plan = plan::plan(&inspection, &robot, &workcell, &cfg.plan)?;
+    let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
+    let plan = plan::plan_cell(&inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     plan.save(&args.out)?;
     let provenance = super::plan_report::provenance(&args.inspection, &cfg.robot, &cfg.plan)?;
     provenance.stamp_json(&args.out)?;
@@ -147,6 +156,24 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
                 r.id, r.peak_mm
             );
         }
+    }
+    if let Some(t) = &plan.turntable {
+        for r in &t.regions {
+            println!(
+                "plan: region {}: table at {:+.1} deg, {:.0}% of it reachable there ({:.0}% at 0 deg)",
+                r.region,
+                r.angle_deg,
+                100.0 * r.reachable_share,
+                100.0 * r.reachable_share_at_zero
+            );
+        }
+        println!(
+            "plan: turntable (servo {}): {} move(s), {:.2} s, ends at {:+.1} deg",
+            t.servo_id,
+            t.moves.len(),
+            t.duration(plan.period),
+            t.end().to_degrees()
+        );
     }
     if let Some(u) = plan.reachability.unreachable.first() {
         println!(

@@ -3,7 +3,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::config::PlanConfig;
-use super::inspection::{Inspection, RegionInfo};
+use super::inspection::{Inspection, RegionInfo, SurfacePoint};
 use super::program::{PlannedPass, Program, SegmentKind};
 use super::raster::PathPoint;
 use super::report::{Metrics, RegionReport};
@@ -87,6 +87,29 @@ pub fn measure(prog: &Program, robot: &Robot, cfg: &PlanConfig) -> Metrics {
     m
 }
 
+/// Whether the tool can sit on `sp`'s normal at the last layer's height (tip `reach` mm out
+/// from the surface plus the allowance, axis against the normal) with the part placed by `wc`.
+pub fn tool_reaches(
+    sp: &SurfacePoint,
+    robot: &Robot,
+    wc: &Workcell,
+    cfg: &PlanConfig,
+    reach: f64,
+) -> bool {
+    let pt = PathPoint {
+        surface: sp.position,
+        normal: sp.normal,
+        offset: cfg.allowance_mm,
+    };
+    let tip = pt.surface + pt.normal * (pt.offset + reach);
+    let target = IkTarget {
+        position: wc.point_from_reference_mm(&tip).coords,
+        axis: -wc.direction_from_reference(&pt.normal),
+        roll: None,
+    };
+    robot.ik(&target, &cfg.home, &cfg.ik).is_ok()
+}
+
 /// Reach and coverage of `region`: a core point is reachable when the tool can sit on its
 /// normal at the last layer's height; covered when it lies within `footprint` mm of a planned
 /// pass of the region (the polylines through the passes' surface points).
@@ -118,18 +141,7 @@ pub fn region_report(
     let (mut reachable, mut covered_reachable, mut covered) = (0usize, 0usize, 0usize);
     for &i in &members {
         let sp = &inspection.points[i];
-        let pt = PathPoint {
-            surface: sp.position,
-            normal: sp.normal,
-            offset: cfg.allowance_mm,
-        };
-        let tip = pt.surface + pt.normal * (pt.offset + reach);
-        let target = IkTarget {
-            position: wc.point_from_reference_mm(&tip).coords,
-            axis: -wc.direction_from_reference(&pt.normal),
-            roll: None,
-        };
-        let ok = robot.ik(&target, &cfg.home, &cfg.ik).is_ok();
+        let ok = tool_reaches(sp, robot, wc, cfg, reach);
         let near = index
             .nearest(&sp.position)
             .is_some_and(|n| n.dist2.sqrt() <= footprint);

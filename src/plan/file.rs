@@ -8,6 +8,7 @@ use super::error::PlanError;
 use super::frames;
 use super::program::{PlannedPass, Segment};
 use super::report::{Metrics, Reachability};
+use super::table_file::TablePlan;
 use super::trajectory::JointTrajectory;
 use super::validate::{validate, ValidationConfig};
 use crate::robot::Robot;
@@ -58,6 +59,9 @@ pub struct Plan {
     /// Removal mode: the dwell map and the predicted part per region (absent in rigid mode).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub removal: Option<super::preston::RemovalReport>,
+    /// The turntable's angles and moves (absent in a cell without a turntable).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turntable: Option<TablePlan>,
 }
 
 /// A plan that passed [`Plan::check`]: its frames as bytes and their raw poses.
@@ -116,6 +120,11 @@ impl Plan {
         config: &ValidationConfig,
     ) -> Result<CheckedPlan, PlanError> {
         let bad = |m: String| Err(PlanError::Frames(m));
+        if self.turntable.as_ref().is_some_and(|t| !t.moves.is_empty()) {
+            return bad(
+                "the plan turns the part turntable, which `run` does not drive yet: refused".into(),
+            );
+        }
         let names: Vec<&str> = robot.joints.iter().map(|j| j.name.as_str()).collect();
         if self.joint_names != names {
             return bad(format!(

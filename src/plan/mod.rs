@@ -24,6 +24,8 @@ pub mod removal;
 pub mod report;
 pub mod ros;
 pub mod surface;
+pub mod table;
+pub mod table_file;
 pub mod trajectory;
 pub mod validate;
 
@@ -36,6 +38,8 @@ pub use inspection::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
 pub use raster::{RasterGeometry, StrokeKind};
 pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
+pub use table::plan_cell;
+pub use table_file::TablePlan;
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
 
@@ -146,6 +150,7 @@ pub fn plan(
         reachability,
         metrics,
         removal,
+        turntable: None,
     })
 }
 

@@ -201,6 +201,10 @@ pub struct Servos {
     /// The servos, in any order.
     #[serde(rename = "servo")]
     pub servos: Vec<Servo>,
+    /// The part turntable's servo (`[turntable]`, bus id 7 on the cell of
+    /// `calibration/turntable/`), if the cell has one: see [`super::turntable`].
+    #[serde(default)]
+    pub turntable: Option<Servo>,
 }
 
 impl Servos {
@@ -305,6 +309,10 @@ pub struct Workcell {
 #[serde(deny_unknown_fields)]
 struct WorkcellFile {
     robot_from_reference: [[f64; 4]; 4],
+    /// The turntable's axis and centre: read by [`super::turntable::Turntable::load`].
+    #[serde(default)]
+    #[allow(dead_code)]
+    turntable: Option<toml::Value>,
 }
 
 impl Workcell {

@@ -15,6 +15,7 @@ pub mod model;
 mod planar;
 pub mod resolution;
 pub mod servo_map;
+pub mod turntable;
 
 pub use calibration::{Servo, Servos, Tool, Workcell};
 pub use error::RobotError;
@@ -24,6 +25,7 @@ pub use resolution::resolution_error;
 pub use servo_map::{
     GripperCalib, JointCalib, JointState, MapRefused, ServoMap, ServoMapError, JOINT_COUNT,
 };
+pub use turntable::Turntable;
 
 /// Where the robot description and the cell's calibration files are, and the IK settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -58,6 +60,17 @@ impl Default for RobotConfig {
             workcell: default_calibration("workcell.toml"),
             ik: IkConfig::default(),
         }
+    }
+}
+
+impl RobotConfig {
+    /// Takes the urdf, tool, servos and workcell files from the cell folder `dir` (the layout
+    /// of `calibration/`, e.g. `calibration/turntable/`).
+    pub fn use_cell(&mut self, dir: &std::path::Path) {
+        self.urdf = dir.join("dofbot.urdf");
+        self.tool = dir.join("tool.toml");
+        self.servos = dir.join("servos.toml");
+        self.workcell = dir.join("workcell.toml");
     }
 }
 

@@ -218,3 +218,19 @@ pub fn dofbot() -> polishbot::robot::Robot {
 pub fn pair_args(cmd: &'static str) -> [&'static str; 7] {
     [cmd, "--reference", "r.ply", "--scan", "s.ply", "-o", "x"]
 }
+
+/// `synth` settings of a case of the real femoral component (shared/data femoral_dm.stl, in
+/// metres) with `defects` random defects on its articular surface (femoral_dm_contact.stl),
+/// 60,000 reference samples (the planner's core points) and a token scan.
+pub fn femoral_synth(seed: u64, defects: usize) -> polishbot::synth::SynthConfig {
+    polishbot::synth::SynthConfig {
+        seed,
+        mesh: Some(shared_data("femoral_dm.stl")),
+        surface: Some(shared_data("femoral_dm_contact.stl")),
+        units: Some(polishbot::cloud::Units::M),
+        reference_points: 60_000,
+        scan_points: 1_000,
+        defects,
+        ..polishbot::synth::SynthConfig::default()
+    }
+}
