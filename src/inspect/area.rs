@@ -5,7 +5,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use nalgebra::Point3;
 
-use super::FileInput;
+use super::config::FileInput;
 use crate::cloud::{self, Geometry};
 use crate::compare::{self, Deviations};
 use crate::spatial::Neighbours;

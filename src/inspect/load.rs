@@ -4,7 +4,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use super::{checks, FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS};
+use super::checks;
+use super::config::{FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS};
 use crate::cloud::{self, Geometry, PointCloud};
 use crate::compare::{self, CoreConfig, Method};
 
