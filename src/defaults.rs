@@ -197,7 +197,7 @@ fn every_stated_default_is_the_default_impl() {
         crate::regions::RegionConfig => "src/regions/mod.rs",
         crate::report::ReportConfig => "src/report/mod.rs",
         crate::synth::SynthConfig => "src/synth/config.rs",
-        crate::acquire::MergeConfig => "src/acquire/mod.rs",
+        crate::acquire::MergeConfig => "src/acquire/config.rs",
         crate::synth::TurntableConfig => "src/synth/turntable.rs",
         crate::synth::FemoralShape => "src/synth/femoral.rs",
         crate::plan::PlanConfig => "src/plan/config.rs",

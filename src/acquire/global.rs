@@ -4,8 +4,8 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::config::MergeConfig;
 use super::pair::{overlap, strided, Prepared};
-use super::MergeConfig;
 
 /// Least share of a view's sample points within the final ICP distance of another view (at
 /// the placed poses) for the ordered pair to join the refinement: below it the pair shares a

@@ -3,7 +3,7 @@
 use anyhow::Result;
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::MergeConfig;
+use super::config::MergeConfig;
 use crate::cloud::PointCloud;
 use crate::preprocess::{estimate_normals, mean_spacing, NormalConfig, Orientation};
 use crate::register::icp::{fitness, icp, IcpParams};

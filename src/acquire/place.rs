@@ -4,8 +4,8 @@ use anyhow::{bail, Result};
 use nalgebra::{Isometry3, Unit, Vector3};
 use serde::Serialize;
 
+use super::config::MergeConfig;
 use super::pair::{coarse_pair, overlap, pair_icp, union, Prepared};
-use super::MergeConfig;
 use crate::cloud::transform::pose_difference;
 use crate::cloud::PointCloud;
 
