@@ -195,7 +195,7 @@ fn every_stated_default_is_the_default_impl() {
         crate::preprocess::PreprocessConfig => "src/preprocess/pipeline.rs",
         crate::register::RegisterConfig => "src/register/config.rs",
         crate::regions::RegionConfig => "src/regions/mod.rs",
-        crate::report::ReportConfig => "src/report/mod.rs",
+        crate::report::ReportConfig => "src/report/input.rs",
         crate::synth::SynthConfig => "src/synth/config.rs",
         crate::acquire::MergeConfig => "src/acquire/config.rs",
         crate::synth::TurntableConfig => "src/synth/turntable.rs",

@@ -7,9 +7,10 @@ use anyhow::{anyhow, Result};
 use nalgebra::{Point3, Vector3};
 use plotters::prelude::*;
 
+use super::font;
+use super::input::{RegionMark, ReportInput};
 use super::marks::{self, BAR_W};
 use super::raster::{self, Camera, NONE};
-use super::{font, RegionMark, ReportInput};
 
 /// Side of the close-up's square panel, px.
 pub const CLOSE_PX: usize = 420;

@@ -5,7 +5,8 @@ use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 
 use super::colour::diverging;
-use super::{font, ReportConfig};
+use super::font;
+use super::input::ReportConfig;
 
 /// Draws the histogram of finite `distances` over [-range, range] into `path`; values beyond
 /// the range are counted in the end bins.

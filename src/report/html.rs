@@ -4,18 +4,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
-use super::{Figure, ReportInput};
-
-/// A table for the report.
-#[derive(Debug, Clone, Default)]
-pub struct Table {
-    /// Heading above the table.
-    pub title: String,
-    /// Column names.
-    pub header: Vec<String>,
-    /// Rows of cells.
-    pub rows: Vec<Vec<String>>,
-}
+use super::input::{Figure, ReportInput};
 
 /// `s` with HTML's special characters escaped.
 pub fn escape(s: &str) -> String {

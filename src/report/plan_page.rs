@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 use super::closeup::{self, Overlay};
 use super::html::{self, Layout, LINKS_ID};
-use super::{colour_range, Figure, ReportConfig, ReportInput};
+use super::input::{colour_range, Figure, ReportConfig, ReportInput};
 
 /// A grinding pass (in contact, at the feed): black, 2 px.
 const PASS: (RGBColor, u32) = (RGBColor(0, 0, 0), 2);

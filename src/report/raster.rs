@@ -5,7 +5,7 @@ use nalgebra::{Point3, Vector3};
 use plotters::style::RGBColor;
 
 use super::colour::{diverging, shade};
-use super::ReportInput;
+use super::input::ReportInput;
 
 /// No point in this pixel.
 pub const NONE: u32 = u32::MAX;

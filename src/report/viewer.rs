@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use serde_json::json;
 
 use super::html::escape;
-use super::ReportInput;
+use super::input::ReportInput;
 
 /// The viewer's script.
 const SCRIPT: &str = include_str!("../../assets/viewer.js");

@@ -9,9 +9,10 @@ use nalgebra::Vector3;
 use plotters::prelude::*;
 use rayon::prelude::*;
 
+use super::font;
+use super::input::{RegionMark, ReportConfig, ReportInput};
 use super::marks::{self, BAR_W};
 use super::raster::{self, Camera, Raster};
-use super::{font, ReportConfig, ReportInput};
 
 const TITLE_H: u32 = 40;
 /// Panels per row of the overview.
@@ -117,7 +118,7 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
     let shown: Vec<Vec<usize>> = pixels
         .iter()
         .map(|px| {
-            let on = |r: &&super::RegionMark| px[r.id].0 >= MIN_REGION_PX;
+            let on = |r: &&RegionMark| px[r.id].0 >= MIN_REGION_PX;
             input.regions.iter().filter(on).map(|r| r.id).collect()
         })
         .collect();
