@@ -5,7 +5,9 @@
 //! `robust_aggr`.
 use nalgebra::{Point3, Vector3};
 
-use super::{Aggregate, Clouds, CompareConfig, Deviation, Reason, Z95};
+use crate::compare::clouds::Clouds;
+use crate::compare::config::{Aggregate, CompareConfig};
+use crate::compare::deviation::{Deviation, Reason, Z95};
 use crate::spatial::Member;
 
 /// Mean and sample variance (n - 1; NaN below two values, as py4dgeo) of the axial offsets.

@@ -13,7 +13,8 @@ use rayon::prelude::*;
 use super::context::Context;
 use super::fit::at_supported;
 use super::radius::Scratch;
-use crate::compare::{CompareConfig, Deviation, Reason};
+use crate::compare::config::CompareConfig;
+use crate::compare::deviation::{Deviation, Reason};
 use crate::spatial::Neighbours;
 
 /// Nearest unmeasured core points looked at per measured one (those of another surface, by

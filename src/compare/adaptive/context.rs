@@ -6,7 +6,7 @@ use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
 use super::point_pair::{Pairing, PAIR_CANDIDATES};
-use crate::compare::Clouds;
+use crate::compare::clouds::Clouds;
 use crate::spatial::Neighbours;
 
 /// Per-cloud data shared by all core points (built by [`super::prepare::prepare`]).
@@ -94,7 +94,7 @@ impl Context<'_> {
 
     /// Whether a result is one whose peak [`super::refine`] looks for: significant and
     /// beyond `refine_above`.
-    pub(super) fn refined(&self, dev: &crate::compare::Deviation) -> bool {
+    pub(super) fn refined(&self, dev: &crate::compare::deviation::Deviation) -> bool {
         dev.significant && dev.distance.abs() > self.limits.refine_above
     }
 

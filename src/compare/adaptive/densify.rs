@@ -20,7 +20,8 @@ use super::model::{fit_window, gather_window, model_result, Model, ModelScratch}
 use super::peak_model::{height_limit, PeakFit};
 use super::quadric::student_t95;
 use super::radius::Scratch;
-use crate::compare::{CompareConfig, DensifyConfig, Deviation, Reason, Z95};
+use crate::compare::config::{CompareConfig, DensifyConfig};
+use crate::compare::deviation::{Deviation, Reason, Z95};
 
 /// Where [`modelled`] fits a peak model.
 struct Top {
@@ -56,7 +57,7 @@ pub(super) fn densify(
     let (above, tolerance) = (prep.limits.densify_above, prep.limits.tolerance);
     let d = &cfg.adaptive.densify;
     // Reference points per mm² (median): a full disc of radius r holds about π r² of them.
-    let density = crate::compare::surface_density(&prep.clouds.ref_grid);
+    let density = crate::compare::clouds::surface_density(&prep.clouds.ref_grid);
     let is_candidate: Vec<bool> = values
         .iter()
         .map(|v| {

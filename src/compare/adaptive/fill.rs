@@ -14,7 +14,8 @@ use super::context::Context;
 use super::model::{fit_window, gather_window, model_result, Model, ModelScratch};
 use super::peak_model::MIN_SUPPORT;
 use super::quadric::TRIM_NOISE;
-use crate::compare::{CompareConfig, Deviation, FillConfig, Reason};
+use crate::compare::config::{CompareConfig, FillConfig};
+use crate::compare::deviation::{Deviation, Reason};
 use crate::spatial::Neighbours;
 
 /// Levels of the defect term (share of its amplitude) that split a window's scan points for

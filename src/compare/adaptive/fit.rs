@@ -11,8 +11,9 @@ use nalgebra::{Point3, Vector3};
 use super::context::Context;
 use super::quadric::{fit, student_t95, AxisFit, TRIM_NOISE};
 use super::radius::{gather, rwme_radius, Ring, Scratch};
+use crate::compare::config::CompareConfig;
 use crate::compare::cover::Support;
-use crate::compare::{CompareConfig, Deviation, Reason, Z95};
+use crate::compare::deviation::{Deviation, Reason, Z95};
 
 /// Fewest scan points a fit may keep after trimming before the radius grows.
 const FIT_MIN: usize = 6;

@@ -41,7 +41,9 @@ use nalgebra::{Point3, Vector3};
 
 pub(super) use self::radius::radii;
 use crate::cloud::PointCloud;
-use crate::compare::{Clouds, CompareConfig, Deviation};
+use crate::compare::clouds::Clouds;
+use crate::compare::config::CompareConfig;
+use crate::compare::deviation::Deviation;
 
 /// Runs the adaptive variant at every core point of `core` (outward unit `normals`) with the
 /// candidate `radii`, adding core points around the summits of defects.

@@ -7,7 +7,8 @@ use nalgebra::{Point3, Vector3};
 use super::context::{tangent_frame, Context};
 use super::peak_model::{fit_peak, PeakFit, PeakScratch, PeakWindow};
 use super::quadric::{student_t95, Local};
-use crate::compare::{CompareConfig, Deviation, Reason, Z95};
+use crate::compare::config::CompareConfig;
+use crate::compare::deviation::{Deviation, Reason, Z95};
 
 /// An accepted peak model and its frame: the window's origin, normal and tangent axes.
 pub(super) struct Model {

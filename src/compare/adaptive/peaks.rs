@@ -6,7 +6,8 @@ use rayon::prelude::*;
 
 use super::context::Context;
 use super::model::{fit_window, gather_window, Model, ModelScratch};
-use crate::compare::{CompareConfig, Deviation, Reason};
+use crate::compare::config::CompareConfig;
+use crate::compare::deviation::{Deviation, Reason};
 
 /// The peak fit (`peak_fit`): at every summit — a refined core point whose |peak| is the
 /// largest among the refined core points of the same sign within the refine radius (one per

@@ -5,7 +5,7 @@
 //! rules there.
 use nalgebra::{Point3, Vector3};
 
-use crate::compare::Clouds;
+use crate::compare::clouds::Clouds;
 use crate::spatial::Grid;
 
 /// Reference points a scan point's pairing looks among ([`Pairing::pair`]).

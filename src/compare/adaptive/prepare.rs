@@ -10,8 +10,10 @@ use super::context::{Context, RefSlot, Thresholds};
 use super::point_pair::{each_nearest, Pairing};
 use super::quadric::MAD_TO_SD;
 use crate::cloud::PointCloud;
+use crate::compare::clouds::{surface_density, Clouds};
+use crate::compare::config::CompareConfig;
+use crate::compare::core::area_share;
 use crate::compare::cover::cover_radius2;
-use crate::compare::{area_share, surface_density, Clouds, CompareConfig};
 use crate::spatial::Neighbours;
 
 /// δ_i looks among this many nearest scan points of a reference point. 3 instead of 4 (until

@@ -12,8 +12,9 @@ use nalgebra::{Point3, Vector3};
 
 use super::context::{tangent_frame, Context};
 use super::quadric::{FitScratch, Local};
+use crate::compare::config::{AdaptiveConfig, CompareConfig};
 use crate::compare::cover::{filled, Sectors};
-use crate::compare::{AdaptiveConfig, CompareConfig, Deviation, Reason};
+use crate::compare::deviation::{Deviation, Reason};
 
 /// Candidate radii when none are configured: r0 · √2^k for k below this (r0 to 2.83 r0; the
 /// largest holds about 8 × the smallest's points).

@@ -11,7 +11,8 @@ use super::context::Context;
 use super::fit::at;
 use super::radius::Scratch;
 use crate::cloud::PointCloud;
-use crate::compare::{CompareConfig, Deviation, PEAK_LOD_RATIO};
+use crate::compare::config::CompareConfig;
+use crate::compare::deviation::{Deviation, PEAK_LOD_RATIO};
 
 /// The given core points measured: one result each, and where its peak lies.
 pub(super) struct Measured {
@@ -30,7 +31,7 @@ pub(super) fn measure(
     cfg: &CompareConfig,
 ) -> Measured {
     let grid = &prep.clouds.ref_grid;
-    let refined = crate::compare::run(grid, core, normals, |s: &mut Scratch, p, n| {
+    let refined = crate::compare::clouds::run(grid, core, normals, |s: &mut Scratch, p, n| {
         let dev = at(prep, p, n, cfg, s);
         refine(prep, dev, p, n, cfg, s)
     });
