@@ -524,7 +524,7 @@ impl<'a> Scene<'a> {
         loop {
             let gap = self.index.nearest(&(c.a + dir * t))?.dist2.sqrt();
             let half = (gap - reach) / 2.0;
-            if !(half >= MIN_SPARE_MM / 2.0) {
+            if half.is_nan() || half < MIN_SPARE_MM / 2.0 {
                 return (t < len).then_some((t, level));
             }
             level = level.min(gap - half);
