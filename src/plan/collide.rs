@@ -8,7 +8,7 @@ use std::sync::Mutex;
 
 use nalgebra::{Matrix4, Point3, Vector3};
 
-use super::contact::segment_box_distance;
+use super::contact::{segment_box_distance, spacing};
 pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, Solid};
 use super::inspection::SurfacePoint;
 use crate::robot::{angle_between, Robot, Workcell};
@@ -563,21 +563,4 @@ impl<'a> Scene<'a> {
     pub fn to_reference(&self, p: &Vector3<f64>) -> Point3<f64> {
         self.ref_from_robot.transform_point(&Point3::from(*p))
     }
-}
-
-/// Median distance from a reference point to its nearest other point, mm, over up to
-/// `SAMPLES` points spread over the set.
-fn spacing(pos: &[Point3<f64>], index: &Neighbours) -> f64 {
-    const SAMPLES: usize = 2000;
-    let step = (pos.len() / SAMPLES).max(1);
-    let mut d: Vec<f64> = pos
-        .iter()
-        .step_by(step)
-        .filter_map(|p| index.knn(p, 2).get(1).map(|n| n.dist2.sqrt()))
-        .collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    d.sort_by(f64::total_cmp);
-    d[d.len() / 2]
 }

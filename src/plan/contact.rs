@@ -1,10 +1,12 @@
 //! What a sample of a plan does and what it came too near: the leaf types that the collision
 //! model, the program, the whole-trajectory check and the planner's errors share (so none of
-//! those files imports another in a circle), the collision model's settings and the
-//! distance to a solid.
+//! those files imports another in a circle), the collision model's settings, the distance
+//! to a solid and the reference points' spacing.
 use std::fmt;
 
 use nalgebra::{Point3, Vector3};
+
+use crate::spatial::Neighbours;
 use serde::{Deserialize, Serialize};
 
 /// What a stretch of samples does.
@@ -294,4 +296,21 @@ pub(super) fn segment_box_distance(
         }
     }
     f(0.5 * (x0 + x1)).min(f(0.0)).min(f(1.0))
+}
+
+/// Median distance from a reference point to its nearest other point, mm, over up to
+/// `SAMPLES` points spread over the set.
+pub(super) fn spacing(pos: &[Point3<f64>], index: &Neighbours) -> f64 {
+    const SAMPLES: usize = 2000;
+    let step = (pos.len() / SAMPLES).max(1);
+    let mut d: Vec<f64> = pos
+        .iter()
+        .step_by(step)
+        .filter_map(|p| index.knn(p, 2).get(1).map(|n| n.dist2.sqrt()))
+        .collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2]
 }
