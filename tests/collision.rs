@@ -2,6 +2,8 @@
 //! kinematics from the joint table of shared/DOFBOT.md (the simulator's, not `robot/`), brute force over every
 //! reference point (no index, no tangent planes), and the tool and cell from their files.
 mod common;
+#[path = "collision/sweep.rs"]
+mod sweep;
 
 use nalgebra::{Matrix4, Point3, Vector3};
 use polishbot::grind_sim::fk::chain;

@@ -164,9 +164,10 @@ impl Program {
             ends.push(trial.len() - 1);
         }
         let mut start = 0;
+        let mut sweep = cell.scene.sweep();
         for (leg, &end) in legs.iter().zip(&ends) {
             for i in start + 1..=end {
-                if let Some(hit) = cell.scene.check(cell.robot, trial.sample(i), leg.allow) {
+                if let Some(hit) = sweep.check(cell.robot, trial.sample(i), leg.allow) {
                     return Ok(Some(hit));
                 }
             }
@@ -365,9 +366,10 @@ impl Program {
         let Ok((samples, _)) = sample_stroke(&spline, &lim, &cell.cfg.trajectory) else {
             return Ok(false);
         };
+        let mut sweep = cell.scene.sweep();
         if samples
             .iter()
-            .any(|q| cell.scene.check(cell.robot, q, Allow::Contact).is_some())
+            .any(|q| sweep.check(cell.robot, q, Allow::Contact).is_some())
         {
             return Ok(false);
         }

@@ -38,8 +38,9 @@ pub fn check_samples<'q>(
 ) -> Vec<Collision> {
     let mut out = Vec::new();
     let rules = allowances(segments, samples.len());
+    let mut sweep = scene.sweep();
     for (i, (q, &(allow, owner))) in samples.zip(&rules).enumerate() {
-        if let Some(hit) = scene.check(robot, q, allow) {
+        if let Some(hit) = sweep.check(robot, q, allow) {
             let seg = owner.map(|k| &segments[k]);
             out.push(Collision {
                 sample: i,

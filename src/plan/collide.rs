@@ -7,154 +7,12 @@ use std::collections::HashSet;
 use std::sync::Mutex;
 
 use nalgebra::{Matrix4, Point3, Vector3};
-use serde::{Deserialize, Serialize};
 
-pub use super::contact::{Body, Hit, Obstacle};
+use super::contact::{segment_box_distance, spacing};
+pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, Solid};
 use super::inspection::SurfacePoint;
 use crate::robot::{angle_between, Robot, Workcell};
-use crate::spatial::Neighbours;
-
-/// Settings of the collision model. Lengths in millimetres.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct CollisionConfig {
-    /// Clearance every body keeps from the part and the solids during free motion, and the
-    /// shank and links during grinding, mm (1.0: above the 0.1 mm path error and the tool
-    /// tip's servo-resolution error, below the approach height).
-    pub margin_mm: f64,
-    /// How far the ball may be inside the nominal surface at and next to a contact (grinding,
-    /// approach, retract, re-orientation), mm (0.1: the planner's `max_path_error_mm`).
-    pub contact_tolerance_mm: f64,
-    /// Two reference points inside the ball whose normals are more than this apart mean the
-    /// ball touches a second face: the tool does not fit there, degrees (45).
-    pub second_face_deg: f64,
-    /// Capsule radius of the link after each actuated joint, base to wrist, mm ([30, 20, 20,
-    /// 12]): the base turret, the two 40 mm wide servo brackets, the wrist with the tool motor
-    /// (24 mm across). The link after the last joint is the tool (tool.toml). Estimates from
-    /// the kit's parts: measure the real arm.
-    pub link_radius_mm: Vec<f64>,
-    /// Height along the surface normal a transit climbs to before it travels, when the
-    /// direct move is not clear, mm (30: half the part's smallest extent in the default cell).
-    pub safe_lift_mm: f64,
-    /// Largest ball-centre move between two pieces of a run made as a straight line at the
-    /// contact (a layer step, a turn about the ball centre), mm (0.5: one contact-point
-    /// spacing); longer moves lift off, travel and come down again.
-    pub glide_mm: f64,
-    /// Angle step of the tool axis between the IK waypoints of a turn about the ball centre,
-    /// degrees (1: the tip strays under 0.01 mm between waypoints).
-    pub turn_step_deg: f64,
-    /// Fixed solids of the cell (table, fixture), robot frame; `solids.toml` beside the
-    /// workcell file adds its `[[solid]]` entries.
-    pub solids: Vec<Solid>,
-    /// How much deeper than `contact_tolerance_mm` the ball may be while grinding (and
-    /// pressing in or out), mm: the compliant tool's preload in removal mode, set by the
-    /// planner from tool.toml and by `run` from plan.json; 0 in rigid mode. Not a user key.
-    #[serde(skip)]
-    pub press_mm: f64,
-}
-
-impl Default for CollisionConfig {
-    fn default() -> Self {
-        CollisionConfig {
-            margin_mm: 1.0,
-            contact_tolerance_mm: 0.1,
-            second_face_deg: 45.0,
-            link_radius_mm: vec![30.0, 20.0, 20.0, 12.0],
-            safe_lift_mm: 30.0,
-            glide_mm: 0.5,
-            turn_step_deg: 1.0,
-            press_mm: 0.0,
-            solids: Vec::new(),
-        }
-    }
-}
-
-impl CollisionConfig {
-    /// Checks the values; names the key at fault.
-    pub fn check(&self, dof: usize) -> Result<(), String> {
-        let positive = [
-            ("margin_mm", self.margin_mm),
-            ("second_face_deg", self.second_face_deg),
-            ("safe_lift_mm", self.safe_lift_mm),
-            ("glide_mm", self.glide_mm),
-            ("turn_step_deg", self.turn_step_deg),
-        ];
-        for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err(format!("collision.{name} must be > 0 (got {v})"));
-            }
-        }
-        if !(self.contact_tolerance_mm >= 0.0 && self.contact_tolerance_mm.is_finite()) {
-            return Err("collision.contact_tolerance_mm must be >= 0".into());
-        }
-        if self.link_radius_mm.len() + 1 != dof {
-            return Err(format!(
-                "collision.link_radius_mm has {} radii, the arm {} links before the tool",
-                self.link_radius_mm.len(),
-                dof.saturating_sub(1)
-            ));
-        }
-        if self
-            .link_radius_mm
-            .iter()
-            .any(|r| !(*r >= 0.0 && r.is_finite()))
-        {
-            return Err("collision.link_radius_mm must be >= 0".into());
-        }
-        for (i, s) in self.solids.iter().enumerate() {
-            if !(0..3).all(|k| s.min[k] < s.max[k] && s.min[k].is_finite() && s.max[k].is_finite())
-            {
-                return Err(format!(
-                    "collision.solids[{i}] ({}): min must be below max",
-                    s.name
-                ));
-            }
-        }
-        Ok(())
-    }
-}
-
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SolidsFile {
-    #[serde(default)]
-    solid: Vec<Solid>,
-}
-
-/// The `[[solid]]` entries of `solids.toml` beside `workcell` (none when there is no such
-/// file).
-pub fn solids_beside(workcell: &std::path::Path) -> Result<Vec<Solid>, crate::robot::RobotError> {
-    let file = workcell.with_file_name("solids.toml");
-    if !file.exists() {
-        return Ok(Vec::new());
-    }
-    let parsed: SolidsFile = crate::robot::error::read_toml(&file)?;
-    for (i, s) in parsed.solid.iter().enumerate() {
-        let ok =
-            (0..3).all(|k| s.min[k].is_finite() && s.max[k].is_finite() && s.min[k] < s.max[k]);
-        if !ok {
-            let msg = "min must be finite and below max on every axis";
-            return Err(crate::robot::RobotError::bad(
-                &file,
-                format!("solid[{i}] ({})", s.name),
-                msg,
-            ));
-        }
-    }
-    Ok(parsed.solid)
-}
-
-/// A fixed solid: an axis-aligned box in the robot base frame, metres.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Solid {
-    /// Name in messages ("table", "fixture post").
-    pub name: String,
-    /// Lowest corner, m.
-    pub min: [f64; 3],
-    /// Highest corner, m.
-    pub max: [f64; 3],
-}
+use crate::spatial::{Neighbour, Neighbours};
 
 /// What a sample may touch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -170,6 +28,69 @@ pub enum Allow {
 
 /// Points closer to the ball's centre than its radius less this count as inside it, mm.
 const INSIDE_MM: f64 = 1e-3;
+
+/// Least spare distance beyond a body's search reach worth carrying to later samples, mm (2:
+/// a carried bound then lasts at least 1 mm of motion, ten grinding samples at the 5 mm/s
+/// feed, and the march that finds it steps at least 1 mm; below it the body is searched).
+const MIN_SPARE_MM: f64 = 2.0;
+
+/// Samples a body is searched as before after its march found it nearer the part than
+/// `MIN_SPARE_MM` beyond its reach, before a new march is tried (8: a body that stays near,
+/// such as the shank while grinding, costs one wasted nearest query in nine samples).
+const NEAR_WAIT: u32 = 8;
+
+/// Allowance for rounding in a bound that stands in for a search, mm (coordinates of hundreds of mm carry
+/// rounding errors near 1e-13 mm; 1e-6 mm is far above them and far below any clearance).
+const ROUNDING_MM: f64 = 1e-6;
+
+/// The last nearest query of a search and its answer (a query repeated at the same point
+/// answers the same).
+type Seen = Option<(Point3<f64>, Neighbour)>;
+
+/// A stretch of a body's axis, from `from` mm along it to its end, clear of the part.
+#[derive(Debug, Clone, Copy)]
+struct Stretch {
+    from: f64,
+    /// Its ends when the level was found, reference frame, mm.
+    start: Point3<f64>,
+    end: Point3<f64>,
+    /// No reference point is nearer any point of the stretch, mm.
+    level: f64,
+}
+
+/// A bound on one body's distance from the part carried from sample to sample.
+#[derive(Debug, Clone, Default)]
+struct Carry {
+    /// The stretch of the axis known clear, with its position then.
+    anchor: Option<Stretch>,
+    /// Samples left before a new march (after one found the body near the part).
+    wait: u32,
+    /// Searches the bound answered.
+    skipped: usize,
+}
+
+/// Samples checked one after another (a move, a stroke, a whole program): each body's
+/// distance from the part found at one sample bounds it at the next ones by how far the body
+/// has moved since, and while that bound stays beyond the body's search reach its search is
+/// skipped (the argument: `Scene::carried_far`). Answers are those of [`Scene::check`], bit
+/// for bit, whatever the order of the samples.
+pub struct Sweep<'s, 'a> {
+    scene: &'s Scene<'a>,
+    carry: Vec<Carry>,
+}
+
+impl Sweep<'_, '_> {
+    /// As [`Scene::check`].
+    pub fn check(&mut self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
+        self.scene
+            .check_carried(robot, q, allow, Some(&mut self.carry))
+    }
+
+    /// Body searches answered by a carried bound so far.
+    pub fn skipped(&self) -> usize {
+        self.carry.iter().map(|c| c.skipped).sum()
+    }
+}
 
 /// The reference points inside the ball (index, distance from the centre) and the nearest.
 #[derive(Default)]
@@ -311,6 +232,26 @@ impl<'a> Scene<'a> {
     /// clear under `Free` when `Contact` is asked (`Free` asks every body for the margin and
     /// searches at least the points `Contact` does, so its smallest clearance is no larger).
     pub fn check(&self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
+        self.check_carried(robot, q, allow, None)
+    }
+
+    /// A check of samples one after another that carries each body's distance from the part
+    /// between them (see [`Sweep`]); it answers every sample exactly as [`Scene::check`] does.
+    pub fn sweep(&self) -> Sweep<'_, 'a> {
+        Sweep {
+            scene: self,
+            carry: Vec::new(),
+        }
+    }
+
+    /// `check`, with the bounds carried from earlier samples when there are any.
+    fn check_carried(
+        &self,
+        robot: &Robot,
+        q: &[f64],
+        allow: Allow,
+        carry: Option<&mut Vec<Carry>>,
+    ) -> Option<Hit> {
         let key: Vec<u64> = q.iter().map(|v| v.to_bits()).collect();
         let mut known = self.clear.lock().unwrap_or_else(|e| e.into_inner());
         let mut key = (key, allow);
@@ -325,17 +266,25 @@ impl<'a> Scene<'a> {
                 return None;
             }
         }
-        let hit = self.search(robot, q, allow);
+        let hit = self.search(robot, q, allow, carry);
         if hit.is_none() {
             known.insert(key);
         }
         hit
     }
 
-    /// `check` without the look-up.
-    fn search(&self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
+    /// `check` without the look-up; `carry` holds each body's bound from earlier samples.
+    fn search(
+        &self,
+        robot: &Robot,
+        q: &[f64],
+        allow: Allow,
+        mut carry: Option<&mut Vec<Carry>>,
+    ) -> Option<Hit> {
         let m = self.cfg.margin_mm;
-        for c in self.bodies(robot, q) {
+        // the ball's first query is the shank's (both start at the ball centre)
+        let mut seen = None;
+        for (k, c) in self.bodies(robot, q).into_iter().enumerate() {
             // grinding: the stretch of the shank inside the ball is the ball, which may touch
             let c = match (c.body, allow) {
                 (Body::Shank, Allow::Grind) => outside_ball(c, self.ball),
@@ -348,7 +297,19 @@ impl<'a> Scene<'a> {
             };
             let grind_ball = c.body == Body::Ball && allow == Allow::Grind;
             let mut inside = Inside::default();
-            let found = self.part_clearance(&c, need, grind_ball.then_some(&mut inside));
+            let limit = match carry.as_deref_mut() {
+                Some(all) if c.body != Body::Ball => {
+                    if all.len() <= k {
+                        all.resize(k + 1, Carry::default());
+                    }
+                    self.search_limit(&mut all[k], &c, self.reach(&c, need))
+                }
+                _ => Some(f64::INFINITY),
+            };
+            let found = limit.and_then(|limit| {
+                let inside = grind_ball.then_some(&mut inside);
+                self.part_clearance(&c, need, limit, inside, &mut seen)
+            });
             if let Some((clear, point)) = found {
                 if clear < need {
                     let at = self.points[point].position;
@@ -416,7 +377,7 @@ impl<'a> Scene<'a> {
             b: *centre,
             radius: self.ball,
         };
-        self.part_clearance(&c, need, None)
+        self.part_clearance(&c, need, f64::INFINITY, None, &mut None)
             .map_or(f64::INFINITY, |(d, _)| d)
     }
 
@@ -426,17 +387,18 @@ impl<'a> Scene<'a> {
     /// the distance is to the plane (signed: negative inside), else to the point. Marches
     /// along the axis: where the nearest point is farther than the reach, the stretch that
     /// distance clears is skipped (sphere tracing); near the part, one radius query per step.
+    /// `seen` holds the last nearest query (kept across the bodies of one sample); the march
+    /// stops past `limit` mm along the axis (beyond it the axis is known to be clear).
     fn part_clearance(
         &self,
         c: &Capsule,
         need: f64,
+        limit: f64,
         mut inside: Option<&mut Inside>,
+        seen: &mut Seen,
     ) -> Option<(f64, usize)> {
-        let reach = c.radius + need.max(0.0) + self.patch;
-        let (slo, shi) = (c.a.inf(&c.b), c.a.sup(&c.b));
-        if c.body != Body::Ball
-            && (0..3).any(|k| slo[k] - reach > self.hi[k] || shi[k] + reach < self.lo[k])
-        {
+        let reach = self.reach(c, need);
+        if c.body != Body::Ball && self.outside_box(c, reach) {
             return None;
         }
         let d = c.b - c.a;
@@ -445,9 +407,16 @@ impl<'a> Scene<'a> {
         let step = c.radius.max(1.0);
         let mut best: Option<(f64, usize)> = None;
         let mut t = 0.0;
-        while t <= len {
+        while t <= len && t <= limit {
             let centre = c.a + dir * t;
-            let nearest = self.index.nearest(&centre)?;
+            let nearest = match *seen {
+                Some((at, found)) if at == centre => found,
+                _ => {
+                    let found = self.index.nearest(&centre)?;
+                    *seen = Some((centre, found));
+                    found
+                }
+            };
             let gap = nearest.dist2.sqrt();
             if let Some(found) = inside.as_deref_mut() {
                 found.nearest = Some(nearest.index);
@@ -495,13 +464,116 @@ impl<'a> Scene<'a> {
         best
     }
 
-    /// The first solid `c` comes within `margin` of.
+    /// How far from `c`'s axis `part_clearance` looks for reference points when it needs
+    /// `need` mm of clearance: a point farther than this from every point of the axis is never
+    /// visited, mm.
+    fn reach(&self, c: &Capsule, need: f64) -> f64 {
+        c.radius + need.max(0.0) + self.patch
+    }
+
+    /// The box around `c`'s axis, widened by `reach`, misses the box of the reference points.
+    fn outside_box(&self, c: &Capsule, reach: f64) -> bool {
+        let (slo, shi) = (c.a.inf(&c.b), c.a.sup(&c.b));
+        (0..3).any(|k| slo[k] - reach > self.hi[k] || shi[k] + reach < self.lo[k])
+    }
+
+    /// How far along `c`'s axis `part_clearance` must march: None when no reference point
+    /// lies within `reach` of the axis (the search would visit no point and answer None),
+    /// else a length beyond which none does (infinite when nothing is known). Shown without
+    /// searching when `carry`'s bound allows; `carry` is renewed when it does not.
+    ///
+    /// Why a skip cannot pass a colliding sample: `carry` holds an earlier stretch `s0`-`e0`
+    /// of the body's axis (from `from` mm along it to its end) and a level `L` such that every
+    /// point of that stretch is at least `L` from every reference point (Euclidean). The same
+    /// stretch now runs `s`-`e`, and its point `s + u (e - s)` lies within `|(1 - u)(s - s0) +
+    /// u (e - e0)| <= max(|s - s0|, |e - e0|) = moved` of `s0 + u (e0 - s0)`; the distance
+    /// to a point set is 1-Lipschitz, so every point of the stretch is at least `L - moved`
+    /// from every reference point. When that exceeds `reach` (by `ROUNDING_MM` for rounding),
+    /// every nearest query of the search's march there finds its point beyond `reach`, so the
+    /// march only steps over the stretch: stopping it at `from` (or not starting it when
+    /// `from` is 0) leaves the answer as it was. Nothing is assumed about the motion between
+    /// the two samples (only positions are compared), and the solids are checked at every
+    /// sample anyway. The ball is never skipped: a centre deep inside the part is far from
+    /// every point and only the search's normal test sees it.
+    fn search_limit(&self, carry: &mut Carry, c: &Capsule, reach: f64) -> Option<f64> {
+        if self.outside_box(c, reach) {
+            return None;
+        }
+        let len = (c.b - c.a).norm();
+        let at = |from: f64| c.a + (c.b - c.a) * (from / len).min(1.0);
+        if let Some(known) = carry.anchor {
+            let moved = (at(known.from) - known.start)
+                .norm()
+                .max((c.b - known.end).norm());
+            if known.level - moved > reach + ROUNDING_MM {
+                carry.skipped += 1;
+                return (known.from > 0.0).then_some(known.from);
+            }
+        }
+        carry.anchor = None;
+        if carry.wait > 0 {
+            carry.wait -= 1;
+            return Some(f64::INFINITY);
+        }
+        match self.clear_stretch(c, reach) {
+            Some((from, level)) => {
+                let (start, end) = (at(from), c.b);
+                carry.anchor = Some(Stretch {
+                    from,
+                    start,
+                    end,
+                    level,
+                });
+                (from > 0.0).then_some(from)
+            }
+            None => {
+                carry.wait = NEAR_WAIT;
+                Some(f64::INFINITY)
+            }
+        }
+    }
+
+    /// The stretch of `c`'s axis from its end back towards its start (from `from` mm along
+    /// it) that keeps at least `reach + MIN_SPARE_MM` from every reference point, and a level
+    /// no point of it comes nearer than; None when the end itself is nearer. Marches back
+    /// from the end: the nearest point at `gap` from a centre leaves every point within
+    /// `(gap - reach) / 2` of the centre at least `(gap + reach) / 2` from the part, and the
+    /// march steps on by that half, so those balls cover the stretch.
+    fn clear_stretch(&self, c: &Capsule, reach: f64) -> Option<(f64, f64)> {
+        let d = c.b - c.a;
+        let len = d.norm();
+        let dir = if len > 0.0 { d / len } else { Vector3::zeros() };
+        let mut level = f64::INFINITY;
+        let mut t = len;
+        loop {
+            let gap = self.index.nearest(&(c.a + dir * t))?.dist2.sqrt();
+            let half = (gap - reach) / 2.0;
+            if half.is_nan() || half < MIN_SPARE_MM / 2.0 {
+                return (t < len).then_some((t, level));
+            }
+            level = level.min(gap - half);
+            t -= half;
+            if t <= 0.0 {
+                return Some((0.0, level));
+            }
+        }
+    }
+
+    /// The first solid `c` comes within `margin` of (answers exactly as the search alone).
     fn solid_hit(&self, c: &Capsule, margin: f64) -> Option<Hit> {
         let to_robot_mm = |p: &Point3<f64>| self.robot_from_ref.transform_point(p) * 1e3;
         let (a, b) = (to_robot_mm(&c.a), to_robot_mm(&c.b));
         self.cfg.solids.iter().find_map(|s| {
             let lo = Point3::from(Vector3::from(s.min) * 1e3);
             let hi = Point3::from(Vector3::from(s.max) * 1e3);
+            // every point of the segment is in its bounding box, so the gap between the two
+            // boxes bounds the distance from below: beyond the margin there, the search
+            // (whose value is a distance to points of the segment) cannot find a hit either
+            let (slo, shi) = (a.inf(&b), a.sup(&b));
+            let gap = Vector3::from_fn(|k, _| (lo[k] - shi[k]).max(0.0).max(slo[k] - hi[k]));
+            if gap.norm() - c.radius >= margin + ROUNDING_MM {
+                return None;
+            }
             let clear = segment_box_distance(&a, &b, &lo, &hi) - c.radius;
             (clear < margin).then(|| Hit {
                 body: c.body,
@@ -515,50 +587,4 @@ impl<'a> Scene<'a> {
     pub fn to_reference(&self, p: &Vector3<f64>) -> Point3<f64> {
         self.ref_from_robot.transform_point(&Point3::from(*p))
     }
-}
-
-/// Distance from `p` to the box `lo`..`hi`.
-fn point_box_distance(p: &Point3<f64>, lo: &Point3<f64>, hi: &Point3<f64>) -> f64 {
-    let d = Vector3::from_fn(|k, _| (lo[k] - p[k]).max(0.0).max(p[k] - hi[k]));
-    d.norm()
-}
-
-/// Distance from the segment `a`-`b` to a box: the distance to a convex set is convex along
-/// the segment, so a golden-section search finds its minimum.
-fn segment_box_distance(
-    a: &Point3<f64>,
-    b: &Point3<f64>,
-    lo: &Point3<f64>,
-    hi: &Point3<f64>,
-) -> f64 {
-    const ITERATIONS: usize = 60; // 0.618^60: 3e-13 of the segment
-    let f = |t: f64| point_box_distance(&(a + (b - a) * t), lo, hi);
-    let g = (5f64.sqrt() - 1.0) / 2.0;
-    let (mut x0, mut x1) = (0.0, 1.0);
-    for _ in 0..ITERATIONS {
-        let (l, r) = (x1 - g * (x1 - x0), x0 + g * (x1 - x0));
-        if f(l) <= f(r) {
-            x1 = r;
-        } else {
-            x0 = l;
-        }
-    }
-    f(0.5 * (x0 + x1)).min(f(0.0)).min(f(1.0))
-}
-
-/// Median distance from a reference point to its nearest other point, mm, over up to
-/// `SAMPLES` points spread over the set.
-fn spacing(pos: &[Point3<f64>], index: &Neighbours) -> f64 {
-    const SAMPLES: usize = 2000;
-    let step = (pos.len() / SAMPLES).max(1);
-    let mut d: Vec<f64> = pos
-        .iter()
-        .step_by(step)
-        .filter_map(|p| index.knn(p, 2).get(1).map(|n| n.dist2.sqrt()))
-        .collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    d.sort_by(f64::total_cmp);
-    d[d.len() / 2]
 }
