@@ -203,7 +203,7 @@ fn every_stated_default_is_the_default_impl() {
         crate::plan::PlanConfig => "src/plan/config.rs",
         crate::plan::TrajectoryConfig => "src/plan/trajectory.rs",
         crate::plan::ValidationConfig => "src/plan/validate.rs",
-        crate::plan::CollisionConfig => "src/plan/collide.rs",
+        crate::plan::CollisionConfig => "src/plan/contact.rs",
         crate::robot::IkConfig => "src/robot/ik.rs",
         crate::bus::BusConfig => "src/bus/config.rs",
         crate::bus::SimTiming => "src/bus/model.rs",

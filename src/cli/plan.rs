@@ -76,33 +76,50 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     provenance.stamp_json(&args.out)?;
     let page = super::plan_report::write_page(&args.out, &inspection, &plan, &provenance)?;
     if let Some(removal) = &plan.removal {
-        let csv = args.out.with_file_name("predicted.csv");
-        std::fs::write(
-            &csv,
-            plan::preston::predicted_csv(removal, &cfg.plan.monte_carlo),
-        )
-        .map_err(|e| anyhow::anyhow!("{}: {e}", csv.display()))?;
-        for r in &removal.regions {
-            println!(
-                "plan: region {}: predicted peak {:+.4} -> {:+.4} mm, RMS {:.4} -> {:.4} mm, \
-                 lowest {:+.4} mm (Monte Carlo low quantile {:+.4} mm), allowance {:.3} mm, {} \
-                 contacts",
-                r.region,
-                r.before.peak_mm,
-                r.after.peak_mm,
-                r.before.rms_mm,
-                r.after.rms_mm,
-                r.after.lowest_mm,
-                r.after_low_p95_mm,
-                r.allowance_mm,
-                r.dwell.len()
-            );
-        }
+        write_removal(removal, &args.out, &cfg.plan)?;
     }
     if let Some(yaml) = &args.export_ros {
         std::fs::write(yaml, ros::joint_trajectory_yaml(&plan, "base_link"))
             .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
     }
+    println!("plan: report {}", page.display());
+    print_summary(&plan, &args.inspection, &args.out);
+    Ok(())
+}
+
+/// Removal mode: writes predicted.csv beside the plan and prints each region's prediction.
+fn write_removal(
+    removal: &plan::preston::RemovalReport,
+    out: &Path,
+    cfg: &PlanConfig,
+) -> anyhow::Result<()> {
+    let csv = out.with_file_name("predicted.csv");
+    std::fs::write(
+        &csv,
+        plan::preston::predicted_csv(removal, &cfg.monte_carlo),
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", csv.display()))?;
+    for r in &removal.regions {
+        println!(
+            "plan: region {}: predicted peak {:+.4} -> {:+.4} mm, RMS {:.4} -> {:.4} mm, \
+             lowest {:+.4} mm (Monte Carlo low quantile {:+.4} mm), allowance {:.3} mm, {} \
+             contacts",
+            r.region,
+            r.before.peak_mm,
+            r.after.peak_mm,
+            r.before.rms_mm,
+            r.after.rms_mm,
+            r.after.lowest_mm,
+            r.after_low_p95_mm,
+            r.allowance_mm,
+            r.dwell.len()
+        );
+    }
+    Ok(())
+}
+
+/// Prints what was planned: totals, accuracy, per region reach and warnings, table moves.
+fn print_summary(plan: &plan::Plan, inspection: &Path, out: &Path) {
     let m = &plan.metrics;
     let planned: Vec<_> = plan
         .reachability
@@ -110,11 +127,10 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
         .iter()
         .filter(|r| r.layers > 0)
         .collect();
-    println!("plan: report {}", page.display());
     println!(
         "plan: {} -> {}: {} region(s) planned, {} passes, {} path points, {} samples, predicted duration {:.2} s",
-        args.inspection.display(),
-        args.out.display(),
+        inspection.display(),
+        out.display(),
         planned.len(),
         plan.passes.len(),
         m.path_points,
@@ -181,5 +197,4 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
             plan.reachability.unreachable.len()
         );
     }
-    Ok(())
 }
