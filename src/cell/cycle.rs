@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::plan::Inspection;
 use crate::regions::{Region, Verdict};
+use crate::report::escape;
 use crate::spatial::Neighbours;
 
 /// Default least share of the planned excess volume an iteration must remove to go on: a
@@ -406,12 +407,6 @@ pub fn table_text(records: &[IterationRecord]) -> String {
         text.push_str(&line(row));
     }
     text
-}
-
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 /// `cycle.html`: the table and the outcome, plain HTML without scripts.

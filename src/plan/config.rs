@@ -197,17 +197,7 @@ impl PlanConfig {
             .check(robot.dof())
             .map_err(PlanError::Config)?;
         self.removal.check().map_err(PlanError::Config)?;
-        let mc = &self.monte_carlo;
-        let mc_ok = (1..=10_000).contains(&mc.draws)
-            && (0.0..=10.0).contains(&mc.backlash_deg)
-            && (0.0..=50.0).contains(&mc.tip_error_mm)
-            && (0.5..1.0).contains(&mc.quantile);
-        if !mc_ok {
-            return Err(PlanError::Config(format!(
-                "`monte_carlo` {mc:?} is outside draws 1..=10000, backlash_deg 0..=10, \
-                 tip_error_mm 0..=50, quantile 0.5..1"
-            )));
-        }
+        self.monte_carlo.check().map_err(PlanError::Config)?;
         for (name, v) in [
             ("force_share", self.force_share),
             ("tolerance_mm", self.tolerance_mm),

@@ -19,6 +19,7 @@ use std::path::Path;
 use anyhow::Result;
 
 pub use colour::diverging;
+pub use html::escape;
 pub use input::{colour_range, Figure, RegionMark, ReportConfig, ReportFiles, ReportInput, Table};
 
 /// Writes report.html and its figures into `dir`.

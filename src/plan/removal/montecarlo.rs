@@ -45,6 +45,23 @@ impl Default for MonteCarloConfig {
     }
 }
 
+impl MonteCarloConfig {
+    /// Checks the settings against their ranges (one message naming them all).
+    pub fn check(&self) -> Result<(), String> {
+        let ok = (1..=10_000).contains(&self.draws)
+            && (0.0..=10.0).contains(&self.backlash_deg)
+            && (0.0..=50.0).contains(&self.tip_error_mm)
+            && (0.5..1.0).contains(&self.quantile);
+        match ok {
+            true => Ok(()),
+            false => Err(format!(
+                "`monte_carlo` {self:?} is outside draws 1..=10000, backlash_deg 0..=10, \
+                 tip_error_mm 0..=50, quantile 0.5..1"
+            )),
+        }
+    }
+}
+
 /// How one contact's joints move its tip: `sensitivity` (3 x dof, mm per rad, the frame of
 /// the contact points) and each joint's quantisation half-step, rad (half a raw count).
 #[derive(Debug, Clone, PartialEq)]
