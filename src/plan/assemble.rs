@@ -16,6 +16,15 @@ use super::report::UnreachablePoint;
 use super::trajectory::{JointTrajectory, Limits, Move};
 use crate::robot::{IkTarget, Robot, Workcell};
 
+/// Waypoint spacing of a straight retract, mm (0.25: the joint spline between two IK
+/// waypoints this close strays from the line by under a micrometre on the DOFBOT's 100 mm
+/// links, far below the 0.1 mm contact tolerance).
+const STRAIGHT_STEP_MM: f64 = 0.25;
+
+/// Two retract directions nearer than this are one, degrees (1: the retract height of 5 mm
+/// then ends under 0.1 mm apart).
+const SAME_DIRECTION_DEG: f64 = 1.0;
+
 /// One rest-to-rest leg of a free motion.
 #[derive(Clone)]
 struct Leg {
@@ -88,40 +97,102 @@ pub(crate) fn assemble(
     if let Some(hit) = scene.check(robot, &cfg.home, Allow::Free) {
         return Err(PlanError::Config(format!("home pose collides: {hit}")));
     }
-    // the contact the tool is on (None: in the air), and the last one it left
-    let mut on: Option<(PlannedPoint, usize)> = None;
-    let mut left: Option<PlannedPoint> = None;
+    // the contact the tool is on (None: in the air), the last one it left, and the pieces
+    // ground since it came down
+    let mut at = Where::default();
     for run in runs {
         for piece in run {
             let start = &piece.points[0];
-            let glided = match &on {
+            let before = prog.mark();
+            let glided = match &at.on {
                 // removal mode: the next piece of the same stroke starts where this one ended
-                Some((at, _)) if piece.dwell_s.is_some() && at.q == start.q => true,
+                Some((on, _)) if piece.dwell_s.is_some() && on.q == start.q => true,
                 // a pressed ball does not slide to another stroke: it would grind off the plan
                 Some(_) if pressed(start) > 0.0 => false,
-                Some((at, _)) => prog.glide(at, start, piece.region, &cell)?,
+                Some((on, _)) => prog.glide(on, start, piece.region, &cell)?,
                 None => false,
             };
-            if !glided {
-                if let Some((at, region)) = on.take() {
-                    prog.retract(&at, region, &cell)?;
-                    left = Some(at);
+            let ground = match glided {
+                true => Ground {
+                    mark: before,
+                    on: at.on.clone(),
+                },
+                false => {
+                    at.lift_off(&mut prog, &cell, unreachable)?;
+                    let mark = prog.mark();
+                    if let Err(reason) = prog.enter(at.left.as_ref(), start, piece.region, &cell)? {
+                        leave_out(&piece, &reason, unreachable);
+                        continue;
+                    }
+                    Ground { mark, on: None }
                 }
-                if let Err(reason) = prog.enter(left.as_ref(), start, piece.region, &cell)? {
-                    leave_out(&piece, &reason, unreachable);
-                    continue;
-                }
-            }
-            on = piece.points.last().cloned().map(|p| (p, piece.region));
+            };
+            at.on = piece.points.last().cloned().map(|p| (p, piece.region));
+            at.since.push(ground);
             prog.grind(piece, robot, cfg)?;
         }
-        if let Some((at, region)) = on.take() {
-            prog.retract(&at, region, &cell)?;
-            left = Some(at);
-        }
+        at.lift_off(&mut prog, &cell, unreachable)?;
     }
-    prog.home(left.as_ref(), &cell)?;
+    prog.home(at.left.as_ref(), &cell)?;
     Ok(prog)
+}
+
+/// Where the program stands: on a contact or in the air, and how it got there.
+#[derive(Default)]
+struct Where {
+    /// The contact the tool is on (None: in the air) and its region.
+    on: Option<(PlannedPoint, usize)>,
+    /// The contact it last left.
+    left: Option<PlannedPoint>,
+    /// The pieces ground since it came down, in order.
+    since: Vec<Ground>,
+}
+
+/// A piece ground: the program before the move onto it (glide or approach) and the contact
+/// the tool was on then.
+struct Ground {
+    mark: Mark,
+    on: Option<(PlannedPoint, usize)>,
+}
+
+impl Where {
+    /// Takes the tool off the part. When no retract from its contact is clear, the last piece
+    /// ground is taken back (with the move onto it) and left out with the reason, and the tool
+    /// leaves from where it stood before that piece.
+    fn lift_off(
+        &mut self,
+        prog: &mut Program,
+        cell: &Cell,
+        unreachable: &mut Vec<UnreachablePoint>,
+    ) -> Result<(), PlanError> {
+        while let Some((at, region)) = self.on.take() {
+            let why = match prog.retract(&at, region, cell)? {
+                Ok(()) => {
+                    self.left = Some(at);
+                    self.since.clear();
+                    return Ok(());
+                }
+                Err(why) => why,
+            };
+            let Some(last) = self.since.pop() else {
+                return Err(PlanError::Collision(why));
+            };
+            let reason = format!("no clear retract after it: {why}");
+            leave_out(&prog.passes[last.mark.passes], &reason, unreachable);
+            prog.back_to(last.mark);
+            self.on = last.on;
+        }
+        Ok(())
+    }
+}
+
+/// The program's length at one time (samples, segments, passes and its counters).
+#[derive(Debug, Clone, Copy)]
+struct Mark {
+    samples: usize,
+    segments: usize,
+    passes: usize,
+    slowed: usize,
 }
 
 /// How far contact `p` is pressed inside the surface, mm (removal mode's preload; 0 in rigid
@@ -146,6 +217,25 @@ fn leave_out(piece: &PlannedPass, reason: &str, unreachable: &mut Vec<Unreachabl
 }
 
 impl Program {
+    fn mark(&self) -> Mark {
+        Mark {
+            samples: self.trajectory.len(),
+            segments: self.segments.len(),
+            passes: self.passes.len(),
+            slowed: self.slowed,
+        }
+    }
+
+    /// The program as it was at `mark`.
+    fn back_to(&mut self, mark: Mark) {
+        let dof = self.trajectory.dof;
+        self.trajectory.positions.truncate(mark.samples * dof);
+        self.cruise.truncate(mark.samples);
+        self.segments.truncate(mark.segments);
+        self.passes.truncate(mark.passes);
+        self.slowed = mark.slowed;
+    }
+
     /// Appends `legs` from the last sample when every sample is clear for its leg; otherwise
     /// leaves the program as it was and returns the first hit.
     fn try_legs(&mut self, legs: &[Leg], cell: &Cell) -> Result<Option<Hit>, PlanError> {
@@ -259,8 +349,15 @@ impl Program {
         Ok(Err(why))
     }
 
-    /// Up the normal off contact `p` (at the retract height, halved when the arm cannot).
-    fn retract(&mut self, p: &PlannedPoint, region: usize, cell: &Cell) -> Result<(), PlanError> {
+    /// Up the normal off contact `p` (at the retract height, halved when the arm cannot): one
+    /// joint move, else straight out in task space (see `straight_out`). The inner error says
+    /// why none is clear.
+    fn retract(
+        &mut self,
+        p: &PlannedPoint,
+        region: usize,
+        cell: &Cell,
+    ) -> Result<Result<(), String>, PlanError> {
         let region = Some(region);
         let mut why = String::from("no retract pose above the contact");
         let press = pressed(p);
@@ -276,14 +373,103 @@ impl Program {
             let mut legs = out.clone();
             legs.push(cell.leg(&above, SegmentKind::Retract, region, Allow::Contact));
             match self.try_legs(&legs, cell)? {
-                None => return Ok(()),
+                None => return Ok(Ok(())),
                 Some(hit) => why = hit.to_string(),
             }
         }
         let [x, y, z] = p.surface_mm;
-        Err(PlanError::Collision(format!(
-            "retract from ({x:.2}, {y:.2}, {z:.2}) mm: {why}"
-        )))
+        let failed = |why: String| {
+            Ok(Err(format!(
+                "retract from ({x:.2}, {y:.2}, {z:.2}) mm: {why}"
+            )))
+        };
+        if let Some(hit) = self.try_legs(&out, cell)? {
+            return failed(hit.to_string());
+        }
+        let up = cell.wc.direction_from_reference(&Vector3::from(p.normal));
+        let back = -cell.robot.fk(self.trajectory.last()).axis;
+        let mut dirs = vec![up];
+        if crate::robot::angle_between(&up, &back).to_degrees() > SAME_DIRECTION_DEG {
+            dirs.push(back);
+        }
+        for dir in dirs {
+            match self.straight_out(&dir, region, cell)? {
+                None => return Ok(Ok(())),
+                Some(w) => why = format!("{why}; straight out: {w}"),
+            }
+        }
+        failed(why)
+    }
+
+    /// From the last sample straight along `dir` (robot frame, unit) by the retract height in
+    /// task space, the tool axis kept: IK every `STRAIGHT_STEP_MM`, sampled along the joint
+    /// spline through them (a joint move between two poses bends the ball's path; near a
+    /// second face the bend can dip it in). None when appended; else why not.
+    fn straight_out(
+        &mut self,
+        dir: &Vector3<f64>,
+        region: Option<usize>,
+        cell: &Cell,
+    ) -> Result<Option<String>, PlanError> {
+        let q0 = self.trajectory.last().to_vec();
+        let pose = cell.robot.fk(&q0);
+        let length = cell.cfg.retract_mm;
+        let steps = (length / STRAIGHT_STEP_MM).ceil().max(1.0) as usize;
+        let mut qs = vec![q0];
+        for k in 1..=steps {
+            let target = IkTarget {
+                position: pose.position + dir * (length * 1e-3 * k as f64 / steps as f64),
+                axis: pose.axis,
+                roll: None,
+            };
+            match cell.robot.ik(&target, &qs[k - 1], &cell.cfg.ik) {
+                Ok(sol) => qs.push(sol.q),
+                Err(e) => {
+                    return Ok(Some(format!(
+                        "no pose {:.2} mm out: {e}",
+                        length * k as f64 / steps as f64
+                    )))
+                }
+            }
+        }
+        let Some(samples) = follow(qs, cell) else {
+            return Ok(Some("the joints cannot follow the line".into()));
+        };
+        Ok(self
+            .append_checked(&samples, SegmentKind::Retract, region, cell)
+            .map(|hit| hit.to_string()))
+    }
+
+    /// Appends `samples` (after the last one) as one segment when every one is clear under the
+    /// contact rule; else leaves the program as it was and returns the first hit.
+    fn append_checked(
+        &mut self,
+        samples: &[Vec<f64>],
+        kind: SegmentKind,
+        region: Option<usize>,
+        cell: &Cell,
+    ) -> Option<Hit> {
+        let mut sweep = cell.scene.sweep();
+        if let Some(hit) = samples
+            .iter()
+            .find_map(|q| sweep.check(cell.robot, q, Allow::Contact))
+        {
+            return Some(hit);
+        }
+        let first = self.trajectory.len() - 1;
+        for q in samples {
+            self.trajectory.push(q);
+        }
+        self.cruise
+            .extend(std::iter::repeat_n(false, samples.len()));
+        self.segments.push(Segment {
+            kind,
+            region,
+            pass: None,
+            first_sample: first,
+            last_sample: first + samples.len(),
+        });
+        None
     }
 
     /// Back home from the air above `left`: directly, or after climbing to the safe height.
@@ -334,7 +520,6 @@ impl Program {
             .ceil()
             .max(1.0) as usize;
         let mut qs = vec![a.q.clone()];
-        let mut s = vec![0.0];
         for k in 1..=steps {
             let f = k as f64 / steps as f64;
             let q = if k == steps {
@@ -351,41 +536,40 @@ impl Program {
                     Err(_) => return Ok(false),
                 }
             };
-            let ds = max_step(&q, &qs[k - 1]);
-            s.push(s[k - 1] + ds.max(1e-9));
             qs.push(q);
         }
-        let spline = JointSpline::new(s, qs);
-        let most = |v: Vec<f64>| v.into_iter().fold(0.0, f64::max);
-        let wanted = PathLimits {
-            velocity: most(cell.limits.velocity.clone()),
-            acceleration: most(cell.limits.acceleration.clone()),
-            jerk: most(cell.limits.jerk.clone()),
-        };
-        let lim = path_limits(&spline, &cell.robot.joints, wanted, cell.cfg.joint_margin);
-        let Ok((samples, _)) = sample_stroke(&spline, &lim, &cell.cfg.trajectory) else {
+        let Some(samples) = follow(qs, cell) else {
             return Ok(false);
         };
-        let mut sweep = cell.scene.sweep();
-        if samples
-            .iter()
-            .any(|q| sweep.check(cell.robot, q, Allow::Contact).is_some())
-        {
-            return Ok(false);
-        }
-        let first = self.trajectory.len() - 1;
-        for q in &samples {
-            self.trajectory.push(q);
-        }
-        self.cruise
-            .extend(std::iter::repeat_n(false, samples.len()));
-        self.segments.push(Segment {
-            kind: SegmentKind::Reorient,
-            region: Some(region),
-            pass: None,
-            first_sample: first,
-            last_sample: first + samples.len(),
-        });
-        Ok(true)
+        Ok(self
+            .append_checked(&samples, SegmentKind::Reorient, Some(region), cell)
+            .is_none())
     }
+}
+
+/// Samples of the joint spline through `qs`, each waypoint's path length its largest joint
+/// step from the one before; None when the joints cannot follow it.
+fn follow(qs: Vec<Vec<f64>>, cell: &Cell) -> Option<Vec<Vec<f64>>> {
+    let mut s = vec![0.0];
+    for w in qs.windows(2) {
+        let last = s[s.len() - 1];
+        s.push(last + max_step(&w[1], &w[0]).max(1e-9));
+    }
+    follow_along(s, qs, cell)
+}
+
+/// Samples of the joint spline through `qs` at path lengths `s`, as fast as the joints allow
+/// (rest to rest); None when they cannot follow it.
+fn follow_along(s: Vec<f64>, qs: Vec<Vec<f64>>, cell: &Cell) -> Option<Vec<Vec<f64>>> {
+    let spline = JointSpline::new(s, qs);
+    let most = |v: Vec<f64>| v.into_iter().fold(0.0, f64::max);
+    let wanted = PathLimits {
+        velocity: most(cell.limits.velocity.clone()),
+        acceleration: most(cell.limits.acceleration.clone()),
+        jerk: most(cell.limits.jerk.clone()),
+    };
+    let lim = path_limits(&spline, &cell.robot.joints, wanted, cell.cfg.joint_margin);
+    sample_stroke(&spline, &lim, &cell.cfg.trajectory)
+        .ok()
+        .map(|(samples, _)| samples)
 }
