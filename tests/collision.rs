@@ -2,6 +2,8 @@
 //! kinematics from the joint table of shared/DOFBOT.md (the simulator's, not `robot/`), brute force over every
 //! reference point (no index, no tangent planes), and the tool and cell from their files.
 mod common;
+#[path = "collision/heldout.rs"]
+mod heldout;
 #[path = "collision/sweep.rs"]
 mod sweep;
 

@@ -124,6 +124,7 @@ pub(crate) fn assemble(
                         leave_out(&piece, &reason, unreachable);
                         continue;
                     }
+                    at.entered.push((mark, at.left.clone()));
                     Ground { mark, on: None }
                 }
             };
@@ -133,7 +134,7 @@ pub(crate) fn assemble(
         }
         at.lift_off(&mut prog, &cell, unreachable)?;
     }
-    prog.home(at.left.as_ref(), &cell)?;
+    at.go_home(&mut prog, &cell, unreachable)?;
     Ok(prog)
 }
 
@@ -146,6 +147,8 @@ struct Where {
     left: Option<PlannedPoint>,
     /// The pieces ground since it came down, in order.
     since: Vec<Ground>,
+    /// Every descent onto the part: the program before it and the contact left then.
+    entered: Vec<(Mark, Option<PlannedPoint>)>,
 }
 
 /// A piece ground: the program before the move onto it (glide or approach) and the contact
@@ -180,9 +183,39 @@ impl Where {
             let reason = format!("no clear retract after it: {why}");
             leave_out(&prog.passes[last.mark.passes], &reason, unreachable);
             prog.back_to(last.mark);
+            if last.on.is_none() {
+                // it was a descent from the air: that descent is gone too
+                self.entered.pop();
+            }
             self.on = last.on;
         }
         Ok(())
+    }
+
+    /// Back home from the air. When no way home is clear, the last descent onto the part is
+    /// taken back with all it ground (left out with the reason), and the tool goes home from
+    /// where it was before it.
+    fn go_home(
+        &mut self,
+        prog: &mut Program,
+        cell: &Cell,
+        unreachable: &mut Vec<UnreachablePoint>,
+    ) -> Result<(), PlanError> {
+        loop {
+            let why = match prog.home(self.left.as_ref(), cell)? {
+                Ok(()) => return Ok(()),
+                Err(why) => why,
+            };
+            let Some((mark, left)) = self.entered.pop() else {
+                return Err(PlanError::Collision(why));
+            };
+            let reason = format!("no clear way home after it: {why}");
+            for piece in &prog.passes[mark.passes..] {
+                leave_out(piece, &reason, unreachable);
+            }
+            prog.back_to(mark);
+            self.left = left;
+        }
     }
 }
 
@@ -472,30 +505,30 @@ impl Program {
         None
     }
 
-    /// Back home from the air above `left`: directly, or after climbing to the safe height.
-    fn home(&mut self, left: Option<&PlannedPoint>, cell: &Cell) -> Result<(), PlanError> {
+    /// Back home from the air above `left`: directly, or after climbing to the safe height
+    /// (halved twice when the arm cannot, or when the way from there is not clear). The inner
+    /// error says why none is clear.
+    fn home(
+        &mut self,
+        left: Option<&PlannedPoint>,
+        cell: &Cell,
+    ) -> Result<Result<(), String>, PlanError> {
         let home = cell.leg(&cell.cfg.home, SegmentKind::Transit, None, Allow::Free);
-        let mut tries = vec![vec![home]];
+        let mut tries = vec![vec![home.clone()]];
         if let Some(l) = left {
-            for up in cell
-                .lifted(l, cell.scene.config().safe_lift_mm)
-                .into_iter()
-                .take(1)
-            {
-                tries.push(vec![
-                    cell.leg(&up, SegmentKind::Transit, None, Allow::Free),
-                    cell.leg(&cell.cfg.home, SegmentKind::Transit, None, Allow::Free),
-                ]);
+            for up in cell.lifted(l, cell.scene.config().safe_lift_mm) {
+                let up = cell.leg(&up, SegmentKind::Transit, None, Allow::Free);
+                tries.push(vec![up, home.clone()]);
             }
         }
         let mut why = String::new();
         for legs in tries {
             match self.try_legs(&legs, cell)? {
-                None => return Ok(()),
+                None => return Ok(Ok(())),
                 Some(hit) => why = hit.to_string(),
             }
         }
-        Err(PlanError::Collision(format!("transit home: {why}")))
+        Ok(Err(format!("transit home: {why}")))
     }
 
     /// Moves the ball from contact `a` to contact `b` in task space (straight line, tool axis

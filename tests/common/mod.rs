@@ -1,5 +1,7 @@
 //! Helpers shared by the integration tests: data paths, the oracle Python, the binary.
 #![allow(dead_code)]
+pub mod femoral;
+
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

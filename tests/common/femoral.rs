@@ -1,0 +1,110 @@
+//! Inspections of `synth` cases of the real femoral component, as `inspect` would write them
+//! from a perfect measurement (tests/turntable.rs, tests/collision.rs).
+use std::path::Path;
+
+use nalgebra::Vector3;
+use polishbot::plan::{Inspection, PlanConfig, SurfacePoint};
+use polishbot::regions::Region;
+use polishbot::robot::{Robot, Turntable, Workcell};
+use polishbot::synth::{synth, SynthConfig};
+
+/// Deviation beyond which a core point belongs to a defect region, mm (regions' default).
+const TOLERANCE: f64 = 0.05;
+
+/// The cell of `calibration/DIR` (`""`: the default cell) and the planner's settings with
+/// its fixed solids, as `plan` loads them.
+pub fn cell(dir: &str) -> (Robot, Workcell, Option<Turntable>, PlanConfig) {
+    let f = |name: &str| super::calib(&format!("{dir}{name}"));
+    let robot = Robot::load(&f("dofbot.urdf"), &f("tool.toml"), &f("servos.toml")).unwrap();
+    let wc = Workcell::load(&f("workcell.toml")).unwrap();
+    let table = Turntable::load(&f("servos.toml"), &f("workcell.toml")).unwrap();
+    let mut config = PlanConfig::default();
+    let solids = polishbot::plan::collide::solids_beside(&f("workcell.toml")).unwrap();
+    config.collision.solids.extend(solids);
+    (robot, wc, table, config)
+}
+
+/// An inspection of a `synth` case of the real femoral component with `defects` random
+/// defects on its articular surface (femoral_dm_contact.stl; placed by the seed, not for the
+/// arm's reach): core points are the reference samples, distances the true deviations, a
+/// region per defect of the points beyond the tolerance it dominates.
+pub fn inspection(seed: u64, defects: usize) -> Inspection {
+    of_case(&super::femoral_synth(seed, defects))
+}
+
+/// As [`inspection`], for any synth settings.
+pub fn of_case(config: &SynthConfig) -> Inspection {
+    let case = synth(config).expect("synth");
+    let area: f64 = (0..case.mesh.faces.len())
+        .map(|i| case.mesh.face_normal_area(i).1)
+        .sum();
+    let per_point = area / case.reference.len() as f64;
+    let normals = case.reference.normals.clone().expect("normals");
+    let defects = &case.truth.defects;
+    let mut points = Vec::new();
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); defects.len()];
+    for (p, n) in case.reference.points.iter().zip(&normals) {
+        let d = case.truth.deviation_at(p, n);
+        let owner = (d.abs() > TOLERANCE).then(|| {
+            (0..defects.len())
+                .max_by(|&a, &b| {
+                    let da = defects[a].displacement(p, n).abs();
+                    da.total_cmp(&defects[b].displacement(p, n).abs())
+                })
+                .expect("defects")
+        });
+        if let Some(k) = owner {
+            members[k].push(points.len());
+        }
+        points.push(SurfacePoint {
+            position: *p,
+            normal: *n,
+            distance: d,
+            region: owner.map_or(-1, |k| k as i64),
+        });
+    }
+    let regions = members
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| !m.is_empty())
+        .map(|(id, m)| region(id, m, &points, per_point))
+        .collect();
+    Inspection {
+        dir: Path::new(".").to_path_buf(),
+        tolerance: Some(TOLERANCE),
+        regions,
+        points,
+    }
+}
+
+/// regions.json's entry for the core points `m` of region `id`.
+fn region(id: usize, m: &[usize], points: &[SurfacePoint], per_point: f64) -> Region {
+    let n = m.len() as f64;
+    let c = m
+        .iter()
+        .fold(Vector3::zeros(), |s, &i| s + points[i].position.coords)
+        / n;
+    let nn = m
+        .iter()
+        .fold(Vector3::zeros(), |s, &i| s + points[i].normal)
+        .normalize();
+    let d: Vec<f64> = m.iter().map(|&i| points[i].distance).collect();
+    let peak = d
+        .iter()
+        .copied()
+        .fold(0.0, |a: f64, b| if b.abs() > a.abs() { b } else { a });
+    Region {
+        id,
+        centroid: c.into(),
+        normal: nn.into(),
+        area: per_point * n,
+        peak,
+        peak_lower_bound: false,
+        mean: d.iter().sum::<f64>() / n,
+        volume: d.iter().map(|x| per_point * (x.abs() - TOLERANCE)).sum(),
+        points: m.len(),
+        repairable: peak > 0.0,
+        measured_share: 1.0,
+        touches_unmeasured: false,
+    }
+}
