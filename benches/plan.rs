@@ -4,6 +4,8 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Point3, Vector3};
+use polishbot::plan::clearance::check_samples;
+use polishbot::plan::collide::Scene;
 use polishbot::plan::{plan, Inspection, PlanConfig, RegionInfo, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
@@ -83,6 +85,18 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
     group.bench_function("plan_5000_path_points", |b| {
         b.iter(|| plan(&insp, &robot, &wc, &cfg).expect("plan"))
+    });
+    // the collision check alone (issue 35's "10 us per checked sample"): every sample of the
+    // plan under its segment's rule, a fresh scene per run (a scene remembers the samples it
+    // found clear), the scene's k-d tree build included
+    let samples = || p.samples.iter().map(|s| s.q.as_slice());
+    let check = || {
+        let scene = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
+        check_samples(samples(), &p.segments, &robot, &scene)
+    };
+    assert!(check().is_empty());
+    group.bench_function(format!("check_{}_samples", p.samples.len()), |b| {
+        b.iter(check)
     });
     group.finish();
 }

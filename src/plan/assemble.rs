@@ -11,7 +11,9 @@ use super::collide::{Allow, Hit, Scene};
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
-use super::program::{max_step, PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
+use super::program::{
+    max_step, Mark, PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind,
+};
 use super::report::UnreachablePoint;
 use super::trajectory::{JointTrajectory, Limits, Move};
 use crate::robot::{IkTarget, Robot, Workcell};
@@ -219,15 +221,6 @@ impl Where {
     }
 }
 
-/// The program's length at one time (samples, segments, passes and its counters).
-#[derive(Debug, Clone, Copy)]
-struct Mark {
-    samples: usize,
-    segments: usize,
-    passes: usize,
-    slowed: usize,
-}
-
 /// How far contact `p` is pressed inside the surface, mm (removal mode's preload; 0 in rigid
 /// mode, whose layers sit on or above nominal).
 fn pressed(p: &PlannedPoint) -> f64 {
@@ -250,25 +243,6 @@ fn leave_out(piece: &PlannedPass, reason: &str, unreachable: &mut Vec<Unreachabl
 }
 
 impl Program {
-    fn mark(&self) -> Mark {
-        Mark {
-            samples: self.trajectory.len(),
-            segments: self.segments.len(),
-            passes: self.passes.len(),
-            slowed: self.slowed,
-        }
-    }
-
-    /// The program as it was at `mark`.
-    fn back_to(&mut self, mark: Mark) {
-        let dof = self.trajectory.dof;
-        self.trajectory.positions.truncate(mark.samples * dof);
-        self.cruise.truncate(mark.samples);
-        self.segments.truncate(mark.segments);
-        self.passes.truncate(mark.passes);
-        self.slowed = mark.slowed;
-    }
-
     /// Appends `legs` from the last sample when every sample is clear for its leg; otherwise
     /// leaves the program as it was and returns the first hit.
     fn try_legs(&mut self, legs: &[Leg], cell: &Cell) -> Result<Option<Hit>, PlanError> {
@@ -580,20 +554,15 @@ impl Program {
     }
 }
 
-/// Samples of the joint spline through `qs`, each waypoint's path length its largest joint
-/// step from the one before; None when the joints cannot follow it.
+/// Samples of the joint spline through `qs` (each waypoint's path length its largest joint
+/// step from the one before) as fast as the joints allow, rest to rest; None when they cannot
+/// follow it.
 fn follow(qs: Vec<Vec<f64>>, cell: &Cell) -> Option<Vec<Vec<f64>>> {
     let mut s = vec![0.0];
     for w in qs.windows(2) {
         let last = s[s.len() - 1];
         s.push(last + max_step(&w[1], &w[0]).max(1e-9));
     }
-    follow_along(s, qs, cell)
-}
-
-/// Samples of the joint spline through `qs` at path lengths `s`, as fast as the joints allow
-/// (rest to rest); None when they cannot follow it.
-fn follow_along(s: Vec<f64>, qs: Vec<Vec<f64>>, cell: &Cell) -> Option<Vec<Vec<f64>>> {
     let spline = JointSpline::new(s, qs);
     let most = |v: Vec<f64>| v.into_iter().fold(0.0, f64::max);
     let wanted = PathLimits {

@@ -322,7 +322,37 @@ fn close(piece: &mut PlannedPass, run: &mut Run, runs: &mut Vec<Run>, end_run: b
     }
 }
 
+/// The program's length at one time (samples, segments, passes and its counters).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Mark {
+    samples: usize,
+    segments: usize,
+    /// Passes.
+    pub(crate) passes: usize,
+    slowed: usize,
+}
+
 impl Program {
+    /// Where the program ends now.
+    pub(crate) fn mark(&self) -> Mark {
+        Mark {
+            samples: self.trajectory.len(),
+            segments: self.segments.len(),
+            passes: self.passes.len(),
+            slowed: self.slowed,
+        }
+    }
+
+    /// The program as it was at `mark`.
+    pub(crate) fn back_to(&mut self, mark: Mark) {
+        let dof = self.trajectory.dof;
+        self.trajectory.positions.truncate(mark.samples * dof);
+        self.cruise.truncate(mark.samples);
+        self.segments.truncate(mark.segments);
+        self.passes.truncate(mark.passes);
+        self.slowed = mark.slowed;
+    }
+
     /// Appends one piece ground at constant feed from rest to rest.
     pub(crate) fn grind(
         &mut self,
