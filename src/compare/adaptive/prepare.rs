@@ -246,7 +246,11 @@ mod tests {
             .map(|_| {
                 let (u, v): (f64, f64) = (rng.gen(), rng.gen());
                 let z = (-2.0 * (1.0 - u).ln()).sqrt() * (std::f64::consts::TAU * v).cos();
-                let sd = if rng.gen::<f64>() < share_big { sd_big } else { 1.0 };
+                let sd = if rng.gen::<f64>() < share_big {
+                    sd_big
+                } else {
+                    1.0
+                };
                 z * sd
             })
             .collect()
