@@ -440,9 +440,10 @@ fn score_turntable(
 }
 
 /// The acceptance case of issue 36 (seeds: POLISHBOT_TURNTABLE_SEEDS, comma-separated;
-/// default seed 1, the one of 1-5 that passes with `merge` of issue 32): on measured core points IoU >= 0.96 and no error above 0.2 mm; every defect
-/// taller than the tolerance found, or its region marked as touching an unmeasured area, or
-/// lying in one.
+/// default seeds 1 and 4: seed 4 failed before the peak models read the noise of a merged
+/// scan's tail, IoU 0.838 → 0.971): on measured core points IoU >= 0.96 and no error above
+/// 0.2 mm; every defect taller than the tolerance found, or its region marked as touching an
+/// unmeasured area, or lying in one.
 #[test]
 fn turntable_views_are_measured_where_seen() {
     let seeds: Vec<u64> = std::env::var("POLISHBOT_TURNTABLE_SEEDS")
@@ -451,7 +452,7 @@ fn turntable_views_are_measured_where_seen() {
                 .map(|t| t.trim().parse().expect("seed"))
                 .collect()
         })
-        .unwrap_or_else(|_| vec![1]);
+        .unwrap_or_else(|_| vec![1, 4]);
     for seed in seeds {
         let s = turntable_case(seed);
         eprintln!("seed {seed}: coverage {:.3}, {s:?}", s.coverage);

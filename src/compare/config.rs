@@ -118,7 +118,8 @@ pub struct AdaptiveConfig {
     /// to them (default 35).
     pub max_normal_angle: f64,
     /// Scan noise (one standard deviation along the normal), mm (default: none = estimated
-    /// from the data).
+    /// from the data: the median's estimate, and for the peak models and the fill the tail's
+    /// when the scan mixes noise levels, as a merged scan does; set, it is both).
     pub noise: Option<f64>,
     /// Beyond the RWME radius the radius keeps growing while the fits' confidence intervals
     /// t_k ± gamma·se_k all intersect (intersection of confidence intervals); 0 turns this

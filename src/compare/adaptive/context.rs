@@ -37,6 +37,10 @@ pub(super) struct Context<'a> {
     pub(super) refine_radius: f64,
     /// Scan noise (one standard deviation along the normal), mm.
     pub(super) noise: f64,
+    /// The noise the peak models' guards and the model fill read, mm: `noise`, or the
+    /// noise of δ's tail when δ is a mixture of noise levels (a merged scan:
+    /// [`super::prepare`]).
+    pub(super) model_noise: f64,
     /// Cosine of `max_normal_angle`.
     pub(super) cos_limit: f64,
     /// δ of every reference point ([`super::prepare`]).

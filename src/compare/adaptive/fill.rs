@@ -265,7 +265,7 @@ fn follows_profile(
         let level = LEVELS
             .windows(2)
             .position(|w| share >= w[0] && share < w[1]);
-        if let (Some(b), true) = (level, residual.abs() <= OUTLIER * prep.noise) {
+        if let (Some(b), true) = (level, residual.abs() <= OUTLIER * prep.model_noise) {
             bins[b].0 += 1;
             bins[b].1 += residual;
         }
@@ -275,7 +275,7 @@ fn follows_profile(
     let (mut chi2, mut levels) = (0.0, 0);
     for &(n, sum) in &bins {
         if n >= min_local {
-            let z = sum / n as f64 / (prep.noise / (n as f64).sqrt());
+            let z = sum / n as f64 / (prep.model_noise / (n as f64).sqrt());
             chi2 += z * z;
             levels += 1;
         }
@@ -305,7 +305,7 @@ fn modelled_at(
     prep.scan_pairs(p, n, prep.smallest_radius(), knn, |_, d, pair| {
         let (su, sv, _) = model.local(&(p + d));
         let residual = pair - fit.height_at(su, sv).0;
-        if residual.abs() <= OUTLIER * prep.noise {
+        if residual.abs() <= OUTLIER * prep.model_noise {
             sum += residual;
             count += 1;
         } else {
@@ -318,7 +318,7 @@ fn modelled_at(
         return None;
     }
     let mean = sum / count as f64;
-    let se_mean = (prep.noise * prep.noise / count as f64 + se * se).sqrt();
+    let se_mean = (prep.model_noise * prep.model_noise / count as f64 + se * se).sqrt();
     if mean.abs() > f.lack_of_fit * se_mean {
         return None;
     }

@@ -97,7 +97,7 @@ pub(super) fn fit_window(
 ) -> Option<(PeakFit, PeakWindow)> {
     let w = PeakWindow {
         radius: scratch.radius,
-        noise: prep.noise,
+        noise: prep.model_noise,
         max_misfit: cfg.adaptive.max_misfit,
         start: supported_start(&scratch.window, start, prep.smallest_radius()),
     };

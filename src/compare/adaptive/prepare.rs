@@ -35,6 +35,20 @@ const REFINE_SPACINGS: f64 = 2.0;
 /// less than the noise's own scatter).
 const NOISE_SAMPLES: usize = 20_000;
 
+/// The tail of |δ| that checks the noise for a mixture: its 90th percentile ...
+const TAIL_QUANTILE: f64 = 0.9;
+
+/// ... is this many standard deviations for Gaussian noise (Φ⁻¹(0.95)).
+const TAIL_Z: f64 = 1.644_853_626_951_472;
+
+/// The tail's noise estimate beyond this many times the median's is a mixture of noise levels:
+/// a merged turntable scan (each surface seen by 1-4 views, voxels averaging 1-4 points with
+/// line-of-sight noise) has 1.37-1.44 (issue 36, seeds 1-5), a single scan with Gaussian noise
+/// 1.00-1.02 (same seeds' full scans). The peak models' guards and the model fill then read
+/// the tail's (their residual SD and χ² tests assume one noise level: with the median's they
+/// rejected the models of most defects on merged scans, and cylinders read the flanks).
+const MIXTURE_RATIO: f64 = 1.2;
+
 /// The core-point spacing reads the area shares of up to this many evenly spread core points.
 const SPACING_SAMPLES: usize = 1000;
 
@@ -67,9 +81,9 @@ pub(super) fn prepare<'a>(
         one_sided_distances(clouds, ref_normals, &nearest, cos_limit, reach, cover2)
             .into_iter()
             .unzip();
-    let noise = match a.noise {
-        Some(s) => s,
-        None => robust_sd(&delta),
+    let (noise, model_noise) = match a.noise {
+        Some(s) => (s, s),
+        None => noise_levels(&delta),
     };
     let ref_slots = clouds
         .ref_grid
@@ -105,6 +119,7 @@ pub(super) fn prepare<'a>(
         core: &core.points,
         core_index,
         noise,
+        model_noise,
         cos_limit,
         delta,
         limits: Thresholds {
@@ -172,9 +187,11 @@ fn one_sided_distances(
     )
 }
 
-/// 1.4826 × median |δ| over up to 20,000 evenly spread values (the noise along the normal
-/// when most of the part is in tolerance).
-fn robust_sd(delta: &[f64]) -> f64 {
+/// The noise along the normal from up to 20,000 evenly spread δ: [σ, σ_models]. σ = 1.4826 ×
+/// median |δ| (the noise when most of the part is in tolerance). σ_models = σ unless the
+/// tail's estimate, the 90th percentile of |δ| / Φ⁻¹(0.95), exceeds [`MIXTURE_RATIO`] σ:
+/// then the latter (δ is a mixture of noise levels).
+fn noise_levels(delta: &[f64]) -> (f64, f64) {
     let step = (delta.len() / NOISE_SAMPLES).max(1);
     let mut abs: Vec<f64> = delta
         .iter()
@@ -183,11 +200,21 @@ fn robust_sd(delta: &[f64]) -> f64 {
         .map(|d| d.abs())
         .collect();
     if abs.is_empty() {
-        return 0.0;
+        return (0.0, 0.0);
     }
-    let mid = abs.len() / 2;
-    let (_, m, _) = abs.select_nth_unstable_by(mid, f64::total_cmp);
-    MAD_TO_SD * *m
+    let abs_len = abs.len();
+    let mid = abs_len / 2;
+    let (_, m, upper) = abs.select_nth_unstable_by(mid, f64::total_cmp);
+    let sd = MAD_TO_SD * *m;
+    // The 90th percentile lies in the upper half (`upper` follows the median): its rank there.
+    let k = (TAIL_QUANTILE * abs_len as f64) as usize;
+    let tail = match k.checked_sub(mid + 1) {
+        Some(rank) if rank < upper.len() => {
+            *upper.select_nth_unstable_by(rank, f64::total_cmp).1 / TAIL_Z
+        }
+        _ => sd,
+    };
+    (sd, if tail > MIXTURE_RATIO * sd { tail } else { sd })
 }
 
 /// Core-point spacing: the square root of the median [`area_share`] over up to 1,000 evenly
@@ -203,4 +230,55 @@ fn spacing(index: &Neighbours, points: &[Point3<f64>]) -> f64 {
         .collect();
     let mid = shares.len() / 2;
     shares.select_nth_unstable_by(mid, f64::total_cmp).1.sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::noise_levels;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// `n` draws of zero-mean Gaussian noise whose SD is `sd_big` with probability `share_big`
+    /// and 1 otherwise (Box-Muller).
+    fn mixture(n: usize, share_big: f64, sd_big: f64) -> Vec<f64> {
+        let mut rng = ChaCha8Rng::seed_from_u64(36);
+        (0..n)
+            .map(|_| {
+                let (u, v): (f64, f64) = (rng.gen(), rng.gen());
+                let z = (-2.0 * (1.0 - u).ln()).sqrt() * (std::f64::consts::TAU * v).cos();
+                let sd = if rng.gen::<f64>() < share_big {
+                    sd_big
+                } else {
+                    1.0
+                };
+                z * sd
+            })
+            .collect()
+    }
+
+    /// One noise level: the models read the median's estimate itself (full scans keep their
+    /// numbers), about 1.
+    #[test]
+    fn gaussian_noise_has_one_level() {
+        let (sd, models) = noise_levels(&mixture(20_000, 0.0, 1.0));
+        assert_eq!(sd, models);
+        assert!((sd - 1.0).abs() < 0.03, "{sd}");
+    }
+
+    /// A mixture (3 in 4 of SD 1, 1 in 4 of SD 3; the quantiles of |δ| from scipy's
+    /// `norm.cdf` and `brentq`: median 0.830847, 90th percentile 2.654797): σ = 1.4826 ×
+    /// 0.830847 = 1.2318, σ_models = 2.654797 / 1.644854 = 1.6140 (ratio 1.31 > 1.2).
+    #[test]
+    fn a_mixture_of_noise_levels_gives_the_models_the_tail() {
+        let (sd, models) = noise_levels(&mixture(20_000, 0.25, 3.0));
+        assert!((sd - 1.2318).abs() < 0.03, "{sd}");
+        assert!((models - 1.6140).abs() < 0.04, "{models}");
+    }
+
+    #[test]
+    fn no_finite_delta_is_no_noise() {
+        assert_eq!(noise_levels(&[f64::NAN; 4]), (0.0, 0.0));
+        let (sd, models) = noise_levels(&[0.01]);
+        assert_eq!((sd, models), (1.4826 * 0.01, 1.4826 * 0.01));
+    }
 }
