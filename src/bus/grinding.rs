@@ -54,6 +54,13 @@ pub struct GrindConfig {
     pub rescan_outliers: f64,
     /// Largest translation of the rescan's random pose, mm (default 60, synth's).
     pub rescan_max_translation_mm: f64,
+    /// Gear backlash per joint (servos 1-5), the full width of the dead band, degrees
+    /// (default 1: shared/DOFBOT.md's "backlash up to 1 deg per servo").
+    pub backlash_deg: [f64; 5],
+    /// Droop of the tool under gravity at the arm's full horizontal reach, mm (default 5:
+    /// the low end of shared/DOFBOT.md's "sag 5..10 mm at full reach"); the droop at the
+    /// part's origin is absorbed by the workcell calibration.
+    pub sag_full_reach_mm: f64,
 }
 
 impl Default for GrindConfig {
@@ -78,9 +85,19 @@ impl Default for GrindConfig {
             rescan_noise_mm: 0.015,
             rescan_outliers: 0.01,
             rescan_max_translation_mm: 60.0,
+            backlash_deg: [DEFAULT_BACKLASH_DEG; 5],
+            sag_full_reach_mm: DEFAULT_SAG_MM,
         }
     }
 }
+
+/// Default backlash per joint, degrees (shared/DOFBOT.md: "up to 1 deg per servo").
+pub const DEFAULT_BACKLASH_DEG: f64 = 1.0;
+/// Default sag at full reach, mm (shared/DOFBOT.md: "sag 5..10 mm at full reach").
+pub const DEFAULT_SAG_MM: f64 = 5.0;
+/// Largest backlash, degrees, and sag, mm, accepted: more is a broken arm, not a worn one.
+const MAX_BACKLASH_DEG: f64 = 10.0;
+const MAX_SAG_MM: f64 = 50.0;
 
 /// Largest hidden mounting offset, mm, and rotation, degrees: a part misplaced by more is
 /// not on the fixture.
@@ -134,6 +151,13 @@ impl GrindConfig {
                 1e4,
                 "mm",
             ),
+            within(
+                "sag_full_reach_mm",
+                self.sag_full_reach_mm,
+                0.0,
+                MAX_SAG_MM,
+                "mm",
+            ),
         ]
         .into_iter()
         .flatten()
@@ -148,6 +172,15 @@ impl GrindConfig {
                 "deg",
             ),
         ];
+        if let Some(x) = self
+            .backlash_deg
+            .iter()
+            .find(|x| !(x.is_finite() && (0.0..=MAX_BACKLASH_DEG).contains(*x)))
+        {
+            found.push(format!(
+                "`backlash_deg` has {x:?} deg, outside 0..={MAX_BACKLASH_DEG} deg"
+            ));
+        }
         for (key, v, max, unit) in arrays {
             if let Some(x) = v.iter().find(|x| !(x.is_finite() && x.abs() <= max)) {
                 found.push(format!(
