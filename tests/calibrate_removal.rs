@@ -5,8 +5,6 @@
 //! (`after_truth.ply`: the removal per point).
 mod common;
 
-use std::path::Path;
-
 use nalgebra::{Point3, Vector3};
 use polishbot::cell::removal_fit::{fit, parse_predicted, predicted_removal, FitConfig};
 use polishbot::plan::preston::PredictedRow;
@@ -206,20 +204,11 @@ const K_WITHIN: f64 = 0.10;
 
 #[test]
 fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("calibrate_removal");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch("calibrate_removal");
     let d = |f: &str| dir.join(f).display().to_string();
     // tests/cycle.rs's case: 5 defects (0.08-0.5 mm) where the arm reaches, one a pit
     common::case(3, &dir);
-    let inspect = |scan: &str, out: &str| {
-        common::succeed(
-            polishbot()
-                .args(["inspect", "--reference", &d("reference.ply")])
-                .args(["--scan", &d(scan), "-o", &d(out)]),
-        )
-    };
-    inspect("scan.ply", "before");
+    common::inspect_in(&dir, "scan.ply", "before");
     let plan = |mode: &str, out: &str| {
         common::succeed(
             polishbot()
@@ -243,7 +232,7 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
         "--ground-out",
         &d("after.ply"),
     ]));
-    inspect("after.ply", "after");
+    common::inspect_in(&dir, "after.ply", "after");
     let shipped = std::fs::read_to_string(common::calib("tool.toml")).unwrap();
     std::fs::write(dir.join("tool.toml"), &shipped).unwrap();
     let calibrate = |plan: &str| {

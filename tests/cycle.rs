@@ -385,9 +385,7 @@ struct Acceptance {
 /// Runs `cycle --mode removal` on synth case `seed` with the simulator's true k 1.3 x the
 /// planner's (`common::SIM_TOOL`), up to 3 grinds, and collects the numbers.
 fn acceptance(seed: u64) -> Acceptance {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("accept-{seed}"));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = common::scratch(&format!("accept-{seed}"));
     let truth = common::case(seed, &dir);
     let cfg = dir.join("cycle.toml");
     std::fs::write(&cfg, format!("[run.sim.grinding]\n{}", common::SIM_TOOL)).unwrap();
@@ -433,13 +431,12 @@ fn acceptance(seed: u64) -> Acceptance {
             on_pits = on_pits.max(truth_scores(&dir, &truth, k).1);
         }
     }
-    let fitted = std::fs::read_to_string(dir.join("cycle/iter-2/tool.toml"))
-        .ok()
-        .map(|_| {
-            polishbot::plan::removal::ToolModel::load(&dir.join("cycle/iter-2/tool.toml"))
-                .unwrap()
-                .preston_k_mm2_n
-        });
+    let refit = dir.join("cycle/iter-2/tool.toml");
+    let fitted = refit.is_file().then(|| {
+        polishbot::plan::removal::ToolModel::load(&refit)
+            .unwrap()
+            .preston_k_mm2_n
+    });
     let plan_k = polishbot::plan::removal::ToolModel::load(&common::calib("tool.toml"))
         .unwrap()
         .preston_k_mm2_n;
@@ -472,6 +469,29 @@ fn accepted(a: &Acceptance) -> bool {
         && a.inspections.iter().all(|i| i.3 >= -TOLERANCE_MM)
         && a.on_pits == 0.0
         && a.k_ratio.is_some_and(|r| (r - 1.0).abs() <= 0.1)
+}
+
+/// The first two of the ten cases in the suite, with the parts of the issue's acceptance that
+/// hold today: k is refitted after the first grind, the first grind removes at least
+/// `min_progress` of the repairable excess volume, the pits are never ground. NOT asserted
+/// (measured, reported to the lead; the removal planner improves on branch issue-28): every
+/// repairable region within tolerance after 3 grinds, no core point below -tolerance, the
+/// first k within 10 % of the true k.
+#[test]
+fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
+    for seed in [1, 21] {
+        let a = acceptance(seed);
+        let (first, second) = (a.inspections[0], a.inspections[1]);
+        assert!(a.k_ratio.is_some(), "seed {seed}: k not refitted");
+        assert!(
+            second.1 < first.1 * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
+            "seed {seed}: volume {} -> {}",
+            first.1,
+            second.1
+        );
+        assert_eq!(a.on_pits, 0.0, "seed {seed}: a pit was ground");
+        println!("seed {seed}: issue acceptance met: {}", accepted(&a));
+    }
 }
 
 /// All ten cases of the issue (seeds 1, 21, .., 181: each `case` tries 20 seeds from its

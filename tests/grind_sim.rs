@@ -259,6 +259,19 @@ fn bad_grinding_settings_are_refused_naming_the_key() {
         ..GrindConfig::default()
     };
     assert!(bad.check().unwrap_err().contains("`spring_rate_n_mm`"));
+    let loose = GrindConfig {
+        backlash_deg: [1.0, 1.0, 11.0, 1.0, 1.0],
+        ..GrindConfig::default()
+    };
+    assert!(loose
+        .check()
+        .unwrap_err()
+        .contains("`backlash_deg` has 11.0 deg"));
+    let sagging = GrindConfig {
+        sag_full_reach_mm: -1.0,
+        ..GrindConfig::default()
+    };
+    assert!(sagging.check().unwrap_err().contains("`sag_full_reach_mm`"));
     let dir = common::tempdir();
     let cfg = dir.path().join("run.toml");
     std::fs::write(&cfg, "[sim.grinding]\nmodulus_mpa = nan\n").unwrap();

@@ -125,6 +125,16 @@ pub fn predicted_removal(before: &Inspection, rows: &[PredictedRow]) -> Result<V
     Ok(removal)
 }
 
+/// Ids of the repairable regions of `inspection` (as deviations.csv's `region` column).
+pub fn repairable_ids(inspection: &Inspection) -> Vec<i64> {
+    inspection
+        .regions
+        .iter()
+        .filter(|r| r.repairable)
+        .map(|r| r.id as i64)
+        .collect()
+}
+
 /// Least squares through the origin of `m` on `p`: the scale and the sum of p^2.
 fn scale(pairs: &[(f64, f64)]) -> (f64, f64) {
     let pp: f64 = pairs.iter().map(|(p, _)| p * p).sum();
@@ -142,12 +152,7 @@ pub fn fit(
     plan_k: f64,
     cfg: &FitConfig,
 ) -> Result<RemovalFit, String> {
-    let repairable: Vec<i64> = before
-        .regions
-        .iter()
-        .filter(|r| r.repairable)
-        .map(|r| r.id as i64)
-        .collect();
+    let repairable = repairable_ids(before);
     let pos: Vec<Point3<f64>> = after.points.iter().map(|p| p.position).collect();
     let index = Neighbours::new(&pos);
     let partner: Vec<Option<usize>> = before

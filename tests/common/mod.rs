@@ -252,12 +252,7 @@ pub fn true_k(inspection: &Path, predicted: &Path, truth: &Path, plan_k: f64) ->
     let truth = polishbot::cloud::load_cloud(truth, None, None).unwrap();
     let removal = truth.field("removal").unwrap();
     let index = polishbot::spatial::Neighbours::new(&truth.points);
-    let ids: Vec<i64> = b
-        .regions
-        .iter()
-        .filter(|r| r.repairable)
-        .map(|r| r.id as i64)
-        .collect();
+    let ids = polishbot::cell::removal_fit::repairable_ids(&b);
     let (mut pm, mut pp) = (0.0, 0.0);
     for (pt, &pi) in b.points.iter().zip(&p) {
         if ids.contains(&pt.region) && pi >= FitConfig::default().min_predicted_mm {
@@ -302,3 +297,24 @@ pub fn case(seed: u64, dir: &Path) -> polishbot::synth::Truth {
 /// `k_factor` alone would not make the planner "30 % off".
 pub const SIM_TOOL: &str = "preston_k = 5e-6\nk_factor = 1.3\nspring_rate_n_mm = 4.0\n\
                             modulus_mpa = 20.0\nspindle_rpm = 10000.0\n";
+
+/// A fresh scratch folder `name` under the tests' temporary directory.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `inspect` of `dir/scan` against `dir/reference.ply` into `dir/out`.
+pub fn inspect_in(dir: &Path, scan: &str, out: &str) -> std::process::Output {
+    succeed(
+        polishbot()
+            .args(["inspect", "--reference"])
+            .arg(dir.join("reference.ply"))
+            .arg("--scan")
+            .arg(dir.join(scan))
+            .arg("-o")
+            .arg(dir.join(out)),
+    )
+}
