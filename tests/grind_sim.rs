@@ -173,6 +173,39 @@ fn the_true_k_varies_by_at_most_its_amplitude_around_nominal_times_the_factor() 
 }
 
 #[test]
+fn backlash_trails_a_moving_servo_by_half_its_band_and_sag_drops_with_reach_squared() {
+    use polishbot::grind_sim::slack::{full_reach_m, Backlash, Sag};
+    let deg = |v: f64| v.to_radians();
+    // a 1 degree band on joint 1, none on the others
+    let mut b = Backlash::new(&[1.0, 0.0, 0.0, 0.0, 0.0]);
+    let at = |b: &mut Backlash, q1: f64| b.follow([deg(q1), deg(q1), 0.0, 0.0, 0.0]);
+    assert_eq!(at(&mut b, 0.0)[0], 0.0);
+    // moving up 2 degrees: the output trails by half the band; joint 2 follows exactly
+    let q = at(&mut b, 2.0);
+    assert!((q[0] - deg(1.5)).abs() < 1e-15 && (q[1] - deg(2.0)).abs() < 1e-15);
+    // a reversal of 0.8 degrees stays inside the band: the output does not move
+    assert!((at(&mut b, 1.2)[0] - deg(1.5)).abs() < 1e-15);
+    // past the band the output trails on the other side
+    assert!((at(&mut b, 0.0)[0] - deg(0.5)).abs() < 1e-15);
+    // the stretched DOFBOT: 82.9 + 82.9 + 174.56 mm of links, the ball 19.3 mm past them
+    let reach = full_reach_m(0.0193);
+    let links = 0.0829 + 0.0829 + 0.00215f64.hypot(0.17455);
+    assert!((reach - links - 0.0193).abs() < 1e-12, "{reach}");
+    // 5 mm at full reach, absorbed at the part's origin 0.2 m out: nothing there, (r/R)^2
+    // growth elsewhere, horizontal position kept
+    let sag = Sag::new(5.0, 0.0193, 0.2);
+    let c = Point3::new(0.2 * 0.6, 0.2 * 0.8, 0.05);
+    assert!((sag.apply(c) - c).norm() < 1e-15);
+    let far = Point3::new(0.0, 0.25, 0.05);
+    let want = 5e-3 * ((0.25 / reach).powi(2) - (0.2 / reach).powi(2));
+    let got = sag.apply(far);
+    assert!(
+        (far.z - got.z - want).abs() < 1e-15 && got.y == far.y,
+        "{got}"
+    );
+}
+
+#[test]
 fn the_sims_kinematics_agree_with_ks_chain_on_the_shipped_urdf() {
     let robot = dofbot();
     let tip = robot.tool.tip_offset;
@@ -226,6 +259,19 @@ fn bad_grinding_settings_are_refused_naming_the_key() {
         ..GrindConfig::default()
     };
     assert!(bad.check().unwrap_err().contains("`spring_rate_n_mm`"));
+    let loose = GrindConfig {
+        backlash_deg: [1.0, 1.0, 11.0, 1.0, 1.0],
+        ..GrindConfig::default()
+    };
+    assert!(loose
+        .check()
+        .unwrap_err()
+        .contains("`backlash_deg` has 11.0 deg"));
+    let sagging = GrindConfig {
+        sag_full_reach_mm: -1.0,
+        ..GrindConfig::default()
+    };
+    assert!(sagging.check().unwrap_err().contains("`sag_full_reach_mm`"));
     let dir = common::tempdir();
     let cfg = dir.path().join("run.toml");
     std::fs::write(&cfg, "[sim.grinding]\nmodulus_mpa = nan\n").unwrap();

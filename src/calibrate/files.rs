@@ -163,6 +163,32 @@ pub fn patch_tool(text: &str, file: &Path, tip: [f64; 3]) -> Result<String, Cali
     Ok(lines.join("\n") + "\n")
 }
 
+/// Sets `preston_k_mm2_n` in the `[removal]` table of the tool.toml text `text`: replaces
+/// that one line (every comment and other key kept), adds it after the `[removal]` header when
+/// the table lacks it, or appends the table when the file has none.
+pub fn patch_preston_k(text: &str, k: f64) -> String {
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let new = format!("preston_k_mm2_n = {}", num(k));
+    let header = lines.iter().position(|l| l.trim() == "[removal]");
+    match header {
+        Some(h) => {
+            let end = (h + 1..lines.len())
+                .find(|&i| lines[i].trim_start().starts_with('['))
+                .unwrap_or(lines.len());
+            match (h + 1..end).find(|&i| sets_key(&lines[i], "preston_k_mm2_n")) {
+                Some(i) => lines[i] = new,
+                None => lines.insert(h + 1, new),
+            }
+        }
+        None => {
+            lines.push(String::new());
+            lines.push("[removal]".into());
+            lines.push(new);
+        }
+    }
+    lines.join("\n") + "\n"
+}
+
 /// workcell.toml text for `robot_from_reference` (metres), with a header comment.
 pub fn workcell_text(m: &Matrix4<f64>, header: &str) -> String {
     let mut s = String::new();
@@ -181,7 +207,8 @@ pub fn workcell_text(m: &Matrix4<f64>, header: &str) -> String {
     s
 }
 
-fn write(file: &Path, text: &str) -> Result<(), CalibError> {
+/// Writes `text` to `file`, creating its folder.
+pub fn write(file: &Path, text: &str) -> Result<(), CalibError> {
     if let Some(dir) = file.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|e| CalibError::file(dir, e))?;
     }

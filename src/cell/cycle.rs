@@ -6,7 +6,8 @@
 //! Front function: [`decide`] with a [`CycleConfig`]; one [`IterationRecord`] per inspection.
 use serde::{Deserialize, Serialize};
 
-use crate::plan::Inspection;
+use super::removal_fit::SAME_POINT_MM;
+use crate::plan::{Inspection, Plan};
 use crate::regions::{Region, Verdict};
 use crate::report::escape;
 use crate::spatial::Neighbours;
@@ -20,11 +21,6 @@ pub const DEFAULT_MIN_PROGRESS: f64 = 0.05;
 
 /// Default number of grinding iterations (issue 29: "after `--max-iterations` (3)").
 pub const DEFAULT_MAX_ITERATIONS: usize = 3;
-
-/// Largest distance between a core point of two inspections for them to count as the same
-/// point, mm: core points are sampled from the same reference with the same seed, so equal
-/// points agree to the last bit; densified points of one inspection have no partner.
-const SAME_POINT_MM: f64 = 1e-6;
 
 /// Settings of the loop.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -106,92 +102,37 @@ fn rms(d: &[f64]) -> Option<f64> {
     (!d.is_empty()).then(|| (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt())
 }
 
-/// What plan.json says about the removal it plans, read with optional fields so that rigid
-/// plans (no `removal` object) and removal plans both read.
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct PlanSummary {
-    /// Reach per region.
-    pub reachability: PlanReach,
-    /// Removal mode's prediction (absent in rigid plans).
-    #[serde(default)]
-    pub removal: Option<PlanRemoval>,
+/// Ids of the regions `plan` grinds: depth layers planned (rigid mode), or a removal
+/// prediction (removal mode).
+pub fn planned_regions(plan: &Plan) -> Vec<usize> {
+    let mut ids: Vec<usize> = plan
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.layers > 0)
+        .map(|r| r.id)
+        .collect();
+    if let Some(rem) = &plan.removal {
+        ids.extend(rem.regions.iter().map(|r| r.region));
+    }
+    ids.sort_unstable();
+    ids.dedup();
+    ids
 }
 
-/// plan.json's `reachability`, the part the loop reads.
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct PlanReach {
-    /// Per region.
-    pub regions: Vec<PlanRegion>,
-}
-
-/// One region of plan.json's `reachability.regions`.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PlanRegion {
-    /// Region id.
-    pub id: usize,
-    /// Depth layers planned (0: not ground). Absent in removal plans: planned when the region
-    /// has a prediction.
-    #[serde(default)]
-    pub layers: usize,
-}
-
-/// plan.json's `removal` object (removal mode), the part the loop reads.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PlanRemoval {
-    /// Per planned region.
-    pub regions: Vec<RegionPrediction>,
-}
-
-/// One region's prediction.
-#[derive(Debug, Clone, Deserialize)]
-pub struct RegionPrediction {
-    /// Region id.
-    pub region: usize,
-    /// Core points the prediction covers.
-    pub core_points: usize,
-    /// Predicted deviation after grinding.
-    pub after: PredictedStats,
-}
-
-/// Predicted statistics of a region after grinding.
-#[derive(Debug, Clone, Deserialize)]
-pub struct PredictedStats {
-    /// RMS of the predicted residual, mm.
-    pub rms_mm: f64,
-}
-
-impl PlanSummary {
-    /// Ids of the regions the plan grinds: layers > 0, or a removal prediction.
-    pub fn planned(&self) -> Vec<usize> {
-        let mut ids: Vec<usize> = self
-            .reachability
+/// The predicted RMS residual over `plan`'s removal regions' points (weighted by their core
+/// points), mm; None for a rigid plan.
+pub fn predicted_rms(plan: &Plan) -> Option<f64> {
+    let rem = plan.removal.as_ref()?;
+    let n: usize = rem.regions.iter().map(|r| r.core_points).sum();
+    (n > 0).then(|| {
+        let s: f64 = rem
             .regions
             .iter()
-            .filter(|r| r.layers > 0)
-            .map(|r| r.id)
-            .collect();
-        if let Some(rem) = &self.removal {
-            ids.extend(rem.regions.iter().map(|r| r.region));
-        }
-        ids.sort_unstable();
-        ids.dedup();
-        ids
-    }
-
-    /// The predicted RMS residual over the planned regions' points (weighted by their core
-    /// points), mm; None for a rigid plan.
-    pub fn predicted_rms(&self) -> Option<f64> {
-        let rem = self.removal.as_ref()?;
-        let n: usize = rem.regions.iter().map(|r| r.core_points).sum();
-        (n > 0).then(|| {
-            let s: f64 = rem
-                .regions
-                .iter()
-                .map(|r| r.core_points as f64 * r.after.rms_mm * r.after.rms_mm)
-                .sum();
-            (s / n as f64).sqrt()
-        })
-    }
+            .map(|r| r.core_points as f64 * r.after.rms_mm * r.after.rms_mm)
+            .sum();
+        (s / n as f64).sqrt()
+    })
 }
 
 /// One inspection of the loop and, when it was followed by a grind, what was planned and
@@ -232,8 +173,8 @@ impl IterationRecord {
     }
 
     /// Records the plan made from this inspection.
-    pub fn planned(&mut self, inspection: &Inspection, plan: &PlanSummary) {
-        let ids = plan.planned();
+    pub fn planned(&mut self, inspection: &Inspection, plan: &Plan) {
+        let ids = planned_regions(plan);
         let volume = inspection
             .regions
             .iter()
@@ -242,7 +183,7 @@ impl IterationRecord {
             .sum();
         self.planned_volume_mm3 = Some(volume);
         self.planned_regions = ids;
-        self.predicted_residual_mm = plan.predicted_rms();
+        self.predicted_residual_mm = predicted_rms(plan);
     }
 
     /// Records what the next inspection found: the progress share of the planned excess

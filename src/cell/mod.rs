@@ -3,9 +3,11 @@
 //! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
 //!
 //! Front functions: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the closed
-//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`].
+//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`]; the removal calibration
+//! [`removal_fit::fit`] with a [`removal_fit::FitConfig`].
 pub mod cycle;
 mod reach;
+pub mod removal_fit;
 mod stream;
 
 pub use reach::reachable_sites;

@@ -73,6 +73,23 @@ pub enum Routine {
         #[arg(long, value_name = "FILE", requires = "targets")]
         fixture: Option<PathBuf>,
     },
+    /// Preston's k from a grind: two inspections and the plan ground between them ->
+    /// tool.toml `[removal] preston_k_mm2_n` (no arm needed).
+    Removal {
+        /// Inspection folder before the grind (the plan's).
+        #[arg(long, value_name = "DIR")]
+        before: PathBuf,
+        /// Inspection folder of the rescan after the grind.
+        #[arg(long, value_name = "DIR")]
+        after: PathBuf,
+        /// The plan that was ground (made with --mode removal; predicted.csv beside it).
+        #[arg(long, value_name = "FILE")]
+        plan: PathBuf,
+        /// The tool file the plan was made with, read and updated in place [default: the
+        /// cell's tool.toml, written into --out].
+        #[arg(long, value_name = "FILE")]
+        tool: Option<PathBuf>,
+    },
 }
 
 /// `--config` TOML of `calibrate`: `[robot]` (files), `[bus]` (timing; the servo map always
@@ -111,6 +128,22 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("calibration"));
     let tool_in = input(&out, "tool.toml", &cfg.robot.tool);
+    if let Routine::Removal {
+        before,
+        after,
+        plan,
+        tool,
+    } = &args.routine
+    {
+        let inputs = super::calibrate_removal::Inputs {
+            before: before.clone(),
+            after: after.clone(),
+            plan: plan.clone(),
+            tool: tool.clone().unwrap_or(tool_in),
+        };
+        let written = tool.clone().unwrap_or_else(|| out.join("tool.toml"));
+        return super::calibrate_removal::run(&inputs, &written);
+    }
     let servos_in = input(&out, "servos.toml", &cfg.robot.servos);
     let robot = Robot::load(&cfg.robot.urdf, &tool_in, &servos_in)?;
     let mut bus_cfg = cfg.bus.clone();
@@ -140,7 +173,7 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
             Some(t) => load_targets(t)?,
             None => DEFAULT_CHECK_POSES.to_vec(),
         }),
-        Routine::Servos { .. } => None,
+        Routine::Servos { .. } | Routine::Removal { .. } => None,
     };
     let prefix = format!("calibrate {name}");
     let mut bus = args.link.connect(&prefix, bus_cfg, &cfg.sim).map_err(|e| {
@@ -174,6 +207,7 @@ fn routine_name(r: &Routine) -> &'static str {
         Routine::Tool { .. } => "tool",
         Routine::Workcell { .. } => "workcell",
         Routine::Verify { .. } => "verify",
+        Routine::Removal { .. } => "removal",
     }
 }
 
@@ -212,7 +246,7 @@ fn routine(
     let interactive = match which {
         Routine::Servos { assume_pose, .. } => !assume_pose,
         Routine::Tool { .. } | Routine::Workcell { .. } => targets.is_none(),
-        Routine::Verify { .. } => false,
+        Routine::Verify { .. } | Routine::Removal { .. } => false,
     };
     let _raw = interactive.then(RawTerminal::enable).flatten();
     match which {
@@ -274,6 +308,9 @@ fn routine(
             ));
             Ok(())
         }
+        Routine::Removal { .. } => Err(CalibError::Refused(
+            "the removal fit needs no arm and runs before connecting".into(),
+        )),
         Routine::Verify { .. } => {
             let poses = targets.expect("set in run");
             let workcell = match &fixture {

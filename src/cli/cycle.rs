@@ -9,13 +9,15 @@ use anyhow::Context;
 use clap::Args;
 
 use super::arm::DeviceArgs;
-use super::common::{read_json, GeometryInput};
+use super::calibrate_removal::{self as calib, Inputs};
+use super::common::{load_config, read_json, GeometryInput};
 use super::{inspect, plan, run as run_cmd};
 use crate::cell::cycle::{
     decide, decide_plan, table_html, table_text, CycleConfig, IterationRecord, Measured, Outcome,
-    PlanSummary, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
+    DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
 };
-use crate::plan::Inspection;
+use crate::cell::removal_fit::FitConfig;
+use crate::plan::{Inspection, Plan, PlanMode};
 use crate::regions::Regions;
 
 /// Exit code of a loop that ended without the part within tolerance (no progress, iterations
@@ -52,6 +54,9 @@ pub struct CycleArgs {
     /// Least share of the planned excess volume an iteration must remove to go on.
     #[arg(long, default_value_t = DEFAULT_MIN_PROGRESS)]
     pub min_progress: f64,
+    /// Plan mode of every iteration, passed to `plan --mode` [default: plan's].
+    #[arg(long, value_enum)]
+    pub mode: Option<PlanMode>,
     /// Which arm: --sim (grinds a virtual part and rescans it), or --port DEV / --i2c DEV
     /// (after each run, asks for the next scan file on stdin).
     #[command(flatten)]
@@ -144,6 +149,8 @@ pub struct Loop {
     pub configs: Configs,
     /// Iteration 1's inspection folder and plan file when already made (demo).
     pub first: Option<(PathBuf, PathBuf)>,
+    /// Plan mode (None: plan's default).
+    pub mode: Option<PlanMode>,
 }
 
 /// Runs `cycle`.
@@ -165,6 +172,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         input: args.input,
         configs,
         first: None,
+        mode: args.mode,
     })?;
     match outcome {
         Outcome::WithinTolerance => Ok(()),
@@ -251,11 +259,22 @@ fn report(l: &Loop, records: &[IterationRecord], outcome: Outcome) -> anyhow::Re
     Ok(())
 }
 
+/// What the last grind was made from: its inspection (folder and points), plan and tool.
+struct Ground {
+    inspection_dir: PathBuf,
+    inspection: Inspection,
+    plan: PathBuf,
+    tool: PathBuf,
+}
+
 /// Runs the loop and returns how it ended (the table printed and written either way).
 pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
     let mut records: Vec<IterationRecord> = Vec::new();
-    let mut previous: Option<Inspection> = None;
+    let mut previous: Option<Ground> = None;
     let mut scan = l.scan.clone();
+    let mut tool = load_config::<plan::PlanFileConfig>(l.configs.plan.as_deref())?
+        .robot
+        .tool;
     for k in 1.. {
         let dir = l.out.join(format!("iter-{k}"));
         std::fs::create_dir_all(&dir)
@@ -270,17 +289,18 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
         }
         let (measured, inspection) = measure(&inspection_dir)?;
         if let (Some(last), Some(before)) = (records.last_mut(), &previous) {
-            last.followed_by(&measured, before, &inspection);
+            last.followed_by(&measured, &before.inspection, &inspection);
+            last.k_fitted = refit(before, &inspection_dir, &dir, &mut tool);
         }
         records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&records, &l.config);
         if outcome == Outcome::Continue {
             if l.first.is_none() || k > 1 {
-                plan_into(l, &inspection_dir, &plan_file)?;
+                plan_into(l, &inspection_dir, &plan_file, &tool, &dir)?;
             }
-            let summary: PlanSummary = read_json(&plan_file)?;
+            let plan = Plan::load(&plan_file)?;
             let last = records.last_mut().expect("pushed above");
-            last.planned(&inspection, &summary);
+            last.planned(&inspection, &plan);
             outcome = decide_plan(last);
         }
         if outcome != Outcome::Continue {
@@ -289,15 +309,78 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
         }
         println!("== cycle: iteration {k}: grind");
         scan = grind(l, &plan_file, &scan, &dir)?;
-        previous = Some(inspection);
+        previous = Some(Ground {
+            inspection_dir,
+            inspection,
+            plan: plan_file,
+            tool: tool.clone(),
+        });
         print!("{}", table_text(&records));
     }
     unreachable!("the loop returns")
 }
 
-/// Plans from `inspection` into `plan_file` with `plan`'s settings.
-fn plan_into(l: &Loop, inspection: &Path, plan_file: &Path) -> anyhow::Result<()> {
+/// Refits k from the last grind (`calibrate removal`'s routine) and, when the fit holds,
+/// writes DIR/tool.toml with it and makes it the `tool` of the next plan; the fitted k, or
+/// None with the reason printed (a rigid plan, too little evidence).
+fn refit(before: &Ground, after: &Path, dir: &Path, tool: &mut PathBuf) -> Option<f64> {
+    let inputs = Inputs {
+        before: before.inspection_dir.clone(),
+        after: after.to_path_buf(),
+        plan: before.plan.clone(),
+        tool: before.tool.clone(),
+    };
+    let written = dir.join("tool.toml");
+    let fitted = calib::fit_files(&inputs, &FitConfig::default()).and_then(|fit| {
+        calib::describe(&fit)
+            .iter()
+            .for_each(|line| println!("cycle: {line}"));
+        calib::write_k(&before.tool, &written, fit.k_mm2_n)?;
+        Ok(fit.k_mm2_n)
+    });
+    match fitted {
+        Ok(k) => {
+            println!("cycle: the next plan uses k from {}", written.display());
+            *tool = written;
+            Some(k)
+        }
+        Err(e) => {
+            println!(
+                "cycle: k not refitted ({}); the next plan keeps {}",
+                super::common::one_line(&e),
+                tool.display()
+            );
+            None
+        }
+    }
+}
+
+/// Plans from `inspection` into `plan_file` with `plan`'s settings and the tool file `tool`
+/// (DIR/plan.toml: the `[plan]` settings with `robot.tool` set).
+fn plan_into(
+    l: &Loop,
+    inspection: &Path,
+    plan_file: &Path,
+    tool: &Path,
+    dir: &Path,
+) -> anyhow::Result<()> {
     println!("== cycle: plan");
+    let mut table: toml::Table = match &l.configs.plan {
+        Some(f) => std::fs::read_to_string(f)
+            .with_context(|| format!("{}: cannot read", f.display()))?
+            .parse()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?,
+        None => toml::Table::new(),
+    };
+    let robot = table
+        .entry("robot")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let Some(r) = robot.as_table_mut() {
+        r.insert("tool".into(), tool.display().to_string().into());
+    }
+    let settings = dir.join("plan.toml");
+    std::fs::write(&settings, toml::to_string(&table)?)
+        .with_context(|| format!("{}: cannot write", settings.display()))?;
     plan::run(
         plan::PlanArgs {
             inspection: inspection.to_path_buf(),
@@ -305,9 +388,9 @@ fn plan_into(l: &Loop, inspection: &Path, plan_file: &Path) -> anyhow::Result<()
             out: plan_file.to_path_buf(),
             export_ros: None,
             require_full_reach: false,
-            mode: None,
+            mode: l.mode,
             cell: None,
         },
-        l.configs.plan.as_deref(),
+        Some(&settings),
     )
 }

@@ -125,6 +125,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         },
         configs: super::cycle::Configs::default(),
         first: Some((inspection.clone(), plan_file.clone())),
+        mode: None,
     })?;
     println!("demo: the loop ended: {}", outcome.describe());
     println!(

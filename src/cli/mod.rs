@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod arm;
 mod calibrate;
+mod calibrate_removal;
 mod common;
 mod cycle;
 mod demo;
@@ -55,7 +56,7 @@ pub enum Command {
     Run(run::RunArgs),
     /// Direct arm commands: ping, read, move, torque.
     Arm(arm::ArmArgs),
-    /// Calibration routines: servos, tool, workcell, verify.
+    /// Calibration routines: servos, tool, workcell, verify, removal.
     Calibrate(calibrate::CalibrateArgs),
     /// Write a synthetic reference, a defective moved scan and the truth.
     Synth(Box<synth::SynthArgs>),

@@ -10,12 +10,13 @@
 //! nominal `robot_from_reference` moved by the hidden offsets `mount_offset_mm` and
 //! `mount_rotation_deg` (given in the reference frame). The servos' physical angles over
 //! virtual time ([`trace::ServoTrace`]) give the ball centre through [`fk`] and the sim's own
-//! `tip_offset_mm`. Method and parameters: docs/ALGORITHMS.md, "Simulated grinding".
+//! `tip_offset_mm`, through the gear backlash and the gravity sag of [`slack`]. Method and parameters: docs/ALGORITHMS.md, "Simulated grinding".
 //!
 //! Front function: [`grind`] with a [`GrindConfig`]; result: [`GrindReport`].
 pub mod fk;
 pub mod law;
 pub mod part;
+pub mod slack;
 pub mod trace;
 
 use nalgebra::{Matrix4, Point3};
@@ -62,10 +63,14 @@ pub fn grind(
         .try_inverse()
         .expect("a rigid transform has an inverse");
     let tip_m = cfg.tip_offset_mm.map(|v| v * 1e-3);
-    let tool_at = |trace: &mut ServoTrace, t: f64| {
+    let mut backlash = slack::Backlash::new(&cfg.backlash_deg);
+    let r0 = nominal[(0, 3)].hypot(nominal[(1, 3)]);
+    let sag = slack::Sag::new(cfg.sag_full_reach_mm, tip_m[2], r0);
+    let mut tool_at = |trace: &mut ServoTrace, t: f64| {
         let deg = trace.physical_deg(t);
-        let q = std::array::from_fn(|k| fk::joint_of_servo_deg(deg[k]));
+        let q = backlash.follow(std::array::from_fn(|k| fk::joint_of_servo_deg(deg[k])));
         let (c, axis) = fk::tool(&q, &tip_m);
+        let c = sag.apply(c);
         let c_ref = reference_from_robot.transform_point(&c) * 1e3;
         let axis_ref = reference_from_robot.transform_vector(&axis).normalize();
         (Point3::from(c_ref.coords), axis_ref)

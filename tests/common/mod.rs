@@ -236,3 +236,87 @@ pub fn femoral_synth(seed: u64, defects: usize) -> polishbot::synth::SynthConfig
         ..polishbot::synth::SynthConfig::default()
     }
 }
+
+/// Ground points averaged per core point for its true removal: the rescan's 150,000 points
+/// lie about 0.3 mm apart, the tool's patch is 1-2 mm across, so 4 neighbours stay on it.
+pub const TRUTH_NEIGHBOURS: usize = 4;
+
+/// The true Preston k of a simulated grind for the planner's model: the least-squares scale
+/// of the simulator's true removal (`truth`, after_truth.ply: mean of the
+/// [`TRUTH_NEIGHBOURS`] nearest ground points) on the plan's predicted removal (`predicted`,
+/// predicted.csv) over the repairable defect points of `inspection` (the plan's) where the
+/// plan predicts at least the fit's threshold, times the plan's k.
+pub fn true_k(inspection: &Path, predicted: &Path, truth: &Path, plan_k: f64) -> f64 {
+    use polishbot::cell::removal_fit::{parse_predicted, predicted_removal, FitConfig};
+    let b = polishbot::plan::Inspection::load(inspection).unwrap();
+    let text = std::fs::read_to_string(predicted).unwrap();
+    let p = predicted_removal(&b, &parse_predicted(&text).unwrap()).unwrap();
+    let truth = polishbot::cloud::load_cloud(truth, None, None).unwrap();
+    let removal = truth.field("removal").unwrap();
+    let index = polishbot::spatial::Neighbours::new(&truth.points);
+    let ids = polishbot::cell::removal_fit::repairable_ids(&b);
+    let (mut pm, mut pp) = (0.0, 0.0);
+    for (pt, &pi) in b.points.iter().zip(&p) {
+        if ids.contains(&pt.region) && pi >= FitConfig::default().min_predicted_mm {
+            let nb = index.knn(&pt.position, TRUTH_NEIGHBOURS);
+            let r = nb.iter().map(|n| removal[n.index]).sum::<f64>() / nb.len() as f64;
+            pm += pi * r;
+            pp += pi * pi;
+        }
+    }
+    pm / pp * plan_k
+}
+
+/// Seeds tried from the one given until synth places all 5 defects (some seeds place only 4
+/// clear of the edges and of each other where the arm reaches).
+pub const SEED_TRIES: u64 = 20;
+
+/// The issue's case: 5 defects (0.08-0.5 mm) where the arm reaches, a fifth of them pits;
+/// the first seed from `seed` on that places all five.
+pub fn case(seed: u64, dir: &Path) -> polishbot::synth::Truth {
+    let reachable = polishbot::cell::reachable_sites().unwrap();
+    let make = |seed| polishbot::synth::SynthConfig {
+        seed,
+        defects: 5,
+        height_range: [0.08, 0.5],
+        width_range: [2.0, 4.0],
+        pit_share: 0.2,
+        reference_points: 200_000,
+        scan_points: 150_000,
+        ..polishbot::synth::SynthConfig::default()
+    };
+    let case = (seed..seed + SEED_TRIES)
+        .find_map(|s| polishbot::synth::synth_at(&make(s), &reachable).ok())
+        .expect("a seed that places 5 defects");
+    println!("synth seed {}", case.truth.seed);
+    case.write(dir).unwrap();
+    case.truth
+}
+
+/// The simulated cell's true tool as the shipped tool.toml's `[removal]` (spring, modulus,
+/// spindle) with a true k 1.3 x its k: the simulator's own defaults are another tool (a
+/// 20 N/mm mount at 1e-4 mm^2/N, removing 4-5 x what the shipped tool's model predicts), so
+/// `k_factor` alone would not make the planner "30 % off".
+pub const SIM_TOOL: &str = "preston_k = 5e-6\nk_factor = 1.3\nspring_rate_n_mm = 4.0\n\
+                            modulus_mpa = 20.0\nspindle_rpm = 10000.0\n";
+
+/// A fresh scratch folder `name` under the tests' temporary directory.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// `inspect` of `dir/scan` against `dir/reference.ply` into `dir/out`.
+pub fn inspect_in(dir: &Path, scan: &str, out: &str) -> std::process::Output {
+    succeed(
+        polishbot()
+            .args(["inspect", "--reference"])
+            .arg(dir.join("reference.ply"))
+            .arg("--scan")
+            .arg(dir.join(scan))
+            .arg("-o")
+            .arg(dir.join(out)),
+    )
+}

@@ -1,0 +1,283 @@
+//! Removal calibration (`polishbot calibrate removal`, and `cycle` after every grind): Preston's
+//! k fitted from what a grind really removed against what its plan predicted.
+//!
+//! The plan's predicted removal at a core point (predicted.csv: deviation minus predicted
+//! residual, summed over the regions whose tool reach holds the point) is linear in k at the
+//! planned force and speeds, so the measured removal m (the deviation before minus the
+//! deviation after, at the same core point of two inspections against the same reference) is
+//! modelled as m = s p with p the predicted removal: least squares through the origin gives
+//! s = sum(m p) / sum(p^2) and k = s x the plan's k. Its spread: the standard error
+//! sqrt(sum(r^2) / (n - 1) / sum(p^2)) of s, and a k per region. Method: docs/CALIBRATION.md,
+//! "5. Removal".
+//!
+//! Front function: [`fit`] with a [`FitConfig`]; result: [`RemovalFit`].
+use nalgebra::Point3;
+use serde::Serialize;
+
+use crate::plan::preston::PredictedRow;
+use crate::plan::Inspection;
+use crate::spatial::Neighbours;
+
+/// Largest distance between a core point of two inspections for them to count as the same
+/// point, mm: core points are sampled from the same reference with the same seed, so equal
+/// points agree to the last bit; densified points of one inspection have no partner.
+pub const SAME_POINT_MM: f64 = 1e-6;
+
+/// Largest distance between a predicted.csv row and its core point, mm: the file prints
+/// positions with 6 decimals (rounding moves a coordinate by at most 5e-7 mm).
+const CSV_POINT_MM: f64 = 1e-5;
+
+/// Settings of the fit.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FitConfig {
+    /// Least predicted removal for a point to count as one the tool ground, mm (0.005: a third
+    /// of the rescan noise 0.015 mm; where less is predicted the measured removal is noise and
+    /// says nothing about k).
+    pub min_predicted_mm: f64,
+    /// Fewest points to fit k from (30: with 0.015 mm noise per point and 0.05 mm of removal,
+    /// 30 points give k within about 5 %).
+    pub min_points: usize,
+    /// Largest relative standard error of k accepted (0.25): a looser k would move the next
+    /// plan's removal by more than the tolerance on a 0.2 mm defect.
+    pub max_relative_error: f64,
+    /// Least share of the first inspection's core points found again in the second (0.9):
+    /// the reference sample is the same in both (about 99 % of the points); each inspection
+    /// adds its own densified points around its defects, which have no partner.
+    pub min_matched_share: f64,
+    /// Fewest points for a region's own k (10).
+    pub min_region_points: usize,
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            min_predicted_mm: 0.005,
+            min_points: 30,
+            max_relative_error: 0.25,
+            min_matched_share: 0.9,
+            min_region_points: 10,
+        }
+    }
+}
+
+/// One region's own k.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RegionFit {
+    /// Region id (of the first inspection).
+    pub region: usize,
+    /// Points used.
+    pub points: usize,
+    /// k fitted on them alone, mm^2/N.
+    pub k_mm2_n: f64,
+}
+
+/// The fitted k and the evidence for it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RemovalFit {
+    /// Fitted Preston coefficient, mm^2/N.
+    pub k_mm2_n: f64,
+    /// The k the plan was made with, mm^2/N.
+    pub plan_k_mm2_n: f64,
+    /// Standard error of the fitted k, mm^2/N.
+    pub k_std_error_mm2_n: f64,
+    /// Per region with at least `min_region_points` points.
+    pub regions: Vec<RegionFit>,
+    /// RMS of measured minus fitted removal over the points used, mm.
+    pub residual_rms_mm: f64,
+    /// Points used: defect points of repairable regions, measured in both inspections, where
+    /// the plan predicted at least `min_predicted_mm`.
+    pub points: usize,
+    /// Defect points of the first inspection with no partner in the second (densified
+    /// around a defect by one inspection only).
+    pub unmatched: usize,
+    /// Mean measured removal over the points used, mm.
+    pub measured_mean_mm: f64,
+    /// Mean predicted removal (at the plan's k) over the points used, mm.
+    pub predicted_mean_mm: f64,
+}
+
+/// Predicted removal per core point of `before`, mm: the rows of predicted.csv matched to the
+/// core points by position and summed (a point in reach of two regions' tools has a row for
+/// each). Rows that match no core point are an error naming the row (1-based, after the
+/// header).
+pub fn predicted_removal(before: &Inspection, rows: &[PredictedRow]) -> Result<Vec<f64>, String> {
+    let pos: Vec<Point3<f64>> = before.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&pos);
+    let mut removal = vec![0.0; pos.len()];
+    for (i, r) in rows.iter().enumerate() {
+        let p = Point3::from(r.position);
+        match index.nearest(&p) {
+            Some(nb) if nb.dist2 <= CSV_POINT_MM * CSV_POINT_MM => {
+                removal[nb.index] += r.deviation - r.residual;
+            }
+            _ => {
+                return Err(format!(
+                    "row {}: ({:.3}, {:.3}, {:.3}) is no core point of the first inspection \
+                     (was the plan made from it?)",
+                    i + 1,
+                    p.x,
+                    p.y,
+                    p.z
+                ))
+            }
+        }
+    }
+    Ok(removal)
+}
+
+/// Ids of the repairable regions of `inspection` (as deviations.csv's `region` column).
+pub fn repairable_ids(inspection: &Inspection) -> Vec<i64> {
+    inspection
+        .regions
+        .iter()
+        .filter(|r| r.repairable)
+        .map(|r| r.id as i64)
+        .collect()
+}
+
+/// Least squares through the origin of `m` on `p`: the scale and the sum of p^2.
+fn scale(pairs: &[(f64, f64)]) -> (f64, f64) {
+    let pp: f64 = pairs.iter().map(|(p, _)| p * p).sum();
+    let pm: f64 = pairs.iter().map(|(p, m)| p * m).sum();
+    (pm / pp, pp)
+}
+
+/// Fits k from the inspections `before` and `after` (the same reference, the same core
+/// points) and `predicted` (per core point of `before`, at the plan's k `plan_k`); refuses
+/// with a one-line reason when the points do not match or the evidence is too thin.
+pub fn fit(
+    before: &Inspection,
+    after: &Inspection,
+    predicted: &[f64],
+    plan_k: f64,
+    cfg: &FitConfig,
+) -> Result<RemovalFit, String> {
+    let repairable = repairable_ids(before);
+    let pos: Vec<Point3<f64>> = after.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&pos);
+    let partner: Vec<Option<usize>> = before
+        .points
+        .iter()
+        .map(|p| {
+            index
+                .nearest(&p.position)
+                .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
+                .map(|nb| nb.index)
+        })
+        .collect();
+    let matched = partner.iter().flatten().count() as f64 / partner.len().max(1) as f64;
+    if matched < cfg.min_matched_share {
+        return Err(format!(
+            "only {:.1} % of the first inspection's {} core points have a core point within \
+             {SAME_POINT_MM} mm in the second (need {:.0} %): the two inspections were not made \
+             against the same reference with the same core points",
+            100.0 * matched,
+            partner.len(),
+            100.0 * cfg.min_matched_share
+        ));
+    }
+    let (mut defect, mut unmatched) = (0, 0);
+    let mut used: Vec<(i64, f64, f64)> = Vec::new();
+    for (i, p) in before.points.iter().enumerate() {
+        if !repairable.contains(&p.region) {
+            continue;
+        }
+        defect += 1;
+        let Some(j) = partner[i] else {
+            unmatched += 1;
+            continue;
+        };
+        let m = p.distance - after.points[j].distance;
+        if m.is_finite() && predicted[i] >= cfg.min_predicted_mm {
+            used.push((p.region, predicted[i], m));
+        }
+    }
+    if defect == 0 {
+        return Err("the first inspection has no repairable region".into());
+    }
+    if used.len() < cfg.min_points {
+        return Err(format!(
+            "{} defect points where the plan predicts at least {} mm of removal and both \
+             inspections measured, fewer than {}: too little evidence to fit k",
+            used.len(),
+            cfg.min_predicted_mm,
+            cfg.min_points
+        ));
+    }
+    let pairs: Vec<(f64, f64)> = used.iter().map(|u| (u.1, u.2)).collect();
+    let (s, pp) = scale(&pairs);
+    let ss: f64 = pairs.iter().map(|(p, m)| (m - s * p).powi(2)).sum();
+    let n = pairs.len() as f64;
+    let se = (ss / (n - 1.0) / pp).sqrt();
+    if s <= 0.0 || se / s > cfg.max_relative_error {
+        return Err(format!(
+            "k scale {s:.3} +- {se:.3} of the plan's over {} points: the relative error is \
+             above {} (or nothing was removed): too little evidence to fit k",
+            pairs.len(),
+            cfg.max_relative_error
+        ));
+    }
+    Ok(RemovalFit {
+        k_mm2_n: s * plan_k,
+        plan_k_mm2_n: plan_k,
+        k_std_error_mm2_n: se * plan_k,
+        regions: region_fits(&used, plan_k, cfg.min_region_points),
+        residual_rms_mm: (ss / n).sqrt(),
+        points: pairs.len(),
+        unmatched,
+        measured_mean_mm: pairs.iter().map(|x| x.1).sum::<f64>() / n,
+        predicted_mean_mm: pairs.iter().map(|x| x.0).sum::<f64>() / n,
+    })
+}
+
+/// k per region over the points `used` (region, predicted, measured).
+fn region_fits(used: &[(i64, f64, f64)], plan_k: f64, least: usize) -> Vec<RegionFit> {
+    let mut ids: Vec<i64> = used.iter().map(|u| u.0).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    ids.into_iter()
+        .filter_map(|id| {
+            let pairs: Vec<(f64, f64)> = used
+                .iter()
+                .filter(|u| u.0 == id)
+                .map(|u| (u.1, u.2))
+                .collect();
+            (pairs.len() >= least).then(|| RegionFit {
+                region: id as usize,
+                points: pairs.len(),
+                k_mm2_n: scale(&pairs).0 * plan_k,
+            })
+        })
+        .collect()
+}
+
+/// Reads predicted.csv's text (`x,y,z,deviation,predicted_residual,spread_p95`); the error
+/// names the line and the column.
+pub fn parse_predicted(text: &str) -> Result<Vec<PredictedRow>, String> {
+    let mut lines = text.lines().enumerate();
+    let head = lines.next().map(|(_, l)| l).unwrap_or_default();
+    if !head.starts_with("x,y,z,deviation,predicted_residual") {
+        return Err(format!(
+            "line 1: header {head:?}, expected x,y,z,deviation,predicted_residual,..."
+        ));
+    }
+    let mut rows = Vec::new();
+    for (n, line) in lines.filter(|(_, l)| !l.trim().is_empty()) {
+        let cells: Vec<&str> = line.split(',').collect();
+        let mut v = [0.0; 5];
+        for (c, slot) in v.iter_mut().enumerate() {
+            *slot = cells
+                .get(c)
+                .and_then(|s| s.trim().parse::<f64>().ok())
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("line {}: column {}: not a finite number", n + 1, c + 1))?;
+        }
+        rows.push(PredictedRow {
+            position: [v[0], v[1], v[2]],
+            deviation: v[3],
+            residual: v[4],
+            spread_p95: 0.0,
+        });
+    }
+    Ok(rows)
+}

@@ -1,0 +1,114 @@
+//! `polishbot calibrate removal --before DIR1 --after DIR2 --plan plan.json [--tool FILE]`:
+//! Preston's k fitted from two inspections and the plan ground between them
+//! (`cell::removal_fit`), written into tool.toml's `[removal] preston_k_mm2_n`. No arm is
+//! needed. `cycle` refits k after every grind through [`fit_files`] and [`write_k`].
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use crate::calibrate::files;
+use crate::cell::removal_fit::{self, FitConfig, RemovalFit};
+use crate::plan::removal::ToolModel;
+use crate::plan::{Inspection, Plan};
+
+/// What `calibrate removal` reads.
+#[derive(Debug, Clone)]
+pub struct Inputs {
+    /// Inspection before the grind (the one the plan was made from).
+    pub before: PathBuf,
+    /// Inspection of the rescan after the grind.
+    pub after: PathBuf,
+    /// The plan that was ground (removal mode; predicted.csv beside it).
+    pub plan: PathBuf,
+    /// The tool file the plan was made with (its k scales the prediction).
+    pub tool: PathBuf,
+}
+
+/// Fits k from the files of `inputs`; every refusal is one line naming the file.
+pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
+    let plan = Plan::load(&inputs.plan)?;
+    anyhow::ensure!(
+        plan.removal.is_some(),
+        "{}: no `removal` prediction (a rigid plan): k is fitted against a plan made with \
+         --mode removal",
+        inputs.plan.display()
+    );
+    let csv = inputs.plan.with_file_name("predicted.csv");
+    let text = std::fs::read_to_string(&csv)
+        .with_context(|| format!("{}: cannot read (written beside plan.json)", csv.display()))?;
+    let rows = removal_fit::parse_predicted(&text)
+        .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
+    let tool = ToolModel::load(&inputs.tool)?;
+    let before = Inspection::load(&inputs.before)?;
+    let after = Inspection::load(&inputs.after)?;
+    let predicted = removal_fit::predicted_removal(&before, &rows)
+        .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
+    removal_fit::fit(&before, &after, &predicted, tool.preston_k_mm2_n, cfg).map_err(|m| {
+        anyhow::anyhow!(
+            "{} -> {}: {m}",
+            inputs.before.display(),
+            inputs.after.display()
+        )
+    })
+}
+
+/// Writes `out` from the tool file `input` with `[removal] preston_k_mm2_n = k` (one line
+/// changed, comments kept) and reads it back through the planner's loader.
+pub fn write_k(input: &Path, out: &Path, k: f64) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(input)
+        .with_context(|| format!("{}: cannot read", input.display()))?;
+    files::write(out, &files::patch_preston_k(&text, k))?;
+    let back = ToolModel::load(out)?.preston_k_mm2_n;
+    anyhow::ensure!(
+        back == k,
+        "{}: preston_k_mm2_n reads back as {back}, wrote {k}",
+        out.display()
+    );
+    Ok(())
+}
+
+/// The fit in lines for the user.
+pub fn describe(fit: &RemovalFit) -> Vec<String> {
+    let per: Vec<String> = fit
+        .regions
+        .iter()
+        .map(|r| format!("{} {:.3e} ({} pts)", r.region, r.k_mm2_n, r.points))
+        .collect();
+    vec![
+        format!(
+            "calibrate removal: k {:.4e} +- {:.2e} mm^2/N (plan's {:.4e}, x {:.3}) from {} \
+             defect points ({} unmatched); fit residual RMS {:.4} mm; measured mean removal \
+             {:.4} mm, predicted {:.4} mm at the plan's k",
+            fit.k_mm2_n,
+            fit.k_std_error_mm2_n,
+            fit.plan_k_mm2_n,
+            fit.k_mm2_n / fit.plan_k_mm2_n,
+            fit.points,
+            fit.unmatched,
+            fit.residual_rms_mm,
+            fit.measured_mean_mm,
+            fit.predicted_mean_mm
+        ),
+        format!(
+            "calibrate removal: k per region [mm^2/N]: {}",
+            if per.is_empty() {
+                "none with enough points".into()
+            } else {
+                per.join(", ")
+            }
+        ),
+    ]
+}
+
+/// Runs `calibrate removal`: fits, prints, writes `out` (tool.toml) from `inputs.tool`.
+pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {
+    let fit = fit_files(inputs, &FitConfig::default())
+        .map_err(|e| anyhow::anyhow!("calibrate removal: {}", super::common::one_line(&e)))?;
+    for line in describe(&fit) {
+        println!("{line}");
+    }
+    write_k(&inputs.tool, out, fit.k_mm2_n)
+        .map_err(|e| anyhow::anyhow!("calibrate removal: {}", super::common::one_line(&e)))?;
+    println!("calibrate removal: wrote {}", out.display());
+    Ok(())
+}

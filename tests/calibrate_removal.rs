@@ -1,0 +1,288 @@
+//! Removal calibration (issue 29, `polishbot calibrate removal`): the fit against closed-form
+//! cases written here (a known scale of a known removal field; Gaussian noise and the
+//! textbook standard error of a slope through the origin, sigma / sqrt(sum p^2)), its
+//! refusals, and the binary on a simulated grind scored against the simulator's own truth
+//! (`after_truth.ply`: the removal per point).
+mod common;
+
+use nalgebra::{Point3, Vector3};
+use polishbot::cell::removal_fit::{fit, parse_predicted, predicted_removal, FitConfig};
+use polishbot::plan::preston::PredictedRow;
+use polishbot::plan::{Inspection, RegionInfo, SurfacePoint};
+use rand::{Rng, SeedableRng};
+
+use common::polishbot;
+
+/// The plan's k in these cases, mm^2/N (the shipped tool.toml's).
+const PLAN_K: f64 = 5e-6;
+/// Grid spacing of the synthetic core points, mm.
+const STEP: f64 = 0.25;
+/// Grid half width in steps: 41 x 41 points over 10 x 10 mm.
+const HALF: i64 = 20;
+
+fn region(id: usize, repairable: bool) -> RegionInfo {
+    serde_json::from_value(serde_json::json!({"id": id, "centroid": [0.0, 0.0, 0.0],
+        "normal": [0.0, 0.0, 1.0], "area": 1.0, "peak": 0.2, "mean": 0.1, "volume": 1.0,
+        "points": 1, "repairable": repairable}))
+    .unwrap()
+}
+
+/// A flat grid with three regions by x (left: repairable 0, middle: repairable 1, right: a
+/// pit, 2), a predicted removal bump p over both halves and the deviation before grinding
+/// 0.05 mm above it; returns the inspection before and p per point.
+fn before() -> (Inspection, Vec<f64>) {
+    let mut points = Vec::new();
+    let mut p = Vec::new();
+    for i in -HALF..=HALF {
+        for j in -HALF..=HALF {
+            let (x, y) = (i as f64 * STEP, j as f64 * STEP);
+            let bump = |cx: f64| 0.2 * (-((x - cx).powi(2) + y * y) / 4.0).exp();
+            let removal = bump(-2.5) + bump(2.5);
+            let region = match x {
+                x if x < 0.0 => 0,
+                x if x < 3.0 => 1,
+                _ => 2,
+            };
+            points.push(SurfacePoint {
+                position: Point3::new(x, y, 0.0),
+                normal: Vector3::z(),
+                distance: removal + 0.05,
+                region,
+            });
+            p.push(removal);
+        }
+    }
+    let regions = vec![region(0, true), region(1, true), region(2, false)];
+    let inspection = Inspection {
+        dir: "before".into(),
+        tolerance: Some(0.05),
+        regions,
+        points,
+    };
+    (inspection, p)
+}
+
+/// The inspection after a grind that removed `removed[i]` at each point.
+fn after(before: &Inspection, removed: &[f64]) -> Inspection {
+    let mut a = before.clone();
+    for (pt, r) in a.points.iter_mut().zip(removed) {
+        pt.distance -= r;
+    }
+    a
+}
+
+/// Points the fit should use: repairable, predicted at least the default threshold.
+fn expected_used(b: &Inspection, p: &[f64]) -> Vec<usize> {
+    let cfg = FitConfig::default();
+    (0..p.len())
+        .filter(|&i| b.points[i].region < 2 && p[i] >= cfg.min_predicted_mm)
+        .collect()
+}
+
+#[test]
+fn a_known_scale_of_a_known_removal_field_gives_k_exactly() {
+    let (b, p) = before();
+    let s = 1.37;
+    let removed: Vec<f64> = p.iter().map(|v| s * v).collect();
+    let mut a = after(&b, &removed);
+    // unmeasured points are left out; the pit's points too, whatever the field says there
+    a.points[0].distance = f64::NAN;
+    let f = fit(&b, &a, &p, PLAN_K, &FitConfig::default()).unwrap();
+    let used = expected_used(&b, &p)
+        .into_iter()
+        .filter(|&i| i != 0)
+        .count();
+    assert_eq!(f.points, used);
+    assert!(
+        (f.k_mm2_n / (s * PLAN_K) - 1.0).abs() < 1e-12,
+        "{}",
+        f.k_mm2_n
+    );
+    assert!(f.residual_rms_mm < 1e-12 && f.k_std_error_mm2_n < 1e-15);
+    assert_eq!(f.regions.len(), 2);
+    for r in &f.regions {
+        assert!((r.k_mm2_n / (s * PLAN_K) - 1.0).abs() < 1e-12);
+    }
+    // predicted.csv rows are summed per core point (one row per region whose reach holds it)
+    let rows: Vec<PredictedRow> = b
+        .points
+        .iter()
+        .zip(&p)
+        .flat_map(|(pt, v)| {
+            let half = PredictedRow {
+                position: pt.position.coords.into(),
+                deviation: pt.distance,
+                residual: pt.distance - v / 2.0,
+                spread_p95: 0.0,
+            };
+            [half, half]
+        })
+        .collect();
+    let summed = predicted_removal(&b, &rows).unwrap();
+    assert!(summed.iter().zip(&p).all(|(a, b)| (a - b).abs() < 1e-12));
+}
+
+/// One standard normal draw (Box-Muller).
+fn normal(rng: &mut impl Rng) -> f64 {
+    let (u, v): (f64, f64) = (rng.gen::<f64>().max(1e-300), rng.gen());
+    (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+}
+
+#[test]
+fn noise_on_the_measured_removal_gives_the_textbook_spread() {
+    let (b, p) = before();
+    let (s, sigma, trials) = (0.7, 0.015, 300);
+    let used = expected_used(&b, &p);
+    let pp: f64 = used.iter().map(|&i| p[i] * p[i]).sum();
+    let want = sigma / pp.sqrt();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(29);
+    let (mut ks, mut ses, mut rms) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..trials {
+        let removed: Vec<f64> = p.iter().map(|v| s * v + sigma * normal(&mut rng)).collect();
+        let f = fit(&b, &after(&b, &removed), &p, PLAN_K, &FitConfig::default()).unwrap();
+        ks.push(f.k_mm2_n / PLAN_K);
+        ses.push(f.k_std_error_mm2_n / PLAN_K);
+        rms.push(f.residual_rms_mm);
+    }
+    let n = trials as f64;
+    let mean = ks.iter().sum::<f64>() / n;
+    let sd = (ks.iter().map(|k| (k - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let se = ses.iter().sum::<f64>() / n;
+    let r = rms.iter().sum::<f64>() / n;
+    println!("scale mean {mean:.5} sd {sd:.5} reported se {se:.5} textbook {want:.5} rms {r:.5}");
+    // unbiased within 3 standard errors of the mean of 300 trials
+    assert!((mean - s).abs() < 3.0 * want / n.sqrt(), "{mean}");
+    // the spread of 300 draws is within 15 % of the textbook value (its own relative
+    // uncertainty is 1 / sqrt(2 x 300) = 4 %), the reported standard error within 5 %
+    assert!((sd / want - 1.0).abs() < 0.15, "{sd} vs {want}");
+    assert!((se / want - 1.0).abs() < 0.05, "{se} vs {want}");
+    assert!((r / sigma - 1.0).abs() < 0.05, "{r} vs {sigma}");
+}
+
+#[test]
+fn thin_evidence_and_unmatched_core_points_are_refused_in_one_line() {
+    let (b, p) = before();
+    let removed: Vec<f64> = p.iter().map(|v| 0.9 * v).collect();
+    let a = after(&b, &removed);
+    let strict = FitConfig {
+        min_points: 100_000,
+        ..FitConfig::default()
+    };
+    let e = fit(&b, &a, &p, PLAN_K, &strict).unwrap_err();
+    assert!(e.contains("too little evidence"), "{e}");
+    // a rescan against another reference (core points 0.01 mm away)
+    let mut moved = a.clone();
+    moved.points.iter_mut().for_each(|q| q.position.x += 0.01);
+    let e = fit(&b, &moved, &p, PLAN_K, &FitConfig::default()).unwrap_err();
+    assert!(e.contains("not made against the same reference"), "{e}");
+    // nothing removed
+    let e = fit(&b, &b, &p, PLAN_K, &FitConfig::default()).unwrap_err();
+    assert!(e.contains("nothing was removed"), "{e}");
+    // noise ten times the removal: k is not determined
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let noisy: Vec<f64> = p.iter().map(|v| v + 2.0 * normal(&mut rng)).collect();
+    let e = fit(&b, &after(&b, &noisy), &p, PLAN_K, &FitConfig::default()).unwrap_err();
+    assert!(e.contains("relative error"), "{e}");
+    assert!(!e.contains('\n'));
+    // predicted.csv: bad cells name the line and column; rows off the core points the row
+    let e =
+        parse_predicted("x,y,z,deviation,predicted_residual,spread_p95\n1,2,x,4,5,\n").unwrap_err();
+    assert_eq!(e, "line 2: column 3: not a finite number");
+    let off = PredictedRow {
+        position: [100.0, 0.0, 0.0],
+        ..PredictedRow::default()
+    };
+    let e = predicted_removal(&b, &[off]).unwrap_err();
+    assert!(
+        e.starts_with("row 1: (100.000, 0.000, 0.000) is no core point"),
+        "{e}"
+    );
+}
+
+/// The issue's bound on the first fit: within 10 % of the true k.
+const K_WITHIN: f64 = 0.10;
+
+#[test]
+fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
+    let dir = common::scratch("calibrate_removal");
+    let d = |f: &str| dir.join(f).display().to_string();
+    // tests/cycle.rs's case: 5 defects (0.08-0.5 mm) where the arm reaches, one a pit
+    common::case(3, &dir);
+    common::inspect_in(&dir, "scan.ply", "before");
+    let plan = |mode: &str, out: &str| {
+        common::succeed(
+            polishbot()
+                .args(["plan", "--mode", mode, "--inspection", &d("before"), "-o"])
+                .arg(d(out)),
+        )
+    };
+    plan("removal", "plan.json");
+    // the simulator's true k 1.3 x the planner's (issue 29's "30 % off")
+    std::fs::write(
+        dir.join("run.toml"),
+        format!("[sim.grinding]\n{}", common::SIM_TOOL),
+    )
+    .unwrap();
+    common::succeed(polishbot().args(["run", "--config", &d("run.toml")]).args([
+        "--plan",
+        &d("plan.json"),
+        "--sim",
+        "--part",
+        &d("scan.ply"),
+        "--ground-out",
+        &d("after.ply"),
+    ]));
+    common::inspect_in(&dir, "after.ply", "after");
+    let shipped = std::fs::read_to_string(common::calib("tool.toml")).unwrap();
+    std::fs::write(dir.join("tool.toml"), &shipped).unwrap();
+    let calibrate = |plan: &str| {
+        let mut cmd = polishbot();
+        cmd.args(["calibrate", "removal", "--before", &d("before")])
+            .args(["--after", &d("after"), "--plan", &d(plan), "--tool"])
+            .arg(d("tool.toml"));
+        cmd
+    };
+    let out = common::succeed(&mut calibrate("plan.json"));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+
+    // k written on its one line, every other line (the comments) kept
+    let written = std::fs::read_to_string(dir.join("tool.toml")).unwrap();
+    let changed: Vec<(&str, &str)> = shipped
+        .lines()
+        .zip(written.lines())
+        .filter(|(a, b)| a != b)
+        .collect();
+    assert_eq!(shipped.lines().count(), written.lines().count());
+    assert_eq!(changed.len(), 1, "{changed:?}");
+    assert!(changed[0].1.starts_with("preston_k_mm2_n = "));
+    let k = polishbot::plan::removal::ToolModel::load(&dir.join("tool.toml"))
+        .unwrap()
+        .preston_k_mm2_n;
+
+    // the true k for the planner's model: the scale that best maps the plan's predicted
+    // removal onto the simulator's true removal at the same points
+    let k_true = common::true_k(
+        &dir.join("before"),
+        &dir.join("predicted.csv"),
+        &dir.join("after_truth.ply"),
+        PLAN_K,
+    );
+    println!(
+        "fitted k {k:.4e}, true k {k_true:.4e}, ratio {:.4}",
+        k / k_true
+    );
+    assert!((k / k_true - 1.0).abs() < K_WITHIN, "{k} vs {k_true}");
+    assert!(stdout.contains("fit residual RMS"), "{stdout}");
+
+    // a rigid plan has no prediction to fit against: refused in one line, the file untouched
+    std::fs::create_dir_all(dir.join("rigid")).unwrap();
+    plan("rigid", "rigid/plan.json");
+    let out = calibrate("rigid/plan.json").output().unwrap();
+    let line = common::one_line_failure(&out);
+    assert!(line.contains("no `removal` prediction"), "{line}");
+    assert_eq!(
+        std::fs::read_to_string(dir.join("tool.toml")).unwrap(),
+        written
+    );
+}
