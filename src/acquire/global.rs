@@ -89,10 +89,14 @@ fn pair_rows(
         .collect()
 }
 
-/// Ordered pairs (a, b) of positions in `views`: each view's partners of largest overlap.
-fn pairs(views: &[&Prepared], poses: &[Isometry3<f64>], cfg: &MergeConfig) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    for a in 0..views.len() {
+/// Ordered pairs (a, b) of positions in `views` at `poses`: each view's partners of largest
+/// overlap.
+pub(super) fn pairs(
+    views: &[&Prepared],
+    poses: &[Isometry3<f64>],
+    cfg: &MergeConfig,
+) -> Vec<(usize, usize)> {
+    let per_view = (0..views.len()).into_par_iter().map(|a| {
         let mut shares: Vec<(f64, usize)> = (0..views.len())
             .filter(|&b| b != a)
             .map(|b| {
@@ -103,9 +107,13 @@ fn pairs(views: &[&Prepared], poses: &[Isometry3<f64>], cfg: &MergeConfig) -> Ve
             .filter(|&(s, _)| s >= MIN_PAIR_OVERLAP)
             .collect();
         shares.sort_by(|x, y| y.0.total_cmp(&x.0).then(x.1.cmp(&y.1)));
-        out.extend(shares.iter().take(MAX_PARTNERS).map(|&(_, b)| (a, b)));
-    }
-    out
+        shares
+            .iter()
+            .take(MAX_PARTNERS)
+            .map(|&(_, b)| (a, b))
+            .collect::<Vec<_>>()
+    });
+    per_view.collect::<Vec<_>>().concat()
 }
 
 /// Geman–McClure weight with squared scale `k2`, as in the register stage's ICP.
@@ -126,15 +134,15 @@ fn median_abs(rows: &[Vec<Row>]) -> f64 {
 
 /// Refines `poses` (view-to-first, position 0 fixed) of `views` jointly: the robust
 /// point-to-plane residuals of every ordered overlapping pair are minimised over all poses at
-/// once (Gauss–Newton, each pose updated by a small motion in the first view's frame). None
-/// when no pair overlaps.
+/// once (Gauss–Newton, each pose updated by a small motion in the first view's frame). `edges`:
+/// the ordered pairs ([`pairs`]). None when there is none.
 pub(super) fn refine(
     views: &[&Prepared],
     poses: &mut [Isometry3<f64>],
+    edges: &[(usize, usize)],
     cfg: &MergeConfig,
 ) -> Option<(GlobalRefinement, Vec<ViewResidual>)> {
     let m = views.len();
-    let edges = pairs(views, poses, cfg);
     if edges.is_empty() || m < 2 {
         return None;
     }
@@ -159,7 +167,7 @@ pub(super) fn refine(
             break;
         }
         let k = (3.0 * 1.4826 * median_abs(&rows)).max(1e-3 * mr);
-        let Some(x) = solve(&edges, &rows, m, k * k) else {
+        let Some(x) = solve(edges, &rows, m, k * k) else {
             break;
         };
         iterations = it + 1;
