@@ -193,6 +193,7 @@ fn synthetic_turntable(n: usize, step: &str, seed: &str, axis: Option<[f64; 3]>)
         let (dr, dt) = pose_difference(&a, &b);
         assert!(dr < 0.02 && dt < 0.02, "{}: {dr} deg {dt} mm", t["file"]);
     }
+    global_partners_are_near_in_turn(&report, step.parse().expect("step"));
     // Axis: same direction as the truth, and the estimated centre lies on the true axis.
     let ta = Vector3::from(serde_json::from_value::<[f64; 3]>(truth["axis"].clone()).unwrap());
     let tc = Vector3::from(serde_json::from_value::<[f64; 3]>(truth["centre"].clone()).unwrap());
@@ -252,6 +253,44 @@ fn synthetic_turntable(n: usize, step: &str, seed: &str, axis: Option<[f64; 3]>)
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+}
+
+/// The global step seeks each view's partners among the 12 views nearest to it in turn: on a
+/// turn of more views every partner is at most 7 steps away (6 steps each way, the table's
+/// errors of up to 3 degrees per view may swap the 6th and the 7th); the steps' wall times
+/// are reported and add up to at most the total.
+fn global_partners_are_near_in_turn(report: &Value, step: f64) {
+    let views = report["views"].as_array().expect("views");
+    let nominal = |name: &str| {
+        let v = views.iter().find(|v| v["name"] == name).expect("partner");
+        v["nominal_deg"].as_f64().expect("nominal")
+    };
+    for v in views {
+        let a = v["nominal_deg"].as_f64().expect("nominal");
+        for p in v["partners"].as_array().expect("partners") {
+            let d = (nominal(p.as_str().unwrap()) - a).rem_euclid(360.0);
+            let gap = d.min(360.0 - d);
+            assert!(
+                views.len() <= 13 || gap <= 7.0 * step + 1e-9,
+                "{}: partner {p} {gap} deg away",
+                v["name"]
+            );
+        }
+    }
+    let t = &report["times"];
+    let parts: f64 = [
+        "prepare",
+        "axis",
+        "place",
+        "loop_closure",
+        "global_pairs",
+        "global_solve",
+        "join",
+    ]
+    .iter()
+    .map(|k| t[k].as_f64().unwrap_or_else(|| panic!("times.{k}: {t}")))
+    .sum();
+    assert!(parts <= t["total"].as_f64().expect("total") + 1e-6, "{t}");
 }
 
 /// bun.conf: `bmesh FILE tx ty tz qi qj qk qr`, applied as p' = p R + t (metres).

@@ -19,8 +19,11 @@ mod global;
 mod pair;
 mod place;
 
+use std::time::Instant;
+
 use anyhow::{bail, Context, Result};
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::cloud::transform::{isometry_to_rows, pose_difference};
@@ -97,6 +100,29 @@ pub struct Merged {
     pub voxel: f64,
     /// Points before thinning.
     pub joined_points: usize,
+    /// Wall time of each step.
+    pub times: MergeTimes,
+}
+
+/// Wall time of each step of [`merge_views`], seconds.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct MergeTimes {
+    /// Preparing every view as an ICP target and source (thinning, normals, grid).
+    pub prepare: f64,
+    /// Seeding the table axis when none is given (0 otherwise).
+    pub axis: f64,
+    /// Placing the views one by one.
+    pub place: f64,
+    /// Measuring the loop closure.
+    pub loop_closure: f64,
+    /// The global step's search for overlapping pairs.
+    pub global_pairs: f64,
+    /// The global step's joint solve.
+    pub global_solve: f64,
+    /// Joining, thinning, outlier filter and normals of the joined cloud.
+    pub join: f64,
+    /// All of [`merge_views`].
+    pub total: f64,
 }
 
 /// Rotation by `deg` about the axis `axis` through `centre`.
@@ -165,11 +191,13 @@ fn seed_axis(
 
 /// The global step over the placed views that were not held (a held view keeps its pose and
 /// is no one's partner): the refined poses of all placed views, the step's summary and each
-/// view's residuals (None for held views, or all when the step did not run).
+/// view's residuals (None for held views, or all when the step did not run). Times its pair
+/// search and its solve into `times`.
 fn refine_globally(
     placed: &[place::Placed],
     prepared: &[pair::Prepared],
     cfg: &MergeConfig,
+    times: &mut MergeTimes,
 ) -> (
     Vec<Isometry3<f64>>,
     Option<GlobalRefinement>,
@@ -185,7 +213,13 @@ fn refine_globally(
     }
     let views: Vec<&pair::Prepared> = free.iter().map(|&k| &prepared[placed[k].index]).collect();
     let mut free_poses: Vec<Isometry3<f64>> = free.iter().map(|&k| poses[k]).collect();
-    let Some((summary, per_view)) = global::refine(&views, &mut free_poses, cfg) else {
+    let t = Instant::now();
+    let edges = global::pairs(&views, &free_poses, cfg);
+    times.global_pairs = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let refined = global::refine(&views, &mut free_poses, &edges, cfg);
+    times.global_solve = t.elapsed().as_secs_f64();
+    let Some((summary, per_view)) = refined else {
         return (poses, None, residuals);
     };
     for ((&k, pose), mut res) in free.iter().zip(free_poses).zip(per_view) {
@@ -221,11 +255,18 @@ pub fn merge_views(
     cfg: &MergeConfig,
 ) -> Result<Merged> {
     check_views(views, names, angles)?;
-    let prepared: Vec<pair::Prepared> = views
-        .iter()
+    let start = Instant::now();
+    let mut times = MergeTimes::default();
+    // Views prepared side by side (each one's normals and grid leave cores idle); the first
+    // failing view in input order is named.
+    let prepared: Vec<Result<pair::Prepared>> = views
+        .par_iter()
         .zip(names)
         .map(|(v, n)| pair::prepare(v, cfg).map_err(|e| anyhow::anyhow!("{n}: {e}")))
-        .collect::<Result<_>>()?;
+        .collect();
+    let prepared: Vec<pair::Prepared> = prepared.into_iter().collect::<Result<_>>()?;
+    times.prepare = start.elapsed().as_secs_f64();
+    let t = Instant::now();
     let centroid = {
         let v = &views[0];
         Point3::from(v.points.iter().map(|p| p.coords).sum::<Vector3<f64>>() / v.len() as f64)
@@ -250,6 +291,7 @@ pub fn merge_views(
             )
         }
     };
+    times.axis = t.elapsed().as_secs_f64();
     let nominal: Vec<Isometry3<f64>> = angles
         .iter()
         .map(|a| table_rotation(&axis, &centre, -(a - angles[0])))
@@ -262,9 +304,13 @@ pub fn merge_views(
         nominal: &nominal,
         axis: &axis,
     };
+    let t = Instant::now();
     let placed = place::place_views(&inputs, cfg)?;
+    times.place = t.elapsed().as_secs_f64();
+    let t = Instant::now();
     let loop_closure = place::loop_closure(&inputs, &placed.placed, cfg);
-    let (poses, global, residuals) = refine_globally(&placed.placed, &prepared, cfg);
+    times.loop_closure = t.elapsed().as_secs_f64();
+    let (poses, global, residuals) = refine_globally(&placed.placed, &prepared, cfg, &mut times);
     let kept: Vec<usize> = placed.placed.iter().map(|p| p.index).collect();
     let axis_est = estimate_axis(&poses, &axis, &centre);
     let mut out_views = Vec::new();
@@ -295,9 +341,37 @@ pub fn merge_views(
             pose: *pose,
         });
     }
+    let t = Instant::now();
+    let (cloud, voxel, joined_points) = join(views, &kept, &poses, cfg)?;
+    times.join = t.elapsed().as_secs_f64();
+    times.total = start.elapsed().as_secs_f64();
+    Ok(Merged {
+        cloud,
+        views: out_views,
+        skipped: placed.skipped,
+        loop_closure,
+        global,
+        angle_tolerance: cfg.angle_tolerance,
+        axis: axis_est,
+        axis_seed,
+        voxel,
+        joined_points,
+        times,
+    })
+}
+
+/// The views at `kept` (input indices) at their `poses` joined into one cloud, thinned on the
+/// voxel (`cfg.voxel`, else the first view's mean spacing), optionally filtered, with normals:
+/// the cloud, the voxel and the points before thinning.
+fn join(
+    views: &[PointCloud],
+    kept: &[usize],
+    poses: &[Isometry3<f64>],
+    cfg: &MergeConfig,
+) -> Result<(PointCloud, f64, usize)> {
     let voxel = cfg.voxel.unwrap_or_else(|| mean_spacing(&views[0]));
     let mut joined = Vec::new();
-    for (i, pose) in kept.iter().zip(&poses) {
+    for (i, pose) in kept.iter().zip(poses) {
         joined.extend(views[*i].points.iter().map(|p| pose * p));
     }
     let joined_points = joined.len();
@@ -321,16 +395,5 @@ pub fn merge_views(
         let est = estimate_normals(&cloud, &ncfg).context("normals of the joined cloud")?;
         cloud.normals = Some(est.normals);
     }
-    Ok(Merged {
-        cloud,
-        views: out_views,
-        skipped: placed.skipped,
-        loop_closure,
-        global,
-        angle_tolerance: cfg.angle_tolerance,
-        axis: axis_est,
-        axis_seed,
-        voxel,
-        joined_points,
-    })
+    Ok((cloud, voxel, joined_points))
 }

@@ -5,7 +5,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::config::MergeConfig;
 use crate::cloud::PointCloud;
-use crate::preprocess::{estimate_normals, mean_spacing, NormalConfig, Orientation};
+use crate::preprocess::{estimate_normals, mean_spacing_in, NormalConfig, Orientation};
 use crate::register::icp::{fitness, icp, IcpParams};
 use crate::register::{register, RegisterConfig};
 use crate::spatial::Grid;
@@ -39,12 +39,14 @@ pub(super) fn prepare(view: &PointCloud, cfg: &MergeConfig) -> Result<Prepared> 
     let target = strided(&view.points, cfg.icp_target_points);
     let target_cloud = PointCloud::from_points(target.clone());
     let normals = estimate_normals(&target_cloud, &ncfg)?.normals;
+    let index = Grid::for_points(&target);
     Ok(Prepared {
-        index: Grid::for_points(&target),
+        // The grid mean_spacing would build over the same points.
+        spacing: mean_spacing_in(&index, &target),
+        index,
         target,
         normals,
         sample: strided(&view.points, cfg.icp_max_points),
-        spacing: mean_spacing(&target_cloud),
     })
 }
 

@@ -159,6 +159,7 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
         "skipped": merged.skipped,
         "voxel": merged.voxel,
         "joined_points": merged.joined_points,
+        "times": merged.times,
         "views": merged.views,
     });
     std::fs::write(&report_path, serde_json::to_string_pretty(&report)? + "\n")
