@@ -92,11 +92,10 @@ pub(crate) fn assemble(
     let mut on: Option<(PlannedPoint, usize)> = None;
     let mut left: Option<PlannedPoint> = None;
     for run in runs {
-        for piece in run {
+        for mut chain in chains(run) {
+            let piece = &chain[0];
             let start = &piece.points[0];
             let glided = match &on {
-                // removal mode: the next piece of the same stroke starts where this one ended
-                Some((at, _)) if piece.dwell_s.is_some() && at.q == start.q => true,
                 // a pressed ball does not slide to another stroke: it would grind off the plan
                 Some(_) if pressed(start) > 0.0 => false,
                 Some((at, _)) => prog.glide(at, start, piece.region, &cell)?,
@@ -108,12 +107,18 @@ pub(crate) fn assemble(
                     left = Some(at);
                 }
                 if let Err(reason) = prog.enter(left.as_ref(), start, piece.region, &cell)? {
-                    leave_out(&piece, &reason, unreachable);
+                    chain
+                        .iter()
+                        .for_each(|p| leave_out(p, &reason, unreachable));
                     continue;
                 }
             }
-            on = piece.points.last().cloned().map(|p| (p, piece.region));
-            prog.grind(piece, robot, cfg)?;
+            let last = &chain[chain.len() - 1];
+            on = last.points.last().cloned().map(|p| (p, last.region));
+            match chain[0].dwell_s.is_some() {
+                true => prog.grind_chain(chain, robot, cfg)?,
+                false => prog.grind(chain.remove(0), robot, cfg)?,
+            }
         }
         if let Some((at, region)) = on.take() {
             prog.retract(&at, region, &cell)?;
@@ -124,6 +129,24 @@ pub(crate) fn assemble(
     Ok(prog)
 }
 
+/// The run cut into what is ground in one go: in removal mode (pieces with a dwell) each
+/// stretch of pieces where the next starts where the last ended (one stroke, ground without
+/// stopping), in rigid mode every piece alone.
+fn chains(run: Run) -> Vec<Vec<PlannedPass>> {
+    let mut out: Vec<Vec<PlannedPass>> = Vec::new();
+    for piece in run {
+        let joins = out.last().and_then(|c| c.last()).is_some_and(|prev| {
+            let end = &prev.points[prev.points.len() - 1];
+            piece.dwell_s.is_some() && prev.dwell_s.is_some() && end.q == piece.points[0].q
+        });
+        match (joins, out.last_mut()) {
+            (true, Some(chain)) => chain.push(piece),
+            _ => out.push(vec![piece]),
+        }
+    }
+    out
+}
+
 /// How far contact `p` is pressed inside the surface, mm (removal mode's preload; 0 in rigid
 /// mode, whose layers sit on or above nominal).
 fn pressed(p: &PlannedPoint) -> f64 {
@@ -131,7 +154,11 @@ fn pressed(p: &PlannedPoint) -> f64 {
 }
 
 /// Records every point of `piece` as left out.
-fn leave_out(piece: &PlannedPass, reason: &str, unreachable: &mut Vec<UnreachablePoint>) {
+pub(crate) fn leave_out(
+    piece: &PlannedPass,
+    reason: &str,
+    unreachable: &mut Vec<UnreachablePoint>,
+) {
     for (pi, p) in piece.points.iter().enumerate() {
         unreachable.push(UnreachablePoint {
             region: piece.region,

@@ -23,6 +23,7 @@ mod regions;
 pub mod removal;
 pub mod report;
 pub mod ros;
+mod stroke;
 pub mod surface;
 pub mod table;
 pub mod table_file;
@@ -84,20 +85,17 @@ pub fn plan(
     let regions::Planned {
         runs,
         counts,
-        allowances,
+        mut allowances,
     } = regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
-    let mut prog = assemble::assemble(
+    let (mut prog, removal) = regions::assemble_and_predict(
         runs,
-        robot,
-        workcell,
-        config,
+        &mut allowances,
+        inspection,
+        &ctx,
+        tool.is_some(),
         &scene,
         &mut reachability.unreachable,
     )?;
-    let removal = match &tool {
-        None => None,
-        Some(_) => Some(preston::predict(&prog, inspection, &allowances, &ctx)?),
-    };
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability

@@ -111,3 +111,44 @@ pub(crate) fn removal_geometry(
         allowance: config.allowance_mm,
     }
 }
+
+/// Assembles `runs` into the program and, in removal mode, predicts the part; a region whose
+/// trajectory over-grinds at the Monte Carlo's quantile is left out (its contacts recorded with
+/// the reason) and the rest assembled again, so that one region does not refuse the plan.
+pub(crate) fn assemble_and_predict(
+    mut runs: Vec<program::Run>,
+    allowances: &mut Vec<(usize, f64)>,
+    inspection: &Inspection,
+    ctx: &preston::Setup,
+    removal_mode: bool,
+    scene: &collide::Scene,
+    unreachable: &mut Vec<super::report::UnreachablePoint>,
+) -> Result<(program::Program, Option<preston::RemovalReport>), PlanError> {
+    loop {
+        let mut left = Vec::new();
+        let prog = super::assemble::assemble(
+            runs.clone(),
+            ctx.robot,
+            ctx.workcell,
+            ctx.config,
+            scene,
+            &mut left,
+        )?;
+        if !removal_mode {
+            unreachable.extend(left);
+            return Ok((prog, None));
+        }
+        let (report, failed) = preston::predict(&prog, inspection, allowances, ctx)?;
+        if failed.is_empty() {
+            unreachable.extend(left);
+            return Ok((prog, Some(report)));
+        }
+        for (id, reason) in failed {
+            for piece in runs.iter().flatten().filter(|p| p.region == id) {
+                super::assemble::leave_out(piece, &reason, unreachable);
+            }
+            runs.retain(|run| run.iter().all(|p| p.region != id));
+            allowances.retain(|a| a.0 != id);
+        }
+    }
+}
