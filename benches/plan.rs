@@ -1,5 +1,6 @@
-//! Grinding planner speed: a whole plan (raster, IK along every stroke with splits, constant-
-//! feed strokes, transits, metrics, coverage, validation, frames) of about 5,000 path points.
+//! Grinding planner speed: a whole rigid plan (raster, IK along every stroke with splits,
+//! constant-feed strokes, transits, metrics, coverage, validation, frames) of about 5,000 path
+//! points, and the removal plan of the demo case.
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -68,7 +69,7 @@ fn bench(c: &mut Criterion) {
     .expect("calibration");
     let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
     let insp = inspection();
-    let cfg = PlanConfig::default();
+    let cfg = PlanConfig::rigid();
     let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
     let r = &p.reachability.regions[0];
     println!(
@@ -87,5 +88,40 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// The demo case (issue 28's target: under 2 s): `polishbot demo`'s inspection planned in the
+/// default (removal) mode. The demo runs once, before the measurement (about a minute).
+fn bench_demo(c: &mut Criterion) {
+    let robot = Robot::load(
+        &calib("dofbot.urdf"),
+        &calib("tool.toml"),
+        &calib("servos.toml"),
+    )
+    .expect("calibration");
+    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_polishbot"))
+        .args(["demo", "--out"])
+        .arg(dir.path())
+        .stdout(std::process::Stdio::null())
+        .status()
+        .expect("polishbot demo");
+    assert!(status.success(), "polishbot demo failed");
+    let insp = Inspection::load(&dir.path().join("inspection")).expect("demo inspection");
+    let cfg = PlanConfig::default();
+    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    println!(
+        "demo plan (removal): {} passes, {} samples, {:.1} s predicted",
+        p.passes.len(),
+        p.samples.len(),
+        p.predicted_duration_s
+    );
+    let mut group = c.benchmark_group("plan");
+    group.sample_size(10);
+    group.bench_function("plan_demo_removal", |b| {
+        b.iter(|| plan(&insp, &robot, &wc, &cfg).expect("plan"))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_demo);
 criterion_main!(benches);
