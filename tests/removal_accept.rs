@@ -3,7 +3,9 @@
 //! mode) predicts, for the nominal model, a residual within the tolerance over every planned
 //! region's reachable core points, no over-grind (nominal and at the Monte Carlo's quantile),
 //! and every force check passed or its refusal named. Two seeds run in the suite, ten in the
-//! ignored test (`cargo test --release --test removal_accept -- --ignored --nocapture`).
+//! ignored test (`cargo test --release --test removal_accept -- --ignored --nocapture`). The
+//! residual is held to the tolerance with Preston's k known to 10 % (`CALIBRATED_K_REL_SD`);
+//! with the shipped 30 % only the over-grind is (issue 28's restatement, docs/ALGORITHMS.md).
 mod common;
 
 use polishbot::plan::{plan, Inspection, PlanConfig, PlanError};
@@ -24,42 +26,55 @@ fn case(seed: u64) -> SynthConfig {
     }
 }
 
-/// Plans synth case `seed` in the default (removal) mode and checks it; a refused force check
-/// must name the joint.
-fn run_seed(seed: u64) -> String {
+/// Preston k's relative uncertainty once a spot test or `calibrate removal` has measured it
+/// (0.1): with the shipped 0.3 the Monte Carlo's 5 % quantile scales the removal by 1.47, so
+/// a bump above 0.26 mm cannot be brought within the tolerance in one pass without risking
+/// over-grind (the robust solve raises its allowance to 0.075 mm, the cycle finishes it).
+const CALIBRATED_K_REL_SD: f64 = 0.1;
+
+/// Plans synth case `seed` in the default (removal) mode, the tool's k uncertainty set to
+/// `k_rel_sd` when given, and checks it (the residual against the tolerance when
+/// `residual_within`); a refused force check must name the joint.
+fn run_seed(seed: u64, k_rel_sd: Option<f64>, residual_within: bool) -> String {
     let dir = common::tempdir();
     common::synthetic::inspection(dir.path(), &case(seed));
     let inspection = Inspection::load(dir.path()).expect("inspection");
-    let robot = common::dofbot();
+    let mut robot = common::dofbot();
+    if let (Some(sd), Some(toml::Value::Table(t))) = (k_rel_sd, robot.tool.removal.as_mut()) {
+        t.insert("preston_k_rel_sd".into(), toml::Value::Float(sd));
+    }
     let wc = polishbot::robot::Workcell::load(&common::calib("workcell.toml")).expect("wc");
     let config = PlanConfig::default();
     let started = std::time::Instant::now();
+    let label = format!("seed {seed} (k sd {k_rel_sd:?})");
     match plan(&inspection, &robot, &wc, &config) {
         Ok(p) => {
-            let line = common::removal::accept(&p, &format!("seed {seed}"));
+            let line = common::removal::accept(&p, &label, residual_within);
             format!(
                 "{line}; planned in {:.2} s",
                 started.elapsed().as_secs_f64()
             )
         }
         Err(PlanError::Config(m)) if m.contains("joint") && m.contains("N m") => {
-            format!("seed {seed}: force check refused: {m}")
+            format!("{label}: force check refused: {m}")
         }
-        Err(e) => panic!("seed {seed}: {e}"),
+        Err(e) => panic!("{label}: {e}"),
     }
 }
 
 #[test]
 fn removal_meets_the_tolerance_on_two_synth_cases() {
     for seed in [9, 11] {
-        println!("{}", run_seed(seed));
+        println!("{}", run_seed(seed, Some(CALIBRATED_K_REL_SD), true));
+        println!("{}", run_seed(seed, None, false));
     }
 }
 
 #[test]
-#[ignore = "ten synth cases, about a minute in release: run by hand, numbers in the report"]
+#[ignore = "ten synth cases, a few minutes in release: run by hand, numbers in the report"]
 fn removal_meets_the_tolerance_on_ten_synth_cases() {
     for seed in 1..=10 {
-        println!("{}", run_seed(seed));
+        println!("{}", run_seed(seed, Some(CALIBRATED_K_REL_SD), true));
+        println!("{}", run_seed(seed, None, false));
     }
 }

@@ -82,14 +82,11 @@ pub fn plan(
         config,
     };
     let mut reachability = Reachability::default();
-    let regions::Planned {
-        runs,
-        counts,
-        mut allowances,
-    } = regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
+    let planned =
+        regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
+    let counts = planned.counts.clone();
     let (mut prog, removal) = regions::assemble_and_predict(
-        runs,
-        &mut allowances,
+        planned,
         inspection,
         &ctx,
         tool.is_some(),

@@ -203,12 +203,14 @@ pub struct Setup<'a> {
 pub type Dwelled = Result<(Vec<Run>, f64), String>;
 
 /// Turns one region's runs into one-contact pieces carrying the dwell the robust solve gives
-/// them; refuses a contact whose force a servo cannot hold (naming the point and the joint).
+/// them, starting from `allowance` mm; refuses a contact whose force a servo cannot hold
+/// (naming the point and the joint).
 pub fn set_dwell(
     runs: Vec<Run>,
     region: &RegionInfo,
     inspection: &Inspection,
     setup: &Setup,
+    allowance: f64,
 ) -> Result<Dwelled, PlanError> {
     let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
     let solve = solve_config(&runs, robot, config)?;
@@ -253,11 +255,10 @@ pub fn set_dwell(
         cores: &cores,
         tolerance: inspection.tolerance.unwrap_or(config.tolerance_mm),
     };
-    let robust =
-        match removal::solve_robust(&problem, config.allowance_mm, &solve, &config.monte_carlo) {
-            Ok(r) => r,
-            Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
-        };
+    let robust = match removal::solve_robust(&problem, allowance, &solve, &config.monte_carlo) {
+        Ok(r) => r,
+        Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
+    };
     let planned = runs
         .iter_mut()
         .flatten()
