@@ -60,20 +60,27 @@ fn inspection() -> Inspection {
     }
 }
 
-fn bench(c: &mut Criterion) {
+/// The shipped arm and workcell.
+fn cell() -> (Robot, Workcell) {
     let robot = Robot::load(
         &calib("dofbot.urdf"),
         &calib("tool.toml"),
         &calib("servos.toml"),
     )
     .expect("calibration");
-    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
-    let insp = inspection();
-    let cfg = PlanConfig::rigid();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    (
+        robot,
+        Workcell::load(&calib("workcell.toml")).expect("workcell"),
+    )
+}
+
+/// Plans `insp` once (printing what it made), then measures `plan` on it as bench `name`.
+fn measure(c: &mut Criterion, name: &str, insp: &Inspection, cfg: &PlanConfig) {
+    let (robot, wc) = cell();
+    let p = plan(insp, &robot, &wc, cfg).expect("plan");
     let r = &p.reachability.regions[0];
     println!(
-        "plan: {} path points ({} left out), {} passes, {} samples, {:.1} s predicted",
+        "{name}: {} path points ({} left out), {} passes, {} samples, {:.1} s predicted",
         r.path_points,
         r.unreachable_path_points,
         p.passes.len(),
@@ -82,22 +89,24 @@ fn bench(c: &mut Criterion) {
     );
     let mut group = c.benchmark_group("plan");
     group.sample_size(10);
-    group.bench_function("plan_5000_path_points", |b| {
-        b.iter(|| plan(&insp, &robot, &wc, &cfg).expect("plan"))
+    group.bench_function(name, |b| {
+        b.iter(|| plan(insp, &robot, &wc, cfg).expect("plan"))
     });
     group.finish();
+}
+
+fn bench(c: &mut Criterion) {
+    measure(
+        c,
+        "plan_5000_path_points",
+        &inspection(),
+        &PlanConfig::rigid(),
+    );
 }
 
 /// The demo case (issue 28's target: under 2 s): `polishbot demo`'s inspection planned in the
 /// default (removal) mode. The demo runs once, before the measurement (about a minute).
 fn bench_demo(c: &mut Criterion) {
-    let robot = Robot::load(
-        &calib("dofbot.urdf"),
-        &calib("tool.toml"),
-        &calib("servos.toml"),
-    )
-    .expect("calibration");
-    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
     let dir = tempfile::tempdir().expect("tempdir");
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_polishbot"))
         .args(["demo", "--out"])
@@ -107,20 +116,7 @@ fn bench_demo(c: &mut Criterion) {
         .expect("polishbot demo");
     assert!(status.success(), "polishbot demo failed");
     let insp = Inspection::load(&dir.path().join("inspection")).expect("demo inspection");
-    let cfg = PlanConfig::default();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
-    println!(
-        "demo plan (removal): {} passes, {} samples, {:.1} s predicted",
-        p.passes.len(),
-        p.samples.len(),
-        p.predicted_duration_s
-    );
-    let mut group = c.benchmark_group("plan");
-    group.sample_size(10);
-    group.bench_function("plan_demo_removal", |b| {
-        b.iter(|| plan(&insp, &robot, &wc, &cfg).expect("plan"))
-    });
-    group.finish();
+    measure(c, "plan_demo_removal", &insp, &PlanConfig::default());
 }
 
 criterion_group!(benches, bench, bench_demo);
