@@ -226,7 +226,7 @@ fn cli_plan(
     extra: &[&std::ffi::OsStr],
 ) -> (std::process::Output, PathBuf) {
     let cfg = dir.join("plan.toml");
-    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+    std::fs::write(&cfg, "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n").unwrap();
     let plan_path = dir.join("plan.json");
     let out = common::succeed(
         common::polishbot()
@@ -509,7 +509,15 @@ fn plan_from_the_inspect_command_of_a_synth_case() {
     let plan_path = tmp.path().join("plan.json");
     println!(
         "{}",
-        run(&["plan", "--inspection", &s(&insp), "-o", &s(&plan_path)])
+        run(&[
+            "plan",
+            "--mode",
+            "rigid",
+            "--inspection",
+            &s(&insp),
+            "-o",
+            &s(&plan_path)
+        ])
     );
     let p = Plan::load(&plan_path).unwrap();
     let (robot, _) = dofbot();
