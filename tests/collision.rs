@@ -502,7 +502,8 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
     let (mut free, mut inside, mut second) = (0, 0, 0);
     for (i, s) in p.samples.iter().enumerate() {
         let m = measure(&s.q, &robot, &wc, &insp.points);
-        if kinds[i] == SegmentKind::Grind {
+        // removal mode: the ball is pressed into the part while grinding and pressing
+        if matches!(kinds[i], SegmentKind::Grind | SegmentKind::Press) {
             second += usize::from(m.second_face);
         } else {
             free += 1;
