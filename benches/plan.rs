@@ -1,5 +1,6 @@
-//! Grinding planner speed: a whole plan (raster, IK along every stroke with splits, constant-
-//! feed strokes, transits, metrics, coverage, validation, frames) of about 5,000 path points.
+//! Grinding planner speed: a whole rigid plan (raster, IK along every stroke with splits,
+//! constant-feed strokes, transits, metrics, coverage, validation, frames) of about 5,000 path
+//! points, and the removal plan of the demo case.
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -61,20 +62,27 @@ fn inspection() -> Inspection {
     }
 }
 
-fn bench(c: &mut Criterion) {
+/// The shipped arm and workcell.
+fn cell() -> (Robot, Workcell) {
     let robot = Robot::load(
         &calib("dofbot.urdf"),
         &calib("tool.toml"),
         &calib("servos.toml"),
     )
     .expect("calibration");
-    let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
-    let insp = inspection();
-    let cfg = PlanConfig::default();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    (
+        robot,
+        Workcell::load(&calib("workcell.toml")).expect("workcell"),
+    )
+}
+
+/// Plans `insp` once (printing what it made), then measures `plan` on it as bench `name`.
+fn measure(c: &mut Criterion, name: &str, insp: &Inspection, cfg: &PlanConfig) {
+    let (robot, wc) = cell();
+    let p = plan(insp, &robot, &wc, cfg).expect("plan");
     let r = &p.reachability.regions[0];
     println!(
-        "plan: {} path points ({} left out), {} passes, {} samples, {:.1} s predicted",
+        "{name}: {} path points ({} left out), {} passes, {} samples, {:.1} s predicted",
         r.path_points,
         r.unreachable_path_points,
         p.passes.len(),
@@ -83,8 +91,8 @@ fn bench(c: &mut Criterion) {
     );
     let mut group = c.benchmark_group("plan");
     group.sample_size(10);
-    group.bench_function("plan_5000_path_points", |b| {
-        b.iter(|| plan(&insp, &robot, &wc, &cfg).expect("plan"))
+    group.bench_function(name, |b| {
+        b.iter(|| plan(insp, &robot, &wc, cfg).expect("plan"))
     });
     // the collision check alone (issue 35's "10 us per checked sample"): every sample of the
     // plan under its segment's rule, a fresh scene per run (a scene remembers the samples it
@@ -101,5 +109,29 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+fn bench(c: &mut Criterion) {
+    measure(
+        c,
+        "plan_5000_path_points",
+        &inspection(),
+        &PlanConfig::rigid(),
+    );
+}
+
+/// The demo case (issue 28's target: under 2 s): `polishbot demo`'s inspection planned in the
+/// default (removal) mode. The demo runs once, before the measurement (about a minute).
+fn bench_demo(c: &mut Criterion) {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_polishbot"))
+        .args(["demo", "--out"])
+        .arg(dir.path())
+        .stdout(std::process::Stdio::null())
+        .status()
+        .expect("polishbot demo");
+    assert!(status.success(), "polishbot demo failed");
+    let insp = Inspection::load(&dir.path().join("inspection")).expect("demo inspection");
+    measure(c, "plan_demo_removal", &insp, &PlanConfig::default());
+}
+
+criterion_group!(benches, bench, bench_demo);
 criterion_main!(benches);

@@ -230,7 +230,7 @@ fn a_contact_in_a_slot_narrower_than_the_ball_is_left_out_because_the_tool_does_
     let robot = dofbot();
     let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
     let insp = slotted_face();
-    let p = plan(&insp, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let p = plan(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
     let slot: Vec<_> = p
         .reachability
         .unreachable
@@ -293,7 +293,7 @@ fn wedge() -> (Inspection, Workcell) {
 fn a_transit_between_the_two_sides_of_a_wedge_goes_around_its_nose_with_the_margin() {
     let robot = dofbot();
     let (insp, wc) = wedge();
-    let cfg = PlanConfig::default();
+    let cfg = PlanConfig::rigid();
     let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
     for id in [0, 1] {
         let why: Vec<&String> = p
@@ -386,7 +386,7 @@ fn cylinder() -> (Inspection, Workcell) {
 fn a_turn_of_the_tool_at_a_contact_keeps_the_ball_centre_within_a_tenth_of_a_millimetre() {
     let robot = dofbot();
     let (insp, wc) = cylinder();
-    let p = plan(&insp, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let p = plan(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
     let mut turns = 0;
     for seg in p
         .segments
@@ -429,7 +429,7 @@ fn a_tall_fixture_in_the_way_of_the_links_keeps_the_arm_out_and_run_refuses_a_pl
 {
     let robot = dofbot();
     let (insp, wc) = cylinder();
-    let open = plan(&insp, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let open = plan(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
     assert!(!open.passes.is_empty());
     // a post beside the base, up to 0.4 m: the forearm reaches out over where it stands
     let post = Solid {
@@ -437,7 +437,7 @@ fn a_tall_fixture_in_the_way_of_the_links_keeps_the_arm_out_and_run_refuses_a_pl
         min: [-0.04, 0.09, 0.0],
         max: [0.04, 0.13, 0.4],
     };
-    let mut cfg = PlanConfig::default();
+    let mut cfg = PlanConfig::rigid();
     cfg.collision.solids.push(post.clone());
     let blocked = plan(&insp, &robot, &wc, &cfg).expect("plan");
     assert!(
@@ -504,7 +504,8 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
     let (mut free, mut inside, mut second) = (0, 0, 0);
     for (i, s) in p.samples.iter().enumerate() {
         let m = measure(&s.q, &robot, &wc, &insp.points);
-        if kinds[i] == SegmentKind::Grind {
+        // removal mode: the ball is pressed into the part while grinding and pressing
+        if matches!(kinds[i], SegmentKind::Grind | SegmentKind::Press) {
             second += usize::from(m.second_face);
         } else {
             free += 1;
@@ -527,7 +528,7 @@ fn a_scene_answers_a_sample_it_has_seen_as_a_fresh_scene_does() {
     use polishbot::plan::collide::{Allow, Scene};
     let robot = dofbot();
     let (insp, wc) = wedge();
-    let cfg = PlanConfig::default();
+    let cfg = PlanConfig::rigid();
     let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
     let seen = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
     let rules = [Allow::Free, Allow::Contact, Allow::Grind];

@@ -83,7 +83,11 @@ fn case() -> &'static Case {
             path_arg(&d("inspection")),
         ]));
         println!("{}", String::from_utf8_lossy(&out.stdout));
-        std::fs::write(d("plan.toml"), "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+        std::fs::write(
+            d("plan.toml"),
+            "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
+        )
+        .unwrap();
         let out = succeed(polishbot().args([
             "plan",
             "--config",

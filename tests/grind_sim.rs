@@ -378,7 +378,11 @@ fn a_ground_rescan_is_a_plain_inspect_input_and_regions_shrink_only_where_the_si
         )
     };
     inspect("scan.ply", "before");
-    std::fs::write(dir.join("plan.toml"), "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+    std::fs::write(
+        dir.join("plan.toml"),
+        "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
+    )
+    .unwrap();
     let plan = [
         "plan",
         "--config",

@@ -37,7 +37,11 @@ fn case() -> &'static Case {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile");
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("plan.toml"), "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+        std::fs::write(
+            dir.join("plan.toml"),
+            "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
+        )
+        .unwrap();
         // Run from the package root, whose calibration/ the plan reads.
         let d = dir.display();
         let steps = [
@@ -386,7 +390,11 @@ fn an_inspection_whose_files_contradict_each_other_is_refused() {
         let tmp = common::tempdir();
         let insp = tampered(tmp.path(), region, csv);
         refused(
-            &mut plan(tmp.path(), &insp, "[plan]\ndepth_step_mm = 1.0\n"),
+            &mut plan(
+                tmp.path(),
+                &insp,
+                "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
+            ),
             &["inspection", needle],
         );
     }
@@ -415,7 +423,11 @@ fn a_core_point_far_away_in_a_region_is_refused_at_once() {
     assert!(done);
     std::fs::write(&csv, edited.join("\n") + "\n").unwrap();
     refused(
-        &mut plan(tmp.path(), &insp, "[plan]\ndepth_step_mm = 1.0\n"),
+        &mut plan(
+            tmp.path(),
+            &insp,
+            "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
+        ),
         &["regions.json", "regions["],
     );
 }

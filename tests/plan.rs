@@ -7,7 +7,6 @@ use std::path::{Path, PathBuf};
 use nalgebra::Vector3;
 use polishbot::plan::{plan, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
-use polishbot::synth::synth;
 
 fn calib(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -26,79 +25,9 @@ fn dofbot() -> (Robot, Workcell) {
     (robot, wc)
 }
 
-/// Writes an inspection folder (deviations.csv, regions.json per DESIGN.md) for a synth case
-/// of the real femoral component: core points are the reference samples, distances the true
-/// deviations, regions the points beyond `tolerance` grouped by the defect that dominates them.
+/// The inspection folder of synth case `seed` with `defects` defects (common::synthetic).
 fn synthetic_inspection(dir: &Path, seed: u64, defects: usize) -> polishbot::synth::Truth {
-    let case = synth(&common::femoral_synth(seed, defects)).expect("synth");
-    let tolerance = 0.05;
-    let area: f64 = (0..case.mesh.faces.len())
-        .map(|i| case.mesh.face_normal_area(i).1)
-        .sum();
-    let share = area / case.reference.len() as f64;
-    let normals = case.reference.normals.as_ref().expect("normals");
-    let truth = case.truth;
-    let mut csv = String::from(
-        "x,y,z,nx,ny,nz,distance,uncertainty,significant,radius,n_ref,n_scan,region\n",
-    );
-    let mut groups: Vec<Vec<(usize, f64)>> = vec![Vec::new(); truth.defects.len()];
-    for (i, (p, n)) in case.reference.points.iter().zip(normals).enumerate() {
-        let d = truth.deviation_at(p, n);
-        let mut region = -1i64;
-        if d.abs() > tolerance {
-            let (k, _) = truth
-                .defects
-                .iter()
-                .enumerate()
-                .map(|(k, def)| (k, def.displacement(p, n).abs()))
-                .max_by(|a, b| a.1.total_cmp(&b.1))
-                .expect("defects");
-            groups[k].push((i, d));
-            region = k as i64;
-        }
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},0.01,{},0.5,20,20,{}\n",
-            p.x,
-            p.y,
-            p.z,
-            n.x,
-            n.y,
-            n.z,
-            d,
-            u8::from(d.abs() > 0.02),
-            region
-        ));
-    }
-    let mut regions = Vec::new();
-    for (k, g) in groups.iter().enumerate().filter(|(_, g)| !g.is_empty()) {
-        let count = g.len() as f64;
-        let c = g.iter().fold(Vector3::zeros(), |s, (i, _)| {
-            s + case.reference.points[*i].coords
-        }) / count;
-        let n = g
-            .iter()
-            .fold(Vector3::zeros(), |s, (i, _)| s + normals[*i])
-            .normalize();
-        let peak = g
-            .iter()
-            .map(|x| x.1)
-            .fold(0.0, |a: f64, b| if b.abs() > a.abs() { b } else { a });
-        regions.push(serde_json::json!({
-            "id": k, "centroid": [c.x, c.y, c.z], "normal": [n.x, n.y, n.z],
-            "area": share * count, "peak": peak,
-            "mean": g.iter().map(|x| x.1).sum::<f64>() / count,
-            "volume": g.iter().map(|x| share * (x.1.abs() - tolerance)).sum::<f64>(),
-            "points": g.len(), "repairable": peak > 0.0,
-        }));
-    }
-    std::fs::create_dir_all(dir).expect("mkdir");
-    std::fs::write(dir.join("deviations.csv"), csv).expect("write csv");
-    let regions = serde_json::json!({
-        "tolerance": tolerance, "spacing": 0.5, "gap": 1.25, "verdict": "repairable",
-        "regions": regions,
-    });
-    std::fs::write(dir.join("regions.json"), regions.to_string()).expect("write regions");
-    truth
+    common::synthetic::inspection(dir, &common::femoral_synth(seed, defects))
 }
 
 /// Finite-difference velocity, acceleration and jerk of the samples against the joint limits.
@@ -137,7 +66,7 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
     let truth = synthetic_inspection(tmp.path(), 11, 6);
     let inspection = Inspection::load(tmp.path()).expect("load inspection");
     let (robot, wc) = dofbot();
-    let cfg = PlanConfig::default();
+    let cfg = PlanConfig::rigid();
     let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
     println!(
         "defects: {:?}",
@@ -237,7 +166,7 @@ fn small_plan(dir: &Path) -> (Plan, PathBuf) {
     let (robot, wc) = dofbot();
     let cfg = PlanConfig {
         depth_step_mm: 1.0,
-        ..PlanConfig::default()
+        ..PlanConfig::rigid()
     };
     let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
     assert!(p.passes.len() > 2, "the case must have reachable passes");
@@ -297,7 +226,7 @@ fn cli_plan(
     extra: &[&std::ffi::OsStr],
 ) -> (std::process::Output, PathBuf) {
     let cfg = dir.join("plan.toml");
-    std::fs::write(&cfg, "[plan]\ndepth_step_mm = 1.0\n").unwrap();
+    std::fs::write(&cfg, "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n").unwrap();
     let plan_path = dir.join("plan.json");
     let out = common::succeed(
         common::polishbot()
@@ -473,7 +402,7 @@ fn unreachable_regions_are_reported_point_by_point() {
     let inspection = Inspection::load(tmp.path()).unwrap();
     let (robot, mut wc) = dofbot();
     wc.robot_from_reference[(1, 3)] += 1.0; // the part 1 m farther away
-    let p = plan(&inspection, &robot, &wc, &PlanConfig::default()).unwrap();
+    let p = plan(&inspection, &robot, &wc, &PlanConfig::rigid()).unwrap();
     assert!(p.passes.is_empty());
     let total: usize = p.reachability.regions.iter().map(|r| r.path_points).sum();
     assert!(total > 0);
@@ -493,7 +422,7 @@ fn unreachable_regions_are_reported_point_by_point() {
     }
     let strict = PlanConfig {
         require_full_reach: true,
-        ..PlanConfig::default()
+        ..PlanConfig::rigid()
     };
     let err = plan(&inspection, &robot, &wc, &strict).unwrap_err();
     assert!(matches!(err, PlanError::Unreachable(ref v) if v.len() == total));
@@ -580,7 +509,15 @@ fn plan_from_the_inspect_command_of_a_synth_case() {
     let plan_path = tmp.path().join("plan.json");
     println!(
         "{}",
-        run(&["plan", "--inspection", &s(&insp), "-o", &s(&plan_path)])
+        run(&[
+            "plan",
+            "--mode",
+            "rigid",
+            "--inspection",
+            &s(&insp),
+            "-o",
+            &s(&plan_path)
+        ])
     );
     let p = Plan::load(&plan_path).unwrap();
     let (robot, _) = dofbot();

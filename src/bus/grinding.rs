@@ -31,7 +31,9 @@ pub struct GrindConfig {
     pub reference_pressure_mpa: f64,
     /// Speed at which the law with exponents equals the linear one, mm/s (default 500).
     pub reference_speed_mm_s: f64,
-    /// Spring rate of the compliant tool mount, N/mm: force = rate x penetration (default 20).
+    /// Spring rate of the compliant tool mount, N/mm: force = rate x penetration (default 1,
+    /// the shipped tool.toml's mount: the simulated cell carries the same spring as the tool it
+    /// grinds with; at the former 20 N/mm the planner's 2 mm preload pressed with 40 N).
     pub spring_rate_n_mm: f64,
     /// Effective (Hertz) modulus of the abrasive ball against the part, MPa (default 10: a
     /// rubber-bonded abrasive; patch radius 0.6 mm at 1 N on a 3 mm ball).
@@ -75,7 +77,7 @@ impl Default for GrindConfig {
             speed_exponent: 0.9,
             reference_pressure_mpa: 1.0,
             reference_speed_mm_s: 500.0,
-            spring_rate_n_mm: 20.0,
+            spring_rate_n_mm: 1.0,
             modulus_mpa: 10.0,
             spindle_rpm: 5000.0,
             ball_radius_mm: 3.0,

@@ -31,7 +31,7 @@ pub struct PlanArgs {
     #[arg(long)]
     pub require_full_reach: bool,
     /// Rigid (depth layers) or removal (a compliant tool's dwell map)
-    /// [default: `mode` of [plan], else rigid].
+    /// [default: `mode` of [plan], else removal].
     #[arg(long, value_enum)]
     pub mode: Option<plan::PlanMode>,
 }

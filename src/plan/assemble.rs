@@ -103,12 +103,11 @@ pub(crate) fn assemble(
     // ground since it came down
     let mut at = Where::default();
     for run in runs {
-        for piece in run {
+        for mut chain in chains(run) {
+            let piece = &chain[0];
             let start = &piece.points[0];
             let before = prog.mark();
             let glided = match &at.on {
-                // removal mode: the next piece of the same stroke starts where this one ended
-                Some((on, _)) if piece.dwell_s.is_some() && on.q == start.q => true,
                 // a pressed ball does not slide to another stroke: it would grind off the plan
                 Some(_) if pressed(start) > 0.0 => false,
                 Some((on, _)) => prog.glide(on, start, piece.region, &cell)?,
@@ -123,16 +122,22 @@ pub(crate) fn assemble(
                     at.lift_off(&mut prog, &cell, unreachable)?;
                     let mark = prog.mark();
                     if let Err(reason) = prog.enter(at.left.as_ref(), start, piece.region, &cell)? {
-                        leave_out(&piece, &reason, unreachable);
+                        chain
+                            .iter()
+                            .for_each(|p| leave_out(p, &reason, unreachable));
                         continue;
                     }
                     at.entered.push((mark, at.left.clone()));
                     Ground { mark, on: None }
                 }
             };
-            at.on = piece.points.last().cloned().map(|p| (p, piece.region));
+            let last = &chain[chain.len() - 1];
+            at.on = last.points.last().cloned().map(|p| (p, last.region));
             at.since.push(ground);
-            prog.grind(piece, robot, cfg)?;
+            match chain[0].dwell_s.is_some() {
+                true => prog.grind_chain(chain, robot, cfg)?,
+                false => prog.grind(chain.remove(0), robot, cfg)?,
+            }
         }
         at.lift_off(&mut prog, &cell, unreachable)?;
     }
@@ -183,7 +188,10 @@ impl Where {
                 return Err(PlanError::Collision(why));
             };
             let reason = format!("no clear retract after it: {why}");
-            leave_out(&prog.passes[last.mark.passes], &reason, unreachable);
+            // a removal chain grinds several pieces in one go: all of them are taken back
+            for piece in &prog.passes[last.mark.passes..] {
+                leave_out(piece, &reason, unreachable);
+            }
             prog.back_to(last.mark);
             if last.on.is_none() {
                 // it was a descent from the air: that descent is gone too
@@ -221,6 +229,24 @@ impl Where {
     }
 }
 
+/// The run cut into what is ground in one go: in removal mode (pieces with a dwell) each
+/// stretch of pieces where the next starts where the last ended (one stroke, ground without
+/// stopping), in rigid mode every piece alone.
+fn chains(run: Run) -> Vec<Vec<PlannedPass>> {
+    let mut out: Vec<Vec<PlannedPass>> = Vec::new();
+    for piece in run {
+        let joins = out.last().and_then(|c| c.last()).is_some_and(|prev| {
+            let end = &prev.points[prev.points.len() - 1];
+            piece.dwell_s.is_some() && prev.dwell_s.is_some() && end.q == piece.points[0].q
+        });
+        match (joins, out.last_mut()) {
+            (true, Some(chain)) => chain.push(piece),
+            _ => out.push(vec![piece]),
+        }
+    }
+    out
+}
+
 /// How far contact `p` is pressed inside the surface, mm (removal mode's preload; 0 in rigid
 /// mode, whose layers sit on or above nominal).
 fn pressed(p: &PlannedPoint) -> f64 {
@@ -228,7 +254,11 @@ fn pressed(p: &PlannedPoint) -> f64 {
 }
 
 /// Records every point of `piece` as left out.
-fn leave_out(piece: &PlannedPass, reason: &str, unreachable: &mut Vec<UnreachablePoint>) {
+pub(crate) fn leave_out(
+    piece: &PlannedPass,
+    reason: &str,
+    unreachable: &mut Vec<UnreachablePoint>,
+) {
     for (pi, p) in piece.points.iter().enumerate() {
         unreachable.push(UnreachablePoint {
             region: piece.region,

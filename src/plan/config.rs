@@ -17,13 +17,12 @@ use crate::robot::{IkConfig, Robot};
 #[serde(rename_all = "snake_case")]
 pub enum PlanMode {
     /// A compliant tool pressed at its preload, one raster per region, the dwell of every
-    /// contact from Preston's law (`--mode removal`; not yet the default: on the demo part
-    /// its predicted residual stays above the tolerance, see docs/ALGORITHMS.md "Removal
-    /// mode").
-    Removal,
-    /// Depth layers of `depth_step_mm` at one feed: a rigid burr on a stiff machine (the
-    /// default until removal mode meets the tolerance on the demo part).
+    /// contact from Preston's law (the default: the DOFBOT's tool-point error is far above
+    /// any depth a layer could hold, docs/ALGORITHMS.md "Removal mode of `plan`").
     #[default]
+    Removal,
+    /// Depth layers of `depth_step_mm` at one feed (`--mode rigid`): a rigid burr on a stiff
+    /// machine.
     Rigid,
 }
 
@@ -79,7 +78,7 @@ pub struct PlanConfig {
     pub validation: ValidationConfig,
     /// The collision model: margins, link radii, fixed solids.
     pub collision: CollisionConfig,
-    /// Rigid depth layers (default) or removal.
+    /// Removal (default) or rigid depth layers.
     pub mode: PlanMode,
     /// The dwell solve of removal mode.
     pub removal: removal::RemovalConfig,
@@ -117,7 +116,7 @@ impl Default for PlanConfig {
             trajectory: TrajectoryConfig::default(),
             validation: ValidationConfig::default(),
             collision: CollisionConfig::default(),
-            mode: PlanMode::Rigid,
+            mode: PlanMode::Removal,
             removal: removal::RemovalConfig::default(),
             monte_carlo: removal::montecarlo::MonteCarloConfig::default(),
             force_share: removal::force::DEFAULT_FORCE_SHARE,

@@ -225,43 +225,6 @@ pub fn sample_stroke(
     Ok((samples, cruise))
 }
 
-/// Bisection steps of the piece speed that makes a rest-to-rest move last its dwell: 50
-/// halvings bring the speed to 1e-15 of its range, below a bus period of time.
-const SPEED_BISECTIONS: usize = 50;
-
-/// The cruise speed, m/s, at which a rest-to-rest move over `length` m within `lim` takes
-/// `dwell` s: `lim.velocity` when even that takes longer, else found by bisection (the
-/// duration falls as the speed rises).
-pub fn speed_for_dwell(
-    length: f64,
-    lim: &PathLimits,
-    dwell: f64,
-    cfg: &TrajectoryConfig,
-) -> Result<f64, TrajectoryError> {
-    let duration = |v: f64| -> Result<f64, TrajectoryError> {
-        let limits = Limits {
-            velocity: vec![v],
-            acceleration: vec![lim.acceleration],
-            jerk: vec![lim.jerk],
-        };
-        Move::new(&[0.0], &[length], &limits, cfg).map(|m| m.duration())
-    };
-    if length <= 0.0 || duration(lim.velocity)? >= dwell {
-        return Ok(lim.velocity);
-    }
-    // at length / dwell the ramps make the move longer than the dwell
-    let (mut lo, mut hi) = (length / dwell, lim.velocity);
-    for _ in 0..SPEED_BISECTIONS {
-        let mid = 0.5 * (lo + hi);
-        if duration(mid)? > dwell {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    Ok(hi)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -310,31 +273,5 @@ mod tests {
             d2[1]
         );
         assert!(d3[1] > 0.0);
-    }
-
-    /// The speed found makes Ruckig's rest-to-rest move last the dwell; a dwell shorter than
-    /// the fastest move keeps the cap.
-    #[test]
-    fn speed_for_dwell_gives_a_move_of_that_duration() {
-        let cfg = TrajectoryConfig::default();
-        let lim = PathLimits {
-            velocity: 0.02,
-            acceleration: 0.05,
-            jerk: 1.0,
-        };
-        let length = 2e-4;
-        let v = speed_for_dwell(length, &lim, 1.5, &cfg).unwrap();
-        let limits = Limits {
-            velocity: vec![v],
-            acceleration: vec![0.05],
-            jerk: vec![1.0],
-        };
-        let t = Move::new(&[0.0], &[length], &limits, &cfg)
-            .unwrap()
-            .duration();
-        assert!((t - 1.5).abs() < 1e-6, "{t}");
-        // a cruise at length / dwell would be shorter: the ramps cost time
-        assert!(v > length / 1.5 && v < 0.02);
-        assert_eq!(speed_for_dwell(length, &lim, 1e-3, &cfg).unwrap(), 0.02);
     }
 }

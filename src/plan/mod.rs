@@ -23,6 +23,7 @@ mod regions;
 pub mod removal;
 pub mod report;
 pub mod ros;
+mod stroke;
 pub mod surface;
 pub mod table;
 pub mod table_file;
@@ -81,23 +82,17 @@ pub fn plan(
         config,
     };
     let mut reachability = Reachability::default();
-    let regions::Planned {
-        runs,
-        counts,
-        allowances,
-    } = regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
-    let mut prog = assemble::assemble(
-        runs,
-        robot,
-        workcell,
-        config,
+    let planned =
+        regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
+    let counts = planned.counts.clone();
+    let (mut prog, removal) = regions::assemble_and_predict(
+        planned,
+        inspection,
+        &ctx,
+        tool.is_some(),
         &scene,
         &mut reachability.unreachable,
     )?;
-    let removal = match &tool {
-        None => None,
-        Some(_) => Some(preston::predict(&prog, inspection, &allowances, &ctx)?),
-    };
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability

@@ -1,19 +1,20 @@
 //! Removal mode of the planner: the compliant tool pressed at its preload along one raster per
 //! region, the dwell of every contact solved (robust to the arm's error, `removal::
-//! solve_robust`), each contact's dwell turned into the time of its own rest-to-rest piece of
-//! stroke, the force checked at each contact's joint angles, and the predicted part from the
+//! solve_robust`), each stroke ground without stopping at the feed its contacts' dwells ask
+//! for (`stroke.rs`), the force checked at each contact's joint angles, and the predicted part from the
 //! dwell the trajectory really spends. Method: docs/ALGORITHMS.md, "Removal planning".
 use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::config::PlanConfig;
 use super::error::PlanError;
+use super::feed::JointSpline;
 use super::inspection::RegionInfo;
 use super::inspection::{Inspection, SurfacePoint};
-use super::program::{PlannedPass, Program, Run};
+use super::program::{PlannedPass, Program, Run, SegmentKind};
 use super::removal::montecarlo::{spread, JointError};
 use super::removal::{self, force, Contact, Influence, Problem, Stats, ToolModel};
-use super::trajectory::{Limits, Move};
+use super::stroke::{chain_knots, chain_limits};
 use crate::robot::{Robot, Workcell};
 
 /// One contact of the dwell map in plan.json.
@@ -21,9 +22,10 @@ use crate::robot::{Robot, Workcell};
 pub struct DwellPoint {
     /// Contact point (middle of its piece of stroke), reference frame, mm.
     pub surface_mm: [f64; 3],
-    /// Time the trajectory spends on the piece, s.
+    /// Time the trajectory spends on the piece, s, plus the dwell-equivalent of a press into
+    /// or out of it (`press_dwell`).
     pub dwell_s: f64,
-    /// Planned cruise speed over the piece, mm/s.
+    /// Mean speed over the piece, mm/s.
     pub feed_mm_s: f64,
 }
 
@@ -201,14 +203,17 @@ pub struct Setup<'a> {
 pub type Dwelled = Result<(Vec<Run>, f64), String>;
 
 /// Turns one region's runs into one-contact pieces carrying the dwell the robust solve gives
-/// them; refuses a contact whose force a servo cannot hold (naming the point and the joint).
+/// them, starting from `allowance` mm; refuses a contact whose force a servo cannot hold
+/// (naming the point and the joint).
 pub fn set_dwell(
     runs: Vec<Run>,
     region: &RegionInfo,
     inspection: &Inspection,
     setup: &Setup,
+    allowance: f64,
 ) -> Result<Dwelled, PlanError> {
     let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
+    let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
     let back = reference_from_robot(workcell);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
@@ -250,68 +255,91 @@ pub fn set_dwell(
         cores: &cores,
         tolerance: inspection.tolerance.unwrap_or(config.tolerance_mm),
     };
-    let solve = solve_config(&contacts, config)?;
-    let robust =
-        match removal::solve_robust(&problem, config.allowance_mm, &solve, &config.monte_carlo) {
-            Ok(r) => r,
-            Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
-        };
-    for (piece, t) in runs.iter_mut().flatten().zip(&robust.plan.dwell) {
+    let robust = match removal::solve_robust(&problem, allowance, &solve, &config.monte_carlo) {
+        Ok(r) => r,
+        Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
+    };
+    let planned = runs
+        .iter_mut()
+        .flatten()
+        .zip(&robust.plan.dwell)
+        .zip(&contacts);
+    for ((piece, t), c) in planned {
         piece.dwell_s = Some(*t);
-        piece.feed_mm_s = config.removal.feed_max_mm_s;
+        piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
     }
     Ok(Ok((runs, robust.allowance)))
 }
 
-/// The dwell solve's settings with the fastest feed lowered so that the shortest dwell of the
-/// shortest piece is no less than its rest-to-rest move at the path limits takes (plus one
-/// bus period of rounding): the bound then holds for every piece.
+/// The dwell solve's settings with the fastest feed lowered to what the joints allow along
+/// the slowest of `runs`' strokes (`stroke::chain_limits`): a continuous stroke's shortest
+/// dwell per contact is its length at that feed, `t_min = piece / feed`.
 fn solve_config(
-    contacts: &[Contact],
+    runs: &[Run],
+    robot: &Robot,
     config: &PlanConfig,
 ) -> Result<removal::RemovalConfig, PlanError> {
     let mut solve = config.removal.clone();
-    let shortest = contacts
-        .iter()
-        .map(|c| c.length)
-        .filter(|l| *l > 0.0)
-        .fold(f64::INFINITY, f64::min);
-    if !shortest.is_finite() {
-        return Ok(solve);
+    for piece in runs.iter().flatten() {
+        let (s, q, _) = chain_knots(&[piece]);
+        let lim = chain_limits(&JointSpline::new(s, q), robot, config);
+        solve.feed_max_mm_s = solve.feed_max_mm_s.min(lim.velocity * 1e3);
     }
-    let limits = Limits {
-        velocity: vec![solve.feed_max_mm_s * 1e-3],
-        acceleration: vec![config.path_acceleration],
-        jerk: vec![config.path_jerk],
-    };
-    let mv =
-        Move::new(&[0.0], &[shortest * 1e-3], &limits, &config.trajectory).map_err(|source| {
-            PlanError::Trajectory {
-                context: "shortest removal piece".into(),
-                source,
-            }
-        })?;
-    let fastest = shortest / (mv.duration() + config.trajectory.period);
-    solve.feed_max_mm_s = solve.feed_max_mm_s.min(fastest);
     if solve.feed_min_mm_s >= solve.feed_max_mm_s {
         return Err(PlanError::Config(format!(
-            "`removal.feed_min_mm_s` {} is not below the {:.3} mm/s the path acceleration and \
-             jerk allow over a {shortest:.3} mm piece",
+            "`removal.feed_min_mm_s` {} is not below the {:.3} mm/s the joints allow along \
+             the strokes",
             solve.feed_min_mm_s, solve.feed_max_mm_s
         )));
     }
     Ok(solve)
 }
 
-/// The part predicted after `prog`: per region, the removal of the dwell the trajectory
-/// spends on each piece actually in the program, before/after statistics and the Monte Carlo
-/// spread; refuses a region whose low quantile over-grinds by more than the tolerance.
+/// Dwell-equivalent of the press segments per pass index, s: a press moves the ball between
+/// touching the surface and the preload, and Preston's removal summed over the contact patch
+/// is `k F v` (linear in the force, F = rate x depth), so each bus period of a press counts
+/// as `period x depth / preload` of dwell (trapezoid over its samples) at the contact it
+/// presses into (the next grinding piece) or out of (the previous one).
+fn press_dwell(prog: &Program, robot: &Robot, wc: &Workcell, preload: f64) -> Vec<f64> {
+    let mut out = vec![0.0; prog.passes.len()];
+    let segs = &prog.segments;
+    for (i, seg) in segs.iter().enumerate() {
+        if seg.kind != SegmentKind::Press || preload <= 0.0 {
+            continue;
+        }
+        let grind = |j: Option<usize>| {
+            j.and_then(|j| segs.get(j))
+                .filter(|s| s.kind == SegmentKind::Grind)
+                .and_then(|s| s.pass)
+        };
+        let (pass, point) = match (grind(Some(i + 1)), grind(i.checked_sub(1))) {
+            (Some(p), _) => (p, &prog.passes[p].points[0]),
+            (None, Some(p)) => (p, &prog.passes[p].points[prog.passes[p].points.len() - 1]),
+            (None, None) => continue,
+        };
+        let normal = wc.direction_from_reference(&Vector3::from(point.normal));
+        let contact = Vector3::from(point.tip_m);
+        let depth = |k: usize| {
+            let tip = robot.fk(prog.trajectory.sample(k)).position;
+            (preload - (tip - contact).dot(&normal) * 1e3).clamp(0.0, preload) / preload
+        };
+        let shares: Vec<f64> = (seg.first_sample..=seg.last_sample).map(depth).collect();
+        let sum: f64 = shares.windows(2).map(|w| 0.5 * (w[0] + w[1])).sum();
+        out[pass] += sum * prog.trajectory.period;
+    }
+    out
+}
+
+/// The part predicted after `prog`, and the regions whose Monte Carlo low quantile
+/// over-grinds by more than the tolerance (with the reason; the caller leaves them out): per
+/// region, the removal of the time the trajectory spends on each piece actually in the
+/// program (its presses counted, `press_dwell`), before/after statistics and the spread.
 pub fn predict(
     prog: &Program,
     inspection: &Inspection,
     allowances: &[(usize, f64)],
     setup: &Setup,
-) -> Result<RemovalReport, PlanError> {
+) -> Result<(RemovalReport, Vec<(usize, String)>), PlanError> {
     let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
     let back = reference_from_robot(workcell);
     let ball_mm = robot.tool.radius * 1e3;
@@ -324,10 +352,21 @@ pub fn predict(
         regions: Vec::new(),
         rows: Vec::new(),
     };
+    let press = press_dwell(prog, robot, workcell, tool.preload_mm);
+    let mut failed = Vec::new();
     for &(id, allowance_mm) in allowances {
-        let pieces: Vec<&PlannedPass> = prog.passes.iter().filter(|p| p.region == id).collect();
+        let (index, pieces): (Vec<usize>, Vec<&PlannedPass>) = prog
+            .passes
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.region == id)
+            .unzip();
         let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, &back)).collect();
-        let dwell: Vec<f64> = pieces.iter().map(|p| p.dwell_s.unwrap_or(0.0)).collect();
+        let dwell: Vec<f64> = pieces
+            .iter()
+            .zip(&index)
+            .map(|(p, &i)| p.dwell_s.unwrap_or(0.0) + press[i])
+            .collect();
         let joints: Vec<JointError> = pieces
             .iter()
             .map(|p| joint_error(robot, &p.points[0].q, &back))
@@ -363,11 +402,16 @@ pub fn predict(
         let median = mc.low(0.5);
         let lowest = low.iter().copied().fold(f64::INFINITY, f64::min);
         if lowest < -tolerance {
-            return Err(PlanError::Config(format!(
-                "region {id}: the trajectory's dwell over-grinds to {lowest:.3} mm at the {} \
-                 quantile, beyond the tolerance {tolerance} mm",
-                config.monte_carlo.quantile
-            )));
+            failed.push((
+                id,
+                format!(
+                    "region left out by the removal planner: the trajectory's dwell \
+                     over-grinds to {lowest:.3} mm at the {} quantile, beyond the tolerance \
+                     {tolerance} mm",
+                    config.monte_carlo.quantile
+                ),
+            ));
+            continue;
         }
         for (k, &i) in idx.iter().enumerate() {
             let p = inspection.points[i].position;
@@ -391,9 +435,10 @@ pub fn predict(
             dwell: pieces
                 .iter()
                 .zip(&contacts)
-                .map(|(p, c)| DwellPoint {
+                .zip(&dwell)
+                .map(|((p, c), t)| DwellPoint {
                     surface_mm: [c.point.x, c.point.y, c.point.z],
-                    dwell_s: p.dwell_s.unwrap_or(0.0),
+                    dwell_s: *t,
                     feed_mm_s: p.feed_mm_s,
                 })
                 .collect(),
@@ -403,7 +448,7 @@ pub fn predict(
             after_low_p95_mm: if lowest.is_finite() { lowest } else { 0.0 },
         });
     }
-    Ok(report)
+    Ok((report, failed))
 }
 
 /// predicted.csv: a header and one row per core point, `spread_p95` empty when the Monte

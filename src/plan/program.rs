@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use super::config::PlanConfig;
 pub use super::contact::SegmentKind;
 use super::error::PlanError;
-use super::feed::{path_limits, sample_stroke, speed_for_dwell, JointSpline, PathLimits};
+use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
 use super::report::UnreachablePoint;
 use super::trajectory::JointTrajectory;
@@ -42,8 +42,8 @@ pub struct PlannedPass {
     /// Cruise speed planned, mm/s (the feed unless the joints need less).
     pub feed_mm_s: f64,
     /// Removal mode: time the trajectory takes over this piece, s (the dwell solved for its
-    /// contact, rounded up to whole bus periods; the shortest rest-to-rest move where the
-    /// solve asked for less). Absent in rigid mode.
+    /// contact, longer where the stroke's speed changes could not follow it; the last piece of
+    /// a stroke also holds the rest of its last bus period). Absent in rigid mode.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dwell_s: Option<f64>,
     /// The points.
@@ -205,9 +205,11 @@ pub(crate) fn walk(
 }
 
 /// Why the ball cannot sit on contact `p` (`reach` mm off it along the normal): it would
-/// touch a second face of the part or enter it beyond the contact tolerance.
+/// touch a second face of the part or enter it beyond the contact tolerance. A pressed ball
+/// (removal mode, negative offset) is placed touching: it stops at the surface and its spring
+/// takes the preload.
 fn misfit(p: &PathPoint, reach: f64, scene: &Scene) -> Option<String> {
-    let centre = p.surface + p.normal * (p.offset + reach);
+    let centre = p.surface + p.normal * (p.offset.max(0.0) + reach);
     if let Some(hit) = scene.second_face(&centre, Some(&p.normal)) {
         return Some(hit.to_string());
     }
@@ -353,7 +355,8 @@ impl Program {
         self.slowed = mark.slowed;
     }
 
-    /// Appends one piece ground at constant feed from rest to rest.
+    /// Appends one piece ground at constant feed from rest to rest (rigid mode; removal
+    /// pieces are ground in chains, `grind_chain`).
     pub(crate) fn grind(
         &mut self,
         mut piece: PlannedPass,
@@ -383,17 +386,9 @@ impl Program {
             acceleration: cfg.path_acceleration,
             jerk: cfg.path_jerk,
         };
-        let mut lim = path_limits(&spline, &robot.joints, wanted, cfg.joint_margin);
+        let lim = path_limits(&spline, &robot.joints, wanted, cfg.joint_margin);
         if lim.velocity < wanted.velocity * (1.0 - 1e-9) {
             self.slowed += 1;
-        }
-        if let Some(dwell) = piece.dwell_s {
-            lim.velocity = speed_for_dwell(spline.length(), &lim, dwell, &cfg.trajectory).map_err(
-                |source| PlanError::Trajectory {
-                    context: "removal piece".into(),
-                    source,
-                },
-            )?;
         }
         piece.feed_mm_s = lim.velocity * 1e3;
         let first = self.trajectory.len() - 1;
@@ -411,9 +406,6 @@ impl Program {
                 self.trajectory.push(sample);
             }
             self.cruise.extend(cruise);
-        }
-        if piece.dwell_s.is_some() {
-            piece.dwell_s = Some(added as f64 * cfg.trajectory.period);
         }
         self.segments.push(Segment {
             kind: SegmentKind::Grind,

@@ -15,6 +15,8 @@ pub(crate) struct Planned {
     pub(crate) runs: Vec<program::Run>,
     pub(crate) counts: std::collections::HashMap<usize, (usize, usize)>,
     pub(crate) allowances: Vec<(usize, f64)>,
+    /// Removal mode: each region's walked runs before the dwell (to solve again).
+    pub(crate) walked: std::collections::HashMap<usize, Vec<program::Run>>,
 }
 
 /// Rasters, solves and (in removal mode) sets the dwell of every repairable region in
@@ -49,6 +51,7 @@ pub(crate) fn plan_regions(
         runs: Vec::new(),
         counts: std::collections::HashMap::new(),
         allowances: Vec::new(),
+        walked: std::collections::HashMap::new(),
     };
     let mut prev = config.home.clone();
     for &k in &visit {
@@ -74,18 +77,28 @@ pub(crate) fn plan_regions(
             &mut reachability.unreachable,
             &mut reachability.jumps,
         );
+        if tool.is_some() {
+            out.walked.insert(region.id, runs.clone());
+        }
         let runs = match tool {
             None => runs,
-            Some(_) => match preston::set_dwell(runs, region, inspection, ctx)? {
-                Ok((runs, allowance)) => {
-                    out.allowances.push((region.id, allowance));
-                    runs
+            Some(_) => {
+                match preston::set_dwell(runs, region, inspection, ctx, config.allowance_mm)? {
+                    Ok((runs, allowance)) => {
+                        out.allowances.push((region.id, allowance));
+                        runs
+                    }
+                    Err(reason) => {
+                        preston::leave_out(
+                            &strokes,
+                            &reason,
+                            workcell,
+                            &mut reachability.unreachable,
+                        );
+                        Vec::new()
+                    }
                 }
-                Err(reason) => {
-                    preston::leave_out(&strokes, &reason, workcell, &mut reachability.unreachable);
-                    Vec::new()
-                }
-            },
+            }
         };
         out.runs.extend(runs);
         let total: usize = strokes.iter().map(|s| s.points.len()).sum();
@@ -109,5 +122,72 @@ pub(crate) fn removal_geometry(
         spacing: config.removal.spacing_share * patch,
         depth_step: f64::MAX,
         allowance: config.allowance_mm,
+    }
+}
+
+/// Assembles the planned runs into the program and, in removal mode, predicts the part; a
+/// region whose trajectory over-grinds at the Monte Carlo's quantile (the trajectory spends a
+/// little more than the solved dwell: speed changes, presses) is solved again with its
+/// allowance raised by `removal::ALLOWANCE_STEP_SHARE` of the tolerance, and left out (its
+/// contacts recorded with the reason) once the robust solve refuses it; the rest stands.
+pub(crate) fn assemble_and_predict(
+    mut planned: Planned,
+    inspection: &Inspection,
+    ctx: &preston::Setup,
+    removal_mode: bool,
+    scene: &collide::Scene,
+    unreachable: &mut Vec<super::report::UnreachablePoint>,
+) -> Result<(program::Program, Option<preston::RemovalReport>), PlanError> {
+    let tolerance = inspection.tolerance.unwrap_or(ctx.config.tolerance_mm);
+    loop {
+        let mut left = Vec::new();
+        let prog = super::assemble::assemble(
+            planned.runs.clone(),
+            ctx.robot,
+            ctx.workcell,
+            ctx.config,
+            scene,
+            &mut left,
+        )?;
+        if !removal_mode {
+            unreachable.extend(left);
+            return Ok((prog, None));
+        }
+        let (report, failed) = preston::predict(&prog, inspection, &planned.allowances, ctx)?;
+        if failed.is_empty() {
+            unreachable.extend(left);
+            return Ok((prog, Some(report)));
+        }
+        for (id, reason) in failed {
+            let at = planned.runs.iter().position(|run| run[0].region == id);
+            planned
+                .runs
+                .retain(|run| run.iter().all(|p| p.region != id));
+            let old = planned
+                .allowances
+                .iter()
+                .find(|a| a.0 == id)
+                .map_or(0.0, |a| a.1);
+            planned.allowances.retain(|a| a.0 != id);
+            let region = inspection.regions.iter().find(|r| r.id == id);
+            let walked = planned.walked.get(&id).cloned().unwrap_or_default();
+            let raised = old + removal::ALLOWANCE_STEP_SHARE * tolerance;
+            let again = match region {
+                Some(r) => preston::set_dwell(walked.clone(), r, inspection, ctx, raised)?,
+                None => Err(reason.clone()),
+            };
+            match again {
+                Ok((runs, allowance)) => {
+                    planned.allowances.push((id, allowance));
+                    let at = at.unwrap_or(planned.runs.len()).min(planned.runs.len());
+                    planned.runs.splice(at..at, runs);
+                }
+                Err(why) => {
+                    for piece in walked.iter().flatten() {
+                        super::assemble::leave_out(piece, &format!("{reason}; {why}"), unreachable);
+                    }
+                }
+            }
+        }
     }
 }

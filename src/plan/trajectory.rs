@@ -89,10 +89,27 @@ impl Move {
         limits: &Limits,
         config: &TrajectoryConfig,
     ) -> Result<Self, TrajectoryError> {
+        let rest = vec![0.0; from.len()];
+        Move::through(from, &rest, to, &rest, limits, config)
+    }
+
+    /// The time-optimal move from `from` at velocity `from_velocity` to `to` at
+    /// `to_velocity`, zero acceleration at both ends (Ruckig's position interface with target
+    /// velocities: a removal stroke passes its contacts without stopping).
+    pub fn through(
+        from: &[f64],
+        from_velocity: &[f64],
+        to: &[f64],
+        to_velocity: &[f64],
+        limits: &Limits,
+        config: &TrajectoryConfig,
+    ) -> Result<Self, TrajectoryError> {
         let dof = limits.dof();
         let lengths = [
             from.len(),
             to.len(),
+            from_velocity.len(),
+            to_velocity.len(),
             limits.acceleration.len(),
             limits.jerk.len(),
         ];
@@ -101,7 +118,12 @@ impl Move {
                 "lengths {lengths:?}, expected {dof}"
             )));
         }
-        if from.iter().chain(to).any(|v| !v.is_finite()) {
+        let all = from
+            .iter()
+            .chain(to)
+            .chain(from_velocity)
+            .chain(to_velocity);
+        if all.clone().any(|v| !v.is_finite()) {
             return Err(TrajectoryError::Input("positions must be finite".into()));
         }
         let mut otg = Ruckig::<0, ThrowErrorHandler>::new(Some(dof), config.period);
@@ -114,7 +136,9 @@ impl Move {
         };
         for i in 0..dof {
             input.current_position[i] = from[i];
+            input.current_velocity[i] = from_velocity[i];
             input.target_position[i] = to[i];
+            input.target_velocity[i] = to_velocity[i];
             input.max_velocity[i] = limits.velocity[i];
             input.max_acceleration[i] = limits.acceleration[i];
             input.max_jerk[i] = limits.jerk[i];
@@ -128,6 +152,13 @@ impl Move {
     /// Duration, seconds.
     pub fn duration(&self) -> f64 {
         self.trajectory.get_duration()
+    }
+
+    /// Lowest and highest position of the first axis over the whole move (Ruckig's exact
+    /// extrema): a move that overshoots its target or backs up shows here.
+    pub fn position_range(&mut self) -> (f64, f64) {
+        let b = &self.trajectory.get_position_extrema()[0];
+        (b.min, b.max)
     }
 
     /// Joint positions at time `t` (clamped to [0, duration]).

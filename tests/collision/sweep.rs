@@ -21,7 +21,7 @@ fn a_link_just_inside_the_margin_after_a_stretch_of_skipped_searches_is_caught()
     let wc = Workcell {
         robot_from_reference: Matrix4::identity(),
     };
-    let cfg = PlanConfig::default().collision;
+    let cfg = PlanConfig::rigid().collision;
     let (steps, step) = (300, 0.002);
     let q = |k: usize| vec![k as f64 * step, 0.6, 0.4, 0.3, 0.0];
     let forearm = |k: usize| {
@@ -76,7 +76,7 @@ fn a_link_just_inside_the_margin_after_a_stretch_of_skipped_searches_is_caught()
 fn a_sweep_over_a_plan_answers_every_sample_as_the_plain_check_does() {
     let robot = dofbot();
     let (insp, wc) = wedge();
-    let cfg = PlanConfig::default();
+    let cfg = PlanConfig::rigid();
     let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
     for allow in [Allow::Free, Allow::Contact, Allow::Grind] {
         let scene = Scene::new(&insp.points, &robot, &wc, &cfg.collision);

@@ -18,7 +18,7 @@ pub fn cell(dir: &str) -> (Robot, Workcell, Option<Turntable>, PlanConfig) {
     let robot = Robot::load(&f("dofbot.urdf"), &f("tool.toml"), &f("servos.toml")).unwrap();
     let wc = Workcell::load(&f("workcell.toml")).unwrap();
     let table = Turntable::load(&f("servos.toml"), &f("workcell.toml")).unwrap();
-    let mut config = PlanConfig::default();
+    let mut config = PlanConfig::rigid();
     let solids = polishbot::plan::collide::solids_beside(&f("workcell.toml")).unwrap();
     config.collision.solids.extend(solids);
     (robot, wc, table, config)

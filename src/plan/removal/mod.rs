@@ -184,7 +184,7 @@ pub fn solve_region(
 
 /// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the
 /// tolerance (0.5): small enough that the plan still removes all it safely can.
-const ALLOWANCE_STEP_SHARE: f64 = 0.5;
+pub const ALLOWANCE_STEP_SHARE: f64 = 0.5;
 
 /// One region's removal problem with the arm's error model.
 pub struct Problem<'a> {

@@ -38,8 +38,8 @@ pub struct ToolModel {
 impl Default for ToolModel {
     fn default() -> Self {
         ToolModel {
-            spring_rate_n_mm: 4.0,
-            preload_mm: 0.5,
+            spring_rate_n_mm: 1.0,
+            preload_mm: 2.0,
             modulus_mpa: 20.0,
             influence_table: None,
             spindle_rpm: 10_000.0,
