@@ -433,6 +433,7 @@ impl<T: Transport> Bus<T> {
 fn reply_name(r: &Reply) -> &'static str {
     match r {
         Reply::Position { .. } => "position",
+        Reply::AnyPosition { .. } => "any_position",
         Reply::Ping { .. } => "ping",
         Reply::OffsetState(_) => "offset_state",
         Reply::Version(_) => "version",

@@ -9,4 +9,4 @@ mod reach;
 mod stream;
 
 pub use reach::reachable_sites;
-pub use stream::{execute, RunConfig, RunReport};
+pub use stream::{execute, steps, RunConfig, RunReport, Step};

@@ -21,6 +21,7 @@ mod register;
 mod run;
 pub mod settings;
 mod synth;
+mod table;
 
 pub use common::{load_config, one_line, GeometryInput};
 
