@@ -1,8 +1,8 @@
 //! Part turntable (issue 33): the cell model, per-region table angles, the table's moves and
 //! 0x19 frames in plan.json, and the reach it buys on parts nobody placed for the arm.
-mod common;
 #[path = "turntable/board.rs"]
 mod board;
+mod common;
 
 use std::path::Path;
 
@@ -215,7 +215,8 @@ fn table_motion_and_raw_counts_match_closed_form() {
 }
 
 /// A plan of the turntable cell that turns the table (the first synth case from seed 2000
-/// whose plan has a table move), checked as `run` checks it.
+/// whose plan has a table move), checked as `run` checks it (frames, table frames, and the
+/// collision re-check at each stretch's table angle).
 fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
     let (robot, wc, table, config) = cell("turntable/");
     let table = table.expect("a turntable");
@@ -232,6 +233,9 @@ fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
         let checked = plan
             .check_cell(&robot, Some(&table), &Default::default())
             .expect("run's check");
+        // run's collision re-check: each stretch against the part at its table angle
+        plan.check_clearance_cell(&insp, &robot, &wc, Some(&table), &config.collision)
+            .expect("run's clearance check");
         return (robot, table, checked, plan.period, end);
     }
     panic!("no case from seed 2000 turns the table");
@@ -315,10 +319,7 @@ fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
     let cfg = bus_config(&robot);
     let start_raw = table.raw(0.0).unwrap();
     let options = SimOptions {
-        extra_servos: vec![ExtraServo {
-            id: 7,
-            start_raw,
-        }],
+        extra_servos: vec![ExtraServo { id: 7, start_raw }],
         ..SimOptions::default()
     };
     // a clean run tells which received frame is the middle of the first table move
@@ -339,8 +340,12 @@ fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
     let mut broken = options.clone();
     broken.faults.disconnect_after = Some(nth as u64 + 1);
     let arm = SimArm::new(&broken, &cfg.servo_map).unwrap();
-    let mut bus =
-        Bus::connect(arm.transport(), cfg.clone(), Journal::append(&journal).unwrap()).unwrap();
+    let mut bus = Bus::connect(
+        arm.transport(),
+        cfg.clone(),
+        Journal::append(&journal).unwrap(),
+    )
+    .unwrap();
     let err = execute(&mut bus, &checked, period, 0, &RunConfig::default()).unwrap_err();
     println!("stopped: {err}");
     let from = ResumePoint::from_journal(&journal).unwrap().resume_from() as usize;
@@ -354,22 +359,39 @@ fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
     let mut resumed = options.clone();
     resumed.extra_servos[0].start_raw = arm.extra_position(7).unwrap();
     let again = SimArm::with_home(&resumed, arm.positions());
-    let mut bus =
-        Bus::connect(again.transport(), cfg, Journal::append(&journal).unwrap()).unwrap();
+    let mut bus = Bus::connect(again.transport(), cfg, Journal::append(&journal).unwrap()).unwrap();
     let report = execute(&mut bus, &checked, period, from, &RunConfig::default()).unwrap();
-    let sent: Vec<_> = again.received().into_iter().filter(|f| f.func == 0x19).collect();
+    let sent: Vec<_> = again
+        .received()
+        .into_iter()
+        .filter(|f| f.func == 0x19)
+        .collect();
     let Step::Table { frame, .. } = all[from] else {
         unreachable!()
     };
-    let total: usize = checked.table.as_ref().unwrap().moves.iter().map(|m| m.raw.len()).sum();
-    assert_eq!(sent.len(), total - frame, "the rest of the table frames, once each");
+    let total: usize = checked
+        .table
+        .as_ref()
+        .unwrap()
+        .moves
+        .iter()
+        .map(|m| m.raw.len())
+        .sum();
+    assert_eq!(
+        sent.len(),
+        total - frame,
+        "the rest of the table frames, once each"
+    );
     assert_eq!(
         u16::from_be_bytes([sent[0].payload[1], sent[0].payload[2]]),
         first.raw[frame]
     );
     let want = table.raw(end).unwrap();
     assert_eq!(again.extra_position(7), Some(want));
-    assert_eq!(report.final_table_raw.map(|r| r.abs_diff(want) <= 1), Some(true));
+    assert_eq!(
+        report.final_table_raw.map(|r| r.abs_diff(want) <= 1),
+        Some(true)
+    );
 }
 
 /// `arm move --table DEG` on the simulator and on the fake I2C board: one rest-to-rest move
@@ -405,7 +427,9 @@ fn arm_move_table_turns_the_table_and_refuses_bad_requests() {
     assert!(blocks
         .iter()
         .all(|o| o["op"] == "write_block" && o["data"][0] == 7));
-    assert!(ops.iter().any(|o| o["reg"] == 0x37 && o["op"] == "read_word"));
+    assert!(ops
+        .iter()
+        .any(|o| o["reg"] == 0x37 && o["op"] == "read_word"));
     let bad = common::polishbot()
         .args(["arm", "--cell"])
         .arg(&cell)

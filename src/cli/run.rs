@@ -187,7 +187,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
             args.plan.display()
         )
     })?;
-    plan.check_clearance(&inspection, &robot, &workcell, &collision)
+    plan.check_clearance_cell(&inspection, &robot, &workcell, table.as_ref(), &collision)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
     let from = start_frame(args.resume.as_deref(), &sha, steps)?;
     let journal_path = args

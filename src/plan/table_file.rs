@@ -303,3 +303,73 @@ impl Plan {
         Ok(checked)
     }
 }
+
+/// The arm samples at one table angle: `first..=last` (a move's resting sample belongs to
+/// the ranges on both sides: the arm rests there while the table turns).
+fn angle_ranges(plan: &TablePlan, samples: usize) -> Vec<(usize, usize, f64)> {
+    let mut out = Vec::with_capacity(plan.moves.len() + 1);
+    let (mut first, mut angle) = (0usize, plan.start);
+    for m in &plan.moves {
+        out.push((first, m.at_sample, angle));
+        first = m.at_sample;
+        angle = *m.samples.last().unwrap_or(&angle);
+    }
+    out.push((first, samples.saturating_sub(1), angle));
+    out
+}
+
+impl Plan {
+    /// [`Plan::check_clearance`] in a cell that may have a turntable: the samples between two
+    /// table moves against the part turned to the table angle they are ground at.
+    pub fn check_clearance_cell(
+        &self,
+        inspection: &super::Inspection,
+        robot: &Robot,
+        wc: &crate::robot::Workcell,
+        table: Option<&Turntable>,
+        cfg: &super::CollisionConfig,
+    ) -> Result<(), PlanError> {
+        let (Some(part), Some(table)) = (&self.turntable, table) else {
+            return self.check_clearance(inspection, robot, wc, cfg);
+        };
+        let mut found = Vec::new();
+        for (lo, hi, angle) in angle_ranges(part, self.samples.len()) {
+            let owners: Vec<usize> = (0..self.segments.len())
+                .filter(|&k| {
+                    let s = &self.segments[k];
+                    s.last_sample >= lo && s.first_sample <= hi
+                })
+                .collect();
+            let segments: Vec<_> = owners
+                .iter()
+                .map(|&k| {
+                    let mut s = self.segments[k].clone();
+                    s.first_sample = s.first_sample.max(lo) - lo;
+                    s.last_sample = s.last_sample.min(hi) - lo;
+                    s
+                })
+                .collect();
+            let sub = Plan {
+                samples: self.samples[lo..=hi].to_vec(),
+                segments,
+                turntable: None,
+                ..self.clone()
+            };
+            let at = table.workcell_at(wc, angle);
+            match sub.check_clearance(inspection, robot, &at, cfg) {
+                Ok(()) => {}
+                Err(PlanError::Collides(hits)) => found.extend(hits.into_iter().map(|mut c| {
+                    c.sample += lo;
+                    c.segment = c.segment.map(|k| owners[k]);
+                    c
+                })),
+                Err(e) => return Err(e),
+            }
+        }
+        if found.is_empty() {
+            Ok(())
+        } else {
+            Err(PlanError::Collides(found))
+        }
+    }
+}

@@ -70,7 +70,9 @@ const STEP_SLACK: f64 = 0.01;
 
 fn reply(kind: u8, data: &[u8]) -> Vec<u8> {
     let len = data.len() as u8 + 3;
-    let sum = data.iter().fold(len as u32 + kind as u32, |s, b| s + *b as u32);
+    let sum = data
+        .iter()
+        .fold(len as u32 + kind as u32, |s, b| s + *b as u32);
     let mut out = vec![0xFF, 0xFB, len, kind];
     out.extend_from_slice(data);
     out.push((sum % 256) as u8);
@@ -126,7 +128,8 @@ impl Board {
             }
             (0x38, 1) => {
                 let alive = (1..=6).contains(&p[0]) || p[0] == self.table.id;
-                s.output.extend(reply(0x38, &[if alive { 0xDA } else { 0 }]));
+                s.output
+                    .extend(reply(0x38, &[if alive { 0xDA } else { 0 }]));
             }
             (0x01, 0) => s.output.extend(reply(0x01, &[1])),
             _ => {}
@@ -136,7 +139,8 @@ impl Board {
     fn judge(&self, s: &mut State, f: &AnyFrame) {
         let t = &self.table;
         if f.id != t.id {
-            s.faults.push(format!("0x19 for id {} at {:.3} s", f.id, f.t));
+            s.faults
+                .push(format!("0x19 for id {} at {:.3} s", f.id, f.t));
             return;
         }
         if f.raw < t.raw_range[0] || f.raw > t.raw_range[1] {
