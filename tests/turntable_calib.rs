@@ -161,3 +161,52 @@ fn bad_turntable_fits_are_refused_with_the_reason() {
     let fit = fit_turntable(&angles, touches, &cfg).unwrap();
     assert!(fit.rms_mm < 1e-9, "{}", fit.rms_mm);
 }
+
+/// `calibrate turntable --sim --cell calibration/turntable --targets FILE`: the table turns to
+/// each angle (0x19 frames for servo 7), the scripted touches find the planted circle, and
+/// workcell.toml in --out gets the fitted axis and centre; too few angles are refused before
+/// the arm is opened, with one line.
+#[test]
+fn calibrate_turntable_on_the_cli_writes_the_fitted_axis_and_centre() {
+    let robot = common::dofbot();
+    let angles = [-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0];
+    let dir = common::tempdir();
+    let targets = dir.path().join("targets.txt");
+    let mut text = String::from("# joint targets, rad, one per table angle\n");
+    for &a in &angles {
+        let q = reach(&robot, fiducial(a));
+        let v: Vec<String> = q.iter().map(|x| format!("{x:?}")).collect();
+        text.push_str(&(v.join(", ") + "\n"));
+    }
+    std::fs::write(&targets, text).unwrap();
+    let list: Vec<String> = angles.iter().map(|a| a.to_string()).collect();
+    let out = dir.path().join("cell");
+    common::succeed(
+        common::polishbot()
+            .args(["calibrate", "turntable", "--sim", "--cell"])
+            .arg(common::calib("turntable"))
+            .arg("--out")
+            .arg(&out)
+            .arg("--targets")
+            .arg(&targets)
+            .arg(format!("--angles={}", list.join(","))),
+    );
+    let table = Turntable::load(
+        &common::calib("turntable/servos.toml"),
+        &out.join("workcell.toml"),
+    )
+    .unwrap()
+    .unwrap();
+    let (axis, centre) = planted();
+    assert!(table.axis.angle(&axis).to_degrees() < 0.2);
+    assert!((table.centre - centre).norm() * 1000.0 < 0.3);
+    let few = common::polishbot()
+        .args(["calibrate", "turntable", "--sim", "--cell"])
+        .arg(common::calib("turntable"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--angles", "0,10,20"])
+        .output()
+        .unwrap();
+    assert!(common::one_line_failure(&few).contains("need at least 5"));
+}

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod arm;
 mod calibrate;
+mod calibrate_table;
 mod common;
 mod cycle;
 mod demo;
