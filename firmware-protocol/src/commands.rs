@@ -273,13 +273,10 @@ impl Command {
                 want(0)?;
                 Command::ReadPosition(ServoId::new(f - FUNC_READ_BASE)?)
             }
-            FUNC_PING => {
+            FUNC_PING | FUNC_READ_ANY => {
                 want(1)?;
-                Command::Ping(BusId::new(p[0])?)
-            }
-            FUNC_READ_ANY => {
-                want(1)?;
-                Command::ReadAny(BusId::new(p[0])?)
+                let id = BusId::new(p[0])?;
+                [Command::Ping(id), Command::ReadAny(id)][usize::from(f == FUNC_READ_ANY)]
             }
             FUNC_TORQUE => {
                 want(1)?;

@@ -63,13 +63,17 @@ pub fn check_angles(angles_deg: &[f64], cfg: &CalibrationConfig) -> Result<f64, 
     Ok(span)
 }
 
+/// What turns the table to an angle (degrees) between two touches (`calibrate turntable`: the
+/// arm to its home pose, then one rest-to-rest table move).
+pub type TurnTable<'a, T> = dyn FnMut(&mut Bus<T>, f64) -> Result<(), CalibError> + 'a;
+
 /// Turns the table to each of `angles_deg` in turn (`turn`, with the arm moved out of the way
 /// by it), touches the fiducial there (`source`) and fits axis and centre.
 pub fn turntable<T: Transport>(
     bus: &mut Bus<T>,
     cell: &Cell,
     angles_deg: &[f64],
-    turn: &mut dyn FnMut(&mut Bus<T>, f64) -> Result<(), CalibError>,
+    turn: &mut TurnTable<'_, T>,
     source: &mut dyn TouchSource<T>,
 ) -> Result<TableFit, CalibError> {
     check_angles(angles_deg, cell.cfg)?;

@@ -315,15 +315,7 @@ fn routine(
             ));
             Ok(())
         }
-        Routine::Turntable { angles, .. } => {
-            let mut src = source(targets, cell.cfg);
-            let files = super::calibrate_table::TableFiles {
-                workcell_in: &ctx.workcell_in,
-                workcell_out: &ctx.out.join("workcell.toml"),
-            };
-            let table = ctx.table.as_ref().expect("loaded in run");
-            super::calibrate_table::run(bus, cell, table, angles, src.as_mut(), &files)
-        }
+        Routine::Turntable { angles, .. } => turntable(bus, cell, angles, targets, ctx),
         Routine::Verify { .. } => {
             let poses = targets.expect("set in run");
             let workcell = match &fixture {
@@ -373,6 +365,21 @@ fn routine(
             }
         }
     }
+}
+
+/// `calibrate turntable` (cli/calibrate_table.rs) with this routine's files.
+fn turntable(
+    bus: &mut Bus<Box<dyn Transport>>,
+    cell: &Cell,
+    angles: &[f64],
+    targets: Option<Vec<[f64; JOINT_COUNT]>>,
+    ctx: &Ctx,
+) -> Result<(), CalibError> {
+    let mut src = source(targets, cell.cfg);
+    let out = ctx.out.join("workcell.toml");
+    let table = ctx.table.as_ref();
+    let input = &ctx.workcell_in;
+    super::calibrate_table::run(bus, cell, table, angles, src.as_mut(), input, &out)
 }
 
 fn say(line: &str) {

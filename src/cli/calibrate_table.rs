@@ -14,23 +14,17 @@ use crate::robot::Turntable;
 /// for), rad.
 const HOME: [f64; JOINT_COUNT] = [0.0; JOINT_COUNT];
 
-/// Where the routine reads and writes.
-pub struct TableFiles<'a> {
-    /// workcell.toml read.
-    pub workcell_in: &'a Path,
-    /// workcell.toml written.
-    pub workcell_out: &'a Path,
-}
-
 /// Runs the routine and prints its result (see the module doc).
 pub fn run<T: Transport>(
     bus: &mut Bus<T>,
     cell: &Cell,
-    table: &Turntable,
+    table: Option<&Turntable>,
     angles: &[f64],
     source: &mut dyn TouchSource<T>,
-    files: &TableFiles,
+    workcell_in: &Path,
+    workcell_out: &Path,
 ) -> Result<(), CalibError> {
+    let table = table.ok_or_else(|| CalibError::Refused("the cell has no turntable".into()))?;
     let period = cell.robot.servos.period;
     let settle = bus.config().settle_ms;
     let gripper = cell.gripper_deg;
@@ -42,7 +36,7 @@ pub fn run<T: Transport>(
     };
     let fit = turntable::turntable(bus, cell, angles, &mut turn, source)?;
     bus.move_joints(&HOME, gripper, None)?;
-    turntable::write_workcell(files.workcell_in, files.workcell_out, &fit)?;
+    turntable::write_workcell(workcell_in, workcell_out, &fit)?;
     let per: Vec<String> = angles
         .iter()
         .zip(&fit.residuals_mm)
@@ -64,7 +58,7 @@ pub fn run<T: Transport>(
         fit.centre[1] * 1000.0,
         fit.centre[2] * 1000.0,
         fit.radius_mm,
-        files.workcell_out.display()
+        workcell_out.display()
     );
     Ok(())
 }

@@ -162,10 +162,7 @@ impl Transport for Board {
     fn write(&mut self, bytes: &[u8]) -> Result<(), BusError> {
         let mut s = self.state.lock().unwrap();
         s.input.extend_from_slice(bytes);
-        loop {
-            let Some(at) = s.input.windows(2).position(|w| w == [0xFF, 0xFC]) else {
-                break;
-            };
+        while let Some(at) = s.input.windows(2).position(|w| w == [0xFF, 0xFC]) {
             s.input.drain(..at);
             if s.input.len() < 3 || s.input.len() < s.input[2] as usize + 2 {
                 break;
