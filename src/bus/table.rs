@@ -17,15 +17,7 @@ impl<T: Transport> Bus<T> {
         target: AnyTarget,
         time_ms: u16,
     ) -> Result<(), BusError> {
-        if self.stopped() {
-            let e = BusError::Stopped;
-            self.log_error(&e, Some(index), EntryKind::Stop)?;
-            return Err(e);
-        }
-        let cmd = Command::MoveAny { target, time_ms };
-        self.write_frame(&cmd, Some(index)).inspect_err(|e| {
-            let _ = self.log_error(e, Some(index), EntryKind::Stop);
-        })
+        self.send_motion_command(index, &Command::MoveAny { target, time_ms })
     }
 
     /// Reads bus servo `id`'s raw position (0x37); 0 or a value outside `range` (the servo's
@@ -61,16 +53,7 @@ impl<T: Transport> Bus<T> {
         let got = self.read_any_raw(id, range).inspect_err(|e| {
             let _ = self.log_error(e, Some(index), EntryKind::Stop);
         })?;
-        if got.abs_diff(expected) > tolerance {
-            let e = BusError::ReadBackMismatch {
-                servo: id.get(),
-                expected,
-                got,
-                tolerance,
-            };
-            self.log_error(&e, Some(index), EntryKind::Stop)?;
-            return Err(e);
-        }
+        self.check_read_back(index, id.get(), expected, got, tolerance)?;
         let mut v = Entry::new(EntryKind::Verified);
         v.motion = Some(index);
         v.name = Some(format!("servo {}", id.get()));
