@@ -1,5 +1,5 @@
-//! `polishbot calibrate (servos | tool | workcell | verify) (--port DEV | --i2c DEV | --sim)
-//! [--out DIR]`:
+//! `polishbot calibrate (servos | tool | workcell | turntable | verify) (--port DEV | --i2c DEV
+//! | --sim) [--out DIR] [--cell DIR]`:
 //! the calibration routines of docs/CALIBRATION.md. Each reads the cell's files from `--out`
 //! where they exist there (so servos -> tool -> workcell -> verify chain in one folder), else
 //! from `[robot]`, and writes its own file into `--out`.
