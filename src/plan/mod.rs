@@ -25,6 +25,7 @@ pub mod report;
 pub mod ros;
 pub mod surface;
 pub mod table;
+pub mod table_check;
 pub mod table_file;
 pub mod trajectory;
 pub mod validate;
