@@ -1,10 +1,16 @@
 //! Part turntable (issue 33): the cell model, per-region table angles, the table's moves and
 //! 0x19 frames in plan.json, and the reach it buys on parts nobody placed for the arm.
+#[path = "turntable/board.rs"]
+mod board;
 mod common;
 
 use common::femoral::{cell, inspection};
 use nalgebra::Point3;
+use polishbot::bus::{Bus, BusConfig, ExtraServo, Journal, ResumePoint, SimArm, SimOptions};
+use polishbot::cell::{execute, steps, RunConfig, Step};
+use polishbot::plan::file::CheckedPlan;
 use polishbot::plan::{plan_cell, table_file};
+use polishbot::robot::{Robot, Turntable};
 
 /// Covered and total repairable area of a plan, mm^2 (coverage of all the region's points
 /// times its area).
@@ -139,4 +145,235 @@ fn plans_without_the_table_survey() {
         }
     }
     assert_eq!(refused, 0, "refused {refused} of 20");
+}
+
+/// A plan of the turntable cell that turns the table (the first synth case from seed 2000
+/// whose plan has a table move), checked as `run` checks it (frames, table frames, and the
+/// collision re-check at each stretch's table angle).
+fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
+    let (robot, wc, table, config) = cell("turntable/");
+    let table = table.expect("a turntable");
+    for seed in 2000..2010 {
+        let insp = inspection(seed, 4);
+        let Ok(plan) = plan_cell(&insp, &robot, &wc, Some(&table), &config) else {
+            continue;
+        };
+        let tp = plan.turntable.as_ref().expect("table part");
+        if tp.moves.is_empty() {
+            continue;
+        }
+        let end = tp.end();
+        let checked = plan
+            .check_cell(&robot, Some(&table), &Default::default())
+            .expect("run's check");
+        // run's collision re-check: each stretch against the part at its table angle
+        plan.check_clearance_cell(&insp, &robot, &wc, Some(&table), &config.collision)
+            .expect("run's clearance check");
+        return (robot, table, checked, plan.period, end);
+    }
+    panic!("no case from seed 2000 turns the table");
+}
+
+/// The table servo as the board emulator knows it: read straight from the cell's servos.toml
+/// (`[turntable]`: id, raw_range, degree_range, velocity), not through polishbot's loader.
+fn board_table() -> board::TableServo {
+    let text = std::fs::read_to_string(common::calib("turntable/servos.toml")).unwrap();
+    let doc: toml::Value = text.parse().unwrap();
+    let t = &doc["turntable"];
+    let raw: Vec<u16> = t["raw_range"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_integer().unwrap() as u16)
+        .collect();
+    let deg = t["degree_range"].as_array().unwrap()[1].as_float().unwrap();
+    board::TableServo {
+        id: t["id"].as_integer().unwrap() as u8,
+        raw_range: [raw[0], raw[1]],
+        counts_per_rad: f64::from(raw[1] - raw[0]) / deg.to_radians(),
+        velocity: t["velocity"].as_float().unwrap(),
+    }
+}
+
+fn bus_config(robot: &Robot) -> BusConfig {
+    BusConfig {
+        servo_map: polishbot::plan::frames::servo_map(robot).unwrap(),
+        ..BusConfig::default()
+    }
+}
+
+/// An independent board (tests/turntable/board.rs, written from Arm_Lib's serial code:
+/// `Arm_serial_servo_write_any`, `Arm_serial_servo_read_any`, `Arm_serial_servo_write6`)
+/// that also serves bus servo 7 runs a plan that turns the table: it receives only valid 0x19
+/// frames, all for id 7, one per planned table sample, and its table ends where the plan's
+/// last table angle points (the raw count of DOFBOT.md's 270-degree scale for that angle).
+#[test]
+fn an_independent_board_serving_servo_7_ends_at_the_plans_last_table_angle() {
+    let (robot, table, checked, period, end) = table_plan();
+    let spec = board_table();
+    let t = checked.table.as_ref().unwrap();
+    // 270 degrees on raw 380..3700, zero at 135 degrees: raw = 380 + 3320 * (135 + a) / 270
+    let start = (380.0 + 3320.0 * 135.0 / 270.0_f64).round() as u16;
+    assert_eq!(t.start_raw, start);
+    let dev = board::Board::new(spec, checked.raw[0], start);
+    let state = dev.state.clone();
+    let mut bus = Bus::connect(dev, bus_config(&robot), Journal::none()).unwrap();
+    let report = execute(&mut bus, &checked, period, 0, &RunConfig::default()).unwrap();
+    let s = state.lock().unwrap();
+    assert!(s.faults.is_empty(), "{:?}", s.faults);
+    let frames: usize = t.moves.iter().map(|m| m.raw.len()).sum();
+    assert_eq!(s.any_frames.len(), frames);
+    assert!(s.any_frames.iter().all(|f| f.id == 7));
+    let want = (380.0 + 3320.0 * (135.0 + end.to_degrees()) / 270.0).round() as u16;
+    assert!(
+        s.table.abs_diff(want) <= 1,
+        "table at raw {}, the plan's last angle {:.3} deg is raw {want}",
+        s.table,
+        end.to_degrees()
+    );
+    assert_eq!(report.final_table_raw, Some(s.table));
+    assert_eq!(s.arm, *checked.raw.last().unwrap());
+    assert_eq!(Some(s.table), table.raw(end).ok());
+    println!(
+        "{} table moves, {frames} 0x19 frames, {} steps; table ends at {:.2} deg (raw {})",
+        t.moves.len(),
+        steps(&checked).len(),
+        end.to_degrees(),
+        s.table
+    );
+}
+
+/// A run stopped in the middle of a table move (the link drops) resumes from its journal: the
+/// interrupted 0x19 frame is sent again, the rest follow, and the table ends at the plan's
+/// last table angle.
+#[test]
+fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
+    let (robot, table, checked, period, end) = table_plan();
+    let cfg = bus_config(&robot);
+    let start_raw = table.raw(0.0).unwrap();
+    let options = SimOptions {
+        extra_servos: vec![ExtraServo { id: 7, start_raw }],
+        ..SimOptions::default()
+    };
+    // a clean run tells which received frame is the middle of the first table move
+    let clean = SimArm::new(&options, &cfg.servo_map).unwrap();
+    let mut bus = Bus::connect(clean.transport(), cfg.clone(), Journal::none()).unwrap();
+    execute(&mut bus, &checked, period, 0, &RunConfig::default()).unwrap();
+    let first = &checked.table.as_ref().unwrap().moves[0];
+    let half = first.raw.len() / 2;
+    let received = clean.received();
+    let (nth, _) = received
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| f.func == 0x19)
+        .nth(half)
+        .unwrap();
+    let dir = common::tempdir();
+    let journal = dir.path().join("journal.jsonl");
+    let mut broken = options.clone();
+    broken.faults.disconnect_after = Some(nth as u64 + 1);
+    let arm = SimArm::new(&broken, &cfg.servo_map).unwrap();
+    let mut bus = Bus::connect(
+        arm.transport(),
+        cfg.clone(),
+        Journal::append(&journal).unwrap(),
+    )
+    .unwrap();
+    let err = execute(&mut bus, &checked, period, 0, &RunConfig::default()).unwrap_err();
+    println!("stopped: {err}");
+    let from = ResumePoint::from_journal(&journal).unwrap().resume_from() as usize;
+    let all = steps(&checked);
+    assert!(
+        matches!(all[from], Step::Table { mv: 0, .. }),
+        "{:?}",
+        all[from]
+    );
+    // the arm and the table stay where the drop left them
+    let mut resumed = options.clone();
+    resumed.extra_servos[0].start_raw = arm.extra_position(7).unwrap();
+    let again = SimArm::with_home(&resumed, arm.positions());
+    let mut bus = Bus::connect(again.transport(), cfg, Journal::append(&journal).unwrap()).unwrap();
+    let report = execute(&mut bus, &checked, period, from, &RunConfig::default()).unwrap();
+    let sent: Vec<_> = again
+        .received()
+        .into_iter()
+        .filter(|f| f.func == 0x19)
+        .collect();
+    let Step::Table { frame, .. } = all[from] else {
+        unreachable!()
+    };
+    let total: usize = checked
+        .table
+        .as_ref()
+        .unwrap()
+        .moves
+        .iter()
+        .map(|m| m.raw.len())
+        .sum();
+    assert_eq!(
+        sent.len(),
+        total - frame,
+        "the rest of the table frames, once each"
+    );
+    assert_eq!(
+        u16::from_be_bytes([sent[0].payload[1], sent[0].payload[2]]),
+        first.raw[frame]
+    );
+    let want = table.raw(end).unwrap();
+    assert_eq!(again.extra_position(7), Some(want));
+    assert_eq!(
+        report.final_table_raw.map(|r| r.abs_diff(want) <= 1),
+        Some(true)
+    );
+}
+
+/// `arm move --table DEG` on the simulator and on the fake I2C board: one rest-to-rest move
+/// read back at the target; out of range, without a table in the cell, or with the arm away
+/// from home: refused with one line.
+#[test]
+fn arm_move_table_turns_the_table_and_refuses_bad_requests() {
+    let cell = common::calib("turntable");
+    let dir = common::tempdir();
+    let log = dir.path().join("i2c.log");
+    for link in [vec!["--sim"], vec!["--i2c", "/dev/i2c-test"]] {
+        let out = common::succeed(
+            common::polishbot()
+                .args(["arm", "--cell"])
+                .arg(&cell)
+                .args(["move", "--table", "30"])
+                .args(&link)
+                .env("POLISHBOT_TEST_FAKE_I2C", &log),
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        // 135 + 30 = 165 degrees of 270 on 380..3700
+        let want = (380.0 + 3320.0 * 165.0 / 270.0_f64).round();
+        assert!((v["raw"].as_f64().unwrap() - want).abs() <= 1.0, "{v}");
+        assert!(v["frames"].as_u64().unwrap() > 10, "{v}");
+    }
+    let ops: Vec<serde_json::Value> = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let blocks: Vec<_> = ops.iter().filter(|o| o["reg"] == 0x19).collect();
+    assert!(!blocks.is_empty(), "no 0x19 block");
+    assert!(blocks
+        .iter()
+        .all(|o| o["op"] == "write_block" && o["data"][0] == 7));
+    assert!(ops
+        .iter()
+        .any(|o| o["reg"] == 0x37 && o["op"] == "read_word"));
+    let bad = common::polishbot()
+        .args(["arm", "--cell"])
+        .arg(&cell)
+        .args(["move", "--table", "200", "--sim"])
+        .output()
+        .unwrap();
+    assert!(common::one_line_failure(&bad).contains("outside"));
+    let none = common::polishbot()
+        .args(["arm", "move", "--table", "10", "--sim"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(common::one_line_failure(&none).contains("[turntable]"));
 }

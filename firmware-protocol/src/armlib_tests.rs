@@ -458,3 +458,42 @@ fn i2c_position_word_is_swapped_and_zero_is_a_failed_read() {
     assert!(i2c_reply(&Command::ReadOffsetState, 7).is_err());
     assert_eq!(i2c_reply(&Command::Torque(true), 0), Ok(None));
 }
+
+#[test]
+fn arm_serial_servo_read_any_request_and_reply() {
+    // Arm_serial_servo_read_any(id): [FF FC 04 37 id chk]; __parse_data keeps the reply's
+    // bytes as servo_H, servo_L; then d = servo_H * 256 + servo_L and
+    // d = (d >> 8 & 0xff) | (d << 8 & 0xff00): the board sent the position low byte first.
+    for id in [1u8, 7, 250] {
+        let want = armlib(vec![0xFF, 0xFC, 0x04, 0x37, id]);
+        assert_eq!(bytes(Command::ReadAny(BusId::new(id).unwrap())), want);
+    }
+    let (servo_h, servo_l) = (0xF8u32, 0x07u32);
+    let d = servo_h * 256 + servo_l;
+    let d = ((d >> 8) & 0xff) | ((d << 8) & 0xff00);
+    assert_eq!(d, 2040);
+    let reply = board_reply(0x0A, &[0xF8, 0x07, 0x37]);
+    assert_eq!(parse(&reply), Ok(Reply::AnyPosition { raw: 2040 }));
+    let mut buf = [0u8; 16];
+    let n = Reply::AnyPosition { raw: 2040 }.encode(&mut buf).unwrap();
+    assert_eq!(&buf[..n], &reply[..]);
+}
+
+#[test]
+fn i2c_read_any_is_request_wait_read_word_swapped() {
+    // Arm_serial_servo_read_any(7): write_byte_data(0x15, 0x37, 7), sleep(0.003),
+    // read_word_data(0x15, 0x37), pos = (pos >> 8 & 0xff) | (pos << 8 & 0xff00).
+    let read = Command::ReadAny(BusId::new(7).unwrap());
+    assert_eq!(
+        i2c(read),
+        [
+            byte(0x37, 7),
+            T::Wait { us: 3_000 },
+            T::ReadWord { reg: 0x37 }
+        ]
+    );
+    assert_eq!(
+        i2c_reply(&read, 0xF807),
+        Ok(Some(Reply::AnyPosition { raw: 2040 }))
+    );
+}

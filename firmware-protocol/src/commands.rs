@@ -9,6 +9,7 @@
 //! 0x19        id(u8) pos(u16) time_ms(u16)    08    MoveAny: any bus servo id 1..250
 //! 0x17        pos(u16) time_ms(u16)           07    MoveEvery: every servo to one raw pos
 //! 0x30+id     -                               03    ReadPosition of servo id (reply 0x0A)
+//! 0x37        id(u8)                          04    ReadAny: any bus servo id (reply 0x0A)
 //! 0x38        id(u8)                          04    Ping (reply 0x38: 0xDA alive, 0 not)
 //! 0x1A        1 | 0                           04    Torque on | off, all servos
 //! 0x18        new id(u8)                      04    SetId of the only servo on the bus
@@ -39,6 +40,8 @@ pub const FUNC_MOVE_ANY: u8 = 0x19;
 pub const FUNC_MOVE_EVERY: u8 = 0x17;
 /// FUNC base of ReadPosition (servo id adds to 0x30).
 pub const FUNC_READ_BASE: u8 = 0x30;
+/// FUNC of ReadAny (Arm_Lib's `Arm_serial_servo_read_any`).
+pub const FUNC_READ_ANY: u8 = 0x37;
 /// FUNC of Ping.
 pub const FUNC_PING: u8 = 0x38;
 /// FUNC of Torque.
@@ -93,6 +96,9 @@ pub enum Command {
     },
     /// 0x30+id: read a servo's raw position.
     ReadPosition(ServoId),
+    /// 0x37: read any bus servo's raw position (reply TYPE 0x0A, position low byte first:
+    /// [`crate::Reply::AnyPosition`]).
+    ReadAny(BusId),
     /// 0x38: ping a bus servo.
     Ping(BusId),
     /// 0x1A: torque on (true) or off for all servos.
@@ -133,6 +139,7 @@ impl Command {
             Command::MoveAny { .. } => FUNC_MOVE_ANY,
             Command::MoveEvery { .. } => FUNC_MOVE_EVERY,
             Command::ReadPosition(id) => FUNC_READ_BASE + id.get(),
+            Command::ReadAny(_) => FUNC_READ_ANY,
             Command::Ping(_) => FUNC_PING,
             Command::Torque(_) => FUNC_TORQUE,
             Command::SetId(_) => FUNC_SET_ID,
@@ -153,6 +160,7 @@ impl Command {
             Command::MoveAny { .. } => "move_any",
             Command::MoveEvery { .. } => "move_every",
             Command::ReadPosition(_) => "read_position",
+            Command::ReadAny(_) => "read_any",
             Command::Ping(_) => "ping",
             Command::Torque(_) => "torque",
             Command::SetId(_) => "set_id",
@@ -193,7 +201,9 @@ impl Command {
             }
             Command::MoveEvery { raw, time_ms } => put(&mut p, &[&be(raw.0), &be(time_ms)]),
             Command::ReadPosition(_) | Command::ReadOffsetState | Command::Version => 0,
-            Command::Ping(id) | Command::SetId(id) => put(&mut p, &[&[id.get()]]),
+            Command::Ping(id) | Command::SetId(id) | Command::ReadAny(id) => {
+                put(&mut p, &[&[id.get()]])
+            }
             Command::Torque(on) => put(&mut p, &[&[on as u8]]),
             Command::StoreMidOffset(id) => put(&mut p, &[&[id.map_or(0, BusId::get)]]),
             Command::Buzzer(b) => put(&mut p, &[&[b.0]]),
@@ -263,9 +273,10 @@ impl Command {
                 want(0)?;
                 Command::ReadPosition(ServoId::new(f - FUNC_READ_BASE)?)
             }
-            FUNC_PING => {
+            FUNC_PING | FUNC_READ_ANY => {
                 want(1)?;
-                Command::Ping(BusId::new(p[0])?)
+                let id = BusId::new(p[0])?;
+                [Command::Ping(id), Command::ReadAny(id)][usize::from(f == FUNC_READ_ANY)]
             }
             FUNC_TORQUE => {
                 want(1)?;

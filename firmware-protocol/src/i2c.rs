@@ -10,6 +10,7 @@
 //! MoveAny            block(0x19, [id pH pL tH tL])               Arm_serial_servo_write_any
 //! MoveEvery          block(0x17, [pH pL tH tL])                  Arm_serial_servo_write_any(0)
 //! ReadPosition       byte(0x30+id, 0); 3 ms; word(0x30+id)       Arm_serial_servo_read
+//! ReadAny            byte(0x37, id); 3 ms; word(0x37)            Arm_serial_servo_read_any
 //! Ping               byte(0x38, id); 3 ms; read byte(0x38)       Arm_ping_servo
 //! Torque             byte(0x1A, 1|0)                             Arm_serial_set_torque
 //! SetId              byte(0x18, id)                              Arm_serial_set_id
@@ -151,6 +152,9 @@ impl Command {
             Command::ReadPosition(_) => {
                 request(f, 0, READ_WAIT_US, Transaction::ReadWord { reg: f })
             }
+            Command::ReadAny(id) => {
+                request(f, id.get(), READ_WAIT_US, Transaction::ReadWord { reg: f })
+            }
             Command::Ping(id) => {
                 request(f, id.get(), READ_WAIT_US, Transaction::ReadByte { reg: f })
             }
@@ -173,6 +177,9 @@ pub fn i2c_reply(cmd: &Command, value: u16) -> Result<Option<Reply>, ReplyError>
     Ok(Some(match *cmd {
         Command::ReadPosition(id) => Reply::Position {
             servo: Some(id),
+            raw: value.swap_bytes(),
+        },
+        Command::ReadAny(_) => Reply::AnyPosition {
             raw: value.swap_bytes(),
         },
         Command::Ping(id) => Reply::Ping {

@@ -7,6 +7,7 @@
 //! TYPE  payload                  reply to            meaning
 //! 0x0A  pos(u16) echo(u8)        0x30+id (read)      raw position; echo = 0x30+id
 //! 0x0A  pos(u16)                 0x30+id (read)      the same without the echo byte
+//! 0x0A  posL posH 0x37           0x37 (read any)     raw position, low byte first
 //! 0x38  status(u8)               0x38 (ping)         0xDA alive, 0x00 no answer, else a servo error
 //! 0x38  id(u8) status(u8)        0x38 (ping)         the same with the pinged id first
 //! 0x33  state(u8)                0x1B                mid-offset state: 0 not found, 1 ok, 2 failed
@@ -22,6 +23,13 @@
 //! none at all. A raw position of 0 or outside the servo's range is a failed read; that
 //! judgement is the driver's (see [`crate::ServoScale::check_raw`]), the reply carries the raw
 //! value as sent.
+//!
+//! `Arm_serial_servo_read_any` (0x37, any bus id) reads the same TYPE 0x0A frame through
+//! `__parse_data` and then swaps the two position bytes: the board sends that position low
+//! byte first. The library never looks at the third byte; this crate takes a reply whose third
+//! byte is 0x37 (the request's FUNC, as 0x30+id is for 0x31..0x36) as the answer to a read-any,
+//! and refuses any other third byte outside 0x31..0x36, as before. That echo value is this
+//! crate's model of the board, not a published fact.
 use core::fmt;
 
 use crate::frame::{Direction, EncodeError, Frame};
@@ -59,6 +67,12 @@ pub enum Reply {
         /// The servo, when the reply carries the 0x30+id echo.
         servo: Option<ServoId>,
         /// Raw position as sent by the board (0 = failed read).
+        raw: u16,
+    },
+    /// Raw position of a bus servo read by id (TYPE 0x0A with echo 0x37: the answer to
+    /// [`crate::Command::ReadAny`]), as the board meant it (its low-byte-first order undone).
+    AnyPosition {
+        /// Raw position (0 = failed read).
         raw: u16,
     },
     /// Ping answer (TYPE 0x38).
@@ -132,6 +146,11 @@ impl Reply {
         let p = frame.payload();
         let bad = || ReplyError::BadPayload { kind, len: p.len() };
         match (kind, p.len()) {
+            (TYPE_POSITION, 3) if p[2] == crate::commands::FUNC_READ_ANY => {
+                Ok(Reply::AnyPosition {
+                    raw: u16::from_le_bytes([p[0], p[1]]),
+                })
+            }
             (TYPE_POSITION, 3) => {
                 let servo = p[2]
                     .checked_sub(crate::commands::FUNC_READ_BASE)
@@ -184,6 +203,10 @@ impl Reply {
                 )
             }
             Reply::Position { servo: None, raw } => Frame::new(TYPE_POSITION, &raw.to_be_bytes()),
+            Reply::AnyPosition { raw } => {
+                let [lo, hi] = raw.to_le_bytes();
+                Frame::new(TYPE_POSITION, &[lo, hi, crate::commands::FUNC_READ_ANY])
+            }
             Reply::Ping {
                 id: Some(id),
                 status,
@@ -226,6 +249,7 @@ mod tests {
                 servo: None,
                 raw: 0,
             },
+            Reply::AnyPosition { raw: 2040 },
             Reply::Ping {
                 id: Some(3),
                 status: PING_ALIVE,

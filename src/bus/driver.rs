@@ -318,13 +318,22 @@ impl<T: Transport> Bus<T> {
     /// Sends motion frame `index` (a 0x1D frame: all six servos, `time_ms`). Refused once the
     /// stop flag is set; a failed write stops motion. Both leave a stop line in the journal.
     pub fn send_motion(&mut self, index: u64, pose: Pose, time_ms: u16) -> Result<(), BusError> {
+        self.send_motion_command(index, &Command::MoveAll { pose, time_ms })
+    }
+
+    /// Sends motion command `cmd` as motion frame `index`: refused once the stop flag is set; a
+    /// failed write stops motion; both leave a stop line in the journal.
+    pub(super) fn send_motion_command(
+        &mut self,
+        index: u64,
+        cmd: &Command,
+    ) -> Result<(), BusError> {
         if self.stopped() {
             let e = BusError::Stopped;
             self.log_error(&e, Some(index), EntryKind::Stop)?;
             return Err(e);
         }
-        let cmd = Command::MoveAll { pose, time_ms };
-        self.write_frame(&cmd, Some(index)).inspect_err(|e| {
+        self.write_frame(cmd, Some(index)).inspect_err(|e| {
             let _ = self.log_error(e, Some(index), EntryKind::Stop);
         })
     }
@@ -372,9 +381,23 @@ impl<T: Transport> Bus<T> {
         let got = self.read_raw(id).inspect_err(|e| {
             let _ = self.log_error(e, Some(index), EntryKind::Stop);
         })?;
+        self.check_read_back(index, id.get(), expected, got, tolerance)?;
+        Ok(got)
+    }
+
+    /// A read-back `got` of servo `servo` at motion `index` against `expected` within
+    /// `tolerance` counts: a mismatch is journalled as a stop line and returned.
+    pub(super) fn check_read_back(
+        &mut self,
+        index: u64,
+        servo: u8,
+        expected: u16,
+        got: u16,
+        tolerance: u16,
+    ) -> Result<(), BusError> {
         if got.abs_diff(expected) > tolerance {
             let e = BusError::ReadBackMismatch {
-                servo: id.get(),
+                servo,
                 expected,
                 got,
                 tolerance,
@@ -382,7 +405,7 @@ impl<T: Transport> Bus<T> {
             self.log_error(&e, Some(index), EntryKind::Stop)?;
             return Err(e);
         }
-        Ok(got)
+        Ok(())
     }
 
     /// Moves to joints `q` (rad) and gripper angle (deg) in `time` (default: the fastest the
@@ -433,6 +456,7 @@ impl<T: Transport> Bus<T> {
 fn reply_name(r: &Reply) -> &'static str {
     match r {
         Reply::Position { .. } => "position",
+        Reply::AnyPosition { .. } => "any_position",
         Reply::Ping { .. } => "ping",
         Reply::OffsetState(_) => "offset_state",
         Reply::Version(_) => "version",

@@ -125,7 +125,7 @@ impl FakeI2c {
             .and_then(|f| Command::parse(&f).ok());
         let answer = cmd.and_then(|c| self.arm.command(&c));
         let value = match answer {
-            Some(Reply::Position { raw, .. }) => raw.swap_bytes(),
+            Some(Reply::Position { raw, .. } | Reply::AnyPosition { raw }) => raw.swap_bytes(),
             Some(Reply::Ping { status, .. }) => status as u16,
             Some(Reply::OffsetState(s)) => match s {
                 OffsetState::NotFound => 0,

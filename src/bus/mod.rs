@@ -22,6 +22,7 @@ pub mod journal;
 pub mod model;
 pub mod serial;
 pub mod sim;
+pub mod table;
 pub mod transport;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -37,7 +38,7 @@ pub use grinding::GrindConfig;
 pub use i2c::LinuxI2c;
 pub use i2c::{I2cBus, I2cTransport};
 pub use journal::{Entry, EntryKind, Journal, ResumePoint};
-pub use model::{Faults, Mechanics, PingReply, SimTiming};
+pub use model::{ExtraServo, Faults, Mechanics, PingReply, SimTiming};
 pub use serial::SerialTransport;
 pub use sim::{SimArm, SimOptions, SimTransport};
 pub use transport::Transport;

@@ -11,6 +11,11 @@
 //! to find: a servo mounted `mount_offset_deg` off reads (and moves to) the raw position of
 //! servo angle `physical + offset`, so the physical joint differs from the commanded one; reads
 //! add seeded integer noise; and the arm can start held by hand at a physical pose, torque off.
+//!
+//! Bus servos beyond the arm's six ([`ExtraServo`], e.g. the part turntable's id 7) move like
+//! the arm's servos on 0x19 frames (Arm_Lib's `Arm_serial_servo_write_any`), answer a 0x37
+//! read (`Arm_serial_servo_read_any`, position low byte first) and a ping; a 0x19 or 0x37 for
+//! an id nobody has goes unanswered, as on a bus where no servo listens to it.
 use serde::{Deserialize, Serialize};
 
 use dofbot_protocol::frame::Frame;
@@ -102,6 +107,16 @@ pub struct Mechanics {
     /// Start with the arm held by hand at these physical servo angles (degrees, 90 = joint
     /// zero), torque off. Default none (home pose, torque on).
     pub start_physical_deg: Option<[f64; SERVO_COUNT]>,
+}
+
+/// A bus servo beyond the arm's six: its id and where it rests at start.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExtraServo {
+    /// Bus id, 7..=250.
+    pub id: u8,
+    /// Raw position at start.
+    pub start_raw: u16,
 }
 
 /// One step of splitmix64 (Steele, Lea, Flood 2014): the noise generator the mock mirrors.
@@ -202,6 +217,7 @@ pub struct Outgoing {
 #[derive(Debug, Clone)]
 pub struct Board {
     servos: [ServoModel; SERVO_COUNT],
+    extra: Vec<(u8, ServoModel)>,
     torque: bool,
     timing: SimTiming,
     faults: Faults,
@@ -236,6 +252,7 @@ impl Board {
         }
         Board {
             servos,
+            extra: Vec::new(),
             torque,
             timing,
             faults,
@@ -252,6 +269,17 @@ impl Board {
     /// The same board answering pings with `ping_reply`.
     pub fn with_ping_reply(mut self, ping_reply: PingReply) -> Board {
         self.ping_reply = ping_reply;
+        self
+    }
+
+    /// The same board with `extra` bus servos beyond the arm's six (ids 1..=6 among them are
+    /// ignored: those are the arm's).
+    pub fn with_extra(mut self, extra: &[ExtraServo]) -> Board {
+        self.extra = extra
+            .iter()
+            .filter(|e| e.id as usize > SERVO_COUNT)
+            .map(|e| (e.id, ServoModel::at(e.start_raw as f64)))
+            .collect();
         self
     }
 
@@ -317,10 +345,12 @@ impl Board {
                 }
             }
             Command::ReadPosition(id) => return self.read(id, t),
+            Command::ReadAny(id) => return self.read_any(id.get(), t),
             Command::Ping(id) => {
                 let id = id.get();
-                let alive =
-                    (1..=SERVO_COUNT as u8).contains(&id) && self.faults.absent_servo != Some(id);
+                let present =
+                    (1..=SERVO_COUNT as u8).contains(&id) || self.extra_index(id).is_some();
+                let alive = present && self.faults.absent_servo != Some(id);
                 let status = if alive { PING_ALIVE } else { 0 };
                 return match self.ping_reply {
                     PingReply::None => None,
@@ -333,7 +363,8 @@ impl Board {
             }
             Command::Torque(on) => {
                 if !on {
-                    for s in &mut self.servos {
+                    let extra = self.extra.iter_mut().map(|(_, s)| s);
+                    for s in self.servos.iter_mut().chain(extra) {
                         *s = ServoModel::at(s.position(t));
                     }
                 }
@@ -348,12 +379,44 @@ impl Board {
 
     fn move_servo(&mut self, id: u8, raw: u16, time_ms: u16, t: f64) {
         let idx = id as usize;
-        if !self.torque || !(1..=SERVO_COUNT).contains(&idx) || self.faults.stall_servo == Some(id)
-        {
+        if !self.torque || self.faults.stall_servo == Some(id) {
             return;
         }
         let speed = self.timing.max_speed_counts_s;
-        self.servos[idx - 1].command(raw, time_ms, t, speed);
+        if (1..=SERVO_COUNT).contains(&idx) {
+            self.servos[idx - 1].command(raw, time_ms, t, speed);
+        } else if let Some(k) = self.extra_index(id) {
+            self.extra[k].1.command(raw, time_ms, t, speed);
+        }
+    }
+
+    fn extra_index(&self, id: u8) -> Option<usize> {
+        self.extra.iter().position(|(i, _)| *i == id)
+    }
+
+    /// A 0x37 read: an arm servo reads as on 0x30+id, an extra one by its model; an id nobody
+    /// has, or an absent servo, gives no reply.
+    fn read_any(&mut self, id: u8, t: f64) -> Option<Reply> {
+        if let Ok(arm) = ServoId::new(id) {
+            return match self.read(arm, t)? {
+                Reply::Position { raw, .. } => Some(Reply::AnyPosition { raw }),
+                other => Some(other),
+            };
+        }
+        let k = self.extra_index(id)?;
+        if self.faults.absent_servo == Some(id) {
+            return None;
+        }
+        self.reads += 1;
+        let noise = self.noise();
+        let raw = (round_raw(self.extra[k].1.position(t)) as i64 + noise).max(0) as u16;
+        Some(Reply::AnyPosition { raw })
+    }
+
+    /// Raw position (rounded) of extra bus servo `id` at time `t`, if there is one.
+    pub fn extra_position(&self, id: u8, t: f64) -> Option<u16> {
+        let k = self.extra_index(id)?;
+        Some(round_raw(self.extra[k].1.position(t)))
     }
 
     fn read(&mut self, id: ServoId, t: f64) -> Option<Reply> {

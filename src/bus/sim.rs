@@ -11,7 +11,7 @@ use dofbot_protocol::{Command, Decoder, Reply};
 
 use super::config::ServoMap;
 use super::error::BusError;
-use super::model::{Board, Faults, Mechanics, PingReply, SimTiming};
+use super::model::{Board, ExtraServo, Faults, Mechanics, PingReply, SimTiming};
 use super::transport::{RealClock, Transport};
 
 /// Settings of the simulated arm.
@@ -33,6 +33,10 @@ pub struct SimOptions {
     pub ping_reply: PingReply,
     /// The virtual part's grinding (`run --part`): the true removal law and mounting.
     pub grinding: super::grinding::GrindConfig,
+    /// Bus servos beyond the arm's six (e.g. the part turntable, id 7). Default none; `run`,
+    /// `arm` and `calibrate` with `--sim` add the cell's turntable at table angle 0 when it is
+    /// not listed here.
+    pub extra_servos: Vec<ExtraServo>,
 }
 
 impl Default for SimOptions {
@@ -45,6 +49,7 @@ impl Default for SimOptions {
             mechanics: Mechanics::default(),
             ping_reply: PingReply::default(),
             grinding: super::grinding::GrindConfig::default(),
+            extra_servos: Vec::new(),
         }
     }
 }
@@ -93,7 +98,8 @@ impl SimArm {
                 options.faults.clone(),
                 options.mechanics.clone(),
             )
-            .with_ping_reply(options.ping_reply),
+            .with_ping_reply(options.ping_reply)
+            .with_extra(&options.extra_servos),
             clock: Duration::ZERO,
             decoder: Decoder::commands(),
             link_free_at: 0.0,
@@ -133,6 +139,12 @@ impl SimArm {
     pub fn physical_deg(&self) -> [f64; SERVO_COUNT] {
         let t = self.now().as_secs_f64();
         self.lock().board.physical_deg(t)
+    }
+
+    /// Raw position now of extra bus servo `id` (e.g. the turntable's 7), if the sim has one.
+    pub fn extra_position(&self, id: u8) -> Option<u16> {
+        let t = self.now().as_secs_f64();
+        self.lock().board.extra_position(id, t)
     }
 
     /// Where the servos are heading (equal to [`SimArm::positions`] once moves are over).

@@ -34,6 +34,16 @@ pub struct CalibrationConfig {
     /// Largest tool-tip error `verify` accepts, mm. Default 1.
     pub max_verify_tip_error_mm: f64,
     /// Initial jog step, degrees. Default 1.
+    /// Fewest table angles `calibrate turntable` touches the fiducial at (5: a circle has three
+    /// unknowns in its plane, the plane three; two spare touches show a bad one).
+    pub min_table_angles: usize,
+    /// Smallest span of those table angles, degrees (90: on a shorter arc the centre's error
+    /// grows as the inverse square of the span; a quarter turn keeps 1-count read noise
+    /// under 0.3 mm at a 40 mm fiducial radius).
+    pub min_table_span_deg: f64,
+    /// Largest RMS distance of the touched tips from the fitted circle, mm (1.0, as the
+    /// workcell fit's).
+    pub max_table_rms_mm: f64,
     pub jog_step_deg: f64,
 }
 
@@ -51,6 +61,9 @@ impl Default for CalibrationConfig {
             min_fiducial_spread: 0.1,
             max_verify_tip_error_mm: 1.0,
             jog_step_deg: 1.0,
+            min_table_angles: 5,
+            min_table_span_deg: 90.0,
+            max_table_rms_mm: 1.0,
         }
     }
 }

@@ -8,7 +8,10 @@
 //! 3. [`workcell()`]: the tool tip touches the fixture's fiducials; a rigid fit (no scale) of
 //!    their reference-frame coordinates onto the touched positions gives
 //!    `robot_from_reference` (workcell.toml).
-//! 4. [`verify()`]: moves through check poses, reads back, reports per-servo and tool-tip error.
+//! 4. [`turntable::turntable`] (cells with a part turntable): the tool tip touches one fiducial
+//!    on the table at several table angles; a plane and circle fit give the table's axis and
+//!    centre (workcell.toml's `[turntable]`).
+//! 5. [`verify()`]: moves through check poses, reads back, reports per-servo and tool-tip error.
 //!
 //! Touches come from a [`TouchSource`]: the interactive jog terminal ([`jog::JogTerminal`])
 //! or a list of joint targets ([`jog::Scripted`]). All settings: [`CalibrationConfig`].
@@ -18,6 +21,7 @@ pub mod jog;
 pub mod pivot;
 pub mod read;
 pub mod servos;
+pub mod turntable;
 pub mod verify;
 pub mod workcell;
 
@@ -26,5 +30,6 @@ pub use files::{load_targets, Fiducial, Fixture};
 pub use jog::{JogTerminal, Scripted, Touch, TouchSource};
 pub use pivot::{tool_tip, PivotFit};
 pub use servos::{servo_offsets, ServoOffset, ServoOffsets};
+pub use turntable::{fit_turntable, TableFit};
 pub use verify::{verify, VerifyReport};
 pub use workcell::{workcell, WorkcellFit};

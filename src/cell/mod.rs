@@ -11,4 +11,4 @@ pub mod removal_fit;
 mod stream;
 
 pub use reach::reachable_sites;
-pub use stream::{execute, RunConfig, RunReport};
+pub use stream::{execute, steps, RunConfig, RunReport, Step};

@@ -13,7 +13,7 @@ use crate::bus::{
     JOINT_COUNT,
 };
 use crate::plan::frames;
-use crate::robot::{Robot, RobotConfig};
+use crate::robot::{Robot, RobotConfig, Turntable};
 
 /// Arguments of `polishbot arm`.
 #[derive(Debug, Args)]
@@ -24,6 +24,10 @@ pub struct ArmArgs {
     /// Which arm, and the journal.
     #[command(flatten)]
     pub link: LinkArgs,
+    /// Cell folder: its dofbot.urdf, tool.toml, servos.toml and workcell.toml (a `[turntable]`
+    /// lets `move --table` turn the table) [default: calibration/].
+    #[arg(long, global = true, value_name = "DIR")]
+    pub cell: Option<PathBuf>,
 }
 
 /// How a command reaches the arm (shared by `arm` and `calibrate`).
@@ -111,6 +115,27 @@ pub fn open_link(
     })
 }
 
+/// The simulator's settings with the cell's turntable servo on the bus (at table angle 0)
+/// unless `[sim] extra_servos` already lists its id.
+pub fn sim_with_table(
+    options: &SimOptions,
+    table: Option<&Turntable>,
+) -> anyhow::Result<SimOptions> {
+    let mut options = options.clone();
+    if let Some(t) = table {
+        if !options.extra_servos.iter().any(|e| e.id == t.servo.id) {
+            let start_raw = t
+                .raw(0.0)
+                .map_err(|m| anyhow::anyhow!("turntable servo {}: {m}", t.servo.id))?;
+            options.extra_servos.push(bus::ExtraServo {
+                id: t.servo.id,
+                start_raw,
+            });
+        }
+    }
+    Ok(options)
+}
+
 /// Longest move time, s: the board's move command carries the time in milliseconds as a
 /// 16-bit count.
 const MAX_MOVE_TIME_S: f64 = u16::MAX as f64 / 1000.0;
@@ -149,7 +174,8 @@ pub enum ArmAction {
     Ping,
     /// Read the joints (rad, URDF convention), the gripper angle and the raw positions.
     Read,
-    /// Move to joint angles, wait, read back and verify.
+    /// Move to joint angles, wait, read back and verify; or (`--table DEG`) turn the cell's
+    /// turntable in one rest-to-rest move while the arm stays at its home pose.
     Move {
         /// Joint angles q1,..,q5 in radians (URDF convention: servo deg = q*180/pi + 90).
         #[arg(
@@ -157,9 +183,14 @@ pub enum ArmAction {
             value_delimiter = ',',
             num_args = 1,
             allow_hyphen_values = true,
-            required = true
+            required_unless_present = "table",
+            conflicts_with = "table"
         )]
         joints: Vec<f64>,
+        /// Turn the cell's turntable to this table angle, degrees (0: the calibrated
+        /// placement), within its range and limits; the arm must be at its home pose.
+        #[arg(long, value_name = "DEG", allow_hyphen_values = true)]
+        table: Option<f64>,
         /// Move time in seconds (default: the fastest the joint velocity limits allow).
         #[arg(long, value_name = "S")]
         time: Option<f64>,
@@ -191,16 +222,38 @@ pub struct ArmConfig {
 /// Runs `polishbot arm`.
 pub fn run(args: ArmArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let file = super::settings::ConfigFile::read(config)?;
-    let cfg: ArmConfig = file.parse()?;
+    let mut cfg: ArmConfig = file.parse()?;
     super::settings::check_link(&file, &cfg.bus, &cfg.sim)?;
+    if let Some(dir) = &args.cell {
+        cfg.robot.use_cell(dir);
+    }
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
+    let table = Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
+    let sim = sim_with_table(&cfg.sim, table.as_ref())?;
     let mut bus_cfg = cfg.bus;
     bus_cfg.servo_map = frames::servo_map(&robot)?;
     // `arm ping` checks every servo itself instead of failing at the first silent one.
     if matches!(args.action, ArmAction::Ping) {
         bus_cfg.ping_at_connect = false;
     }
-    act(args.link.connect("arm", bus_cfg, &cfg.sim)?, &args.action)
+    if let ArmAction::Move {
+        table: Some(deg), ..
+    } = args.action
+    {
+        let table = table.ok_or_else(|| {
+            anyhow::anyhow!(
+                "--table: {} has no [turntable] (give --cell DIR of a cell with one)",
+                cfg.robot.servos.display()
+            )
+        })?;
+        let settle = bus_cfg.settle_ms;
+        let mut bus = args.link.connect("arm", bus_cfg, &sim)?;
+        bus::install_ctrlc(bus.stop_flag()).context("arm move --table")?;
+        let out = super::table::turn(&mut bus, &table, deg, robot.servos.period, settle)?;
+        println!("{out}");
+        return Ok(());
+    }
+    act(args.link.connect("arm", bus_cfg, &sim)?, &args.action)
 }
 
 fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> {
@@ -228,6 +281,7 @@ fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> 
             joints,
             time,
             gripper,
+            ..
         } => {
             let q: [f64; JOINT_COUNT] = joints.as_slice().try_into().map_err(|_| {
                 anyhow::anyhow!("--joints: need {JOINT_COUNT} values, got {}", joints.len())

@@ -1,5 +1,5 @@
-//! `polishbot calibrate (servos | tool | workcell | verify) (--port DEV | --i2c DEV | --sim)
-//! [--out DIR]`:
+//! `polishbot calibrate (servos | tool | workcell | turntable | verify) (--port DEV | --i2c DEV
+//! | --sim) [--out DIR] [--cell DIR]`:
 //! the calibration routines of docs/CALIBRATION.md. Each reads the cell's files from `--out`
 //! where they exist there (so servos -> tool -> workcell -> verify chain in one folder), else
 //! from `[robot]`, and writes its own file into `--out`.
@@ -30,9 +30,13 @@ pub struct CalibrateArgs {
     #[command(flatten)]
     pub link: LinkArgs,
     /// Folder the calibration files are written to, and read from where present
-    /// [default: calibration].
+    /// [default: the --cell folder, else calibration].
     #[arg(long, global = true, value_name = "DIR")]
     pub out: Option<PathBuf>,
+    /// Cell folder: its dofbot.urdf, tool.toml, servos.toml and workcell.toml
+    /// [default: calibration/].
+    #[arg(long, global = true, value_name = "DIR")]
+    pub cell: Option<PathBuf>,
 }
 
 /// The routines, in the order a new cell runs them.
@@ -60,6 +64,21 @@ pub enum Routine {
         #[arg(long, value_name = "FILE")]
         fixture: PathBuf,
         /// Joint targets, one per fiducial in the fixture's order, instead of jogging.
+        #[arg(long, value_name = "FILE")]
+        targets: Option<PathBuf>,
+    },
+    /// Turntable: touch one fiducial on the table at >= 5 table angles -> workcell.toml's
+    /// [turntable] axis and centre.
+    Turntable {
+        /// Table angles to touch the fiducial at, degrees (>= 5, spanning >= 90 degrees).
+        #[arg(
+            long,
+            value_delimiter = ',',
+            allow_hyphen_values = true,
+            required = true
+        )]
+        angles: Vec<f64>,
+        /// Joint targets, one per table angle in order, instead of jogging.
         #[arg(long, value_name = "FILE")]
         targets: Option<PathBuf>,
     },
@@ -121,11 +140,15 @@ fn input(out: &Path, name: &str, fallback: &Path) -> PathBuf {
 /// Runs `calibrate`.
 pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let file = super::settings::ConfigFile::read(config)?;
-    let cfg: CalibrateFileConfig = file.parse()?;
+    let mut cfg: CalibrateFileConfig = file.parse()?;
     super::settings::check_link(&file, &cfg.bus, &cfg.sim)?;
+    if let Some(dir) = &args.cell {
+        cfg.robot.use_cell(dir);
+    }
     let out = args
         .out
         .clone()
+        .or(args.cell.clone())
         .unwrap_or_else(|| PathBuf::from("calibration"));
     let tool_in = input(&out, "tool.toml", &cfg.robot.tool);
     if let Routine::Removal {
@@ -165,10 +188,21 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         } => Some(Fixture::load(fixture)?),
         _ => None,
     };
+    let workcell_in = input(&out, "workcell.toml", &cfg.robot.workcell);
+    let table = match &args.routine {
+        Routine::Turntable { angles, targets } => Some(super::calibrate_table::prepare(
+            &servos_in,
+            &workcell_in,
+            angles,
+            targets.as_deref(),
+            &cfg.calibrate,
+        )?),
+        _ => None,
+    };
     let targets = match &args.routine {
-        Routine::Tool { targets } | Routine::Workcell { targets, .. } => {
-            targets.as_deref().map(load_targets).transpose()?
-        }
+        Routine::Tool { targets }
+        | Routine::Workcell { targets, .. }
+        | Routine::Turntable { targets, .. } => targets.as_deref().map(load_targets).transpose()?,
         Routine::Verify { targets, .. } => Some(match targets {
             Some(t) => load_targets(t)?,
             None => DEFAULT_CHECK_POSES.to_vec(),
@@ -176,7 +210,8 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         Routine::Servos { .. } | Routine::Removal { .. } => None,
     };
     let prefix = format!("calibrate {name}");
-    let mut bus = args.link.connect(&prefix, bus_cfg, &cfg.sim).map_err(|e| {
+    let sim = super::arm::sim_with_table(&cfg.sim, table.as_ref())?;
+    let mut bus = args.link.connect(&prefix, bus_cfg, &sim).map_err(|e| {
         let line = super::common::one_line(&e);
         match line.starts_with(&prefix) {
             true => anyhow::anyhow!(line),
@@ -195,7 +230,8 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         out: &out,
         tool_in: &tool_in,
         servos_in: &servos_in,
-        workcell_in: input(&out, "workcell.toml", &cfg.robot.workcell),
+        workcell_in,
+        table,
     };
     routine(&mut bus, &cell, &args.routine, fixture, targets, &ctx)
         .map_err(|e| anyhow::anyhow!("calibrate {name}: {e}"))
@@ -206,6 +242,7 @@ fn routine_name(r: &Routine) -> &'static str {
         Routine::Servos { .. } => "servos",
         Routine::Tool { .. } => "tool",
         Routine::Workcell { .. } => "workcell",
+        Routine::Turntable { .. } => "turntable",
         Routine::Verify { .. } => "verify",
         Routine::Removal { .. } => "removal",
     }
@@ -217,6 +254,8 @@ struct Ctx<'a> {
     tool_in: &'a Path,
     servos_in: &'a Path,
     workcell_in: PathBuf,
+    /// The cell's turntable (`calibrate turntable` only).
+    table: Option<crate::robot::Turntable>,
 }
 
 /// The touch source: the script, or the jog terminal on standard input and output.
@@ -245,7 +284,9 @@ fn routine(
     // Raw keys only while a routine may read them (restored on return, also on errors).
     let interactive = match which {
         Routine::Servos { assume_pose, .. } => !assume_pose,
-        Routine::Tool { .. } | Routine::Workcell { .. } => targets.is_none(),
+        Routine::Tool { .. } | Routine::Workcell { .. } | Routine::Turntable { .. } => {
+            targets.is_none()
+        }
         Routine::Verify { .. } | Routine::Removal { .. } => false,
     };
     let _raw = interactive.then(RawTerminal::enable).flatten();
@@ -311,6 +352,7 @@ fn routine(
         Routine::Removal { .. } => Err(CalibError::Refused(
             "the removal fit needs no arm and runs before connecting".into(),
         )),
+        Routine::Turntable { angles, .. } => turntable(bus, cell, angles, targets, ctx),
         Routine::Verify { .. } => {
             let poses = targets.expect("set in run");
             let workcell = match &fixture {
@@ -360,6 +402,21 @@ fn routine(
             }
         }
     }
+}
+
+/// `calibrate turntable` (cli/calibrate_table.rs) with this routine's files.
+fn turntable(
+    bus: &mut Bus<Box<dyn Transport>>,
+    cell: &Cell,
+    angles: &[f64],
+    targets: Option<Vec<[f64; JOINT_COUNT]>>,
+    ctx: &Ctx,
+) -> Result<(), CalibError> {
+    let mut src = source(targets, cell.cfg);
+    let out = ctx.out.join("workcell.toml");
+    let table = ctx.table.as_ref();
+    let input = &ctx.workcell_in;
+    super::calibrate_table::run(bus, cell, table, angles, src.as_mut(), input, &out)
 }
 
 fn say(line: &str) {

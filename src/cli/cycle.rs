@@ -217,6 +217,7 @@ fn grind(l: &Loop, plan: &Path, scan: &Path, dir: &Path) -> anyhow::Result<PathB
         run_cmd::RunArgs {
             plan: plan.to_path_buf(),
             device: l.device.clone(),
+            cell: None,
             dry_run: false,
             resume: None,
             journal: Some(dir.join("journal.jsonl")),

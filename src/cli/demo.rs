@@ -100,6 +100,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         run_cmd::RunArgs {
             plan: plan_file.clone(),
             device: super::arm::DeviceArgs::sim(),
+            cell: None,
             dry_run: false,
             resume: None,
             journal: Some(journal),

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 mod arm;
 mod calibrate;
 mod calibrate_removal;
+mod calibrate_table;
 mod common;
 mod cycle;
 mod demo;
@@ -22,6 +23,7 @@ mod register;
 mod run;
 pub mod settings;
 mod synth;
+mod table;
 
 pub use common::{load_config, one_line, GeometryInput};
 

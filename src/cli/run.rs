@@ -11,7 +11,7 @@ use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, SimOptions, Transpo
 use crate::cell::{execute, RunConfig};
 use crate::plan::file::CheckedPlan;
 use crate::plan::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
-use crate::robot::{Robot, RobotConfig, Workcell};
+use crate::robot::{Robot, RobotConfig, Turntable, Workcell};
 
 /// Arguments of `run`.
 #[derive(Debug, Args)]
@@ -25,6 +25,10 @@ pub struct RunArgs {
     /// Check the plan and print what would be sent; send nothing.
     #[arg(long)]
     pub dry_run: bool,
+    /// Cell folder: its dofbot.urdf, tool.toml, servos.toml and workcell.toml (a
+    /// `[turntable]` in both lets `run` turn the table) [default: calibration/].
+    #[arg(long, value_name = "DIR")]
+    pub cell: Option<PathBuf>,
     /// Continue an interrupted run from this journal (appended to).
     #[arg(long, value_name = "FILE")]
     pub resume: Option<PathBuf>,
@@ -118,7 +122,7 @@ fn start_frame(resume: Option<&Path>, sha: &str, frames: usize) -> anyhow::Resul
     let from = rp.resume_from();
     anyhow::ensure!(
         from < frames as u64,
-        "{}: --resume: the journal says frame {from} was sent, but the plan has {frames} frames",
+        "{}: --resume: the journal says step {from} was sent, but the plan has {frames} steps",
         j.display()
     );
     Ok(from as usize)
@@ -157,15 +161,21 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
         .check()
         .map_err(|m| file.refuse("sim.grinding", &m))?;
     check_run_settings(&file, &cfg.run)?;
+    let mut cfg = cfg;
+    if let Some(dir) = &args.cell {
+        cfg.robot.use_cell(dir);
+    }
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
     // one read: the plan is parsed from the bytes its SHA-256 is taken of
     let text = std::fs::read_to_string(&args.plan)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
     let plan = Plan::parse(&args.plan, &text)?;
     let sha = sha256_hex(text.as_bytes());
+    let table = Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
     let checked = plan
-        .check(&robot, &cfg.validation)
+        .check_cell(&robot, table.as_ref(), &cfg.validation)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
+    let steps = crate::cell::steps(&checked).len();
     let workcell = Workcell::load(&cfg.robot.workcell)?;
     let mut collision = cfg.collision.clone();
     collision
@@ -177,9 +187,9 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
             args.plan.display()
         )
     })?;
-    plan.check_clearance(&inspection, &robot, &workcell, &collision)
+    plan.check_clearance_cell(&inspection, &robot, &workcell, table.as_ref(), &collision)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
-    let from = start_frame(args.resume.as_deref(), &sha, checked.frames.len())?;
+    let from = start_frame(args.resume.as_deref(), &sha, steps)?;
     let journal_path = args
         .journal
         .clone()
@@ -192,12 +202,13 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     bus_cfg.servo_map = frames::servo_map(&robot)?;
     bus_cfg.servo_map.validate()?;
     let ground = ground(&args, &cfg.sim, &inspection)?;
+    let sim = super::arm::sim_with_table(&cfg.sim, table.as_ref())?;
     if args.dry_run {
         println!(
             "run: dry run: {} passes, {} frames from frame {from}, {:.2} s at {} ms per frame; nothing sent",
             plan.passes.len(),
-            checked.frames.len(),
-            (checked.frames.len() - from) as f64 * plan.period,
+            steps,
+            (steps - from) as f64 * plan.period,
             checked.time_ms
         );
         return Ok(());
@@ -207,12 +218,16 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let _ = bus::install_ctrlc(stop.clone());
     if let Some(ground) = ground {
         let map = bus_cfg.servo_map.clone();
+        anyhow::ensure!(
+            checked.table.is_none(),
+            "run: --part: the virtual part's grinding does not follow the turntable; run the plan without --part"
+        );
         let arm = ground.arm(&map)?;
         let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
         stream(bus, &checked, &plan, from, &cfg.run, stop, &journal_path)?;
         return ground.finish(&arm, &map, &workcell);
     }
-    let link = super::arm::open_link(&args.device, &cfg.sim, &bus_cfg.servo_map, "run")?;
+    let link = super::arm::open_link(&args.device, &sim, &bus_cfg.servo_map, "run")?;
     stream(
         Bus::connect(link, bus_cfg, journal)?,
         &checked,
@@ -258,8 +273,11 @@ fn stream<T: Transport>(
     let port = bus.transport().describe();
     match execute(&mut bus, checked, plan.period, from, cfg) {
         Ok(r) => {
+            let table = r
+                .final_table_raw
+                .map_or(String::new(), |t| format!(", table raw {t}"));
             println!(
-                "run: {port}: sent frames {}..{} ({} frames), {} read-backs (worst {} counts), final pose {:?} verified; journal {}",
+                "run: {port}: sent frames {}..{} ({} frames), {} read-backs (worst {} counts), final pose {:?}{table} verified; journal {}",
                 r.first,
                 r.first + r.sent - 1,
                 r.sent,

@@ -73,6 +73,8 @@ pub struct CheckedPlan {
     pub raw: Vec<[u16; SERVO_COUNT]>,
     /// Move time of every frame, ms (the period).
     pub time_ms: u16,
+    /// The turntable's moves (`None`: the plan turns no table; see [`Plan::check_cell`]).
+    pub table: Option<super::table_file::CheckedTable>,
 }
 
 impl Plan {
@@ -122,7 +124,7 @@ impl Plan {
         let bad = |m: String| Err(PlanError::Frames(m));
         if self.turntable.as_ref().is_some_and(|t| !t.moves.is_empty()) {
             return bad(
-                "the plan turns the part turntable, which `run` does not drive yet: refused".into(),
+                "the plan turns the part turntable: it needs the cell's turntable to be checked (run --cell DIR)".into(),
             );
         }
         let names: Vec<&str> = robot.joints.iter().map(|j| j.name.as_str()).collect();
@@ -201,6 +203,7 @@ impl Plan {
             frames: expected,
             raw,
             time_ms,
+            table: None,
         })
     }
 }

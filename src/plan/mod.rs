@@ -26,6 +26,7 @@ pub mod ros;
 mod stroke;
 pub mod surface;
 pub mod table;
+pub mod table_check;
 pub mod table_file;
 pub mod trajectory;
 pub mod validate;

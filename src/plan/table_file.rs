@@ -39,6 +39,30 @@ pub struct TableMove {
     pub frames: Vec<String>,
 }
 
+/// A table move `run` may send: where it happens and each frame's raw target.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedMove {
+    /// Arm sample index the move happens at (the arm rests there, at its start pose).
+    pub at_sample: usize,
+    /// Raw count each frame sends the table servo to.
+    pub raw: Vec<u16>,
+    /// The frames' bytes.
+    pub frames: Vec<Vec<u8>>,
+}
+
+/// The table part of a plan as checked against the cell's turntable.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedTable {
+    /// Bus id of the table servo.
+    pub servo_id: u8,
+    /// The servo's raw range (what a read-back may be).
+    pub raw_range: [u16; 2],
+    /// Raw count of the plan's start angle (where the table must be before the first frame).
+    pub start_raw: u16,
+    /// The moves in order.
+    pub moves: Vec<CheckedMove>,
+}
+
 /// The `turntable` object of plan.json.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TablePlan {
@@ -118,16 +142,23 @@ pub fn table_move(
     })
 }
 
+/// The 0x19 frame's raw target, read back from its bytes.
+fn frame_raw(frame: &[u8]) -> u16 {
+    // FF FC LEN 19 id posH posL timeH timeL CHK
+    u16::from_be_bytes([frame[5], frame[6]])
+}
+
 /// Checks the plan's table part against the cell's `table`: the servo id, each move's place
 /// (in order, within the arm's samples), continuity from the start angle, every sample inside
-/// the table's range, every step within its velocity limit, and every frame equal byte for
-/// byte to the 0x19 frame its sample makes. Returns the frames as bytes, move by move.
+/// the table's range (so every raw target inside its raw and degree ranges), every step within
+/// its velocity limit and every change of step within its acceleration limit, and every frame
+/// equal byte for byte to the 0x19 frame its sample makes. Returns what `run` sends.
 pub fn check(
     plan: &TablePlan,
     table: &Turntable,
     arm_samples: usize,
     period: f64,
-) -> Result<Vec<Vec<Vec<u8>>>, PlanError> {
+) -> Result<CheckedTable, PlanError> {
     let bad = |m: String| Err(PlanError::Frames(format!("turntable: {m}")));
     if plan.servo_id != table.servo.id {
         return bad(format!(
@@ -137,8 +168,13 @@ pub fn check(
     }
     let time_ms = frame_time_ms(period)?;
     let [lo, hi] = table.range();
-    let most = table.limits()[0] * period * (1.0 + STEP_TOLERANCE);
+    let [v, a, _] = table.limits();
+    let most = v * period * (1.0 + STEP_TOLERANCE);
+    let most_change = a * period * period * (1.0 + STEP_TOLERANCE);
     let (mut at, mut angle) = (0usize, plan.start);
+    let start_raw = table
+        .raw(plan.start)
+        .map_err(|m| PlanError::Frames(format!("turntable: start: {m}")))?;
     let mut out = Vec::with_capacity(plan.moves.len());
     for (k, m) in plan.moves.iter().enumerate() {
         if m.at_sample < at || m.at_sample >= arm_samples.max(1) {
@@ -176,6 +212,17 @@ pub fn check(
                     (q - m.samples[i - 1]).abs()
                 ));
             }
+            let change = if i >= 2 {
+                q - 2.0 * m.samples[i - 1] + m.samples[i - 2]
+            } else {
+                q - m.samples[0]
+            };
+            if change.abs() > most_change {
+                return bad(format!(
+                    "move {k} sample {i}: its step changes by {:.6} rad, the acceleration limit allows {most_change:.6}",
+                    change.abs()
+                ));
+            }
             let want = frame(table, *q, time_ms)?;
             if to_hex(&want) != m.frames[i - 1] {
                 return bad(format!(
@@ -186,9 +233,25 @@ pub fn check(
             }
             bytes.push(want);
         }
-        out.push(bytes);
+        let last = m.samples.len() - 1;
+        if (m.samples[last] - m.samples[last - 1]).abs() > most_change {
+            return bad(format!(
+                "move {k}: does not end at rest (last step {:.6} rad)",
+                (m.samples[last] - m.samples[last - 1]).abs()
+            ));
+        }
+        out.push(CheckedMove {
+            at_sample: m.at_sample,
+            raw: bytes.iter().map(|f| frame_raw(f)).collect(),
+            frames: bytes,
+        });
         at = m.at_sample;
         angle = *m.samples.last().unwrap_or(&angle);
     }
-    Ok(out)
+    Ok(CheckedTable {
+        servo_id: table.servo.id,
+        raw_range: table.servo.raw_range,
+        start_raw,
+        moves: out,
+    })
 }

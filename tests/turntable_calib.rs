@@ -1,0 +1,212 @@
+//! `calibrate turntable` (issue 33): the tool tip touches one fiducial on the table at several
+//! table angles on the simulated arm (1-count read noise); the plane and circle fit recover a
+//! planted axis and centre; bad inputs and bad fits are refused with the reason.
+mod common;
+
+use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
+use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, SimArm, SimOptions};
+use polishbot::calibrate::jog::{Cell, Scripted, Touch};
+use polishbot::calibrate::turntable::{fit_turntable, patch_workcell, turntable};
+use polishbot::calibrate::{CalibError, CalibrationConfig};
+use polishbot::plan::frames;
+use polishbot::robot::{IkConfig, IkTarget, Robot, Turntable};
+
+/// The planted table: an axis tilted off robot x and its centre, metres.
+fn planted() -> (Unit<Vector3<f64>>, Point3<f64>) {
+    (
+        Unit::new_normalize(Vector3::new(1.0, 0.03, -0.02)),
+        Point3::new(0.004, 0.28, 0.24),
+    )
+}
+
+/// Radius of the fiducial's circle about the axis, metres.
+const RADIUS: f64 = 0.05;
+
+/// The fiducial at table angle `deg` (degrees), robot frame.
+fn fiducial(deg: f64) -> Vector3<f64> {
+    let (axis, c) = planted();
+    let r0 = axis.cross(&Vector3::z()).normalize().cross(&axis) * RADIUS;
+    let turned = UnitQuaternion::from_axis_angle(&axis, deg.to_radians()) * r0;
+    c.coords + turned
+}
+
+/// Joints that put the tool tip on `p` (the arm's own closed-form IK; the truth is the
+/// planted circle, not this).
+fn reach(robot: &Robot, p: Vector3<f64>) -> [f64; 5] {
+    // tool axes from slightly up through level to down and back; the first pose clear of
+    // every joint limit by 0.02 rad (a noisy read at a servo's end count may land past it)
+    for k in 0..12 {
+        let tilt = -0.6 + 0.3 * f64::from(k);
+        let target = IkTarget {
+            position: p,
+            axis: Vector3::new(0.0, tilt.cos(), -tilt.sin()),
+            roll: Some(0.0),
+        };
+        if let Ok(s) = robot.ik(&target, &[0.0; 5], &IkConfig::default()) {
+            if robot.limit_violation(&s.q, -0.02).is_none() {
+                return s.q.try_into().unwrap();
+            }
+        }
+    }
+    panic!("the arm reaches no pose at {p:?}");
+}
+
+fn sim_bus(robot: &Robot) -> (SimArm, Bus<polishbot::bus::SimTransport>) {
+    let cfg = BusConfig {
+        servo_map: frames::servo_map(robot).unwrap(),
+        ..BusConfig::default()
+    };
+    let options = SimOptions {
+        mechanics: Mechanics {
+            read_noise_counts: 1,
+            noise_seed: 33,
+            ..Mechanics::default()
+        },
+        ..SimOptions::default()
+    };
+    let arm = SimArm::new(&options, &cfg.servo_map).unwrap();
+    let bus = Bus::connect(arm.transport(), cfg, Journal::none()).unwrap();
+    (arm, bus)
+}
+
+/// Touches at nine table angles over 240 degrees on the simulated arm (+-1 count read noise)
+/// recover the planted axis within 0.2 degree and the centre within 0.3 mm; the fit written
+/// into the shipped turntable cell's workcell.toml keeps every comment and loads back.
+#[test]
+fn the_sim_recovers_a_planted_axis_and_centre() {
+    let robot = common::dofbot();
+    let angles = [-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0];
+    let targets: Vec<[f64; 5]> = angles.iter().map(|&a| reach(&robot, fiducial(a))).collect();
+    let (_arm, mut bus) = sim_bus(&robot);
+    let map = bus.config().servo_map.clone();
+    let cfg = CalibrationConfig::default();
+    let cell = Cell {
+        robot: &robot,
+        map: &map,
+        gripper_deg: 90.0,
+        cfg: &cfg,
+    };
+    let mut turned = Vec::new();
+    let mut turn = |_: &mut Bus<_>, a: f64| -> Result<(), CalibError> {
+        turned.push(a);
+        Ok(())
+    };
+    let mut source = Scripted::new(targets);
+    let fit = turntable(&mut bus, &cell, &angles, &mut turn, &mut source).unwrap();
+    assert_eq!(turned, angles);
+    let (axis, centre) = planted();
+    let tilt = Vector3::from(fit.axis).angle(&axis).to_degrees();
+    let off = (Point3::from(fit.centre) - centre).norm() * 1000.0;
+    println!(
+        "axis off by {tilt:.3} deg, centre by {off:.3} mm, radius {:.2} mm, RMS {:.3} mm",
+        fit.radius_mm, fit.rms_mm
+    );
+    assert!(tilt < 0.2, "axis off by {tilt} deg");
+    assert!(off < 0.3, "centre off by {off} mm");
+    assert!((fit.radius_mm - RADIUS * 1000.0).abs() < 0.3);
+
+    let shipped = common::calib("turntable/workcell.toml");
+    let text = std::fs::read_to_string(&shipped).unwrap();
+    let patched = patch_workcell(&text, &fit);
+    for line in text.lines().filter(|l| l.trim_start().starts_with('#')) {
+        assert!(patched.contains(line), "comment lost: {line}");
+    }
+    let dir = common::tempdir();
+    std::fs::write(dir.path().join("workcell.toml"), &patched).unwrap();
+    let table = Turntable::load(
+        &common::calib("turntable/servos.toml"),
+        &dir.path().join("workcell.toml"),
+    )
+    .unwrap()
+    .unwrap();
+    assert!((table.axis.into_inner() - Vector3::from(fit.axis)).norm() < 1e-12);
+    assert_eq!(table.centre, Point3::from(fit.centre));
+}
+
+fn touch(p: Vector3<f64>) -> Touch {
+    Touch {
+        label: "t".into(),
+        joints: [0.0; 5],
+        tip: p.into(),
+    }
+}
+
+/// Too few angles, angles spanning too little, and a touch that missed the fiducial are
+/// refused, each with its reason.
+#[test]
+fn bad_turntable_fits_are_refused_with_the_reason() {
+    let cfg = CalibrationConfig::default();
+    let err = |angles: &[f64], moved: Option<(usize, f64)>| {
+        let touches = angles
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| {
+                let shift = moved.filter(|m| m.0 == i).map_or(0.0, |m| m.1);
+                touch(fiducial(a) + Vector3::new(0.0, 0.0, shift))
+            })
+            .collect();
+        fit_turntable(angles, touches, &cfg)
+            .unwrap_err()
+            .to_string()
+    };
+    let few = err(&[0.0, 30.0, 60.0, 90.0], None);
+    assert!(few.contains("need at least 5"), "{few}");
+    let short = err(&[0.0, 10.0, 20.0, 30.0, 40.0], None);
+    assert!(short.contains("span 40.0 deg"), "{short}");
+    let missed = err(&[-60.0, -30.0, 0.0, 30.0, 60.0, 90.0], Some((2, 0.005)));
+    assert!(missed.contains("RMS residual"), "{missed}");
+    // exact touches fit exactly
+    let angles = [-60.0, -30.0, 0.0, 30.0, 60.0, 90.0];
+    let touches = angles.iter().map(|&a| touch(fiducial(a))).collect();
+    let fit = fit_turntable(&angles, touches, &cfg).unwrap();
+    assert!(fit.rms_mm < 1e-9, "{}", fit.rms_mm);
+}
+
+/// `calibrate turntable --sim --cell calibration/turntable --targets FILE`: the table turns to
+/// each angle (0x19 frames for servo 7), the scripted touches find the planted circle, and
+/// workcell.toml in --out gets the fitted axis and centre; too few angles are refused before
+/// the arm is opened, with one line.
+#[test]
+fn calibrate_turntable_on_the_cli_writes_the_fitted_axis_and_centre() {
+    let robot = common::dofbot();
+    let angles = [-120.0, -90.0, -60.0, -30.0, 0.0, 30.0, 60.0, 90.0, 120.0];
+    let dir = common::tempdir();
+    let targets = dir.path().join("targets.txt");
+    let mut text = String::from("# joint targets, rad, one per table angle\n");
+    for &a in &angles {
+        let q = reach(&robot, fiducial(a));
+        let v: Vec<String> = q.iter().map(|x| format!("{x:?}")).collect();
+        text.push_str(&(v.join(", ") + "\n"));
+    }
+    std::fs::write(&targets, text).unwrap();
+    let list: Vec<String> = angles.iter().map(|a| a.to_string()).collect();
+    let out = dir.path().join("cell");
+    common::succeed(
+        common::polishbot()
+            .args(["calibrate", "turntable", "--sim", "--cell"])
+            .arg(common::calib("turntable"))
+            .arg("--out")
+            .arg(&out)
+            .arg("--targets")
+            .arg(&targets)
+            .arg(format!("--angles={}", list.join(","))),
+    );
+    let table = Turntable::load(
+        &common::calib("turntable/servos.toml"),
+        &out.join("workcell.toml"),
+    )
+    .unwrap()
+    .unwrap();
+    let (axis, centre) = planted();
+    assert!(table.axis.angle(&axis).to_degrees() < 0.2);
+    assert!((table.centre - centre).norm() * 1000.0 < 0.3);
+    let few = common::polishbot()
+        .args(["calibrate", "turntable", "--sim", "--cell"])
+        .arg(common::calib("turntable"))
+        .arg("--out")
+        .arg(&out)
+        .args(["--angles", "0,10,20"])
+        .output()
+        .unwrap();
+    assert!(common::one_line_failure(&few).contains("need at least 5"));
+}
