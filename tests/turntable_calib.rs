@@ -3,13 +3,13 @@
 //! planted axis and centre; bad inputs and bad fits are refused with the reason.
 mod common;
 
-use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Point3, Rotation3, Unit, UnitQuaternion, Vector3};
 use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, SimArm, SimOptions};
 use polishbot::calibrate::jog::{Cell, Scripted, Touch};
 use polishbot::calibrate::turntable::{fit_turntable, patch_workcell, turntable};
 use polishbot::calibrate::{CalibError, CalibrationConfig};
 use polishbot::plan::frames;
-use polishbot::robot::{IkConfig, IkTarget, Robot, Turntable};
+use polishbot::robot::{IkConfig, IkTarget, Robot, Turntable, Workcell};
 
 /// The planted table: an axis tilted off robot x and its centre, metres.
 fn planted() -> (Unit<Vector3<f64>>, Point3<f64>) {
@@ -209,4 +209,78 @@ fn calibrate_turntable_on_the_cli_writes_the_fitted_axis_and_centre() {
         .output()
         .unwrap();
     assert!(common::one_line_failure(&few).contains("need at least 5"));
+}
+
+/// `calibrate workcell --sim --cell calibration/turntable`: touching four fiducials placed by
+/// the shipped turntable workcell rewrites `robot_from_reference` (it reads back within 1 mm
+/// and 0.5 degree of the shipped placement, as tests/calibrate.rs) and keeps the `[turntable]` section, its comments and the axis
+/// and centre the table loads with, unchanged.
+#[test]
+fn calibrate_workcell_on_a_turntable_cell_keeps_the_turntable() {
+    let cell = |name: &str| common::calib(&format!("turntable/{name}"));
+    let robot = Robot::load(
+        &cell("dofbot.urdf"),
+        &cell("tool.toml"),
+        &cell("servos.toml"),
+    )
+    .unwrap();
+    let shipped = Workcell::load(&cell("workcell.toml")).unwrap();
+    // fiducials on the part's arm-facing side (part -y), reference frame, mm
+    let fiducials = [
+        [20.0, -30.0, 15.0],
+        [-20.0, -30.0, 15.0],
+        [0.0, -30.0, -20.0],
+        [15.0, -20.0, -25.0],
+    ];
+    let dir = common::tempdir();
+    let mut fixture = String::new();
+    let mut targets = String::new();
+    for (k, p) in fiducials.iter().enumerate() {
+        fixture.push_str(&format!(
+            "[[fiducial]]\nname = \"F{k}\"\nposition = [{:?}, {:?}, {:?}]\n",
+            p[0], p[1], p[2]
+        ));
+        let at = shipped.point_from_reference_mm(&Point3::from(*p));
+        let q = reach(&robot, at.coords);
+        let v: Vec<String> = q.iter().map(|x| format!("{x:?}")).collect();
+        targets.push_str(&(v.join(", ") + "\n"));
+    }
+    std::fs::write(dir.path().join("fixture.toml"), fixture).unwrap();
+    std::fs::write(dir.path().join("targets.txt"), targets).unwrap();
+    let out = dir.path().join("cell");
+    common::succeed(
+        common::polishbot()
+            .args(["calibrate", "workcell", "--sim", "--cell"])
+            .arg(common::calib("turntable"))
+            .arg("--out")
+            .arg(&out)
+            .arg("--fixture")
+            .arg(dir.path().join("fixture.toml"))
+            .arg("--targets")
+            .arg(dir.path().join("targets.txt")),
+    );
+    let written = out.join("workcell.toml");
+    let w = Workcell::load(&written).unwrap();
+    let (a, b) = (w.robot_from_reference, shipped.robot_from_reference);
+    let moved = (a.fixed_slice::<3, 1>(0, 3) - b.fixed_slice::<3, 1>(0, 3)).norm() * 1000.0;
+    let r = a.fixed_slice::<3, 3>(0, 0).transpose() * b.fixed_slice::<3, 3>(0, 0);
+    let turned = Rotation3::from_matrix_unchecked(r).angle().to_degrees();
+    println!("workcell: {moved:.3} mm, {turned:.4} deg off the shipped placement");
+    // as tests/calibrate.rs: count quantisation of the touches leaves tenths of a mm
+    assert!(moved < 1.0 && turned < 0.5, "{moved} mm, {turned} deg");
+    let text = std::fs::read_to_string(&written).unwrap();
+    assert!(text.starts_with("# Written by `polishbot calibrate workcell`"));
+    let old = std::fs::read_to_string(cell("workcell.toml")).unwrap();
+    let from = old.find("# The part turntable").unwrap();
+    assert!(
+        text.ends_with(&old[from..]),
+        "[turntable] not kept:\n{text}"
+    );
+    let want = Turntable::load(&cell("servos.toml"), &cell("workcell.toml"))
+        .unwrap()
+        .unwrap();
+    let got = Turntable::load(&cell("servos.toml"), &written)
+        .unwrap()
+        .unwrap();
+    assert_eq!((got.axis, got.centre), (want.axis, want.centre));
 }

@@ -252,7 +252,74 @@ pub fn write_tool(input: &Path, out: &Path, tip: [f64; 3]) -> Result<Tool, Calib
 
 /// Writes workcell.toml and reads it back.
 pub fn write_workcell(out: &Path, m: &Matrix4<f64>, header: &str) -> Result<Workcell, CalibError> {
-    write(out, &workcell_text(m, header))?;
+    write_and_check(out, &workcell_text(m, header), m)
+}
+
+/// True when `line` is a TOML table header (`[name]`, `[[name]]`), not a row of an array.
+fn is_table_header(line: &str) -> bool {
+    let t = line.split('#').next().unwrap_or("").trim();
+    let inner = t.trim_start_matches('[').trim_end_matches(']');
+    t.starts_with('[')
+        && t.ends_with(']')
+        && !inner.is_empty()
+        && inner
+            .chars()
+            .all(|c| c.is_alphanumeric() || matches!(c, '_' | '-' | '.' | ' '))
+}
+
+/// The tables of the workcell.toml text `text` (`[turntable]`, ...) with the comment lines
+/// right above the first one: everything after the top-level `robot_from_reference`, kept as
+/// it is when the matrix is rewritten. Empty when the file has no table.
+pub fn workcell_tables(text: &str) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let Some(first) = lines.iter().position(|l| is_table_header(l)) else {
+        return String::new();
+    };
+    let mut start = first;
+    while start > 0 && lines[start - 1].trim_start().starts_with('#') {
+        start -= 1;
+    }
+    lines[start..].join("\n") + "\n"
+}
+
+/// Writes `out` with a new `robot_from_reference` (and `header` comment), keeping the tables
+/// of `input` (a turntable's `[turntable]` axis and centre, with their comments), and reads it
+/// back: the matrix and every kept table must load as written.
+pub fn update_workcell(
+    input: &Path,
+    out: &Path,
+    m: &Matrix4<f64>,
+    header: &str,
+) -> Result<Workcell, CalibError> {
+    let old = std::fs::read_to_string(input).map_err(|e| CalibError::file(input, e))?;
+    let kept: toml::Table = read_toml(input)?;
+    let tables = workcell_tables(&old);
+    let mut text = workcell_text(m, header);
+    if !tables.is_empty() {
+        text.push('\n');
+        text.push_str(&tables);
+    }
+    // Checked before writing: a table written inline (`turntable = {..}`) is not kept above.
+    let others = |t: toml::Table| -> Vec<(String, toml::Value)> {
+        t.into_iter()
+            .filter(|(k, _)| k != "robot_from_reference")
+            .collect()
+    };
+    let new: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| CalibError::file(out, e.message().replace('\n', " ")))?;
+    if others(kept) != others(new) {
+        return Err(CalibError::file(
+            input,
+            "its tables could not be kept (write [turntable] as a table, not inline)",
+        ));
+    }
+    write_and_check(out, &text, m)
+}
+
+/// Writes workcell.toml text `text` and checks its matrix reads back as `m`.
+fn write_and_check(out: &Path, text: &str, m: &Matrix4<f64>) -> Result<Workcell, CalibError> {
+    write(out, text)?;
     let w = Workcell::load(out)?;
     if w.robot_from_reference != *m {
         return Err(CalibError::file(
@@ -261,4 +328,52 @@ pub fn write_workcell(out: &Path, m: &Matrix4<f64>, header: &str) -> Result<Work
         ));
     }
     Ok(w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_headers_are_told_from_matrix_rows() {
+        assert!(is_table_header("[turntable]  # the table"));
+        assert!(is_table_header("[[servo]]"));
+        assert!(!is_table_header("  [0.0, 1.0, 0.0, 0.28],"));
+        assert!(!is_table_header("robot_from_reference = ["));
+        assert!(!is_table_header("]"));
+    }
+
+    #[test]
+    fn tables_keep_their_comments_and_an_inline_table_is_refused() {
+        let text = "# head\nrobot_from_reference = [\n  [1.0, 0.0, 0.0, 0.0],\n]\n\n# axis\n# more\n[turntable]\naxis = [1.0, 0.0, 0.0]\n";
+        assert_eq!(
+            workcell_tables(text),
+            "# axis\n# more\n[turntable]\naxis = [1.0, 0.0, 0.0]\n"
+        );
+        assert_eq!(workcell_tables("robot_from_reference = []\n"), "");
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("in.toml");
+        let row = |r: usize| {
+            format!(
+                "[{}]",
+                (0..4)
+                    .map(|c| if c == r { "1.0" } else { "0.0" })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        let m = (0..4).map(row).collect::<Vec<_>>().join(", ");
+        let inline = format!(
+            "robot_from_reference = [{m}]\nturntable = {{ axis = [1.0, 0.0, 0.0], centre = [0.0, 0.0, 0.0] }}\n"
+        );
+        std::fs::write(&input, inline).unwrap();
+        let out = dir.path().join("out.toml");
+        let e = update_workcell(&input, &out, &Matrix4::identity(), "t").unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("in.toml: its tables could not be kept"),
+            "{e}"
+        );
+        assert!(!out.exists());
+    }
 }

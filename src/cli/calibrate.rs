@@ -340,7 +340,7 @@ fn routine(
                 per.join(", "),
                 fit.rms_mm
             );
-            files::write_workcell(&file, &fit.robot_from_reference, &header)?;
+            files::update_workcell(&ctx.workcell_in, &file, &fit.robot_from_reference, &header)?;
             say(&format!(
                 "calibrate workcell: residual per fiducial [mm]: {}; RMS {:.3} mm; wrote {}",
                 per.join(", "),
