@@ -284,3 +284,87 @@ fn calibrate_workcell_on_a_turntable_cell_keeps_the_turntable() {
         .unwrap();
     assert_eq!((got.axis, got.centre), (want.axis, want.centre));
 }
+
+/// `calibrate verify --sim --cell calibration/turntable` (+-1 count read noise) turns the
+/// table to each default check angle, commanding the raw count of DOFBOT.md's 270-degree servo
+/// scale (0..270 deg on raw 380..3700, zero at 135 deg) and reading it back within the noise;
+/// each error is reported in counts and in degrees (0.0813 deg a count, the commanded count's
+/// rounding included). With a tolerance of 0
+/// counts the same noise fails verify with one line; an angle outside the table's range is
+/// refused before anything moves, naming the config key.
+#[test]
+fn calibrate_verify_turns_the_table_and_reports_its_read_back_error() {
+    let dir = common::tempdir();
+    let verify = |name: &str, extra: &str| {
+        let config = dir.path().join(name);
+        let text = format!("[sim.mechanics]\nread_noise_counts = 1\nnoise_seed = 7\n{extra}");
+        std::fs::write(&config, text).unwrap();
+        common::polishbot()
+            .args(["calibrate", "verify", "--sim", "--cell"])
+            .arg(common::calib("turntable"))
+            .arg("--config")
+            .arg(&config)
+            .output()
+            .unwrap()
+    };
+    let ok = verify("ok.toml", "");
+    let stdout = String::from_utf8_lossy(&ok.stdout).to_string();
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let lines: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("calibrate verify: table "))
+        .collect();
+    let angles = [-90.0, -30.0, 30.0, 90.0, 0.0];
+    assert_eq!(lines.len(), angles.len(), "{stdout}");
+    let per_count = 270.0 / (3700.0 - 380.0);
+    for (line, a) in lines.iter().zip(angles) {
+        println!("{line}");
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let num = |i: usize| -> f64 {
+            words[i]
+                .trim_matches(|c| "()+:".contains(c))
+                .parse()
+                .unwrap()
+        };
+        assert_eq!(num(3), a, "{line}");
+        let exact = 380.0 + (135.0 + a) / 270.0 * 3320.0_f64;
+        assert_eq!(num(6), exact.round(), "{line}");
+        let (counts, deg) = (num(9), num(11));
+        assert!(counts.abs() <= 1.0, "{line}");
+        // degrees: the mean read-back's angle, so the commanded count's rounding is in them
+        let want = (exact.round() + counts - exact) * per_count;
+        assert!((deg - want).abs() < 0.002, "{line}: want {want:.4} deg");
+    }
+    assert!(
+        stdout.contains("calibrate verify: worst table error "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("calibrate verify: worst servo error"),
+        "{stdout}"
+    );
+
+    let strict = verify(
+        "strict.toml",
+        "[calibrate]\nmax_verify_table_error_counts = 0\n",
+    );
+    let line = common::one_line_failure(&strict);
+    assert!(
+        line.contains("table read-back error") && line.contains("above 0 counts"),
+        "{line}"
+    );
+
+    let far = verify(
+        "far.toml",
+        "[calibrate]\nverify_table_angles_deg = [0.0, 200.0]\n",
+    );
+    let line = common::one_line_failure(&far);
+    assert!(
+        line.contains("verify_table_angles_deg") && line.contains("outside"),
+        "{line}"
+    );
+}

@@ -33,7 +33,6 @@ pub struct CalibrationConfig {
     pub min_fiducial_spread: f64,
     /// Largest tool-tip error `verify` accepts, mm. Default 1.
     pub max_verify_tip_error_mm: f64,
-    /// Initial jog step, degrees. Default 1.
     /// Fewest table angles `calibrate turntable` touches the fiducial at (5: a circle has three
     /// unknowns in its plane, the plane three; two spare touches show a bad one).
     pub min_table_angles: usize,
@@ -44,6 +43,16 @@ pub struct CalibrationConfig {
     /// Largest RMS distance of the touched tips from the fitted circle, mm (1.0, as the
     /// workcell fit's).
     pub max_table_rms_mm: f64,
+    /// Table angles `verify` turns a cell's turntable to (arm at home), degrees. Default -90,
+    /// -30, 30, 90, 0: both directions over most of the shipped table's +-135 degrees (a servo
+    /// that drags under load misses most at the far ends), ending at the calibrated placement.
+    pub verify_table_angles_deg: Vec<f64>,
+    /// Largest mean read-back error of the table `verify` accepts, counts. Default 2: the
+    /// spread `max_spread_counts` accepts from a still servo; on the 270-degree table servo
+    /// (0.081 degree a count) 2 counts move a point 40 mm off the axis by 0.11 mm, a tenth of
+    /// `max_verify_tip_error_mm`.
+    pub max_verify_table_error_counts: u16,
+    /// Initial jog step, degrees. Default 1.
     pub jog_step_deg: f64,
 }
 
@@ -64,6 +73,8 @@ impl Default for CalibrationConfig {
             min_table_angles: 5,
             min_table_span_deg: 90.0,
             max_table_rms_mm: 1.0,
+            verify_table_angles_deg: vec![-90.0, -30.0, 30.0, 90.0, 0.0],
+            max_verify_table_error_counts: 2,
         }
     }
 }

@@ -11,7 +11,8 @@
 //! 4. [`turntable::turntable`] (cells with a part turntable): the tool tip touches one fiducial
 //!    on the table at several table angles; a plane and circle fit give the table's axis and
 //!    centre (workcell.toml's `[turntable]`).
-//! 5. [`verify()`]: moves through check poses, reads back, reports per-servo and tool-tip error.
+//! 5. [`verify()`]: moves through check poses, reads back, reports per-servo and tool-tip error;
+//!    [`verify::verify_table`] turns a cell's turntable to check angles and reads it back.
 //!
 //! Touches come from a [`TouchSource`]: the interactive jog terminal ([`jog::JogTerminal`])
 //! or a list of joint targets ([`jog::Scripted`]). All settings: [`CalibrationConfig`].

@@ -2,14 +2,17 @@
 //! per-servo error (read-back against commanded, counts and degrees) and the tool-tip error
 //! it causes (forward kinematics of read-back against commanded joints). With a fixture and
 //! the workcell, each pose touches a fiducial and its tip is also compared with where
-//! workcell.toml puts that fiducial.
+//! workcell.toml puts that fiducial. [`verify_table`] checks a cell's turntable: turned to
+//! each angle, read back over 0x37, the error in counts and degrees.
+use dofbot_protocol::BusId;
 use nalgebra::Point3;
 
 use super::config::CalibError;
 use super::files::Fixture;
 use super::jog::{record, Cell};
+use super::turntable::TurnTable;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
-use crate::robot::Workcell;
+use crate::robot::{Turntable, Workcell};
 
 /// Check poses `verify` uses when none are given, rad: zero, then spread over the joint
 /// ranges, ending at zero.
@@ -117,4 +120,50 @@ pub fn verify<T: Transport>(
         max_fiducial_error_mm,
         ok,
     })
+}
+
+/// The turntable's read-back at one verify angle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableCheck {
+    /// Commanded table angle, degrees.
+    pub angle_deg: f64,
+    /// Raw count commanded for it.
+    pub commanded_raw: u16,
+    /// Mean read-back minus commanded raw, counts.
+    pub error_counts: f64,
+    /// Mean read-back table angle minus commanded, degrees.
+    pub error_deg: f64,
+}
+
+/// Turns the table to each of `angles_deg` in turn (`turn`: the arm to its home pose, then one
+/// rest-to-rest table move), reads it back `reads` times over 0x37 and reports the mean error
+/// against the commanded raw count and angle. The caller judges the errors.
+pub fn verify_table<T: Transport>(
+    bus: &mut Bus<T>,
+    table: &Turntable,
+    angles_deg: &[f64],
+    reads: usize,
+    turn: &mut TurnTable<'_, T>,
+) -> Result<Vec<TableCheck>, CalibError> {
+    let refuse = |m: String| CalibError::Refused(format!("turntable: {m}"));
+    let id = BusId::new(table.servo.id).map_err(|e| refuse(e.to_string()))?;
+    let reads = reads.max(1);
+    let mut out = Vec::with_capacity(angles_deg.len());
+    for &a in angles_deg {
+        let commanded_raw = table.raw(a.to_radians()).map_err(refuse)?;
+        turn(bus, a)?;
+        let (mut counts, mut deg) = (0.0, 0.0);
+        for _ in 0..reads {
+            let raw = bus.read_any_raw(id, table.servo.raw_range)?;
+            counts += f64::from(raw) - f64::from(commanded_raw);
+            deg += table.angle_from_raw(raw).map_err(refuse)?.to_degrees() - a;
+        }
+        out.push(TableCheck {
+            angle_deg: a,
+            commanded_raw,
+            error_counts: counts / reads as f64,
+            error_deg: deg / reads as f64,
+        });
+    }
+    Ok(out)
 }

@@ -18,7 +18,7 @@ use crate::calibrate::{
     TouchSource,
 };
 use crate::plan::frames;
-use crate::robot::{Robot, RobotConfig, Workcell};
+use crate::robot::{Robot, RobotConfig};
 
 /// Arguments of `calibrate`.
 #[derive(Debug, Args)]
@@ -197,6 +197,9 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
             targets.as_deref(),
             &cfg.calibrate,
         )?),
+        Routine::Verify { .. } => {
+            super::calibrate_verify::prepare(&servos_in, &workcell_in, &cfg.calibrate)?
+        }
         _ => None,
     };
     let targets = match &args.routine {
@@ -254,7 +257,7 @@ struct Ctx<'a> {
     tool_in: &'a Path,
     servos_in: &'a Path,
     workcell_in: PathBuf,
-    /// The cell's turntable (`calibrate turntable` only).
+    /// The cell's turntable (`calibrate turntable`, and `verify` on a cell with one).
     table: Option<crate::robot::Turntable>,
 }
 
@@ -355,51 +358,9 @@ fn routine(
         Routine::Turntable { angles, .. } => turntable(bus, cell, angles, targets, ctx),
         Routine::Verify { .. } => {
             let poses = targets.expect("set in run");
-            let workcell = match &fixture {
-                Some(_) => Some(Workcell::load(&ctx.workcell_in)?),
-                None => None,
-            };
-            let pair = fixture.as_ref().zip(workcell.as_ref());
-            let r = calibrate::verify(bus, cell, &poses, pair)?;
-            for (k, p) in r.poses.iter().enumerate() {
-                let e: Vec<String> = p
-                    .servo_error_deg
-                    .iter()
-                    .map(|v| format!("{v:+.3}"))
-                    .collect();
-                let fid = match (&p.fiducial, p.fiducial_error_mm) {
-                    (Some(n), Some(e)) => format!(", fiducial {n} {e:.3} mm"),
-                    _ => String::new(),
-                };
-                say(&format!(
-                    "calibrate verify: pose {}: servo error [deg] {}; tool tip {:.3} mm{fid}",
-                    k + 1,
-                    e.join(" "),
-                    p.tip_error_mm
-                ));
-            }
-            let fid = r
-                .max_fiducial_error_mm
-                .map(|e| format!(", fiducials {e:.3} mm"))
-                .unwrap_or_default();
-            let worst: Vec<String> = r
-                .max_servo_error_deg
-                .iter()
-                .map(|v| format!("{v:.3}"))
-                .collect();
-            say(&format!(
-                "calibrate verify: worst servo error [deg] {}; worst tool tip {:.3} mm{fid}",
-                worst.join(" "),
-                r.max_tip_error_mm
-            ));
-            if r.ok {
-                Ok(())
-            } else {
-                Err(CalibError::Refused(format!(
-                    "tool-tip error above {} mm (tip {:.3} mm{fid})",
-                    cell.cfg.max_verify_tip_error_mm, r.max_tip_error_mm
-                )))
-            }
+            let table = ctx.table.as_ref();
+            let w = &ctx.workcell_in;
+            super::calibrate_verify::run(bus, cell, table, &poses, fixture.as_ref(), w)
         }
     }
 }
@@ -419,7 +380,8 @@ fn turntable(
     super::calibrate_table::run(bus, cell, table, angles, src.as_mut(), input, &out)
 }
 
-fn say(line: &str) {
+/// Prints one line of a routine's report (flushed at once: the jog terminal runs raw).
+pub(super) fn say(line: &str) {
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{line}");
     let _ = out.flush();

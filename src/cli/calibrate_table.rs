@@ -25,17 +25,9 @@ pub fn run<T: Transport>(
     workcell_out: &Path,
 ) -> Result<(), CalibError> {
     let table = table.ok_or_else(|| CalibError::Refused("the cell has no turntable".into()))?;
-    let period = cell.robot.servos.period;
-    let settle = bus.config().settle_ms;
-    let gripper = cell.gripper_deg;
-    let mut turn = |bus: &mut Bus<T>, deg: f64| -> Result<(), CalibError> {
-        bus.move_joints(&HOME, gripper, None)?;
-        super::table::turn(bus, table, deg, period, settle)
-            .map(|_| ())
-            .map_err(|e| CalibError::Refused(super::common::one_line(&e)))
-    };
+    let mut turn = |bus: &mut Bus<T>, deg: f64| turn_at_home(bus, cell, table, deg);
     let fit = turntable::turntable(bus, cell, angles, &mut turn, source)?;
-    bus.move_joints(&HOME, gripper, None)?;
+    bus.move_joints(&HOME, cell.gripper_deg, None)?;
     turntable::write_workcell(workcell_in, workcell_out, &fit)?;
     let per: Vec<String> = angles
         .iter()
@@ -61,6 +53,21 @@ pub fn run<T: Transport>(
         workcell_out.display()
     );
     Ok(())
+}
+
+/// Moves the arm to its home pose, then turns the table to `deg` degrees in one rest-to-rest
+/// move (`arm move --table`, read back at the end); a refused or missed turn is one line.
+pub fn turn_at_home<T: Transport>(
+    bus: &mut Bus<T>,
+    cell: &Cell,
+    table: &Turntable,
+    deg: f64,
+) -> Result<(), CalibError> {
+    bus.move_joints(&HOME, cell.gripper_deg, None)?;
+    let settle = bus.config().settle_ms;
+    super::table::turn(bus, table, deg, cell.robot.servos.period, settle)
+        .map(|_| ())
+        .map_err(|e| CalibError::Refused(super::common::one_line(&e)))
 }
 
 /// Checks that need no arm, before anything moves: the cell has a turntable, the angles can

@@ -8,6 +8,7 @@ mod arm;
 mod calibrate;
 mod calibrate_removal;
 mod calibrate_table;
+mod calibrate_verify;
 mod common;
 mod cycle;
 mod demo;

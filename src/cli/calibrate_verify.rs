@@ -1,0 +1,140 @@
+//! `polishbot calibrate verify [--targets FILE [--fixture FILE]]`: on a cell with a turntable
+//! the table is checked first: turned to each of `[calibrate] verify_table_angles_deg` (the
+//! arm at its home pose during each turn), read back over 0x37 and its error reported per
+//! angle in counts and degrees, then turned back to 0 (the placement workcell.toml gives).
+//! Then the arm moves through the check poses (calibrate/verify.rs). Fails with one line
+//! naming every check over its tolerance.
+use std::path::Path;
+
+use super::calibrate::say;
+use crate::bus::{Bus, Transport, JOINT_COUNT};
+use crate::calibrate::jog::Cell;
+use crate::calibrate::verify::{verify_table, TableCheck};
+use crate::calibrate::{self, CalibError, CalibrationConfig, Fixture};
+use crate::robot::{Turntable, Workcell};
+
+/// The config key of the table's check angles, named in its errors.
+const ANGLES_KEY: &str = "[calibrate] verify_table_angles_deg";
+
+/// The cell's turntable, if it has one, with the check angles tested against its range before
+/// anything moves.
+pub fn prepare(
+    servos: &Path,
+    workcell: &Path,
+    cfg: &CalibrationConfig,
+) -> anyhow::Result<Option<Turntable>> {
+    let Some(table) = Turntable::load(servos, workcell)? else {
+        return Ok(None);
+    };
+    anyhow::ensure!(
+        !cfg.verify_table_angles_deg.is_empty(),
+        "{ANGLES_KEY}: empty; the cell's turntable needs at least one check angle"
+    );
+    for a in cfg.verify_table_angles_deg.iter().chain(&[0.0]) {
+        table
+            .raw(a.to_radians())
+            .map_err(|m| anyhow::anyhow!("{ANGLES_KEY}: {m}"))?;
+    }
+    Ok(Some(table))
+}
+
+/// Runs verify: the table (when the cell has one), then the check poses; prints every error.
+pub fn run<T: Transport>(
+    bus: &mut Bus<T>,
+    cell: &Cell,
+    table: Option<&Turntable>,
+    poses: &[[f64; JOINT_COUNT]],
+    fixture: Option<&Fixture>,
+    workcell_in: &Path,
+) -> Result<(), CalibError> {
+    let mut failed = Vec::new();
+    if let Some(table) = table {
+        let angles = &cell.cfg.verify_table_angles_deg;
+        let mut turn = |bus: &mut Bus<T>, deg: f64| {
+            super::calibrate_table::turn_at_home(bus, cell, table, deg)
+        };
+        bus.torque(true)?;
+        let checks = verify_table(bus, table, angles, cell.cfg.touch_reads, &mut turn)?;
+        if angles.last() != Some(&0.0) {
+            turn(bus, 0.0)?;
+        }
+        failed.extend(judge_table(&checks, cell.cfg.max_verify_table_error_counts));
+    }
+    let workcell = match fixture {
+        Some(_) => Some(Workcell::load(workcell_in)?),
+        None => None,
+    };
+    let r = calibrate::verify(bus, cell, poses, fixture.zip(workcell.as_ref()))?;
+    for (k, p) in r.poses.iter().enumerate() {
+        let e: Vec<String> = p
+            .servo_error_deg
+            .iter()
+            .map(|v| format!("{v:+.3}"))
+            .collect();
+        let fid = match (&p.fiducial, p.fiducial_error_mm) {
+            (Some(n), Some(e)) => format!(", fiducial {n} {e:.3} mm"),
+            _ => String::new(),
+        };
+        say(&format!(
+            "calibrate verify: pose {}: servo error [deg] {}; tool tip {:.3} mm{fid}",
+            k + 1,
+            e.join(" "),
+            p.tip_error_mm
+        ));
+    }
+    let fid = r
+        .max_fiducial_error_mm
+        .map(|e| format!(", fiducials {e:.3} mm"))
+        .unwrap_or_default();
+    let worst: Vec<String> = r
+        .max_servo_error_deg
+        .iter()
+        .map(|v| format!("{v:.3}"))
+        .collect();
+    say(&format!(
+        "calibrate verify: worst servo error [deg] {}; worst tool tip {:.3} mm{fid}",
+        worst.join(" "),
+        r.max_tip_error_mm
+    ));
+    if !r.ok {
+        failed.insert(
+            0,
+            format!(
+                "tool-tip error above {} mm (tip {:.3} mm{fid})",
+                cell.cfg.max_verify_tip_error_mm, r.max_tip_error_mm
+            ),
+        );
+    }
+    match failed.is_empty() {
+        true => Ok(()),
+        false => Err(CalibError::Refused(failed.join("; "))),
+    }
+}
+
+/// Prints the table's error per angle and the worst; the failure line when the worst exceeds
+/// `tolerance` counts.
+fn judge_table(checks: &[TableCheck], tolerance: u16) -> Option<String> {
+    for c in checks {
+        say(&format!(
+            "calibrate verify: table {} deg (raw {}): read-back error {:+.2} counts ({:+.3} deg)",
+            c.angle_deg, c.commanded_raw, c.error_counts, c.error_deg
+        ));
+    }
+    let worst = checks
+        .iter()
+        .max_by(|a, b| a.error_counts.abs().total_cmp(&b.error_counts.abs()))?;
+    say(&format!(
+        "calibrate verify: worst table error {:.2} counts ({:.3} deg) at {} deg",
+        worst.error_counts.abs(),
+        worst.error_deg.abs(),
+        worst.angle_deg
+    ));
+    (worst.error_counts.abs() > f64::from(tolerance)).then(|| {
+        format!(
+            "table read-back error {:.2} counts ({:.3} deg) at {} deg above {tolerance} counts",
+            worst.error_counts.abs(),
+            worst.error_deg.abs(),
+            worst.angle_deg
+        )
+    })
+}
