@@ -51,6 +51,20 @@ fn reach(robot: &Robot, p: Vector3<f64>) -> [f64; 5] {
     panic!("the arm reaches no pose at {p:?}");
 }
 
+/// `polishbot calibrate ROUTINE --sim --cell calibration/turntable`.
+fn on_the_table_cell(routine: &str) -> std::process::Command {
+    let mut cmd = common::polishbot();
+    cmd.args(["calibrate", routine, "--sim", "--cell"])
+        .arg(common::calib("turntable"));
+    cmd
+}
+
+/// One line of a joint targets file.
+fn target_line(q: &[f64; 5]) -> String {
+    let v: Vec<String> = q.iter().map(|x| format!("{x:?}")).collect();
+    v.join(", ") + "\n"
+}
+
 fn sim_bus(robot: &Robot) -> (SimArm, Bus<polishbot::bus::SimTransport>) {
     let cfg = BusConfig {
         servo_map: frames::servo_map(robot).unwrap(),
@@ -174,17 +188,13 @@ fn calibrate_turntable_on_the_cli_writes_the_fitted_axis_and_centre() {
     let targets = dir.path().join("targets.txt");
     let mut text = String::from("# joint targets, rad, one per table angle\n");
     for &a in &angles {
-        let q = reach(&robot, fiducial(a));
-        let v: Vec<String> = q.iter().map(|x| format!("{x:?}")).collect();
-        text.push_str(&(v.join(", ") + "\n"));
+        text.push_str(&target_line(&reach(&robot, fiducial(a))));
     }
     std::fs::write(&targets, text).unwrap();
     let list: Vec<String> = angles.iter().map(|a| a.to_string()).collect();
     let out = dir.path().join("cell");
     common::succeed(
-        common::polishbot()
-            .args(["calibrate", "turntable", "--sim", "--cell"])
-            .arg(common::calib("turntable"))
+        on_the_table_cell("turntable")
             .arg("--out")
             .arg(&out)
             .arg("--targets")
@@ -200,9 +210,7 @@ fn calibrate_turntable_on_the_cli_writes_the_fitted_axis_and_centre() {
     let (axis, centre) = planted();
     assert!(table.axis.angle(&axis).to_degrees() < 0.2);
     assert!((table.centre - centre).norm() * 1000.0 < 0.3);
-    let few = common::polishbot()
-        .args(["calibrate", "turntable", "--sim", "--cell"])
-        .arg(common::calib("turntable"))
+    let few = on_the_table_cell("turntable")
         .arg("--out")
         .arg(&out)
         .args(["--angles", "0,10,20"])
@@ -241,17 +249,13 @@ fn calibrate_workcell_on_a_turntable_cell_keeps_the_turntable() {
             p[0], p[1], p[2]
         ));
         let at = shipped.point_from_reference_mm(&Point3::from(*p));
-        let q = reach(&robot, at.coords);
-        let v: Vec<String> = q.iter().map(|x| format!("{x:?}")).collect();
-        targets.push_str(&(v.join(", ") + "\n"));
+        targets.push_str(&target_line(&reach(&robot, at.coords)));
     }
     std::fs::write(dir.path().join("fixture.toml"), fixture).unwrap();
     std::fs::write(dir.path().join("targets.txt"), targets).unwrap();
     let out = dir.path().join("cell");
     common::succeed(
-        common::polishbot()
-            .args(["calibrate", "workcell", "--sim", "--cell"])
-            .arg(common::calib("turntable"))
+        on_the_table_cell("workcell")
             .arg("--out")
             .arg(&out)
             .arg("--fixture")
@@ -299,9 +303,7 @@ fn calibrate_verify_turns_the_table_and_reports_its_read_back_error() {
         let config = dir.path().join(name);
         let text = format!("[sim.mechanics]\nread_noise_counts = 1\nnoise_seed = 7\n{extra}");
         std::fs::write(&config, text).unwrap();
-        common::polishbot()
-            .args(["calibrate", "verify", "--sim", "--cell"])
-            .arg(common::calib("turntable"))
+        on_the_table_cell("verify")
             .arg("--config")
             .arg(&config)
             .output()
@@ -348,23 +350,21 @@ fn calibrate_verify_turns_the_table_and_reports_its_read_back_error() {
         "{stdout}"
     );
 
-    let strict = verify(
-        "strict.toml",
-        "[calibrate]\nmax_verify_table_error_counts = 0\n",
-    );
-    let line = common::one_line_failure(&strict);
-    assert!(
-        line.contains("table read-back error") && line.contains("above 0 counts"),
-        "{line}"
-    );
-
-    let far = verify(
-        "far.toml",
-        "[calibrate]\nverify_table_angles_deg = [0.0, 200.0]\n",
-    );
-    let line = common::one_line_failure(&far);
-    assert!(
-        line.contains("verify_table_angles_deg") && line.contains("outside"),
-        "{line}"
-    );
+    // (config file, its [calibrate] lines, what the one-line failure names)
+    let refused = [
+        (
+            "strict.toml",
+            "max_verify_table_error_counts = 0",
+            ["table read-back error", "above 0 counts"],
+        ),
+        (
+            "far.toml",
+            "verify_table_angles_deg = [0.0, 200.0]",
+            ["verify_table_angles_deg", "outside"],
+        ),
+    ];
+    for (name, setting, words) in refused {
+        let line = common::one_line_failure(&verify(name, &format!("[calibrate]\n{setting}\n")));
+        assert!(words.iter().all(|w| line.contains(w)), "{line}");
+    }
 }
