@@ -394,7 +394,13 @@ fn a_ground_rescan_is_a_plain_inspect_input_and_regions_shrink_only_where_the_si
     common::succeed(polishbot().args(plan).arg(d("plan.json")));
     // a true k three times the nominal: one pass of the default k takes 0.03 mm off the
     // region's mean (measured), too close to the rescan's own 0.01 mm to assert on
-    std::fs::write(dir.join("run.toml"), "[sim.grinding]\nk_factor = 3.0\n").unwrap();
+    // a rigid plan is for a rigid burr: the simulated mount is stiff (20 N/mm, the simulator's
+    // default before the compliant 1 N/mm tool became the default)
+    std::fs::write(
+        dir.join("run.toml"),
+        "[sim.grinding]\nk_factor = 3.0\nspring_rate_n_mm = 20.0\n",
+    )
+    .unwrap();
     let run = [
         "run",
         "--config",

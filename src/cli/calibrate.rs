@@ -10,6 +10,7 @@ use clap::{Args, Subcommand};
 use serde::Deserialize;
 
 use super::arm::LinkArgs;
+use super::common::say;
 use crate::bus::{Bus, BusConfig, SimOptions, Transport, JOINT_COUNT};
 use crate::calibrate::jog::{Cell, RawTerminal};
 use crate::calibrate::verify::DEFAULT_CHECK_POSES;
@@ -378,13 +379,6 @@ fn turntable(
     let table = ctx.table.as_ref();
     let input = &ctx.workcell_in;
     super::calibrate_table::run(bus, cell, table, angles, src.as_mut(), input, &out)
-}
-
-/// Prints one line of a routine's report (flushed at once: the jog terminal runs raw).
-pub(super) fn say(line: &str) {
-    let mut out = std::io::stdout().lock();
-    let _ = writeln!(out, "{line}");
-    let _ = out.flush();
 }
 
 fn servos(

@@ -6,7 +6,7 @@
 //! naming every check over its tolerance.
 use std::path::Path;
 
-use super::calibrate::say;
+use super::common::say;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
 use crate::calibrate::jog::Cell;
 use crate::calibrate::verify::{verify_table, TableCheck};

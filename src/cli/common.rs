@@ -50,3 +50,12 @@ pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<
     serde_json::from_str(&text)
         .map_err(|e| anyhow::anyhow!("{}: line {}: {e}", path.display(), e.line()))
 }
+
+/// Prints one line of a calibration routine's report (flushed at once: the jog terminal runs
+/// raw).
+pub fn say(line: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{line}");
+    let _ = out.flush();
+}

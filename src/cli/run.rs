@@ -122,7 +122,7 @@ fn start_frame(resume: Option<&Path>, sha: &str, frames: usize) -> anyhow::Resul
     let from = rp.resume_from();
     anyhow::ensure!(
         from < frames as u64,
-        "{}: --resume: the journal says step {from} was sent, but the plan has {frames} steps",
+        "{}: --resume: the journal says frame {from} was sent, but the plan has {frames} frames (arm and table)",
         j.display()
     );
     Ok(from as usize)
