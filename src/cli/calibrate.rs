@@ -3,7 +3,6 @@
 //! the calibration routines of docs/CALIBRATION.md. Each reads the cell's files from `--out`
 //! where they exist there (so servos -> tool -> workcell -> verify chain in one folder), else
 //! from `[robot]`, and writes its own file into `--out`.
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
