@@ -253,12 +253,14 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
     std::fs::create_dir_all(&dir).unwrap();
     let truth = common::case(3, &dir);
     // the rigid loop as this test was written for it: depth layers ground by a stiff burr
-    // (20 N/mm, the simulator's former default mount) whose true k is 1.3 x the simulator's
-    // default; the removal loop (now the default mode) is the two-case test below
+    // (20 N/mm, the simulator's former default mount) whose true k is 1.3 x 1e-4 mm^2/N, a
+    // 10 MPa abrasive at 5000 rpm (the simulator's former default tool); the removal loop
+    // (now the default mode) is the two-case test below
     let cfg = dir.join("cycle.toml");
     std::fs::write(
         &cfg,
-        "[run.sim.grinding]\nk_factor = 1.3\nspring_rate_n_mm = 20.0\n",
+        "[run.sim.grinding]\npreston_k = 1e-4\nk_factor = 1.3\nspring_rate_n_mm = 20.0\n\
+         modulus_mpa = 10.0\nspindle_rpm = 5000.0\n",
     )
     .unwrap();
     let out = cycle(&dir, "cycle")
