@@ -395,6 +395,10 @@ struct Acceptance {
     k_ratio: Option<f64>,
     /// Largest removal on a pit, mm.
     on_pits: f64,
+    /// Iteration 1's agreement (cycle.json): RMS over its defect points of the residual
+    /// predicted at the plan's k, at the fitted k, achieved, and achieved minus predicted at
+    /// the fitted k point by point, mm.
+    agreement: Option<[f64; 4]>,
 }
 
 /// Runs `cycle --mode removal` on synth case `seed` with the simulator's true k 1.3 x the
@@ -463,10 +467,23 @@ fn acceptance(seed: u64) -> Acceptance {
         plan_k,
     );
     let k_ratio = fitted.map(|k| k / k_true);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cycle/cycle.json")).unwrap())
+            .unwrap();
+    let agreement = json["records"][0]["agreement"].as_object().map(|a| {
+        [
+            "predicted_plan_k_mm",
+            "predicted_fitted_k_mm",
+            "achieved_mm",
+            "difference_mm",
+        ]
+        .map(|key| a[key].as_f64().unwrap_or(f64::NAN))
+    });
     let a = Acceptance {
         inspections,
         k_ratio,
         on_pits,
+        agreement,
     };
     println!("acceptance seed {seed}: {a:.4?}");
     a
@@ -498,6 +515,13 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
         let a = acceptance(seed);
         let (first, second) = (a.inspections[0], a.inspections[1]);
         assert!(a.k_ratio.is_some(), "seed {seed}: k not refitted");
+        // the first pass re-predicted at the fitted k, compared with what it achieved
+        let [plan_k, fitted_k, achieved, _] = a.agreement.expect("no agreement in cycle.json");
+        assert!(
+            plan_k > 0.0 && fitted_k > 0.0 && achieved > 0.0,
+            "{:?}",
+            a.agreement
+        );
         assert!(
             second.1 < first.1 * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
             "seed {seed}: volume {} -> {}",

@@ -111,7 +111,8 @@ fn the_exponents_bend_the_law_at_the_centre_as_written() {
     press(&mut part, &cfg, depth, tilt, time);
     let (p0, v) = centre_pressure_and_speed(&cfg, depth, tilt);
     let (pr, vr) = (cfg.reference_pressure_mpa, cfg.reference_speed_mm_s);
-    let want = cfg.preston_k * cfg.k_factor * pr * (p0 / pr).powf(1.1) * vr * (v / vr).powf(0.9) * time;
+    let want =
+        cfg.preston_k * cfg.k_factor * pr * (p0 / pr).powf(1.1) * vr * (v / vr).powf(0.9) * time;
     let got = part.removal()[at(0, 0)];
     assert!(((got - want) / want).abs() < 0.02, "{got} vs {want}");
 }
