@@ -131,7 +131,7 @@ fn rms_over(idx: &[usize], f: impl Fn(usize) -> f64) -> f64 {
 fn a_pass_re_predicted_with_the_fitted_k_scales_the_predicted_removal_at_each_point() {
     let (b, p) = before();
     // the true removal: 1.3 x the prediction, plus a ripple of +-0.004 mm point by point
-    let ripple = |i: usize| if i % 2 == 0 { 0.004 } else { -0.004 };
+    let ripple = |i: usize| if i.is_multiple_of(2) { 0.004 } else { -0.004 };
     let removed: Vec<f64> = (0..p.len()).map(|i| 1.3 * p[i] + ripple(i)).collect();
     let mut a = after(&b, &removed);
     // a point the second inspection did not measure is left out
