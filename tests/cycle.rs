@@ -505,10 +505,13 @@ fn accepted(a: &Acceptance) -> bool {
 
 /// The first two of the ten cases in the suite, with the parts of the issue's acceptance that
 /// hold today: k is refitted after the first grind, the first grind removes at least
-/// `min_progress` of the repairable excess volume, the pits are never ground. NOT asserted
-/// (measured, reported to the lead; the removal planner improves on branch issue-28): every
-/// repairable region within tolerance after 3 grinds, no core point below -tolerance, the
-/// first k within 10 % of the true k.
+/// `min_progress` of the repairable excess volume, the pits are never ground, the first pass
+/// is re-predicted at the fitted k in cycle.json. NOT asserted (measured, reported to the
+/// lead): every repairable region within tolerance after 3 grinds, no core point below
+/// -tolerance, the first k within 10 % of the true k, the re-prediction within 0.01 mm RMS
+/// (seed 1: 0.069 mm). The planner models every contact at tool.toml's 20 degree spindle tilt
+/// while the arm's joint angles give 2-45 degrees (region by region), so the true removal is
+/// 0.6-1.8 x the predicted one at the same k and no single k fits a pass.
 #[test]
 fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
     for seed in [1, 21] {
@@ -534,12 +537,17 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
 }
 
 /// All ten cases of the issue (seeds 1, 21, .., 181: each `case` tries 20 seeds from its
-/// own); slow, run by hand: `cargo test --release --test cycle -- --ignored ten`.
+/// own); slow, run by hand: `cargo test --release --test cycle -- --ignored ten`; a subset
+/// with `POLISHBOT_ACCEPT_SEEDS=61,81` (seed 41's second plan ran over 20 min, issue 29).
 #[test]
 #[ignore]
 fn ten_acceptance_cases_with_the_removal_planner() {
-    let results: Vec<(u64, bool)> = (0..10)
-        .map(|c| 1 + 20 * c)
+    let seeds: Vec<u64> = match std::env::var("POLISHBOT_ACCEPT_SEEDS") {
+        Ok(list) => list.split(',').map(|s| s.trim().parse().unwrap()).collect(),
+        Err(_) => (0..10).map(|c| 1 + 20 * c).collect(),
+    };
+    let results: Vec<(u64, bool)> = seeds
+        .into_iter()
         .map(|s| (s, accepted(&acceptance(s))))
         .collect();
     println!("accepted: {results:?}");
