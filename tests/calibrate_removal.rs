@@ -6,7 +6,7 @@
 mod common;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::cell::removal_fit::{fit, parse_predicted, predicted_removal, FitConfig};
+use polishbot::cell::removal_fit::{agreement, fit, parse_predicted, predicted_removal, FitConfig};
 use polishbot::plan::preston::PredictedRow;
 use polishbot::plan::{Inspection, RegionInfo, SurfacePoint};
 use rand::{Rng, SeedableRng};
@@ -120,6 +120,77 @@ fn a_known_scale_of_a_known_removal_field_gives_k_exactly() {
         .collect();
     let summed = predicted_removal(&b, &rows).unwrap();
     assert!(summed.iter().zip(&p).all(|(a, b)| (a - b).abs() < 1e-12));
+}
+
+/// RMS of `f` over the indices `idx`.
+fn rms_over(idx: &[usize], f: impl Fn(usize) -> f64) -> f64 {
+    (idx.iter().map(|&i| f(i).powi(2)).sum::<f64>() / idx.len() as f64).sqrt()
+}
+
+#[test]
+fn a_pass_re_predicted_with_the_fitted_k_scales_the_predicted_removal_at_each_point() {
+    let (b, p) = before();
+    // the true removal: 1.3 x the prediction, plus a ripple of +-0.004 mm point by point
+    let ripple = |i: usize| if i.is_multiple_of(2) { 0.004 } else { -0.004 };
+    let removed: Vec<f64> = (0..p.len()).map(|i| 1.3 * p[i] + ripple(i)).collect();
+    let mut a = after(&b, &removed);
+    // a point the second inspection did not measure is left out
+    a.points[1].distance = f64::NAN;
+    let got = agreement(&b, &a, &p, Some(1.3), &[0, 1]).unwrap();
+    // written out here: the defect points of regions 0 and 1, deviation d = p + 0.05 before
+    let idx: Vec<usize> = (0..p.len())
+        .filter(|&i| b.points[i].region < 2 && i != 1)
+        .collect();
+    let d = |i: usize| p[i] + 0.05;
+    let close = |x: f64, y: f64| assert!((x - y).abs() < 1e-12, "{x} vs {y}");
+    assert_eq!(got.points, idx.len());
+    close(got.predicted_plan_k_mm, rms_over(&idx, |i| d(i) - p[i]));
+    close(
+        got.predicted_fitted_k_mm.unwrap(),
+        rms_over(&idx, |i| 0.05 - 0.3 * p[i]),
+    );
+    close(got.achieved_mm, rms_over(&idx, |i| d(i) - removed[i]));
+    // at the fitted k only the ripple is left between prediction and achievement
+    close(got.difference_mm, 0.004);
+    // the lowest ground point: over the defect points and wherever removal was predicted
+    // (the pit region's points in the tool's reach too)
+    let lowest = (0..p.len())
+        .filter(|&i| i != 1 && (b.points[i].region < 2 || p[i] > 0.0))
+        .map(|i| d(i) - removed[i])
+        .fold(f64::INFINITY, f64::min);
+    close(got.lowest_ground_mm, lowest);
+    // k not fitted: compared with the plan's k
+    let plain = agreement(&b, &a, &p, None, &[0, 1]).unwrap();
+    assert_eq!(plain.predicted_fitted_k_mm, None);
+    close(
+        plain.difference_mm,
+        rms_over(&idx, |i| 0.3 * p[i] + ripple(i)),
+    );
+    // no planned region: nothing to compare
+    assert_eq!(agreement(&b, &a, &p, Some(1.3), &[7]), None);
+}
+
+#[test]
+fn the_planners_removal_rate_is_linear_in_k() {
+    // what makes the re-prediction a scaling: the planner's removal is its influence rate
+    // times the dwell, and the rate at every patch offset is proportional to k
+    use polishbot::plan::removal::{Influence, ToolModel};
+    let tool = ToolModel::default();
+    let scaled = ToolModel {
+        preston_k_mm2_n: tool.preston_k_mm2_n * 1.37,
+        ..tool.clone()
+    };
+    let (a, b) = (Influence::new(&tool, 3.0), Influence::new(&scaled, 3.0));
+    let mut nonzero = 0;
+    for i in -8..=8 {
+        for j in -8..=8 {
+            let (x, y) = (i as f64 * 0.08, j as f64 * 0.08);
+            let (ra, rb) = (a.rate(x, y), b.rate(x, y));
+            assert!((rb - 1.37 * ra).abs() <= 1e-12 * rb.abs(), "({x}, {y})");
+            nonzero += usize::from(ra > 0.0);
+        }
+    }
+    assert!(nonzero > 50, "{nonzero} offsets inside the patch");
 }
 
 /// One standard normal draw (Box-Muller).

@@ -253,12 +253,14 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
     std::fs::create_dir_all(&dir).unwrap();
     let truth = common::case(3, &dir);
     // the rigid loop as this test was written for it: depth layers ground by a stiff burr
-    // (20 N/mm, the simulator's former default mount) whose true k is 1.3 x the simulator's
-    // default; the removal loop (now the default mode) is the two-case test below
+    // (20 N/mm, the simulator's former default mount) whose true k is 1.3 x 1e-4 mm^2/N, a
+    // 10 MPa abrasive at 5000 rpm (the simulator's former default tool); the removal loop
+    // (now the default mode) is the two-case test below
     let cfg = dir.join("cycle.toml");
     std::fs::write(
         &cfg,
-        "[run.sim.grinding]\nk_factor = 1.3\nspring_rate_n_mm = 20.0\n",
+        "[run.sim.grinding]\npreston_k = 1e-4\nk_factor = 1.3\nspring_rate_n_mm = 20.0\n\
+         modulus_mpa = 10.0\nspindle_rpm = 5000.0\n",
     )
     .unwrap();
     let out = cycle(&dir, "cycle")
@@ -393,6 +395,10 @@ struct Acceptance {
     k_ratio: Option<f64>,
     /// Largest removal on a pit, mm.
     on_pits: f64,
+    /// Iteration 1's agreement (cycle.json): RMS over its defect points of the residual
+    /// predicted at the plan's k, at the fitted k, achieved, and achieved minus predicted at
+    /// the fitted k point by point, mm.
+    agreement: Option<[f64; 4]>,
 }
 
 /// Runs `cycle --mode removal` on synth case `seed` with the simulator's true k 1.3 x the
@@ -461,10 +467,23 @@ fn acceptance(seed: u64) -> Acceptance {
         plan_k,
     );
     let k_ratio = fitted.map(|k| k / k_true);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cycle/cycle.json")).unwrap())
+            .unwrap();
+    let agreement = json["records"][0]["agreement"].as_object().map(|a| {
+        [
+            "predicted_plan_k_mm",
+            "predicted_fitted_k_mm",
+            "achieved_mm",
+            "difference_mm",
+        ]
+        .map(|key| a[key].as_f64().unwrap_or(f64::NAN))
+    });
     let a = Acceptance {
         inspections,
         k_ratio,
         on_pits,
+        agreement,
     };
     println!("acceptance seed {seed}: {a:.4?}");
     a
@@ -486,16 +505,26 @@ fn accepted(a: &Acceptance) -> bool {
 
 /// The first two of the ten cases in the suite, with the parts of the issue's acceptance that
 /// hold today: k is refitted after the first grind, the first grind removes at least
-/// `min_progress` of the repairable excess volume, the pits are never ground. NOT asserted
-/// (measured, reported to the lead; the removal planner improves on branch issue-28): every
-/// repairable region within tolerance after 3 grinds, no core point below -tolerance, the
-/// first k within 10 % of the true k.
+/// `min_progress` of the repairable excess volume, the pits are never ground, the first pass
+/// is re-predicted at the fitted k in cycle.json. NOT asserted (measured, reported to the
+/// lead): every repairable region within tolerance after 3 grinds, no core point below
+/// -tolerance, the first k within 10 % of the true k, the re-prediction within 0.01 mm RMS
+/// (seed 1: 0.069 mm). The planner models every contact at tool.toml's 20 degree spindle tilt
+/// while the arm's joint angles give 2-45 degrees (region by region), so the true removal is
+/// 0.6-1.8 x the predicted one at the same k and no single k fits a pass.
 #[test]
 fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
     for seed in [1, 21] {
         let a = acceptance(seed);
         let (first, second) = (a.inspections[0], a.inspections[1]);
         assert!(a.k_ratio.is_some(), "seed {seed}: k not refitted");
+        // the first pass re-predicted at the fitted k, compared with what it achieved
+        let [plan_k, fitted_k, achieved, _] = a.agreement.expect("no agreement in cycle.json");
+        assert!(
+            plan_k > 0.0 && fitted_k > 0.0 && achieved > 0.0,
+            "{:?}",
+            a.agreement
+        );
         assert!(
             second.1 < first.1 * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
             "seed {seed}: volume {} -> {}",
@@ -508,12 +537,17 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
 }
 
 /// All ten cases of the issue (seeds 1, 21, .., 181: each `case` tries 20 seeds from its
-/// own); slow, run by hand: `cargo test --release --test cycle -- --ignored ten`.
+/// own); slow, run by hand: `cargo test --release --test cycle -- --ignored ten`; a subset
+/// with `POLISHBOT_ACCEPT_SEEDS=61,81` (seed 41's second plan ran over 20 min, issue 29).
 #[test]
 #[ignore]
 fn ten_acceptance_cases_with_the_removal_planner() {
-    let results: Vec<(u64, bool)> = (0..10)
-        .map(|c| 1 + 20 * c)
+    let seeds: Vec<u64> = match std::env::var("POLISHBOT_ACCEPT_SEEDS") {
+        Ok(list) => list.split(',').map(|s| s.trim().parse().unwrap()).collect(),
+        Err(_) => (0..10).map(|c| 1 + 20 * c).collect(),
+    };
+    let results: Vec<(u64, bool)> = seeds
+        .into_iter()
         .map(|s| (s, accepted(&acceptance(s))))
         .collect();
     println!("accepted: {results:?}");

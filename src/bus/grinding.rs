@@ -11,11 +11,12 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GrindConfig {
-    /// The planner's nominal Preston coefficient, mm^2/N (= 1/MPa): the removal rate in mm/s
-    /// is k x pressure (MPa) x speed (mm/s) for exponents 1. Default 1e-4: about 0.05 mm per
-    /// second of dwell at 1 MPa and 500 mm/s.
+    /// The nominal Preston coefficient, mm^2/N (= 1/MPa): the removal rate in mm/s is k x
+    /// pressure (MPa) x speed (mm/s) for exponents 1. Default [`NOMINAL_PRESTON_K`], the
+    /// shipped calibration/tool.toml's `preston_k_mm2_n`.
     pub preston_k: f64,
-    /// True k / nominal k (default 1.0: the true k equals the nominal on average).
+    /// True k / nominal k (default [`DEFAULT_K_FACTOR`], 1.3: an uncalibrated tool whose true
+    /// k is 30 % above the shipped tool.toml's, which the loop's refit must learn).
     pub k_factor: f64,
     /// Amplitude of the local variation of the true k, share (default 0.10: +-10 %).
     pub k_noise: f64,
@@ -35,10 +36,12 @@ pub struct GrindConfig {
     /// the shipped tool.toml's mount: the simulated cell carries the same spring as the tool it
     /// grinds with; at the former 20 N/mm the planner's 2 mm preload pressed with 40 N).
     pub spring_rate_n_mm: f64,
-    /// Effective (Hertz) modulus of the abrasive ball against the part, MPa (default 10: a
-    /// rubber-bonded abrasive; patch radius 0.6 mm at 1 N on a 3 mm ball).
+    /// Effective (Hertz) modulus of the abrasive ball against the part, MPa (default
+    /// [`NOMINAL_MODULUS_MPA`], 20: the shipped tool.toml's rubber-bonded abrasive; patch
+    /// radius 0.6 mm at 2 N on a 3 mm ball).
     pub modulus_mpa: f64,
-    /// Spindle speed, rev/min (default 5000: a rotary tool at its low setting).
+    /// Spindle speed, rev/min (default [`NOMINAL_SPINDLE_RPM`], 10000: the shipped
+    /// tool.toml's).
     pub spindle_rpm: f64,
     /// Radius of the ball, mm (default 3, the shipped tool.toml's).
     pub ball_radius_mm: f64,
@@ -68,8 +71,8 @@ pub struct GrindConfig {
 impl Default for GrindConfig {
     fn default() -> Self {
         GrindConfig {
-            preston_k: 1e-4,
-            k_factor: 1.0,
+            preston_k: NOMINAL_PRESTON_K,
+            k_factor: DEFAULT_K_FACTOR,
             k_noise: 0.10,
             k_noise_wavelength_mm: 8.0,
             seed: 29,
@@ -78,8 +81,8 @@ impl Default for GrindConfig {
             reference_pressure_mpa: 1.0,
             reference_speed_mm_s: 500.0,
             spring_rate_n_mm: 1.0,
-            modulus_mpa: 10.0,
-            spindle_rpm: 5000.0,
+            modulus_mpa: NOMINAL_MODULUS_MPA,
+            spindle_rpm: NOMINAL_SPINDLE_RPM,
             ball_radius_mm: 3.0,
             tip_offset_mm: [0.0, 0.0, 19.3],
             mount_offset_mm: [0.0; 3],
@@ -92,6 +95,22 @@ impl Default for GrindConfig {
         }
     }
 }
+
+/// Nominal Preston coefficient of the simulated tool, mm^2/N: the shipped
+/// calibration/tool.toml's `[removal] preston_k_mm2_n` (5e-6), written here rather than read
+/// from the planner's file, so that the simulator's truth never follows the planner's model.
+/// The former default, 1e-4 (20 x the tool file's, at half its modulus and spindle speed),
+/// ground the demo's virtual part 3.24 mm deep in one pass (measured, issue 29).
+pub const NOMINAL_PRESTON_K: f64 = 5e-6;
+/// True k / nominal k by default: 1.3, the issue's "planner's k 30 % off the simulator's true
+/// k"; an uncalibrated tool that the loop's refit of k must learn.
+pub const DEFAULT_K_FACTOR: f64 = 1.3;
+/// Nominal Hertz modulus of the simulated abrasive, MPa: the shipped tool.toml's
+/// `[removal] modulus_mpa` (20).
+pub const NOMINAL_MODULUS_MPA: f64 = 20.0;
+/// Nominal spindle speed of the simulated tool, rev/min: the shipped tool.toml's
+/// `[removal] spindle_rpm` (10000).
+pub const NOMINAL_SPINDLE_RPM: f64 = 10000.0;
 
 /// Default backlash per joint, degrees: 0 (off). shared/DOFBOT.md reports "up to 1 deg per
 /// servo"; with 1 degree and 5 mm of sag a removal grind of tests/cycle.rs's seed-3 case fits

@@ -6,7 +6,7 @@
 //! Front function: [`decide`] with a [`CycleConfig`]; one [`IterationRecord`] per inspection.
 use serde::{Deserialize, Serialize};
 
-use super::removal_fit::SAME_POINT_MM;
+use super::removal_fit::{Agreement, SAME_POINT_MM};
 use crate::plan::{Inspection, Plan};
 use crate::regions::{Region, Verdict};
 use crate::report::escape;
@@ -155,6 +155,9 @@ pub struct IterationRecord {
     pub progress: Option<f64>,
     /// Preston's k fitted after this iteration's grind, mm^2/N (None: not fitted).
     pub k_fitted: Option<f64>,
+    /// The grind's prediction at the plan's and at the fitted k against the achieved
+    /// residual, over the same defect points (removal plans only).
+    pub agreement: Option<Agreement>,
 }
 
 impl IterationRecord {
@@ -169,6 +172,7 @@ impl IterationRecord {
             achieved_residual_mm: None,
             progress: None,
             k_fitted: None,
+            agreement: None,
         }
     }
 
@@ -288,8 +292,11 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or("-".into(), |x| format!("{x:.digits$}"))
 }
 
+/// Columns of the table.
+const COLUMNS: usize = 11;
+
 /// The table's header cells.
-pub const TABLE_HEADER: [&str; 9] = [
+pub const TABLE_HEADER: [&str; COLUMNS] = [
     "iter",
     "verdict",
     "regions (pits)",
@@ -298,11 +305,27 @@ pub const TABLE_HEADER: [&str; 9] = [
     "volume mm3",
     "removed %",
     "residual pred/achieved mm",
+    "defect pts: pred k0/pred k fit/achieved (fit-achieved) mm",
+    "lowest ground mm",
     "k mm2/N",
 ];
 
+/// The agreement cell: the RMS residuals over the same defect points, predicted at the
+/// plan's k, at the fitted k and achieved, and the point-by-point RMS difference.
+fn agreement_cell(a: Option<&Agreement>) -> String {
+    a.map_or("-".into(), |a| {
+        format!(
+            "{:.4}/{}/{:.4} ({:.4})",
+            a.predicted_plan_k_mm,
+            opt(a.predicted_fitted_k_mm, 4),
+            a.achieved_mm,
+            a.difference_mm
+        )
+    })
+}
+
 /// The table's cells of one record.
-pub fn table_row(r: &IterationRecord) -> [String; 9] {
+pub fn table_row(r: &IterationRecord) -> [String; COLUMNS] {
     let m = &r.measured;
     let verdict = serde_json::to_value(m.verdict)
         .ok()
@@ -321,6 +344,8 @@ pub fn table_row(r: &IterationRecord) -> [String; 9] {
             opt(r.predicted_residual_mm, 4),
             opt(r.achieved_residual_mm, 4)
         ),
+        agreement_cell(r.agreement.as_ref()),
+        opt(r.agreement.map(|a| a.lowest_ground_mm), 4),
         r.k_fitted
             .map_or("not fitted".into(), |k| format!("{k:.3e}")),
     ]
@@ -328,7 +353,7 @@ pub fn table_row(r: &IterationRecord) -> [String; 9] {
 
 /// The table as aligned text, one line per record.
 pub fn table_text(records: &[IterationRecord]) -> String {
-    let rows: Vec<[String; 9]> = records.iter().map(table_row).collect();
+    let rows: Vec<[String; COLUMNS]> = records.iter().map(table_row).collect();
     let mut width = TABLE_HEADER.map(str::len);
     for row in &rows {
         for (w, c) in width.iter_mut().zip(row) {
@@ -348,6 +373,12 @@ pub fn table_text(records: &[IterationRecord]) -> String {
         text.push_str(&line(row));
     }
     text
+}
+
+/// `cycle.json`: how the loop ended and every record (what the table shows, in full).
+pub fn table_json(records: &[IterationRecord], outcome: Outcome) -> serde_json::Value {
+    serde_json::json!({"format": "polishbot-cycle", "version": 1, "outcome": outcome,
+        "records": records})
 }
 
 /// `cycle.html`: the table and the outcome, plain HTML without scripts.
@@ -372,7 +403,11 @@ pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
     }
     html += &format!(
         "</table>\n<p>Outcome: {}.</p>\n<p>Each row is the inspection that began iteration k \
-         (folder iter-k); removed % and the achieved residual come from the next inspection.</p>\n\
+         (folder iter-k); removed % and the achieved residual come from the next inspection. \
+         The defect points' column re-predicts the grind with the k fitted after it (the \
+         plan's removal x fitted k / plan's k) and compares it with the achieved residual at \
+         the same points; lowest ground is the next inspection's lowest distance where the \
+         plan ground.</p>\n\
          </body></html>\n",
         escape(outcome.describe())
     );

@@ -12,7 +12,7 @@
 //!
 //! Front function: [`fit`] with a [`FitConfig`]; result: [`RemovalFit`].
 use nalgebra::Point3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::plan::preston::PredictedRow;
 use crate::plan::Inspection;
@@ -125,6 +125,95 @@ pub fn predicted_removal(before: &Inspection, rows: &[PredictedRow]) -> Result<V
     Ok(removal)
 }
 
+/// Per core point of `before`, the index of the same core point in `after` (within
+/// [`SAME_POINT_MM`]), None for a point `after` has not.
+pub fn partners(before: &Inspection, after: &Inspection) -> Vec<Option<usize>> {
+    let pos: Vec<Point3<f64>> = after.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&pos);
+    before
+        .points
+        .iter()
+        .map(|p| {
+            index
+                .nearest(&p.position)
+                .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
+                .map(|nb| nb.index)
+        })
+        .collect()
+}
+
+/// The residual a pass left against the one its plan predicted, over the same defect points:
+/// the plan's prediction re-made with the fitted k (issue 29: "the achieved residual agrees
+/// with the plan's prediction, made with the fitted k, within 0.01 mm RMS").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Agreement {
+    /// Defect points compared: core points of the planned repairable regions of the first
+    /// inspection, measured (finite) in both inspections.
+    pub points: usize,
+    /// RMS of the residual predicted at the plan's k over them, mm.
+    pub predicted_plan_k_mm: f64,
+    /// RMS of the residual predicted at the fitted k (None: k not fitted), mm.
+    pub predicted_fitted_k_mm: Option<f64>,
+    /// RMS of the achieved residual (the second inspection's distance) over them, mm.
+    pub achieved_mm: f64,
+    /// RMS over them of achieved minus predicted at the fitted k (at the plan's k when k
+    /// was not fitted), point by point, mm.
+    pub difference_mm: f64,
+    /// Lowest achieved distance over those points and every other core point where the plan
+    /// predicted removal, mm: below -tolerance the pass over-ground.
+    pub lowest_ground_mm: f64,
+}
+
+/// Re-predicts a ground pass with `scale` = fitted k / the plan's k and compares it with what
+/// the next inspection measured, over the core points of `before` in the regions `ids` that
+/// both inspections measured. `predicted` is the plan's removal per core point of `before`
+/// at the plan's k ([`predicted_removal`]; 0 where the tool does not reach); the planner's
+/// removal is k x (its influence matrix x the dwell the trajectory spends), linear in k at a
+/// fixed trajectory, so the removal at k_fit is `predicted` x `scale`. None: no such point.
+pub fn agreement(
+    before: &Inspection,
+    after: &Inspection,
+    predicted: &[f64],
+    scale: Option<f64>,
+    ids: &[i64],
+) -> Option<Agreement> {
+    let partner = partners(before, after);
+    // (defect point, deviation before, after, predicted removal) of every matched point
+    let all: Vec<(bool, f64, f64, f64)> = before
+        .points
+        .iter()
+        .zip(&partner)
+        .zip(predicted)
+        .filter_map(|((p, j), r)| {
+            let a = after.points[(*j)?].distance;
+            Some((ids.contains(&p.region), p.distance, a, *r))
+        })
+        .filter(|(_, d, a, _)| d.is_finite() && a.is_finite())
+        .collect();
+    let rows: Vec<(f64, f64, f64)> = all
+        .iter()
+        .filter(|x| x.0)
+        .map(|x| (x.1, x.2, x.3))
+        .collect();
+    let lowest_ground_mm = all
+        .iter()
+        .filter(|x| x.0 || x.3 > 0.0)
+        .map(|x| x.2)
+        .fold(f64::INFINITY, f64::min);
+    let rms = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
+        (rows.iter().map(|x| f(x).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
+    };
+    let s = scale.unwrap_or(1.0);
+    (!rows.is_empty()).then(|| Agreement {
+        points: rows.len(),
+        predicted_plan_k_mm: rms(&|(d, _, r)| d - r),
+        predicted_fitted_k_mm: scale.map(|s| rms(&|(d, _, r)| d - r * s)),
+        achieved_mm: rms(&|(_, a, _)| *a),
+        difference_mm: rms(&|(d, a, r)| a - (d - r * s)),
+        lowest_ground_mm,
+    })
+}
+
 /// Ids of the repairable regions of `inspection` (as deviations.csv's `region` column).
 pub fn repairable_ids(inspection: &Inspection) -> Vec<i64> {
     inspection
@@ -153,18 +242,7 @@ pub fn fit(
     cfg: &FitConfig,
 ) -> Result<RemovalFit, String> {
     let repairable = repairable_ids(before);
-    let pos: Vec<Point3<f64>> = after.points.iter().map(|p| p.position).collect();
-    let index = Neighbours::new(&pos);
-    let partner: Vec<Option<usize>> = before
-        .points
-        .iter()
-        .map(|p| {
-            index
-                .nearest(&p.position)
-                .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
-                .map(|nb| nb.index)
-        })
-        .collect();
+    let partner = partners(before, after);
     let matched = partner.iter().flatten().count() as f64 / partner.len().max(1) as f64;
     if matched < cfg.min_matched_share {
         return Err(format!(

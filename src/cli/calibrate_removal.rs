@@ -26,24 +26,44 @@ pub struct Inputs {
 
 /// Fits k from the files of `inputs`; every refusal is one line naming the file.
 pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
-    let plan = Plan::load(&inputs.plan)?;
+    let before = Inspection::load(&inputs.before)?;
+    let (predicted, plan_k) = evidence(&inputs.plan, &inputs.tool, &before)?;
+    let after = Inspection::load(&inputs.after)?;
+    fit_loaded(inputs, &before, &after, &predicted, plan_k, cfg)
+}
+
+/// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
+/// plan `plan`, at the plan's k) and that k (the tool file `tool` the plan was made with).
+pub fn evidence(plan: &Path, tool: &Path, before: &Inspection) -> anyhow::Result<(Vec<f64>, f64)> {
+    let loaded = Plan::load(plan)?;
     anyhow::ensure!(
-        plan.removal.is_some(),
+        loaded.removal.is_some(),
         "{}: no `removal` prediction (a rigid plan): k is fitted against a plan made with \
          --mode removal",
-        inputs.plan.display()
+        plan.display()
     );
-    let csv = inputs.plan.with_file_name("predicted.csv");
+    let csv = plan.with_file_name("predicted.csv");
     let text = std::fs::read_to_string(&csv)
         .with_context(|| format!("{}: cannot read (written beside plan.json)", csv.display()))?;
     let rows = removal_fit::parse_predicted(&text)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
-    let tool = ToolModel::load(&inputs.tool)?;
-    let before = Inspection::load(&inputs.before)?;
-    let after = Inspection::load(&inputs.after)?;
-    let predicted = removal_fit::predicted_removal(&before, &rows)
+    let k = ToolModel::load(tool)?.preston_k_mm2_n;
+    let predicted = removal_fit::predicted_removal(before, &rows)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
-    removal_fit::fit(&before, &after, &predicted, tool.preston_k_mm2_n, cfg).map_err(|m| {
+    Ok((predicted, k))
+}
+
+/// The fit of `removal_fit::fit` on inspections already read from `inputs`' folders; the
+/// refusal names both folders.
+pub fn fit_loaded(
+    inputs: &Inputs,
+    before: &Inspection,
+    after: &Inspection,
+    predicted: &[f64],
+    plan_k: f64,
+    cfg: &FitConfig,
+) -> anyhow::Result<RemovalFit> {
+    removal_fit::fit(before, after, predicted, plan_k, cfg).map_err(|m| {
         anyhow::anyhow!(
             "{} -> {}: {m}",
             inputs.before.display(),

@@ -13,10 +13,10 @@ use super::calibrate_removal::{self as calib, Inputs};
 use super::common::{load_config, read_json, GeometryInput};
 use super::{inspect, plan, run as run_cmd};
 use crate::cell::cycle::{
-    decide, decide_plan, table_html, table_text, CycleConfig, IterationRecord, Measured, Outcome,
-    DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
+    decide, decide_plan, table_html, table_json, table_text, CycleConfig, IterationRecord,
+    Measured, Outcome, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
 };
-use crate::cell::removal_fit::FitConfig;
+use crate::cell::removal_fit::{self, Agreement, FitConfig};
 use crate::plan::{Inspection, Plan, PlanMode};
 use crate::regions::Regions;
 
@@ -256,6 +256,12 @@ fn report(l: &Loop, records: &[IterationRecord], outcome: Outcome) -> anyhow::Re
     let html = l.out.join("cycle.html");
     std::fs::write(&html, table_html(records, outcome))
         .with_context(|| format!("{}: cannot write", html.display()))?;
+    let json = l.out.join("cycle.json");
+    std::fs::write(
+        &json,
+        serde_json::to_string_pretty(&table_json(records, outcome))?,
+    )
+    .with_context(|| format!("{}: cannot write", json.display()))?;
     println!("cycle: table in {}", html.display());
     Ok(())
 }
@@ -291,7 +297,14 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
         let (measured, inspection) = measure(&inspection_dir)?;
         if let (Some(last), Some(before)) = (records.last_mut(), &previous) {
             last.followed_by(&measured, &before.inspection, &inspection);
-            last.k_fitted = refit(before, &inspection_dir, &dir, &mut tool);
+            let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
+            (last.k_fitted, last.agreement) = refit(
+                before,
+                (&inspection_dir, &inspection),
+                &ids,
+                &dir,
+                &mut tool,
+            );
         }
         records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&records, &l.config);
@@ -322,24 +335,41 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
 }
 
 /// Refits k from the last grind (`calibrate removal`'s routine) and, when the fit holds,
-/// writes DIR/tool.toml with it and makes it the `tool` of the next plan; the fitted k, or
-/// None with the reason printed (a rigid plan, too little evidence).
-fn refit(before: &Ground, after: &Path, dir: &Path, tool: &mut PathBuf) -> Option<f64> {
+/// writes DIR/tool.toml with it and makes it the `tool` of the next plan; re-predicts the
+/// grind with the fitted k over the defect points of the regions `ids` against the `after`
+/// inspection (folder and points). Returns the fitted k, or None with the reason printed (a
+/// rigid plan, too little evidence), and the agreement (None for a rigid plan).
+fn refit(
+    before: &Ground,
+    after: (&Path, &Inspection),
+    ids: &[i64],
+    dir: &Path,
+    tool: &mut PathBuf,
+) -> (Option<f64>, Option<Agreement>) {
     let inputs = Inputs {
         before: before.inspection_dir.clone(),
-        after: after.to_path_buf(),
+        after: after.0.to_path_buf(),
         plan: before.plan.clone(),
         tool: before.tool.clone(),
     };
     let written = dir.join("tool.toml");
-    let fitted = calib::fit_files(&inputs, &FitConfig::default()).and_then(|fit| {
+    let evidence = calib::evidence(&before.plan, &before.tool, &before.inspection);
+    let fitted = evidence.as_ref().map_err(clone_error).and_then(|(p, k)| {
+        let fit = calib::fit_loaded(
+            &inputs,
+            &before.inspection,
+            after.1,
+            p,
+            *k,
+            &FitConfig::default(),
+        )?;
         calib::describe(&fit)
             .iter()
             .for_each(|line| println!("cycle: {line}"));
         calib::write_k(&before.tool, &written, fit.k_mm2_n)?;
         Ok(fit.k_mm2_n)
     });
-    match fitted {
+    let k = match fitted {
         Ok(k) => {
             println!("cycle: the next plan uses k from {}", written.display());
             *tool = written;
@@ -353,7 +383,16 @@ fn refit(before: &Ground, after: &Path, dir: &Path, tool: &mut PathBuf) -> Optio
             );
             None
         }
-    }
+    };
+    let agreement = evidence.ok().and_then(|(p, plan_k)| {
+        removal_fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
+    });
+    (k, agreement)
+}
+
+/// A copy of `e` (its one-line chain) to hand on while the original is kept.
+fn clone_error(e: &anyhow::Error) -> anyhow::Error {
+    anyhow::anyhow!("{}", super::common::one_line(e))
 }
 
 /// Plans from `inspection` into `plan_file` with `plan`'s settings and the tool file `tool`

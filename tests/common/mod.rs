@@ -297,9 +297,8 @@ pub fn case(seed: u64, dir: &Path) -> polishbot::synth::Truth {
 }
 
 /// The simulated cell's true tool as the shipped tool.toml's `[removal]` (spring 1 N/mm, modulus,
-/// spindle) with a true k 1.3 x its k: the simulator's own defaults are another tool (k at
-/// 1e-4 mm^2/N, removing several times what the shipped tool's model predicts), so
-/// `k_factor` alone would not make the planner "30 % off".
+/// spindle) with a true k 1.3 x its k: the simulator's defaults (src/bus/grinding.rs), written
+/// out so that the acceptance cases keep the planner "30 % off" whatever those become.
 pub const SIM_TOOL: &str = "preston_k = 5e-6\nk_factor = 1.3\nspring_rate_n_mm = 1.0\n\
                             modulus_mpa = 20.0\nspindle_rpm = 10000.0\n";
 
