@@ -12,11 +12,14 @@ use polishbot::synth::{synth, SynthConfig, TurntableConfig, TurntableTruth};
 
 /// Worst rotation (degrees) and translation (mm) of a merged view pose against the truth.
 fn worst_pose(m: &Merged, truth: &TurntableTruth) -> [f64; 2] {
-    m.views.iter().zip(&truth.views).fold([0.0f64; 2], |w, (v, t)| {
-        let t = isometry_from_rows(&t.view_to_first).expect("truth pose");
-        let (dr, dt) = pose_difference(&t, &v.pose);
-        [w[0].max(dr), w[1].max(dt)]
-    })
+    m.views
+        .iter()
+        .zip(&truth.views)
+        .fold([0.0f64; 2], |w, (v, t)| {
+            let t = isometry_from_rows(&t.view_to_first).expect("truth pose");
+            let (dr, dt) = pose_difference(&t, &v.pose);
+            [w[0].max(dr), w[1].max(dt)]
+        })
 }
 
 /// Hash of the merged cloud's coordinates' bits.
