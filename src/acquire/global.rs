@@ -1,6 +1,6 @@
 //! Global refinement: one joint point-to-plane ICP over every overlapping pair of placed views
 //! (multi-view ICP), replacing the loop-closure spread of a single chain.
-use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Vector3, Vector6};
+use nalgebra::{DMatrix, DVector, Isometry3, Matrix6, Point3, Vector3, Vector6};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -28,8 +28,15 @@ const PAIR_POINTS: usize = 2_000;
 /// Every how many sample points the pair overlap test uses.
 const OVERLAP_EVERY: usize = 8;
 
-/// Iteration cap of the joint solve.
+/// Cap of the joint solve's searches for matches (each followed by its Gauss–Newton steps).
 const ITERATIONS: usize = 15;
+
+/// Most Gauss–Newton steps on one search's matches. The nearest-point searches of all pairs
+/// are the step's cost (216 pairs x 2,000 points on a 36-view turn) while a step on fixed
+/// matches costs a fraction of one: the steps go on with the same matches until they settle
+/// (4-6 steps on the 36-view turn), then the matches are sought again. Bounded so that a
+/// far-off start cannot run long on stale matches.
+const STEPS_PER_SEARCH: usize = 8;
 
 /// The joint solve has converged when no pose moves by more than this (degrees and mm).
 const CONVERGED: f64 = 1e-4;
@@ -43,8 +50,11 @@ const DAMPING: f64 = 1e-9;
 pub struct GlobalRefinement {
     /// Ordered view pairs (moving, fixed) in the joint fit.
     pub pairs: usize,
-    /// Iterations run.
+    /// Gauss–Newton steps run (on fresh matches and on kept ones).
     pub iterations: usize,
+    /// Searches for matches (nearest target points of every pair's points), the last one
+    /// giving the residuals after.
+    pub searches: usize,
     /// RMS point-to-plane residual over all pairs before and after, mm.
     pub rms_before_mm: f64,
     /// RMS point-to-plane residual over all pairs after, mm.
@@ -68,29 +78,49 @@ pub(super) struct ViewResidual {
 /// (the fixed view's is its negative) and the residual.
 type Row = (Vector6<f64>, f64);
 
-/// Matches of the ordered pair (a onto b) at `poses`, in the first view's frame.
-fn pair_rows(
+/// One pair's matches: a source point of the moving view (its own frame) and the index of its
+/// nearest target point of the fixed view.
+type Matches = Vec<(Point3<f64>, u32)>;
+
+/// Matches of the ordered pair (a onto b) at `poses`: each of a's pair points (evenly strided
+/// from its sample) with its nearest target point of b within `max_distance`.
+fn pair_matches(
     a: &Prepared,
     b: &Prepared,
     pose_a: &Isometry3<f64>,
     pose_b: &Isometry3<f64>,
     max_distance: f64,
-) -> Vec<Row> {
+) -> Matches {
     let rel = pose_b.inverse() * pose_a;
     let mut out = Vec::new();
     strided(&a.sample, PAIR_POINTS)
-        .iter()
+        .into_iter()
         .filter_map(|p| {
-            let q = rel * p;
-            b.index.knn(&q, 1, max_distance, &mut out);
-            let &(_, j) = out.first()?;
-            let world = pose_b * q;
+            b.index.knn(&(rel * p), 1, max_distance, &mut out);
+            out.first().map(|&(_, j)| (p, j))
+        })
+        .collect()
+}
+
+/// Rows of the ordered pair (a onto b) at `poses` from its `matches`, in the first view's
+/// frame.
+fn pair_rows(
+    matches: &Matches,
+    b: &Prepared,
+    pose_a: &Isometry3<f64>,
+    pose_b: &Isometry3<f64>,
+) -> Vec<Row> {
+    let rel = pose_b.inverse() * pose_a;
+    matches
+        .iter()
+        .map(|&(p, j)| {
+            let world = pose_b * (rel * p);
             let t = pose_b * b.target[j as usize];
             let n: Vector3<f64> = pose_b.rotation * b.normals[j as usize];
             let r = n.dot(&(world - t));
             let jac =
                 Vector6::from_iterator(world.coords.cross(&n).iter().chain(n.iter()).copied());
-            Some((jac, r))
+            (jac, r)
         })
         .collect()
 }
@@ -159,40 +189,56 @@ pub(super) fn refine(
     }
     let start = poses.to_vec();
     let mr = views.iter().map(|v| v.spacing).fold(0.0, f64::max);
-    let mut rms_before = f64::NAN;
     let mut iterations = 0;
-    let mut rows: Vec<Vec<Row>> = Vec::new();
-    let mut converged = false;
-    for it in 0..=ITERATIONS {
-        rows = edges
+    let search = |poses: &[Isometry3<f64>]| -> Vec<Matches> {
+        edges
             .par_iter()
             .map(|&(a, b)| {
                 let d = cfg.final_distance * views[a].spacing.max(views[b].spacing);
-                pair_rows(views[a], views[b], &poses[a], &poses[b], d)
+                pair_matches(views[a], views[b], &poses[a], &poses[b], d)
             })
-            .collect();
-        if it == 0 {
-            rms_before = rms(rows.iter().flatten());
+            .collect()
+    };
+    let rows_at = |matches: &[Matches], poses: &[Isometry3<f64>]| -> Vec<Vec<Row>> {
+        edges
+            .par_iter()
+            .zip(matches)
+            .map(|(&(a, b), m)| pair_rows(m, views[b], &poses[a], &poses[b]))
+            .collect()
+    };
+    let mut matches = search(poses);
+    let mut rows = rows_at(&matches, poses);
+    let rms_before = rms(rows.iter().flatten());
+    let mut searches = 1;
+    for _ in 0..ITERATIONS {
+        // Gauss–Newton steps on this search's matches until they settle.
+        let mut first_largest = f64::INFINITY;
+        for step in 0..STEPS_PER_SEARCH {
+            let k = (3.0 * 1.4826 * median_abs(&rows)).max(1e-3 * mr);
+            let Some(x) = solve(edges, &rows, m, k * k) else {
+                break;
+            };
+            iterations += 1;
+            let largest = apply(poses, &x);
+            if step == 0 {
+                first_largest = largest;
+            }
+            rows = rows_at(&matches, poses);
+            if largest < CONVERGED {
+                break;
+            }
         }
-        if converged || it == ITERATIONS {
+        if first_largest.is_infinite() {
+            // No step could be solved on fresh matches: the rows stand as they are.
             break;
         }
-        let k = (3.0 * 1.4826 * median_abs(&rows)).max(1e-3 * mr);
-        let Some(x) = solve(edges, &rows, m, k * k) else {
+        matches = search(poses);
+        rows = rows_at(&matches, poses);
+        searches += 1;
+        // Converged: the first step on fresh matches moved no pose by more than CONVERGED.
+        if first_largest < CONVERGED {
             break;
-        };
-        iterations = it + 1;
-        let mut largest: f64 = 0.0;
-        for (p, pose) in poses.iter_mut().enumerate().skip(1) {
-            let s = x.rows(6 * (p - 1), 6);
-            let (w, v) = (
-                Vector3::new(s[0], s[1], s[2]),
-                Vector3::new(s[3], s[4], s[5]),
-            );
-            *pose = Isometry3::new(v, w) * *pose;
-            largest = largest.max(w.norm().to_degrees()).max(v.norm());
         }
-        converged = largest < CONVERGED;
     }
     let largest_move = start
         .iter()
@@ -216,11 +262,29 @@ pub(super) fn refine(
     let summary = GlobalRefinement {
         pairs: edges.len(),
         iterations,
+        searches,
         rms_before_mm: rms_before,
         rms_after_mm: rms(rows.iter().flatten()),
         largest_move,
     };
     Some((summary, per_view))
+}
+
+/// Moves every pose but the first by its motion in `x` (rotation vector, then translation,
+/// six per view from position 1; applied in the first view's frame): the largest rotation
+/// (degrees) or translation (mm).
+fn apply(poses: &mut [Isometry3<f64>], x: &DVector<f64>) -> f64 {
+    let mut largest: f64 = 0.0;
+    for (p, pose) in poses.iter_mut().enumerate().skip(1) {
+        let s = x.rows(6 * (p - 1), 6);
+        let (w, v) = (
+            Vector3::new(s[0], s[1], s[2]),
+            Vector3::new(s[3], s[4], s[5]),
+        );
+        *pose = Isometry3::new(v, w) * *pose;
+        largest = largest.max(w.norm().to_degrees()).max(v.norm());
+    }
+    largest
 }
 
 /// RMS of the residuals of `rows` (NaN when empty).

@@ -111,7 +111,8 @@ pub struct MergeTimes {
     pub prepare: f64,
     /// Seeding the table axis when none is given (0 otherwise).
     pub axis: f64,
-    /// Placing the views one by one.
+    /// Placing the views one by one, with the pulls from the nominal poses computed ahead
+    /// side by side (the loop closure's first pull among them).
     pub place: f64,
     /// Measuring the loop closure.
     pub loop_closure: f64,
@@ -296,15 +297,17 @@ pub fn merge_views(
         .iter()
         .map(|a| table_rotation(&axis, &centre, -(a - angles[0])))
         .collect();
-    let inputs = place::Inputs {
+    let mut inputs = place::Inputs {
         views,
         prepared: &prepared,
         names,
         angles,
         nominal: &nominal,
         axis: &axis,
+        pulls: Vec::new(),
     };
     let t = Instant::now();
+    inputs.pulls = place::nominal_pulls(&inputs, cfg);
     let placed = place::place_views(&inputs, cfg)?;
     times.place = t.elapsed().as_secs_f64();
     let t = Instant::now();

@@ -2,6 +2,7 @@
 //! the new one), with each correction bounded by the table's stated accuracy.
 use anyhow::{bail, Result};
 use nalgebra::{Isometry3, Unit, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::config::MergeConfig;
@@ -96,6 +97,72 @@ pub(super) struct Inputs<'a> {
     pub nominal: &'a [Isometry3<f64>],
     /// The table axis (first view's frame).
     pub axis: &'a Unit<Vector3<f64>>,
+    /// Pulls computed ahead ([`nominal_pulls`]).
+    pub pulls: Vec<Pull>,
+}
+
+/// A pull computed ahead: view `pair.0` pulled onto view `pair.1` by the full ICP from
+/// `start` (their nominal relative pose), with its result (relative pose, fitness).
+pub(super) struct Pull {
+    pair: (usize, usize),
+    start: Isometry3<f64>,
+    result: (Isometry3<f64>, f64),
+}
+
+/// The pulls placing and the loop closure will ask for when every view fits at its first
+/// try: each view from its nominal pose onto the nearest earlier view in angle (the first on
+/// ties, as [`nearest_placed`] picks), and on a full turn the last view onto its predecessor.
+/// They depend on the two views and their nominal angles only, not on the placed poses, so
+/// they run side by side (one pull leaves a core idle most of the time) and give the same
+/// poses as one after the other. A pull that is not asked for (a held or skipped view
+/// changes the nearest placed one) is wasted work, not a different answer: [`pull`] matches
+/// the pair and the start exactly.
+pub(super) fn nominal_pulls(inp: &Inputs, cfg: &MergeConfig) -> Vec<Pull> {
+    let n = inp.views.len();
+    let mut pairs: Vec<(usize, usize)> = (1..n)
+        .map(|i| {
+            let j = (0..i)
+                .min_by(|&a, &b| {
+                    let gap = |k: usize| angle_gap(inp.angles[k], inp.angles[i]);
+                    gap(a).total_cmp(&gap(b))
+                })
+                .expect("view 0 is earlier");
+            (i, j)
+        })
+        .collect();
+    if full_turn(inp.angles) && !pairs.contains(&(n - 1, n - 2)) {
+        pairs.push((n - 1, n - 2));
+    }
+    pairs
+        .into_par_iter()
+        .map(|(i, j)| {
+            let start = inp.nominal[j].inverse() * inp.nominal[i];
+            let result = pair_icp(&inp.prepared[i], &inp.prepared[j], &start, cfg, false);
+            Pull {
+                pair: (i, j),
+                start,
+                result,
+            }
+        })
+        .collect()
+}
+
+/// View `i` pulled onto view `j` by the full ICP from `start`: computed ahead when it was
+/// among [`nominal_pulls`], else now.
+fn pull(
+    inp: &Inputs,
+    (i, j): (usize, usize),
+    start: &Isometry3<f64>,
+    cfg: &MergeConfig,
+) -> (Isometry3<f64>, f64) {
+    match inp
+        .pulls
+        .iter()
+        .find(|p| p.pair == (i, j) && p.start == *start)
+    {
+        Some(p) => p.result,
+        None => pair_icp(&inp.prepared[i], &inp.prepared[j], start, cfg, false),
+    }
 }
 
 /// Result of [`place_views`].
@@ -216,8 +283,7 @@ impl Trials<'_> {
         let (pulled, pull_fit) = match onto {
             Some(k) => {
                 let p = &self.placed[k];
-                let dst = &self.inp.prepared[p.index];
-                let (rel, f) = pair_icp(src, dst, start, self.cfg, false);
+                let (rel, f) = pull(self.inp, (self.i, p.index), start, self.cfg);
                 (p.pose * rel, Some(f))
             }
             None => (*start, None),
@@ -399,7 +465,7 @@ pub(super) fn loop_closure(inp: &Inputs, placed: &[Placed], cfg: &MergeConfig) -
         .find(|p| p.index == n - 2 && p.placement != Placement::Held)?;
     let last = &inp.prepared[n - 1];
     let start = inp.nominal[n - 2].inverse() * inp.nominal[n - 1];
-    let (rel, f) = pair_icp(last, &inp.prepared[n - 2], &start, cfg, false);
+    let (rel, f) = pull(inp, (n - 1, n - 2), &start, cfg);
     if f < cfg.min_fitness {
         return None;
     }
