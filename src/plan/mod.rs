@@ -14,6 +14,7 @@ pub mod error;
 pub mod feed;
 pub mod file;
 pub mod frames;
+mod free_motion;
 pub mod inspection;
 pub mod order;
 pub mod preston;
