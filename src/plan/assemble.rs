@@ -8,7 +8,7 @@ use super::error::PlanError;
 use super::free_motion::{pressed, Cell};
 use super::program::{Mark, PlannedPass, PlannedPoint, Program, Run};
 use super::report::UnreachablePoint;
-use super::trajectory::{JointTrajectory, Limits};
+use super::trajectory::JointTrajectory;
 use crate::robot::{Robot, Workcell};
 
 /// Splices runs into one program from `home` back to `home`; a run the tool cannot enter
@@ -21,13 +21,7 @@ pub(crate) fn assemble(
     scene: &Scene,
     unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Program, PlanError> {
-    let cell = Cell {
-        robot,
-        wc,
-        cfg,
-        scene,
-        limits: Limits::from_joints(&robot.joints),
-    };
+    let cell = Cell::new(robot, wc, cfg, scene);
     let mut prog = Program {
         trajectory: JointTrajectory::starting_at(&cfg.home, cfg.trajectory.period),
         segments: Vec::new(),
@@ -171,7 +165,7 @@ impl Where {
 /// The run cut into what is ground in one go: in removal mode (pieces with a dwell) each
 /// stretch of pieces where the next starts where the last ended (one stroke, ground without
 /// stopping), in rigid mode every piece alone.
-fn chains(run: Run) -> Vec<Vec<PlannedPass>> {
+pub(super) fn chains(run: Run) -> Vec<Vec<PlannedPass>> {
     let mut out: Vec<Vec<PlannedPass>> = Vec::new();
     for piece in run {
         let joins = out.last().and_then(|c| c.last()).is_some_and(|prev| {

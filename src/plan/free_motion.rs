@@ -42,10 +42,26 @@ pub(super) struct Cell<'a> {
     pub(super) limits: Limits,
 }
 
-impl Cell<'_> {
+impl<'a> Cell<'a> {
+    /// The cell of `robot` in `wc` with `cfg`'s settings and the part's `scene`.
+    pub(super) fn new(
+        robot: &'a Robot,
+        wc: &'a Workcell,
+        cfg: &'a PlanConfig,
+        scene: &'a Scene<'a>,
+    ) -> Self {
+        Cell {
+            robot,
+            wc,
+            cfg,
+            scene,
+            limits: Limits::from_joints(&robot.joints),
+        }
+    }
+
     /// Joint solutions with the ball `lift` mm above contact `p` along its normal, same axis:
     /// at `lift`, then halved twice (the arm may not reach the full height).
-    fn lifted(&self, p: &PlannedPoint, lift: f64) -> Vec<Vec<f64>> {
+    pub(super) fn lifted(&self, p: &PlannedPoint, lift: f64) -> Vec<Vec<f64>> {
         let up = self.wc.direction_from_reference(&Vector3::from(p.normal));
         (0..3)
             .filter_map(|k| {

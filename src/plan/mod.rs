@@ -17,6 +17,7 @@ pub mod frames;
 mod free_motion;
 pub mod inspection;
 pub mod order;
+mod predict;
 pub mod preston;
 pub mod program;
 pub mod raster;
