@@ -78,11 +78,15 @@ pub fn plan(
     check_work(inspection, &geometry)?;
     let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
     let fallback = removal::ToolModel::default();
+    let positions: Vec<nalgebra::Point3<f64>> =
+        inspection.points.iter().map(|p| p.position).collect();
+    let index = crate::spatial::Neighbours::new(&positions);
     let ctx = preston::Setup {
         tool: tool.as_ref().unwrap_or(&fallback),
         robot,
         workcell,
         config,
+        index: &index,
     };
     let mut reachability = Reachability::default();
     let planned =

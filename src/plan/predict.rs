@@ -191,7 +191,7 @@ fn region_verdict(
     let influence = Influence::new(tool, ball_mm);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, &back)).collect();
-    let idx = cores_near(inspection, &contacts, influence.patch_radius());
+    let idx = cores_near(inspection, setup.index, &contacts, influence.patch_radius());
     let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
         .iter()
         .map(|&i| {

@@ -177,16 +177,19 @@ fn split(runs: Vec<Run>) -> Vec<Run> {
 
 /// Core points in reach of `contacts` (the region's and its neighbours'), with the inspection
 /// indices they come from, in index order: a point is in reach of a contact within the patch
-/// radius plus half its piece (`reach + 0.5 length`, mm).
-pub(crate) fn cores_near(inspection: &Inspection, contacts: &[Contact], reach: f64) -> Vec<usize> {
-    let positions: Vec<Point3<f64>> = inspection.points.iter().map(|p| p.position).collect();
-    let index = Neighbours::new(&positions);
-    let mut keep = vec![false; positions.len()];
+/// radius plus half its piece (`reach + 0.5 length`, mm). `index`: the inspection's points.
+pub(crate) fn cores_near(
+    inspection: &Inspection,
+    index: &Neighbours,
+    contacts: &[Contact],
+    reach: f64,
+) -> Vec<usize> {
+    let mut keep = vec![false; inspection.points.len()];
     for c in contacts {
         let radius = reach + 0.5 * c.length;
         // the index's radius widened for rounding; the test below decides
         for nb in index.within_unsorted(&c.point, radius * (1.0 + 1e-9)) {
-            keep[nb.index] |= (positions[nb.index] - c.point).norm() <= radius;
+            keep[nb.index] |= (inspection.points[nb.index].position - c.point).norm() <= radius;
         }
     }
     (0..keep.len()).filter(|&i| keep[i]).collect()
@@ -202,6 +205,8 @@ pub struct Setup<'a> {
     pub workcell: &'a Workcell,
     /// The planner's settings.
     pub config: &'a PlanConfig,
+    /// The inspection's core points indexed by position (in inspection order).
+    pub index: &'a Neighbours,
 }
 
 /// A region's runs with the dwell solved at an allowance.
@@ -238,7 +243,7 @@ pub fn set_dwell(
     }
     let ball_mm = robot.tool.radius * 1e3;
     let reach = Influence::new(tool, ball_mm).patch_radius();
-    let cores: Vec<SurfacePoint> = cores_near(inspection, &contacts, reach)
+    let cores: Vec<SurfacePoint> = cores_near(inspection, setup.index, &contacts, reach)
         .into_iter()
         .map(|i| inspection.points[i])
         .collect();
