@@ -98,8 +98,13 @@ fn measure(c: &mut Criterion, name: &str, insp: &Inspection, cfg: &PlanConfig) {
     // plan under its segment's rule, a fresh scene per run (a scene remembers the samples it
     // found clear), the scene's k-d tree build included
     let samples = || p.samples.iter().map(|s| s.q.as_slice());
+    // a removal plan's pressed samples are checked with its preload, as `run` re-checks them
+    let mut collision = cfg.collision.clone();
+    if let Some(r) = &p.removal {
+        collision.press_mm = r.preload_mm;
+    }
     let check = || {
-        let scene = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
+        let scene = Scene::new(&insp.points, &robot, &wc, &collision);
         check_samples(samples(), &p.segments, &robot, &scene)
     };
     assert!(check().is_empty());

@@ -6,6 +6,7 @@ mod common;
 
 use nalgebra::{Point3, Vector3};
 use polishbot::plan::removal::force::{joint_torques, overload, DEFAULT_FORCE_SHARE};
+use polishbot::plan::removal::influence::Reach;
 use polishbot::plan::removal::montecarlo::{spread, JointError, MonteCarloConfig};
 use polishbot::plan::removal::{
     solve_region, solve_robust, Contact, Influence, Problem, RemovalConfig, ToolModel,
@@ -261,4 +262,45 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_raise_the_allowance() {
         robust.allowance
     );
     assert!(robust.allowance > 0.0 && deepest >= -0.05);
+}
+
+/// The Monte Carlo takes each contact's core points once, within twice its reach, and picks a
+/// moved contact's column from them (`Reach::column_among`): the columns must be those of the
+/// index's own radius query (`Reach::column`), value for value, for contacts moved up to half
+/// the reach and for patches grown and shrunk by a changed preload.
+#[test]
+fn columns_among_gathered_candidates_equal_the_direct_query() {
+    let cores = plate();
+    let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
+    let reach = Reach::new(&geometry);
+    let tool = ToolModel::default();
+    let a = Influence::new(&tool, BALL_MM).patch_radius();
+    let contacts = raster(0.33 * a, 0.5 * a);
+    let mut compared = 0;
+    for (k, c) in contacts.iter().enumerate().step_by(7) {
+        let gathered = reach.candidates(&c.point, 2.0 * (a + 0.5 * c.length));
+        for (shift, preload) in [(0.0, 2.0), (0.2, 1.7), (0.3, 2.3)] {
+            let angle = k as f64;
+            let moved = Contact {
+                point: c.point + Vector3::new(angle.cos(), angle.sin(), 0.0) * shift,
+                ..*c
+            };
+            let model = ToolModel {
+                preload_mm: preload,
+                ..tool.clone()
+            };
+            let influence = Influence::new(&model, BALL_MM);
+            let mut direct = reach.column(&influence, &moved);
+            let mut among = reach.column_among(&influence, &moved, &gathered);
+            direct.sort_by_key(|e| e.0);
+            among.sort_by_key(|e| e.0);
+            assert!(!direct.is_empty());
+            assert_eq!(
+                direct, among,
+                "contact {k} moved {shift} mm, preload {preload}"
+            );
+            compared += direct.len();
+        }
+    }
+    assert!(compared > 1000, "{compared} entries compared");
 }

@@ -7,7 +7,11 @@ mod common;
 use std::path::Path;
 
 use common::polishbot;
-use polishbot::plan::{collide, CollisionConfig, Inspection, Plan, PlanError, SegmentKind};
+use nalgebra::{Point3, Vector3};
+use polishbot::plan::{
+    collide, plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo,
+    SegmentKind, SurfacePoint,
+};
 use polishbot::robot::Workcell;
 
 /// The shipped tool.toml's preload, mm.
@@ -91,4 +95,87 @@ fn removal_contacts_are_pressed_in_and_out_only_under_the_grinding_rule() {
             "{h}"
         );
     }
+}
+
+/// A 12 mm square patch of the part at `centre` (reference frame, facing -y like the distal
+/// surface the default workcell presents to the arm, 0.5 mm pitch) with a round bump of
+/// 0.15 mm, 3 mm in radius, as region `id`.
+fn patch(centre: Point3<f64>, id: usize) -> (Vec<SurfacePoint>, RegionInfo) {
+    let mut points = Vec::new();
+    for i in 0..=24 {
+        for k in 0..=24 {
+            let p = centre + Vector3::new(-6.0 + 0.5 * i as f64, 0.0, -6.0 + 0.5 * k as f64);
+            let r = (p - centre).norm();
+            let inside = r <= 3.0;
+            points.push(SurfacePoint {
+                position: p,
+                normal: -Vector3::y(),
+                distance: if inside {
+                    0.1 * (1.0 - (r / 3.0).powi(2)) + 0.06
+                } else {
+                    0.0
+                },
+                region: if inside { id as i64 } else { -1 },
+            });
+        }
+    }
+    let members = points.iter().filter(|p| p.region == id as i64).count();
+    let region = RegionInfo {
+        id,
+        centroid: [centre.x, centre.y, centre.z],
+        normal: [0.0, -1.0, 0.0],
+        area: members as f64 * 0.25,
+        peak: 0.16,
+        peak_lower_bound: false,
+        mean: 0.11,
+        volume: 1.0,
+        points: members,
+        repairable: true,
+        measured_share: 1.0,
+        touches_unmeasured: false,
+    };
+    (points, region)
+}
+
+/// A repairable region the arm cannot reach at all (half a metre past the part) is not
+/// reported as planned (no removal entry of "peak 0 -> 0" over no core points): every one of
+/// its points is left out with a reason, while the reachable region beside it is planned.
+#[test]
+fn a_region_out_of_reach_is_left_out_with_reasons_not_planned_as_nothing() {
+    let (mut points, near) = patch(Point3::new(5.0, -35.0, -25.0), 0);
+    let (far_points, far) = patch(Point3::new(5.0, -35.0, 475.0), 1);
+    points.extend(far_points);
+    let inspection = Inspection {
+        dir: "out_of_reach".into(),
+        tolerance: Some(0.05),
+        regions: vec![near, far],
+        points,
+    };
+    let robot = common::dofbot();
+    let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
+    let p = plan(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let removal = p.removal.as_ref().expect("a removal report");
+    let planned: Vec<usize> = removal.regions.iter().map(|r| r.region).collect();
+    assert!(
+        !planned.contains(&1),
+        "region 1 reported as planned: {planned:?}"
+    );
+    assert!(removal.regions.iter().all(|r| r.core_points > 0));
+    let left: Vec<_> = p
+        .reachability
+        .unreachable
+        .iter()
+        .filter(|u| u.region == 1)
+        .collect();
+    assert!(
+        !left.is_empty(),
+        "region 1's points not recorded as unreachable"
+    );
+    assert!(left.iter().all(|u| !u.reason.is_empty()), "{:?}", left[0]);
+    println!(
+        "region 1: {} points left out: {}",
+        left.len(),
+        left[0].reason
+    );
+    println!("{}", common::removal::accept(&p, "near patch"));
 }

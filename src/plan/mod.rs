@@ -14,8 +14,10 @@ pub mod error;
 pub mod feed;
 pub mod file;
 pub mod frames;
+mod free_motion;
 pub mod inspection;
 pub mod order;
+mod predict;
 pub mod preston;
 pub mod program;
 pub mod raster;
@@ -76,11 +78,15 @@ pub fn plan(
     check_work(inspection, &geometry)?;
     let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
     let fallback = removal::ToolModel::default();
+    let positions: Vec<nalgebra::Point3<f64>> =
+        inspection.points.iter().map(|p| p.position).collect();
+    let index = crate::spatial::Neighbours::new(&positions);
     let ctx = preston::Setup {
         tool: tool.as_ref().unwrap_or(&fallback),
         robot,
         workcell,
         config,
+        index: &index,
     };
     let mut reachability = Reachability::default();
     let planned =

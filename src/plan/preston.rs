@@ -11,11 +11,12 @@ use super::error::PlanError;
 use super::feed::JointSpline;
 use super::inspection::RegionInfo;
 use super::inspection::{Inspection, SurfacePoint};
-use super::program::{PlannedPass, Program, Run, SegmentKind};
-use super::removal::montecarlo::{spread, JointError};
-use super::removal::{self, force, Contact, Influence, Problem, Stats, ToolModel};
+use super::program::{PlannedPass, Run};
+use super::removal::montecarlo::JointError;
+use super::removal::{self, force, Contact, Influence, Stats, ToolModel};
 use super::stroke::{chain_knots, chain_limits};
 use crate::robot::{Robot, Workcell};
+use crate::spatial::Neighbours;
 
 /// One contact of the dwell map in plan.json.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -93,7 +94,7 @@ pub fn tool_model(robot: &Robot) -> Result<ToolModel, PlanError> {
 }
 
 /// Rotation from the robot frame to the reference frame.
-fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
+pub(crate) fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
     let r = Matrix3::from_columns(&[
         wc.direction_from_reference(&Vector3::x()),
         wc.direction_from_reference(&Vector3::y()),
@@ -104,7 +105,7 @@ fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
 
 /// The contact of a two-point piece: its middle, mean normal, direction, length, and the
 /// tangent toward which the spindle leans (the arm's vertical plane through its base axis).
-fn contact(piece: &PlannedPass, back: &Matrix3<f64>) -> Contact {
+pub(crate) fn contact(piece: &PlannedPass, back: &Matrix3<f64>) -> Contact {
     let (a, b) = (&piece.points[0], &piece.points[piece.points.len() - 1]);
     let (pa, pb) = (Point3::from(a.surface_mm), Point3::from(b.surface_mm));
     let normal = (Vector3::from(a.normal) + Vector3::from(b.normal)).normalize();
@@ -128,7 +129,7 @@ fn contact(piece: &PlannedPass, back: &Matrix3<f64>) -> Contact {
 
 /// How the joints of a piece's first pose move the tip (mm/rad, reference frame) and each
 /// servo's half raw count (rad), as `robot/resolution.rs` quantises them.
-fn joint_error(robot: &Robot, q: &[f64], back: &Matrix3<f64>) -> JointError {
+pub(crate) fn joint_error(robot: &Robot, q: &[f64], back: &Matrix3<f64>) -> JointError {
     let jac = robot.jacobian(q);
     let position = jac.rows(0, 3).into_owned() * 1e3;
     let sensitivity: DMatrix<f64> = DMatrix::from_fn(3, robot.dof(), |r, c| {
@@ -175,13 +176,21 @@ fn split(runs: Vec<Run>) -> Vec<Run> {
 }
 
 /// Core points in reach of `contacts` (the region's and its neighbours'), with the inspection
-/// indices they come from.
-fn cores_near(inspection: &Inspection, contacts: &[Contact], reach: f64) -> Vec<usize> {
+/// indices they come from, in index order: a point is in reach of a contact within the patch
+/// radius plus half its piece (`reach + 0.5 length`, mm). `index`: the inspection's points.
+pub(crate) fn cores_near(
+    inspection: &Inspection,
+    index: &Neighbours,
+    contacts: &[Contact],
+    reach: f64,
+) -> Vec<usize> {
     let mut keep = vec![false; inspection.points.len()];
-    for (i, p) in inspection.points.iter().enumerate() {
-        keep[i] = contacts
-            .iter()
-            .any(|c| (p.position - c.point).norm() <= reach + 0.5 * c.length);
+    for c in contacts {
+        let radius = reach + 0.5 * c.length;
+        // the index's radius widened for rounding; the test below decides
+        for nb in index.within_unsorted(&c.point, radius * (1.0 + 1e-9)) {
+            keep[nb.index] |= (inspection.points[nb.index].position - c.point).norm() <= radius;
+        }
     }
     (0..keep.len()).filter(|&i| keep[i]).collect()
 }
@@ -196,22 +205,33 @@ pub struct Setup<'a> {
     pub workcell: &'a Workcell,
     /// The planner's settings.
     pub config: &'a PlanConfig,
+    /// The inspection's core points indexed by position (in inspection order).
+    pub index: &'a Neighbours,
 }
 
-/// A region's runs with their dwell and the allowance used, or why the region is left out
-/// (the robust solve found no allowance without predicted over-grind).
-pub type Dwelled = Result<(Vec<Run>, f64), String>;
+/// A region's runs with the dwell solved at an allowance.
+pub struct Dwelled {
+    /// One-contact pieces carrying their dwell.
+    pub runs: Vec<Run>,
+    /// The allowance solved at, mm.
+    pub allowance: f64,
+    /// The highest deviation over the core points in reach, mm: above it the allowance asks
+    /// for no removal (every dwell at its shortest).
+    pub highest: f64,
+}
 
-/// Turns one region's runs into one-contact pieces carrying the dwell the robust solve gives
-/// them, starting from `allowance` mm; refuses a contact whose force a servo cannot hold
-/// (naming the point and the joint).
+/// Turns one region's runs into one-contact pieces carrying the dwell solved at `allowance`
+/// mm (`removal::solve_region`; the Monte Carlo on the dwell the trajectory spends is the
+/// caller's, `predict::rehearse_region`); refuses a contact whose force a servo cannot hold
+/// (naming the point and the joint). The inner error says why the region is left out: no core
+/// point in the tool's reach of its contacts, or the solver failed.
 pub fn set_dwell(
     runs: Vec<Run>,
     region: &RegionInfo,
     inspection: &Inspection,
     setup: &Setup,
     allowance: f64,
-) -> Result<Dwelled, PlanError> {
+) -> Result<Result<Dwelled, String>, PlanError> {
     let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
     let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
@@ -219,56 +239,63 @@ pub fn set_dwell(
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
     let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, &back)).collect();
     for (p, c) in pieces.iter().zip(&contacts) {
-        let push = workcell.direction_from_reference(&c.normal) * tool.force_n();
-        if let Some(o) = force::overload(robot, &p.points[0].q, &push, config.force_share) {
-            let s = c.point;
-            return Err(PlanError::Config(format!(
-                "region {}: contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to \
-                 hold {:.2} N, more than its {:.3} N m (`force_share` {})",
-                region.id,
-                s.x,
-                s.y,
-                s.z,
-                o.name,
-                o.torque_nm,
-                tool.force_n(),
-                o.limit_nm,
-                config.force_share
-            )));
-        }
+        check_force(p, c, region.id, setup)?;
     }
-    let joints: Vec<JointError> = pieces
-        .iter()
-        .map(|p| joint_error(robot, &p.points[0].q, &back))
-        .collect();
     let ball_mm = robot.tool.radius * 1e3;
     let reach = Influence::new(tool, ball_mm).patch_radius();
-    let cores: Vec<SurfacePoint> = cores_near(inspection, &contacts, reach)
+    let cores: Vec<SurfacePoint> = cores_near(inspection, setup.index, &contacts, reach)
         .into_iter()
         .map(|i| inspection.points[i])
         .collect();
-    let problem = Problem {
-        tool,
-        ball_mm,
-        contacts: &contacts,
-        joints: &joints,
-        cores: &cores,
-        tolerance: inspection.tolerance.unwrap_or(config.tolerance_mm),
-    };
-    let robust = match removal::solve_robust(&problem, allowance, &solve, &config.monte_carlo) {
-        Ok(r) => r,
+    if cores.is_empty() {
+        return Ok(Err(format!(
+            "region left out by the removal planner: no core point within the tool's reach              ({reach:.3} mm patch radius) of its {} contacts, so no removal can be planned or              predicted",
+            contacts.len()
+        )));
+    }
+    let influence = Influence::new(tool, ball_mm);
+    let plan = match removal::solve_region(&influence, &contacts, &cores, allowance, &solve) {
+        Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
     };
-    let planned = runs
-        .iter_mut()
-        .flatten()
-        .zip(&robust.plan.dwell)
-        .zip(&contacts);
+    let planned = runs.iter_mut().flatten().zip(&plan.dwell).zip(&contacts);
     for ((piece, t), c) in planned {
         piece.dwell_s = Some(*t);
         piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
     }
-    Ok(Ok((runs, robust.allowance)))
+    Ok(Ok(Dwelled {
+        runs,
+        allowance,
+        highest: plan.before.iter().copied().fold(0.0, f64::max),
+    }))
+}
+
+/// Refuses contact `c` of piece `p` when a servo cannot hold the tool's force there (the
+/// static torque `J^T F` above `force_share` of its rating), naming the point and the joint.
+fn check_force(
+    p: &PlannedPass,
+    c: &Contact,
+    region: usize,
+    setup: &Setup,
+) -> Result<(), PlanError> {
+    let (tool, config) = (setup.tool, setup.config);
+    let push = setup.workcell.direction_from_reference(&c.normal) * tool.force_n();
+    let Some(o) = force::overload(setup.robot, &p.points[0].q, &push, config.force_share) else {
+        return Ok(());
+    };
+    let s = c.point;
+    Err(PlanError::Config(format!(
+        "region {region}: contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to \
+         hold {:.2} N, more than its {:.3} N m (`force_share` {})",
+        s.x,
+        s.y,
+        s.z,
+        o.name,
+        o.torque_nm,
+        tool.force_n(),
+        o.limit_nm,
+        config.force_share
+    )))
 }
 
 /// The dwell solve's settings with the fastest feed lowered to what the joints allow along
@@ -293,162 +320,6 @@ fn solve_config(
         )));
     }
     Ok(solve)
-}
-
-/// Dwell-equivalent of the press segments per pass index, s: a press moves the ball between
-/// touching the surface and the preload, and Preston's removal summed over the contact patch
-/// is `k F v` (linear in the force, F = rate x depth), so each bus period of a press counts
-/// as `period x depth / preload` of dwell (trapezoid over its samples) at the contact it
-/// presses into (the next grinding piece) or out of (the previous one).
-fn press_dwell(prog: &Program, robot: &Robot, wc: &Workcell, preload: f64) -> Vec<f64> {
-    let mut out = vec![0.0; prog.passes.len()];
-    let segs = &prog.segments;
-    for (i, seg) in segs.iter().enumerate() {
-        if seg.kind != SegmentKind::Press || preload <= 0.0 {
-            continue;
-        }
-        let grind = |j: Option<usize>| {
-            j.and_then(|j| segs.get(j))
-                .filter(|s| s.kind == SegmentKind::Grind)
-                .and_then(|s| s.pass)
-        };
-        let (pass, point) = match (grind(Some(i + 1)), grind(i.checked_sub(1))) {
-            (Some(p), _) => (p, &prog.passes[p].points[0]),
-            (None, Some(p)) => (p, &prog.passes[p].points[prog.passes[p].points.len() - 1]),
-            (None, None) => continue,
-        };
-        let normal = wc.direction_from_reference(&Vector3::from(point.normal));
-        let contact = Vector3::from(point.tip_m);
-        let depth = |k: usize| {
-            let tip = robot.fk(prog.trajectory.sample(k)).position;
-            (preload - (tip - contact).dot(&normal) * 1e3).clamp(0.0, preload) / preload
-        };
-        let shares: Vec<f64> = (seg.first_sample..=seg.last_sample).map(depth).collect();
-        let sum: f64 = shares.windows(2).map(|w| 0.5 * (w[0] + w[1])).sum();
-        out[pass] += sum * prog.trajectory.period;
-    }
-    out
-}
-
-/// The part predicted after `prog`, and the regions whose Monte Carlo low quantile
-/// over-grinds by more than the tolerance (with the reason; the caller leaves them out): per
-/// region, the removal of the time the trajectory spends on each piece actually in the
-/// program (its presses counted, `press_dwell`), before/after statistics and the spread.
-pub fn predict(
-    prog: &Program,
-    inspection: &Inspection,
-    allowances: &[(usize, f64)],
-    setup: &Setup,
-) -> Result<(RemovalReport, Vec<(usize, String)>), PlanError> {
-    let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
-    let back = reference_from_robot(workcell);
-    let ball_mm = robot.tool.radius * 1e3;
-    let influence = Influence::new(tool, ball_mm);
-    let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
-    let mut report = RemovalReport {
-        force_n: tool.force_n(),
-        preload_mm: tool.preload_mm,
-        tolerance_mm: tolerance,
-        regions: Vec::new(),
-        rows: Vec::new(),
-    };
-    let press = press_dwell(prog, robot, workcell, tool.preload_mm);
-    let mut failed = Vec::new();
-    for &(id, allowance_mm) in allowances {
-        let (index, pieces): (Vec<usize>, Vec<&PlannedPass>) = prog
-            .passes
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| p.region == id)
-            .unzip();
-        let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, &back)).collect();
-        let dwell: Vec<f64> = pieces
-            .iter()
-            .zip(&index)
-            .map(|(p, &i)| p.dwell_s.unwrap_or(0.0) + press[i])
-            .collect();
-        let joints: Vec<JointError> = pieces
-            .iter()
-            .map(|p| joint_error(robot, &p.points[0].q, &back))
-            .collect();
-        let idx = cores_near(inspection, &contacts, influence.patch_radius());
-        let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
-            .iter()
-            .map(|&i| {
-                let p = inspection.points[i];
-                let d = if p.distance.is_finite() {
-                    p.distance
-                } else {
-                    0.0
-                };
-                (p.position, p.normal, d)
-            })
-            .collect();
-        let geometry: Vec<(Point3<f64>, Vector3<f64>)> = cores.iter().map(|c| (c.0, c.1)).collect();
-        let a = removal::influence::matrix(&influence, &contacts, &geometry);
-        let removed = removal::influence::apply(&a, &dwell, cores.len());
-        let before: Vec<f64> = cores.iter().map(|c| c.2).collect();
-        let after: Vec<f64> = before.iter().zip(&removed).map(|(d, r)| d - r).collect();
-        let mc = spread(
-            tool,
-            ball_mm,
-            &contacts,
-            &joints,
-            &dwell,
-            &cores,
-            &config.monte_carlo,
-        );
-        let low = mc.low(config.monte_carlo.quantile);
-        let median = mc.low(0.5);
-        let lowest = low.iter().copied().fold(f64::INFINITY, f64::min);
-        if lowest < -tolerance {
-            failed.push((
-                id,
-                format!(
-                    "region left out by the removal planner: the trajectory's dwell \
-                     over-grinds to {lowest:.3} mm at the {} quantile, beyond the tolerance \
-                     {tolerance} mm",
-                    config.monte_carlo.quantile
-                ),
-            ));
-            continue;
-        }
-        for (k, &i) in idx.iter().enumerate() {
-            let p = inspection.points[i].position;
-            report.rows.push(PredictedRow {
-                position: [p.x, p.y, p.z],
-                deviation: before[k],
-                residual: after[k],
-                spread_p95: median[k] - low[k],
-            });
-        }
-        let area = inspection
-            .regions
-            .iter()
-            .find(|r| r.id == id)
-            .map_or(0.0, |r| {
-                r.area / inspection.region_points(id).len().max(1) as f64
-            });
-        report.regions.push(RegionPrediction {
-            region: id,
-            allowance_mm,
-            dwell: pieces
-                .iter()
-                .zip(&contacts)
-                .zip(&dwell)
-                .map(|((p, c), t)| DwellPoint {
-                    surface_mm: [c.point.x, c.point.y, c.point.z],
-                    dwell_s: *t,
-                    feed_mm_s: p.feed_mm_s,
-                })
-                .collect(),
-            core_points: idx.len(),
-            before: Stats::of(&before, tolerance, area),
-            after: Stats::of(&after, tolerance, area),
-            after_low_p95_mm: if lowest.is_finite() { lowest } else { 0.0 },
-        });
-    }
-    Ok((report, failed))
 }
 
 /// predicted.csv: a header and one row per core point, `spread_p95` empty when the Monte

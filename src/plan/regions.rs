@@ -4,10 +4,11 @@ use nalgebra::Point3;
 
 use super::config::PlanConfig;
 use super::error::PlanError;
+use super::free_motion::Cell;
 use super::inspection::{Inspection, RegionInfo, SurfacePoint};
 use super::raster::RasterGeometry;
 use super::report::Reachability;
-use super::{collide, order, preston, program, raster, removal, surface};
+use super::{collide, order, predict, preston, program, raster, removal, surface};
 
 /// The regions planned, their runs and per region (layers, contact points); in removal mode
 /// also the allowance each region's robust solve settled on.
@@ -17,6 +18,10 @@ pub(crate) struct Planned {
     pub(crate) allowances: Vec<(usize, f64)>,
     /// Removal mode: each region's walked runs before the dwell (to solve again).
     pub(crate) walked: std::collections::HashMap<usize, Vec<program::Run>>,
+    /// Removal mode: each region's verdict as checked before assembling.
+    pub(crate) rehearsed: predict::Rehearsed,
+    /// Removal mode: each region's highest deviation in reach of its contacts, mm.
+    pub(crate) highest: std::collections::HashMap<usize, f64>,
 }
 
 /// Rasters, solves and (in removal mode) sets the dwell of every repairable region in
@@ -52,7 +57,10 @@ pub(crate) fn plan_regions(
         counts: std::collections::HashMap::new(),
         allowances: Vec::new(),
         walked: std::collections::HashMap::new(),
+        rehearsed: predict::Rehearsed::new(),
+        highest: std::collections::HashMap::new(),
     };
+    let cell = Cell::new(robot, workcell, config, scene);
     let mut prev = config.home.clone();
     for &k in &visit {
         let region = planned[k];
@@ -82,12 +90,19 @@ pub(crate) fn plan_regions(
         }
         let runs = match tool {
             None => runs,
+            // nothing reachable: every point is already recorded with the reason
+            Some(_) if runs.is_empty() => runs,
             Some(_) => {
                 match preston::set_dwell(runs, region, inspection, ctx, config.allowance_mm)? {
-                    Ok((runs, allowance)) => {
-                        out.allowances.push((region.id, allowance));
-                        runs
-                    }
+                    Ok(dwelled) => settle(
+                        dwelled,
+                        region,
+                        inspection,
+                        ctx,
+                        &cell,
+                        &mut out,
+                        reachability,
+                    )?,
                     Err(reason) => {
                         preston::leave_out(
                             &strokes,
@@ -125,11 +140,79 @@ pub(crate) fn removal_geometry(
     }
 }
 
+/// A region's dwelled runs checked as the trajectory will grind them (`predict::rehearse`);
+/// while the Monte Carlo on that dwell over-grinds, the region is solved again alone with its
+/// allowance raised (`resolve`). Returns the runs to assemble (none when it is left out) and
+/// records the allowance used.
+fn settle(
+    mut dwelled: preston::Dwelled,
+    region: &RegionInfo,
+    inspection: &Inspection,
+    ctx: &preston::Setup,
+    cell: &Cell,
+    out: &mut Planned,
+    reachability: &mut Reachability,
+) -> Result<Vec<program::Run>, PlanError> {
+    let id = region.id;
+    let rehearsed = &mut out.rehearsed;
+    while let Some(reason) = predict::rehearse_region(
+        &dwelled.runs,
+        (id, dwelled.allowance),
+        cell,
+        inspection,
+        ctx,
+        rehearsed,
+    )? {
+        let walked = out.walked.get(&id).map_or(&[][..], Vec::as_slice);
+        let unreachable = &mut reachability.unreachable;
+        let level = (dwelled.allowance, dwelled.highest);
+        match resolve(walked, region, &reason, level, inspection, ctx, unreachable)? {
+            Some(again) => dwelled = again,
+            None => return Ok(Vec::new()),
+        }
+    }
+    out.allowances.push((id, dwelled.allowance));
+    out.highest.insert(id, dwelled.highest);
+    Ok(dwelled.runs)
+}
+
+/// Solves a region that over-grinds for `reason` again from its `walked` runs with the
+/// allowance raised from `allowance` by `removal::ALLOWANCE_STEP_SHARE` of the tolerance. Once
+/// the allowance is above the `highest` deviation in reach (every dwell already at its
+/// shortest), or when the solve fails, the region's pieces are left out with both reasons
+/// and None comes back.
+fn resolve(
+    walked: &[program::Run],
+    region: &RegionInfo,
+    reason: &str,
+    (allowance, highest): (f64, f64),
+    inspection: &Inspection,
+    ctx: &preston::Setup,
+    unreachable: &mut Vec<super::report::UnreachablePoint>,
+) -> Result<Option<preston::Dwelled>, PlanError> {
+    let tolerance = inspection.tolerance.unwrap_or(ctx.config.tolerance_mm);
+    let raised = allowance + removal::ALLOWANCE_STEP_SHARE * tolerance;
+    let why = match allowance > highest {
+        true => format!(
+            "it over-grinds even with an allowance of {allowance:.3} mm, above the highest \
+             deviation {highest:.3} mm (every dwell at its shortest)"
+        ),
+        false => match preston::set_dwell(walked.to_vec(), region, inspection, ctx, raised)? {
+            Ok(again) => return Ok(Some(again)),
+            Err(why) => why,
+        },
+    };
+    for piece in walked.iter().flatten() {
+        super::assemble::leave_out(piece, &format!("{reason}; {why}"), unreachable);
+    }
+    Ok(None)
+}
+
 /// Assembles the planned runs into the program and, in removal mode, predicts the part; a
-/// region whose trajectory over-grinds at the Monte Carlo's quantile (the trajectory spends a
-/// little more than the solved dwell: speed changes, presses) is solved again with its
-/// allowance raised by `removal::ALLOWANCE_STEP_SHARE` of the tolerance, and left out (its
-/// contacts recorded with the reason) once the robust solve refuses it; the rest stands.
+/// region whose trajectory still over-grinds at the Monte Carlo's quantile once assembled
+/// (the rehearsal before assembling did not know a chain the assembly left out) is solved
+/// again (`resolve`) and the program assembled again; a region the robust solve refuses is
+/// left out (its contacts recorded with the reason); the rest stands.
 pub(crate) fn assemble_and_predict(
     mut planned: Planned,
     inspection: &Inspection,
@@ -138,7 +221,6 @@ pub(crate) fn assemble_and_predict(
     scene: &collide::Scene,
     unreachable: &mut Vec<super::report::UnreachablePoint>,
 ) -> Result<(program::Program, Option<preston::RemovalReport>), PlanError> {
-    let tolerance = inspection.tolerance.unwrap_or(ctx.config.tolerance_mm);
     loop {
         let mut left = Vec::new();
         let prog = super::assemble::assemble(
@@ -153,7 +235,13 @@ pub(crate) fn assemble_and_predict(
             unreachable.extend(left);
             return Ok((prog, None));
         }
-        let (report, failed) = preston::predict(&prog, inspection, &planned.allowances, ctx)?;
+        let (report, failed) = predict::predict(
+            &prog,
+            inspection,
+            &planned.allowances,
+            ctx,
+            &planned.rehearsed,
+        )?;
         if failed.is_empty() {
             unreachable.extend(left);
             return Ok((prog, Some(report)));
@@ -163,28 +251,33 @@ pub(crate) fn assemble_and_predict(
             planned
                 .runs
                 .retain(|run| run.iter().all(|p| p.region != id));
-            let old = planned
-                .allowances
-                .iter()
-                .find(|a| a.0 == id)
-                .map_or(0.0, |a| a.1);
-            planned.allowances.retain(|a| a.0 != id);
+            let slot = planned.allowances.iter().position(|a| a.0 == id);
+            let old = slot.map_or(0.0, |k| planned.allowances[k].1);
+            let highest = planned.highest.get(&id).copied().unwrap_or(0.0);
+            planned.rehearsed.remove(&id);
             let region = inspection.regions.iter().find(|r| r.id == id);
             let walked = planned.walked.get(&id).cloned().unwrap_or_default();
-            let raised = old + removal::ALLOWANCE_STEP_SHARE * tolerance;
             let again = match region {
-                Some(r) => preston::set_dwell(walked.clone(), r, inspection, ctx, raised)?,
-                None => Err(reason.clone()),
+                Some(r) => resolve(
+                    &walked,
+                    r,
+                    &reason,
+                    (old, highest),
+                    inspection,
+                    ctx,
+                    unreachable,
+                )?,
+                None => None,
             };
-            match again {
-                Ok((runs, allowance)) => {
-                    planned.allowances.push((id, allowance));
+            match (again, slot) {
+                (Some(again), Some(k)) => {
+                    planned.allowances[k].1 = again.allowance;
                     let at = at.unwrap_or(planned.runs.len()).min(planned.runs.len());
-                    planned.runs.splice(at..at, runs);
+                    planned.runs.splice(at..at, again.runs);
                 }
-                Err(why) => {
-                    for piece in walked.iter().flatten() {
-                        super::assemble::leave_out(piece, &format!("{reason}; {why}"), unreachable);
+                (_, slot) => {
+                    if let Some(k) = slot {
+                        planned.allowances.remove(k);
                     }
                 }
             }

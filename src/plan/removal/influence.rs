@@ -31,8 +31,10 @@ pub struct Influence {
     ball_mm: f64,
     /// Spindle speed, rad/s.
     omega: f64,
-    /// Tilt of the spindle from the normal, rad.
-    tilt: f64,
+    /// Sine and cosine of the spindle's tilt from the normal (the spin axis in patch
+    /// coordinates is (sin, 0, -cos)); kept, not recomputed at every patch point.
+    tilt_sin: f64,
+    tilt_cos: f64,
     /// Preston coefficient, mm^2/N.
     k: f64,
 }
@@ -70,7 +72,8 @@ impl Influence {
             pressure,
             ball_mm,
             omega: tool.omega(),
-            tilt: tool.tilt_deg.to_radians(),
+            tilt_sin: tool.tilt_deg.to_radians().sin(),
+            tilt_cos: tool.tilt_deg.to_radians().cos(),
             k: tool.preston_k_mm2_n,
         }
     }
@@ -104,7 +107,7 @@ impl Influence {
     pub fn speed(&self, x: f64, y: f64) -> f64 {
         // the ball's surface point over (x, y), relative to its centre (flat patch)
         let w = Vector3::new(x, y, -self.ball_mm);
-        let axis = Vector3::new(self.tilt.sin(), 0.0, -self.tilt.cos());
+        let axis = Vector3::new(self.tilt_sin, 0.0, -self.tilt_cos);
         let along = w.dot(&axis);
         self.omega * (w.norm_squared() - along * along).max(0.0).sqrt()
     }
@@ -157,13 +160,49 @@ impl<'a> Reach<'a> {
     /// One column of A: the removal depth per second of dwell at contact `c` at every core
     /// point in reach, the influence averaged over the contact's piece of stroke.
     pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {
+        let reach = influence.patch_radius() + 0.5 * c.length;
+        let near = self.index.within(&c.point, reach);
+        self.column_over(influence, c, near.iter().map(|nb| nb.index))
+    }
+
+    /// The core points within `radius` mm of `centre`, in no particular order: a superset to
+    /// hand [`Reach::column_among`] for contacts that stay within `radius - reach` of it.
+    pub fn candidates(&self, centre: &Point3<f64>, radius: f64) -> Vec<usize> {
+        let near = self.index.within_unsorted(centre, radius);
+        near.into_iter().map(|nb| nb.index).collect()
+    }
+
+    /// [`Reach::column`] over `candidates` (a superset of the core points in reach of `c`,
+    /// any order; entries in that order): the points in reach are chosen by the same squared
+    /// distance the index uses, so the column holds the same values.
+    pub fn column_among(
+        &self,
+        influence: &Influence,
+        c: &Contact,
+        candidates: &[usize],
+    ) -> Vec<(usize, f64)> {
+        let reach = influence.patch_radius() + 0.5 * c.length;
+        let centre = [c.point.x, c.point.y, c.point.z];
+        let inside = candidates.iter().copied().filter(|&i| {
+            let p = self.cores[i].0;
+            crate::spatial::dist2(&[p.x, p.y, p.z], &centre) <= reach * reach
+        });
+        self.column_over(influence, c, inside)
+    }
+
+    /// The column's entries at the core points `inside` (all in reach of `c`).
+    fn column_over(
+        &self,
+        influence: &Influence,
+        c: &Contact,
+        inside: impl Iterator<Item = usize>,
+    ) -> Vec<(usize, f64)> {
         let n = c.normal;
         let tx = (c.tilt_dir - n * n.dot(&c.tilt_dir)).normalize();
         let ty = n.cross(&tx);
-        let reach = influence.patch_radius() + 0.5 * c.length;
         let mut column = Vec::new();
-        for nb in self.index.within(&c.point, reach) {
-            let (p, pn) = self.cores[nb.index];
+        for index in inside {
+            let (p, pn) = self.cores[index];
             if pn.dot(&n) < SAME_FACE_COS {
                 continue;
             }
@@ -176,7 +215,7 @@ impl<'a> Reach<'a> {
                 .sum::<f64>()
                 / SUBSAMPLES as f64;
             if mean > 0.0 {
-                column.push((nb.index, mean));
+                column.push((index, mean));
             }
         }
         column
@@ -243,7 +282,8 @@ mod tests {
         assert!((inf.speed(0.0, 0.0) - want).abs() < 1e-9 * want);
         // untilted, the pole does not move
         let flat = Influence {
-            tilt: 0.0,
+            tilt_sin: 0.0,
+            tilt_cos: 1.0,
             ..inf.clone()
         };
         assert!(flat.speed(0.0, 0.0).abs() < 1e-9);

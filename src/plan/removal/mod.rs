@@ -216,6 +216,9 @@ pub struct Robust {
 /// Solves `problem` at `allowance`, then raises the allowance by half the tolerance until the
 /// Monte Carlo's low quantile of the residual stays above -tolerance everywhere; refuses (with
 /// the deepest predicted cut) once the allowance passes the highest deviation.
+/// The planner itself checks the dwell the trajectory spends instead (`plan`'s rehearsal,
+/// docs/ALGORITHMS.md), which is at least the solved dwell, so it reaches the same allowance;
+/// this is the same rule on the model alone.
 pub fn solve_robust(
     problem: &Problem,
     mut allowance: f64,

@@ -11,6 +11,15 @@ use serde::{Deserialize, Serialize};
 use super::influence::{Contact, Influence, Reach};
 use super::tool::ToolModel;
 
+/// Radius of the core points gathered once per contact for all draws, as a multiple of its
+/// nominal reach (patch radius + half its piece) (2): a draw moves a contact by about a tenth
+/// of a millimetre and changes its patch by a few percent, well inside twice the reach; a draw
+/// that leaves it queries the index itself, so the factor sets the speed only, not the answer.
+const CANDIDATE_REACH_FACTOR: f64 = 2.0;
+
+/// Relative slack for rounding when a draw's reach is compared with the gathered radius.
+const ROUNDING: f64 = 1e-9;
+
 /// Settings of the Monte Carlo.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -113,13 +122,22 @@ pub fn spread(
     let half_backlash = 0.5 * config.backlash_deg.to_radians();
     // Preston's k uniform with the model's standard deviation: half-width sqrt(3) sd
     let k_half = 3f64.sqrt() * tool.preston_k_rel_sd;
+    let patch = Influence::new(tool, ball_mm).patch_radius();
+    let gathered: Vec<(f64, Vec<usize>)> = contacts
+        .iter()
+        .map(|c| {
+            let radius = CANDIDATE_REACH_FACTOR * (patch + 0.5 * c.length);
+            (radius, reach.candidates(&c.point, radius))
+        })
+        .collect();
     let draws = (0..config.draws)
         .map(|_| {
             let backlash = DVector::from_fn(dof, |_, _| rng.gen_range(-1.0..=1.0) * half_backlash);
             let tip = Vector3::from_fn(|_, _| rng.gen_range(-1.0..=1.0) * config.tip_error_mm);
             let k_scale = 1.0 + k_half * rng.gen_range(-1.0..=1.0);
             let mut removal = vec![0.0; cores.len()];
-            for ((c, je), t) in contacts.iter().zip(joints).zip(dwell) {
+            let each = contacts.iter().zip(joints).zip(dwell).zip(&gathered);
+            for (((c, je), t), (radius, near)) in each {
                 let quant =
                     DVector::from_fn(dof, |i, _| rng.gen_range(-1.0..=1.0) * je.half_count[i]);
                 let d = &je.sensitivity * (&backlash + quant);
@@ -139,7 +157,13 @@ pub fn spread(
                     point: c.point + (shift - c.normal * along_normal),
                     ..*c
                 };
-                for (j, v) in reach.column(&Influence::new(&model, ball_mm), &moved) {
+                let influence = Influence::new(&model, ball_mm);
+                let needs = (moved.point - c.point).norm() + influence.patch_radius();
+                let column = match needs + 0.5 * c.length <= *radius * (1.0 - ROUNDING) {
+                    true => reach.column_among(&influence, &moved, near),
+                    false => reach.column(&influence, &moved),
+                };
+                for (j, v) in column {
                     removal[j] += v * t;
                 }
             }
