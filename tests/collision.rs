@@ -6,8 +6,6 @@ mod common;
 mod heldout;
 #[path = "collision/sweep.rs"]
 mod sweep;
-#[path = "collision/takeback.rs"]
-mod takeback;
 
 use nalgebra::{Matrix4, Point3, Vector3};
 use polishbot::grind_sim::fk::chain;
@@ -520,9 +518,11 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
         "{inside} of {free} free samples with the ball over 0.1 mm inside"
     );
     assert_eq!(second, 0, "{second} grinding samples touch a second face");
-    // the planner's fast check (carried bounds) against the exhaustive one
-    for (allow, clear, hits, skipped) in
-        sweep::sweep_answers_as_plain(&p, &insp.points, &wc, &PlanConfig::default().collision)
+    // the planner's fast check (carried bounds) against the exhaustive one, the ball pressed
+    // in by the plan's preload as `plan` and `run` check it
+    let mut cfg = PlanConfig::default().collision;
+    cfg.press_mm = p.removal.as_ref().map_or(0.0, |r| r.preload_mm);
+    for (allow, clear, hits, skipped) in sweep::sweep_answers_as_plain(&p, &insp.points, &wc, &cfg)
     {
         println!("demo, {allow:?}: {clear} clear, {hits} refused, {skipped} searches skipped");
         assert!(clear > 0 && skipped > 0, "{allow:?}");
