@@ -518,6 +518,15 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
         "{inside} of {free} free samples with the ball over 0.1 mm inside"
     );
     assert_eq!(second, 0, "{second} grinding samples touch a second face");
+    // the planner's fast check (carried bounds) against the exhaustive one, the ball pressed
+    // in by the plan's preload as `plan` and `run` check it
+    let mut cfg = PlanConfig::default().collision;
+    cfg.press_mm = p.removal.as_ref().map_or(0.0, |r| r.preload_mm);
+    for (allow, clear, hits, skipped) in sweep::sweep_answers_as_plain(&p, &insp.points, &wc, &cfg)
+    {
+        println!("demo, {allow:?}: {clear} clear, {hits} refused, {skipped} searches skipped");
+        assert!(clear > 0 && skipped > 0, "{allow:?}");
+    }
 }
 
 /// `Scene::check` remembers the samples it found clear (so `plan`'s final check skips the

@@ -3,6 +3,8 @@
 //! robot frame), and the moving bodies at a joint sample: the tool's ball, its shank and the
 //! arm's links as capsules between the URDF joint origins. Method: docs/ALGORITHMS.md,
 //! "Collision model".
+mod sweep;
+
 use std::collections::HashSet;
 use std::sync::Mutex;
 
@@ -13,6 +15,8 @@ pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, So
 use super::inspection::SurfacePoint;
 use crate::robot::{angle_between, Robot, Workcell};
 use crate::spatial::{Neighbour, Neighbours};
+use sweep::Carry;
+pub use sweep::Sweep;
 
 /// What a sample may touch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -29,15 +33,9 @@ pub enum Allow {
 /// Points closer to the ball's centre than its radius less this count as inside it, mm.
 const INSIDE_MM: f64 = 1e-3;
 
-/// Least spare distance beyond a body's search reach worth carrying to later samples, mm (2:
-/// a carried bound then lasts at least 1 mm of motion, ten grinding samples at the 5 mm/s
-/// feed, and the march that finds it steps at least 1 mm; below it the body is searched).
-const MIN_SPARE_MM: f64 = 2.0;
-
-/// Samples a body is searched as before after its march found it nearer the part than
-/// `MIN_SPARE_MM` beyond its reach, before a new march is tried (8: a body that stays near,
-/// such as the shank while grinding, costs one wasted nearest query in nine samples).
-const NEAR_WAIT: u32 = 8;
+/// Margin on a cosine that stands in for an angle test (1e-9: the cosine of unit normals is
+/// off by about 1e-16; a normal this close to the limit gets its angle computed).
+const COS_SLACK: f64 = 1e-9;
 
 /// Allowance for rounding in a bound that stands in for a search, mm (coordinates of hundreds of mm carry
 /// rounding errors near 1e-13 mm; 1e-6 mm is far above them and far below any clearance).
@@ -46,51 +44,6 @@ const ROUNDING_MM: f64 = 1e-6;
 /// The last nearest query of a search and its answer (a query repeated at the same point
 /// answers the same).
 type Seen = Option<(Point3<f64>, Neighbour)>;
-
-/// A stretch of a body's axis, from `from` mm along it to its end, clear of the part.
-#[derive(Debug, Clone, Copy)]
-struct Stretch {
-    from: f64,
-    /// Its ends when the level was found, reference frame, mm.
-    start: Point3<f64>,
-    end: Point3<f64>,
-    /// No reference point is nearer any point of the stretch, mm.
-    level: f64,
-}
-
-/// A bound on one body's distance from the part carried from sample to sample.
-#[derive(Debug, Clone, Default)]
-struct Carry {
-    /// The stretch of the axis known clear, with its position then.
-    anchor: Option<Stretch>,
-    /// Samples left before a new march (after one found the body near the part).
-    wait: u32,
-    /// Searches the bound answered.
-    skipped: usize,
-}
-
-/// Samples checked one after another (a move, a stroke, a whole program): each body's
-/// distance from the part found at one sample bounds it at the next ones by how far the body
-/// has moved since, and while that bound stays beyond the body's search reach its search is
-/// skipped (the argument: `Scene::carried_far`). Answers are those of [`Scene::check`], bit
-/// for bit, whatever the order of the samples.
-pub struct Sweep<'s, 'a> {
-    scene: &'s Scene<'a>,
-    carry: Vec<Carry>,
-}
-
-impl Sweep<'_, '_> {
-    /// As [`Scene::check`].
-    pub fn check(&mut self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
-        self.scene
-            .check_carried(robot, q, allow, Some(&mut self.carry))
-    }
-
-    /// Body searches answered by a carried bound so far.
-    pub fn skipped(&self) -> usize {
-        self.carry.iter().map(|c| c.skipped).sum()
-    }
-}
 
 /// The reference points inside the ball (index, distance from the centre) and the nearest.
 #[derive(Default)]
@@ -231,17 +184,9 @@ impl<'a> Scene<'a> {
     /// clear before under the same rule is clear again without a new search; so is one found
     /// clear under `Free` when `Contact` is asked (`Free` asks every body for the margin and
     /// searches at least the points `Contact` does, so its smallest clearance is no larger).
+    /// Grinding samples are not remembered (`plan` checks most of them once, at the end).
     pub fn check(&self, robot: &Robot, q: &[f64], allow: Allow) -> Option<Hit> {
         self.check_carried(robot, q, allow, None)
-    }
-
-    /// A check of samples one after another that carries each body's distance from the part
-    /// between them (see [`Sweep`]); it answers every sample exactly as [`Scene::check`] does.
-    pub fn sweep(&self) -> Sweep<'_, 'a> {
-        Sweep {
-            scene: self,
-            carry: Vec::new(),
-        }
     }
 
     /// `check`, with the bounds carried from earlier samples when there are any.
@@ -252,6 +197,9 @@ impl<'a> Scene<'a> {
         allow: Allow,
         carry: Option<&mut Vec<Carry>>,
     ) -> Option<Hit> {
+        if allow == Allow::Grind {
+            return self.search(robot, q, allow, carry);
+        }
         let key: Vec<u64> = q.iter().map(|v| v.to_bits()).collect();
         let mut known = self.clear.lock().unwrap_or_else(|e| e.into_inner());
         let mut key = (key, allow);
@@ -353,9 +301,16 @@ impl<'a> Scene<'a> {
 
     /// The first of `inside` (points in the ball with their distances from its centre) whose
     /// normal lies more than `second_face_deg` from `n0`.
+    /// A normal whose cosine with `n0` exceeds the limit's by `COS_SLACK` lies within the limit
+    /// and its angle is not computed (the same answer, without an `atan2` per point).
     fn second_face_among(&self, inside: &[(usize, f64)], n0: &Vector3<f64>) -> Option<Hit> {
+        let within = self.cfg.second_face_deg.to_radians().cos() + COS_SLACK;
+        let n0_norm = n0.norm();
         inside.iter().find_map(|&(i, dist)| {
             let p = &self.points[i];
+            if p.normal.dot(n0) >= within * p.normal.norm() * n0_norm {
+                return None;
+            }
             let angle = angle_between(&p.normal, n0).to_degrees();
             (angle > self.cfg.second_face_deg).then(|| Hit {
                 body: Body::Ball,
@@ -475,88 +430,6 @@ impl<'a> Scene<'a> {
     fn outside_box(&self, c: &Capsule, reach: f64) -> bool {
         let (slo, shi) = (c.a.inf(&c.b), c.a.sup(&c.b));
         (0..3).any(|k| slo[k] - reach > self.hi[k] || shi[k] + reach < self.lo[k])
-    }
-
-    /// How far along `c`'s axis `part_clearance` must march: None when no reference point
-    /// lies within `reach` of the axis (the search would visit no point and answer None),
-    /// else a length beyond which none does (infinite when nothing is known). Shown without
-    /// searching when `carry`'s bound allows; `carry` is renewed when it does not.
-    ///
-    /// Why a skip cannot pass a colliding sample: `carry` holds an earlier stretch `s0`-`e0`
-    /// of the body's axis (from `from` mm along it to its end) and a level `L` such that every
-    /// point of that stretch is at least `L` from every reference point (Euclidean). The same
-    /// stretch now runs `s`-`e`, and its point `s + u (e - s)` lies within `|(1 - u)(s - s0) +
-    /// u (e - e0)| <= max(|s - s0|, |e - e0|) = moved` of `s0 + u (e0 - s0)`; the distance
-    /// to a point set is 1-Lipschitz, so every point of the stretch is at least `L - moved`
-    /// from every reference point. When that exceeds `reach` (by `ROUNDING_MM` for rounding),
-    /// every nearest query of the search's march there finds its point beyond `reach`, so the
-    /// march only steps over the stretch: stopping it at `from` (or not starting it when
-    /// `from` is 0) leaves the answer as it was. Nothing is assumed about the motion between
-    /// the two samples (only positions are compared), and the solids are checked at every
-    /// sample anyway. The ball is never skipped: a centre deep inside the part is far from
-    /// every point and only the search's normal test sees it.
-    fn search_limit(&self, carry: &mut Carry, c: &Capsule, reach: f64) -> Option<f64> {
-        if self.outside_box(c, reach) {
-            return None;
-        }
-        let len = (c.b - c.a).norm();
-        let at = |from: f64| c.a + (c.b - c.a) * (from / len).min(1.0);
-        if let Some(known) = carry.anchor {
-            let moved = (at(known.from) - known.start)
-                .norm()
-                .max((c.b - known.end).norm());
-            if known.level - moved > reach + ROUNDING_MM {
-                carry.skipped += 1;
-                return (known.from > 0.0).then_some(known.from);
-            }
-        }
-        carry.anchor = None;
-        if carry.wait > 0 {
-            carry.wait -= 1;
-            return Some(f64::INFINITY);
-        }
-        match self.clear_stretch(c, reach) {
-            Some((from, level)) => {
-                let (start, end) = (at(from), c.b);
-                carry.anchor = Some(Stretch {
-                    from,
-                    start,
-                    end,
-                    level,
-                });
-                (from > 0.0).then_some(from)
-            }
-            None => {
-                carry.wait = NEAR_WAIT;
-                Some(f64::INFINITY)
-            }
-        }
-    }
-
-    /// The stretch of `c`'s axis from its end back towards its start (from `from` mm along
-    /// it) that keeps at least `reach + MIN_SPARE_MM` from every reference point, and a level
-    /// no point of it comes nearer than; None when the end itself is nearer. Marches back
-    /// from the end: the nearest point at `gap` from a centre leaves every point within
-    /// `(gap - reach) / 2` of the centre at least `(gap + reach) / 2` from the part, and the
-    /// march steps on by that half, so those balls cover the stretch.
-    fn clear_stretch(&self, c: &Capsule, reach: f64) -> Option<(f64, f64)> {
-        let d = c.b - c.a;
-        let len = d.norm();
-        let dir = if len > 0.0 { d / len } else { Vector3::zeros() };
-        let mut level = f64::INFINITY;
-        let mut t = len;
-        loop {
-            let gap = self.index.nearest(&(c.a + dir * t))?.dist2.sqrt();
-            let half = (gap - reach) / 2.0;
-            if half.is_nan() || half < MIN_SPARE_MM / 2.0 {
-                return (t < len).then_some((t, level));
-            }
-            level = level.min(gap - half);
-            t -= half;
-            if t <= 0.0 {
-                return Some((0.0, level));
-            }
-        }
     }
 
     /// The first solid `c` comes within `margin` of (answers exactly as the search alone).

@@ -173,6 +173,12 @@ fn plans_of_parts_with_defects_near_edges_keep_the_tool_and_arm_out_of_the_part(
             &t,
         );
         assert!(!plan.passes.is_empty(), "seed {seed}: something is ground");
+        let (_, wc, _, config) = cell("");
+        for (allow, clear, hits, _) in
+            super::sweep::sweep_answers_as_plain(&plan, &insp.points, &wc, &config.collision)
+        {
+            println!("seed {seed}, {allow:?}: fast = exhaustive on {clear} clear, {hits} refused");
+        }
         if seed == 3001 {
             let (plan, t) = turntable_cell(&insp);
             let moves = plan.turntable.as_ref().map_or(0, |tp| tp.moves.len());

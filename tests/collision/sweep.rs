@@ -3,11 +3,20 @@
 //! searches, never an answer.
 use nalgebra::{Matrix4, Point3};
 use polishbot::plan::collide::{Allow, Body, Scene};
-use polishbot::plan::{plan, PlanConfig, SurfacePoint};
-use polishbot::robot::Workcell;
+use polishbot::plan::{plan, CollisionConfig, Plan, PlanConfig, SurfacePoint};
+use polishbot::robot::{Robot, Workcell};
 
 use super::{arm, grid, measure, point, to_ref, wedge};
 use crate::common::dofbot;
+
+/// The arm, the part placed in the robot frame as it is (mm to m only) and the rigid plan's
+/// collision settings.
+fn bare_cell() -> (Robot, Workcell, CollisionConfig) {
+    let wc = Workcell {
+        robot_from_reference: Matrix4::identity(),
+    };
+    (dofbot(), wc, PlanConfig::rigid().collision)
+}
 
 /// The forearm (the link after joint 2, a 20 mm capsule) swept sideways by the base joint in
 /// 0.002 rad steps towards a wall of reference points that it ends 0.5 mm inside the 1 mm
@@ -17,11 +26,7 @@ use crate::common::dofbot;
 /// answering each sample afresh refuses it.
 #[test]
 fn a_link_just_inside_the_margin_after_a_stretch_of_skipped_searches_is_caught() {
-    let robot = dofbot();
-    let wc = Workcell {
-        robot_from_reference: Matrix4::identity(),
-    };
-    let cfg = PlanConfig::rigid().collision;
+    let (robot, wc, cfg) = bare_cell();
     let (steps, step) = (300, 0.002);
     let q = |k: usize| vec![k as f64 * step, 0.6, 0.4, 0.3, 0.0];
     let forearm = |k: usize| {
@@ -78,9 +83,33 @@ fn a_sweep_over_a_plan_answers_every_sample_as_the_plain_check_does() {
     let (insp, wc) = wedge();
     let cfg = PlanConfig::rigid();
     let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    for (allow, clear, hits, skipped) in
+        sweep_answers_as_plain(&p, &insp.points, &wc, &cfg.collision)
+    {
+        assert!(clear > 0, "{allow:?}: no sample clear");
+        assert!(
+            hits > 0 || allow != Allow::Free,
+            "{allow:?}: grinding samples touch the part"
+        );
+        assert!(skipped > 0, "{allow:?}: nothing skipped");
+    }
+}
+
+/// Every sample of `p`, in order, under each rule, checked by a sweep and by a plain scene
+/// (no carried bound, every body searched: the exhaustive check) of `points` placed by `wc`:
+/// the answers are the same (refusals with the same body, point and clearance). Per rule:
+/// samples clear, samples refused, searches the sweep skipped.
+pub(super) fn sweep_answers_as_plain(
+    p: &Plan,
+    points: &[SurfacePoint],
+    wc: &Workcell,
+    cfg: &CollisionConfig,
+) -> Vec<(Allow, usize, usize, usize)> {
+    let robot = dofbot();
+    let mut out = Vec::new();
     for allow in [Allow::Free, Allow::Contact, Allow::Grind] {
-        let scene = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
-        let plain = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
+        let scene = Scene::new(points, &robot, wc, cfg);
+        let plain = Scene::new(points, &robot, wc, cfg);
         let mut sweep = scene.sweep();
         let (mut clear, mut hits) = (0, 0);
         for (i, s) in p.samples.iter().enumerate() {
@@ -93,11 +122,84 @@ fn a_sweep_over_a_plan_answers_every_sample_as_the_plain_check_does() {
                 hits += 1;
             }
         }
-        assert!(clear > 0, "{allow:?}: no sample clear");
-        assert!(
-            hits > 0 || allow != Allow::Free,
-            "{allow:?}: grinding samples touch the part"
-        );
-        assert!(sweep.skipped() > 0, "{allow:?}: nothing skipped");
+        out.push((allow, clear, hits, sweep.skipped()));
     }
+    out
+}
+
+/// The ball slid 1 mm per sample along a surface it sits 0.05 mm inside (a surface of
+/// revolution about the base joint, built from the simulator's kinematics: every sample sees
+/// it alike), with one reference point planted where only the middle sample's ball reaches it:
+/// for `Contact`, raised 0.15 mm towards the ball (that ball 0.2 mm inside, beyond the 0.1 mm
+/// tolerance; the neighbours' balls, 1 mm away, 0.027 mm inside); for `Grind`, 0.25 mm beside
+/// the middle ball's nearest point with its normal turned 60 degrees (inside that ball only,
+/// 0.04 mm: a second face). Swept from
+/// several first samples (the bounds carried for the shank and links start at different
+/// samples), the middle sample is refused naming the planted point and the ball, the others
+/// pass, and every answer equals the plain check's: the sweep covers every sample, not only
+/// the ends of a stretch it found clear.
+#[test]
+fn a_ball_inside_the_part_between_two_clear_samples_is_caught_by_the_sweep() {
+    let (robot, wc, cfg) = bare_cell();
+    let r = robot.tool.radius * 1e3;
+    let q = |phi: f64| vec![phi, 0.6, 0.4, 0.3, 0.0];
+    // the ball centre and tool axis at base angle phi (reference frame, mm)
+    let ball = |phi: f64| {
+        let (_, tip, axis) = arm(&q(phi), &robot);
+        (to_ref(&wc, &tip), axis)
+    };
+    let (c0, _) = ball(0.0);
+    let per_mm = 1e-4 / (ball(1e-4).0 - c0).norm();
+    let (samples, middle) = (13usize, 6usize);
+    // columns 0.5 mm apart: the line across the ball's path 0.05 mm inside its front
+    let mut pts = Vec::new();
+    for j in -8..=(2 * samples as i64 + 8) {
+        let phi = j as f64 * 0.5 * per_mm;
+        let (c, axis) = ball(phi);
+        let along = (ball(phi + 1e-6).0 - c).normalize();
+        let across = axis.cross(&along).normalize();
+        let foot = c + axis * (r - 0.05);
+        pts.extend((-8..=8).map(|i| point(foot + across * (0.5 * i as f64), -axis, 0.0, -1)));
+    }
+    let (cm, axis_m) = ball(middle as f64 * per_mm);
+    let across_m = axis_m
+        .cross(&(ball(middle as f64 * per_mm + 1e-6).0 - cm))
+        .normalize();
+    let turned = -axis_m * 60f64.to_radians().cos() + across_m * 60f64.to_radians().sin();
+    let planted = pts.len();
+    let mut skipped = 0;
+    for (allow, offset, normal) in [
+        (Allow::Contact, -axis_m * 0.15, -axis_m),
+        (Allow::Grind, across_m * 0.25, turned),
+    ] {
+        let mut surface = pts.clone();
+        surface.push(point(cm + axis_m * (r - 0.05) + offset, normal, 0.0, -1));
+        let plain = Scene::new(&surface, &robot, &wc, &cfg);
+        for first in 0..4 {
+            let scene = Scene::new(&surface, &robot, &wc, &cfg);
+            let mut sweep = scene.sweep();
+            for k in first..samples {
+                let qk = q(k as f64 * per_mm);
+                let got = sweep.check(&robot, &qk, allow);
+                let want = plain.check(&robot, &qk, allow);
+                assert_eq!(
+                    format!("{got:?}"),
+                    format!("{want:?}"),
+                    "{allow:?}, sample {k}"
+                );
+                if k != middle {
+                    assert!(got.is_none(), "{allow:?}, sample {k}: {got:?}");
+                    continue;
+                }
+                let hit = got.unwrap_or_else(|| panic!("{allow:?}: the middle sample passed"));
+                assert_eq!(hit.body, Body::Ball, "{hit}");
+                assert!(
+                    format!("{hit:?}").contains(&format!("point: {planted}")),
+                    "{hit:?}"
+                );
+            }
+            skipped += sweep.skipped();
+        }
+    }
+    assert!(skipped > 0, "the sweeps carried no bound");
 }
