@@ -183,95 +183,9 @@ pub fn solve_region(
 }
 
 /// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the
-/// tolerance (0.5): small enough that the plan still removes all it safely can.
+/// tolerance (0.5): small enough that the plan still removes all it safely can. The planner's
+/// re-solve (`plan/regions.rs`) raises a region's allowance by it.
 pub const ALLOWANCE_STEP_SHARE: f64 = 0.5;
-
-/// One region's removal problem with the arm's error model.
-pub struct Problem<'a> {
-    /// The compliant tool.
-    pub tool: &'a ToolModel,
-    /// Ball radius, mm.
-    pub ball_mm: f64,
-    /// Raster contact points.
-    pub contacts: &'a [Contact],
-    /// The error model of each contact's joints.
-    pub joints: &'a [montecarlo::JointError],
-    /// Core points in reach.
-    pub cores: &'a [SurfacePoint],
-    /// Tolerance, mm: over-grind is a residual below -tolerance.
-    pub tolerance: f64,
-}
-
-/// A removal plan whose predicted over-grind at the Monte Carlo's quantile is zero.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Robust {
-    /// The plan at the allowance finally used.
-    pub plan: RegionRemoval,
-    /// The allowance used, mm.
-    pub allowance: f64,
-    /// Low quantile of the residual per core point, mm.
-    pub low: Vec<f64>,
-}
-
-/// Solves `problem` at `allowance`, then raises the allowance by half the tolerance until the
-/// Monte Carlo's low quantile of the residual stays above -tolerance everywhere; refuses (with
-/// the deepest predicted cut) once the allowance passes the highest deviation.
-/// The planner itself checks the dwell the trajectory spends instead (`plan`'s rehearsal,
-/// docs/ALGORITHMS.md), which is at least the solved dwell, so it reaches the same allowance;
-/// this is the same rule on the model alone.
-pub fn solve_robust(
-    problem: &Problem,
-    mut allowance: f64,
-    config: &RemovalConfig,
-    mc: &montecarlo::MonteCarloConfig,
-) -> Result<Robust, String> {
-    let influence = Influence::new(problem.tool, problem.ball_mm);
-    let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = problem
-        .cores
-        .iter()
-        .map(|c| (c.position, c.normal, known(c.distance)))
-        .collect();
-    let highest = cores.iter().map(|c| c.2).fold(0.0, f64::max);
-    loop {
-        let plan = solve_region(
-            &influence,
-            problem.contacts,
-            problem.cores,
-            allowance,
-            config,
-        )?;
-        let spread = montecarlo::spread(
-            problem.tool,
-            problem.ball_mm,
-            problem.contacts,
-            problem.joints,
-            &plan.dwell,
-            &cores,
-            mc,
-        );
-        let low = spread.low(mc.quantile);
-        let (j, deepest) = low
-            .iter()
-            .copied()
-            .enumerate()
-            .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
-        if deepest >= -problem.tolerance {
-            return Ok(Robust {
-                plan,
-                allowance,
-                low,
-            });
-        }
-        if allowance > highest {
-            return Err(format!(
-                "predicted over-grind at core point {j}: {deepest:.3} mm at the {} quantile \
-                 even with an allowance of {allowance:.3} mm above the highest deviation",
-                mc.quantile
-            ));
-        }
-        allowance += ALLOWANCE_STEP_SHARE * problem.tolerance;
-    }
-}
 
 #[cfg(test)]
 mod tests {
