@@ -307,7 +307,7 @@ pub(crate) fn rehearse_region(
 pub(crate) fn predict(
     prog: &Program,
     inspection: &Inspection,
-    allowances: &[(usize, f64)],
+    allowances: impl IntoIterator<Item = (usize, f64)>,
     setup: &Setup,
     rehearsed: &Rehearsed,
 ) -> Result<(RemovalReport, Vec<(usize, String)>), PlanError> {
@@ -321,7 +321,7 @@ pub(crate) fn predict(
     };
     let press = press_dwell(prog, setup.robot, setup.workcell, tool.preload_mm);
     let mut failed = Vec::new();
-    for &(id, allowance) in allowances {
+    for (id, allowance) in allowances {
         let (index, pieces): (Vec<usize>, Vec<&PlannedPass>) = prog
             .passes
             .iter()

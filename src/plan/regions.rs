@@ -1,5 +1,7 @@
 //! The regions of a plan in visiting order: rastered, walked and, in removal mode, given
 //! their dwell.
+use std::collections::HashMap;
+
 use nalgebra::Point3;
 
 use super::config::PlanConfig;
@@ -7,21 +9,38 @@ use super::error::PlanError;
 use super::free_motion::Cell;
 use super::inspection::{Inspection, RegionInfo, SurfacePoint};
 use super::raster::RasterGeometry;
-use super::report::Reachability;
+use super::report::{Reachability, UnreachablePoint};
 use super::{collide, order, predict, preston, program, raster, removal, surface};
 
+/// A region planned in removal mode whose verdict stands (so far): what solving it again needs.
+pub(crate) struct Settled {
+    /// Region id.
+    pub(crate) id: usize,
+    /// The allowance its last solve used, mm.
+    pub(crate) allowance: f64,
+    /// Its highest deviation in reach of its contacts, mm.
+    pub(crate) highest: f64,
+    /// Its walked runs before the dwell (to solve again from).
+    pub(crate) walked: Vec<program::Run>,
+}
+
 /// The regions planned, their runs and per region (layers, contact points); in removal mode
-/// also the allowance each region's robust solve settled on.
+/// also the regions settled and their rehearsals.
 pub(crate) struct Planned {
     pub(crate) runs: Vec<program::Run>,
-    pub(crate) counts: std::collections::HashMap<usize, (usize, usize)>,
-    pub(crate) allowances: Vec<(usize, f64)>,
-    /// Removal mode: each region's walked runs before the dwell (to solve again).
-    pub(crate) walked: std::collections::HashMap<usize, Vec<program::Run>>,
+    pub(crate) counts: HashMap<usize, (usize, usize)>,
+    /// Removal mode: the regions settled, in visiting order.
+    pub(crate) settled: Vec<Settled>,
     /// Removal mode: each region's verdict as checked before assembling.
     pub(crate) rehearsed: predict::Rehearsed,
-    /// Removal mode: each region's highest deviation in reach of its contacts, mm.
-    pub(crate) highest: std::collections::HashMap<usize, f64>,
+}
+
+/// What settling a region reads: the part, the planner's setup and the cell its rehearsal
+/// grinds in.
+struct Bench<'a> {
+    inspection: &'a Inspection,
+    ctx: &'a preston::Setup<'a>,
+    cell: &'a Cell<'a>,
 }
 
 /// Rasters, solves and (in removal mode) sets the dwell of every repairable region in
@@ -54,13 +73,16 @@ pub(crate) fn plan_regions(
     let visit = order::order(&start, &centroids);
     let mut out = Planned {
         runs: Vec::new(),
-        counts: std::collections::HashMap::new(),
-        allowances: Vec::new(),
-        walked: std::collections::HashMap::new(),
+        counts: HashMap::new(),
+        settled: Vec::new(),
         rehearsed: predict::Rehearsed::new(),
-        highest: std::collections::HashMap::new(),
     };
     let cell = Cell::new(robot, workcell, config, scene);
+    let bench = Bench {
+        inspection,
+        ctx,
+        cell: &cell,
+    };
     let mut prev = config.home.clone();
     for &k in &visit {
         let region = planned[k];
@@ -85,31 +107,38 @@ pub(crate) fn plan_regions(
             &mut reachability.unreachable,
             &mut reachability.jumps,
         );
-        if tool.is_some() {
-            out.walked.insert(region.id, runs.clone());
-        }
         let runs = match tool {
             None => runs,
             // nothing reachable: every point is already recorded with the reason
             Some(_) if runs.is_empty() => runs,
             Some(_) => {
-                match preston::set_dwell(runs, region, inspection, ctx, config.allowance_mm)? {
-                    Ok(dwelled) => settle(
-                        dwelled,
-                        region,
-                        inspection,
-                        ctx,
-                        &cell,
-                        &mut out,
-                        reachability,
-                    )?,
+                let unreachable = &mut reachability.unreachable;
+                match preston::set_dwell(
+                    runs.clone(),
+                    region,
+                    inspection,
+                    ctx,
+                    config.allowance_mm,
+                )? {
+                    Ok(dwelled) => {
+                        let mut settled = Settled {
+                            id: region.id,
+                            allowance: dwelled.allowance,
+                            highest: dwelled.highest,
+                            walked: runs,
+                        };
+                        let rehearsed = &mut out.rehearsed;
+                        let first = (dwelled.runs, None);
+                        match settle(&mut settled, first, region, &bench, rehearsed, unreachable)? {
+                            Some(runs) => {
+                                out.settled.push(settled);
+                                runs
+                            }
+                            None => Vec::new(),
+                        }
+                    }
                     Err(reason) => {
-                        preston::leave_out(
-                            &strokes,
-                            &reason,
-                            workcell,
-                            &mut reachability.unreachable,
-                        );
+                        preston::leave_out(&strokes, &reason, workcell, unreachable);
                         Vec::new()
                     }
                 }
@@ -140,56 +169,55 @@ pub(crate) fn removal_geometry(
     }
 }
 
-/// A region's dwelled runs checked as the trajectory will grind them (`predict::rehearse`);
-/// while the Monte Carlo on that dwell over-grinds, the region is solved again alone with its
-/// allowance raised (`resolve`). Returns the runs to assemble (none when it is left out) and
-/// records the allowance used.
+/// Settles region `s` from its `runs` dwelled at `s.allowance` and, when given, the reason the
+/// assembled program's prediction found it over-grinding: while it over-grinds (for that
+/// reason first, then as its rehearsal grinds it: `predict::rehearse_region`), it is solved
+/// again alone with its allowance raised (`resolve`), `s` following the solve. Returns the runs
+/// to assemble, or None when the region is left out.
 fn settle(
-    mut dwelled: preston::Dwelled,
+    s: &mut Settled,
+    (mut runs, mut failed): (Vec<program::Run>, Option<String>),
     region: &RegionInfo,
-    inspection: &Inspection,
-    ctx: &preston::Setup,
-    cell: &Cell,
-    out: &mut Planned,
-    reachability: &mut Reachability,
-) -> Result<Vec<program::Run>, PlanError> {
-    let id = region.id;
-    let rehearsed = &mut out.rehearsed;
-    while let Some(reason) = predict::rehearse_region(
-        &dwelled.runs,
-        (id, dwelled.allowance),
-        cell,
-        inspection,
-        ctx,
-        rehearsed,
-    )? {
-        let walked = out.walked.get(&id).map_or(&[][..], Vec::as_slice);
-        let unreachable = &mut reachability.unreachable;
-        let level = (dwelled.allowance, dwelled.highest);
-        match resolve(walked, region, &reason, level, inspection, ctx, unreachable)? {
-            Some(again) => dwelled = again,
-            None => return Ok(Vec::new()),
+    bench: &Bench,
+    rehearsed: &mut predict::Rehearsed,
+    unreachable: &mut Vec<UnreachablePoint>,
+) -> Result<Option<Vec<program::Run>>, PlanError> {
+    let (inspection, ctx) = (bench.inspection, bench.ctx);
+    loop {
+        let reason = match failed.take() {
+            Some(reason) => reason,
+            None => {
+                let level = (s.id, s.allowance);
+                let cell = bench.cell;
+                match predict::rehearse_region(&runs, level, cell, inspection, ctx, rehearsed)? {
+                    Some(reason) => reason,
+                    None => return Ok(Some(runs)),
+                }
+            }
+        };
+        match resolve(s, region, &reason, inspection, ctx, unreachable)? {
+            Some(again) => {
+                (s.allowance, s.highest) = (again.allowance, again.highest);
+                runs = again.runs;
+            }
+            None => return Ok(None),
         }
     }
-    out.allowances.push((id, dwelled.allowance));
-    out.highest.insert(id, dwelled.highest);
-    Ok(dwelled.runs)
 }
 
-/// Solves a region that over-grinds for `reason` again from its `walked` runs with the
-/// allowance raised from `allowance` by `removal::ALLOWANCE_STEP_SHARE` of the tolerance. Once
-/// the allowance is above the `highest` deviation in reach (every dwell already at its
-/// shortest), or when the solve fails, the region's pieces are left out with both reasons
-/// and None comes back.
+/// Solves region `s` that over-grinds for `reason` again from its walked runs with its
+/// allowance raised by `removal::ALLOWANCE_STEP_SHARE` of the tolerance. Once the allowance is
+/// above the highest deviation in reach (every dwell already at its shortest), or when the
+/// solve fails, the region's pieces are left out with both reasons and None comes back.
 fn resolve(
-    walked: &[program::Run],
+    s: &Settled,
     region: &RegionInfo,
     reason: &str,
-    (allowance, highest): (f64, f64),
     inspection: &Inspection,
     ctx: &preston::Setup,
-    unreachable: &mut Vec<super::report::UnreachablePoint>,
+    unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Option<preston::Dwelled>, PlanError> {
+    let (allowance, highest) = (s.allowance, s.highest);
     let tolerance = inspection.tolerance.unwrap_or(ctx.config.tolerance_mm);
     let raised = allowance + removal::ALLOWANCE_STEP_SHARE * tolerance;
     let why = match allowance > highest {
@@ -197,12 +225,12 @@ fn resolve(
             "it over-grinds even with an allowance of {allowance:.3} mm, above the highest \
              deviation {highest:.3} mm (every dwell at its shortest)"
         ),
-        false => match preston::set_dwell(walked.to_vec(), region, inspection, ctx, raised)? {
+        false => match preston::set_dwell(s.walked.clone(), region, inspection, ctx, raised)? {
             Ok(again) => return Ok(Some(again)),
             Err(why) => why,
         },
     };
-    for piece in walked.iter().flatten() {
+    for piece in s.walked.iter().flatten() {
         super::assemble::leave_out(piece, &format!("{reason}; {why}"), unreachable);
     }
     Ok(None)
@@ -210,17 +238,23 @@ fn resolve(
 
 /// Assembles the planned runs into the program and, in removal mode, predicts the part; a
 /// region whose trajectory still over-grinds at the Monte Carlo's quantile once assembled
-/// (the rehearsal before assembling did not know a chain the assembly left out) is solved
-/// again (`resolve`) and the program assembled again; a region the robust solve refuses is
-/// left out (its contacts recorded with the reason); the rest stands.
+/// (its rehearsal did not know a chain the assembly left out) is settled again (`settle`, the
+/// path every region's verdict takes) and the program assembled again; a region the re-solve
+/// refuses is left out (its contacts recorded with the reason); the rest stands.
 pub(crate) fn assemble_and_predict(
     mut planned: Planned,
     inspection: &Inspection,
     ctx: &preston::Setup,
     removal_mode: bool,
     scene: &collide::Scene,
-    unreachable: &mut Vec<super::report::UnreachablePoint>,
+    unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<(program::Program, Option<preston::RemovalReport>), PlanError> {
+    let cell = Cell::new(ctx.robot, ctx.workcell, ctx.config, scene);
+    let bench = Bench {
+        inspection,
+        ctx,
+        cell: &cell,
+    };
     loop {
         let mut left = Vec::new();
         let prog = super::assemble::assemble(
@@ -235,52 +269,60 @@ pub(crate) fn assemble_and_predict(
             unreachable.extend(left);
             return Ok((prog, None));
         }
-        let (report, failed) = predict::predict(
-            &prog,
-            inspection,
-            &planned.allowances,
-            ctx,
-            &planned.rehearsed,
-        )?;
+        let allowances = planned.settled.iter().map(|s| (s.id, s.allowance));
+        let (report, failed) =
+            predict::predict(&prog, inspection, allowances, ctx, &planned.rehearsed)?;
         if failed.is_empty() {
             unreachable.extend(left);
             return Ok((prog, Some(report)));
         }
         for (id, reason) in failed {
-            let at = planned.runs.iter().position(|run| run[0].region == id);
-            planned
-                .runs
-                .retain(|run| run.iter().all(|p| p.region != id));
-            let slot = planned.allowances.iter().position(|a| a.0 == id);
-            let old = slot.map_or(0.0, |k| planned.allowances[k].1);
-            let highest = planned.highest.get(&id).copied().unwrap_or(0.0);
-            planned.rehearsed.remove(&id);
-            let region = inspection.regions.iter().find(|r| r.id == id);
-            let walked = planned.walked.get(&id).cloned().unwrap_or_default();
-            let again = match region {
-                Some(r) => resolve(
-                    &walked,
-                    r,
-                    &reason,
-                    (old, highest),
-                    inspection,
-                    ctx,
-                    unreachable,
-                )?,
-                None => None,
-            };
-            match (again, slot) {
-                (Some(again), Some(k)) => {
-                    planned.allowances[k].1 = again.allowance;
-                    let at = at.unwrap_or(planned.runs.len()).min(planned.runs.len());
-                    planned.runs.splice(at..at, again.runs);
-                }
-                (_, slot) => {
-                    if let Some(k) = slot {
-                        planned.allowances.remove(k);
-                    }
-                }
-            }
+            settle_again(&mut planned, id, reason, &bench, unreachable)?;
         }
     }
+}
+
+/// Takes region `id`'s runs out of `planned` and settles it again for `reason` (the assembled
+/// program's verdict): its new runs go where its runs were, or it is left out.
+fn settle_again(
+    planned: &mut Planned,
+    id: usize,
+    reason: String,
+    bench: &Bench,
+    unreachable: &mut Vec<UnreachablePoint>,
+) -> Result<(), PlanError> {
+    let at = planned.runs.iter().position(|run| run[0].region == id);
+    planned
+        .runs
+        .retain(|run| run.iter().all(|p| p.region != id));
+    let Some(k) = planned.settled.iter().position(|s| s.id == id) else {
+        return Ok(());
+    };
+    let region = bench.inspection.regions.iter().find(|r| r.id == id);
+    let rehearsed = &mut planned.rehearsed;
+    let again = match region {
+        Some(r) => {
+            let first = (Vec::new(), Some(reason));
+            settle(
+                &mut planned.settled[k],
+                first,
+                r,
+                bench,
+                rehearsed,
+                unreachable,
+            )?
+        }
+        None => None,
+    };
+    match again {
+        Some(runs) => {
+            let at = at.unwrap_or(planned.runs.len()).min(planned.runs.len());
+            planned.runs.splice(at..at, runs);
+        }
+        None => {
+            planned.settled.remove(k);
+            planned.rehearsed.remove(&id);
+        }
+    }
+    Ok(())
 }
