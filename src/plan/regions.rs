@@ -113,35 +113,7 @@ pub(crate) fn plan_regions(
             Some(_) if runs.is_empty() => runs,
             Some(_) => {
                 let unreachable = &mut reachability.unreachable;
-                match preston::set_dwell(
-                    runs.clone(),
-                    region,
-                    inspection,
-                    ctx,
-                    config.allowance_mm,
-                )? {
-                    Ok(dwelled) => {
-                        let mut settled = Settled {
-                            id: region.id,
-                            allowance: dwelled.allowance,
-                            highest: dwelled.highest,
-                            walked: runs,
-                        };
-                        let rehearsed = &mut out.rehearsed;
-                        let first = (dwelled.runs, None);
-                        match settle(&mut settled, first, region, &bench, rehearsed, unreachable)? {
-                            Some(runs) => {
-                                out.settled.push(settled);
-                                runs
-                            }
-                            None => Vec::new(),
-                        }
-                    }
-                    Err(reason) => {
-                        preston::leave_out(&strokes, &reason, workcell, unreachable);
-                        Vec::new()
-                    }
-                }
+                dwell_region(runs, &strokes, region, &bench, &mut out, unreachable)?
             }
         };
         out.runs.extend(runs);
@@ -149,6 +121,43 @@ pub(crate) fn plan_regions(
         out.counts.insert(region.id, (offsets.len(), total));
     }
     Ok(out)
+}
+
+/// Removal mode: sets the dwell of one region's walked `runs` at the configured allowance
+/// and settles it (`settle`); returns the runs to assemble (none when it is left out, its
+/// points recorded with the reason) and records it in `out.settled`.
+fn dwell_region(
+    runs: Vec<program::Run>,
+    strokes: &[raster::Stroke],
+    region: &RegionInfo,
+    bench: &Bench,
+    out: &mut Planned,
+    unreachable: &mut Vec<UnreachablePoint>,
+) -> Result<Vec<program::Run>, PlanError> {
+    let (inspection, ctx) = (bench.inspection, bench.ctx);
+    let allowance = ctx.config.allowance_mm;
+    let dwelled = match preston::set_dwell(runs.clone(), region, inspection, ctx, allowance)? {
+        Ok(dwelled) => dwelled,
+        Err(reason) => {
+            preston::leave_out(strokes, &reason, ctx.workcell, unreachable);
+            return Ok(Vec::new());
+        }
+    };
+    let mut settled = Settled {
+        id: region.id,
+        allowance: dwelled.allowance,
+        highest: dwelled.highest,
+        walked: runs,
+    };
+    let first = (dwelled.runs, None);
+    let rehearsed = &mut out.rehearsed;
+    match settle(&mut settled, first, region, bench, rehearsed, unreachable)? {
+        Some(runs) => {
+            out.settled.push(settled);
+            Ok(runs)
+        }
+        None => Ok(Vec::new()),
+    }
 }
 
 /// Raster geometry of removal mode: lines and contacts spaced as shares of the tool's contact
