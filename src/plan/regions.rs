@@ -84,6 +84,7 @@ pub(crate) fn plan_regions(
             &mut prev,
             &mut reachability.unreachable,
             &mut reachability.jumps,
+            tool.map(|t| t.tilt_deg.to_radians()),
         );
         if tool.is_some() {
             out.walked.insert(region.id, runs.clone());
