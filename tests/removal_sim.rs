@@ -156,10 +156,14 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let dir = common::tempdir();
     let (inspection, plan) = match std::env::var("POLISHBOT_SIM_DEMO") {
-        Ok(demo) => (
-            Inspection::load(&Path::new(&demo).join("inspection")).unwrap(),
-            Plan::load(&Path::new(&demo).join("plan.json")).unwrap(),
-        ),
+        Ok(demo) => {
+            let d = Path::new(&demo);
+            let mut plan = Plan::load(&d.join("plan.json")).unwrap();
+            let text = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
+            let rows = polishbot::cell::removal_fit::parse_predicted(&text).unwrap();
+            plan.removal.as_mut().expect("a removal plan").rows = rows;
+            (Inspection::load(&d.join("inspection")).unwrap(), plan)
+        }
         Err(_) => {
             let inspection = demo_like(dir.path());
             let started = std::time::Instant::now();
