@@ -241,10 +241,15 @@ fn stroke_axis(targets: &[IkTarget], spread_deg: f64) -> Option<Vector3<f64>> {
 /// Joint angles and the tool axis used for one point, or why it is unreachable.
 type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
 
+/// A stroke solved again: every point's answer and the last pose.
+type Resolved = (Vec<Solved>, Vec<f64>);
+
 /// Which way a held tilt (removal mode, [`solve_stroke`]) leans first: true tips the tool
 /// axis (shank to tip) away from the arm's base, the shank back toward it; the other way is
 /// tried when this one leaves a point unreachable. Measured on the demo (docs/ALGORITHMS.md,
-/// "Split and splice"): away from the base first keeps every point reachable.
+/// "Split and splice"), away first -> toward first: the same tilts in four regions of five,
+/// 0 unreachable points either way, lowest point after the grind -0.176 -> -0.276 mm,
+/// fit-vs-achieved RMS 0.035 -> 0.041 mm.
 const LEAN_AWAY_FIRST: bool = true;
 
 /// Halvings of the hold between 0 and `tilt_deg` when the arm cannot hold the whole of it
@@ -312,14 +317,14 @@ struct Restroke<'a> {
 
 impl Restroke<'_> {
     /// The stroke solved again with `delta` rad of in-plane tilt ([`solve_tilted`]).
-    fn tilted(&self, delta: f64) -> Option<(Vec<Solved>, Vec<f64>)> {
+    fn tilted(&self, delta: f64) -> Option<Resolved> {
         solve_tilted(self, delta)
     }
 
     /// The stroke held at least `min` rad from every normal, leaning the preferred way first;
     /// where neither way reaches it, at the largest smaller hold either way reaches (bisected,
     /// [`HOLD_BISECTIONS`]). None when no hold is reached.
-    fn hold(&self, min: f64) -> Option<(Vec<Solved>, Vec<f64>)> {
+    fn hold(&self, min: f64) -> Option<Resolved> {
         let away = away_sign(self.targets, self.first, self.robot)?;
         let frames = plane_frames(self);
         let max = self.cfg.ik.max_axis_miss_deg.to_radians();
@@ -334,7 +339,7 @@ impl Restroke<'_> {
         if let Some(found) = signs.iter().find_map(|&s| attempt(min, s)) {
             return Some(found);
         }
-        let mut best: Option<(f64, (Vec<Solved>, Vec<f64>))> = None;
+        let mut best: Option<(f64, Resolved)> = None;
         for sign in signs {
             let (mut lo, mut hi, mut found) = (0.0, min, None);
             for _ in 0..HOLD_BISECTIONS {
@@ -441,7 +446,7 @@ fn least_tilt(frames: &[(f64, f64)], min: f64, sign: f64, reach: f64, max: f64) 
 /// The stroke `s` solved again with every solved point of its first answers tilted by `delta`
 /// rad in the arm plane (exact IK, chained from its start): the answers and the last pose, or None when a
 /// point becomes unreachable or its axis leaves the cone of its requested axis or normal.
-fn solve_tilted(s: &Restroke, delta: f64) -> Option<(Vec<Solved>, Vec<f64>)> {
+fn solve_tilted(s: &Restroke, delta: f64) -> Option<Resolved> {
     let (robot, cfg) = (s.robot, s.cfg);
     let exact = crate::robot::IkConfig {
         axis_search: false,
