@@ -174,7 +174,7 @@ fn a_pass_re_predicted_with_the_fitted_k_scales_the_predicted_removal_at_each_po
 fn the_planners_removal_rate_is_linear_in_k() {
     // what makes the re-prediction a scaling: the planner's removal is its influence rate
     // times the dwell, and the rate at every patch offset is proportional to k
-    use polishbot::plan::removal::{Influence, ToolModel};
+    use polishbot::plan::removal::{Influence, Tilt, ToolModel};
     let tool = ToolModel::default();
     let scaled = ToolModel {
         preston_k_mm2_n: tool.preston_k_mm2_n * 1.37,
@@ -185,7 +185,8 @@ fn the_planners_removal_rate_is_linear_in_k() {
     for i in -8..=8 {
         for j in -8..=8 {
             let (x, y) = (i as f64 * 0.08, j as f64 * 0.08);
-            let (ra, rb) = (a.rate(x, y), b.rate(x, y));
+            let tilt = Tilt::of_angle(20f64.to_radians());
+            let (ra, rb) = (a.rate(x, y, tilt), b.rate(x, y, tilt));
             assert!((rb - 1.37 * ra).abs() <= 1e-12 * rb.abs(), "({x}, {y})");
             nonzero += usize::from(ra > 0.0);
         }

@@ -44,9 +44,21 @@ fn plate() -> Vec<SurfacePoint> {
     out
 }
 
+/// The spindle axis (shank to tip) tilted `tilt_deg` from the plate's inward normal -z,
+/// leaning toward the azimuth `toward_deg` from +x.
+fn spindle(tilt_deg: f64, toward_deg: f64) -> Vector3<f64> {
+    let (t, a) = (tilt_deg.to_radians(), toward_deg.to_radians());
+    Vector3::new(t.sin() * a.cos(), t.sin() * a.sin(), -t.cos())
+}
+
+/// The shipped tool's precession: 20 degrees, leaning toward +x.
+fn leaning() -> Vector3<f64> {
+    spindle(20.0, 0.0)
+}
+
 /// Zig-zag strokes along x, `stepover` apart, contact pieces `spacing` long; the spindle
-/// leans toward +x.
-fn raster(spacing: f64, stepover: f64) -> Vec<Contact> {
+/// held along `spin`.
+fn raster(spacing: f64, stepover: f64, spin: Vector3<f64>) -> Vec<Contact> {
     let lines = (2.0 * RASTER_HALF_MM / stepover).floor() as i32;
     let per_line = (2.0 * RASTER_HALF_MM / spacing).floor() as i32;
     let mut out = Vec::new();
@@ -59,7 +71,7 @@ fn raster(spacing: f64, stepover: f64) -> Vec<Contact> {
                 point: Point3::new(x, y, 0.0),
                 normal: Vector3::z(),
                 along: Vector3::x() * dir,
-                tilt_dir: Vector3::x(),
+                spin,
                 length: spacing,
             });
         }
@@ -69,8 +81,8 @@ fn raster(spacing: f64, stepover: f64) -> Vec<Contact> {
 
 /// Preston's removal rate at surface point `p` under a tool whose contact patch is centred at
 /// `c` on the plate z = 0, mm/s: Hertz pressure (Johnson, Contact Mechanics, eq. 4.22-4.23)
-/// times the speed of the ball's surface, |omega x r| of the spinning ball.
-fn preston_rate(tool: &ToolModel, c: &Point3<f64>, p: &Point3<f64>) -> f64 {
+/// times the speed of the ball's surface, |omega x r| of the ball spinning about `spin`.
+fn preston_rate(tool: &ToolModel, spin: &Vector3<f64>, c: &Point3<f64>, p: &Point3<f64>) -> f64 {
     let force = tool.spring_rate_n_mm * tool.preload_mm;
     let a = (3.0 * force * BALL_MM / (4.0 * tool.modulus_mpa)).powf(1.0 / 3.0);
     let p0 = 3.0 * force / (2.0 * std::f64::consts::PI * a * a);
@@ -80,9 +92,8 @@ fn preston_rate(tool: &ToolModel, c: &Point3<f64>, p: &Point3<f64>) -> f64 {
     }
     let pressure = p0 * (1.0 - rho2 / (a * a)).sqrt();
     let omega_mag = tool.spindle_rpm / 60.0 * 2.0 * std::f64::consts::PI;
-    let tilt = tool.tilt_deg * std::f64::consts::PI / 180.0;
-    // spin axis leaning toward +x from the inward normal -z, through the ball centre above c
-    let omega = Vector3::new(tilt.sin(), 0.0, -tilt.cos()) * omega_mag;
+    // spin axis through the ball centre above c
+    let omega = spin * omega_mag;
     let centre = c + Vector3::new(0.0, 0.0, BALL_MM);
     let velocity = omega.cross(&(p - centre));
     tool.preston_k_mm2_n * pressure * velocity.norm()
@@ -102,7 +113,7 @@ fn integrate(tool: &ToolModel, contacts: &[Contact], dwell: &[f64], p: &Point3<f
                 .map(|s| {
                     let f = (s as f64 + 0.5) / steps as f64 - 0.5;
                     let centre = c.point + c.along * (f * c.length);
-                    preston_rate(tool, &centre, p) * t / steps as f64
+                    preston_rate(tool, &c.spin, &centre, p) * t / steps as f64
                 })
                 .sum::<f64>()
         })
@@ -117,7 +128,11 @@ fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
     assert!(a > 0.3 && a < 1.0, "patch radius {a} mm");
     let config = RemovalConfig::default();
     let cores = plate();
-    let contacts = raster(config.spacing_share * a, config.stepover_share * a);
+    let contacts = raster(
+        config.spacing_share * a,
+        config.stepover_share * a,
+        leaning(),
+    );
     let plan = solve_region(&influence, &contacts, &cores, 0.0, &config).expect("dwell");
     let residual = plan.residual();
     let mut worst_diff = 0.0f64;
@@ -156,6 +171,94 @@ fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
         "{}",
         residual[centre]
     );
+}
+
+/// The per-contact spindle axis: the same plate planned with the spindle held at 0, 2, 20
+/// and 45 degrees from the normal (leaning 30 degrees off the strokes, so the patch's own
+/// axes are not the plate's), each prediction against the independent integration about
+/// that axis. At 0 the pole does not cut and the rate peaks off centre; at 2 the centre runs
+/// at a tenth of 20's speed; the planner's removal must follow the integration at every one.
+#[test]
+fn the_plate_at_every_spindle_tilt_matches_the_integration() {
+    let tool = ToolModel::default();
+    let influence = Influence::new(&tool, BALL_MM);
+    let a = influence.patch_radius();
+    let config = RemovalConfig::default();
+    let cores = plate();
+    let mut centre_rates = Vec::new();
+    for tilt in [0.0, 2.0, 20.0, 45.0] {
+        let spin = spindle(tilt, 30.0);
+        let contacts = raster(config.spacing_share * a, config.stepover_share * a, spin);
+        let plan = solve_region(&influence, &contacts, &cores, 0.0, &config).expect("dwell");
+        let (mut worst, mut most) = (0.0f64, 0.0f64);
+        for (j, c) in cores.iter().enumerate() {
+            let removed = integrate(&tool, &contacts, &plan.dwell, &c.position);
+            worst = worst.max((removed - plan.removal[j]).abs());
+            most = most.max(removed);
+        }
+        let rate = preston_rate(&tool, &spin, &Point3::origin(), &Point3::origin());
+        println!(
+            "tilt {tilt:>4} deg: most removed {most:.4} mm, |planner - integration| \
+             {worst:.6} mm, centre rate {rate:.5} mm/s"
+        );
+        assert!(most > 0.0, "tilt {tilt}: nothing removed");
+        assert!(worst <= 0.02 * most, "tilt {tilt}: {worst} mm of {most} mm");
+        centre_rates.push(rate);
+    }
+    // the integration itself: the pole still at 0, omega R sin(tilt) at the others
+    let sin = |deg: f64| deg.to_radians().sin();
+    assert!(centre_rates[0] == 0.0);
+    for (rate, tilt) in centre_rates[1..].iter().zip([2.0, 20.0, 45.0]) {
+        assert!((rate / centre_rates[2] - sin(tilt) / sin(20.0)).abs() < 1e-9);
+    }
+}
+
+/// A contact's spindle axis is the one the arm holds: the simulator's own forward kinematics
+/// (grind_sim::fk, from DOFBOT.md's joint table, not the planner's k chain) at the piece's
+/// first and last joint angles, averaged, turned into the reference frame by the inverse of
+/// the workcell's rotation; the tilt it reports is that axis's angle from the inward normal.
+#[test]
+fn a_contacts_spindle_axis_is_the_arms_at_its_joint_angles() {
+    use polishbot::plan::preston::{contact, reference_from_robot};
+    use polishbot::plan::{PlannedPass, PlannedPoint, StrokeKind};
+    let robot = common::dofbot();
+    let wc = polishbot::robot::Workcell::load(&common::calib("workcell.toml")).unwrap();
+    let tip = robot.tool.tip_offset;
+    let normal = Vector3::new(0.2, -0.9, 0.3).normalize();
+    let point = |q: [f64; 5], x: f64| PlannedPoint {
+        surface_mm: [x, -30.0, -20.0],
+        normal: normal.into(),
+        offset_mm: -2.0,
+        tip_m: [0.0; 3],
+        axis: [0.0; 3],
+        q: q.to_vec(),
+    };
+    let (qa, qb) = ([0.1, 0.5, -0.7, -0.9, 0.3], [0.14, 0.47, -0.66, -0.95, 0.3]);
+    let piece = PlannedPass {
+        region: 0,
+        layer: 0,
+        kind: StrokeKind::Pass,
+        feed_mm_s: 5.0,
+        dwell_s: None,
+        points: vec![point(qa, 1.0), point(qb, 1.2)],
+    };
+    let c = contact(&piece, &robot, &reference_from_robot(&wc));
+    let r = wc
+        .robot_from_reference
+        .fixed_slice::<3, 3>(0, 0)
+        .into_owned();
+    let sim_axis = |q: [f64; 5]| polishbot::grind_sim::fk::tool(&q, &tip).1;
+    let want = (r.transpose() * (sim_axis(qa) + sim_axis(qb))).normalize();
+    assert!((c.spin - want).norm() < 1e-12, "{} vs {want}", c.spin);
+    let (tilt, lean) = c.tilt();
+    let angle = c.spin.angle(&-normal);
+    assert!(
+        (tilt.angle() - angle).abs() < 1e-12,
+        "{} vs {angle}",
+        tilt.angle()
+    );
+    assert!(lean.dot(&normal).abs() < 1e-12 && (lean.norm() - 1.0).abs() < 1e-12);
+    println!("spindle {:.2} deg from the normal", angle.to_degrees());
 }
 
 /// The static torques J^T F against virtual work by central differences of the tool tip
@@ -214,7 +317,11 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
     let a = influence.patch_radius();
     let config = RemovalConfig::default();
     let cores = plate();
-    let contacts = raster(config.spacing_share * a, config.stepover_share * a);
+    let contacts = raster(
+        config.spacing_share * a,
+        config.stepover_share * a,
+        leaning(),
+    );
     let plan = solve_region(&influence, &contacts, &cores, 0.0, &config).unwrap();
     let still = MonteCarloConfig {
         draws: 3,
@@ -275,7 +382,7 @@ fn columns_among_gathered_candidates_equal_the_direct_query() {
     let reach = Reach::new(&geometry);
     let tool = ToolModel::default();
     let a = Influence::new(&tool, BALL_MM).patch_radius();
-    let contacts = raster(0.33 * a, 0.5 * a);
+    let contacts = raster(0.33 * a, 0.5 * a, leaning());
     let mut compared = 0;
     for (k, c) in contacts.iter().enumerate().step_by(7) {
         let gathered = reach.candidates(&c.point, 2.0 * (a + 0.5 * c.length));

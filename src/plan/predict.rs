@@ -190,7 +190,7 @@ fn region_verdict(
     let ball_mm = robot.tool.radius * 1e3;
     let influence = Influence::new(tool, ball_mm);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
-    let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, &back)).collect();
+    let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
     let idx = cores_near(inspection, setup.index, &contacts, influence.patch_radius());
     let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
         .iter()

@@ -95,7 +95,7 @@ pub fn tool_model(robot: &Robot) -> Result<ToolModel, PlanError> {
 }
 
 /// Rotation from the robot frame to the reference frame.
-pub(crate) fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
+pub fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
     let r = Matrix3::from_columns(&[
         wc.direction_from_reference(&Vector3::x()),
         wc.direction_from_reference(&Vector3::y()),
@@ -105,8 +105,9 @@ pub(crate) fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
 }
 
 /// The contact of a two-point piece: its middle, mean normal, direction, length, and the
-/// tangent toward which the spindle leans (the arm's vertical plane through its base axis).
-pub(crate) fn contact(piece: &PlannedPass, back: &Matrix3<f64>) -> Contact {
+/// spindle axis the arm holds over it (`robot`'s FK at the piece's first and last poses,
+/// averaged, in the reference frame by `back`, `reference_from_robot`).
+pub fn contact(piece: &PlannedPass, robot: &Robot, back: &Matrix3<f64>) -> Contact {
     let (a, b) = (&piece.points[0], &piece.points[piece.points.len() - 1]);
     let (pa, pb) = (Point3::from(a.surface_mm), Point3::from(b.surface_mm));
     let normal = (Vector3::from(a.normal) + Vector3::from(b.normal)).normalize();
@@ -114,16 +115,12 @@ pub(crate) fn contact(piece: &PlannedPass, back: &Matrix3<f64>) -> Contact {
     let along = d
         .try_normalize(1e-12)
         .unwrap_or_else(|| normal.cross(&Vector3::x()));
-    let radial = back * Vector3::new(a.tip_m[0], a.tip_m[1], 0.0);
-    let tilt = radial - normal * normal.dot(&radial);
-    let tilt_dir = tilt
-        .try_normalize(1e-12)
-        .unwrap_or_else(|| along.cross(&normal));
+    let held = robot.fk(&a.q).axis.normalize() + robot.fk(&b.q).axis.normalize();
     Contact {
         point: pa + d * 0.5,
         normal,
         along,
-        tilt_dir,
+        spin: (back * held).normalize(),
         length: d.norm(),
     }
 }
@@ -238,7 +235,7 @@ pub fn set_dwell(
     let mut runs = split(runs);
     let back = reference_from_robot(workcell);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
-    let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, &back)).collect();
+    let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
     for (p, c) in pieces.iter().zip(&contacts) {
         check_force(p, c, region.id, setup)?;
     }

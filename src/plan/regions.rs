@@ -106,6 +106,7 @@ pub(crate) fn plan_regions(
             &mut prev,
             &mut reachability.unreachable,
             &mut reachability.jumps,
+            tool.map(|t| t.tilt_deg.to_radians()),
         );
         let runs = match tool {
             None => runs,

@@ -3,13 +3,17 @@
 use std::path::Path;
 
 use nalgebra::Vector3;
-use polishbot::synth::{synth, SynthConfig, Truth};
+use polishbot::synth::{synth, SynthCase, SynthConfig, Truth};
 
 /// Writes an inspection folder (deviations.csv, regions.json per DESIGN.md) for the synth case
 /// of `config`: core points are the reference samples, distances the true
 /// deviations, regions the points beyond `tolerance` grouped by the defect that dominates them.
 pub fn inspection(dir: &Path, config: &SynthConfig) -> Truth {
-    let case = synth(config).expect("synth");
+    inspection_of(dir, synth(config).expect("synth"))
+}
+
+/// As [`inspection`], for a case already made (`synth_at`: defects where the arm reaches).
+pub fn inspection_of(dir: &Path, case: SynthCase) -> Truth {
     let tolerance = 0.05;
     let area: f64 = (0..case.mesh.faces.len())
         .map(|i| case.mesh.face_normal_area(i).1)

@@ -31,10 +31,6 @@ pub struct Influence {
     ball_mm: f64,
     /// Spindle speed, rad/s.
     omega: f64,
-    /// Sine and cosine of the spindle's tilt from the normal (the spin axis in patch
-    /// coordinates is (sin, 0, -cos)); kept, not recomputed at every patch point.
-    tilt_sin: f64,
-    tilt_cos: f64,
     /// Preston coefficient, mm^2/N.
     k: f64,
 }
@@ -72,8 +68,6 @@ impl Influence {
             pressure,
             ball_mm,
             omega: tool.omega(),
-            tilt_sin: tool.tilt_deg.to_radians().sin(),
-            tilt_cos: tool.tilt_deg.to_radians().cos(),
             k: tool.preston_k_mm2_n,
         }
     }
@@ -104,21 +98,44 @@ impl Influence {
     /// Relative speed of the abrasive at patch offset (x, y) mm, mm/s: x runs along the
     /// tilt direction. The ball spins at omega about an axis through its centre, tilted by
     /// `tilt` from the normal; the speed is omega times the distance from that axis.
-    pub fn speed(&self, x: f64, y: f64) -> f64 {
+    pub fn speed(&self, x: f64, y: f64, tilt: Tilt) -> f64 {
         // the ball's surface point over (x, y), relative to its centre (flat patch)
         let w = Vector3::new(x, y, -self.ball_mm);
-        let axis = Vector3::new(self.tilt_sin, 0.0, -self.tilt_cos);
+        let axis = Vector3::new(tilt.sin, 0.0, -tilt.cos);
         let along = w.dot(&axis);
         self.omega * (w.norm_squared() - along * along).max(0.0).sqrt()
     }
 
-    /// Removal depth rate at patch offset (x, y) mm, mm/s.
-    pub fn rate(&self, x: f64, y: f64) -> f64 {
+    /// Removal depth rate at patch offset (x, y) mm under a spindle tilted by `tilt`, mm/s.
+    pub fn rate(&self, x: f64, y: f64, tilt: Tilt) -> f64 {
         let p = self.pressure((x * x + y * y).sqrt());
         if p <= 0.0 {
             return 0.0;
         }
-        self.k * p * self.speed(x, y)
+        self.k * p * self.speed(x, y, tilt)
+    }
+}
+
+/// The spindle's tilt from the inward normal at a contact: in patch coordinates (x toward
+/// the tilt, z along the outward normal) the spin axis is (sin, 0, -cos).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tilt {
+    /// Sine of the angle between the spindle axis and the inward normal.
+    pub sin: f64,
+    /// Its cosine.
+    pub cos: f64,
+}
+
+impl Tilt {
+    /// The tilt of `angle` radians.
+    pub fn of_angle(angle: f64) -> Tilt {
+        let (sin, cos) = angle.sin_cos();
+        Tilt { sin, cos }
+    }
+
+    /// The angle, radians.
+    pub fn angle(&self) -> f64 {
+        self.sin.atan2(self.cos)
     }
 }
 
@@ -131,10 +148,25 @@ pub struct Contact {
     pub normal: Vector3<f64>,
     /// Unit direction of motion along the stroke (tangent).
     pub along: Vector3<f64>,
-    /// Unit tangent toward which the spindle axis leans (the arm's vertical plane).
-    pub tilt_dir: Vector3<f64>,
+    /// Unit spindle axis (shank to tip) the arm holds at the contact: its tilt from the
+    /// inward normal sets the abrasive's speed over the patch.
+    pub spin: Vector3<f64>,
     /// Length of the stroke piece the dwell covers, centred on `point`, mm (0: a spot).
     pub length: f64,
+}
+
+impl Contact {
+    /// The spindle's tilt from the inward normal and the patch's x axis (the unit tangent
+    /// toward which the spindle leans; any tangent, the stroke's, when it does not lean).
+    pub fn tilt(&self) -> (Tilt, Vector3<f64>) {
+        let n = self.normal;
+        let lean = self.spin - n * n.dot(&self.spin);
+        let tilt = Tilt {
+            sin: lean.norm(),
+            cos: -n.dot(&self.spin),
+        };
+        (tilt, lean.try_normalize(1e-12).unwrap_or(self.along))
+    }
 }
 
 /// A is stored by columns: for each contact, the (core index, removal per second, mm/s)
@@ -198,7 +230,7 @@ impl<'a> Reach<'a> {
         inside: impl Iterator<Item = usize>,
     ) -> Vec<(usize, f64)> {
         let n = c.normal;
-        let tx = (c.tilt_dir - n * n.dot(&c.tilt_dir)).normalize();
+        let (tilt, tx) = c.tilt();
         let ty = n.cross(&tx);
         let mut column = Vec::new();
         for index in inside {
@@ -210,7 +242,7 @@ impl<'a> Reach<'a> {
                 .map(|s| {
                     let f = (s as f64 + 0.5) / SUBSAMPLES as f64 - 0.5;
                     let d = p - (c.point + c.along * (f * c.length));
-                    influence.rate(d.dot(&tx), d.dot(&ty))
+                    influence.rate(d.dot(&tx), d.dot(&ty), tilt)
                 })
                 .sum::<f64>()
                 / SUBSAMPLES as f64;
@@ -278,14 +310,11 @@ mod tests {
     fn speed_at_the_pole_is_omega_r_sin_tilt() {
         let tool = ToolModel::default();
         let inf = Influence::new(&tool, 3.0);
-        let want = tool.omega() * 3.0 * 20f64.to_radians().sin();
-        assert!((inf.speed(0.0, 0.0) - want).abs() < 1e-9 * want);
+        let tilt = Tilt::of_angle(20f64.to_radians());
+        let want = tool.omega() * 3.0 * tilt.sin;
+        assert!((inf.speed(0.0, 0.0, tilt) - want).abs() < 1e-9 * want);
+        assert!((tilt.angle() - 20f64.to_radians()).abs() < 1e-15);
         // untilted, the pole does not move
-        let flat = Influence {
-            tilt_sin: 0.0,
-            tilt_cos: 1.0,
-            ..inf.clone()
-        };
-        assert!(flat.speed(0.0, 0.0).abs() < 1e-9);
+        assert!(inf.speed(0.0, 0.0, Tilt::of_angle(0.0)).abs() < 1e-9);
     }
 }

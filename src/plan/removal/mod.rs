@@ -12,7 +12,7 @@ pub mod tool;
 use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-pub use influence::{Contact, Influence};
+pub use influence::{Contact, Influence, Tilt};
 pub use tool::ToolModel;
 
 use super::inspection::SurfacePoint;

@@ -1,5 +1,6 @@
 //! The compliant grinding tool of `tool.toml`'s `[removal]` table: spring, preload, contact
-//! pressure (Hertz or a measured radial table), spindle speed, tilt and Preston's coefficient.
+//! pressure (Hertz or a measured radial table), spindle speed, the least spindle tilt the
+//! planner holds and Preston's coefficient.
 //! Method and the defaults' sources: docs/ALGORITHMS.md, "Removal planning".
 use std::path::Path;
 
@@ -24,9 +25,11 @@ pub struct ToolModel {
     pub influence_table: Option<Vec<[f64; 2]>>,
     /// Spindle speed, revolutions per minute.
     pub spindle_rpm: f64,
-    /// Angle between the spindle axis and the surface normal, degrees: a ball spinning about
-    /// the normal does not cut at its pole; the relative speed at the contact is
-    /// omega x R x sin(tilt).
+    /// Smallest angle between the spindle axis and the surface normal that the planner holds
+    /// where the arm can, degrees: a ball spinning about the normal does not cut at its pole
+    /// (the relative speed at the contact is omega x R x sin(tilt)), and near it the removal
+    /// follows the axis error by cot(tilt). The removal model itself takes the axis the arm
+    /// holds at each contact (`Contact::spin`), not this value.
     pub tilt_deg: f64,
     /// Preston coefficient k, mm^2/N (removal depth rate = k x pressure x relative speed).
     pub preston_k_mm2_n: f64,

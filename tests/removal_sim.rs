@@ -1,0 +1,215 @@
+//! The planner's removal prediction against the simulated cell's true law (issues 28/29): a
+//! demo-like plan (the demo's defect settings placed where the arm reaches, a perfect
+//! inspection) is ground along its exact joint trajectory by `grind_sim`'s own kinematics and
+//! removal law (not the planner's), on the nominal surface the planner presses against
+//! (normals by PCA as `run --sim` gives them). With the linear law (exponents 1/1), the true
+//! k the planner's (factor 1) and no k field, each planned region's removal must match the
+//! prediction within [`WITHIN`]: the planner's model of each contact (the spindle axis the arm
+//! holds there, its force, patch and dwell) is then the simulator's physics. The same
+//! trajectory on the part as it is (nominal + deviation) is printed, not held: there the
+//! excess presses the ball deeper than the preload the planner assumes.
+//!
+//! It can fail: with the simulator's default exponents 1.1/0.9 it does (run by hand:
+//! `POLISHBOT_SIM_EXPONENTS=1.1,0.9 cargo test --release --test removal_sim -- --nocapture`;
+//! measured: nominal-surface ratios 0.975 / 0.980 / 0.985 / 0.908, the last region, held at
+//! 35 degrees, 9 % short: past the law's 500 mm/s reference speed the abrasive cuts less).
+//! Measured with exponents 1/1 (tilt_deg 20): 0.973 / 0.969 / 0.957 / 0.972 on the nominal
+//! surface, 1.27 / 1.12 / 1.28 / 1.06 on the part; with the hold off (tilt_deg 1, the axis
+//! the IK chose, 2-4 degrees in three regions) 0.963 / 0.981 / 0.956 / 0.972 and
+//! 1.41 / 1.54 / 1.52 / 1.06. `POLISHBOT_SIM_DEMO=DIR` grinds a `demo --out DIR` instead (its
+//! plan.json and inspection/).
+mod common;
+
+use std::path::Path;
+
+use nalgebra::Point3;
+use polishbot::grind_sim::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
+use polishbot::plan::preston::{contact, reference_from_robot};
+use polishbot::plan::{plan, Inspection, Plan, PlanConfig, SegmentKind};
+use polishbot::preprocess::{estimate_normals, NormalConfig, Orientation};
+use polishbot::robot::{Robot, Workcell};
+use polishbot::spatial::Neighbours;
+
+/// Largest relative difference between the simulator's removal and the plan's per region.
+const WITHIN: f64 = 0.05;
+
+/// The demo's part (cli/demo.rs `demo_config`, seed 1) at 200,000 reference samples (the
+/// planner's core points here; tests/common `case`'s density).
+fn demo_like(dir: &Path) -> Inspection {
+    let config = polishbot::synth::SynthConfig {
+        seed: 1,
+        defects: 5,
+        height_range: [0.12, 0.4],
+        width_range: [2.0, 4.0],
+        pit_share: 0.2,
+        ridge_share: 0.2,
+        reference_points: 200_000,
+        scan_points: 1_000,
+        ..polishbot::synth::SynthConfig::default()
+    };
+    let reachable = polishbot::cell::reachable_sites().unwrap();
+    let case = polishbot::synth::synth_at(&config, &reachable).expect("synth");
+    common::synthetic::inspection_of(dir, case);
+    Inspection::load(dir).expect("inspection")
+}
+
+/// The simulated cell's truth for this test: the shipped tool, k as the planner's, no k
+/// field, the exponents of `POLISHBOT_SIM_EXPONENTS` (pressure,speed; default 1,1).
+fn truth(robot: &Robot) -> GrindConfig {
+    let exponents: Vec<f64> = std::env::var("POLISHBOT_SIM_EXPONENTS")
+        .unwrap_or_else(|_| "1,1".into())
+        .split(',')
+        .map(|v| v.trim().parse().expect("two numbers"))
+        .collect();
+    GrindConfig {
+        k_factor: 1.0,
+        k_noise: 0.0,
+        pressure_exponent: exponents[0],
+        speed_exponent: exponents[1],
+        tip_offset_mm: robot.tool.tip_offset.map(|v| v * 1e3),
+        ..GrindConfig::default()
+    }
+}
+
+/// The part: every core point moved out by `lift` of its deviation, PCA normals turned
+/// outward.
+fn part(inspection: &Inspection, cfg: &GrindConfig, lift: impl Fn(f64) -> f64) -> VirtualPart {
+    let points: Vec<Point3<f64>> = inspection
+        .points
+        .iter()
+        .map(|p| p.position + p.normal * lift(p.distance))
+        .collect();
+    let mut cloud = polishbot::cloud::PointCloud::from_points(points);
+    let normals = NormalConfig {
+        orientation: Orientation::Unoriented,
+        ..NormalConfig::default()
+    };
+    let mut n = estimate_normals(&cloud, &normals).unwrap().normals;
+    for (v, p) in n.iter_mut().zip(&inspection.points) {
+        if v.dot(&p.normal) < 0.0 {
+            *v = -*v;
+        }
+    }
+    cloud.normals = None;
+    VirtualPart::new(cloud.points, n, cfg)
+}
+
+/// Grinds `part` along `plan`'s joint samples, linear between them, at the simulator's step.
+fn grind(part: &mut VirtualPart, plan: &Plan, wc: &Workcell, cfg: &GrindConfig) {
+    let back = wc.robot_from_reference.try_inverse().unwrap();
+    let tip = cfg.tip_offset_mm.map(|v| v * 1e-3);
+    let at = |q: &[f64]| {
+        let (c, axis) = fk::tool(&std::array::from_fn(|k| q[k]), &tip);
+        let c = back.transform_point(&c) * 1e3;
+        (c, back.transform_vector(&axis).normalize())
+    };
+    let steps = (plan.period / SIM_STEP_S).round() as usize;
+    let mut prev = at(&plan.samples[0].q).0;
+    for w in plan.samples.windows(2) {
+        for s in 1..=steps {
+            let f = s as f64 / steps as f64;
+            let q: Vec<f64> = w[0]
+                .q
+                .iter()
+                .zip(&w[1].q)
+                .map(|(a, b)| a + (b - a) * f)
+                .collect();
+            let (centre, axis) = at(&q);
+            let velocity = (centre - prev) / SIM_STEP_S;
+            prev = centre;
+            let tool = ToolState {
+                centre,
+                axis,
+                velocity,
+            };
+            part.grind_step(&tool, SIM_STEP_S, cfg);
+        }
+    }
+}
+
+/// Median and smallest spindle tilt from the normal over a region's contacts, degrees.
+fn tilts(plan: &Plan, region: usize, robot: &Robot, wc: &Workcell) -> (f64, f64) {
+    let back = reference_from_robot(wc);
+    let ground: Vec<usize> = plan
+        .segments
+        .iter()
+        .filter(|s| s.kind == SegmentKind::Grind && s.region == Some(region))
+        .filter_map(|s| s.pass)
+        .collect();
+    let mut t: Vec<f64> = ground
+        .iter()
+        .map(|&i| {
+            contact(&plan.passes[i], robot, &back)
+                .tilt()
+                .0
+                .angle()
+                .to_degrees()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    (t[t.len() / 2], t[0])
+}
+
+#[test]
+fn the_simulator_removes_what_the_plan_predicts_per_region() {
+    let robot = common::dofbot();
+    let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
+    let dir = common::tempdir();
+    let (inspection, plan) = match std::env::var("POLISHBOT_SIM_DEMO") {
+        Ok(demo) => {
+            let d = Path::new(&demo);
+            let mut plan = Plan::load(&d.join("plan.json")).unwrap();
+            let text = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
+            let rows = polishbot::cell::removal_fit::parse_predicted(&text).unwrap();
+            plan.removal.as_mut().expect("a removal plan").rows = rows;
+            (Inspection::load(&d.join("inspection")).unwrap(), plan)
+        }
+        Err(_) => {
+            let inspection = demo_like(dir.path());
+            let started = std::time::Instant::now();
+            let plan = plan(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
+            println!("planned in {:.2} s", started.elapsed().as_secs_f64());
+            (inspection, plan)
+        }
+    };
+    let removal = plan.removal.as_ref().expect("a removal plan");
+    let cfg = truth(&robot);
+    // the nominal surface the planner presses against, and the part as it is (the excess
+    // presses the ball deeper: force rate x (preload + deviation), not rate x preload)
+    let mut nominal = part(&inspection, &cfg, |_| 0.0);
+    let mut real = part(&inspection, &cfg, |d| if d.is_finite() { d } else { 0.0 });
+    grind(&mut nominal, &plan, &wc, &cfg);
+    grind(&mut real, &plan, &wc, &cfg);
+    let positions: Vec<Point3<f64>> = inspection.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&positions);
+    let mut rows = removal.rows.iter();
+    let mut ratios = Vec::new();
+    for r in &removal.regions {
+        let (mut sim, mut deeper, mut predicted) = (0.0, 0.0, 0.0);
+        for row in rows.by_ref().take(r.core_points) {
+            let i = index.nearest(&Point3::from(row.position)).unwrap().index;
+            sim += nominal.removal()[i];
+            deeper += real.removal()[i];
+            predicted += row.deviation - row.residual;
+        }
+        let (median, least) = tilts(&plan, r.region, &robot, &wc);
+        let ratio = sim / predicted;
+        println!(
+            "region {}: tilt median {median:.1} deg, min {least:.1} deg; removal sim/plan \
+             {ratio:.3} on the nominal surface, {:.3} on the part ({} points)",
+            r.region,
+            deeper / predicted,
+            r.core_points
+        );
+        ratios.push(ratio);
+    }
+    assert!(!ratios.is_empty(), "no region planned");
+    let unreachable = plan.reachability.unreachable.len();
+    println!(
+        "{} regions planned, {unreachable} unreachable contact points",
+        ratios.len()
+    );
+    for ratio in ratios {
+        assert!((ratio - 1.0).abs() <= WITHIN, "sim/plan {ratio}");
+    }
+}
