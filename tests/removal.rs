@@ -73,6 +73,7 @@ fn raster(spacing: f64, stepover: f64, spin: Vector3<f64>) -> Vec<Contact> {
                 along: Vector3::x() * dir,
                 spin,
                 length: spacing,
+                force_ratio: 1.0,
             });
         }
     }
@@ -374,7 +375,7 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
 /// The Monte Carlo takes each contact's core points once, within twice its reach, and picks a
 /// moved contact's column from them (`Reach::column_among`): the columns must be those of the
 /// index's own radius query (`Reach::column`), value for value, for contacts moved up to half
-/// the reach and for patches grown and shrunk by a changed preload.
+/// the reach and for patches grown and shrunk by a changed force (`Contact::force_ratio`).
 #[test]
 fn columns_among_gathered_candidates_equal_the_direct_query() {
     let cores = plate();
@@ -386,17 +387,14 @@ fn columns_among_gathered_candidates_equal_the_direct_query() {
     let mut compared = 0;
     for (k, c) in contacts.iter().enumerate().step_by(7) {
         let gathered = reach.candidates(&c.point, 2.0 * (a + 0.5 * c.length));
-        for (shift, preload) in [(0.0, 2.0), (0.2, 1.7), (0.3, 2.3)] {
+        let influence = Influence::new(&tool, BALL_MM);
+        for (shift, ratio) in [(0.0, 1.0), (0.2, 0.85), (0.3, 1.15)] {
             let angle = k as f64;
             let moved = Contact {
                 point: c.point + Vector3::new(angle.cos(), angle.sin(), 0.0) * shift,
+                force_ratio: ratio,
                 ..*c
             };
-            let model = ToolModel {
-                preload_mm: preload,
-                ..tool.clone()
-            };
-            let influence = Influence::new(&model, BALL_MM);
             let mut direct = reach.column(&influence, &moved);
             let mut among = reach.column_among(&influence, &moved, &gathered);
             direct.sort_by_key(|e| e.0);
@@ -404,7 +402,7 @@ fn columns_among_gathered_candidates_equal_the_direct_query() {
             assert!(!direct.is_empty());
             assert_eq!(
                 direct, among,
-                "contact {k} moved {shift} mm, preload {preload}"
+                "contact {k} moved {shift} mm, force ratio {ratio}"
             );
             compared += direct.len();
         }

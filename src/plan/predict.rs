@@ -14,12 +14,12 @@ use super::error::PlanError;
 use super::free_motion::{pressed, Cell};
 use super::inspection::Inspection;
 use super::preston::{
-    contact, cores_near, joint_error, reference_from_robot, DwellPoint, PredictedRow,
+    cores_near, joint_error, pressed_contacts, reference_from_robot, DwellPoint, PredictedRow,
     RegionPrediction, RemovalReport, Setup,
 };
 use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
 use super::removal::montecarlo::{spread, JointError};
-use super::removal::{self, Contact, Influence, Stats};
+use super::removal::{self, Influence, Stats};
 use super::trajectory::{JointTrajectory, Move};
 use crate::robot::{Robot, Workcell};
 
@@ -190,8 +190,8 @@ fn region_verdict(
     let ball_mm = robot.tool.radius * 1e3;
     let influence = Influence::new(tool, ball_mm);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
-    let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
-    let idx = cores_near(inspection, setup.index, &contacts, influence.patch_radius());
+    let contacts = pressed_contacts(pieces, inspection, setup, allowance_mm);
+    let idx = cores_near(inspection, setup.index, &contacts, &influence);
     let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
         .iter()
         .map(|&i| {

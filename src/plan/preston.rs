@@ -122,7 +122,26 @@ pub fn contact(piece: &PlannedPass, robot: &Robot, back: &Matrix3<f64>) -> Conta
         along,
         spin: (back * held).normalize(),
         length: d.norm(),
+        force_ratio: 1.0,
     }
+}
+
+/// The contacts of `pieces` (`contact`) pressed as the part really is: each one's force from
+/// the inspection's deviation around it, the plan removing down to `allowance` mm
+/// (`removal::press`).
+pub(crate) fn pressed_contacts(
+    pieces: &[&PlannedPass],
+    inspection: &Inspection,
+    setup: &Setup,
+    allowance: f64,
+) -> Vec<Contact> {
+    let back = reference_from_robot(setup.workcell);
+    let robot = setup.robot;
+    let mut contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
+    let influence = Influence::new(setup.tool, robot.tool.radius * 1e3);
+    let cores = (inspection.points.as_slice(), setup.index);
+    removal::press::press(&mut contacts, setup.tool, &influence, cores, allowance);
+    contacts
 }
 
 /// How the joints of a piece's first pose move the tip (mm/rad, reference frame) and each
@@ -174,17 +193,18 @@ fn split(runs: Vec<Run>) -> Vec<Run> {
 }
 
 /// Core points in reach of `contacts` (the region's and its neighbours'), with the inspection
-/// indices they come from, in index order: a point is in reach of a contact within the patch
-/// radius plus half its piece (`reach + 0.5 length`, mm). `index`: the inspection's points.
+/// indices they come from, in index order: a point is in reach of a contact within its patch
+/// radius under its force (`influence`) plus half its piece, mm. `index`: the inspection's
+/// points.
 pub(crate) fn cores_near(
     inspection: &Inspection,
     index: &Neighbours,
     contacts: &[Contact],
-    reach: f64,
+    influence: &Influence,
 ) -> Vec<usize> {
     let mut keep = vec![false; inspection.points.len()];
     for c in contacts {
-        let radius = reach + 0.5 * c.length;
+        let radius = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
         // the index's radius widened for rounding; the test below decides
         for nb in index.within_unsorted(&c.point, radius * (1.0 + 1e-9)) {
             keep[nb.index] |= (inspection.points[nb.index].position - c.point).norm() <= radius;
@@ -230,18 +250,17 @@ pub fn set_dwell(
     setup: &Setup,
     allowance: f64,
 ) -> Result<Result<Dwelled, String>, PlanError> {
-    let (tool, robot, workcell, config) = (setup.tool, setup.robot, setup.workcell, setup.config);
+    let (tool, robot, config) = (setup.tool, setup.robot, setup.config);
     let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
-    let back = reference_from_robot(workcell);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
-    let contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
+    let contacts = pressed_contacts(&pieces, inspection, setup, allowance);
     for (p, c) in pieces.iter().zip(&contacts) {
         check_force(p, c, region.id, setup)?;
     }
-    let ball_mm = robot.tool.radius * 1e3;
-    let reach = Influence::new(tool, ball_mm).patch_radius();
-    let cores: Vec<SurfacePoint> = cores_near(inspection, setup.index, &contacts, reach)
+    let influence = Influence::new(tool, robot.tool.radius * 1e3);
+    let reach = influence.patch_radius();
+    let cores: Vec<SurfacePoint> = cores_near(inspection, setup.index, &contacts, &influence)
         .into_iter()
         .map(|i| inspection.points[i])
         .collect();
@@ -251,7 +270,6 @@ pub fn set_dwell(
             contacts.len()
         )));
     }
-    let influence = Influence::new(tool, ball_mm);
     let plan = match removal::solve_region(&influence, &contacts, &cores, allowance, &solve) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
@@ -268,8 +286,9 @@ pub fn set_dwell(
     }))
 }
 
-/// Refuses contact `c` of piece `p` when a servo cannot hold the tool's force there (the
-/// static torque `J^T F` above `force_share` of its rating), naming the point and the joint.
+/// Refuses contact `c` of piece `p` when a servo cannot hold the force the ball presses with
+/// there (the preload's times `c.force_ratio`: the part's excess presses harder; the static
+/// torque `J^T F` above `force_share` of its rating), naming the point and the joint.
 fn check_force(
     p: &PlannedPass,
     c: &Contact,
@@ -277,7 +296,8 @@ fn check_force(
     setup: &Setup,
 ) -> Result<(), PlanError> {
     let (tool, config) = (setup.tool, setup.config);
-    let push = setup.workcell.direction_from_reference(&c.normal) * tool.force_n();
+    let force = tool.force_n() * c.force_ratio;
+    let push = setup.workcell.direction_from_reference(&c.normal) * force;
     let Some(o) = force::overload(setup.robot, &p.points[0].q, &push, config.force_share) else {
         return Ok(());
     };
@@ -285,14 +305,7 @@ fn check_force(
     Err(PlanError::Config(format!(
         "region {region}: contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to \
          hold {:.2} N, more than its {:.3} N m (`force_share` {})",
-        s.x,
-        s.y,
-        s.z,
-        o.name,
-        o.torque_nm,
-        tool.force_n(),
-        o.limit_nm,
-        config.force_share
+        s.x, s.y, s.z, o.name, o.torque_nm, force, o.limit_nm, config.force_share
     )))
 }
 

@@ -72,11 +72,45 @@ impl Influence {
         }
     }
 
+    /// The influence under `ratio` times the preload's force ([`Contact::force_ratio`]):
+    /// Hertz's patch radius and peak pressure both grow as `ratio^(1/3)` (the force, the peak
+    /// times the radius squared, as `ratio`); a measured table is scaled by `ratio` at its
+    /// measured shape (measured at one force, its radii are kept: the pressure still
+    /// integrates to the force, the patch does not grow).
+    pub fn at_force(&self, ratio: f64) -> Influence {
+        let pressure = match &self.pressure {
+            Pressure::Hertz { p0, a } => {
+                let grow = ratio.cbrt();
+                Pressure::Hertz {
+                    p0: p0 * grow,
+                    a: a * grow,
+                }
+            }
+            Pressure::Table(rows) => {
+                Pressure::Table(rows.iter().map(|&[r, p]| [r, p * ratio]).collect())
+            }
+        };
+        Influence {
+            pressure,
+            ball_mm: self.ball_mm,
+            omega: self.omega,
+            k: self.k,
+        }
+    }
+
     /// Radius of the contact patch, mm: outside it the pressure is zero.
     pub fn patch_radius(&self) -> f64 {
         match &self.pressure {
             Pressure::Hertz { a, .. } => *a,
             Pressure::Table(rows) => rows.last().map_or(0.0, |r| r[0]),
+        }
+    }
+
+    /// Radius of the contact patch under `ratio` times the preload's force, mm.
+    pub fn patch_radius_at(&self, ratio: f64) -> f64 {
+        match &self.pressure {
+            Pressure::Hertz { a, .. } => a * ratio.cbrt(),
+            Pressure::Table(_) => self.patch_radius(),
         }
     }
 
@@ -153,6 +187,10 @@ pub struct Contact {
     pub spin: Vector3<f64>,
     /// Length of the stroke piece the dwell covers, centred on `point`, mm (0: a spot).
     pub length: f64,
+    /// The force the ball presses with here as a share of the tool's preload force (1: the
+    /// preload on the nominal surface): the real penetration over the preload
+    /// ([`super::press`]), which sets the patch and the pressure.
+    pub force_ratio: f64,
 }
 
 impl Contact {
@@ -192,7 +230,7 @@ impl<'a> Reach<'a> {
     /// One column of A: the removal depth per second of dwell at contact `c` at every core
     /// point in reach, the influence averaged over the contact's piece of stroke.
     pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {
-        let reach = influence.patch_radius() + 0.5 * c.length;
+        let reach = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
         let near = self.index.within(&c.point, reach);
         self.column_over(influence, c, near.iter().map(|nb| nb.index))
     }
@@ -213,7 +251,7 @@ impl<'a> Reach<'a> {
         c: &Contact,
         candidates: &[usize],
     ) -> Vec<(usize, f64)> {
-        let reach = influence.patch_radius() + 0.5 * c.length;
+        let reach = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
         let centre = [c.point.x, c.point.y, c.point.z];
         let inside = candidates.iter().copied().filter(|&i| {
             let p = self.cores[i].0;
@@ -232,6 +270,7 @@ impl<'a> Reach<'a> {
         let n = c.normal;
         let (tilt, tx) = c.tilt();
         let ty = n.cross(&tx);
+        let pressed = influence.at_force(c.force_ratio);
         let mut column = Vec::new();
         for index in inside {
             let (p, pn) = self.cores[index];
@@ -242,7 +281,7 @@ impl<'a> Reach<'a> {
                 .map(|s| {
                     let f = (s as f64 + 0.5) / SUBSAMPLES as f64 - 0.5;
                     let d = p - (c.point + c.along * (f * c.length));
-                    influence.rate(d.dot(&tx), d.dot(&ty), tilt)
+                    pressed.rate(d.dot(&tx), d.dot(&ty), tilt)
                 })
                 .sum::<f64>()
                 / SUBSAMPLES as f64;
@@ -293,17 +332,28 @@ mod tests {
                 ..tool.clone()
             },
         ] {
-            let inf = Influence::new(&model, 3.0);
-            let a = inf.patch_radius();
-            let n = 20_000;
-            let force: f64 = (0..n)
-                .map(|i| {
-                    let r = (i as f64 + 0.5) * a / n as f64;
-                    inf.pressure(r) * std::f64::consts::TAU * r * a / n as f64
-                })
-                .sum();
-            assert!((force - 2.0).abs() < 1e-3, "{force}");
+            // at the preload, and pressed 30 % harder (Hertz: patch and peak x 1.3^(1/3))
+            for ratio in [1.0, 1.3] {
+                let inf = Influence::new(&model, 3.0).at_force(ratio);
+                let a = inf.patch_radius();
+                assert_eq!(a, Influence::new(&model, 3.0).patch_radius_at(ratio));
+                let n = 20_000;
+                let force: f64 = (0..n)
+                    .map(|i| {
+                        let r = (i as f64 + 0.5) * a / n as f64;
+                        inf.pressure(r) * std::f64::consts::TAU * r * a / n as f64
+                    })
+                    .sum();
+                assert!((force - 2.0 * ratio).abs() < 1e-3, "{force} at {ratio}");
+            }
         }
+        let (one, more) = (
+            Influence::new(&tool, 3.0),
+            Influence::new(&tool, 3.0).at_force(1.3),
+        );
+        let grow = 1.3f64.cbrt();
+        assert!((more.patch_radius() - one.patch_radius() * grow).abs() < 1e-12);
+        assert!((more.pressure(0.0) - one.pressure(0.0) * grow).abs() < 1e-12);
     }
 
     #[test]

@@ -7,6 +7,7 @@ pub mod dwell;
 pub mod force;
 pub mod influence;
 pub mod montecarlo;
+pub mod press;
 pub mod tool;
 
 use nalgebra::{Point3, Vector3};

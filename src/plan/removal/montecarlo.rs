@@ -1,8 +1,8 @@
 //! The arm's position error propagated into the predicted residual by Monte Carlo: every draw
 //! displaces each contact by its servo quantisation (per contact), backlash and a tool-tip
 //! error (both systematic within a draw) and scales Preston's k; a displacement along the
-//! normal changes the preload, hence the force and the Hertz patch; along the surface it moves
-//! the patch.
+//! normal changes the contact's penetration (its preload and the part's deviation there,
+//! `press.rs`), hence the force and the Hertz patch; along the surface it moves the patch.
 use nalgebra::{DMatrix, DVector, Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -122,10 +122,11 @@ pub fn spread(
     let half_backlash = 0.5 * config.backlash_deg.to_radians();
     // Preston's k uniform with the model's standard deviation: half-width sqrt(3) sd
     let k_half = 3f64.sqrt() * tool.preston_k_rel_sd;
-    let patch = Influence::new(tool, ball_mm).patch_radius();
+    let nominal = Influence::new(tool, ball_mm);
     let gathered: Vec<(f64, Vec<usize>)> = contacts
         .iter()
         .map(|c| {
+            let patch = nominal.patch_radius_at(c.force_ratio);
             let radius = CANDIDATE_REACH_FACTOR * (patch + 0.5 * c.length);
             (radius, reach.candidates(&c.point, radius))
         })
@@ -135,6 +136,11 @@ pub fn spread(
             let backlash = DVector::from_fn(dof, |_, _| rng.gen_range(-1.0..=1.0) * half_backlash);
             let tip = Vector3::from_fn(|_, _| rng.gen_range(-1.0..=1.0) * config.tip_error_mm);
             let k_scale = 1.0 + k_half * rng.gen_range(-1.0..=1.0);
+            let drawn = ToolModel {
+                preston_k_mm2_n: tool.preston_k_mm2_n * k_scale.max(0.0),
+                ..tool.clone()
+            };
+            let influence = Influence::new(&drawn, ball_mm);
             let mut removal = vec![0.0; cores.len()];
             let each = contacts.iter().zip(joints).zip(dwell).zip(&gathered);
             for (((c, je), t), (radius, near)) in each {
@@ -143,22 +149,19 @@ pub fn spread(
                 let d = &je.sensitivity * (&backlash + quant);
                 let shift = Vector3::new(d[0], d[1], d[2]) + tip;
                 let along_normal = shift.dot(&c.normal);
-                // the tool moved outward by `along_normal` presses that much less
-                let preload = (tool.preload_mm - along_normal).max(0.0);
-                if preload <= 0.0 {
-                    continue;
-                }
-                let model = ToolModel {
-                    preload_mm: preload,
-                    preston_k_mm2_n: tool.preston_k_mm2_n * k_scale.max(0.0),
-                    ..tool.clone()
-                };
+                // the tool moved outward by `along_normal` presses that much less than the
+                // contact's own penetration (the part's deviation counted, `press.rs`)
+                let penetration = c.force_ratio * tool.preload_mm - along_normal;
                 let moved = Contact {
                     point: c.point + (shift - c.normal * along_normal),
+                    force_ratio: tool.force_ratio(penetration),
                     ..*c
                 };
-                let influence = Influence::new(&model, ball_mm);
-                let needs = (moved.point - c.point).norm() + influence.patch_radius();
+                if moved.force_ratio <= 0.0 {
+                    continue;
+                }
+                let needs =
+                    (moved.point - c.point).norm() + influence.patch_radius_at(moved.force_ratio);
                 let column = match needs + 0.5 * c.length <= *radius * (1.0 - ROUNDING) {
                     true => reach.column_among(&influence, &moved, near),
                     false => reach.column(&influence, &moved),

@@ -113,6 +113,12 @@ impl ToolModel {
         self.spring_rate_n_mm * self.preload_mm
     }
 
+    /// The force of a ball pressed `penetration_mm` into the part as a share of the preload's
+    /// (`spring_rate x penetration` over `force_n`; 0 once the ball is off the part).
+    pub fn force_ratio(&self, penetration_mm: f64) -> f64 {
+        penetration_mm.max(0.0) / self.preload_mm
+    }
+
     /// Spindle angular speed, rad/s.
     pub fn omega(&self) -> f64 {
         self.spindle_rpm * std::f64::consts::TAU / 60.0
