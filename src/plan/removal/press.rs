@@ -5,7 +5,7 @@
 //! (`Contact::force_ratio`), and the influence scales its patch and pressure by it; the Monte
 //! Carlo's position error changes the same penetration through [`ToolModel::force_ratio`].
 //! Method: docs/ALGORITHMS.md, "Removal planning".
-use nalgebra::Point3;
+use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::influence::{Contact, Influence};
 use super::tool::ToolModel;
@@ -19,27 +19,78 @@ use crate::spatial::Neighbours;
 /// force over the pass is the force at half the removal.
 pub const MID_PASS_SHARE: f64 = 0.5;
 
-/// The part's measured deviation at `point`, mm: the mean of the known deviations of the core
-/// points `cores` (indexed by `index`) within `radius` mm (the contact patch: the area the ball
-/// rests on), or the nearest core point's when none is that close (0 where unknown).
-pub fn deviation_at(
+/// Smallest determinant of the plane fit's normal matrix per point cubed (1e-4, coordinates
+/// in patch radii): about a tenth of a radius of spread in both directions; below it the
+/// slope is not determined and the mean deviation stands.
+const MIN_SPREAD: f64 = 1e-4;
+
+/// The part as measured around a contact: its deviation there and the deviation's slope.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measured {
+    /// Deviation at the contact point, mm (+ = excess).
+    pub deviation: f64,
+    /// Gradient of the deviation along the surface, mm/mm (tangent to the nominal normal).
+    pub slope: Vector3<f64>,
+}
+
+impl Measured {
+    /// Outward unit normal of the measured surface at a point whose nominal normal is `n`:
+    /// the surface moved out by `d` along `n` has tangents `t + (grad d . t) n`.
+    pub fn normal(&self, n: &Vector3<f64>) -> Vector3<f64> {
+        (n - self.slope).normalize()
+    }
+}
+
+/// The part around the contact at `point` (nominal normal `normal`) from the known deviations
+/// of the core points `cores` (indexed by `index`) within `radius` mm: the plane `d0 + g . x`
+/// fitted by least squares in the tangent plane; fewer than three points or a degenerate
+/// spread: their mean with no slope; none: the nearest core point's deviation (0 where
+/// unknown).
+pub fn measured_at(
     cores: &[SurfacePoint],
     index: &Neighbours,
-    point: &Point3<f64>,
+    (point, normal): (&Point3<f64>, &Vector3<f64>),
     radius: f64,
-) -> f64 {
-    let near: Vec<f64> = index
+) -> Measured {
+    let near: Vec<(Vector3<f64>, f64)> = index
         .within_unsorted(point, radius)
         .iter()
-        .map(|nb| cores[nb.index].distance)
-        .filter(|d| d.is_finite())
+        .map(|nb| &cores[nb.index])
+        .filter(|c| c.distance.is_finite())
+        .map(|c| (c.position - point, c.distance))
         .collect();
+    let flat = |deviation| Measured {
+        deviation,
+        slope: Vector3::zeros(),
+    };
     if near.is_empty() {
-        return index
-            .nearest(point)
-            .map_or(0.0, |nb| known(cores[nb.index].distance));
+        let nearest = index.nearest(point).map(|nb| cores[nb.index].distance);
+        return flat(known(nearest.unwrap_or(0.0)));
     }
-    near.iter().sum::<f64>() / near.len() as f64
+    let mean = near.iter().map(|n| n.1).sum::<f64>() / near.len() as f64;
+    let tx = normal.cross(&Vector3::x()).try_normalize(0.1);
+    let tx = tx.unwrap_or_else(|| normal.cross(&Vector3::y()).normalize());
+    let ty = normal.cross(&tx);
+    let (mut m, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
+    for (x, d) in &near {
+        let row = Vector3::new(1.0, x.dot(&tx) / radius, x.dot(&ty) / radius);
+        m += row * row.transpose();
+        rhs += row * *d;
+    }
+    // the coordinates in patch radii: a spread of a tenth of it in each direction at least
+    match (near.len() >= 3 && m.determinant() > MIN_SPREAD * near.len().pow(3) as f64)
+        .then(|| m.try_inverse())
+        .flatten()
+    {
+        Some(inv) => {
+            let f = inv * rhs;
+            Measured {
+                deviation: f[0],
+                slope: (tx * f[1] + ty * f[2]) / radius,
+            }
+        }
+        None => flat(mean),
+    }
 }
 
 /// The force ratio at a contact where the part stands `deviation` mm above nominal and the
@@ -50,9 +101,10 @@ pub fn force_ratio(tool: &ToolModel, deviation: f64, allowance: f64) -> f64 {
     tool.force_ratio(tool.preload_mm + deviation - removed)
 }
 
-/// Sets every contact's `force_ratio` from the part measured at the core points `cores`
-/// (indexed by `index`) under the patch of the preload's force (`influence`), the plan
-/// removing down to `allowance` mm.
+/// Sets every contact's `force_ratio` and `normal` from the part measured at the core points
+/// `cores` (indexed by `index`) under the patch of the preload's force (`influence`), the plan
+/// removing down to `allowance` mm: the ball presses the measured surface, at its deviation
+/// and along its normal.
 pub fn press(
     contacts: &mut [Contact],
     tool: &ToolModel,
@@ -62,8 +114,9 @@ pub fn press(
 ) {
     let patch = influence.patch_radius();
     for c in contacts {
-        let deviation = deviation_at(cores, index, &c.point, patch);
-        c.force_ratio = force_ratio(tool, deviation, allowance);
+        let part = measured_at(cores, index, (&c.point, &c.normal), patch);
+        c.force_ratio = force_ratio(tool, part.deviation, allowance);
+        c.normal = part.normal(&c.normal);
     }
 }
 
@@ -93,7 +146,7 @@ mod tests {
     }
 
     #[test]
-    fn the_deviation_is_the_mean_under_the_patch_or_the_nearest() {
+    fn without_a_spread_the_deviation_is_the_mean_under_the_patch_or_the_nearest() {
         let cores = [
             core(0.0, 0.2),
             core(0.3, 0.4),
@@ -103,12 +156,40 @@ mod tests {
         ];
         let positions: Vec<_> = cores.iter().map(|c| c.position).collect();
         let index = Neighbours::new(&positions);
-        let at = |x: f64| deviation_at(&cores, &index, &Point3::new(x, 0.0, 0.0), 0.6);
+        let z = Vector3::z();
+        let at = |x: f64| {
+            let m = measured_at(&cores, &index, (&Point3::new(x, 0.0, 0.0), &z), 0.6);
+            assert_eq!(m.slope, Vector3::zeros(), "points on a line give no slope");
+            m.deviation
+        };
         // the unknown point under the patch is skipped
         assert!((at(0.1) - 0.3).abs() < 1e-12);
         assert!((at(0.5) - 0.3).abs() < 1e-12);
         // none under the patch: the nearest; unknown there: 0
         assert!((at(3.0) - 1.0).abs() < 1e-12);
         assert_eq!(at(5.1), 0.0);
+    }
+
+    /// A tilted plane of deviations d = 0.1 + 0.2 x - 0.1 y: found exactly, and the normal of
+    /// the measured surface is (-0.2, 0.1, 1) normalised.
+    #[test]
+    fn a_sloped_part_gives_its_deviation_and_normal() {
+        let cores: Vec<SurfacePoint> = (0..100)
+            .map(|i| {
+                let (x, y) = ((i % 10) as f64 * 0.2 - 0.9, (i / 10) as f64 * 0.2 - 0.9);
+                SurfacePoint {
+                    position: Point3::new(x, y, 0.0),
+                    distance: 0.1 + 0.2 * x - 0.1 * y,
+                    ..core(0.0, 0.0)
+                }
+            })
+            .collect();
+        let positions: Vec<_> = cores.iter().map(|c| c.position).collect();
+        let index = Neighbours::new(&positions);
+        let p = Point3::new(0.1, 0.05, 0.0);
+        let m = measured_at(&cores, &index, (&p, &Vector3::z()), 0.6);
+        assert!((m.deviation - (0.1 + 0.02 - 0.005)).abs() < 1e-12, "{m:?}");
+        let want = Vector3::new(-0.2, 0.1, 1.0).normalize();
+        assert!((m.normal(&Vector3::z()) - want).norm() < 1e-12, "{m:?}");
     }
 }
