@@ -50,4 +50,15 @@ fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
     let frames = plan["frames"].as_array().unwrap().len();
     assert!(frames > 100, "plan has {frames} frames");
     assert!(stdout.contains(&format!("({frames} frames)")), "{stdout}");
+    // Run again into the same folder, as a user repeating the README's command does: the
+    // earlier run's journals and loop iterations must not stop it.
+    let again = polishbot()
+        .args(["demo", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        again.status.success(),
+        "second demo into the same folder failed:\n{}",
+        String::from_utf8_lossy(&again.stderr)
+    );
 }

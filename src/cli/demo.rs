@@ -111,10 +111,17 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     )?;
     summary(&out, &inspection, &plan_file, &case.truth)?;
     step("cycle: grind the virtual part, rescan, inspect, plan again (the closed loop)");
+    // The loop's folders are the demo's own: an earlier demo's journals (of other plans) and
+    // iterations would be refused or mixed in, so the loop starts from an empty folder.
+    let cycle_dir = out.join("cycle");
+    if cycle_dir.exists() {
+        std::fs::remove_dir_all(&cycle_dir)
+            .with_context(|| format!("{}: cannot remove", cycle_dir.display()))?;
+    }
     let outcome = super::cycle::run_loop(&super::cycle::Loop {
         reference: out.join("reference.ply"),
         scan: out.join("scan.ply"),
-        out: out.join("cycle"),
+        out: cycle_dir,
         config: crate::cell::cycle::CycleConfig {
             max_iterations: DEMO_ITERATIONS,
             ..Default::default()
