@@ -153,14 +153,7 @@ fn raster_lines(
 ) -> Vec<Vec<Point3<f64>>> {
     let c = Point3::from(region.centroid);
     let n = Vector3::from(region.normal).normalize();
-    let a = n.cross(&Vector3::x());
-    let a = if a.norm() < 0.5 {
-        n.cross(&Vector3::y())
-    } else {
-        a
-    }
-    .normalize();
-    let b = n.cross(&a);
+    let (a, b) = crate::spatial::tangent_basis(&n);
     let uv: Vec<Vector2<f64>> = members
         .iter()
         .map(|p| Vector2::new((p.position - c).dot(&a), (p.position - c).dot(&b)))

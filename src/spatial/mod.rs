@@ -39,6 +39,22 @@ fn ifloor(x: f64) -> isize {
     }
 }
 
+/// Two unit tangents `(a, b)` of the unit normal `n`, right-handed with it (`b = n x a`):
+/// `a` is `n x X`, or `n x Y` where `n` is within 30 degrees of X (the cross product's norm
+/// under 0.5).
+pub fn tangent_basis(
+    n: &nalgebra::Vector3<f64>,
+) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>) {
+    let a = n.cross(&nalgebra::Vector3::x());
+    let a = if a.norm() < 0.5 {
+        n.cross(&nalgebra::Vector3::y())
+    } else {
+        a
+    }
+    .normalize();
+    (a, n.cross(&a))
+}
+
 /// `values` (the answer for each of some points, in a visiting order) put back in index
 /// order: `order[j]` is the index of the point whose answer is `values[j]`; `order` must be a
 /// permutation of `0..values.len()`.

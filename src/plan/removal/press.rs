@@ -68,9 +68,8 @@ pub fn measured_at(
         return flat(known(nearest.unwrap_or(0.0)));
     }
     let mean = near.iter().map(|n| n.1).sum::<f64>() / near.len() as f64;
-    let tx = normal.cross(&Vector3::x()).try_normalize(0.1);
-    let tx = tx.unwrap_or_else(|| normal.cross(&Vector3::y()).normalize());
-    let ty = normal.cross(&tx);
+    // the fit's deviation and slope do not depend on which tangents span the plane
+    let (tx, ty) = crate::spatial::tangent_basis(normal);
     let (mut m, mut rhs) = (Matrix3::zeros(), Vector3::zeros());
     for (x, d) in &near {
         let row = Vector3::new(1.0, x.dot(&tx) / radius, x.dot(&ty) / radius);
