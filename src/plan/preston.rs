@@ -279,11 +279,38 @@ pub fn set_dwell(
         piece.dwell_s = Some(*t);
         piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
     }
+    let highest = plan.before.iter().copied().fold(0.0, f64::max);
+    let runs = lift_over(runs, &plan.lifted);
+    if runs.is_empty() {
+        return Ok(Err(format!(
+            "region left out by the removal planner: nothing to grind at an allowance of \
+             {allowance:.3} mm (the highest deviation in reach is {highest:.3} mm; every contact \
+             would remove less than passing at full feed)"
+        )));
+    }
     Ok(Ok(Dwelled {
         runs,
         allowance,
-        highest: plan.before.iter().copied().fold(0.0, f64::max),
+        highest,
     }))
+}
+
+/// `runs` without the pieces the tool lifts over (`lifted`, one flag per piece in order): a
+/// run is cut where a piece is lifted over, so that each part is ground without lifting.
+fn lift_over(runs: Vec<Run>, lifted: &[bool]) -> Vec<Run> {
+    let mut flags = lifted.iter();
+    let mut out = Vec::new();
+    for run in runs {
+        let mut part: Run = Vec::new();
+        for piece in run {
+            match flags.next() {
+                Some(true) => out.extend((!part.is_empty()).then(|| std::mem::take(&mut part))),
+                _ => part.push(piece),
+            }
+        }
+        out.extend((!part.is_empty()).then_some(part));
+    }
+    out
 }
 
 /// Refuses contact `c` of piece `p` when a servo cannot hold the force the ball presses with

@@ -38,6 +38,12 @@ pub struct RemovalConfig {
     pub spacing_share: f64,
     /// Distance between strokes as a share of the patch radius (0.5).
     pub stepover_share: f64,
+    /// A contact is not ground (the tool lifts over it) when the dwell solved with the tool
+    /// free to lift (`t >= 0`) is under this share of its shortest pass (0.5: halfway between
+    /// lifting and passing at full feed; 0 grinds every contact). Passing at full feed still
+    /// removes a floor amount, which cuts the part below nominal where an earlier pass already
+    /// brought it near (docs/ALGORITHMS.md, "Lifting over what needs nothing").
+    pub lift_share: f64,
 }
 
 impl Default for RemovalConfig {
@@ -48,6 +54,7 @@ impl Default for RemovalConfig {
             feed_min_mm_s: 0.05,
             spacing_share: 0.33,
             stepover_share: 0.5,
+            lift_share: 0.5,
         }
     }
 }
@@ -61,6 +68,7 @@ impl RemovalConfig {
             ("feed_min_mm_s", 1e-4, 1000.0, "mm/s"),
             ("spacing_share", 0.01, 2.0, "x patch radius"),
             ("stepover_share", 0.01, 2.0, "x patch radius"),
+            ("lift_share", 0.0, 1.0, "x shortest dwell"),
         ];
         let values = [
             self.regularization,
@@ -68,6 +76,7 @@ impl RemovalConfig {
             self.feed_min_mm_s,
             self.spacing_share,
             self.stepover_share,
+            self.lift_share,
         ];
         if let Some((name, msg)) = tool::out_of_range(&ranges, &values) {
             return Err(format!("`removal.{name}` {msg}"));
@@ -114,8 +123,10 @@ impl Stats {
 /// The removal planned over one region.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RegionRemoval {
-    /// Dwell time per contact point, s.
+    /// Dwell time per contact point, s; 0 where the tool lifts over the contact.
     pub dwell: Vec<f64>,
+    /// Per contact point: the tool lifts over it (not ground).
+    pub lifted: Vec<bool>,
     /// Predicted removal depth per core point, mm.
     pub removal: Vec<f64>,
     /// Deviation before grinding at the core points, mm.
@@ -150,7 +161,9 @@ fn known(distance: f64) -> f64 {
 
 /// Plans the dwell at every contact of `contacts` so that the removal at the core points
 /// `cores` (the region's and its neighbours' in reach of the tool) matches their excess above
-/// `allowance` mm: A from `influence`, dwell bounds from the feed limits of `config`.
+/// `allowance` mm: A from `influence`, dwell bounds from the feed limits of `config`. A
+/// contact the tool need not touch gets dwell 0 ([`lifted`]); the others are solved within
+/// their bounds.
 pub fn solve_region(
     influence: &Influence,
     contacts: &[Contact],
@@ -165,22 +178,106 @@ pub fn solve_region(
         .iter()
         .map(|c| target(c.distance, allowance))
         .collect();
-    let lower: Vec<f64> = contacts
-        .iter()
-        .map(|c| c.length / config.feed_max_mm_s)
-        .collect();
-    let upper: Vec<f64> = contacts
-        .iter()
-        .map(|c| c.length / config.feed_min_mm_s)
-        .collect();
-    let dwell = dwell::solve(&a, cores.len(), &r, &lower, &upper, config.regularization)?;
-    let removal = influence::apply(&a, &dwell, cores.len());
+    let bounds = |feed: f64| -> Vec<f64> { contacts.iter().map(|c| c.length / feed).collect() };
+    let (lower, upper) = (bounds(config.feed_max_mm_s), bounds(config.feed_min_mm_s));
+    let n = cores.len();
+    let mut lift = lifted(&a, n, &r, (&lower, &upper), config)?;
+    bridge(
+        &mut lift,
+        contacts,
+        LIFT_SPAN_PATCHES * influence.patch_radius(),
+    );
+    let keep: Vec<usize> = (0..contacts.len()).filter(|&i| !lift[i]).collect();
+    let pick = |v: &[f64]| -> Vec<f64> { keep.iter().map(|&i| v[i]).collect() };
+    let kept: influence::Columns = keep.iter().map(|&i| a[i].clone()).collect();
+    let solved = dwell::solve(
+        &kept,
+        n,
+        &r,
+        &pick(&lower),
+        &pick(&upper),
+        config.regularization,
+    )?;
+    let mut dwell = vec![0.0; contacts.len()];
+    for (&i, t) in keep.iter().zip(solved) {
+        dwell[i] = t;
+    }
+    let removal = influence::apply(&a, &dwell, n);
     let before = cores.iter().map(|c| known(c.distance)).collect();
     Ok(RegionRemoval {
         dwell,
+        lifted: lift,
         removal,
         before,
     })
+}
+
+/// Shortest stretch of a stroke, in patch radii, the tool lifts over between two ground
+/// stretches (2: the patch's diameter). Each lift adds a press out and a press in, each about
+/// 0.2 s of dwell at full force on one spot (0.38 s moves over the 2 mm preload), against about
+/// 0.1 s per contact passed at full feed (0.3 mm pieces at the 2.8 mm/s the joints allow): a
+/// shorter gap costs more removal than grinding through it, and the dwell solve's oscillation
+/// between neighbouring contacts would otherwise cut a bump into many short chains.
+const LIFT_SPAN_PATCHES: f64 = 2.0;
+
+/// Grinds through every lifted stretch of a stroke that is shorter than `span` mm and has
+/// ground contacts on both sides (`lift`, one flag per contact of `contacts`, in order; a
+/// stroke is a run of contacts each starting where the one before ends). A lifted stretch at
+/// a stroke's start or end costs no extra press and stays lifted.
+fn bridge(lift: &mut [bool], contacts: &[Contact], span: f64) {
+    let joined = |a: &Contact, b: &Contact| {
+        let end = a.point + a.along * (0.5 * a.length);
+        let start = b.point - b.along * (0.5 * b.length);
+        (end - start).norm() <= JOIN_MM
+    };
+    let mut i = 0;
+    while i < contacts.len() {
+        if !lift[i] {
+            i += 1;
+            continue;
+        }
+        let mut j = i;
+        while j + 1 < contacts.len() && lift[j + 1] && joined(&contacts[j], &contacts[j + 1]) {
+            j += 1;
+        }
+        let inside = i > 0
+            && j + 1 < contacts.len()
+            && joined(&contacts[i - 1], &contacts[i])
+            && joined(&contacts[j], &contacts[j + 1]);
+        let length: f64 = contacts[i..=j].iter().map(|c| c.length).sum();
+        if inside && length < span {
+            lift[i..=j].iter_mut().for_each(|l| *l = false);
+        }
+        i = j + 1;
+    }
+}
+
+/// Largest gap between one contact's piece end and the next one's start for the two to be
+/// on one stroke, mm (1e-6: the pieces share their end point, up to rounding).
+const JOIN_MM: f64 = 1e-6;
+
+/// Which contacts the tool lifts over: those whose dwell, solved with the tool free to lift
+/// (`0 <= t <= t_max`), is under `lift_share` of their shortest pass `t_min` (the removal
+/// wanted there is less than passing at full feed would make). A contact is ground at no less
+/// than its shortest pass or not at all; this decides which, and the kept ones are solved again
+/// within their bounds. None lifted when `lift_share` is 0.
+fn lifted(
+    a: &influence::Columns,
+    n: usize,
+    r: &[f64],
+    (lower, upper): (&[f64], &[f64]),
+    config: &RemovalConfig,
+) -> Result<Vec<bool>, String> {
+    if config.lift_share <= 0.0 {
+        return Ok(vec![false; a.len()]);
+    }
+    let free = vec![0.0; a.len()];
+    let relaxed = dwell::solve(a, n, r, &free, upper, config.regularization)?;
+    Ok(relaxed
+        .iter()
+        .zip(lower)
+        .map(|(t, t_min)| *t < config.lift_share * t_min)
+        .collect())
 }
 
 /// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the
