@@ -393,6 +393,8 @@ struct Acceptance {
     inspections: Vec<(usize, f64, f64, f64)>,
     /// First fitted k / true k (None: not fitted).
     k_ratio: Option<f64>,
+    /// Every grind's fitted k (cycle.json's `k_fitted`, the k the next plan used) / true k.
+    k_ratios: Vec<Option<f64>>,
     /// Largest removal on a pit, mm.
     on_pits: f64,
     /// Iteration 1's agreement (cycle.json): RMS over its defect points of the residual
@@ -479,9 +481,17 @@ fn acceptance(seed: u64) -> Acceptance {
         ]
         .map(|key| a[key].as_f64().unwrap_or(f64::NAN))
     });
+    let k_ratios = json["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["planned_volume_mm3"].is_number())
+        .map(|r| r["k_fitted"].as_f64().map(|k| k / k_true))
+        .collect();
     let a = Acceptance {
         inspections,
         k_ratio,
+        k_ratios,
         on_pits,
         agreement,
     };
@@ -550,7 +560,11 @@ fn ten_acceptance_cases_with_the_removal_planner() {
     };
     let results: Vec<(u64, bool)> = seeds
         .into_iter()
-        .map(|s| (s, accepted(&acceptance(s))))
+        .map(|s| {
+            let a = acceptance(s);
+            println!("seed {s}: k after each grind / true k: {:.3?}", a.k_ratios);
+            (s, accepted(&a))
+        })
         .collect();
     println!("accepted: {results:?}");
 }
