@@ -1,12 +1,14 @@
 //! Removal calibration (issue 29, `polishbot calibrate removal`): the fit against closed-form
 //! cases written here (a known scale of a known removal field; Gaussian noise and the
 //! textbook standard error of a slope through the origin, sigma / sqrt(sum p^2)), its
-//! refusals, and the binary on a simulated grind scored against the simulator's own truth
+//! refusals, the pooling of grinds planned at different k (`cycle`), and the binary on a simulated grind scored against the simulator's own truth
 //! (`after_truth.ply`: the removal per point).
 mod common;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::cell::removal_fit::{agreement, fit, parse_predicted, predicted_removal, FitConfig};
+use polishbot::cell::removal_fit::{
+    agreement, evidence, fit, parse_predicted, pool, predicted_removal, Evidence, FitConfig,
+};
 use polishbot::plan::preston::PredictedRow;
 use polishbot::plan::{Inspection, RegionInfo, SurfacePoint};
 use rand::{Rng, SeedableRng};
@@ -269,6 +271,88 @@ fn thin_evidence_and_unmatched_core_points_are_refused_in_one_line() {
         e.starts_with("row 1: (100.000, 0.000, 0.000) is no core point"),
         "{e}"
     );
+}
+
+/// Scanner noise on the measured removal of the pooled grinds, mm (the rescan's).
+const NOISE_MM: f64 = 0.015;
+/// The true k of the pooled grinds: 1.3 x the first plan's, as the simulated tool's.
+const TRUE_K: f64 = 1.3 * PLAN_K;
+
+/// A grind of `before()` planned at `plan_k` predicting `p`, removing `bias` x what TRUE_K
+/// would (the prediction x TRUE_K / plan_k) plus NOISE_MM of Gaussian noise: its evidence and
+/// the (u, m) pairs the fit should use (u = p / plan_k, m the removal), worked out here.
+fn grind(
+    b: &Inspection,
+    p: &[f64],
+    plan_k: f64,
+    bias: f64,
+    rng: &mut impl Rng,
+) -> (Evidence, Vec<(f64, f64)>) {
+    let removed: Vec<f64> = p
+        .iter()
+        .map(|v| bias * TRUE_K / plan_k * v + NOISE_MM * normal(rng))
+        .collect();
+    let g = evidence(b, &after(b, &removed), p, plan_k, &FitConfig::default()).unwrap();
+    let pairs = expected_used(b, p)
+        .into_iter()
+        .map(|i| (p[i] / plan_k, removed[i]))
+        .collect();
+    (g, pairs)
+}
+
+#[test]
+fn grinds_planned_at_different_k_pool_into_one_fit_and_a_thin_grind_adds_its_points() {
+    let (b, p) = before();
+    let cfg = FitConfig::default();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(21);
+    // grind 1 at the plan's k; grind 2 a finishing grind planned at a refitted k that
+    // predicts 3 % of the bump (66 points above 0.005 mm, each removal near the noise) and
+    // removed half of what the true k would: alone its k's relative error is above 0.25
+    let (g1, pairs1) = grind(&b, &p, PLAN_K, 1.0, &mut rng);
+    let p2: Vec<f64> = p.iter().map(|v| 0.03 * v).collect();
+    let k2 = 1.25 * PLAN_K;
+    let (g2, pairs2) = grind(&b, &p2, k2, 0.5, &mut rng);
+    assert_eq!(
+        (g1.points.len(), g2.points.len()),
+        (pairs1.len(), pairs2.len())
+    );
+    let e = pool(std::slice::from_ref(&g2), &cfg).unwrap_err();
+    assert!(e.contains("too little evidence"), "{e}");
+    let loose = FitConfig {
+        min_points: 2,
+        max_relative_error: f64::INFINITY,
+        ..cfg
+    };
+    let own2 = pool(std::slice::from_ref(&g2), &loose).unwrap().k_mm2_n;
+    let own1 = pool(std::slice::from_ref(&g1), &cfg).unwrap();
+    let both = pool(&[g1, g2], &cfg).unwrap();
+    // closed form over both grinds' points
+    let all: Vec<(f64, f64)> = pairs1.iter().chain(&pairs2).copied().collect();
+    let uu: f64 = all.iter().map(|(u, _)| u * u).sum();
+    let k = all.iter().map(|(u, m)| u * m).sum::<f64>() / uu;
+    let ss: f64 = all.iter().map(|(u, m)| (m - k * u).powi(2)).sum();
+    let se = (ss / (all.len() as f64 - 1.0) / uu).sqrt();
+    println!(
+        "grind 1 alone {:.4e}, grind 2 alone {own2:.4e} ({} points), pooled {:.4e} +- {:.2e}, \
+         true {TRUE_K:.4e}",
+        own1.k_mm2_n,
+        pairs2.len(),
+        both.k_mm2_n,
+        both.k_std_error_mm2_n
+    );
+    assert!(
+        (both.k_mm2_n / k - 1.0).abs() < 1e-12,
+        "{} vs {k}",
+        both.k_mm2_n
+    );
+    assert!((both.k_std_error_mm2_n / se - 1.0).abs() < 1e-9);
+    assert_eq!((both.points, both.grinds), (all.len(), 2));
+    assert_eq!(both.plan_k_mm2_n, k2);
+    // the thin grind's points are in the fit, yet it does not drag k towards its own
+    assert!(both.k_mm2_n != own1.k_mm2_n);
+    assert!((own2 / TRUE_K - 1.0).abs() > 0.3, "{own2}");
+    assert!((both.k_mm2_n / own1.k_mm2_n - 1.0).abs() < 0.01);
+    assert!((both.k_mm2_n - TRUE_K).abs() < 3.0 * both.k_std_error_mm2_n);
 }
 
 /// The issue's bound on the first fit: within 10 % of the true k.

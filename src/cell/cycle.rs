@@ -153,7 +153,8 @@ pub struct IterationRecord {
     pub achieved_residual_mm: Option<f64>,
     /// Share of the planned excess volume that the next inspection found removed.
     pub progress: Option<f64>,
-    /// Preston's k fitted after this iteration's grind, mm^2/N (None: not fitted).
+    /// Preston's k fitted after this iteration's grind to the points of every grind so far
+    /// (`removal_fit::pool`), the next plan's k, mm^2/N (None: not fitted).
     pub k_fitted: Option<f64>,
     /// The grind's prediction at the plan's and at the fitted k against the achieved
     /// residual, over the same defect points (removal plans only).

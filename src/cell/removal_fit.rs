@@ -7,10 +7,13 @@
 //! deviation after, at the same core point of two inspections against the same reference) is
 //! modelled as m = s p with p the predicted removal: least squares through the origin gives
 //! s = sum(m p) / sum(p^2) and k = s x the plan's k. Its spread: the standard error
-//! sqrt(sum(r^2) / (n - 1) / sum(p^2)) of s, and a k per region. Method: docs/CALIBRATION.md,
-//! "5. Removal".
+//! sqrt(sum(r^2) / (n - 1) / sum(p^2)) of s, and a k per region. `cycle` pools the points of
+//! every grind so far: with u = p / the grind's plan k, m = k u and k = sum(m u) / sum(u^2)
+//! over all of them. Method: docs/CALIBRATION.md, "5. Removal".
 //!
-//! Front function: [`fit`] with a [`FitConfig`]; result: [`RemovalFit`].
+//! Stages: [`evidence`] collects one grind's points ([`Evidence`]); [`pool`] fits k to the
+//! points of one or more grinds under a [`FitConfig`] ([`RemovalFit`]); [`fit`] is both for
+//! one grind (`calibrate removal`).
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
@@ -76,23 +79,25 @@ pub struct RegionFit {
 pub struct RemovalFit {
     /// Fitted Preston coefficient, mm^2/N.
     pub k_mm2_n: f64,
-    /// The k the plan was made with, mm^2/N.
+    /// The k the plan was made with (the last grind's when pooled), mm^2/N.
     pub plan_k_mm2_n: f64,
     /// Standard error of the fitted k, mm^2/N.
     pub k_std_error_mm2_n: f64,
-    /// Per region with at least `min_region_points` points.
+    /// Per region of the last grind with at least `min_region_points` points.
     pub regions: Vec<RegionFit>,
     /// RMS of measured minus fitted removal over the points used, mm.
     pub residual_rms_mm: f64,
     /// Points used: defect points of repairable regions, measured in both inspections, where
-    /// the plan predicted at least `min_predicted_mm`.
+    /// the plan predicted at least `min_predicted_mm` (of every grind pooled).
     pub points: usize,
+    /// Grinds whose points were pooled (1 for `calibrate removal`'s single grind).
+    pub grinds: usize,
     /// Defect points of the first inspection with no partner in the second (densified
-    /// around a defect by one inspection only).
+    /// around a defect by one inspection only), summed over the grinds pooled.
     pub unmatched: usize,
     /// Mean measured removal over the points used, mm.
     pub measured_mean_mm: f64,
-    /// Mean predicted removal (at the plan's k) over the points used, mm.
+    /// Mean predicted removal (at each grind's plan k) over the points used, mm.
     pub predicted_mean_mm: f64,
 }
 
@@ -224,23 +229,76 @@ pub fn repairable_ids(inspection: &Inspection) -> Vec<i64> {
         .collect()
 }
 
-/// Least squares through the origin of `m` on `p`: the scale and the sum of p^2.
-fn scale(pairs: &[(f64, f64)]) -> (f64, f64) {
-    let pp: f64 = pairs.iter().map(|(p, _)| p * p).sum();
-    let pm: f64 = pairs.iter().map(|(p, m)| p * m).sum();
-    (pm / pp, pp)
+/// One point of a grind's evidence: a defect point of a repairable region, measured in both
+/// inspections, where the plan predicted at least `min_predicted_mm`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct EvidencePoint {
+    /// Region id (of the inspection before the grind).
+    pub region: i64,
+    /// Removal the plan predicted at its k, mm.
+    pub predicted_mm: f64,
+    /// Removal measured (deviation before minus after), mm.
+    pub measured_mm: f64,
 }
 
-/// Fits k from the inspections `before` and `after` (the same reference, the same core
-/// points) and `predicted` (per core point of `before`, at the plan's k `plan_k`); refuses
-/// with a one-line reason when the points do not match or the evidence is too thin.
-pub fn fit(
+/// What one grind says about k: its points and the k its plan was made with. The model is
+/// m = k u with u = predicted / plan k (the removal per unit k), so grinds planned at
+/// different k pool into one fit ([`pool`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Evidence {
+    /// The k the grind's plan was made with, mm^2/N.
+    pub plan_k_mm2_n: f64,
+    /// The points usable for the fit.
+    pub points: Vec<EvidencePoint>,
+    /// Defect points of the inspection before with no partner in the one after.
+    pub unmatched: usize,
+}
+
+impl Evidence {
+    /// (u, m) per point: the predicted removal per unit k (mm per mm^2/N) and the measured
+    /// removal (mm).
+    fn pairs(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.points
+            .iter()
+            .map(|q| (q.predicted_mm / self.plan_k_mm2_n, q.measured_mm))
+    }
+}
+
+/// Least squares through the origin of y on x over pairs (x, y).
+struct Slope {
+    /// sum(x y) / sum(x^2).
+    value: f64,
+    /// sqrt(sum(r^2) / (n - 1) / sum(x^2)), r = y - value x.
+    std_error: f64,
+    /// sum(r^2).
+    residual_ss: f64,
+}
+
+/// The one least-squares fit of this file: `fit`'s k, `pool`'s, and each region's.
+fn through_origin(pairs: &[(f64, f64)]) -> Slope {
+    let xx: f64 = pairs.iter().map(|(x, _)| x * x).sum();
+    let xy: f64 = pairs.iter().map(|(x, y)| x * y).sum();
+    let value = xy / xx;
+    let residual_ss: f64 = pairs.iter().map(|(x, y)| (y - value * x).powi(2)).sum();
+    let std_error = (residual_ss / (pairs.len() as f64 - 1.0) / xx).sqrt();
+    Slope {
+        value,
+        std_error,
+        residual_ss,
+    }
+}
+
+/// Collects the evidence of one grind from the inspections `before` and `after` (the same
+/// reference, the same core points) and `predicted` (per core point of `before`, at the
+/// plan's k `plan_k`); refuses with a one-line reason when the points do not match or
+/// `before` has no repairable region. Thin evidence is not refused here: [`pool`] judges it.
+pub fn evidence(
     before: &Inspection,
     after: &Inspection,
     predicted: &[f64],
     plan_k: f64,
     cfg: &FitConfig,
-) -> Result<RemovalFit, String> {
+) -> Result<Evidence, String> {
     let repairable = repairable_ids(before);
     let partner = partners(before, after);
     let matched = partner.iter().flatten().count() as f64 / partner.len().max(1) as f64;
@@ -255,7 +313,7 @@ pub fn fit(
         ));
     }
     let (mut defect, mut unmatched) = (0, 0);
-    let mut used: Vec<(i64, f64, f64)> = Vec::new();
+    let mut points = Vec::new();
     for (i, p) in before.points.iter().enumerate() {
         if !repairable.contains(&p.region) {
             continue;
@@ -267,63 +325,101 @@ pub fn fit(
         };
         let m = p.distance - after.points[j].distance;
         if m.is_finite() && predicted[i] >= cfg.min_predicted_mm {
-            used.push((p.region, predicted[i], m));
+            points.push(EvidencePoint {
+                region: p.region,
+                predicted_mm: predicted[i],
+                measured_mm: m,
+            });
         }
     }
     if defect == 0 {
         return Err("the first inspection has no repairable region".into());
     }
-    if used.len() < cfg.min_points {
+    Ok(Evidence {
+        plan_k_mm2_n: plan_k,
+        points,
+        unmatched,
+    })
+}
+
+/// Fits k from one grind ([`evidence`], then [`pool`] over it alone); refuses with a one-line
+/// reason when the points do not match or the evidence is too thin.
+pub fn fit(
+    before: &Inspection,
+    after: &Inspection,
+    predicted: &[f64],
+    plan_k: f64,
+    cfg: &FitConfig,
+) -> Result<RemovalFit, String> {
+    pool(&[evidence(before, after, predicted, plan_k, cfg)?], cfg)
+}
+
+/// Fits one k to the points of all `grinds` pooled: m = k u with u = predicted / the grind's
+/// plan k, k = sum(m u) / sum(u^2) over every point, its standard error
+/// sqrt(sum(r^2) / (n - 1) / sum(u^2)). A grind too thin to fit alone still adds its points.
+/// Refuses with a one-line reason when the pool as a whole has fewer than `min_points`
+/// points, a relative standard error above `max_relative_error`, or nothing removed. The
+/// fit's plan k, scale and regions are the last grind's (the one the current plan made).
+pub fn pool(grinds: &[Evidence], cfg: &FitConfig) -> Result<RemovalFit, String> {
+    let pairs: Vec<(f64, f64)> = grinds.iter().flat_map(Evidence::pairs).collect();
+    let used = grinds.iter().filter(|g| !g.points.is_empty()).count();
+    let over = match used {
+        0 | 1 => String::new(),
+        n => format!(" (pooled over {n} grinds)"),
+    };
+    // a standard error needs two points
+    let least = cfg.min_points.max(2);
+    let Some(last) = grinds.last().filter(|_| pairs.len() >= least) else {
         return Err(format!(
             "{} defect points where the plan predicts at least {} mm of removal and both \
-             inspections measured, fewer than {}: too little evidence to fit k",
-            used.len(),
+             inspections measured{over}, fewer than {least}: too little evidence to fit k",
+            pairs.len(),
             cfg.min_predicted_mm,
-            cfg.min_points
         ));
-    }
-    let pairs: Vec<(f64, f64)> = used.iter().map(|u| (u.1, u.2)).collect();
-    let (s, pp) = scale(&pairs);
-    let ss: f64 = pairs.iter().map(|(p, m)| (m - s * p).powi(2)).sum();
-    let n = pairs.len() as f64;
-    let se = (ss / (n - 1.0) / pp).sqrt();
-    if s <= 0.0 || se / s > cfg.max_relative_error {
+    };
+    let k = through_origin(&pairs);
+    let (s, se) = (k.value / last.plan_k_mm2_n, k.std_error / last.plan_k_mm2_n);
+    if !(s > 0.0 && se / s <= cfg.max_relative_error) {
         return Err(format!(
-            "k scale {s:.3} +- {se:.3} of the plan's over {} points: the relative error is \
-             above {} (or nothing was removed): too little evidence to fit k",
+            "k scale {s:.3} +- {se:.3} of the plan's over {} points{over}: the relative error \
+             is above {} (or nothing was removed): too little evidence to fit k",
             pairs.len(),
             cfg.max_relative_error
         ));
     }
+    let n = pairs.len() as f64;
+    let all = || grinds.iter().flat_map(|g| &g.points);
     Ok(RemovalFit {
-        k_mm2_n: s * plan_k,
-        plan_k_mm2_n: plan_k,
-        k_std_error_mm2_n: se * plan_k,
-        regions: region_fits(&used, plan_k, cfg.min_region_points),
-        residual_rms_mm: (ss / n).sqrt(),
+        k_mm2_n: k.value,
+        plan_k_mm2_n: last.plan_k_mm2_n,
+        k_std_error_mm2_n: k.std_error,
+        regions: region_fits(last, cfg.min_region_points),
+        residual_rms_mm: (k.residual_ss / n).sqrt(),
         points: pairs.len(),
-        unmatched,
-        measured_mean_mm: pairs.iter().map(|x| x.1).sum::<f64>() / n,
-        predicted_mean_mm: pairs.iter().map(|x| x.0).sum::<f64>() / n,
+        grinds: used,
+        unmatched: grinds.iter().map(|g| g.unmatched).sum(),
+        measured_mean_mm: all().map(|q| q.measured_mm).sum::<f64>() / n,
+        predicted_mean_mm: all().map(|q| q.predicted_mm).sum::<f64>() / n,
     })
 }
 
-/// k per region over the points `used` (region, predicted, measured).
-fn region_fits(used: &[(i64, f64, f64)], plan_k: f64, least: usize) -> Vec<RegionFit> {
-    let mut ids: Vec<i64> = used.iter().map(|u| u.0).collect();
+/// k per region of the grind `g` with at least `least` points.
+fn region_fits(g: &Evidence, least: usize) -> Vec<RegionFit> {
+    let mut ids: Vec<i64> = g.points.iter().map(|q| q.region).collect();
     ids.sort_unstable();
     ids.dedup();
     ids.into_iter()
         .filter_map(|id| {
-            let pairs: Vec<(f64, f64)> = used
-                .iter()
-                .filter(|u| u.0 == id)
-                .map(|u| (u.1, u.2))
+            let pairs: Vec<(f64, f64)> = g
+                .pairs()
+                .zip(&g.points)
+                .filter(|(_, q)| q.region == id)
+                .map(|(uv, _)| uv)
                 .collect();
             (pairs.len() >= least).then(|| RegionFit {
                 region: id as usize,
                 points: pairs.len(),
-                k_mm2_n: scale(&pairs).0 * plan_k,
+                k_mm2_n: through_origin(&pairs).value,
             })
         })
         .collect()

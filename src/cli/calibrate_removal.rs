@@ -1,13 +1,14 @@
 //! `polishbot calibrate removal --before DIR1 --after DIR2 --plan plan.json [--tool FILE]`:
 //! Preston's k fitted from two inspections and the plan ground between them
 //! (`cell::removal_fit`), written into tool.toml's `[removal] preston_k_mm2_n`. No arm is
-//! needed. `cycle` refits k after every grind through [`fit_files`] and [`write_k`].
+//! needed. `cycle` collects every grind's points through [`prediction`] and
+//! [`evidence_loaded`], pools them and writes k with [`write_k`].
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 
 use crate::calibrate::files;
-use crate::cell::removal_fit::{self, FitConfig, RemovalFit};
+use crate::cell::removal_fit::{self, Evidence, FitConfig, RemovalFit};
 use crate::plan::removal::ToolModel;
 use crate::plan::{Inspection, Plan};
 
@@ -27,14 +28,18 @@ pub struct Inputs {
 /// Fits k from the files of `inputs`; every refusal is one line naming the file.
 pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
     let before = Inspection::load(&inputs.before)?;
-    let (predicted, plan_k) = evidence(&inputs.plan, &inputs.tool, &before)?;
+    let (predicted, plan_k) = prediction(&inputs.plan, &inputs.tool, &before)?;
     let after = Inspection::load(&inputs.after)?;
-    fit_loaded(inputs, &before, &after, &predicted, plan_k, cfg)
+    removal_fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
 /// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
 /// plan `plan`, at the plan's k) and that k (the tool file `tool` the plan was made with).
-pub fn evidence(plan: &Path, tool: &Path, before: &Inspection) -> anyhow::Result<(Vec<f64>, f64)> {
+pub fn prediction(
+    plan: &Path,
+    tool: &Path,
+    before: &Inspection,
+) -> anyhow::Result<(Vec<f64>, f64)> {
     let loaded = Plan::load(plan)?;
     anyhow::ensure!(
         loaded.removal.is_some(),
@@ -53,23 +58,26 @@ pub fn evidence(plan: &Path, tool: &Path, before: &Inspection) -> anyhow::Result
     Ok((predicted, k))
 }
 
-/// The fit of `removal_fit::fit` on inspections already read from `inputs`' folders; the
-/// refusal names both folders.
-pub fn fit_loaded(
+/// One grind's evidence (`removal_fit::evidence`) from inspections already read from
+/// `inputs`' folders; the refusal names both folders.
+pub fn evidence_loaded(
     inputs: &Inputs,
     before: &Inspection,
     after: &Inspection,
     predicted: &[f64],
     plan_k: f64,
     cfg: &FitConfig,
-) -> anyhow::Result<RemovalFit> {
-    removal_fit::fit(before, after, predicted, plan_k, cfg).map_err(|m| {
-        anyhow::anyhow!(
-            "{} -> {}: {m}",
-            inputs.before.display(),
-            inputs.after.display()
-        )
-    })
+) -> anyhow::Result<Evidence> {
+    removal_fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+}
+
+/// `removal_fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
+fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{} -> {}: {m}",
+        inputs.before.display(),
+        inputs.after.display()
+    )
 }
 
 /// Writes `out` from the tool file `input` with `[removal] preston_k_mm2_n = k` (one line
@@ -87,8 +95,8 @@ pub fn write_k(input: &Path, out: &Path, k: f64) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The fit in lines for the user.
-pub fn describe(fit: &RemovalFit) -> Vec<String> {
+/// The fit in lines for the user, each starting with `label`.
+pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
     let per: Vec<String> = fit
         .regions
         .iter()
@@ -96,7 +104,7 @@ pub fn describe(fit: &RemovalFit) -> Vec<String> {
         .collect();
     vec![
         format!(
-            "calibrate removal: k {:.4e} +- {:.2e} mm^2/N (plan's {:.4e}, x {:.3}) from {} \
+            "{label}: k {:.4e} +- {:.2e} mm^2/N (plan's {:.4e}, x {:.3}) from {} \
              defect points ({} unmatched); fit residual RMS {:.4} mm; measured mean removal \
              {:.4} mm, predicted {:.4} mm at the plan's k",
             fit.k_mm2_n,
@@ -110,7 +118,7 @@ pub fn describe(fit: &RemovalFit) -> Vec<String> {
             fit.predicted_mean_mm
         ),
         format!(
-            "calibrate removal: k per region [mm^2/N]: {}",
+            "{label}: k per region [mm^2/N]: {}",
             if per.is_empty() {
                 "none with enough points".into()
             } else {
@@ -124,7 +132,7 @@ pub fn describe(fit: &RemovalFit) -> Vec<String> {
 pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {
     let fit = fit_files(inputs, &FitConfig::default())
         .map_err(|e| anyhow::anyhow!("calibrate removal: {}", super::common::one_line(&e)))?;
-    for line in describe(&fit) {
+    for line in describe(&fit, "calibrate removal") {
         println!("{line}");
     }
     write_k(&inputs.tool, out, fit.k_mm2_n)

@@ -16,7 +16,7 @@ use crate::cell::cycle::{
     decide, decide_plan, table_html, table_json, table_text, CycleConfig, IterationRecord,
     Measured, Outcome, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
 };
-use crate::cell::removal_fit::{self, Agreement, FitConfig};
+use crate::cell::removal_fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
 use crate::plan::{Inspection, Plan, PlanMode};
 use crate::regions::Regions;
 
@@ -278,6 +278,8 @@ struct Ground {
 pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
     let mut records: Vec<IterationRecord> = Vec::new();
     let mut previous: Option<Ground> = None;
+    // every grind's removal evidence so far: k is fitted to all of it
+    let mut pooled = Vec::new();
     let mut scan = l.scan.clone();
     let mut tool = load_config::<plan::PlanFileConfig>(l.configs.plan.as_deref())?
         .robot
@@ -304,6 +306,7 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
                 &ids,
                 &dir,
                 &mut tool,
+                &mut pooled,
             );
         }
         records.push(IterationRecord::new(k, measured));
@@ -334,17 +337,19 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
     unreachable!("the loop returns")
 }
 
-/// Refits k from the last grind (`calibrate removal`'s routine) and, when the fit holds,
-/// writes DIR/tool.toml with it and makes it the `tool` of the next plan; re-predicts the
-/// grind with the fitted k over the defect points of the regions `ids` against the `after`
-/// inspection (folder and points). Returns the fitted k, or None with the reason printed (a
-/// rigid plan, too little evidence), and the agreement (None for a rigid plan).
+/// Refits k after the last grind from the points of every grind so far (`pooled`, which this
+/// grind's points join; `removal_fit::pool`) and, when the fit holds, writes DIR/tool.toml
+/// with it and makes it the `tool` of the next plan; re-predicts the grind with the fitted k
+/// over the defect points of the regions `ids` against the `after` inspection (folder and
+/// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
+/// evidence), and the agreement (None for a rigid plan).
 fn refit(
     before: &Ground,
     after: (&Path, &Inspection),
     ids: &[i64],
     dir: &Path,
     tool: &mut PathBuf,
+    pooled: &mut Vec<Evidence>,
 ) -> (Option<f64>, Option<Agreement>) {
     let inputs = Inputs {
         before: before.inspection_dir.clone(),
@@ -353,19 +358,12 @@ fn refit(
         tool: before.tool.clone(),
     };
     let written = dir.join("tool.toml");
-    let evidence = calib::evidence(&before.plan, &before.tool, &before.inspection);
-    let fitted = evidence.as_ref().map_err(clone_error).and_then(|(p, k)| {
-        let fit = calib::fit_loaded(
-            &inputs,
-            &before.inspection,
-            after.1,
-            p,
-            *k,
-            &FitConfig::default(),
-        )?;
-        calib::describe(&fit)
-            .iter()
-            .for_each(|line| println!("cycle: {line}"));
+    let prediction = calib::prediction(&before.plan, &before.tool, &before.inspection);
+    let fitted = prediction.as_ref().map_err(clone_error).and_then(|(p, k)| {
+        let cfg = FitConfig::default();
+        let grind = calib::evidence_loaded(&inputs, &before.inspection, after.1, p, *k, &cfg)?;
+        pooled.push(grind);
+        let fit = fit_pooled(pooled, &cfg)?;
         calib::write_k(&before.tool, &written, fit.k_mm2_n)?;
         Ok(fit.k_mm2_n)
     });
@@ -384,10 +382,42 @@ fn refit(
             None
         }
     };
-    let agreement = evidence.ok().and_then(|(p, plan_k)| {
+    let agreement = prediction.ok().and_then(|(p, plan_k)| {
         removal_fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
     (k, agreement)
+}
+
+/// Prints the last grind's own fit (or why it cannot fit alone, when it has earlier grinds to
+/// pool with) and fits k to the points of all grinds in `pooled`, printing that fit with the
+/// grinds and points it pooled.
+fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
+    let last = pooled.last().expect("the grind just pushed");
+    match removal_fit::pool(std::slice::from_ref(last), cfg) {
+        Ok(own) => calib::describe(&own, "cycle: this grind alone")
+            .iter()
+            .for_each(|line| println!("{line}")),
+        // with no earlier grind the pool's refusal below says the same
+        Err(m) if pooled.len() > 1 => println!(
+            "cycle: this grind alone fits no k ({m}); its {} points join the pool",
+            last.points.len()
+        ),
+        Err(_) => {}
+    }
+    let fit = removal_fit::pool(pooled, cfg).map_err(|m| anyhow::anyhow!("{m}"))?;
+    println!(
+        "cycle: k {:.4e} +- {:.2e} mm^2/N pooled over {} grind{} / {} points (x {:.3} of the last \
+         plan's {:.4e}); fit residual RMS {:.4} mm",
+        fit.k_mm2_n,
+        fit.k_std_error_mm2_n,
+        fit.grinds,
+        if fit.grinds == 1 { "" } else { "s" },
+        fit.points,
+        fit.k_mm2_n / fit.plan_k_mm2_n,
+        fit.plan_k_mm2_n,
+        fit.residual_rms_mm
+    );
+    Ok(fit)
 }
 
 /// A copy of `e` (its one-line chain) to hand on while the original is kept.
