@@ -436,11 +436,14 @@ fn acceptance(seed: u64) -> Acceptance {
             break;
         };
         let rep: Vec<_> = i.regions.iter().filter(|r| r.repairable).collect();
+        let sure = measured_within(&it.join("inspection"), TOLERANCE_MM);
+        assert_eq!(sure.len(), i.points.len());
         let lowest = i
             .points
             .iter()
-            .filter(|p| p.distance.is_finite() && !near_pit(&p.position))
-            .map(|p| p.distance)
+            .zip(&sure)
+            .filter(|(p, s)| **s && p.distance.is_finite() && !near_pit(&p.position))
+            .map(|(p, _)| p.distance)
             .fold(f64::INFINITY, f64::min);
         inspections.push((
             rep.len(),
@@ -502,6 +505,24 @@ fn acceptance(seed: u64) -> Acceptance {
 /// Tolerance of the cases, mm (inspect's default).
 const TOLERANCE_MM: f64 = 0.05;
 
+/// Per core point of the inspection in `dir` (deviations.csv's rows, in order): whether its
+/// distance is measured to within `limit` mm (its `uncertainty` at most that). A point measured
+/// from a handful of scan points at an edge (seed 1: 6 scan points, uncertainty 0.30 mm,
+/// distance -0.094 then -0.123 mm on rescans, true removal 0) cannot say whether the part is
+/// below the tolerance there, and is not counted as over-ground.
+fn measured_within(dir: &Path, limit: f64) -> Vec<bool> {
+    let text = std::fs::read_to_string(dir.join("deviations.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = header.iter().position(|h| *h == "uncertainty").unwrap();
+    lines
+        .map(|l| {
+            let u: f64 = l.split(',').nth(col).unwrap().parse().unwrap_or(f64::NAN);
+            u <= limit
+        })
+        .collect()
+}
+
 /// The acceptance on one case: no repairable region left after the last grind, no
 /// core point away from the pits more than the tolerance below nominal, pits untouched, the
 /// first fitted k within 10 % of the true k.
@@ -517,13 +538,11 @@ fn accepted(a: &Acceptance) -> bool {
 /// hold today: k is refitted after the first grind, the first grind removes at least
 /// `min_progress` of the repairable excess volume, the pits are never ground, the first pass
 /// is re-predicted at the fitted k in cycle.json. NOT asserted (measured, reported to the
-/// lead): every repairable region within tolerance after 3 grinds, no core point below
-/// -tolerance, the first k within 10 % of the true k, the re-prediction within 0.01 mm RMS
-/// (seed 1: 0.055 mm; 0.069 while every contact was modelled at a fixed 20 degree spindle
-/// tilt). Each contact is now modelled at the spindle axis the arm holds there, held at least
-/// tool.toml's `tilt_deg` from the normal where the arm can; what is left is mostly the force:
-/// the ball is pressed the preload below the nominal surface, so an excess presses it deeper
-/// than the model assumes (tests/removal_sim.rs), and seed 1 still grinds to -0.27 mm.
+/// lead): every repairable region within tolerance after 3 grinds (the cap on one pass's
+/// removal, `removal.max_pass_mm`, takes a 0.5 mm bump down over more passes), no measured core
+/// point below -tolerance (-0.04..-0.07 mm over the ten cases: the simulator's removal is more
+/// concentrated than the planner's model, docs/ALGORITHMS.md), the re-prediction within 0.01 mm
+/// RMS.
 #[test]
 fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
     for seed in [1, 21] {

@@ -213,7 +213,9 @@ fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
     };
     let robot = common::dofbot();
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
-    let config = PlanConfig::default();
+    let mut config = PlanConfig::default();
+    // no cap on one pass's removal here (the next test has it): the steps start at 0
+    config.removal.max_pass_mm = 1.0;
     let p = plan(&inspection, &robot, &wc, &config).expect("plan");
     let removal = p.removal.as_ref().expect("a removal report");
     assert_eq!(
@@ -232,4 +234,45 @@ fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
     );
     // the quantile within the tolerance, excess removed
     println!("{}", common::removal::accept(&p, "tall bump"));
+}
+
+/// One pass removes at most `removal.max_pass_mm`: the same tall bump (0.31 mm) with a cap
+/// of 0.1 mm is planned at an allowance of at least its highest deviation less the cap, and
+/// the predicted peak after the pass stays above it.
+#[test]
+fn one_pass_removes_at_most_the_cap() {
+    let (points, region) = patch(Point3::new(5.0, -35.0, -25.0), 0, TALL_MM);
+    let inspection = Inspection {
+        dir: "tall_bump_capped".into(),
+        tolerance: Some(TOLERANCE_MM),
+        regions: vec![region],
+        points,
+    };
+    let robot = common::dofbot();
+    let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
+    let mut config = PlanConfig::default();
+    config.removal.max_pass_mm = 0.1;
+    let p = plan(&inspection, &robot, &wc, &config).expect("plan");
+    let removal = p.removal.as_ref().expect("a removal report");
+    assert_eq!(
+        removal.regions.len(),
+        1,
+        "{:?}",
+        p.reachability.unreachable.first()
+    );
+    let r = &removal.regions[0];
+    println!(
+        "peak {:.3} -> {:.3} mm at allowance {:.3} mm (cap 0.1 mm)",
+        r.before.peak_mm, r.after.peak_mm, r.allowance_mm
+    );
+    assert!(
+        r.allowance_mm >= r.before.peak_mm - 0.1 - 1e-12,
+        "{}",
+        r.allowance_mm
+    );
+    assert!(
+        r.after.peak_mm > r.before.peak_mm - 0.1 - TOLERANCE_MM,
+        "{:?}",
+        r.after
+    );
 }

@@ -226,12 +226,7 @@ fn region_verdict(
     };
     let (low, median) = (&quantiles.low, &quantiles.median);
     let lowest = low.iter().copied().fold(f64::INFINITY, f64::min);
-    if lowest < -tolerance {
-        let why = format!(
-            "region left out by the removal planner: the trajectory's dwell over-grinds to \
-             {lowest:.3} mm at the {} quantile, beyond the tolerance {tolerance} mm",
-            mc.quantile
-        );
+    if let Some(why) = over_grind(low, &before, tolerance, mc.quantile) {
         return (Err(why), quantiles);
     }
     let rows = idx
@@ -271,6 +266,34 @@ fn region_verdict(
         after_low_p95_mm: if lowest.is_finite() { lowest } else { 0.0 },
     };
     (Ok((prediction, rows)), quantiles)
+}
+
+/// Share of the tolerance a core point already below `-tolerance` before grinding (a pit, or
+/// a spot an earlier pass over-ground) may lose at the Monte Carlo's quantile (0.1: 0.005 mm at
+/// the default 0.05 mm, a third of the scanner's noise, so it cannot be measured as ground):
+/// such a point is below the tolerance whatever the plan does, and the plan may grind a bump
+/// around it only as long as it does not deepen it.
+const ALREADY_LOW_SHARE: f64 = 0.1;
+
+/// Why the residual's low quantile `low` over-grinds, or None: a core point goes below
+/// `-tolerance`, or, when it was below already (`before`), loses more than `ALREADY_LOW_SHARE`
+/// of the tolerance. The reason names the worst point's residual and its deviation before.
+fn over_grind(low: &[f64], before: &[f64], tolerance: f64, quantile: f64) -> Option<String> {
+    let floor = |b: f64| (-tolerance).min(b - ALREADY_LOW_SHARE * tolerance);
+    let (k, margin) = low
+        .iter()
+        .zip(before)
+        .map(|(l, b)| l - floor(*b))
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    (margin < 0.0).then(|| {
+        format!(
+            "region left out by the removal planner: the trajectory's dwell over-grinds to \
+             {:.3} mm at the {quantile} quantile (a core point at {:.3} mm before), beyond the \
+             tolerance {tolerance} mm",
+            low[k], before[k]
+        )
+    })
 }
 
 /// Checks one region before assembling (`rehearse`, `region_verdict`) and keeps the verdict
@@ -355,4 +378,21 @@ pub(crate) fn predict(
         }
     }
     Ok((report, failed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_point_already_below_the_tolerance_may_not_be_deepened_beyond_a_tenth_of_it() {
+        let tol = 0.05;
+        // above the tolerance: -0.049 passes, -0.051 fails
+        assert!(over_grind(&[-0.049], &[0.1], tol, 0.05).is_none());
+        assert!(over_grind(&[-0.051], &[0.1], tol, 0.05).is_some());
+        // already at -0.2 (a pit): may lose 0.005 mm, not 0.006
+        assert!(over_grind(&[-0.2049], &[-0.2], tol, 0.05).is_none());
+        let why = over_grind(&[0.0, -0.206], &[0.1, -0.2], tol, 0.05).unwrap();
+        assert!(why.contains("-0.206") && why.contains("-0.200"), "{why}");
+    }
 }

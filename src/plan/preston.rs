@@ -254,19 +254,27 @@ pub fn set_dwell(
     let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
-    let contacts = pressed_contacts(&pieces, inspection, setup, allowance);
+    let influence = Influence::new(tool, robot.tool.radius * 1e3);
+    let (mut contacts, mut cores) = in_reach(&pieces, inspection, setup, allowance);
+    let mut allowance = allowance;
+    let highest = cores
+        .iter()
+        .map(|c| c.distance)
+        .filter(|d| d.is_finite())
+        .fold(0.0, f64::max);
+    if highest - solve.max_pass_mm > allowance {
+        allowance = highest - solve.max_pass_mm;
+        (contacts, cores) = in_reach(&pieces, inspection, setup, allowance);
+    }
     for (p, c) in pieces.iter().zip(&contacts) {
         check_force(p, c, region.id, setup)?;
     }
-    let influence = Influence::new(tool, robot.tool.radius * 1e3);
-    let reach = influence.patch_radius();
-    let cores: Vec<SurfacePoint> = cores_near(inspection, setup.index, &contacts, &influence)
-        .into_iter()
-        .map(|i| inspection.points[i])
-        .collect();
     if cores.is_empty() {
         return Ok(Err(format!(
-            "region left out by the removal planner: no core point within the tool's reach              ({reach:.3} mm patch radius) of its {} contacts, so no removal can be planned or              predicted",
+            "region left out by the removal planner: no core point within the tool's reach \
+             ({:.3} mm patch radius) of its {} contacts, so no removal can be planned or \
+             predicted",
+            influence.patch_radius(),
             contacts.len()
         )));
     }
@@ -279,7 +287,6 @@ pub fn set_dwell(
         piece.dwell_s = Some(*t);
         piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
     }
-    let highest = plan.before.iter().copied().fold(0.0, f64::max);
     let runs = lift_over(runs, &plan.lifted);
     if runs.is_empty() {
         return Ok(Err(format!(
@@ -311,6 +318,23 @@ fn lift_over(runs: Vec<Run>, lifted: &[bool]) -> Vec<Run> {
         out.extend((!part.is_empty()).then_some(part));
     }
     out
+}
+
+/// The contacts of `pieces` pressed for a plan down to `allowance` mm (`pressed_contacts`) and
+/// the core points in their reach (`cores_near`).
+fn in_reach(
+    pieces: &[&PlannedPass],
+    inspection: &Inspection,
+    setup: &Setup,
+    allowance: f64,
+) -> (Vec<Contact>, Vec<SurfacePoint>) {
+    let contacts = pressed_contacts(pieces, inspection, setup, allowance);
+    let influence = Influence::new(setup.tool, setup.robot.tool.radius * 1e3);
+    let cores = cores_near(inspection, setup.index, &contacts, &influence)
+        .into_iter()
+        .map(|i| inspection.points[i])
+        .collect();
+    (contacts, cores)
 }
 
 /// Refuses contact `c` of piece `p` when a servo cannot hold the force the ball presses with

@@ -233,7 +233,7 @@ fn resolve(
     let why = match allowance > highest {
         true => format!(
             "it over-grinds even with an allowance of {allowance:.3} mm, above the highest \
-             deviation {highest:.3} mm (every dwell at its shortest)"
+             deviation {highest:.3} mm (no removal asked for anywhere)"
         ),
         false => match preston::set_dwell(s.walked.clone(), region, inspection, ctx, raised)? {
             Ok(again) => return Ok(Some(again)),

@@ -44,6 +44,15 @@ pub struct RemovalConfig {
     /// removes a floor amount, which cuts the part below nominal where an earlier pass already
     /// brought it near (docs/ALGORITHMS.md, "Lifting over what needs nothing").
     pub lift_share: f64,
+    /// Most one pass removes, mm (0.15): the allowance is raised to the highest deviation in a
+    /// region's reach less this. The prediction's error grows with the removal (tests/cycle.rs
+    /// seed 141, the simulator's law made linear and its k exact: it removed 0.83 x the
+    /// prediction where 0.02-0.1 mm was planned, 1.30 x where 0.2-0.3 mm), and the first pass
+    /// also carries k's error (1.3 x on the acceptance cases). Over the 10 acceptance cases the
+    /// lowest point after the first pass was -0.031..-0.058 mm with 0.15, down to -0.120 mm
+    /// with 0.25; a tall bump is taken down over more passes, with a rescan and a refit of k
+    /// between them.
+    pub max_pass_mm: f64,
 }
 
 impl Default for RemovalConfig {
@@ -55,6 +64,7 @@ impl Default for RemovalConfig {
             spacing_share: 0.33,
             stepover_share: 0.5,
             lift_share: 0.5,
+            max_pass_mm: 0.15,
         }
     }
 }
@@ -69,6 +79,7 @@ impl RemovalConfig {
             ("spacing_share", 0.01, 2.0, "x patch radius"),
             ("stepover_share", 0.01, 2.0, "x patch radius"),
             ("lift_share", 0.0, 1.0, "x shortest dwell"),
+            ("max_pass_mm", 0.001, 100.0, "mm"),
         ];
         let values = [
             self.regularization,
@@ -77,6 +88,7 @@ impl RemovalConfig {
             self.spacing_share,
             self.stepover_share,
             self.lift_share,
+            self.max_pass_mm,
         ];
         if let Some((name, msg)) = tool::out_of_range(&ranges, &values) {
             return Err(format!("`removal.{name}` {msg}"));
@@ -310,5 +322,34 @@ mod tests {
         assert_eq!(target(f64::NAN, 0.0), 0.0);
         assert_eq!(target(-0.2, 0.0), 0.0);
         assert!((target(0.3, 0.1) - 0.2).abs() < 1e-15);
+    }
+
+    /// Contacts 1 mm long in a row along x (one stroke), the second stroke starting apart.
+    fn row(n: usize, y: f64) -> Vec<Contact> {
+        (0..n)
+            .map(|i| Contact {
+                point: Point3::new(i as f64 + 0.5, y, 0.0),
+                normal: Vector3::z(),
+                along: Vector3::x(),
+                spin: -Vector3::z(),
+                length: 1.0,
+                force_ratio: 1.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn short_inner_gaps_are_ground_through_and_stroke_ends_stay_lifted() {
+        let mut contacts = row(8, 0.0);
+        contacts.extend(row(3, 5.0));
+        let (t, f) = (true, false);
+        // stroke 1: lifted start (2 mm), a 2 mm gap, a 1 mm gap; stroke 2: lifted at its start,
+        // right after stroke 1's last contact (not joined to it); then a 3 mm gap stays lifted
+        let mut lift = vec![t, t, f, t, t, f, t, f, t, f, f];
+        bridge(&mut lift, &contacts, 2.5);
+        assert_eq!(lift, vec![t, t, f, f, f, f, f, f, t, f, f]);
+        let mut long = vec![f, t, t, t, f, f, f, f, f, f, f];
+        bridge(&mut long, &contacts, 2.5);
+        assert_eq!(long, vec![f, t, t, t, f, f, f, f, f, f, f]);
     }
 }
