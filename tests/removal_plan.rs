@@ -198,15 +198,12 @@ fn a_region_out_of_reach_is_left_out_with_reasons_not_planned_as_nothing() {
     println!("{}", common::removal::accept(&p, "near patch"));
 }
 
-/// The planner's real path to a region's allowance (`plan/regions.rs`: set_dwell, the
-/// rehearsal's Monte Carlo, the re-solve): a bump that over-grinds at the Monte Carlo's quantile
-/// with the default allowance is planned, not left out, with its allowance raised by whole
-/// steps of `ALLOWANCE_STEP_SHARE` x tolerance until the quantile stays within the tolerance.
-#[test]
-fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
+/// The tall bump (`TALL_MM`) planned alone with one pass's removal capped at `max_pass` mm;
+/// the plan must keep it (one region planned).
+fn tall_bump_plan(name: &str, max_pass: f64) -> (Plan, PlanConfig) {
     let (points, region) = patch(Point3::new(5.0, -35.0, -25.0), 0, TALL_MM);
     let inspection = Inspection {
-        dir: "tall_bump".into(),
+        dir: name.into(),
         tolerance: Some(TOLERANCE_MM),
         regions: vec![region],
         points,
@@ -214,16 +211,22 @@ fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
     let robot = common::dofbot();
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let mut config = PlanConfig::default();
-    // no cap on one pass's removal here (the next test has it): the steps start at 0
-    config.removal.max_pass_mm = 1.0;
+    config.removal.max_pass_mm = max_pass;
     let p = plan(&inspection, &robot, &wc, &config).expect("plan");
+    let planned = p.removal.as_ref().expect("a removal report").regions.len();
+    assert_eq!(planned, 1, "{:?}", p.reachability.unreachable.first());
+    (p, config)
+}
+
+/// The planner's real path to a region's allowance (`plan/regions.rs`: set_dwell, the
+/// rehearsal's Monte Carlo, the re-solve): a bump that over-grinds at the Monte Carlo's quantile
+/// with the default allowance is planned, not left out, with its allowance raised by whole
+/// steps of `ALLOWANCE_STEP_SHARE` x tolerance until the quantile stays within the tolerance.
+#[test]
+fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
+    // no cap on one pass's removal here (the next test has it): the steps start at 0
+    let (p, config) = tall_bump_plan("tall_bump", 1.0);
     let removal = p.removal.as_ref().expect("a removal report");
-    assert_eq!(
-        removal.regions.len(),
-        1,
-        "{:?}",
-        p.reachability.unreachable.first()
-    );
     let allowance = removal.regions[0].allowance_mm;
     let steps = (allowance - config.allowance_mm) / (ALLOWANCE_STEP_SHARE * TOLERANCE_MM);
     println!("allowance {allowance:.3} mm ({steps:.3} steps)");
@@ -241,25 +244,8 @@ fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
 /// the predicted peak after the pass stays above it.
 #[test]
 fn one_pass_removes_at_most_the_cap() {
-    let (points, region) = patch(Point3::new(5.0, -35.0, -25.0), 0, TALL_MM);
-    let inspection = Inspection {
-        dir: "tall_bump_capped".into(),
-        tolerance: Some(TOLERANCE_MM),
-        regions: vec![region],
-        points,
-    };
-    let robot = common::dofbot();
-    let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
-    let mut config = PlanConfig::default();
-    config.removal.max_pass_mm = 0.1;
-    let p = plan(&inspection, &robot, &wc, &config).expect("plan");
+    let (p, _) = tall_bump_plan("tall_bump_capped", 0.1);
     let removal = p.removal.as_ref().expect("a removal report");
-    assert_eq!(
-        removal.regions.len(),
-        1,
-        "{:?}",
-        p.reachability.unreachable.first()
-    );
     let r = &removal.regions[0];
     println!(
         "peak {:.3} -> {:.3} mm at allowance {:.3} mm (cap 0.1 mm)",
