@@ -33,9 +33,16 @@ use polishbot::robot::{Robot, Workcell};
 use polishbot::spatial::Neighbours;
 
 /// Largest relative difference between the simulator's removal on the part and the plan's per
-/// region (0.05): measured within 0.016 on the perfect inspection; the force at preload on the
-/// nominal surface was 8-36 % off.
-const WITHIN: f64 = 0.05;
+/// region (0.06): measured within 0.016 on the perfect inspection while every contact was
+/// ground; since the tool lifts over contacts that need nothing, 0.950-1.040. Per point the
+/// simulator's removal is more concentrated than the plan's (printed per band of planned
+/// removal: about 0.5 x where under 0.02 mm is planned, 1.07-1.17 x at 0.1-0.2 mm, on the exact
+/// joint trajectory, so not the bus), and lifting leaves more of a region at its patches'
+/// edges. The force at preload on the nominal surface was 8-36 % off.
+const WITHIN: f64 = 0.06;
+
+/// Bands of planned removal for the per-point comparison, mm (upper ends).
+const BANDS_MM: [f64; 3] = [0.02, 0.1, 0.2];
 
 /// The demo's part (cli/demo.rs `demo_config`, seed 1) at 200,000 reference samples (the
 /// planner's core points here; tests/common `case`'s density).
@@ -190,12 +197,21 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
     let mut ratios = Vec::new();
     for r in &removal.regions {
         let (mut sim, mut deeper, mut predicted) = (0.0, 0.0, 0.0);
+        let mut bands = [(0.0, 0.0); BANDS_MM.len() + 1];
         for row in rows.by_ref().take(r.core_points) {
             let i = index.nearest(&Point3::from(row.position)).unwrap().index;
+            let planned = row.deviation - row.residual;
             sim += nominal.removal()[i];
             deeper += real.removal()[i];
-            predicted += row.deviation - row.residual;
+            predicted += planned;
+            let band = BANDS_MM.iter().take_while(|&&b| planned >= b).count();
+            bands[band].0 += real.removal()[i];
+            bands[band].1 += planned;
         }
+        let per_band: Vec<f64> = bands.iter().map(|(s, p)| s / p).collect();
+        println!(
+            "  sim/plan per point by planned removal (< {BANDS_MM:?} mm, above): {per_band:.3?}"
+        );
         let (median, least) = tilts(&plan, r.region, &robot, &wc);
         let ratio = deeper / predicted;
         println!(
