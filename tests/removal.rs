@@ -79,6 +79,7 @@ fn raster(spacing: f64, stepover: f64, spin: Vector3<f64>) -> Vec<Contact> {
                 spin,
                 length: spacing,
                 force_ratio: 1.0,
+                offset: Vector3::zeros(),
             });
         }
     }

@@ -123,6 +123,7 @@ pub fn contact(piece: &PlannedPass, robot: &Robot, back: &Matrix3<f64>) -> Conta
         spin: (back * held).normalize(),
         length: d.norm(),
         force_ratio: 1.0,
+        offset: Vector3::zeros(),
     }
 }
 
@@ -206,8 +207,9 @@ pub(crate) fn cores_near(
     for c in contacts {
         let radius = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
         // the index's radius widened for rounding; the test below decides
-        for nb in index.within_unsorted(&c.point, radius * (1.0 + 1e-9)) {
-            keep[nb.index] |= (inspection.points[nb.index].position - c.point).norm() <= radius;
+        let centre = c.centre();
+        for nb in index.within_unsorted(&centre, radius * (1.0 + 1e-9)) {
+            keep[nb.index] |= (inspection.points[nb.index].position - centre).norm() <= radius;
         }
     }
     (0..keep.len()).filter(|&i| keep[i]).collect()

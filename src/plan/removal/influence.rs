@@ -98,6 +98,11 @@ impl Influence {
         }
     }
 
+    /// Radius of the ball, mm.
+    pub fn ball_mm(&self) -> f64 {
+        self.ball_mm
+    }
+
     /// Radius of the contact patch, mm: outside it the pressure is zero.
     pub fn patch_radius(&self) -> f64 {
         match &self.pressure {
@@ -191,9 +196,18 @@ pub struct Contact {
     /// preload on the nominal surface): the real penetration over the preload
     /// ([`super::press`]), which sets the patch and the pressure.
     pub force_ratio: f64,
+    /// The patch centre's offset from `point` along the surface, mm: zero on the nominal
+    /// surface; where the part is sloped the ball touches it up-slope of its nominal contact,
+    /// at the foot of its centre on the measured surface ([`super::press`]).
+    pub offset: Vector3<f64>,
 }
 
 impl Contact {
+    /// Centre of the contact patch, mm: `point + offset`.
+    pub fn centre(&self) -> Point3<f64> {
+        self.point + self.offset
+    }
+
     /// The spindle's tilt from the inward normal and the patch's x axis (the unit tangent
     /// toward which the spindle leans; any tangent, the stroke's, when it does not lean).
     pub fn tilt(&self) -> (Tilt, Vector3<f64>) {
@@ -231,7 +245,7 @@ impl<'a> Reach<'a> {
     /// point in reach, the influence averaged over the contact's piece of stroke.
     pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {
         let reach = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
-        let near = self.index.within(&c.point, reach);
+        let near = self.index.within(&c.centre(), reach);
         self.column_over(influence, c, near.iter().map(|nb| nb.index))
     }
 
@@ -252,7 +266,8 @@ impl<'a> Reach<'a> {
         candidates: &[usize],
     ) -> Vec<(usize, f64)> {
         let reach = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
-        let centre = [c.point.x, c.point.y, c.point.z];
+        let o = c.centre();
+        let centre = [o.x, o.y, o.z];
         let inside = candidates.iter().copied().filter(|&i| {
             let p = self.cores[i].0;
             crate::spatial::dist2(&[p.x, p.y, p.z], &centre) <= reach * reach
@@ -280,7 +295,7 @@ impl<'a> Reach<'a> {
             let mean = (0..SUBSAMPLES)
                 .map(|s| {
                     let f = (s as f64 + 0.5) / SUBSAMPLES as f64 - 0.5;
-                    let d = p - (c.point + c.along * (f * c.length));
+                    let d = p - (c.centre() + c.along * (f * c.length));
                     pressed.rate(d.dot(&tx), d.dot(&ty), tilt)
                 })
                 .sum::<f64>()

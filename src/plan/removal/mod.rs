@@ -334,6 +334,7 @@ mod tests {
                 spin: -Vector3::z(),
                 length: 1.0,
                 force_ratio: 1.0,
+                offset: Vector3::zeros(),
             })
             .collect()
     }

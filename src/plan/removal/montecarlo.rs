@@ -128,7 +128,7 @@ pub fn spread(
         .map(|c| {
             let patch = nominal.patch_radius_at(c.force_ratio);
             let radius = CANDIDATE_REACH_FACTOR * (patch + 0.5 * c.length);
-            (radius, reach.candidates(&c.point, radius))
+            (radius, reach.candidates(&c.centre(), radius))
         })
         .collect();
     let draws = (0..config.draws)

@@ -115,7 +115,15 @@ pub fn press(
     for c in contacts {
         let part = measured_at(cores, index, (&c.point, &c.normal), patch);
         c.force_ratio = force_ratio(tool, part.deviation, allowance);
-        c.normal = part.normal(&c.normal);
+        let nominal = c.normal;
+        c.normal = part.normal(&nominal);
+        // the ball centre is this far from the measured surface (its radius less the
+        // penetration); its foot there is up-slope of the nominal contact by that times the
+        // part of the nominal normal across the measured one
+        let height = (influence.ball_mm() - c.force_ratio * tool.preload_mm).max(0.0);
+        let across = nominal - c.normal * nominal.dot(&c.normal);
+        let slide = across * height;
+        c.offset = slide - nominal * nominal.dot(&slide);
     }
 }
 
