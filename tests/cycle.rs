@@ -538,11 +538,10 @@ fn accepted(a: &Acceptance) -> bool {
 /// hold today: k is refitted after the first grind, the first grind removes at least
 /// `min_progress` of the repairable excess volume, the pits are never ground, the first pass
 /// is re-predicted at the fitted k in cycle.json. NOT asserted (measured, reported to the
-/// lead): every repairable region within tolerance after 3 grinds (the cap on one pass's
-/// removal, `removal.max_pass_mm`, takes a 0.5 mm bump down over more passes), no measured core
-/// point below -tolerance (-0.04..-0.07 mm over the ten cases: the simulator's removal is more
-/// concentrated than the planner's model, docs/ALGORITHMS.md), the re-prediction within 0.01 mm
-/// RMS.
+/// lead): every repairable region within tolerance after 3 grinds (1 of the 10 cases; a 0.5 mm
+/// bump takes two passes under `removal.max_pass_mm`, and the allowance steps leave the rest),
+/// no measured core point below -tolerance (the lowest over the ten cases -0.047..-0.071 mm),
+/// the re-prediction within 0.01 mm RMS (0.014-0.028 mm).
 #[test]
 fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
     for seed in [1, 21] {

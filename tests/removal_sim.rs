@@ -33,13 +33,14 @@ use polishbot::robot::{Robot, Workcell};
 use polishbot::spatial::Neighbours;
 
 /// Largest relative difference between the simulator's removal on the part and the plan's per
-/// region (0.06): measured within 0.016 on the perfect inspection while every contact was
-/// ground; since the tool lifts over contacts that need nothing, 0.950-1.040. Per point the
-/// simulator's removal is more concentrated than the plan's (printed per band of planned
-/// removal: about 0.5 x where under 0.02 mm is planned, 1.07-1.17 x at 0.1-0.2 mm, on the exact
-/// joint trajectory, so not the bus), and lifting leaves more of a region at its patches'
-/// edges. The force at preload on the nominal surface was 8-36 % off.
-const WITHIN: f64 = 0.06;
+/// region (0.05): measured within 0.016 on the perfect inspection while every contact was
+/// ground; with the tool lifting, 0.950-1.040 until each patch was centred where the ball
+/// touches a sloped part (up-slope of its nominal contact), 0.961-1.001 since. Per point
+/// (printed per band of planned removal) the simulator's removal over the plan's was
+/// 0.46-0.61 / 0.79-0.96 / 1.07-1.17 under 0.02 / 0.02-0.1 / 0.1-0.2 mm before that, and
+/// 1.02-1.24 / 1.00-1.03 / 0.93-0.98 after. The force at preload on the nominal surface was
+/// 8-36 % off.
+const WITHIN: f64 = 0.05;
 
 /// Bands of planned removal for the per-point comparison, mm (upper ends).
 const BANDS_MM: [f64; 3] = [0.02, 0.1, 0.2];

@@ -199,4 +199,50 @@ mod tests {
         let want = Vector3::new(-0.2, 0.1, 1.0).normalize();
         assert!((m.normal(&Vector3::z()) - want).norm() < 1e-12, "{m:?}");
     }
+
+    /// On a part sloped 0.2 mm/mm along x at 0.1 mm above nominal, the ball (radius 3 mm,
+    /// preload 2 mm: its centre 3 - 2.1 = 0.9 mm from the measured surface, no allowance
+    /// removed at mid-pass with allowance above the deviation) touches up-slope at the foot of
+    /// its centre on the measured plane, 0.9 x sin(atan 0.2) away along it: on the nominal
+    /// surface, 0.9 x sin x cos of the slope's angle along +x.
+    #[test]
+    fn on_a_slope_the_patch_moves_up_slope_by_the_centre_height() {
+        let cores: Vec<SurfacePoint> = (0..400)
+            .map(|i| {
+                let (x, y) = ((i % 20) as f64 * 0.1 - 0.95, (i / 20) as f64 * 0.1 - 0.95);
+                SurfacePoint {
+                    position: Point3::new(x, y, 0.0),
+                    distance: 0.1 + 0.2 * x,
+                    ..core(0.0, 0.0)
+                }
+            })
+            .collect();
+        let positions: Vec<_> = cores.iter().map(|c| c.position).collect();
+        let index = Neighbours::new(&positions);
+        let tool = ToolModel::default();
+        let influence = Influence::new(&tool, 3.0);
+        let mut contacts = [Contact {
+            point: Point3::origin(),
+            normal: Vector3::z(),
+            along: Vector3::y(),
+            spin: -Vector3::z(),
+            length: 0.0,
+            force_ratio: 1.0,
+            offset: Vector3::zeros(),
+        }];
+        press(&mut contacts, &tool, &influence, (&cores, &index), 1.0);
+        let c = &contacts[0];
+        assert!(
+            (c.force_ratio - 2.1 / 2.0).abs() < 1e-9,
+            "{}",
+            c.force_ratio
+        );
+        let angle = 0.2f64.atan();
+        let want = 0.9 * angle.sin() * angle.cos();
+        assert!(
+            (c.offset - Vector3::x() * want).norm() < 1e-9,
+            "{:?} vs {want}",
+            c.offset
+        );
+    }
 }
