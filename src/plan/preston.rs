@@ -257,7 +257,8 @@ pub fn set_dwell(
     let mut runs = split(runs);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
     let influence = Influence::new(tool, robot.tool.radius * 1e3);
-    let (mut contacts, mut cores) = in_reach(&pieces, inspection, setup, allowance);
+    let bench = (inspection, setup);
+    let (mut contacts, mut cores) = in_reach(&pieces, bench, &influence, allowance);
     let mut allowance = allowance;
     let highest = cores
         .iter()
@@ -266,7 +267,7 @@ pub fn set_dwell(
         .fold(0.0, f64::max);
     if highest - solve.max_pass_mm > allowance {
         allowance = highest - solve.max_pass_mm;
-        (contacts, cores) = in_reach(&pieces, inspection, setup, allowance);
+        (contacts, cores) = in_reach(&pieces, bench, &influence, allowance);
     }
     for (p, c) in pieces.iter().zip(&contacts) {
         check_force(p, c, region.id, setup)?;
@@ -323,16 +324,15 @@ fn lift_over(runs: Vec<Run>, lifted: &[bool]) -> Vec<Run> {
 }
 
 /// The contacts of `pieces` pressed for a plan down to `allowance` mm (`pressed_contacts`) and
-/// the core points in their reach (`cores_near`).
+/// the core points in their reach under the tool's `influence` (`cores_near`).
 fn in_reach(
     pieces: &[&PlannedPass],
-    inspection: &Inspection,
-    setup: &Setup,
+    (inspection, setup): (&Inspection, &Setup),
+    influence: &Influence,
     allowance: f64,
 ) -> (Vec<Contact>, Vec<SurfacePoint>) {
     let contacts = pressed_contacts(pieces, inspection, setup, allowance);
-    let influence = Influence::new(setup.tool, setup.robot.tool.radius * 1e3);
-    let cores = cores_near(inspection, setup.index, &contacts, &influence)
+    let cores = cores_near(inspection, setup.index, &contacts, influence)
         .into_iter()
         .map(|i| inspection.points[i])
         .collect();

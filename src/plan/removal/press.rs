@@ -177,22 +177,30 @@ mod tests {
         assert_eq!(at(5.1), 0.0);
     }
 
-    /// A tilted plane of deviations d = 0.1 + 0.2 x - 0.1 y: found exactly, and the normal of
-    /// the measured surface is (-0.2, 0.1, 1) normalised.
-    #[test]
-    fn a_sloped_part_gives_its_deviation_and_normal() {
-        let cores: Vec<SurfacePoint> = (0..100)
+    /// An n x n grid of core points `pitch` mm apart centred on the origin of the plane z = 0,
+    /// with deviation `d(x, y)`, and its index.
+    fn plane(n: usize, pitch: f64, d: impl Fn(f64, f64) -> f64) -> (Vec<SurfacePoint>, Neighbours) {
+        let half = 0.5 * (n - 1) as f64 * pitch;
+        let cores: Vec<SurfacePoint> = (0..n * n)
             .map(|i| {
-                let (x, y) = ((i % 10) as f64 * 0.2 - 0.9, (i / 10) as f64 * 0.2 - 0.9);
+                let (x, y) = ((i % n) as f64 * pitch - half, (i / n) as f64 * pitch - half);
                 SurfacePoint {
                     position: Point3::new(x, y, 0.0),
-                    distance: 0.1 + 0.2 * x - 0.1 * y,
+                    distance: d(x, y),
                     ..core(0.0, 0.0)
                 }
             })
             .collect();
         let positions: Vec<_> = cores.iter().map(|c| c.position).collect();
         let index = Neighbours::new(&positions);
+        (cores, index)
+    }
+
+    /// A tilted plane of deviations d = 0.1 + 0.2 x - 0.1 y: found exactly, and the normal of
+    /// the measured surface is (-0.2, 0.1, 1) normalised.
+    #[test]
+    fn a_sloped_part_gives_its_deviation_and_normal() {
+        let (cores, index) = plane(10, 0.2, |x, y| 0.1 + 0.2 * x - 0.1 * y);
         let p = Point3::new(0.1, 0.05, 0.0);
         let m = measured_at(&cores, &index, (&p, &Vector3::z()), 0.6);
         assert!((m.deviation - (0.1 + 0.02 - 0.005)).abs() < 1e-12, "{m:?}");
@@ -207,18 +215,7 @@ mod tests {
     /// surface, 0.9 x sin x cos of the slope's angle along +x.
     #[test]
     fn on_a_slope_the_patch_moves_up_slope_by_the_centre_height() {
-        let cores: Vec<SurfacePoint> = (0..400)
-            .map(|i| {
-                let (x, y) = ((i % 20) as f64 * 0.1 - 0.95, (i / 20) as f64 * 0.1 - 0.95);
-                SurfacePoint {
-                    position: Point3::new(x, y, 0.0),
-                    distance: 0.1 + 0.2 * x,
-                    ..core(0.0, 0.0)
-                }
-            })
-            .collect();
-        let positions: Vec<_> = cores.iter().map(|c| c.position).collect();
-        let index = Neighbours::new(&positions);
+        let (cores, index) = plane(20, 0.1, |x, _| 0.1 + 0.2 * x);
         let tool = ToolModel::default();
         let influence = Influence::new(&tool, 3.0);
         let mut contacts = [Contact {
