@@ -163,27 +163,29 @@ pub fn patch_tool(text: &str, file: &Path, tip: [f64; 3]) -> Result<String, Cali
     Ok(lines.join("\n") + "\n")
 }
 
-/// Sets `preston_k_mm2_n` in the `[removal]` table of the tool.toml text `text`: replaces
-/// that one line (every comment and other key kept), adds it after the `[removal]` header when
-/// the table lacks it, or appends the table when the file has none.
-pub fn patch_preston_k(text: &str, k: f64) -> String {
+/// Sets each `(key, value)` of `set` in the `[removal]` table of the tool.toml text `text`:
+/// replaces that key's one line (every comment and other key kept), adds it after the
+/// `[removal]` header when the table lacks it, or appends the table when the file has none.
+pub fn patch_removal(text: &str, set: &[(&str, f64)]) -> String {
     let mut lines: Vec<String> = text.lines().map(String::from).collect();
-    let new = format!("preston_k_mm2_n = {}", num(k));
-    let header = lines.iter().position(|l| l.trim() == "[removal]");
-    match header {
-        Some(h) => {
-            let end = (h + 1..lines.len())
-                .find(|&i| lines[i].trim_start().starts_with('['))
-                .unwrap_or(lines.len());
-            match (h + 1..end).find(|&i| sets_key(&lines[i], "preston_k_mm2_n")) {
-                Some(i) => lines[i] = new,
-                None => lines.insert(h + 1, new),
+    for &(key, value) in set {
+        let new = format!("{key} = {}", num(value));
+        let header = lines.iter().position(|l| l.trim() == "[removal]");
+        match header {
+            Some(h) => {
+                let end = (h + 1..lines.len())
+                    .find(|&i| lines[i].trim_start().starts_with('['))
+                    .unwrap_or(lines.len());
+                match (h + 1..end).find(|&i| sets_key(&lines[i], key)) {
+                    Some(i) => lines[i] = new,
+                    None => lines.insert(h + 1, new),
+                }
             }
-        }
-        None => {
-            lines.push(String::new());
-            lines.push("[removal]".into());
-            lines.push(new);
+            None => {
+                lines.push(String::new());
+                lines.push("[removal]".into());
+                lines.push(new);
+            }
         }
     }
     lines.join("\n") + "\n"
@@ -333,6 +335,24 @@ fn write_and_check(out: &Path, text: &str, m: &Matrix4<f64>) -> Result<Workcell,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn removal_keys_are_replaced_in_place_or_added_under_the_table() {
+        let text =
+            "# tool\n[removal]\n# k\npreston_k_mm2_n = 1e-6\nspindle_rpm = 100.0\n[other]\nx = 1\n";
+        let out = patch_removal(
+            text,
+            &[("preston_k_mm2_n", 2.5), ("preston_k_rel_sd", 0.25)],
+        );
+        assert_eq!(
+            out,
+            "# tool\n[removal]\npreston_k_rel_sd = 0.25\n# k\npreston_k_mm2_n = 2.5\nspindle_rpm = 100.0\n[other]\nx = 1\n"
+        );
+        assert_eq!(
+            patch_removal("a = 1\n", &[("preston_k_mm2_n", 2.0)]),
+            "a = 1\n\n[removal]\npreston_k_mm2_n = 2.0\n"
+        );
+    }
 
     #[test]
     fn table_headers_are_told_from_matrix_rows() {

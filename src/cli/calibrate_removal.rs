@@ -1,8 +1,9 @@
 //! `polishbot calibrate removal --before DIR1 --after DIR2 --plan plan.json [--tool FILE]`:
 //! Preston's k fitted from two inspections and the plan ground between them
-//! (`cell::removal_fit`), written into tool.toml's `[removal] preston_k_mm2_n`. No arm is
+//! (`cell::removal_fit`), written into tool.toml's `[removal] preston_k_mm2_n` with its
+//! uncertainty `preston_k_rel_sd`. No arm is
 //! needed. `cycle` collects every grind's points through [`prediction`] and
-//! [`evidence_loaded`], pools them and writes k with [`write_k`].
+//! [`evidence_loaded`], pools them and writes k with [`write_fit`].
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -80,17 +81,22 @@ fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
     )
 }
 
-/// Writes `out` from the tool file `input` with `[removal] preston_k_mm2_n = k` (one line
-/// changed, comments kept) and reads it back through the planner's loader.
-pub fn write_k(input: &Path, out: &Path, k: f64) -> anyhow::Result<()> {
+/// Writes `out` from the tool file `input` with the fit's `[removal] preston_k_mm2_n` and
+/// `preston_k_rel_sd` (`RemovalFit::k_rel_sd`, at most 1, the key's range) (two lines changed,
+/// comments kept) and reads them back through the planner's loader.
+pub fn write_fit(input: &Path, out: &Path, fit: &RemovalFit) -> anyhow::Result<()> {
     let text = std::fs::read_to_string(input)
         .with_context(|| format!("{}: cannot read", input.display()))?;
-    files::write(out, &files::patch_preston_k(&text, k))?;
-    let back = ToolModel::load(out)?.preston_k_mm2_n;
+    let (k, sd) = (fit.k_mm2_n, fit.k_rel_sd().min(1.0));
+    let set = [("preston_k_mm2_n", k), ("preston_k_rel_sd", sd)];
+    files::write(out, &files::patch_removal(&text, &set))?;
+    let back = ToolModel::load(out)?;
     anyhow::ensure!(
-        back == k,
-        "{}: preston_k_mm2_n reads back as {back}, wrote {k}",
-        out.display()
+        back.preston_k_mm2_n == k && back.preston_k_rel_sd == sd,
+        "{}: preston_k_mm2_n, preston_k_rel_sd read back as {}, {}; wrote {k}, {sd}",
+        out.display(),
+        back.preston_k_mm2_n,
+        back.preston_k_rel_sd
     );
     Ok(())
 }
@@ -106,7 +112,8 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
         format!(
             "{label}: k {:.4e} +- {:.2e} mm^2/N (plan's {:.4e}, x {:.3}) from {} \
              defect points ({} unmatched); fit residual RMS {:.4} mm; measured mean removal \
-             {:.4} mm, predicted {:.4} mm at the plan's k",
+             {:.4} mm, predicted {:.4} mm at the plan's k; k varies {:.1} % from point to point \
+             over a measurement noise of {:.4} mm (the next plan's k uncertainty {:.1} %)",
             fit.k_mm2_n,
             fit.k_std_error_mm2_n,
             fit.plan_k_mm2_n,
@@ -115,7 +122,10 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
             fit.unmatched,
             fit.residual_rms_mm,
             fit.measured_mean_mm,
-            fit.predicted_mean_mm
+            fit.predicted_mean_mm,
+            100.0 * fit.k_local_rel_sd,
+            fit.noise_mm,
+            100.0 * fit.k_rel_sd()
         ),
         format!(
             "{label}: k per region [mm^2/N]: {}",
@@ -135,7 +145,7 @@ pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {
     for line in describe(&fit, "calibrate removal") {
         println!("{line}");
     }
-    write_k(&inputs.tool, out, fit.k_mm2_n)
+    write_fit(&inputs.tool, out, &fit)
         .map_err(|e| anyhow::anyhow!("calibrate removal: {}", super::common::one_line(&e)))?;
     println!("calibrate removal: wrote {}", out.display());
     Ok(())

@@ -207,10 +207,11 @@ fn measure(dir: &Path) -> anyhow::Result<(Measured, Inspection)> {
     Ok((Measured::of(regions.verdict, &inspection), inspection))
 }
 
-/// Streams `plan` to the arm, journalling into `dir`; with the simulator the part `scan` is
-/// ground and its rescan written to DIR/after.ply, with a real arm the next scan's path is
-/// read from stdin.
-fn grind(l: &Loop, plan: &Path, scan: &Path, dir: &Path) -> anyhow::Result<PathBuf> {
+/// Streams `plan` to the arm, journalling into `dir`; with the simulator the virtual `part`
+/// (its file, and whether it is in the reference frame: `run --part-in-reference`) is ground
+/// and its rescan written to DIR/after.ply, with a real arm the next scan's path is read from
+/// stdin.
+fn grind(l: &Loop, plan: &Path, part: (&Path, bool), dir: &Path) -> anyhow::Result<PathBuf> {
     let after = dir.join("after.ply");
     let sim = l.device.sim;
     run_cmd::run(
@@ -221,8 +222,9 @@ fn grind(l: &Loop, plan: &Path, scan: &Path, dir: &Path) -> anyhow::Result<PathB
             dry_run: false,
             resume: None,
             journal: Some(dir.join("journal.jsonl")),
-            part: sim.then(|| scan.to_path_buf()),
+            part: sim.then(|| part.0.to_path_buf()),
             ground_out: sim.then(|| after.to_path_buf()),
+            part_in_reference: sim && part.1,
         },
         l.configs.run.as_deref(),
     )?;
@@ -281,6 +283,9 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
     // every grind's removal evidence so far: k is fitted to all of it
     let mut pooled = Vec::new();
     let mut scan = l.scan.clone();
+    // the simulator's virtual part: the first scan, then the ground part itself (its truth
+    // file, reference frame), so that it keeps its shape between grinds
+    let mut part = (l.scan.clone(), false);
     let mut tool = load_config::<plan::PlanFileConfig>(l.configs.plan.as_deref())?
         .robot
         .tool;
@@ -325,7 +330,10 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
             return Ok(outcome);
         }
         println!("== cycle: iteration {k}: grind");
-        scan = grind(l, &plan_file, &scan, &dir)?;
+        scan = grind(l, &plan_file, (&part.0, part.1), &dir)?;
+        if l.device.sim {
+            part = (super::grind::truth_paths(&scan).0, true);
+        }
         previous = Some(Ground {
             inspection_dir,
             inspection,
@@ -364,7 +372,7 @@ fn refit(
         let grind = calib::evidence_loaded(&inputs, &before.inspection, after.1, p, *k, &cfg)?;
         pooled.push(grind);
         let fit = fit_pooled(pooled, &cfg)?;
-        calib::write_k(&before.tool, &written, fit.k_mm2_n)?;
+        calib::write_fit(&before.tool, &written, &fit)?;
         Ok(fit.k_mm2_n)
     });
     let k = match fitted {
@@ -407,7 +415,7 @@ fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit
     let fit = removal_fit::pool(pooled, cfg).map_err(|m| anyhow::anyhow!("{m}"))?;
     println!(
         "cycle: k {:.4e} +- {:.2e} mm^2/N pooled over {} grind{} / {} points (x {:.3} of the last \
-         plan's {:.4e}); fit residual RMS {:.4} mm",
+         plan's {:.4e}); fit residual RMS {:.4} mm; k uncertainty {:.1} % ({:.1} % point to point)",
         fit.k_mm2_n,
         fit.k_std_error_mm2_n,
         fit.grinds,
@@ -415,7 +423,9 @@ fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit
         fit.points,
         fit.k_mm2_n / fit.plan_k_mm2_n,
         fit.plan_k_mm2_n,
-        fit.residual_rms_mm
+        fit.residual_rms_mm,
+        100.0 * fit.k_rel_sd(),
+        100.0 * fit.k_local_rel_sd
     );
     Ok(fit)
 }

@@ -106,6 +106,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
             journal: Some(journal),
             part: None,
             ground_out: None,
+            part_in_reference: false,
         },
         None,
     )?;

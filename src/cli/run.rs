@@ -39,6 +39,14 @@ pub struct RunArgs {
     /// the plan's inspection registered (e.g. that scan.ply).
     #[arg(long, value_name = "FILE", requires = "ground_out")]
     pub part: Option<PathBuf>,
+    /// With --part: the part file is already in the reference frame and holds the part's
+    /// surface as it is (the `<stem>_truth.ply` an earlier `--ground-out` wrote): it is not
+    /// moved by the plan's registration. `cycle` grinds the one
+    /// virtual part this way from its second grind on, so that the part keeps its shape
+    /// between grinds (a rescan's noise and registration error are the measurement's, not
+    /// the part's).
+    #[arg(long, requires = "part")]
+    pub part_in_reference: bool,
     /// With --part: write the ground part's rescan here (a valid `inspect` scan), and its
     /// removal per point in <stem>_truth.ply beside it.
     #[arg(long, value_name = "FILE", requires = "part")]
@@ -257,7 +265,7 @@ fn ground(
         args.resume.is_none(),
         "run: --part cannot --resume: the virtual part's removal lives only in one run"
     );
-    super::grind::Ground::prepare(sim, part, out, inspection).map(Some)
+    super::grind::Ground::prepare(sim, (part, args.part_in_reference), out, inspection).map(Some)
 }
 
 fn stream<T: Transport>(
