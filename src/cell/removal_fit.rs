@@ -14,21 +14,20 @@
 //! Stages: [`evidence`] collects one grind's points ([`Evidence`]); [`pool`] fits k to the
 //! points of one or more grinds under a [`FitConfig`] ([`RemovalFit`]); [`fit`] is both for
 //! one grind (`calibrate removal`).
-use nalgebra::Point3;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
-use crate::plan::preston::PredictedRow;
+use super::matching::partners;
 use crate::plan::Inspection;
-use crate::spatial::Neighbours;
 
-/// Largest distance between a core point of two inspections for them to count as the same
-/// point, mm: core points are sampled from the same reference with the same seed, so equal
-/// points agree to the last bit; densified points of one inspection have no partner.
-pub const SAME_POINT_MM: f64 = 1e-6;
+pub use super::matching::{
+    agreement, parse_predicted, predicted_removal, repairable_ids, Agreement, SAME_POINT_MM,
+};
 
-/// Largest distance between a predicted.csv row and its core point, mm: the file prints
-/// positions with 6 decimals (rounding moves a coordinate by at most 5e-7 mm).
-const CSV_POINT_MM: f64 = 1e-5;
+/// Least uncertainty of a fitted k (0.05): the evidence is one part and a handful of regions;
+/// a region's own k from 30-150 points scatters by 2-3 % from the rescan noise alone (0.015 mm
+/// on removals of about 0.1 mm), so a spread under 5 % cannot be told from that scatter, and
+/// the tool's k drifts with wear between grinds.
+pub const MIN_K_REL_SD: f64 = 0.05;
 
 /// Settings of the fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -90,6 +89,9 @@ pub struct RemovalFit {
     /// Relative spread of the removal about the fitted k from point to point (the tool's and
     /// the part's local variation and the model's local error): s of [`LocalSpread`].
     pub k_local_rel_sd: f64,
+    /// Relative spread of k between regions (`region_spread`): what varies over a region's
+    /// extent, which the point-to-point spread can miss under the measurement noise.
+    pub k_region_rel_sd: f64,
     /// The measurement noise of one point's removal (two inspections), mm: sigma of
     /// [`LocalSpread`].
     pub noise_mm: f64,
@@ -105,134 +107,6 @@ pub struct RemovalFit {
     pub measured_mean_mm: f64,
     /// Mean predicted removal (at each grind's plan k) over the points used, mm.
     pub predicted_mean_mm: f64,
-}
-
-/// Predicted removal per core point of `before`, mm: the rows of predicted.csv matched to the
-/// core points by position and summed (a point in reach of two regions' tools has a row for
-/// each). Rows that match no core point are an error naming the row (1-based, after the
-/// header).
-pub fn predicted_removal(before: &Inspection, rows: &[PredictedRow]) -> Result<Vec<f64>, String> {
-    let pos: Vec<Point3<f64>> = before.points.iter().map(|p| p.position).collect();
-    let index = Neighbours::new(&pos);
-    let mut removal = vec![0.0; pos.len()];
-    for (i, r) in rows.iter().enumerate() {
-        let p = Point3::from(r.position);
-        match index.nearest(&p) {
-            Some(nb) if nb.dist2 <= CSV_POINT_MM * CSV_POINT_MM => {
-                removal[nb.index] += r.deviation - r.residual;
-            }
-            _ => {
-                return Err(format!(
-                    "row {}: ({:.3}, {:.3}, {:.3}) is no core point of the first inspection \
-                     (was the plan made from it?)",
-                    i + 1,
-                    p.x,
-                    p.y,
-                    p.z
-                ))
-            }
-        }
-    }
-    Ok(removal)
-}
-
-/// Per core point of `before`, the index of the same core point in `after` (within
-/// [`SAME_POINT_MM`]), None for a point `after` has not.
-pub fn partners(before: &Inspection, after: &Inspection) -> Vec<Option<usize>> {
-    let pos: Vec<Point3<f64>> = after.points.iter().map(|p| p.position).collect();
-    let index = Neighbours::new(&pos);
-    before
-        .points
-        .iter()
-        .map(|p| {
-            index
-                .nearest(&p.position)
-                .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
-                .map(|nb| nb.index)
-        })
-        .collect()
-}
-
-/// The residual a pass left against the one its plan predicted, over the same defect points:
-/// the plan's prediction re-made with the fitted k (issue 29: "the achieved residual agrees
-/// with the plan's prediction, made with the fitted k, within 0.01 mm RMS").
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Agreement {
-    /// Defect points compared: core points of the planned repairable regions of the first
-    /// inspection, measured (finite) in both inspections.
-    pub points: usize,
-    /// RMS of the residual predicted at the plan's k over them, mm.
-    pub predicted_plan_k_mm: f64,
-    /// RMS of the residual predicted at the fitted k (None: k not fitted), mm.
-    pub predicted_fitted_k_mm: Option<f64>,
-    /// RMS of the achieved residual (the second inspection's distance) over them, mm.
-    pub achieved_mm: f64,
-    /// RMS over them of achieved minus predicted at the fitted k (at the plan's k when k
-    /// was not fitted), point by point, mm.
-    pub difference_mm: f64,
-    /// Lowest achieved distance over those points and every other core point where the plan
-    /// predicted removal, mm: below -tolerance the pass over-ground.
-    pub lowest_ground_mm: f64,
-}
-
-/// Re-predicts a ground pass with `scale` = fitted k / the plan's k and compares it with what
-/// the next inspection measured, over the core points of `before` in the regions `ids` that
-/// both inspections measured. `predicted` is the plan's removal per core point of `before`
-/// at the plan's k ([`predicted_removal`]; 0 where the tool does not reach); the planner's
-/// removal is k x (its influence matrix x the dwell the trajectory spends), linear in k at a
-/// fixed trajectory, so the removal at k_fit is `predicted` x `scale`. None: no such point.
-pub fn agreement(
-    before: &Inspection,
-    after: &Inspection,
-    predicted: &[f64],
-    scale: Option<f64>,
-    ids: &[i64],
-) -> Option<Agreement> {
-    let partner = partners(before, after);
-    // (defect point, deviation before, after, predicted removal) of every matched point
-    let all: Vec<(bool, f64, f64, f64)> = before
-        .points
-        .iter()
-        .zip(&partner)
-        .zip(predicted)
-        .filter_map(|((p, j), r)| {
-            let a = after.points[(*j)?].distance;
-            Some((ids.contains(&p.region), p.distance, a, *r))
-        })
-        .filter(|(_, d, a, _)| d.is_finite() && a.is_finite())
-        .collect();
-    let rows: Vec<(f64, f64, f64)> = all
-        .iter()
-        .filter(|x| x.0)
-        .map(|x| (x.1, x.2, x.3))
-        .collect();
-    let lowest_ground_mm = all
-        .iter()
-        .filter(|x| x.0 || x.3 > 0.0)
-        .map(|x| x.2)
-        .fold(f64::INFINITY, f64::min);
-    let rms = |f: &dyn Fn(&(f64, f64, f64)) -> f64| {
-        (rows.iter().map(|x| f(x).powi(2)).sum::<f64>() / rows.len() as f64).sqrt()
-    };
-    let s = scale.unwrap_or(1.0);
-    (!rows.is_empty()).then(|| Agreement {
-        points: rows.len(),
-        predicted_plan_k_mm: rms(&|(d, _, r)| d - r),
-        predicted_fitted_k_mm: scale.map(|s| rms(&|(d, _, r)| d - r * s)),
-        achieved_mm: rms(&|(_, a, _)| *a),
-        difference_mm: rms(&|(d, a, r)| a - (d - r * s)),
-        lowest_ground_mm,
-    })
-}
-
-/// Ids of the repairable regions of `inspection` (as deviations.csv's `region` column).
-pub fn repairable_ids(inspection: &Inspection) -> Vec<i64> {
-    inspection
-        .regions
-        .iter()
-        .filter(|r| r.repairable)
-        .map(|r| r.id as i64)
-        .collect()
 }
 
 /// One point of a grind's evidence: a defect point of a repairable region, measured in both
@@ -447,6 +321,7 @@ pub fn pool(grinds: &[Evidence], cfg: &FitConfig) -> Result<RemovalFit, String> 
         regions: region_fits(last, cfg.min_region_points),
         residual_rms_mm: (k.residual_ss / n).sqrt(),
         k_local_rel_sd: local.relative,
+        k_region_rel_sd: region_spread(grinds, k.value, cfg.min_region_points),
         noise_mm: local.noise_mm,
         points: pairs.len(),
         grinds: used,
@@ -457,65 +332,70 @@ pub fn pool(grinds: &[Evidence], cfg: &FitConfig) -> Result<RemovalFit, String> 
 }
 
 impl RemovalFit {
-    /// Relative standard uncertainty of k for the next plan's Monte Carlo: the point-to-point
-    /// spread and the fit's standard error, sqrt(s^2 + (se / k)^2).
+    /// Relative standard uncertainty of k for the next plan's Monte Carlo: the larger of the
+    /// point-to-point and the between-region spread with the fit's standard error,
+    /// sqrt(s^2 + (se / k)^2), and at least [`MIN_K_REL_SD`].
     pub fn k_rel_sd(&self) -> f64 {
         self.k_local_rel_sd
+            .max(self.k_region_rel_sd)
             .hypot(self.k_std_error_mm2_n / self.k_mm2_n)
+            .max(MIN_K_REL_SD)
     }
 }
 
-/// k per region of the grind `g` with at least `least` points.
-fn region_fits(g: &Evidence, least: usize) -> Vec<RegionFit> {
+/// The (u, m) pairs of grind `g` per region with at least `least` points, by region id.
+fn by_region(g: &Evidence, least: usize) -> Vec<(i64, Vec<(f64, f64)>)> {
     let mut ids: Vec<i64> = g.points.iter().map(|q| q.region).collect();
     ids.sort_unstable();
     ids.dedup();
     ids.into_iter()
-        .filter_map(|id| {
+        .map(|id| {
             let pairs: Vec<(f64, f64)> = g
                 .pairs()
                 .zip(&g.points)
                 .filter(|(_, q)| q.region == id)
                 .map(|(uv, _)| uv)
                 .collect();
-            (pairs.len() >= least).then(|| RegionFit {
-                region: id as usize,
-                points: pairs.len(),
-                k_mm2_n: through_origin(&pairs).value,
-            })
+            (id, pairs)
+        })
+        .filter(|(_, pairs)| pairs.len() >= least)
+        .collect()
+}
+
+/// k per region of the grind `g` with at least `least` points.
+fn region_fits(g: &Evidence, least: usize) -> Vec<RegionFit> {
+    by_region(g, least)
+        .into_iter()
+        .map(|(id, pairs)| RegionFit {
+            region: id as usize,
+            points: pairs.len(),
+            k_mm2_n: through_origin(&pairs).value,
         })
         .collect()
 }
 
-/// Reads predicted.csv's text (`x,y,z,deviation,predicted_residual,spread_p95`); the error
-/// names the line and the column.
-pub fn parse_predicted(text: &str) -> Result<Vec<PredictedRow>, String> {
-    let mut lines = text.lines().enumerate();
-    let head = lines.next().map(|(_, l)| l).unwrap_or_default();
-    if !head.starts_with("x,y,z,deviation,predicted_residual") {
-        return Err(format!(
-            "line 1: header {head:?}, expected x,y,z,deviation,predicted_residual,..."
-        ));
+/// Spread of k between regions relative to `k`: the regions of every grind with at least
+/// `least` points, each fitted alone and weighted by its sum(u^2) (what it knows about k, as
+/// in the pooled fit: a region the plan barely ground weighs little); 0 with fewer than two.
+fn region_spread(grinds: &[Evidence], k: f64, least: usize) -> f64 {
+    let fits: Vec<(f64, f64)> = grinds
+        .iter()
+        .flat_map(|g| by_region(g, least))
+        .map(|(_, pairs)| {
+            let w: f64 = pairs.iter().map(|(u, _)| u * u).sum();
+            (through_origin(&pairs).value, w)
+        })
+        .collect();
+    let w: f64 = fits.iter().map(|f| f.1).sum();
+    match fits.len() {
+        0 | 1 => 0.0,
+        _ => (fits
+            .iter()
+            .map(|(kr, wr)| wr * (kr / k - 1.0).powi(2))
+            .sum::<f64>()
+            / w)
+            .sqrt(),
     }
-    let mut rows = Vec::new();
-    for (n, line) in lines.filter(|(_, l)| !l.trim().is_empty()) {
-        let cells: Vec<&str> = line.split(',').collect();
-        let mut v = [0.0; 5];
-        for (c, slot) in v.iter_mut().enumerate() {
-            *slot = cells
-                .get(c)
-                .and_then(|s| s.trim().parse::<f64>().ok())
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| format!("line {}: column {}: not a finite number", n + 1, c + 1))?;
-        }
-        rows.push(PredictedRow {
-            position: [v[0], v[1], v[2]],
-            deviation: v[3],
-            residual: v[4],
-            spread_p95: 0.0,
-        });
-    }
-    Ok(rows)
 }
 
 #[cfg(test)]
@@ -555,5 +435,44 @@ mod tests {
             "{relative:?}"
         );
         assert!(relative.noise_mm < 0.01, "{relative:?}");
+    }
+
+    /// Two regions of 40 points each, the same removals, k 1.1 and 0.9 x the plan's with no
+    /// noise: the pooled k is the plan's, the regions spread by 10 % about it (and so do the
+    /// points); one region alone spreads by nothing and the written uncertainty is the floor.
+    #[test]
+    fn regions_that_remove_at_different_rates_spread_k_and_one_alone_gets_the_floor() {
+        let plan_k = 5e-6;
+        let region = |id: i64, scale: f64| {
+            (0..40).map(move |i| {
+                let p = 0.01 + 0.005 * i as f64;
+                EvidencePoint {
+                    region: id,
+                    predicted_mm: p,
+                    measured_mm: scale * p,
+                }
+            })
+        };
+        let grind = |points: Vec<EvidencePoint>| Evidence {
+            plan_k_mm2_n: plan_k,
+            points,
+            unmatched: 0,
+        };
+        let cfg = FitConfig::default();
+        let two = pool(
+            &[grind(region(0, 1.1).chain(region(1, 0.9)).collect())],
+            &cfg,
+        )
+        .unwrap();
+        assert!((two.k_mm2_n / plan_k - 1.0).abs() < 1e-12, "{two:?}");
+        assert!((two.k_region_rel_sd - 0.1).abs() < 1e-9, "{two:?}");
+        assert!(
+            two.k_rel_sd() >= 0.1 && two.k_rel_sd() < 0.11,
+            "{}",
+            two.k_rel_sd()
+        );
+        let one = pool(&[grind(region(0, 1.1).collect())], &cfg).unwrap();
+        assert_eq!(one.k_region_rel_sd, 0.0);
+        assert_eq!(one.k_rel_sd(), MIN_K_REL_SD);
     }
 }

@@ -113,7 +113,8 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
             "{label}: k {:.4e} +- {:.2e} mm^2/N (plan's {:.4e}, x {:.3}) from {} \
              defect points ({} unmatched); fit residual RMS {:.4} mm; measured mean removal \
              {:.4} mm, predicted {:.4} mm at the plan's k; k varies {:.1} % from point to point \
-             over a measurement noise of {:.4} mm (the next plan's k uncertainty {:.1} %)",
+             over a measurement noise of {:.4} mm and {:.1} % between regions (the next plan's k \
+             uncertainty {:.1} %)",
             fit.k_mm2_n,
             fit.k_std_error_mm2_n,
             fit.plan_k_mm2_n,
@@ -125,6 +126,7 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
             fit.predicted_mean_mm,
             100.0 * fit.k_local_rel_sd,
             fit.noise_mm,
+            100.0 * fit.k_region_rel_sd,
             100.0 * fit.k_rel_sd()
         ),
         format!(

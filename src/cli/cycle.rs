@@ -415,7 +415,7 @@ fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit
     let fit = removal_fit::pool(pooled, cfg).map_err(|m| anyhow::anyhow!("{m}"))?;
     println!(
         "cycle: k {:.4e} +- {:.2e} mm^2/N pooled over {} grind{} / {} points (x {:.3} of the last \
-         plan's {:.4e}); fit residual RMS {:.4} mm; k uncertainty {:.1} % ({:.1} % point to point)",
+         plan's {:.4e}); fit residual RMS {:.4} mm; k uncertainty {:.1} % ({:.1} % point to point, {:.1} % between regions)",
         fit.k_mm2_n,
         fit.k_std_error_mm2_n,
         fit.grinds,
@@ -425,7 +425,8 @@ fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit
         fit.plan_k_mm2_n,
         fit.residual_rms_mm,
         100.0 * fit.k_rel_sd(),
-        100.0 * fit.k_local_rel_sd
+        100.0 * fit.k_local_rel_sd,
+        100.0 * fit.k_region_rel_sd
     );
     Ok(fit)
 }
