@@ -126,11 +126,26 @@ pub fn pca_normal(
         s + d * d.transpose()
     }) / n;
     let eig = SymmetricEigen::new(cov);
+    // nalgebra 0.30 can pair an eigenvalue with another one's eigenvector
+    // (dimforge/nalgebra#1109; here on a neighbourhood that is exactly planar and square to an
+    // axis, the normal came out in the plane): the normal is the eigenvector with the least
+    // variance along it (v^T C v), and its eigenvalue is that variance when the index disagrees
+    let rayleigh = |c: usize| {
+        let v = eig.eigenvectors.column(c).normalize();
+        v.dot(&(cov * v))
+    };
+    let least = (0..3)
+        .min_by(|&a, &b| rayleigh(a).total_cmp(&rayleigh(b)))
+        .unwrap_or(0);
     let small = eig.eigenvalues.imin();
-    let normal = eig.eigenvectors.column(small).normalize();
+    let value = match least == small {
+        true => eig.eigenvalues[small],
+        false => rayleigh(least),
+    };
+    let normal = eig.eigenvectors.column(least).normalize();
     let sum = eig.eigenvalues.sum();
     let variation = if sum > 0.0 {
-        (eig.eigenvalues[small] / sum).max(0.0)
+        (value / sum).max(0.0)
     } else {
         0.0
     };
@@ -327,6 +342,49 @@ mod tests {
                 })
                 .collect(),
         )
+    }
+
+    /// An exactly planar, axis-square neighbourhood (a 20 x 20 grid's edge point and its 20
+    /// nearest, 0.05 mm apart, all at z = -0.01): nalgebra 0.30 pairs the zero eigenvalue with
+    /// the in-plane y axis there (dimforge/nalgebra#1109); the normal must be z all the same.
+    #[test]
+    fn an_exact_plane_square_to_the_axes_gets_its_normal() {
+        let at = |x: f64, y: f64| Point3::new(0.05 * x, 0.05 * y, -0.01);
+        let mut near = vec![at(11.0, 0.0), at(11.0, 1.0), at(10.0, 0.0), at(12.0, 0.0)];
+        near.extend(
+            [
+                (10.0, 1.0),
+                (12.0, 1.0),
+                (13.0, 0.0),
+                (11.0, 2.0),
+                (9.0, 0.0),
+            ]
+            .map(|(x, y)| at(x, y)),
+        );
+        near.extend(
+            [
+                (13.0, 1.0),
+                (10.0, 2.0),
+                (12.0, 2.0),
+                (9.0, 1.0),
+                (13.0, 2.0),
+            ]
+            .map(|(x, y)| at(x, y)),
+        );
+        near.extend(
+            [
+                (9.0, 2.0),
+                (8.0, 0.0),
+                (14.0, 0.0),
+                (11.0, 3.0),
+                (8.0, 1.0),
+                (14.0, 1.0),
+            ]
+            .map(|(x, y)| at(x, y)),
+        );
+        let (n, variation) = pca_normal(&near, 0..near.len());
+        assert!(n.z.abs() > 1.0 - 1e-12, "{n}");
+        assert!(variation.abs() < 1e-12, "{variation}");
     }
 
     #[test]
