@@ -14,6 +14,8 @@
 //! Stages: [`evidence`] collects one grind's points ([`Evidence`]); [`pool`] fits k to the
 //! points of one or more grinds under a [`FitConfig`] ([`RemovalFit`]); [`fit`] is both for
 //! one grind (`calibrate removal`).
+use std::collections::BTreeMap;
+
 use serde::Serialize;
 
 use super::matching::partners;
@@ -183,11 +185,7 @@ pub fn spread(pairs: &[(f64, f64)], k: f64) -> LocalSpread {
     let mut a = if sxx > 0.0 { sxy / sxx } else { 0.0 };
     let mut b = my - a * mx;
     if b < 0.0 {
-        let xx: f64 = xy.iter().map(|(x, _)| x * x).sum();
-        (a, b) = (
-            xy.iter().map(|(x, y)| x * y).sum::<f64>() / xx.max(f64::MIN_POSITIVE),
-            0.0,
-        );
+        (a, b) = (through_origin(&xy).value, 0.0);
     }
     if a < 0.0 {
         (a, b) = (0.0, my);
@@ -345,19 +343,12 @@ impl RemovalFit {
 
 /// The (u, m) pairs of grind `g` per region with at least `least` points, by region id.
 fn by_region(g: &Evidence, least: usize) -> Vec<(i64, Vec<(f64, f64)>)> {
-    let mut ids: Vec<i64> = g.points.iter().map(|q| q.region).collect();
-    ids.sort_unstable();
-    ids.dedup();
-    ids.into_iter()
-        .map(|id| {
-            let pairs: Vec<(f64, f64)> = g
-                .pairs()
-                .zip(&g.points)
-                .filter(|(_, q)| q.region == id)
-                .map(|(uv, _)| uv)
-                .collect();
-            (id, pairs)
-        })
+    let mut regions: BTreeMap<i64, Vec<(f64, f64)>> = BTreeMap::new();
+    for (uv, q) in g.pairs().zip(&g.points) {
+        regions.entry(q.region).or_default().push(uv);
+    }
+    regions
+        .into_iter()
         .filter(|(_, pairs)| pairs.len() >= least)
         .collect()
 }

@@ -177,7 +177,7 @@ impl VirtualPart {
         let mut around = std::mem::take(&mut self.stale);
         around.sort_unstable();
         around.dedup();
-        let fresh: Vec<(usize, Vector3<f64>)> = around
+        let renewed: Vec<(usize, Vector3<f64>)> = around
             .iter()
             .map(|&i| {
                 let near: Vec<Point3<f64>> = self
@@ -190,7 +190,7 @@ impl VirtualPart {
                 (i, if n.dot(&self.normals[i]) < 0.0 { -n } else { n })
             })
             .collect();
-        for (i, n) in fresh {
+        for (i, n) in renewed {
             self.points[i] = self.current(i);
             self.fresh[i] = self.removal[i];
             self.normals[i] = n;

@@ -130,17 +130,17 @@ pub fn pca_normal(
     // (dimforge/nalgebra#1109; here on a neighbourhood that is exactly planar and square to an
     // axis, the normal came out in the plane): the normal is the eigenvector with the least
     // variance along it (v^T C v), and its eigenvalue is that variance when the index disagrees
-    let rayleigh = |c: usize| {
+    let rayleigh: [f64; 3] = std::array::from_fn(|c| {
         let v = eig.eigenvectors.column(c).normalize();
         v.dot(&(cov * v))
-    };
+    });
     let least = (0..3)
-        .min_by(|&a, &b| rayleigh(a).total_cmp(&rayleigh(b)))
+        .min_by(|&a, &b| rayleigh[a].total_cmp(&rayleigh[b]))
         .unwrap_or(0);
     let small = eig.eigenvalues.imin();
     let value = match least == small {
         true => eig.eigenvalues[small],
-        false => rayleigh(least),
+        false => rayleigh[least],
     };
     let normal = eig.eigenvectors.column(least).normalize();
     let sum = eig.eigenvalues.sum();
