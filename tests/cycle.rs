@@ -15,9 +15,9 @@ use polishbot::cell::cycle::{
 };
 use polishbot::plan::Plan;
 use polishbot::regions::Verdict;
-use polishbot::spatial::Neighbours;
-use polishbot::synth::{DefectKind, Truth};
+use polishbot::synth::DefectKind;
 
+use common::accept::{acceptance, accepted, cycle, footprint, truth_scores, untouched_drift};
 use common::polishbot;
 
 fn measured(verdict: Verdict, repairable: usize, pits: usize, volume: f64) -> Measured {
@@ -170,61 +170,6 @@ fn an_unknown_table_in_the_cycle_settings_is_refused_naming_file_and_line() {
     );
 }
 
-/// The planted defect's footprint radius on the surface, mm (as demo's summary matches).
-fn footprint(width: f64, length: f64) -> f64 {
-    width + length / 2.0
-}
-
-/// Signed distance of each point to the reference cloud (nearest point's normal), mm.
-fn true_deviation(reference: &polishbot::cloud::PointCloud, points: &[Point3<f64>]) -> Vec<f64> {
-    let index = Neighbours::new(&reference.points);
-    let normals = reference.normals.as_ref().unwrap();
-    points
-        .iter()
-        .map(|p| {
-            let nb = index.nearest(p).unwrap();
-            normals[nb.index].dot(&(p - reference.points[nb.index]))
-        })
-        .collect()
-}
-
-/// 90th percentile of `v` (None when empty).
-fn p90(mut v: Vec<f64>) -> Option<f64> {
-    v.sort_by(f64::total_cmp);
-    (!v.is_empty()).then(|| v[(v.len() - 1) * 9 / 10])
-}
-
-/// Per planted bump or ridge: the 90th percentile of the true deviation over the points of
-/// its central part (half its footprint) before and after one iteration's grind, from that
-/// iteration's truth file (the removal per point); and the largest removal on any pit.
-fn truth_scores(dir: &Path, truth: &Truth, iter: usize) -> (Vec<(f64, f64)>, f64) {
-    let reference = polishbot::cloud::load_cloud(&dir.join("reference.ply"), None, None).unwrap();
-    let file = dir.join(format!("cycle/iter-{iter}/after_truth.ply"));
-    let ground = polishbot::cloud::load_cloud(&file, None, None).unwrap();
-    let removal = ground.field("removal").unwrap();
-    let dev = true_deviation(&reference, &ground.points);
-    let mut peaks = Vec::new();
-    let mut on_pits: f64 = 0.0;
-    for d in &truth.defects {
-        let c = Point3::from(d.centre);
-        let r = footprint(d.width, d.length);
-        let inside: Vec<usize> = (0..ground.len())
-            .filter(|&i| (ground.points[i] - c).norm() < r)
-            .collect();
-        if d.kind == DefectKind::Pit {
-            on_pits = inside.iter().map(|&i| removal[i]).fold(on_pits, f64::max);
-            continue;
-        }
-        let centre: Vec<usize> = (0..ground.len())
-            .filter(|&i| (ground.points[i] - c).norm() < r / 2.0)
-            .collect();
-        let after = p90(centre.iter().map(|&i| dev[i]).collect()).unwrap();
-        let before = p90(centre.iter().map(|&i| dev[i] + removal[i]).collect()).unwrap();
-        peaks.push((before, after));
-    }
-    (peaks, on_pits)
-}
-
 /// Least drop of a planted bump's true peak (p90) in the first grind, mm: the rigid layers
 /// at k 1.3 x nominal take 0.04-0.1 mm off (42 % of the demo's excess volume in its first
 /// pass), so 0.01 mm (two thirds of the scan noise) tells a ground defect from a missed one.
@@ -232,19 +177,6 @@ const FIRST_DROP_MM: f64 = 0.01;
 /// Noise margin when comparing a peak across two rescans (different points), mm: the p90 of a
 /// few hundred points with 0.015 mm scanner noise moves by about this much between rescans.
 const RESCAN_MARGIN_MM: f64 = 0.01;
-
-/// `cycle` on the case in `dir` (reference.ply, scan.ply) into `dir/out`.
-fn cycle(dir: &Path, out: &str) -> std::process::Command {
-    let mut cmd = polishbot();
-    cmd.arg("cycle")
-        .arg("--reference")
-        .arg(dir.join("reference.ply"))
-        .arg("--scan")
-        .arg(dir.join("scan.ply"))
-        .arg("-o")
-        .arg(dir.join(out));
-    cmd
-}
 
 #[test]
 fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pits() {
@@ -383,197 +315,6 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
     assert!(!dir.join("real/iter-1/after.ply").exists());
 }
 
-/// One acceptance case's numbers (issue 29): per inspection the repairable volume above the
-/// tolerance and peak, and the lowest core point away from the planted pits; the first
-/// fitted k against the true k (the scale that maps iteration 1's predicted removal onto the
-/// simulator's true removal, `after_truth.ply`).
-#[derive(Debug)]
-struct Acceptance {
-    /// (repairable regions, volume mm^3, peak mm, lowest core point away from pits mm,
-    /// core points of repairable regions above the tolerance where the arm reaches).
-    inspections: Vec<(usize, f64, f64, f64, usize)>,
-    /// First fitted k / true k (None: not fitted).
-    k_ratio: Option<f64>,
-    /// Every grind's fitted k (cycle.json's `k_fitted`, the k the next plan used) / true k.
-    k_ratios: Vec<Option<f64>>,
-    /// Largest removal on a pit, mm.
-    on_pits: f64,
-    /// Iteration 1's agreement (cycle.json): RMS over its defect points of the residual
-    /// predicted at the plan's k, at the fitted k, achieved, and achieved minus predicted at
-    /// the fitted k point by point, mm.
-    agreement: Option<[f64; 4]>,
-}
-
-/// Runs `cycle --mode removal` on synth case `seed` with the simulator's true k 1.3 x the
-/// planner's (`common::SIM_TOOL`), up to 3 grinds, and collects the numbers.
-fn acceptance(seed: u64) -> Acceptance {
-    let dir = common::scratch(&format!("accept-{seed}"));
-    let truth = common::case(seed, &dir);
-    let cfg = dir.join("cycle.toml");
-    std::fs::write(&cfg, format!("[run.sim.grinding]\n{}", common::SIM_TOOL)).unwrap();
-    let out = cycle(&dir, "cycle")
-        .args(["--sim", "--mode", "removal", "--config"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
-    println!("{}", String::from_utf8_lossy(&out.stdout));
-    let code = out.status.code();
-    assert!(
-        code == Some(0) || code == Some(4),
-        "{code:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let near_pit = |p: &Point3<f64>| {
-        truth.defects.iter().any(|d| {
-            d.kind == DefectKind::Pit
-                && (Point3::from(d.centre) - p).norm() < footprint(d.width, d.length) + 1.0
-        })
-    };
-    let mut inspections = Vec::new();
-    let mut on_pits: f64 = 0.0;
-    let reach = polishbot::cell::reachable_sites().unwrap();
-    for k in 1.. {
-        let it = dir.join(format!("cycle/iter-{k}"));
-        let Ok(i) = polishbot::plan::Inspection::load(&it.join("inspection")) else {
-            break;
-        };
-        let rep: Vec<_> = i.regions.iter().filter(|r| r.repairable).collect();
-        let sure = measured_within(&it.join("inspection"), TOLERANCE_MM);
-        assert_eq!(sure.len(), i.points.len());
-        let lowest = i
-            .points
-            .iter()
-            .zip(&sure)
-            .filter(|(p, s)| **s && p.distance.is_finite() && !near_pit(&p.position))
-            .map(|(p, _)| p.distance)
-            .fold(f64::INFINITY, f64::min);
-        // the issue's "reachable area": the tool reaches the point square to the reference
-        // surface within the planner's axis limit (a defect at the part's edge has a rim the
-        // 5-DOF arm cannot tilt to: plan.json lists its raster points as unreachable)
-        let open = i
-            .points
-            .iter()
-            .filter(|p| {
-                rep.iter().any(|r| r.id as i64 == p.region)
-                    && p.distance > TOLERANCE_MM
-                    && reach(&p.position, &p.normal, 0.0)
-            })
-            .count();
-        inspections.push((
-            rep.len(),
-            rep.iter().map(|r| r.volume).sum(),
-            rep.iter().map(|r| r.peak).fold(0.0, f64::max),
-            lowest,
-            open,
-        ));
-        if it.join("after_truth.ply").is_file() {
-            on_pits = on_pits.max(truth_scores(&dir, &truth, k).1);
-        }
-    }
-    let refit = dir.join("cycle/iter-2/tool.toml");
-    let fitted = refit.is_file().then(|| {
-        polishbot::plan::removal::ToolModel::load(&refit)
-            .unwrap()
-            .preston_k_mm2_n
-    });
-    let plan_k = polishbot::plan::removal::ToolModel::load(&common::calib("tool.toml"))
-        .unwrap()
-        .preston_k_mm2_n;
-    let it = dir.join("cycle/iter-1");
-    let k_true = common::true_k(
-        &it.join("inspection"),
-        &it.join("predicted.csv"),
-        &it.join("after_truth.ply"),
-        plan_k,
-    );
-    let k_ratio = fitted.map(|k| k / k_true);
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("cycle/cycle.json")).unwrap())
-            .unwrap();
-    let agreement = json["records"][0]["agreement"].as_object().map(|a| {
-        [
-            "predicted_plan_k_mm",
-            "predicted_fitted_k_mm",
-            "achieved_mm",
-            "difference_mm",
-        ]
-        .map(|key| a[key].as_f64().unwrap_or(f64::NAN))
-    });
-    let k_ratios = json["records"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| r["planned_volume_mm3"].is_number())
-        .map(|r| r["k_fitted"].as_f64().map(|k| k / k_true))
-        .collect();
-    let a = Acceptance {
-        inspections,
-        k_ratio,
-        k_ratios,
-        on_pits,
-        agreement,
-    };
-    println!("acceptance seed {seed}: {a:.4?}");
-    a
-}
-
-/// Tolerance of the cases, mm (inspect's default).
-const TOLERANCE_MM: f64 = 0.05;
-
-/// Per core point of the inspection in `dir` (deviations.csv's rows, in order): whether its
-/// distance is measured to within `limit` mm (its `uncertainty` at most that). A point measured
-/// from a handful of scan points at an edge (seed 1: 6 scan points, uncertainty 0.30 mm,
-/// distance -0.094 then -0.123 mm on rescans, true removal 0) cannot say whether the part is
-/// below the tolerance there, and is not counted as over-ground.
-fn measured_within(dir: &Path, limit: f64) -> Vec<bool> {
-    let text = std::fs::read_to_string(dir.join("deviations.csv")).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = header.iter().position(|h| *h == "uncertainty").unwrap();
-    lines
-        .map(|l| {
-            let u: f64 = l.split(',').nth(col).unwrap().parse().unwrap_or(f64::NAN);
-            u <= limit
-        })
-        .collect()
-}
-
-/// The issue's acceptance on one case: no core point of a repairable region above the
-/// tolerance where the arm reaches after the last grind, no core point away from the pits more
-/// than the tolerance below nominal, pits untouched, the first fitted k within 10 % of the
-/// true k.
-fn accepted(a: &Acceptance) -> bool {
-    let last = a.inspections.last().unwrap();
-    last.4 == 0
-        && a.inspections.iter().all(|i| i.3 >= -TOLERANCE_MM)
-        && a.on_pits == 0.0
-        && a.k_ratio.is_some_and(|r| (r - 1.0).abs() <= 0.1)
-}
-
-/// Points of grind `k`'s truth (every 50th) that grind `k` did not touch, and how far the
-/// farthest of them lies from the part grind `k - 1` left (its truth), mm: the simulator grinds
-/// one virtual part, so what a grind leaves alone keeps its place to the bit (before the part
-/// was carried over, it was rebuilt from each noisy rescan and drifted by 0.01 mm of mean and
-/// 0.015 mm of noise per grind, raising new 0.12 mm "defects" by the third).
-fn untouched_drift(dir: &Path, k: usize) -> (usize, f64) {
-    let load = |k: usize| {
-        let f = dir.join(format!("cycle/iter-{k}/after_truth.ply"));
-        polishbot::cloud::load_cloud(&f, None, None).unwrap()
-    };
-    let (before, after) = (load(k - 1), load(k));
-    let index = Neighbours::new(&before.points);
-    let removal = after.field("removal").unwrap();
-    let untouched: Vec<usize> = (0..after.len())
-        .step_by(50)
-        .filter(|&i| removal[i] == 0.0)
-        .collect();
-    let drift = untouched
-        .iter()
-        .map(|&i| index.nearest(&after.points[i]).unwrap().dist2.sqrt())
-        .fold(0.0, f64::max);
-    (untouched.len(), drift)
-}
-
 /// The first two of the ten cases in the suite, with the parts of the issue's acceptance that
 /// hold today: k is refitted after the first grind, the first grind removes at least
 /// `min_progress` of the repairable excess volume, the pits are never ground, the first pass
@@ -596,10 +337,10 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
             a.agreement
         );
         assert!(
-            second.1 < first.1 * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
+            second.volume < first.volume * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
             "seed {seed}: volume {} -> {}",
-            first.1,
-            second.1
+            first.volume,
+            second.volume
         );
         assert_eq!(a.on_pits, 0.0, "seed {seed}: a pit was ground");
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("accept-{seed}"));

@@ -11,5 +11,5 @@ mod reach;
 pub mod removal_fit;
 mod stream;
 
-pub use reach::reachable_sites;
+pub use reach::{reachable_sites, SITE_AXIS_MARGIN_DEG};
 pub use stream::{execute, steps, RunConfig, RunReport, Step};

@@ -53,7 +53,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let start = Instant::now();
     let out = args.out;
     step("synth: parametric femoral component with defects planted where the arm reaches");
-    let reachable = crate::cell::reachable_sites()?;
+    let reachable = crate::cell::reachable_sites(crate::cell::SITE_AXIS_MARGIN_DEG)?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
     case.write(&out)?;
     let inspection = out.join("inspection");

@@ -171,6 +171,7 @@ const MAX_TRANSLATION_MM: f64 = 10_000.0;
 /// Largest dimension of the parametric part's shape settings, mm.
 const MAX_SHAPE_MM: f64 = 1000.0;
 
-/// Decides whether a defect may sit at a surface point (reference frame, outward normal,
-/// footprint radius in mm), e.g. only where the arm can reach.
-pub type SiteFilter = dyn Fn(&Point3<f64>, &Vector3<f64>, f64) -> bool + Sync;
+/// Decides whether a defect may sit at a site, e.g. only where the arm can reach: given the
+/// site's probes (reference frame, mm), its centre first and then points on the surface
+/// around its footprint, each with the surface's own outward normal there.
+pub type SiteFilter = dyn Fn(&[(Point3<f64>, Vector3<f64>)]) -> bool + Sync;

@@ -151,7 +151,7 @@ pub fn rescan(
 
 /// Makes a case.
 pub fn synth(cfg: &SynthConfig) -> Result<SynthCase> {
-    synth_at(cfg, &|_, _, _| true)
+    synth_at(cfg, &|_| true)
 }
 
 /// Makes a case whose defects sit only where `accept` allows.

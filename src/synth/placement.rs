@@ -12,7 +12,7 @@ use super::defects::{Defect, DefectKind};
 use super::random::gauss;
 use super::truth::OutlierTruth;
 use crate::cloud::{sample_mesh, Mesh, PointCloud};
-use crate::spatial::{Neighbours, SparseGrid};
+use crate::spatial::{tangent_basis, Neighbours, SparseGrid};
 
 /// Points every `step` mm along the mesh's sharp edges (dihedral angle over 25 degrees) and
 /// its open boundary edges.
@@ -40,6 +40,33 @@ fn sharp_edge_points(mesh: &Mesh, step: f64) -> Vec<Point3<f64>> {
         }
     }
     out
+}
+
+/// Probes around a site's footprint: a defect's rim at the part's edge turns its normal away
+/// from the centre's, and an arm that reaches the centre square to the surface may not reach
+/// the rim (issue 29's seeds 21 and 41: rim contacts 45-48 degrees off the arm plane). Eight
+/// directions keep the gaps between probes under 0.8 x the radius.
+const RIM_PROBES: usize = 8;
+
+/// The site's probes for a [`SiteFilter`]: the centre with its normal, then the sampled surface
+/// point nearest each of [`RIM_PROBES`] points `radius` mm from the centre in its tangent plane,
+/// with that sample's own normal.
+fn site_probes(
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    radius: f64,
+    surface: &Neighbours,
+    normals: &[Vector3<f64>],
+) -> Vec<(Point3<f64>, Vector3<f64>)> {
+    let (t1, t2) = tangent_basis(n);
+    let rim = (0..RIM_PROBES).filter_map(|k| {
+        let angle = std::f64::consts::TAU * k as f64 / RIM_PROBES as f64;
+        let q = p + (t1 * angle.cos() + t2 * angle.sin()) * radius;
+        surface
+            .nearest(&q)
+            .map(|hit| (surface.point(hit.index), normals[hit.index]))
+    });
+    std::iter::once((*p, *n)).chain(rim).collect()
 }
 
 /// Plants `cfg.defects` defects on the surface (on `articular` when given), each clear of
@@ -74,6 +101,7 @@ pub fn place_defects(
     let sharp = SparseGrid::new(2.0, sharp);
     let candidates = sample_mesh(mesh, 20_000, rng.gen())?.cloud;
     let normals = candidates.normals.as_ref().expect("sampled normals");
+    let surface = Neighbours::new(&candidates.points);
     let mut defects: Vec<Defect> = Vec::new();
     for (p, n) in candidates.points.iter().zip(normals) {
         if defects.len() == cfg.defects {
@@ -127,7 +155,9 @@ pub fn place_defects(
             (Point3::from(o.centre) - p).norm()
                 > 2.0 * (width + o.width) + (length + o.length) / 2.0 + 1.0
         };
-        if defects.iter().all(clear) && accept(p, n, width + length / 2.0) {
+        if defects.iter().all(clear)
+            && accept(&site_probes(p, n, width + length / 2.0, &surface, normals))
+        {
             defects.push(d);
         }
     }

@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: data paths, the oracle Python, the binary.
 #![allow(dead_code)]
+pub mod accept;
 pub mod femoral;
 
 use std::io::{BufRead, BufReader};
@@ -277,7 +278,8 @@ pub const SEED_TRIES: u64 = 20;
 /// The case: 5 defects (0.08-0.5 mm) where the arm reaches, a fifth of them pits;
 /// the first seed from `seed` on that places all five.
 pub fn case(seed: u64, dir: &Path) -> polishbot::synth::Truth {
-    let reachable = polishbot::cell::reachable_sites().unwrap();
+    let reachable =
+        polishbot::cell::reachable_sites(polishbot::cell::SITE_AXIS_MARGIN_DEG).unwrap();
     let make = |seed| polishbot::synth::SynthConfig {
         seed,
         defects: 5,
