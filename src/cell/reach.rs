@@ -1,9 +1,9 @@
 //! Where on a part the cell can grind: a site filter for synthetic cases whose defects the
 //! arm must reach (demo, tests/cycle.rs).
 use anyhow::Result;
-use nalgebra::{Point3, Vector3};
 
 use crate::robot::{self as robot_model, IkConfig, IkTarget, RobotConfig};
+use crate::synth::SiteProbe;
 
 /// Joint-limit margin of the reach test, rad: the sites keep 0.02 rad inside every limit so
 /// the planner's own margin and the servo quantisation still leave the pose reachable.
@@ -20,9 +20,7 @@ pub const SITE_AXIS_MARGIN_DEG: f64 = 5.0;
 /// reachable with the tool against the surface at its own normal, the tool axis within the
 /// default cell's axis limit less `axis_margin_deg` (the default cell calibration). Synth's
 /// sites use [`SITE_AXIS_MARGIN_DEG`]; judging a point the planner could grind uses 0.
-pub fn reachable_sites(
-    axis_margin_deg: f64,
-) -> Result<impl Fn(&[(Point3<f64>, Vector3<f64>)]) -> bool + Sync> {
+pub fn reachable_sites(axis_margin_deg: f64) -> Result<impl Fn(&[SiteProbe]) -> bool + Sync> {
     let robot_cfg = RobotConfig::default();
     let (robot, workcell) = robot_model::load(&robot_cfg)?;
     let ik = IkConfig {
@@ -32,7 +30,7 @@ pub fn reachable_sites(
     };
     let ball_mm = robot.tool.radius * 1000.0;
     let home = vec![0.0; robot.dof()];
-    Ok(move |probes: &[(Point3<f64>, Vector3<f64>)]| {
+    Ok(move |probes: &[SiteProbe]| {
         probes.iter().all(|(contact, n)| {
             let target = IkTarget {
                 position: workcell

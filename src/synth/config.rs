@@ -174,4 +174,8 @@ const MAX_SHAPE_MM: f64 = 1000.0;
 /// Decides whether a defect may sit at a site, e.g. only where the arm can reach: given the
 /// site's probes (reference frame, mm), its centre first and then points on the surface
 /// around its footprint, each with the surface's own outward normal there.
-pub type SiteFilter = dyn Fn(&[(Point3<f64>, Vector3<f64>)]) -> bool + Sync;
+pub type SiteFilter = dyn Fn(&[SiteProbe]) -> bool + Sync;
+
+/// A point of a candidate defect site (reference frame, mm) with the surface's outward unit
+/// normal there.
+pub type SiteProbe = (Point3<f64>, Vector3<f64>);

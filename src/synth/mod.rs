@@ -19,7 +19,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-pub use config::{SiteFilter, SynthConfig, MAX_DEFECTS};
+pub use config::{SiteFilter, SiteProbe, SynthConfig, MAX_DEFECTS};
 pub use defects::{deviation_at, Defect, DefectKind};
 pub use femoral::{build as build_femoral, FemoralPart, FemoralShape};
 pub use limits::MAX_POINTS;

@@ -7,7 +7,7 @@ use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::config::{SiteFilter, SynthConfig};
+use super::config::{SiteFilter, SiteProbe, SynthConfig};
 use super::defects::{Defect, DefectKind};
 use super::random::gauss;
 use super::truth::OutlierTruth;
@@ -57,7 +57,7 @@ fn site_probes(
     radius: f64,
     surface: &Neighbours,
     normals: &[Vector3<f64>],
-) -> Vec<(Point3<f64>, Vector3<f64>)> {
+) -> Vec<SiteProbe> {
     let (t1, t2) = tangent_basis(n);
     let rim = (0..RIM_PROBES).filter_map(|k| {
         let angle = std::f64::consts::TAU * k as f64 / RIM_PROBES as f64;
