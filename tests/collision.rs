@@ -522,11 +522,17 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
     // in by the plan's preload as `plan` and `run` check it
     let mut cfg = PlanConfig::default().collision;
     cfg.press_mm = p.removal.as_ref().map_or(0.0, |r| r.preload_mm);
+    let mut skips = 0;
     for (allow, clear, hits, skipped) in sweep::sweep_answers_as_plain(&p, &insp.points, &wc, &cfg)
     {
         println!("demo, {allow:?}: {clear} clear, {hits} refused, {skipped} searches skipped");
-        assert!(clear > 0 && skipped > 0, "{allow:?}");
+        assert!(clear > 0, "{allow:?}");
+        skips += skipped;
     }
+    // the carried bounds answered some searches: on the demo since its defects moved (synth's
+    // site filter probes their rims, `cell::reachable_sites`) none under `Free` (2844 clear
+    // samples), 288 under `Contact` and 1096 under `Grind`
+    assert!(skips > 0, "no search skipped under any rule");
 }
 
 /// `Scene::check` remembers the samples it found clear (so `plan`'s final check skips the

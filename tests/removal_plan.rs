@@ -48,20 +48,36 @@ fn removal_contacts_are_pressed_in_and_out_only_under_the_grinding_rule() {
     let plan = Plan::load(&dir.join("plan.json")).unwrap();
     let removal = plan.removal.as_ref().expect("a removal report");
     assert_eq!(removal.preload_mm, PRELOAD_MM);
-    // every region of the demo ground but its smallest bump (0.18 mm): pressed as the part
-    // is (its excess presses harder, its flanks tilt the surface), that one's shortest dwell
-    // over-grinds at the Monte Carlo's quantile (-0.062 mm; -0.050 with the force at the
-    // preload on the nominal surface, on the edge), so it alone is left out, for that reason
+    // every repairable region of the demo planned (its four bumps and ridges; the fifth
+    // defect is a pit); a contact left out is one of a region the removal planner left out
+    // (it over-grinds at the Monte Carlo's quantile), or one the collision check refused: the
+    // demo's region 3 has 4 of its 103 path points next to a face 67 degrees away, where the
+    // ball pressed by the preload does not fit on the retract ("tool does not fit")
     assert!(
         removal.regions.len() >= 4,
         "{} regions",
         removal.regions.len()
     );
     let planned: Vec<usize> = removal.regions.iter().map(|r| r.region).collect();
+    let mut refused = 0;
     for u in &plan.reachability.unreachable {
-        assert!(!planned.contains(&u.region), "{u:?}");
-        assert!(u.reason.contains("over-grinds"), "{}", u.reason);
+        if planned.contains(&u.region) {
+            assert!(u.reason.contains("tool does not fit"), "{u:?}");
+            refused += 1;
+        } else {
+            assert!(u.reason.contains("over-grinds"), "{}", u.reason);
+        }
     }
+    let path_points: usize = plan
+        .reachability
+        .regions
+        .iter()
+        .map(|r| r.path_points)
+        .sum();
+    assert!(
+        refused * 20 <= path_points,
+        "{refused} of {path_points} path points refused"
+    );
     // issue 28's acceptance as far as it holds: excess removed, no over-grind (nominal or at
     // the Monte Carlo's quantile); the residual peaks are printed
     println!("{}", common::removal::accept(&plan, "demo"));
