@@ -134,11 +134,15 @@ pub fn acceptance(seed: u64) -> Acceptance {
     let truth = super::case(seed, &dir);
     let cfg = dir.join("cycle.toml");
     std::fs::write(&cfg, format!("[run.sim.grinding]\n{}", super::SIM_TOOL)).unwrap();
-    let out = cycle(&dir, "cycle")
+    let mut command = cycle(&dir, "cycle");
+    command
         .args(["--sim", "--mode", "removal", "--config"])
-        .arg(&cfg)
-        .output()
-        .unwrap();
+        .arg(&cfg);
+    // more grinds than the 3, to see what a 4th would do (run by hand)
+    if let Ok(grinds) = std::env::var("POLISHBOT_ACCEPT_GRINDS") {
+        command.args(["--max-iterations", &grinds]);
+    }
+    let out = command.output().unwrap();
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let code = out.status.code();
     assert!(
@@ -211,6 +215,22 @@ pub fn acceptance(seed: u64) -> Acceptance {
             ground.extend(part.grind(&dir, &truth, k));
         }
     }
+    let (k_ratio, k_ratios, agreement) = k_numbers(&dir);
+    let a = Acceptance {
+        inspections,
+        true_low: part.lowest_ground(&|p| !near_pit(p)),
+        k_ratio,
+        k_ratios,
+        on_pits,
+        agreement,
+    };
+    println!("acceptance seed {seed}: {a:.4?}");
+    a
+}
+
+/// The loop's k in `dir` against the true k: the first refit's ratio (None: not refitted),
+/// every grind's (cycle.json's `k_fitted`), and iteration 1's agreement (see [`Acceptance`]).
+fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
     let refit = dir.join("cycle/iter-2/tool.toml");
     let fitted = refit.is_file().then(|| {
         polishbot::plan::removal::ToolModel::load(&refit)
@@ -247,16 +267,7 @@ pub fn acceptance(seed: u64) -> Acceptance {
         .filter(|r| r["planned_volume_mm3"].is_number())
         .map(|r| r["k_fitted"].as_f64().map(|k| k / k_true))
         .collect();
-    let a = Acceptance {
-        inspections,
-        true_low: part.lowest_ground(&|p| !near_pit(p)),
-        k_ratio,
-        k_ratios,
-        on_pits,
-        agreement,
-    };
-    println!("acceptance seed {seed}: {a:.4?}");
-    a
+    (k_ratio, k_ratios, agreement)
 }
 
 /// The true part through the grinds without the scan's noise: the deviation synth planted at
