@@ -226,9 +226,9 @@ const ALLOWANCE_STEP_HALVINGS: u32 = 2;
 /// Solves region `s` that over-grinds for `reason` again from its walked runs with its
 /// allowance raised by `removal::ALLOWANCE_STEP_SHARE` of the tolerance, or by half or a
 /// quarter of that where the full step leaves nothing to grind ([`ALLOWANCE_STEP_HALVINGS`]).
-/// Once the allowance is
-/// above the highest deviation in reach (every dwell already at its shortest), or when the
-/// solve fails, the region's pieces are left out with both reasons and None comes back.
+/// Once the allowance is above the highest deviation in reach (every dwell already at its
+/// shortest), or when the solve fails, the region's pieces are left out with both reasons and
+/// None comes back.
 fn resolve(
     s: &Settled,
     region: &RegionInfo,

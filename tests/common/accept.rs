@@ -388,10 +388,9 @@ pub fn measured_within(dir: &Path, limit: f64) -> Vec<bool> {
 /// tolerance where the arm reaches after the last grind; no core point where the cell ground
 /// measured more than the tolerance below nominal on any re-inspection; pits untouched; the
 /// first fitted k within 10 % of the true k. Reported, not judged: measured core points below
-/// the tolerance where the cell never ground (inspection error at the part's edges, on a part
-/// the simulator's truth has at -0.001..-0.009 mm there) and single points of the truth below
-/// it (`true_low`: a handful of the 300-550 ground points, their 0.6 mm neighbourhood 0.02-0.05
-/// mm higher).
+/// the tolerance where the cell never ground (inspection error on the part's outer faces,
+/// where the simulator's truth averages -0.001..-0.005 mm) and single points of the truth
+/// below it (`true_low`: 0-7 of the 95-748 ground points of a case).
 pub fn accepted(a: &Acceptance) -> bool {
     let last = a.inspections.last().unwrap();
     last.open == 0
