@@ -215,8 +215,9 @@ fn settle(
     }
 }
 
-/// Times the allowance step is halved when a region solved at the raised allowance has
-/// nothing left to grind (2: steps of 1/2, 1/4 and 1/8 of the tolerance). Between an
+/// Times the allowance step is halved when the region's solve at the raised allowance fails,
+/// most often because it has nothing left to grind (2: steps of 1/2, 1/4 and 1/8 of the
+/// tolerance). Between an
 /// allowance that over-grinds and one where every contact would remove less than passing at
 /// full feed there can be a level that grinds safely: issue 29's case at synth seed 22 kept a
 /// 0.087 mm peak through two grinds (over-grinding to -0.051 mm at 0.05, nothing to grind at
@@ -225,7 +226,8 @@ const ALLOWANCE_STEP_HALVINGS: u32 = 2;
 
 /// Solves region `s` that over-grinds for `reason` again from its walked runs with its
 /// allowance raised by `removal::ALLOWANCE_STEP_SHARE` of the tolerance, or by half or a
-/// quarter of that where the full step leaves nothing to grind ([`ALLOWANCE_STEP_HALVINGS`]).
+/// quarter of that where the solve at the full step fails (nothing left to grind, say:
+/// [`ALLOWANCE_STEP_HALVINGS`]); the reason kept is the full step's.
 /// Once the allowance is above the highest deviation in reach (every dwell already at its
 /// shortest), or when the solve fails, the region's pieces are left out with both reasons and
 /// None comes back.

@@ -114,7 +114,7 @@ pub struct Acceptance {
     pub k_ratio: Option<f64>,
     /// Every grind's fitted k (cycle.json's `k_fitted`, the k the next plan used) / true k.
     pub k_ratios: Vec<Option<f64>>,
-    /// Largest removal on a pit, mm.
+    /// Largest removal summed over the grinds on a pit's footprint, mm.
     pub on_pits: f64,
     /// Iteration 1's agreement (cycle.json): RMS over its defect points of the residual
     /// predicted at the plan's k, at the fitted k, achieved, and achieved minus predicted at
@@ -157,9 +157,7 @@ pub fn acceptance(seed: u64) -> Acceptance {
         })
     };
     let mut inspections = Vec::new();
-    let mut on_pits: f64 = 0.0;
     let mut part = TruePart::default();
-    let mut ground: Vec<Point3<f64>> = Vec::new();
     let reach = polishbot::cell::reachable_sites(0.0).unwrap();
     for k in 1.. {
         let it = dir.join(format!("cycle/iter-{k}"));
@@ -180,6 +178,7 @@ pub fn acceptance(seed: u64) -> Acceptance {
             .iter()
             .map(|p| p.distance)
             .fold(f64::INFINITY, f64::min);
+        let ground = part.ground();
         let ground_index = (!ground.is_empty()).then(|| Neighbours::new(&ground));
         let lowest_ground = judged
             .iter()
@@ -211,17 +210,21 @@ pub fn acceptance(seed: u64) -> Acceptance {
             open,
         });
         if it.join("after_truth.ply").is_file() {
-            on_pits = on_pits.max(truth_scores(&dir, &truth, k).1);
-            ground.extend(part.grind(&dir, &truth, k));
+            part.grind(&dir, &truth, k);
         }
     }
     let (k_ratio, k_ratios, agreement) = k_numbers(&dir);
     let a = Acceptance {
         inspections,
         true_low: part.lowest_ground(&|p| !near_pit(p)),
+        on_pits: part.most_removed(&|p| {
+            truth.defects.iter().any(|d| {
+                d.kind == DefectKind::Pit
+                    && (Point3::from(d.centre) - p).norm() < footprint(d.width, d.length)
+            })
+        }),
         k_ratio,
         k_ratios,
-        on_pits,
         agreement,
     };
     println!("acceptance seed {seed}: {a:.4?}");
@@ -290,8 +293,8 @@ struct TruePart {
 }
 
 impl TruePart {
-    /// Adds grind `k`'s removal; returns the points it removed from (reference frame).
-    fn grind(&mut self, dir: &Path, truth: &Truth, k: usize) -> Vec<Point3<f64>> {
+    /// Adds grind `k`'s removal (its truth file).
+    fn grind(&mut self, dir: &Path, truth: &Truth, k: usize) {
         let file = dir.join(format!("cycle/iter-{k}/after_truth.ply"));
         let after = polishbot::cloud::load_cloud(&file, None, None).unwrap();
         let removal = after.field("removal").unwrap();
@@ -311,15 +314,26 @@ impl TruePart {
         } else {
             self.follow(&after.points, after.normals.as_ref().unwrap(), removal, k);
         }
-        let mut touched = Vec::new();
-        for (i, r) in removal.iter().enumerate() {
-            self.removed[i] += r;
-            if *r > 0.0 {
-                touched.push(after.points[i]);
-            }
+        for (total, r) in self.removed.iter_mut().zip(removal) {
+            *total += r;
         }
         self.points = after.points;
-        touched
+    }
+
+    /// The points some grind removed from, where they are now (reference frame).
+    fn ground(&self) -> Vec<Point3<f64>> {
+        (0..self.points.len())
+            .filter(|&i| self.removed[i] > 0.0)
+            .map(|i| self.points[i])
+            .collect()
+    }
+
+    /// The most removed so far at a point `inside` accepts, mm (0 where none).
+    fn most_removed(&self, inside: &dyn Fn(&Point3<f64>) -> bool) -> f64 {
+        (0..self.points.len())
+            .filter(|&i| inside(&self.points[i]))
+            .map(|i| self.removed[i])
+            .fold(0.0, f64::max)
     }
 
     /// Keeps, in order, the points of the last grind that grind `k`'s part kept (`points`, the
@@ -336,12 +350,14 @@ impl TruePart {
         let mut kept = Vec::with_capacity(points.len());
         for ((p, n), r) in points.iter().zip(normals).zip(removal) {
             let before = p + n * *r;
-            while (self.points[at] - before).norm() > MATCH_MM {
+            loop {
+                let earlier = self.points.get(at);
+                let earlier =
+                    earlier.unwrap_or_else(|| panic!("grind {k}: a point of no earlier grind"));
+                if (earlier - before).norm() <= MATCH_MM {
+                    break;
+                }
                 at += 1;
-                assert!(
-                    at < self.points.len(),
-                    "grind {k}: a point of no earlier grind"
-                );
             }
             kept.push(at);
             at += 1;
