@@ -364,7 +364,9 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
 /// All ten cases of the issue (seeds 1, 21, .., 181: each `case` tries 20 seeds from its
 /// own); slow, run by hand: `cargo test --release --test cycle -- --ignored ten`; a subset
 /// with `POLISHBOT_ACCEPT_SEEDS=61,81` (seed 41's second plan ran over 20 min, issue 29);
-/// `POLISHBOT_ACCEPT_GRINDS=4` allows that many grinds instead of the cycle's default 3.
+/// `POLISHBOT_ACCEPT_GRINDS=4` allows that many grinds instead of the cycle's default 3;
+/// `POLISHBOT_ACCEPT_SIM="pressure_exponent = 1.0; k_noise = 0.0"` adds `[sim.grinding]` keys
+/// (docs/ALGORITHMS.md, "The acceptance cases": what each part of the truth costs).
 #[test]
 #[ignore]
 fn ten_acceptance_cases_with_the_removal_planner() {

@@ -133,7 +133,17 @@ pub fn acceptance(seed: u64) -> Acceptance {
     let dir = super::scratch(&format!("accept-{seed}"));
     let truth = super::case(seed, &dir);
     let cfg = dir.join("cycle.toml");
-    std::fs::write(&cfg, format!("[run.sim.grinding]\n{}", super::SIM_TOOL)).unwrap();
+    // more of the simulated cell's truth, to take it apart by hand: `;`-separated
+    // `[sim.grinding]` lines whose keys SIM_TOOL does not set (e.g. "pressure_exponent = 1.0;
+    // k_noise = 0.0")
+    let extra = std::env::var("POLISHBOT_ACCEPT_SIM")
+        .unwrap_or_default()
+        .replace(';', "\n");
+    std::fs::write(
+        &cfg,
+        format!("[run.sim.grinding]\n{}{extra}\n", super::SIM_TOOL),
+    )
+    .unwrap();
     let mut command = cycle(&dir, "cycle");
     command
         .args(["--sim", "--mode", "removal", "--config"])
