@@ -281,7 +281,8 @@ pub fn set_dwell(
             contacts.len()
         )));
     }
-    let plan = match removal::solve_region(&influence, &contacts, &cores, allowance, &solve) {
+    let bounds = (&influence, &solve);
+    let plan = match solve_in_order(&pieces, setup, bounds, (&contacts, &cores), allowance) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
     };
@@ -303,6 +304,49 @@ pub fn set_dwell(
         allowance,
         highest,
     }))
+}
+
+/// Rounds of the in-order correction of a region's dwell solve (2): the in-order removal of
+/// a pass differs from the linear model's by 10-40 % at a bump's top and skirt (the bump's
+/// force and normal change as it goes down, `removal::sequence`), and each round leaves about
+/// that share of the difference before it.
+const IN_ORDER_ROUNDS: usize = 2;
+
+/// The dwell of one region solved for the pass as the tool grinds it: on the linear model
+/// first (`removal::solve_region`), then [`IN_ORDER_ROUNDS`] times again with each core
+/// point's target raised by what the linear model removes there beyond the contacts ground in
+/// order (r' = r + A t - S(t), S `removal::sequence::in_order`), so that the pass ground in
+/// order removes the target.
+fn solve_in_order(
+    pieces: &[&PlannedPass],
+    setup: &Setup,
+    (influence, solve): (&Influence, &removal::RemovalConfig),
+    (contacts, cores): (&[Contact], &[SurfacePoint]),
+    allowance: f64,
+) -> Result<removal::RegionRemoval, String> {
+    let back = reference_from_robot(setup.workcell);
+    let placed: Vec<Contact> = pieces
+        .iter()
+        .map(|p| contact(p, setup.robot, &back))
+        .collect();
+    let mut plan = removal::solve_region(influence, contacts, cores, allowance, solve)?;
+    for _ in 0..IN_ORDER_ROUNDS {
+        let order = removal::sequence::in_order(&placed, &plan.dwell, setup.tool, influence, cores);
+        let aimed: Vec<SurfacePoint> = cores
+            .iter()
+            .zip(plan.removal.iter().zip(&order))
+            .map(|(c, (linear, ground))| {
+                let want = removal::target(c.distance, allowance) + linear - ground;
+                let distance = match want > 0.0 {
+                    true => allowance + want,
+                    false => c.distance.min(allowance),
+                };
+                SurfacePoint { distance, ..*c }
+            })
+            .collect();
+        plan = removal::solve_region(influence, contacts, &aimed, allowance, solve)?;
+    }
+    Ok(plan)
 }
 
 /// `runs` without the pieces the tool lifts over (`lifted`, one flag per piece in order): a

@@ -8,6 +8,7 @@ pub mod force;
 pub mod influence;
 pub mod montecarlo;
 pub mod press;
+pub mod sequence;
 pub mod tool;
 
 use nalgebra::{Point3, Vector3};
