@@ -4,19 +4,21 @@
 //! removal law (not the planner's) on the part as it is (nominal + deviation, normals by PCA
 //! as `run --sim` gives them). With the linear law (exponents 1/1), the true k the planner's
 //! (factor 1) and no k field, each planned region's removal must match the prediction within
-//! [`WITHIN`]: the planner's model of each contact (the spindle axis the arm holds there, the
-//! force and surface normal of the part the ball really presses, its patch and dwell) is then
-//! the simulator's physics. The same trajectory on the nominal surface is printed, not held:
+//! [`WITHIN`], and each band of planned removal within [`BAND_WITHIN`]: the planner's model of
+//! each contact (the spindle axis the arm holds there, the force and surface normal of the
+//! part the ball really presses as the pass leaves it, its patch and dwell) is then the
+//! simulator's physics. The same trajectory on the nominal surface is printed, not held:
 //! there the ball presses only the preload, less than the plan expects on the excess.
 //!
 //! It can fail: with the contacts pressed at the preload on the nominal surface (the model
 //! before `removal/press.rs`) the part took 1.08 / 1.23 / 1.27 / 1.36 / 1.09 x the plan
 //! (`demo`, seed 1); with the force alone from the real penetration 1.16 / 1.19 / 1.29 / 1.01
 //! (the bumps' slopes tilt the surface under the spindle, which near 10 degrees of tilt
-//! changes the abrasive's speed by tens of percent). Measured now (exponents 1/1): 1.016 /
-//! 0.985 / 0.995 / 0.985 on the part, 0.81 / 0.87 / 0.77 / 0.91 on the nominal surface; the
-//! demo's own inspection (`POLISHBOT_SIM_DEMO`, scan noise in the deviations): 1.08 / 1.02 /
-//! 1.06 / 1.04. With the simulator's default exponents 1.1/0.9 the law itself differs from
+//! changes the abrasive's speed by tens of percent); with every contact pressed on the part as
+//! measured (the linear model, before `removal/sequence.rs`) 0.892-1.099 per region and
+//! 1.42-2.19 per band where under 0.02 mm was planned. Measured now (exponents 1/1):
+//! 1.008 / 0.996 / 0.940 / 0.969 on the part, per band 0.913-1.094, and 0.72-0.96 on the
+//! nominal surface. With the simulator's default exponents 1.1/0.9 the law itself differs from
 //! the planner's (`POLISHBOT_SIM_EXPONENTS=1.1,0.9 cargo test --release --test removal_sim --
 //! --nocapture`). `POLISHBOT_SIM_DEMO=DIR` grinds a `demo --out DIR` instead (its plan.json
 //! and inspection/).
@@ -46,11 +48,20 @@ use polishbot::spatial::Neighbours;
 /// force) gave 0.939-1.080 and was not kept; the planner's model of it is open (issue 28).
 /// Widened from 0.1 to 0.12 when synth's site filter began to test a defect's rim with the
 /// rim's own normals (`cell::reachable_sites`), which moved this part's defects: per region
-/// 0.892-1.099 over its four regions; the mid-pass normal gave 0.892-1.247 on it.
-const WITHIN: f64 = 0.12;
+/// 0.892-1.099 over its four regions; the mid-pass normal gave 0.892-1.247 on it. Narrowed to
+/// 0.08 when the planner began to grind its pass in order (`plan::removal::sequence`: each
+/// contact pressed on the part as the contacts before it left it): 0.940-1.008 per region.
+const WITHIN: f64 = 0.08;
 
 /// Bands of planned removal for the per-point comparison, mm (upper ends).
 const BANDS_MM: [f64; 3] = [0.02, 0.1, 0.2];
+
+/// Largest relative difference between the simulator's removal and the plan's per band of
+/// planned removal in a region (0.15): with the pass predicted in order 0.913-1.094 over the
+/// bands of the four regions; with the linear model (every contact pressed on the part as
+/// measured) 1.42-2.19 where under 0.02 mm was planned and 0.78-0.97 over 0.1 mm, the error
+/// that left narrow peaks above the tolerance after the acceptance cases' grinds (issue 29).
+const BAND_WITHIN: f64 = 0.15;
 
 /// The demo's part (cli/demo.rs `demo_config`, seed 1) at 200,000 reference samples (the
 /// planner's core points here; tests/common `case`'s density).
@@ -203,7 +214,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
     let positions: Vec<Point3<f64>> = inspection.points.iter().map(|p| p.position).collect();
     let index = Neighbours::new(&positions);
     let mut rows = removal.rows.iter();
-    let mut ratios = Vec::new();
+    let (mut ratios, mut band_ratios) = (Vec::new(), Vec::new());
     for r in &removal.regions {
         let (mut sim, mut deeper, mut predicted) = (0.0, 0.0, 0.0);
         let mut bands = [(0.0, 0.0); BANDS_MM.len() + 1];
@@ -218,6 +229,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
             bands[band].1 += planned;
         }
         let per_band: Vec<f64> = bands.iter().map(|(s, p)| s / p).collect();
+        band_ratios.extend(per_band.iter().copied().filter(|r| r.is_finite()));
         println!(
             "  sim/plan per point by planned removal (< {BANDS_MM:?} mm, above): {per_band:.3?}"
         );
@@ -240,5 +252,11 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
     );
     for ratio in ratios {
         assert!((ratio - 1.0).abs() <= WITHIN, "sim/plan {ratio}");
+    }
+    for ratio in band_ratios {
+        assert!(
+            (ratio - 1.0).abs() <= BAND_WITHIN,
+            "sim/plan in a band of planned removal {ratio}"
+        );
     }
 }
