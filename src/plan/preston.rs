@@ -307,9 +307,12 @@ pub fn set_dwell(
 }
 
 /// Rounds of the in-order correction of a region's dwell solve (2): the in-order removal of
-/// a pass differs from the linear model's by 10-40 % at a bump's top and skirt (the bump's
-/// force and normal change as it goes down, `removal::sequence`), and each round leaves about
-/// that share of the difference before it.
+/// a pass differs from the linear model's by up to 2x at a bump's skirt and 20-40 % at its top
+/// (the bump's force and normal change as it goes down, `removal::sequence`). Measured on the
+/// ten acceptance cases (3 grinds): no correction (the in-order model only predicting) left
+/// 145 reachable points above the tolerance, 2 rounds 104, 3 rounds 106; which cases ended
+/// with none moved between the runs (5 of 10 with 2 rounds, 1 with 3: a third round moves the
+/// spots left just above the tolerance, not how many), and a round costs a solve and a pass.
 const IN_ORDER_ROUNDS: usize = 2;
 
 /// The dwell of one region solved for the pass as the tool grinds it: on the linear model
