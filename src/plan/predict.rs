@@ -15,12 +15,12 @@ use super::free_motion::{pressed, Cell};
 use super::inspection::Inspection;
 use super::inspection::SurfacePoint;
 use super::preston::{
-    contact, cores_near, joint_error, pressed_contacts, reference_from_robot, DwellPoint,
+    cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, DwellPoint,
     PredictedRow, RegionPrediction, RemovalReport, Setup,
 };
 use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
 use super::removal::montecarlo::{spread, JointError};
-use super::removal::{self, Contact, Influence, Stats};
+use super::removal::{self, Influence, Stats};
 use super::trajectory::{JointTrajectory, Move};
 use crate::robot::{Robot, Workcell};
 
@@ -191,7 +191,8 @@ fn region_verdict(
     let ball_mm = robot.tool.radius * 1e3;
     let influence = Influence::new(tool, ball_mm);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
-    let contacts = pressed_contacts(pieces, inspection, setup, allowance_mm);
+    let placed = placed_contacts(pieces, setup);
+    let contacts = pressed_contacts(&placed, inspection, setup, allowance_mm);
     let idx = cores_near(inspection, setup.index, &contacts, &influence);
     let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
         .iter()
@@ -209,7 +210,6 @@ fn region_verdict(
     let a = removal::influence::matrix(&influence, &contacts, &geometry);
     let linear = removal::influence::apply(&a, dwell, cores.len());
     // the pass as the tool grinds it, contact by contact (`removal::sequence`)
-    let placed: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
     let surface: Vec<SurfacePoint> = idx.iter().map(|&i| inspection.points[i]).collect();
     let removed = removal::sequence::in_order(&placed, dwell, tool, &influence, &surface);
     let before: Vec<f64> = cores.iter().map(|c| c.2).collect();

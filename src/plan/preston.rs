@@ -127,19 +127,26 @@ pub fn contact(piece: &PlannedPass, robot: &Robot, back: &Matrix3<f64>) -> Conta
     }
 }
 
-/// The contacts of `pieces` (`contact`) pressed as the part really is: each one's force from
-/// the inspection's deviation around it, the plan removing down to `allowance` mm
+/// The contacts of `pieces` as the raster placed them (`contact`: nominal point and normal).
+pub(crate) fn placed_contacts(pieces: &[&PlannedPass], setup: &Setup) -> Vec<Contact> {
+    let back = reference_from_robot(setup.workcell);
+    pieces
+        .iter()
+        .map(|p| contact(p, setup.robot, &back))
+        .collect()
+}
+
+/// The `placed` contacts pressed as the part really is: each one's force from the
+/// inspection's deviation around it, the plan removing down to `allowance` mm
 /// (`removal::press`).
 pub(crate) fn pressed_contacts(
-    pieces: &[&PlannedPass],
+    placed: &[Contact],
     inspection: &Inspection,
     setup: &Setup,
     allowance: f64,
 ) -> Vec<Contact> {
-    let back = reference_from_robot(setup.workcell);
-    let robot = setup.robot;
-    let mut contacts: Vec<Contact> = pieces.iter().map(|p| contact(p, robot, &back)).collect();
-    let influence = Influence::new(setup.tool, robot.tool.radius * 1e3);
+    let mut contacts = placed.to_vec();
+    let influence = Influence::new(setup.tool, setup.robot.tool.radius * 1e3);
     let cores = (inspection.points.as_slice(), setup.index);
     removal::press::press(&mut contacts, setup.tool, &influence, cores, allowance);
     contacts
@@ -258,7 +265,8 @@ pub fn set_dwell(
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
     let influence = Influence::new(tool, robot.tool.radius * 1e3);
     let bench = (inspection, setup);
-    let (mut contacts, mut cores) = in_reach(&pieces, bench, &influence, allowance);
+    let placed = placed_contacts(&pieces, setup);
+    let (mut contacts, mut cores) = in_reach(&placed, bench, &influence, allowance);
     let mut allowance = allowance;
     let highest = cores
         .iter()
@@ -267,7 +275,7 @@ pub fn set_dwell(
         .fold(0.0, f64::max);
     if highest - solve.max_pass_mm > allowance {
         allowance = highest - solve.max_pass_mm;
-        (contacts, cores) = in_reach(&pieces, bench, &influence, allowance);
+        (contacts, cores) = in_reach(&placed, bench, &influence, allowance);
     }
     for (p, c) in pieces.iter().zip(&contacts) {
         check_force(p, c, region.id, setup)?;
@@ -282,7 +290,7 @@ pub fn set_dwell(
         )));
     }
     let bounds = (&influence, &solve);
-    let plan = match solve_in_order(&pieces, setup, bounds, (&contacts, &cores), allowance) {
+    let plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), allowance) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
     };
@@ -318,23 +326,18 @@ const IN_ORDER_ROUNDS: usize = 2;
 /// The dwell of one region solved for the pass as the tool grinds it: on the linear model
 /// first (`removal::solve_region`), then [`IN_ORDER_ROUNDS`] times again with each core
 /// point's target raised by what the linear model removes there beyond the contacts ground in
-/// order (r' = r + A t - S(t), S `removal::sequence::in_order`), so that the pass ground in
-/// order removes the target.
+/// order (r' = r + A t - S(t), S `removal::sequence::in_order` of the `placed` contacts),
+/// so that the pass ground in order removes the target.
 fn solve_in_order(
-    pieces: &[&PlannedPass],
-    setup: &Setup,
+    placed: &[Contact],
+    tool: &ToolModel,
     (influence, solve): (&Influence, &removal::RemovalConfig),
     (contacts, cores): (&[Contact], &[SurfacePoint]),
     allowance: f64,
 ) -> Result<removal::RegionRemoval, String> {
-    let back = reference_from_robot(setup.workcell);
-    let placed: Vec<Contact> = pieces
-        .iter()
-        .map(|p| contact(p, setup.robot, &back))
-        .collect();
     let mut plan = removal::solve_region(influence, contacts, cores, allowance, solve)?;
     for _ in 0..IN_ORDER_ROUNDS {
-        let order = removal::sequence::in_order(&placed, &plan.dwell, setup.tool, influence, cores);
+        let order = removal::sequence::in_order(placed, &plan.dwell, tool, influence, cores);
         let aimed: Vec<SurfacePoint> = cores
             .iter()
             .zip(plan.removal.iter().zip(&order))
@@ -370,15 +373,15 @@ fn lift_over(runs: Vec<Run>, lifted: &[bool]) -> Vec<Run> {
     out
 }
 
-/// The contacts of `pieces` pressed for a plan down to `allowance` mm (`pressed_contacts`) and
+/// The `placed` contacts pressed for a plan down to `allowance` mm (`pressed_contacts`) and
 /// the core points in their reach under the tool's `influence` (`cores_near`).
 fn in_reach(
-    pieces: &[&PlannedPass],
+    placed: &[Contact],
     (inspection, setup): (&Inspection, &Setup),
     influence: &Influence,
     allowance: f64,
 ) -> (Vec<Contact>, Vec<SurfacePoint>) {
-    let contacts = pressed_contacts(pieces, inspection, setup, allowance);
+    let contacts = pressed_contacts(placed, inspection, setup, allowance);
     let cores = cores_near(inspection, setup.index, &contacts, influence)
         .into_iter()
         .map(|i| inspection.points[i])

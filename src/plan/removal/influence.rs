@@ -241,6 +241,11 @@ impl<'a> Reach<'a> {
         }
     }
 
+    /// The index of the core points' positions.
+    pub fn neighbours(&self) -> &Neighbours {
+        &self.index
+    }
+
     /// One column of A: the removal depth per second of dwell at contact `c` at every core
     /// point in reach, the influence averaged over the contact's piece of stroke.
     pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {

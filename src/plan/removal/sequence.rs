@@ -11,7 +11,6 @@ use super::influence::{Contact, Influence, Reach};
 use super::press::press;
 use super::tool::ToolModel;
 use crate::plan::inspection::SurfacePoint;
-use crate::spatial::Neighbours;
 
 /// The removal at every one of `cores` (mm) of `contacts` (as the raster placed them: the
 /// nominal point and normal, not yet pressed) ground in order for `dwell` s each.
@@ -22,8 +21,6 @@ pub fn in_order(
     influence: &Influence,
     cores: &[SurfacePoint],
 ) -> Vec<f64> {
-    let positions: Vec<Point3<f64>> = cores.iter().map(|c| c.position).collect();
-    let index = Neighbours::new(&positions);
     let geometry: Vec<(Point3<f64>, Vector3<f64>)> =
         cores.iter().map(|c| (c.position, c.normal)).collect();
     let reach = Reach::new(&geometry);
@@ -35,7 +32,13 @@ pub fn in_order(
         }
         let mut c = [*placed];
         // no allowance: the force is the penetration into the part as it is now
-        press(&mut c, tool, influence, (&part, &index), f64::INFINITY);
+        press(
+            &mut c,
+            tool,
+            influence,
+            (&part, reach.neighbours()),
+            f64::INFINITY,
+        );
         for (j, v) in reach.column(influence, &c[0]) {
             removed[j] += v * t;
             part[j].distance -= v * t;
@@ -46,7 +49,9 @@ pub fn in_order(
 
 #[cfg(test)]
 mod tests {
+    use super::super::influence::{apply, matrix};
     use super::*;
+    use crate::spatial::Neighbours;
 
     /// A flat part 0.1 mm above nominal ground at one spot for two seconds in order: the first
     /// second presses with 2.1 mm of penetration and leaves a dip, and the second presses on
@@ -103,8 +108,8 @@ mod tests {
             (&cores, &index),
             f64::INFINITY,
         );
-        let a = super::super::influence::matrix(&influence, &pressed, &geometry);
-        let linear = super::super::influence::apply(&a, &[1.0, 1.0], cores.len())[centre];
+        let a = matrix(&influence, &pressed, &geometry);
+        let linear = apply(&a, &[1.0, 1.0], cores.len())[centre];
         assert!(
             (linear - 2.0 * once).abs() < 1e-12 * once,
             "{linear} {once}"
