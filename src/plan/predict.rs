@@ -207,11 +207,13 @@ fn region_verdict(
         })
         .collect();
     let geometry: Vec<(Point3<f64>, Vector3<f64>)> = cores.iter().map(|c| (c.0, c.1)).collect();
-    let a = removal::influence::matrix(&influence, &contacts, &geometry);
+    let reach = removal::influence::Reach::new(&geometry);
+    let a = reach.matrix(&influence, &contacts);
     let linear = removal::influence::apply(&a, dwell, cores.len());
     // the pass as the tool grinds it, contact by contact (`removal::sequence`)
     let surface: Vec<SurfacePoint> = idx.iter().map(|&i| inspection.points[i]).collect();
-    let removed = removal::sequence::in_order(&placed, dwell, tool, &influence, &surface);
+    let ground = (surface.as_slice(), &reach);
+    let removed = removal::sequence::in_order(&placed, dwell, tool, &influence, ground);
     let before: Vec<f64> = cores.iter().map(|c| c.2).collect();
     let after: Vec<f64> = before.iter().zip(&removed).map(|(d, r)| d - r).collect();
     let mc = &config.monte_carlo;

@@ -336,8 +336,11 @@ fn solve_in_order(
     allowance: f64,
 ) -> Result<removal::RegionRemoval, String> {
     let mut plan = removal::solve_region(influence, contacts, cores, allowance, solve)?;
+    let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
+    let reach = removal::influence::Reach::new(&geometry);
     for _ in 0..IN_ORDER_ROUNDS {
-        let order = removal::sequence::in_order(placed, &plan.dwell, tool, influence, cores);
+        let ground = (cores, &reach);
+        let order = removal::sequence::in_order(placed, &plan.dwell, tool, influence, ground);
         let aimed: Vec<SurfacePoint> = cores
             .iter()
             .zip(plan.removal.iter().zip(&order))

@@ -246,6 +246,11 @@ impl<'a> Reach<'a> {
         &self.index
     }
 
+    /// A by columns: one [`Reach::column`] per contact of `contacts`.
+    pub fn matrix(&self, influence: &Influence, contacts: &[Contact]) -> Columns {
+        contacts.iter().map(|c| self.column(influence, c)).collect()
+    }
+
     /// One column of A: the removal depth per second of dwell at contact `c` at every core
     /// point in reach, the influence averaged over the contact's piece of stroke.
     pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {
@@ -320,11 +325,7 @@ pub fn matrix(
     contacts: &[Contact],
     cores: &[(Point3<f64>, Vector3<f64>)],
 ) -> Columns {
-    let reach = Reach::new(cores);
-    contacts
-        .iter()
-        .map(|c| reach.column(influence, c))
-        .collect()
+    Reach::new(cores).matrix(influence, contacts)
 }
 
 /// A t: the removal depth at every one of `n` core points, mm.

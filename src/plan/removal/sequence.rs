@@ -5,25 +5,21 @@
 //! down during the pass, so the later contacts press it with less force and meet a flatter
 //! surface whose normal has turned back towards nominal, which at the spindle's tilt changes the
 //! abrasive's speed by cot(tilt) per radian. Method: docs/ALGORITHMS.md, "Removal planning".
-use nalgebra::{Point3, Vector3};
-
 use super::influence::{Contact, Influence, Reach};
 use super::press::press;
 use super::tool::ToolModel;
 use crate::plan::inspection::SurfacePoint;
 
 /// The removal at every one of `cores` (mm) of `contacts` (as the raster placed them: the
-/// nominal point and normal, not yet pressed) ground in order for `dwell` s each.
+/// nominal point and normal, not yet pressed) ground in order for `dwell` s each; `reach`
+/// indexes the same core points (the caller's, which its A was built on).
 pub fn in_order(
     contacts: &[Contact],
     dwell: &[f64],
     tool: &ToolModel,
     influence: &Influence,
-    cores: &[SurfacePoint],
+    (cores, reach): (&[SurfacePoint], &Reach),
 ) -> Vec<f64> {
-    let geometry: Vec<(Point3<f64>, Vector3<f64>)> =
-        cores.iter().map(|c| (c.position, c.normal)).collect();
-    let reach = Reach::new(&geometry);
     let mut part = cores.to_vec();
     let mut removed = vec![0.0; cores.len()];
     for (placed, &t) in contacts.iter().zip(dwell) {
@@ -49,9 +45,9 @@ pub fn in_order(
 
 #[cfg(test)]
 mod tests {
-    use super::super::influence::{apply, matrix};
+    use super::super::influence::apply;
     use super::*;
-    use crate::spatial::Neighbours;
+    use nalgebra::{Point3, Vector3};
 
     /// A flat part 0.1 mm above nominal ground at one spot for two seconds in order: the first
     /// second presses with 2.1 mm of penetration and leaves a dip, and the second presses on
@@ -86,29 +82,34 @@ mod tests {
             offset: Vector3::zeros(),
         };
         let centre = 20 * 41 + 20;
+        let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
+        let reach = Reach::new(&geometry);
         let once = in_order(
             std::slice::from_ref(&spot),
             &[1.0],
             &tool,
             &influence,
-            &cores,
+            (&cores, &reach),
         )[centre];
-        let twice = in_order(&[spot, spot], &[1.0, 1.0], &tool, &influence, &cores)[centre];
+        let twice = in_order(
+            &[spot, spot],
+            &[1.0, 1.0],
+            &tool,
+            &influence,
+            (&cores, &reach),
+        )[centre];
         assert!(once > 0.001, "{once}");
         let second = (twice - once) / once;
         assert!(second > 0.97 && second < 0.99, "{once} {twice}");
-        let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
-        let positions: Vec<_> = cores.iter().map(|c| c.position).collect();
         let mut pressed = [spot, spot];
-        let index = Neighbours::new(&positions);
         press(
             &mut pressed,
             &tool,
             &influence,
-            (&cores, &index),
+            (&cores, reach.neighbours()),
             f64::INFINITY,
         );
-        let a = matrix(&influence, &pressed, &geometry);
+        let a = reach.matrix(&influence, &pressed);
         let linear = apply(&a, &[1.0, 1.0], cores.len())[centre];
         assert!(
             (linear - 2.0 * once).abs() < 1e-12 * once,
