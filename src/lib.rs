@@ -11,6 +11,7 @@ pub mod cli;
 pub mod cloud;
 pub mod compare;
 mod defaults;
+pub mod design;
 pub mod grind_sim;
 pub mod inspect;
 pub mod plan;
