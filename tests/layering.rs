@@ -148,13 +148,13 @@ fn the_plan_does_not_import_bus() {
 }
 
 /// The motion half's floors, lowest first, as DESIGN.md's flow has them: the board's driver
-/// and simulator (`bus`) and the arm's model (`robot`) know nothing of a plan, the cell that
-/// streams it or the simulated grind that runs above the simulator.
+/// (`bus`) and the arm's model (`robot`) know nothing of a plan, the cell that streams it or
+/// the simulator; the simulator (`sim`) plugs into the bus and shares nothing with the planner.
 const MOTION_RULES: [(&str, &[&str]); 4] = [
-    ("robot", &["bus", "plan", "cell", "grind_sim", "inspect"]),
-    ("bus", &["plan", "cell", "grind_sim", "inspect"]),
-    ("plan", &["cell", "grind_sim", "inspect"]),
-    ("grind_sim", &["plan", "cell"]),
+    ("robot", &["bus", "plan", "cell", "sim", "inspect"]),
+    ("bus", &["plan", "cell", "sim", "inspect"]),
+    ("plan", &["cell", "sim", "inspect"]),
+    ("sim", &["plan", "cell", "robot", "inspect"]),
 ];
 
 #[test]
