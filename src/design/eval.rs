@@ -4,7 +4,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
-use super::{Part, SampleVerdict};
+use super::part::{Part, SampleVerdict};
 use crate::plan::collide::{Allow, Hit, Obstacle, Scene};
 use crate::plan::{PlanConfig, Solid};
 use crate::robot::{IkTarget, Robot, Servo, Turntable, Unreachable, Workcell};

@@ -1,12 +1,11 @@
 //! The search: a coarse grid of table axes, part mountings, table places and shanks scored on
 //! a few surface samples, the best re-scored on more, then local refinement of the winner.
-use std::f64::consts::FRAC_1_SQRT_2;
 
 use nalgebra::{Rotation3, Unit, Vector3};
 use rayon::prelude::*;
 
+use super::config::DesignConfig;
 use super::eval::{score, Candidate, Context};
-use super::DesignConfig;
 
 /// What the search found.
 pub struct Found {
@@ -17,18 +16,6 @@ pub struct Found {
     /// The best coverage of each table-axis family at the ranking stage.
     pub alternatives: Vec<(String, f64, Candidate)>,
 }
-
-/// Table axes of the grid (robot frame; the fixture is on the lower side, so none points
-/// down): vertical, horizontal across and along the arm plane, tilted 45 degrees on a
-/// bracket towards, away from and across the arm plane.
-pub const AXES: [[f64; 3]; 6] = [
-    [0.0, 0.0, 1.0],
-    [1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, -FRAC_1_SQRT_2, FRAC_1_SQRT_2],
-    [0.0, FRAC_1_SQRT_2, FRAC_1_SQRT_2],
-    [FRAC_1_SQRT_2, 0.0, FRAC_1_SQRT_2],
-];
 
 /// First refinement steps: table place, m (20 mm), and turns of the mount and the axis,
 /// degrees (15); each round halves them.
