@@ -60,3 +60,49 @@ fn survey_of_hand_picked_cells() {
         }
     }
 }
+
+/// The shipped cell for femoral components (calibration/femoral/, written by `cell design`)
+/// scores again what its design.json says when assessed apart from the search (same samples,
+/// same rules), and no less than the 85 % the design reached (issue 51 asks 95 %: the notch
+/// walls and the condyles' side faces stay out, docs/ALGORITHMS.md "Cell design"); every
+/// sample it leaves out names a rule and a table angle.
+#[test]
+fn the_shipped_femoral_cell_reaches_what_its_design_says() {
+    let text = std::fs::read_to_string(calib("femoral/design.json")).unwrap();
+    let doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let c = &doc["candidate"];
+    let v3 = |k: &str| -> [f64; 3] { std::array::from_fn(|i| c[k][i].as_f64().unwrap()) };
+    let candidate = Candidate {
+        axis: v3("axis"),
+        mount: v3("mount"),
+        centre: v3("centre"),
+        shank: 0,
+        shank_m: c["shank_m"].as_f64().unwrap(),
+    };
+    let cfg = DesignConfig::default();
+    let part = femoral_part(&cfg);
+    let source = SourceCell::load(&calib("turntable")).unwrap();
+    let d = design::assess(&part, &source, &cfg, &candidate).unwrap();
+    let said = doc["coverage"].as_f64().unwrap();
+    println!(
+        "shipped cell: {:.1} % ({:?})",
+        100.0 * d.coverage,
+        d.refused
+    );
+    assert!(
+        (d.coverage - said).abs() < 1e-12,
+        "{} vs {said}",
+        d.coverage
+    );
+    assert!(d.coverage >= 0.85, "{}", d.coverage);
+    for s in d.samples.iter().filter(|s| s.angle_deg.is_none()) {
+        assert!(s.refused_by.is_some() && s.nearest_angle_deg.is_some());
+    }
+    // the workcell written beside it places the part as the candidate does
+    let wc = polishbot::robot::Workcell::load(&calib("femoral/workcell.toml")).unwrap();
+    for (r, row) in d.robot_from_reference.iter().enumerate() {
+        for (k, v) in row.iter().enumerate() {
+            assert!((wc.robot_from_reference[(r, k)] - v).abs() < 1e-6);
+        }
+    }
+}
