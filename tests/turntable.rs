@@ -13,18 +13,6 @@ use polishbot::plan::{plan_cell, table_file};
 use polishbot::robot::{Robot, Turntable};
 use polishbot::sim::{ExtraServo, SimArm, SimOptions};
 
-/// Covered and total repairable area of a plan, mm^2 (coverage of all the region's points
-/// times its area).
-fn covered(plan: &polishbot::plan::Plan) -> (f64, f64) {
-    plan.reachability
-        .regions
-        .iter()
-        .filter(|r| r.repairable)
-        .fold((0.0, 0.0), |(c, t), r| {
-            (c + r.coverage_of_all * r.area_mm2, t + r.area_mm2)
-        })
-}
-
 /// Ten synth parts with random defects on the articular surface: the turntable cell covers at
 /// least 90 % of their repairable area; today's figure (the same cell without turning) is
 /// printed beside it. Every table move is a valid, rest-to-rest run of 0x19 frames for servo 7.
@@ -41,13 +29,13 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
         // today's planner refuses some of these parts outright (a retract it cannot clear):
         // that case counts as nothing covered
         let (c0, t0) = match plan_cell(&insp, &plain_robot, &plain_wc, None, &plain) {
-            Ok(fixed) => covered(&fixed),
+            Ok(fixed) => common::femoral::planned_area(&fixed),
             Err(e) => {
                 println!("case {seed}: without the table: {e}");
-                (0.0, covered(&turned).1)
+                (0.0, common::femoral::planned_area(&turned).1)
             }
         };
-        let (c, t) = covered(&turned);
+        let (c, t) = common::femoral::planned_area(&turned);
         assert!((t - t0).abs() < 1e-9);
         let tp = turned.turntable.as_ref().expect("table part");
         println!(

@@ -106,17 +106,7 @@ pub fn design(part: &Part, source: &SourceCell, cfg: &DesignConfig) -> Result<De
         .iter()
         .map(|&s| source.robot(s))
         .collect::<Result<Vec<_>>>()?;
-    let ctx = eval::Context {
-        part,
-        robots: &robots,
-        shanks: &cfg.shanks_m,
-        plan: &plan,
-        servo: source
-            .servos
-            .turntable
-            .clone()
-            .context("no turntable servo")?,
-    };
+    let ctx = context(part, source, &robots, &cfg.shanks_m, &plan)?;
     let found = search::run(&ctx, cfg);
     let mut d = assess_in(&ctx, &found.best, cfg)?;
     d.candidates_scored = found.scored;
@@ -135,22 +125,33 @@ pub fn assess(
     let robot = source.robot(candidate.shank_m)?;
     let robots = vec![robot];
     let shanks = [candidate.shank_m];
-    let ctx = eval::Context {
-        part,
-        robots: &robots,
-        shanks: &shanks,
-        plan: &plan,
-        servo: source
-            .servos
-            .turntable
-            .clone()
-            .context("no turntable servo")?,
-    };
+    let ctx = context(part, source, &robots, &shanks, &plan)?;
     let one = Candidate {
         shank: 0,
         ..candidate.clone()
     };
     assess_in(&ctx, &one, cfg)
+}
+
+/// The scoring context of `part` in `source`'s cell with one arm per shank.
+fn context<'a>(
+    part: &'a Part,
+    source: &SourceCell,
+    robots: &'a [Robot],
+    shanks: &'a [f64],
+    plan: &'a PlanConfig,
+) -> Result<eval::Context<'a>> {
+    Ok(eval::Context {
+        part,
+        robots,
+        shanks,
+        plan,
+        servo: source
+            .servos
+            .turntable
+            .clone()
+            .context("no turntable servo")?,
+    })
 }
 
 fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Result<Design> {
