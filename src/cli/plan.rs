@@ -62,6 +62,8 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
         cfg.plan.mode = mode;
     }
     let (robot, workcell) = robot::load(&cfg.robot)?;
+    // the tool file's [removal] checked here, so that its errors name the file's full path
+    crate::plan::removal::ToolModel::load(&cfg.robot.tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
         plan::PlanError::Config(m) => file.refuse("plan", &m),
         e => e.into(),
