@@ -45,9 +45,9 @@ pub fn prediction(
     tool: &Path,
     before: &Inspection,
 ) -> anyhow::Result<(Vec<f64>, f64)> {
-    let text = std::fs::read_to_string(plan)
+    let plan_text = std::fs::read_to_string(plan)
         .with_context(|| format!("{}: cannot read", plan.display()))?;
-    let loaded = Plan::parse(plan, &text)?;
+    let loaded = Plan::parse(plan, &plan_text)?;
     anyhow::ensure!(
         loaded.removal.is_some(),
         "{}: no `removal` prediction (a rigid plan): k is fitted against a plan made with \
@@ -59,7 +59,7 @@ pub fn prediction(
         .with_context(|| format!("{}: cannot read (written beside plan.json)", csv.display()))?;
     let rows = removal_fit::parse_predicted(&text)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
-    let recorded = serde_json::from_str::<serde_json::Value>(&text)?["provenance"]["config"]
+    let recorded = serde_json::from_str::<serde_json::Value>(&plan_text)?["provenance"]["config"]
         ["removal_tool"]["preston_k_mm2_n"]
         .as_f64();
     let k = match recorded {
