@@ -249,7 +249,10 @@ fn inspect_says_incomplete_without_evidence() {
         .output()
         .unwrap();
     let line = common::one_line_failure(&run);
-    assert!(line.contains("tiny.ply") && line.contains("too sparse"), "{line}");
+    assert!(
+        line.contains("tiny.ply") && line.contains("too sparse"),
+        "{line}"
+    );
     for (name, scan, incomplete) in [("half", &half, true), ("full", &case.scan, false)] {
         let scan_file = d.join(format!("{name}.ply"));
         cloud::write_ply(&scan_file, scan, None, PlyPrecision::F64).unwrap();

@@ -119,10 +119,17 @@ fn cycle_refuses_a_used_output_folder_unless_told_to_replace_it() {
     std::fs::write(out.join("iter-1/plan.json"), "{}").unwrap();
     let cycle = |extra: &[&str]| {
         let mut cmd = polishbot();
-        cmd.args(["cycle", "--sim", "--reference", "missing.ply", "--scan", "missing.ply"])
-            .arg("-o")
-            .arg(&out)
-            .args(extra);
+        cmd.args([
+            "cycle",
+            "--sim",
+            "--reference",
+            "missing.ply",
+            "--scan",
+            "missing.ply",
+        ])
+        .arg("-o")
+        .arg(&out)
+        .args(extra);
         cmd.output().unwrap()
     };
     let line = one_line_failure(&cycle(&[]));
@@ -153,7 +160,10 @@ fn merge_refuses_non_finite_and_duplicate_angles_and_absurd_centres() {
         one_line_failure(&cmd.output().unwrap())
     };
     let inf = merge(&["--angles", "0,inf"]);
-    assert!(inf.contains("--angles: view 1") && inf.contains("finite"), "{inf}");
+    assert!(
+        inf.contains("--angles: view 1") && inf.contains("finite"),
+        "{inf}"
+    );
     let twice = merge(&["--angles", "10,370"]);
     assert!(twice.contains("views 0 and 1"), "{twice}");
     let nan = merge(&["--angles", "0,180", "--centre", "NaN,0,0"]);
@@ -163,7 +173,10 @@ fn merge_refuses_non_finite_and_duplicate_angles_and_absurd_centres() {
     let cal = tmp.path().join("cal.json");
     std::fs::write(&cal, r#"{"axis": [0, 0, 1], "centre": [1e300, 0, 0]}"#).unwrap();
     let file = merge(&["--angles", "0,180", "--calibration", cal.to_str().unwrap()]);
-    assert!(file.contains("cal.json") && file.contains("centre"), "{file}");
+    assert!(
+        file.contains("cal.json") && file.contains("centre"),
+        "{file}"
+    );
 }
 
 #[test]
@@ -214,9 +227,8 @@ fn plan_with_tool(edit: impl Fn(&str) -> String) -> String {
 
 #[test]
 fn a_tool_whose_ball_sits_in_the_flange_is_refused_at_tip_offset() {
-    let line = plan_with_tool(|t| {
-        t.replace("tip_offset = [0.0, 0.0, 0.0193]", "tip_offset = [0, 0, 0]")
-    });
+    let line =
+        plan_with_tool(|t| t.replace("tip_offset = [0.0, 0.0, 0.0193]", "tip_offset = [0, 0, 0]"));
     assert!(
         line.contains("cell/tool.toml") && line.contains("tip_offset") && line.contains("flange"),
         "{line}"

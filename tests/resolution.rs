@@ -19,13 +19,15 @@ fn case() -> &'static PathBuf {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let d = dir.display();
-        succeed(polishbot().args(
-            format!(
-                "synth --out {d} --seed 5 --defects 3 --reference-points 100000 \
+        succeed(
+            polishbot().args(
+                format!(
+                    "synth --out {d} --seed 5 --defects 3 --reference-points 100000 \
                  --scan-points 100000 --height-range 0.15,0.35 --width-range 2,3"
-            )
-            .split_whitespace(),
-        ));
+                )
+                .split_whitespace(),
+            ),
+        );
         let reference = cloud::load_cloud(&dir.join("reference.ply"), None, None).unwrap();
         let core = reference.select(&(0..10).map(|i| i * 9_973).collect::<Vec<usize>>());
         cloud::write_ply(&dir.join("core10.ply"), &core, None, PlyPrecision::F64).unwrap();
@@ -124,7 +126,11 @@ fn a_pose_far_off_and_a_hundred_point_scan_are_refused() {
     let mut rows = truth["scan_to_reference"].clone();
     rows[0][3] = 1e300.into();
     let far = d.join("pose_far.json");
-    std::fs::write(&far, serde_json::json!({ "scan_to_reference": rows }).to_string()).unwrap();
+    std::fs::write(
+        &far,
+        serde_json::json!({ "scan_to_reference": rows }).to_string(),
+    )
+    .unwrap();
     let run = polishbot()
         .arg("inspect")
         .arg("--reference")
@@ -138,7 +144,10 @@ fn a_pose_far_off_and_a_hundred_point_scan_are_refused() {
         .output()
         .unwrap();
     let line = common::one_line_failure(&run);
-    assert!(line.contains("pose_far.json") && line.contains("--pose"), "{line}");
+    assert!(
+        line.contains("pose_far.json") && line.contains("--pose"),
+        "{line}"
+    );
     let scan = cloud::load_cloud(&d.join("scan.ply"), None, None).unwrap();
     let few = scan.select(&(0..100).map(|i| i * 997).collect::<Vec<usize>>());
     cloud::write_ply(&d.join("scan100.ply"), &few, None, PlyPrecision::F64).unwrap();
@@ -155,5 +164,8 @@ fn a_pose_far_off_and_a_hundred_point_scan_are_refused() {
         .output()
         .unwrap();
     let line = common::one_line_failure(&run);
-    assert!(line.contains("scan100.ply") && line.contains("too sparse"), "{line}");
+    assert!(
+        line.contains("scan100.ply") && line.contains("too sparse"),
+        "{line}"
+    );
 }

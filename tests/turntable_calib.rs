@@ -187,8 +187,13 @@ fn degenerate_turntable_touches_are_refused_with_the_reason() {
         let touches = angles.iter().map(|&a| touch(at(a))).collect();
         fit_turntable(listed, touches, &cfg)
     };
-    let one = fit(&angles, &|_| fiducial(0.0), &angles).unwrap_err().to_string();
-    assert!(one.contains("radius") && one.contains("need at least 10 mm"), "{one}");
+    let one = fit(&angles, &|_| fiducial(0.0), &angles)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        one.contains("radius") && one.contains("need at least 10 mm"),
+        "{one}"
+    );
     let tiny = fit(&angles, &|a| fiducial(a / 100.0), &angles)
         .unwrap_err()
         .to_string();
@@ -198,7 +203,11 @@ fn degenerate_turntable_touches_are_refused_with_the_reason() {
     assert!(order.contains("not in the order of the touches"), "{order}");
     // the same touches in their own order fit, with the planted axis's sign
     let good = fit(&angles, &fiducial, &angles).unwrap();
-    assert!(Vector3::from(good.axis).dot(&planted().0) > 0.999, "{:?}", good.axis);
+    assert!(
+        Vector3::from(good.axis).dot(&planted().0) > 0.999,
+        "{:?}",
+        good.axis
+    );
 }
 
 /// `calibrate turntable --sim --cell calibration/turntable --targets FILE`: the table turns to

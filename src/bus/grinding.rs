@@ -149,10 +149,22 @@ impl GrindConfig {
                 .then(|| format!("`{key}` = {v:?} {unit} is outside {lo:?}..={hi:?} {unit}"))
         };
         let mut found = [
-            within("preston_k", self.preston_k, PRESTON_K_RANGE.0, PRESTON_K_RANGE.1, "mm^2/N"),
+            within(
+                "preston_k",
+                self.preston_k,
+                PRESTON_K_RANGE.0,
+                PRESTON_K_RANGE.1,
+                "mm^2/N",
+            ),
             within("k_factor", self.k_factor, 0.01, 100.0, ""),
             within("k_noise", self.k_noise, 0.0, 0.99, "(share)"),
-            within("k_noise_wavelength_mm", self.k_noise_wavelength_mm, 0.01, 1e4, "mm"),
+            within(
+                "k_noise_wavelength_mm",
+                self.k_noise_wavelength_mm,
+                0.01,
+                1e4,
+                "mm",
+            ),
             within(
                 "pressure_exponent",
                 self.pressure_exponent,
@@ -161,12 +173,36 @@ impl GrindConfig {
                 "",
             ),
             within("speed_exponent", self.speed_exponent, 0.0, MAX_EXPONENT, ""),
-            within("reference_pressure_mpa", self.reference_pressure_mpa, 1e-3, MODULUS_RANGE.1, "MPa"),
-            within("reference_speed_mm_s", self.reference_speed_mm_s, 1e-3, 1e6, "mm/s"),
+            within(
+                "reference_pressure_mpa",
+                self.reference_pressure_mpa,
+                1e-3,
+                MODULUS_RANGE.1,
+                "MPa",
+            ),
+            within(
+                "reference_speed_mm_s",
+                self.reference_speed_mm_s,
+                1e-3,
+                1e6,
+                "mm/s",
+            ),
             within("spring_rate_n_mm", self.spring_rate_n_mm, 1e-3, 1e4, "N/mm"),
-            within("modulus_mpa", self.modulus_mpa, MODULUS_RANGE.0, MODULUS_RANGE.1, "MPa"),
+            within(
+                "modulus_mpa",
+                self.modulus_mpa,
+                MODULUS_RANGE.0,
+                MODULUS_RANGE.1,
+                "MPa",
+            ),
             within("spindle_rpm", self.spindle_rpm, 0.0, 1e6, "rev/min"),
-            within("ball_radius_mm", self.ball_radius_mm, BALL_RADIUS_RANGE.0, BALL_RADIUS_RANGE.1, "mm"),
+            within(
+                "ball_radius_mm",
+                self.ball_radius_mm,
+                BALL_RADIUS_RANGE.0,
+                BALL_RADIUS_RANGE.1,
+                "mm",
+            ),
             within("rescan_noise_mm", self.rescan_noise_mm, 0.0, 5.0, "mm"),
             within(
                 "rescan_outliers",

@@ -56,12 +56,30 @@ const DEMO_CELL: [(&str, &str); 10] = [
     ("servos.toml", include_str!("../../calibration/servos.toml")),
     ("solids.toml", include_str!("../../calibration/solids.toml")),
     ("tool.toml", include_str!("../../calibration/tool.toml")),
-    ("workcell.toml", include_str!("../../calibration/workcell.toml")),
-    ("turntable/dofbot.urdf", include_str!("../../calibration/turntable/dofbot.urdf")),
-    ("turntable/servos.toml", include_str!("../../calibration/turntable/servos.toml")),
-    ("turntable/solids.toml", include_str!("../../calibration/turntable/solids.toml")),
-    ("turntable/tool.toml", include_str!("../../calibration/turntable/tool.toml")),
-    ("turntable/workcell.toml", include_str!("../../calibration/turntable/workcell.toml")),
+    (
+        "workcell.toml",
+        include_str!("../../calibration/workcell.toml"),
+    ),
+    (
+        "turntable/dofbot.urdf",
+        include_str!("../../calibration/turntable/dofbot.urdf"),
+    ),
+    (
+        "turntable/servos.toml",
+        include_str!("../../calibration/turntable/servos.toml"),
+    ),
+    (
+        "turntable/solids.toml",
+        include_str!("../../calibration/turntable/solids.toml"),
+    ),
+    (
+        "turntable/tool.toml",
+        include_str!("../../calibration/turntable/tool.toml"),
+    ),
+    (
+        "turntable/workcell.toml",
+        include_str!("../../calibration/turntable/workcell.toml"),
+    ),
 ];
 
 /// Creates `out`, writes the built-in cell into `out/calibration/` and makes `out` the working
@@ -80,8 +98,7 @@ fn enter_demo_folder(out: &Path) -> Result<PathBuf> {
         }
         std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
     }
-    std::env::set_current_dir(&out)
-        .with_context(|| format!("{}: cannot enter", out.display()))?;
+    std::env::set_current_dir(&out).with_context(|| format!("{}: cannot enter", out.display()))?;
     Ok(out)
 }
 

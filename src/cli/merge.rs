@@ -120,7 +120,10 @@ fn check_axis_centre(axis: Option<[f64; 3]>, centre: Option<[f64; 3]>, place: &s
 /// two views at one angle cannot be told apart by the turn between them.
 fn check_angles(angles: &[f64], place: &str) -> Result<()> {
     if let Some(i) = angles.iter().position(|a| !a.is_finite()) {
-        bail!("{place}: view {i}: angle {} is not a finite number of degrees", angles[i]);
+        bail!(
+            "{place}: view {i}: angle {} is not a finite number of degrees",
+            angles[i]
+        );
     }
     for i in 0..angles.len() {
         for j in i + 1..angles.len() {
@@ -188,7 +191,14 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
             (0..n).map(|i| i as f64 * step).collect()
         }
     };
-    check_angles(&angles, if args.angles.is_some() { "--angles" } else { "--step" })?;
+    check_angles(
+        &angles,
+        if args.angles.is_some() {
+            "--angles"
+        } else {
+            "--step"
+        },
+    )?;
     let views = args
         .scans
         .iter()

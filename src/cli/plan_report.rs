@@ -31,8 +31,7 @@ pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str,
 pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> Result<Provenance> {
     let inputs = plan_inputs(inspection, robot);
     let files: Vec<(&str, &Path)> = inputs.iter().map(|(r, p)| (*r, p.as_path())).collect();
-    let existing: Vec<(&str, &Path)> = files
-        .into_iter().filter(|(_, p)| p.is_file()).collect();
+    let existing: Vec<(&str, &Path)> = files.into_iter().filter(|(_, p)| p.is_file()).collect();
     // the removal model the plan used (its k is what `calibrate removal` scales from)
     let tool = crate::plan::removal::ToolModel::load(&robot.tool).ok();
     let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": tool });

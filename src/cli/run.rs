@@ -162,7 +162,12 @@ fn sha256_hex(bytes: &[u8]) -> String {
 /// provenance records (the inspection's and the cell's, by role) must have the recorded
 /// SHA-256 now; a file the plan did not have must still be absent. A plan without a
 /// provenance block (written by hand or by an older version) is not checked.
-fn check_made_for(plan_path: &Path, text: &str, plan: &Plan, robot: &RobotConfig) -> anyhow::Result<()> {
+fn check_made_for(
+    plan_path: &Path,
+    text: &str,
+    plan: &Plan,
+    robot: &RobotConfig,
+) -> anyhow::Result<()> {
     let value: serde_json::Value = serde_json::from_str(text)?;
     let Some(recorded) = value["provenance"]["inputs"].as_array() else {
         return Ok(());
@@ -176,13 +181,20 @@ fn check_made_for(plan_path: &Path, text: &str, plan: &Plan, robot: &RobotConfig
             "re-plan after calibrating"
         };
         let refuse = |what: String| {
-            anyhow::anyhow!("{}: refused: {role} {}: {what}: {advice}", plan_path.display(), path.display())
+            anyhow::anyhow!(
+                "{}: refused: {role} {}: {what}: {advice}",
+                plan_path.display(),
+                path.display()
+            )
         };
         match (entry, std::fs::read(path)) {
             (None, Err(_)) => {}
             (None, Ok(_)) => return Err(refuse("the plan was made without this file".into())),
             (Some(e), Err(err)) => {
-                return Err(refuse(format!("cannot read it ({err}); the plan was made with {}", e["path"])))
+                return Err(refuse(format!(
+                    "cannot read it ({err}); the plan was made with {}",
+                    e["path"]
+                )))
             }
             (Some(e), Ok(bytes)) => {
                 let sha = sha256_hex(&bytes);

@@ -5,8 +5,8 @@
 use super::collide::CollisionConfig;
 use super::error::PlanError;
 use super::file::{CheckedPlan, Plan};
-use super::program::SegmentKind;
 use super::inspection::Inspection;
+use super::program::SegmentKind;
 use super::table_file::{check, TablePlan};
 use super::validate::ValidationConfig;
 use crate::robot::{Robot, Turntable, Workcell};
