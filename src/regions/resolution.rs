@@ -6,10 +6,11 @@
 //!    defect of [`SMALLEST_DEFECT_MM`] away with the surface around it: a sparse scan makes
 //!    the adaptive radius grow);
 //! 3. its level of detection (LoD95) is at most the tolerance (a larger LoD cannot tell a
-//!    defect at the tolerance from noise: a large `--registration-error` does this);
-//! and it vouches for at most [`MAX_SHARE_MM2`] of area (a disc of the smallest defect's
-//! width): between sparser core points (a `--core` file of a few points) a defect is unseen.
-//! The coverage is the resolved area over the area to inspect.
+//!    defect at the tolerance from noise: a large `--registration-error` does this).
+//!
+//! A resolved core point vouches for at most [`MAX_SHARE_MM2`] of area (a disc of the
+//! smallest defect's width): between sparser core points (a `--core` file of a few points) a
+//! defect is unseen. The coverage is the resolved area over the area to inspect.
 use serde::{Deserialize, Serialize};
 
 use crate::compare::Deviations;
