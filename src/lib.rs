@@ -11,6 +11,7 @@ pub mod cli;
 pub mod cloud;
 pub mod compare;
 mod defaults;
+pub mod design;
 pub mod inspect;
 pub mod plan;
 pub mod preprocess;

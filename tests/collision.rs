@@ -6,6 +6,8 @@ mod common;
 mod heldout;
 #[path = "collision/sweep.rs"]
 mod sweep;
+#[path = "collision/uniform.rs"]
+mod uniform;
 
 use nalgebra::{Matrix4, Point3, Vector3};
 use polishbot::plan::{

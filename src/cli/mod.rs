@@ -9,6 +9,7 @@ mod calibrate;
 mod calibrate_removal;
 mod calibrate_table;
 mod calibrate_verify;
+mod cell;
 mod common;
 mod cycle;
 mod demo;
@@ -61,6 +62,8 @@ pub enum Command {
     Arm(arm::ArmArgs),
     /// Calibration routines: servos, tool, workcell, verify, removal.
     Calibrate(calibrate::CalibrateArgs),
+    /// Cell design: search a turntable cell that reaches a part family's articular surface.
+    Cell(cell::CellArgs),
     /// Write a synthetic reference, a defective moved scan and the truth.
     Synth(Box<synth::SynthArgs>),
     /// The whole chain on a built-in part against the simulated arm.
@@ -103,6 +106,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Run(args) => run::run(args, config),
         Command::Arm(args) => arm::run(args, config),
         Command::Calibrate(args) => calibrate::run(args, config),
+        Command::Cell(args) => cell::run(args, config),
         Command::Demo(args) => demo::run(args, config),
         Command::Cycle(args) => cycle::run(*args, config),
     }

@@ -137,6 +137,21 @@ impl<'a> Scene<'a> {
         }
     }
 
+    /// Moves the part to the placement `wc` and sets the fixed solids (the part's index is
+    /// kept: it lies in the reference frame): the cell design tries many placements of one
+    /// part. Forgets the samples found clear.
+    pub fn place(&mut self, wc: &Workcell, solids: &[Solid]) {
+        self.robot_from_ref = wc.robot_from_reference * Matrix4::new_scaling(1e-3);
+        self.ref_from_robot = self
+            .robot_from_ref
+            .try_inverse()
+            .unwrap_or(Matrix4::new_scaling(1e3));
+        self.cfg.solids = solids.to_vec();
+        if let Ok(c) = self.clear.get_mut() {
+            c.clear();
+        }
+    }
+
     /// The settings.
     pub fn config(&self) -> &CollisionConfig {
         &self.cfg

@@ -3,7 +3,7 @@
 //! normal; the histogram of deviations; tables). Works offline: no CDN, a shipped font.
 mod closeup;
 mod colour;
-mod font;
+pub(crate) mod font;
 mod histogram;
 mod html;
 mod input;

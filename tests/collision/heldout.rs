@@ -24,7 +24,7 @@ const NEAR_EDGE_MM: f64 = 5.0;
 
 /// What the check found over one plan.
 #[derive(Debug, Default)]
-struct Tally {
+pub(super) struct Tally {
     free: usize,
     /// Free samples (all but grinding) with the ball more than 0.1 mm inside the part.
     inside: usize,
@@ -101,8 +101,21 @@ fn turntable_cell(insp: &Inspection) -> (Plan, Tally) {
     let (robot, wc, table, config) = cell("turntable/");
     let table = table.expect("turntable");
     let plan = plan_cell(insp, &robot, &wc, Some(&table), &config).expect("plan");
+    let t = turned_tally(&plan, &robot, insp, &wc, "turntable/");
+    (plan, t)
+}
+
+/// The check of a plan made in the turntable cell `calibration/DIR`, the part turned by this
+/// test from DIR/workcell.toml's `[turntable]` at each sample's table angle.
+pub(super) fn turned_tally(
+    plan: &Plan,
+    robot: &Robot,
+    insp: &Inspection,
+    wc: &Workcell,
+    dir: &str,
+) -> Tally {
     // the table's axis and centre as workcell.toml states them
-    let text = std::fs::read_to_string(calib("turntable/workcell.toml")).expect("workcell");
+    let text = std::fs::read_to_string(calib(&format!("{dir}workcell.toml"))).expect("workcell");
     let doc: toml::Value = toml::from_str(&text).expect("toml");
     let vec3 = |key: &str| {
         let v = doc["turntable"][key].as_array().expect(key);
@@ -134,14 +147,13 @@ fn turntable_cell(insp: &Inspection) -> (Plan, Tally) {
         }
         out
     };
-    let t = tally(&plan, &robot, insp, |i| {
+    tally(plan, robot, insp, |i| {
         angles(i).into_iter().map(turned).collect()
-    });
-    (plan, t)
+    })
 }
 
 /// Prints and asserts the acceptance's numbers for one plan.
-fn accept(what: &str, plan: &Plan, t: &Tally) {
+pub(super) fn accept(what: &str, plan: &Plan, t: &Tally) {
     let ground = plan.passes.iter().map(|p| p.points.len()).sum::<usize>();
     println!(
         "{what}: {ground} contacts ground, {} left out; free {} (ball > 0.1 mm inside: {}, deepest {:.3} mm), grinding {} (second face: {}), shank/links min clearance {:.2} mm",

@@ -1,9 +1,11 @@
 //! Inspections of `synth` cases of the real femoral component, as `inspect` would write them
-//! from a perfect measurement (tests/turntable.rs, tests/collision.rs).
+//! from a perfect measurement (tests/turntable.rs, tests/collision.rs), and the cases like
+//! users' of issue 51 (defects uniform over the articular surface; tests/uniform.rs).
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::Vector3;
-use polishbot::plan::{Inspection, PlanConfig, SurfacePoint};
+use polishbot::plan::{Inspection, Plan, PlanConfig, SurfacePoint};
 use polishbot::regions::Region;
 use polishbot::robot::{Robot, Turntable, Workcell};
 use polishbot::synth::{synth, SynthConfig};
@@ -107,4 +109,61 @@ fn region(id: usize, m: &[usize], points: &[SurfacePoint], per_point: f64) -> Re
         measured_share: 1.0,
         touches_unmeasured: false,
     }
+}
+
+/// Defects per case: 60 over the articular surface, so every part of it gets some (the
+/// default 6 leaves most of it without a defect; half of them are pits, not repairable).
+const DEFECTS: usize = 60;
+
+/// Reference points per case (a quarter of the turntable test's 60,000; 0.5 mm spacing stays
+/// under the ball's 3 mm radius and keeps a plan to seconds).
+const POINTS: usize = 15_000;
+
+/// Seed `seed`'s case: `DEFECTS` defects uniform over the articular surface.
+pub fn uniform_case(seed: u64) -> Inspection {
+    of_case(&SynthConfig {
+        reference_points: POINTS,
+        ..super::femoral_synth(seed, DEFECTS)
+    })
+}
+
+/// The same on synth's parametric femoral part (its own frame: medial-lateral along x).
+pub fn parametric_case(seed: u64) -> Inspection {
+    of_case(&SynthConfig {
+        seed,
+        reference_points: POINTS,
+        scan_points: 1_000,
+        defects: DEFECTS,
+        ..SynthConfig::default()
+    })
+}
+
+/// Planned and total repairable area of a plan, mm^2: per repairable region its area times
+/// the share of its points within the footprint of a planned stroke (plan.json's
+/// `coverage_of_all`).
+pub fn planned_area(plan: &Plan) -> (f64, f64) {
+    plan.reachability
+        .regions
+        .iter()
+        .filter(|r| r.repairable)
+        .fold((0.0, 0.0), |(c, t), r| {
+            (c + r.coverage_of_all * r.area_mm2, t + r.area_mm2)
+        })
+}
+
+/// plan.json's reasons for the contact points it left out, by rule (the reason's words
+/// before its first number or colon).
+pub fn reasons(plan: &Plan) -> BTreeMap<String, usize> {
+    let mut out = BTreeMap::new();
+    for u in &plan.reachability.unreachable {
+        let rule: String = u
+            .reason
+            .split(|c: char| c.is_ascii_digit() || c == ':' || c == '(')
+            .next()
+            .unwrap_or("")
+            .trim()
+            .to_string();
+        *out.entry(rule).or_insert(0) += 1;
+    }
+    out
 }

@@ -1,0 +1,35 @@
+//! Issue 51's acceptance case: defects uniform over femoral_dm's articular surface (placed by
+//! the seed, not for the arm), planned in the shipped cell designed for femoral components
+//! (calibration/femoral/, by `polishbot cell design`): the share of the repairable area
+//! planned, and this suite's clearance check of every sample with the part turned by the test
+//! at each sample's table angle. Rigid mode, as the other cases of this check: removal mode
+//! presses the ball its preload (2 mm) into the part on purpose, which this check (ball depth,
+//! shank from the ball centre) reads as a collision; removal mode's planned share is in
+//! tests/uniform.rs.
+use polishbot::plan::plan_cell;
+
+use super::heldout::{accept, turned_tally};
+use crate::common::femoral::{cell, planned_area, reasons, uniform_case};
+
+/// Least share of the repairable area planned: issue 51's 0.9. The designed cell reaches
+/// 86 % of the articular surface (the design's own score: the notch walls and the condyles'
+/// side faces, whose normals lie along the table axis, stay out of the arm's 45 degree cone at
+/// every table angle); this seed's defects plan to 100 % here and to 90.6 % in removal mode.
+const PLANNED_FLOOR: f64 = 0.90;
+
+#[test]
+fn uniform_defects_on_the_femoral_component_in_the_designed_cell() {
+    let insp = uniform_case(5100);
+    let (robot, wc, table, config) = cell("femoral/");
+    let table = table.expect("the designed cell has a turntable");
+    let plan = plan_cell(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+    let (c, t) = planned_area(&plan);
+    println!(
+        "designed cell: repairable {t:.1} mm^2, planned {:.1} %, left out {:?}",
+        100.0 * c / t,
+        reasons(&plan)
+    );
+    let tally = turned_tally(&plan, &robot, &insp, &wc, "femoral/");
+    accept("uniform defects, designed cell", &plan, &tally);
+    assert!(c / t >= PLANNED_FLOOR, "planned {:.3}", c / t);
+}
