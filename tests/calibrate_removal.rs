@@ -438,6 +438,17 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
     assert!((k / k_true - 1.0).abs() < K_WITHIN, "{k} vs {k_true}");
     assert!(stdout.contains("fit residual RMS"), "{stdout}");
 
+    // run again on the tool file it just wrote: the plan's k comes from the plan, so the same
+    // k is written (issue 52: it compounded 5.85e-6, 6.84e-6, 8.00e-6)
+    common::succeed(&mut calibrate("plan.json"));
+    let again = polishbot::plan::removal::ToolModel::load(&dir.join("tool.toml")).unwrap();
+    assert!(
+        (again.preston_k_mm2_n / k - 1.0).abs() < 1e-9,
+        "{} after {k}",
+        again.preston_k_mm2_n
+    );
+    let written = std::fs::read_to_string(dir.join("tool.toml")).unwrap();
+
     // a rigid plan has no prediction to fit against: refused in one line, the file untouched
     std::fs::create_dir_all(dir.join("rigid")).unwrap();
     plan("rigid", "rigid/plan.json");

@@ -5,10 +5,13 @@ use common::{polishbot, tempdir};
 
 #[test]
 fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
+    // Run in an empty folder with a relative --out, as after `cargo install` (issue 52): the
+    // demo carries its own cell and needs no ./calibration/.
     let dir = tempdir();
     let out = dir.path().join("demo");
     let run = polishbot()
-        .args(["demo", "--out", out.to_str().unwrap()])
+        .current_dir(dir.path())
+        .args(["demo", "--out", "demo"])
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
@@ -41,6 +44,8 @@ fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
         "plan.json",
         "journal.jsonl",
         "trajectory.yaml",
+        "calibration/tool.toml",
+        "calibration/turntable/workcell.toml",
     ] {
         assert!(out.join(f).exists(), "{f} missing");
     }

@@ -163,6 +163,35 @@ fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
     panic!("no case from seed 2000 turns the table");
 }
 
+/// A table plan whose table moves were deleted (issue 52: it streamed with the table never
+/// turning) is refused by run's check, naming the region and its angle; the plan as made
+/// passes the same check.
+#[test]
+fn a_table_plan_without_its_table_moves_is_refused() {
+    let (robot, wc, table, config) = cell("turntable/");
+    let table = table.expect("a turntable");
+    for seed in 2000..2010 {
+        let insp = inspection(seed, 4);
+        let Ok(plan) = plan_cell(&insp, &robot, &wc, Some(&table), &config) else {
+            continue;
+        };
+        if plan.turntable.as_ref().is_none_or(|t| t.moves.is_empty()) {
+            continue;
+        }
+        plan.check_cell(&robot, Some(&table), &Default::default())
+            .expect("the plan as made");
+        let mut cut = plan.clone();
+        cut.turntable.as_mut().unwrap().moves.clear();
+        let err = cut
+            .check_cell(&robot, Some(&table), &Default::default())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("are table moves missing"), "{err}");
+        return;
+    }
+    panic!("no case from seed 2000 turns the table");
+}
+
 /// The table servo as the board emulator knows it: read straight from the cell's servos.toml
 /// (`[turntable]`: id, raw_range, degree_range, velocity), not through polishbot's loader.
 fn board_table() -> board::TableServo {

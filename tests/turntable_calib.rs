@@ -177,6 +177,40 @@ fn bad_turntable_fits_are_refused_with_the_reason() {
     assert!(fit.rms_mm < 1e-9, "{}", fit.rms_mm);
 }
 
+/// Degenerate touches (issue 52) are refused with the reason: five touches at one point
+/// (radius 0), touches over 1.2 degrees of arc for 120 degrees of table, and the angles listed
+/// in another order than the touches (which flipped the axis silently).
+#[test]
+fn degenerate_turntable_touches_are_refused_with_the_reason() {
+    let cfg = CalibrationConfig::default();
+    let angles = [-60.0, -30.0, 0.0, 30.0, 60.0];
+    let fit = |angles: &[f64], at: &dyn Fn(f64) -> Vector3<f64>, listed: &[f64]| {
+        let touches = angles.iter().map(|&a| touch(at(a))).collect();
+        fit_turntable(listed, touches, &cfg)
+    };
+    let one = fit(&angles, &|_| fiducial(0.0), &angles)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        one.contains("radius") && one.contains("need at least 10 mm"),
+        "{one}"
+    );
+    let tiny = fit(&angles, &|a| fiducial(a / 100.0), &angles)
+        .unwrap_err()
+        .to_string();
+    assert!(tiny.contains("did not turn with the table"), "{tiny}");
+    let swapped = [-60.0, 0.0, -30.0, 30.0, 60.0];
+    let order = fit(&angles, &fiducial, &swapped).unwrap_err().to_string();
+    assert!(order.contains("not in the order of the touches"), "{order}");
+    // the same touches in their own order fit, with the planted axis's sign
+    let good = fit(&angles, &fiducial, &angles).unwrap();
+    assert!(
+        Vector3::from(good.axis).dot(&planted().0) > 0.999,
+        "{:?}",
+        good.axis
+    );
+}
+
 /// `calibrate turntable --sim --cell calibration/turntable --targets FILE`: the table turns to
 /// each angle (0x19 frames for servo 7), the scripted touches find the planted circle, and
 /// workcell.toml in --out gets the fitted axis and centre; too few angles are refused before

@@ -171,6 +171,7 @@ pub fn fit_turntable(
                 .join(", ")
         )));
     }
+    check_arc(angles_deg, &pts, (&centre, &axis, &u), radius * 1000.0)?;
     Ok(TableFit {
         axis: axis.into(),
         centre: centre.into(),
@@ -180,6 +181,58 @@ pub fn fit_turntable(
         span_deg,
         touches,
     })
+}
+
+/// Smallest accepted radius of the fiducial's circle, mm: the axis direction comes from the
+/// tips' circle, so its tilt error is about the touch error (0.1-0.3 mm with a hand-jogged
+/// ball) over the radius; at 10 mm that is 1-2 degrees, the most a table plan can use. Five
+/// touches at one point (radius 0) say nothing about the axis.
+pub const MIN_TABLE_RADIUS_MM: f64 = 10.0;
+/// Largest accepted difference between a step of the commanded table angles and the arc the
+/// touched tips turn through about the fitted axis over that step, degrees: a touch error of
+/// 0.3 mm at the 10 mm smallest radius is 1.7 degrees; a fiducial that did not turn with the
+/// table, or angles listed in another order than the touches, misses by tens of degrees.
+pub const MAX_ARC_MISMATCH_DEG: f64 = 5.0;
+
+/// Refuses touches that do not follow the commanded angles: a circle smaller than
+/// [`MIN_TABLE_RADIUS_MM`], or a step between two angles (in the order given) whose touched
+/// arc about the fitted axis (`frame`: centre, axis, an in-plane direction) differs from the
+/// commanded step by more than [`MAX_ARC_MISMATCH_DEG`].
+fn check_arc(
+    angles_deg: &[f64],
+    pts: &[Vector3<f64>],
+    frame: (&Vector3<f64>, &Vector3<f64>, &Vector3<f64>),
+    radius_mm: f64,
+) -> Result<(), CalibError> {
+    if radius_mm.is_nan() || radius_mm < MIN_TABLE_RADIUS_MM {
+        return Err(CalibError::Refused(format!(
+            "turntable: the touched tips lie on a circle of radius {radius_mm:.3} mm, need at \
+             least {MIN_TABLE_RADIUS_MM} mm (a fiducial near the axis, or every touch at one \
+             point, leaves the axis undetermined)"
+        )));
+    }
+    let (centre, axis, u) = frame;
+    let v = axis.cross(u);
+    let theta = |p: &Vector3<f64>| {
+        let d = p - centre;
+        d.dot(&v).atan2(d.dot(u)).to_degrees()
+    };
+    let wrap = |a: f64| (a + 180.0).rem_euclid(360.0) - 180.0;
+    for i in 1..pts.len() {
+        let touched = wrap(theta(&pts[i]) - theta(&pts[i - 1]));
+        let commanded = angles_deg[i] - angles_deg[i - 1];
+        if wrap(touched - commanded).abs() > MAX_ARC_MISMATCH_DEG {
+            return Err(CalibError::Refused(format!(
+                "turntable: touches {} and {}: the tip turned {touched:.1} deg about the fitted \
+                 axis while the table turned {commanded:.1} deg (more than \
+                 {MAX_ARC_MISMATCH_DEG} deg apart): the fiducial did not turn with the table, \
+                 or the angles are not in the order of the touches",
+                i - 1,
+                i
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Shortest decimal that reads back as the same f64.

@@ -22,7 +22,8 @@ pub struct Inputs {
     pub after: PathBuf,
     /// The plan that was ground (removal mode; predicted.csv beside it).
     pub plan: PathBuf,
-    /// The tool file the plan was made with (its k scales the prediction).
+    /// The tool file the fit is written from (a plan without a recorded k also takes its k
+    /// from it).
     pub tool: PathBuf,
 }
 
@@ -35,13 +36,18 @@ pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit>
 }
 
 /// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
-/// plan `plan`, at the plan's k) and that k (the tool file `tool` the plan was made with).
+/// plan `plan`, at the plan's k) and that k: the one plan.json's provenance records
+/// (`config.removal_tool.preston_k_mm2_n`), so that a tool file already rewritten by an
+/// earlier fit does not scale the prediction again; the tool file `tool` only for a plan
+/// without that record.
 pub fn prediction(
     plan: &Path,
     tool: &Path,
     before: &Inspection,
 ) -> anyhow::Result<(Vec<f64>, f64)> {
-    let loaded = Plan::load(plan)?;
+    let plan_text = std::fs::read_to_string(plan)
+        .with_context(|| format!("{}: cannot read", plan.display()))?;
+    let loaded = Plan::parse(plan, &plan_text)?;
     anyhow::ensure!(
         loaded.removal.is_some(),
         "{}: no `removal` prediction (a rigid plan): k is fitted against a plan made with \
@@ -53,7 +59,17 @@ pub fn prediction(
         .with_context(|| format!("{}: cannot read (written beside plan.json)", csv.display()))?;
     let rows = removal_fit::parse_predicted(&text)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
-    let k = ToolModel::load(tool)?.preston_k_mm2_n;
+    let recorded = serde_json::from_str::<serde_json::Value>(&plan_text)?["provenance"]["config"]
+        ["removal_tool"]["preston_k_mm2_n"]
+        .as_f64();
+    let k = match recorded {
+        Some(k) if k.is_finite() && k > 0.0 => k,
+        Some(k) => anyhow::bail!(
+            "{}: provenance.config.removal_tool.preston_k_mm2_n {k:.4e} is not a positive k",
+            plan.display()
+        ),
+        None => ToolModel::load(tool)?.preston_k_mm2_n,
+    };
     let predicted = removal_fit::predicted_removal(before, &rows)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
     Ok((predicted, k))

@@ -64,6 +64,56 @@ pub struct CycleArgs {
     /// Units and format of the inputs.
     #[command(flatten)]
     pub input: GeometryInput,
+    /// Remove an earlier loop's outputs from the output folder first (its iter-N folders,
+    /// cycle.html, cycle.json and the settings files); without it a non-empty output folder
+    /// is refused, so that no earlier run's plans and scans sit beside the new ones.
+    #[arg(long)]
+    pub replace: bool,
+}
+
+/// Whether `name`, an entry of the output folder, is one `cycle` writes.
+fn is_cycle_output(name: &str) -> bool {
+    let iteration = name
+        .strip_prefix("iter-")
+        .is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()));
+    iteration
+        || ["cycle.html", "cycle.json"].contains(&name)
+        || SECTIONS.iter().any(|s| name == format!("{s}.toml"))
+}
+
+/// Makes `out` ready for a new loop: created when missing; with `replace` the earlier loop's
+/// outputs removed (other files, e.g. the inputs, stay); without it refused when not empty.
+fn prepare_out(out: &Path, replace: bool) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let read = |out: &Path| {
+        std::fs::read_dir(out)
+            .with_context(|| format!("{}: cannot list", out.display()))?
+            .map(|e| e.map(|e| e.path()).map_err(anyhow::Error::from))
+            .collect::<anyhow::Result<Vec<PathBuf>>>()
+    };
+    if replace {
+        for path in read(out)? {
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if !is_cycle_output(name) {
+                continue;
+            }
+            let gone = if path.is_dir() {
+                std::fs::remove_dir_all(&path)
+            } else {
+                std::fs::remove_file(&path)
+            };
+            gone.with_context(|| format!("{}: cannot remove", path.display()))?;
+        }
+    }
+    if let Some(first) = read(out)?.first().filter(|_| !replace) {
+        anyhow::bail!(
+            "{}: the output folder is not empty ({}): give an empty folder, or --replace to \
+             remove an earlier loop's outputs (iter-N, cycle.html, cycle.json)",
+            out.display(),
+            first.display()
+        );
+    }
+    Ok(())
 }
 
 /// The per-command settings files cut from `cycle --config`: its `[inspect]`, `[plan]` and
@@ -160,8 +210,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         min_progress: args.min_progress,
     };
     cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("{}: cannot create", args.out.display()))?;
+    prepare_out(&args.out, args.replace)?;
     let configs = Configs::split(config, &args.out)?;
     let outcome = run_loop(&Loop {
         reference: args.reference,

@@ -48,10 +48,69 @@ fn step(name: &str) {
     println!("== {name}");
 }
 
+/// The shipped cell (the files of the source tree's `calibration/`), built into the binary so
+/// that the demo runs from any folder: `(path under calibration/, contents)`. The real
+/// commands keep reading their cell from `./calibration/` or the files they are given.
+const DEMO_CELL: [(&str, &str); 10] = [
+    ("dofbot.urdf", include_str!("../../calibration/dofbot.urdf")),
+    ("servos.toml", include_str!("../../calibration/servos.toml")),
+    ("solids.toml", include_str!("../../calibration/solids.toml")),
+    ("tool.toml", include_str!("../../calibration/tool.toml")),
+    (
+        "workcell.toml",
+        include_str!("../../calibration/workcell.toml"),
+    ),
+    (
+        "turntable/dofbot.urdf",
+        include_str!("../../calibration/turntable/dofbot.urdf"),
+    ),
+    (
+        "turntable/servos.toml",
+        include_str!("../../calibration/turntable/servos.toml"),
+    ),
+    (
+        "turntable/solids.toml",
+        include_str!("../../calibration/turntable/solids.toml"),
+    ),
+    (
+        "turntable/tool.toml",
+        include_str!("../../calibration/turntable/tool.toml"),
+    ),
+    (
+        "turntable/workcell.toml",
+        include_str!("../../calibration/turntable/workcell.toml"),
+    ),
+];
+
+/// Creates `out`, writes the built-in cell into `out/calibration/` and makes `out` the working
+/// directory (every default cell path is `calibration/...` under it); returns `out` made
+/// absolute, so the demo's own paths do not depend on the change.
+fn enter_demo_folder(out: &Path) -> Result<PathBuf> {
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
+    let out = out
+        .canonicalize()
+        .with_context(|| format!("{}: cannot resolve", out.display()))?;
+    for (name, text) in DEMO_CELL {
+        let path = out.join("calibration").join(name);
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("{}: cannot create", dir.display()))?;
+        }
+        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    std::env::set_current_dir(&out).with_context(|| format!("{}: cannot enter", out.display()))?;
+    Ok(out)
+}
+
 /// Runs the chain and prints the summary.
 pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let start = Instant::now();
-    let out = args.out;
+    let shown = args.out.clone();
+    let out = enter_demo_folder(&args.out)?;
+    println!(
+        "demo: the shipped cell is in {} (built into the binary)",
+        shown.join("calibration").display()
+    );
     step("synth: parametric femoral component with defects planted where the arm reaches");
     let reachable = crate::cell::reachable_sites(crate::cell::SITE_AXIS_MARGIN_DEG)?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
@@ -140,7 +199,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     println!(
         "demo: done in {:.1} s; everything is in {}",
         start.elapsed().as_secs_f64(),
-        out.display()
+        shown.display()
     );
     Ok(())
 }

@@ -21,6 +21,10 @@ use crate::spatial::Neighbours;
 /// the tallest defect of the issue's cases, and under the 1 mm that synth's nearest outliers
 /// keep from the surface.
 const OFF_SURFACE_MM: f64 = 0.5;
+/// Least share of the part file's points within [`OFF_SURFACE_MM`] of the inspected surface:
+/// a scan of the inspected part keeps all but its outliers (synth's 1 %, a real scanner's
+/// few percent) and the part beyond the inspected area; another part kept 0.1-1 % (issue 52).
+const MIN_ON_SURFACE_SHARE: f64 = 0.5;
 
 /// A virtual part ready to be ground, and where its rescan goes.
 pub struct Ground {
@@ -106,6 +110,21 @@ impl Ground {
                 ", in the reference frame"
             } else {
                 ""
+            }
+        );
+        let kept = on_surface.len() as f64 / cloud.len() as f64;
+        anyhow::ensure!(
+            kept >= MIN_ON_SURFACE_SHARE,
+            "{}: --part: only {:.2} % of its {} points lie within {OFF_SURFACE_MM} mm of the \
+             inspected surface (need {:.0} %): it is not the part the plan's inspection measured{}",
+            part.display(),
+            100.0 * kept,
+            cloud.len(),
+            100.0 * MIN_ON_SURFACE_SHARE,
+            if in_reference {
+                " (in the reference frame)"
+            } else {
+                " (give the scan that inspection registered)"
             }
         );
         // normals of the surface as it is now, also for a truth file: the normals it holds

@@ -22,7 +22,6 @@ pub fn verdict_text(v: Verdict) -> &'static str {
 /// The verdict line: the verdict, the number of regions and the measured share of the area
 /// to inspect beside it ("within tolerance" holds over the measured part only).
 pub fn verdict_line(found: &Regions) -> String {
-    let unmeasured = 100.0 * (1.0 - found.coverage);
     let why = match found.verdict {
         Verdict::Incomplete => format!(
             ", below the {:.1} % needed for a verdict",
@@ -30,9 +29,12 @@ pub fn verdict_line(found: &Regions) -> String {
         ),
         _ => String::new(),
     };
+    let rest = match found.shortfall.describe() {
+        w if w.is_empty() => String::new(),
+        w => format!(": {w}"),
+    };
     format!(
-        "{} ({} regions; measured {:.1} % of the area to inspect, {unmeasured:.1} % not \
-         measured{why})",
+        "{} ({} regions; resolved {:.1} % of the area to inspect{rest}{why})",
         verdict_text(found.verdict),
         found.regions.len(),
         100.0 * found.coverage,
@@ -75,8 +77,10 @@ pub const INCOMPLETE_EXIT: u8 = 3;
 /// The error `inspect` ends with when the verdict is incomplete (exit [`INCOMPLETE_EXIT`]).
 #[derive(Debug)]
 pub struct Incomplete {
-    /// Measured share of the area to inspect.
+    /// Resolved share of the area to inspect.
     pub coverage: f64,
+    /// Where the rest went.
+    pub shortfall: crate::regions::Shortfall,
     /// Share needed for a verdict.
     pub min_coverage: f64,
 }
@@ -85,10 +89,12 @@ impl std::fmt::Display for Incomplete {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "inspect: verdict incomplete: measured {:.1} % of the area to inspect, below the \
-             {:.1} % needed ([regions] min_coverage)",
+            "inspect: verdict incomplete: resolved {:.1} % of the area to inspect, below the \
+             {:.1} % needed ([regions] min_coverage): {} (docs/ALGORITHMS.md, \"Coverage and \
+             resolution\")",
             100.0 * self.coverage,
-            100.0 * self.min_coverage
+            100.0 * self.min_coverage,
+            self.shortfall.describe()
         )
     }
 }

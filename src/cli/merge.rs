@@ -89,6 +89,57 @@ fn check_tolerance(t: f64, place: &str) -> Result<()> {
     Ok(())
 }
 
+/// Largest accepted distance of the table centre from the views' origin, mm: a scanner sees
+/// a few metres at most, so 100 m is a typo or a unit slip (and a centre of 1e300 made the
+/// matching run without end).
+const MAX_CENTRE_MM: f64 = 1e5;
+
+/// Refuses an axis that is not three finite numbers of non-zero length, or a centre that is
+/// not finite or farther than [`MAX_CENTRE_MM`] from the origin; `place` names where it came
+/// from (a flag or the calibration file).
+fn check_axis_centre(axis: Option<[f64; 3]>, centre: Option<[f64; 3]>, place: &str) -> Result<()> {
+    if let Some(a) = axis {
+        let norm = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !(norm.is_finite() && norm > 0.0) {
+            bail!("{place}: axis {a:?} is not a finite direction of non-zero length");
+        }
+    }
+    if let Some(c) = centre {
+        let far = c.iter().map(|v| v * v).sum::<f64>().sqrt();
+        if !(far.is_finite() && far <= MAX_CENTRE_MM) {
+            bail!(
+                "{place}: centre {c:?} mm is not finite or farther than {MAX_CENTRE_MM:.0} mm \
+                 from the views' origin (check the unit)"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Refuses an angle that is not finite, or two views at one table angle (modulo 360 degrees):
+/// two views at one angle cannot be told apart by the turn between them.
+fn check_angles(angles: &[f64], place: &str) -> Result<()> {
+    if let Some(i) = angles.iter().position(|a| !a.is_finite()) {
+        bail!(
+            "{place}: view {i}: angle {} is not a finite number of degrees",
+            angles[i]
+        );
+    }
+    for i in 0..angles.len() {
+        for j in i + 1..angles.len() {
+            let d = (angles[j] - angles[i]).rem_euclid(360.0);
+            if d.min(360.0 - d) < 1e-6 {
+                bail!(
+                    "{place}: views {i} and {j} are both at {} deg (modulo 360): each view needs \
+                     its own table angle",
+                    angles[i]
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 fn read_calibration(path: &Path) -> Result<Calibration> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
@@ -106,6 +157,7 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
     }
     if let Some(path) = &args.calibration {
         let c = read_calibration(path)?;
+        check_axis_centre(Some(c.axis), Some(c.centre), &path.display().to_string())?;
         cfg.axis = Some(c.axis);
         cfg.centre = Some(c.centre);
         if let Some(t) = c.angle_tolerance {
@@ -123,6 +175,10 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
     if let Some(c) = &args.centre {
         cfg.centre = Some(triple(c, "centre")?);
     }
+    let place = config.map_or("--axis/--centre".to_string(), |c| {
+        format!("{} or --axis/--centre", c.display())
+    });
+    check_axis_centre(cfg.axis, cfg.centre, &place)?;
     cfg.skip_bad |= args.skip_bad;
     cfg.sor |= args.sor;
     cfg.voxel = args.voxel.or(cfg.voxel);
@@ -135,6 +191,14 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
             (0..n).map(|i| i as f64 * step).collect()
         }
     };
+    check_angles(
+        &angles,
+        if args.angles.is_some() {
+            "--angles"
+        } else {
+            "--step"
+        },
+    )?;
     let views = args
         .scans
         .iter()

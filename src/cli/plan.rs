@@ -62,6 +62,8 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
         cfg.plan.mode = mode;
     }
     let (robot, workcell) = robot::load(&cfg.robot)?;
+    // the tool file's [removal] checked here, so that its errors name the file's full path
+    crate::plan::removal::ToolModel::load(&cfg.robot.tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
         plan::PlanError::Config(m) => file.refuse("plan", &m),
         e => e.into(),
@@ -137,14 +139,24 @@ fn print_summary(plan: &plan::Plan, inspection: &Path, out: &Path) {
         m.samples,
         m.predicted_duration_s
     );
+    // no grinding sample at a steady cruise (every stroke too short to reach the set feed, or
+    // a dwell plan): say so instead of "0.00..0.00 mm/s"
+    let cruise = if m.cruise_feed_max_mm_s > 0.0 {
+        format!(
+            "cruise feed {:.4}..{:.4} mm/s (set {:.4})",
+            m.cruise_feed_min_mm_s, m.cruise_feed_max_mm_s, m.feed_mm_s
+        )
+    } else {
+        format!(
+            "no stroke reaches a steady cruise at the set feed {:.4} mm/s",
+            m.feed_mm_s
+        )
+    };
     println!(
-        "plan: servo resolution alone moves the tool tip up to {:.3} mm (mean {:.3} mm); modelled tip within {:.4} mm of the path; cruise feed {:.2}..{:.2} mm/s (set {:.2})",
+        "plan: servo resolution alone moves the tool tip up to {:.3} mm (mean {:.3} mm); modelled tip within {:.4} mm of the path; {cruise}",
         m.resolution_error_max_mm,
         m.resolution_error_mean_mm,
         m.sample_to_path_max_mm.max(m.path_to_samples_max_mm),
-        m.cruise_feed_min_mm_s,
-        m.cruise_feed_max_mm_s,
-        m.feed_mm_s
     );
     for r in &planned {
         println!(

@@ -12,22 +12,29 @@ use crate::report::provenance::Provenance;
 use crate::report::{ReportConfig, ReportInput, Table};
 use crate::robot::RobotConfig;
 
+/// The files a plan is made from, by role: the inspection's (under `inspection`) and the
+/// cell's. plan.json's provenance records their SHA-256; `run` compares them with the files
+/// it is given ([`super::run`]) and refuses a plan made for other files.
+pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str, PathBuf)> {
+    vec![
+        ("inspection regions", inspection.join("regions.json")),
+        ("inspection deviations", inspection.join("deviations.csv")),
+        ("robot description", robot.urdf.clone()),
+        ("tool", robot.tool.clone()),
+        ("servo calibration", robot.servos.clone()),
+        ("workcell", robot.workcell.clone()),
+        ("solids", robot.workcell.with_file_name("solids.toml")),
+    ]
+}
+
 /// The provenance of a plan: the inspection's files it read, the cell's files, the settings.
 pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> Result<Provenance> {
-    let (regions, deviations) = (
-        inspection.join("regions.json"),
-        inspection.join("deviations.csv"),
-    );
-    let files = [
-        ("inspection regions", regions.as_path()),
-        ("inspection deviations", deviations.as_path()),
-        ("robot description", robot.urdf.as_path()),
-        ("tool", robot.tool.as_path()),
-        ("servo calibration", robot.servos.as_path()),
-        ("workcell", robot.workcell.as_path()),
-    ];
+    let inputs = plan_inputs(inspection, robot);
+    let files: Vec<(&str, &Path)> = inputs.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let existing: Vec<(&str, &Path)> = files.into_iter().filter(|(_, p)| p.is_file()).collect();
-    let config = serde_json::json!({ "robot": robot, "plan": plan });
+    // the removal model the plan used (its k is what `calibrate removal` scales from)
+    let tool = crate::plan::removal::ToolModel::load(&robot.tool).ok();
+    let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": tool });
     Provenance::new(
         "plan",
         "inspection in mm (reference frame); robot in m and rad (URDF base frame)",

@@ -159,6 +159,60 @@ fn sha256_hex(bytes: &[u8]) -> String {
     digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// Refuses a plan made from other files than `run` is given: each file plan.json's
+/// provenance records (the inspection's and the cell's, by role) must have the recorded
+/// SHA-256 now; a file the plan did not have must still be absent. A plan without a
+/// provenance block (written by hand or by an older version) is not checked.
+fn check_made_for(
+    plan_path: &Path,
+    text: &str,
+    plan: &Plan,
+    robot: &RobotConfig,
+) -> anyhow::Result<()> {
+    let value: serde_json::Value = serde_json::from_str(text)?;
+    let Some(recorded) = value["provenance"]["inputs"].as_array() else {
+        return Ok(());
+    };
+    let now = super::plan_report::plan_inputs(Path::new(&plan.inspection), robot);
+    for (role, path) in &now {
+        let entry = recorded.iter().find(|e| e["role"] == *role);
+        let advice = if role.starts_with("inspection") {
+            "re-plan from the current inspection"
+        } else {
+            "re-plan after calibrating"
+        };
+        let refuse = |what: String| {
+            anyhow::anyhow!(
+                "{}: refused: {role} {}: {what}: {advice}",
+                plan_path.display(),
+                path.display()
+            )
+        };
+        match (entry, std::fs::read(path)) {
+            (None, Err(_)) => {}
+            (None, Ok(_)) => return Err(refuse("the plan was made without this file".into())),
+            (Some(e), Err(err)) => {
+                return Err(refuse(format!(
+                    "cannot read it ({err}); the plan was made with {}",
+                    e["path"]
+                )))
+            }
+            (Some(e), Ok(bytes)) => {
+                let sha = sha256_hex(&bytes);
+                if e["sha256"].as_str() != Some(sha.as_str()) {
+                    return Err(refuse(format!(
+                        "changed since the plan was made (SHA-256 {}, the plan's {} from {})",
+                        &sha[..12],
+                        e["sha256"].as_str().map_or("?", |h| &h[..h.len().min(12)]),
+                        e["path"]
+                    )));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Runs `run`. `--dry-run` makes every check of a real run (settings, plan, servo map,
 /// resume point, journal) and stops before opening the link.
 pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
@@ -180,6 +234,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
     let plan = Plan::parse(&args.plan, &text)?;
     let sha = sha256_hex(text.as_bytes());
+    check_made_for(&args.plan, &text, &plan, &cfg.robot)?;
     let table = Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
     let checked = plan
         .check_cell(&robot, table.as_ref(), &cfg.validation)

@@ -188,7 +188,7 @@ pub fn in_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result
     match value.is_finite() && (min..=max).contains(&value) {
         true => Ok(()),
         false => Err(format!(
-            "`{key}` = {value:?} {unit} is outside {min}..={max} {unit}"
+            "`{key}` = {value:?} {unit} is outside {min:?}..={max:?} {unit}"
         )),
     }
 }

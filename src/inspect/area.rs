@@ -49,7 +49,7 @@ pub fn core_points_in(path: &Path, input: FileInput, dev: &Deviations) -> Result
 }
 
 /// The square root of the median area share of `points` (0 for fewer than 9).
-fn spacing(points: &[Point3<f64>]) -> f64 {
+pub(crate) fn spacing(points: &[Point3<f64>]) -> f64 {
     let mut share: Vec<f64> = compare::area_shares(points)
         .into_iter()
         .filter(|a| *a > 0.0)

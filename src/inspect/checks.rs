@@ -183,6 +183,60 @@ pub fn check_sizes(reference: (&Path, &PointCloud), scan: (&Path, &PointCloud)) 
     Ok(())
 }
 
+/// Largest accepted median spacing of the (filtered) scan's points, mm: twice the width of
+/// the smallest defect the verdict must see ([`crate::regions::SMALLEST_DEFECT_MM`]). A scan
+/// that sparse resolves no core point (its cylinders would be about 2 x the spacing wide, over
+/// [`crate::regions::MAX_RESOLVING_RADIUS_MM`]), and its comparison grows cylinders of tens of
+/// millimetres: a 100-point scan of the synth part took 56 s (issue 52).
+pub const MAX_SCAN_SPACING_MM: f64 = 2.0 * crate::regions::SMALLEST_DEFECT_MM;
+
+/// Refuses a scan whose median point spacing (the square root of the median area per point)
+/// exceeds [`MAX_SCAN_SPACING_MM`].
+pub fn check_scan_density(path: &Path, scan: &PointCloud) -> Result<()> {
+    let s = super::area::spacing(&scan.points);
+    if s.is_nan() || s > MAX_SCAN_SPACING_MM {
+        bail!(
+            "{}: the scan's points are {s:.4} mm apart (median, {} points after the outlier \
+             filter): too sparse to see a {} mm defect anywhere (at most {MAX_SCAN_SPACING_MM} mm)",
+            path.display(),
+            scan.len(),
+            crate::regions::SMALLEST_DEFECT_MM
+        );
+    }
+    Ok(())
+}
+
+/// Refuses a pose that does not put the scan onto the reference: the moved scan's median
+/// point must lie within the reference's robust extent ([`robust_extent`]) of the
+/// reference's (a pose of another scan, or a translation of 1e300 that made the comparison
+/// search without end).
+pub fn check_overlap(reference: (&Path, &PointCloud), scan: (&Path, &PointCloud)) -> Result<()> {
+    let extent = robust_extent(&reference.1.points);
+    let off = (median_point(&scan.1.points) - median_point(&reference.1.points)).norm();
+    if !(off.is_finite() && off <= extent) {
+        bail!(
+            "{}: --pose puts the scan {off:.4e} mm from the reference {} (which spans {extent:.4} \
+             mm): not a pose of this scan onto this reference",
+            scan.0.display(),
+            reference.0.display()
+        );
+    }
+    Ok(())
+}
+
+/// The per-axis median of `points` (the origin for none).
+fn median_point(points: &[Point3<f64>]) -> Point3<f64> {
+    let mut centre = Point3::origin();
+    if points.is_empty() {
+        return centre;
+    }
+    for axis in 0..3 {
+        let mut v: Vec<f64> = points.iter().map(|p| p[axis]).collect();
+        centre[axis] = *v.select_nth_unstable_by(points.len() / 2, f64::total_cmp).1;
+    }
+    centre
+}
+
 /// Twice the distance from the per-axis median point within which all but [`EXTENT_TRIM`] of
 /// the points lie: about the part's diameter, unmoved by a few stray points.
 fn robust_extent(points: &[Point3<f64>]) -> f64 {
@@ -190,11 +244,7 @@ fn robust_extent(points: &[Point3<f64>]) -> f64 {
         return f64::NAN;
     }
     let n = points.len();
-    let mut centre = Point3::origin();
-    for axis in 0..3 {
-        let mut v: Vec<f64> = points.iter().map(|p| p[axis]).collect();
-        centre[axis] = *v.select_nth_unstable_by(n / 2, f64::total_cmp).1;
-    }
+    let centre = median_point(points);
     let mut d: Vec<f64> = points.iter().map(|p| (p - centre).norm()).collect();
     let k = (((n - 1) as f64) * (1.0 - EXTENT_TRIM)) as usize;
     2.0 * *d.select_nth_unstable_by(k, f64::total_cmp).1

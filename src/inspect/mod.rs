@@ -71,6 +71,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
         (&inputs.reference, &reference.cloud),
         (&inputs.scan, &scan_cloud),
     )?;
+    checks::check_scan_density(&inputs.scan, &scan_cloud)?;
     times.lap("filter");
 
     let pose = match &inputs.pose {
@@ -85,6 +86,9 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
         )?)),
     };
     scan_cloud.transform(&pose.pose());
+    if let PoseSource::Given { source, .. } = &pose {
+        checks::check_overlap((&inputs.reference, &reference.cloud), (source, &scan_cloud))?;
+    }
     times.lap("register");
 
     let removed = format!(

@@ -6,6 +6,7 @@ use super::collide::CollisionConfig;
 use super::error::PlanError;
 use super::file::{CheckedPlan, Plan};
 use super::inspection::Inspection;
+use super::program::SegmentKind;
 use super::table_file::{check, TablePlan};
 use super::validate::ValidationConfig;
 use crate::robot::{Robot, Turntable, Workcell};
@@ -50,10 +51,46 @@ impl Plan {
                 )));
             }
         }
+        self.check_region_angles(part)?;
         checked.table = Some(moves);
         Ok(checked)
     }
+
+    /// Every grinding segment runs at its region's planned table angle (a plan whose table
+    /// moves were deleted or edited would grind with the part at another angle).
+    fn check_region_angles(&self, part: &TablePlan) -> Result<(), PlanError> {
+        let ranges = angle_ranges(part, self.samples.len());
+        for s in &self.segments {
+            let (SegmentKind::Grind, Some(region)) = (&s.kind, s.region) else {
+                continue;
+            };
+            let Some(want) = part.regions.iter().find(|r| r.region == region) else {
+                return Err(PlanError::Frames(format!(
+                    "turntable: region {region} is ground but has no table angle in `turntable.regions`"
+                )));
+            };
+            let at = ranges
+                .iter()
+                .find(|(lo, hi, _)| s.first_sample >= *lo && s.first_sample < (*hi).max(*lo + 1))
+                .map_or(part.start, |r| r.2);
+            if (at.to_degrees() - want.angle_deg).abs() > ANGLE_TOLERANCE_DEG {
+                return Err(PlanError::Frames(format!(
+                    "turntable: region {region} is planned at {:.4} deg but the table is at {:.4} deg \
+                     when it is ground (sample {}): are table moves missing?",
+                    want.angle_deg,
+                    at.to_degrees(),
+                    s.first_sample
+                )));
+            }
+        }
+        Ok(())
+    }
 }
+
+/// Largest accepted difference between a region's planned table angle and the angle the plan's
+/// moves leave the table at, degrees (the angles are written as computed; a thousandth of a
+/// degree is far below the table servo's step).
+const ANGLE_TOLERANCE_DEG: f64 = 1e-3;
 
 /// The arm samples at one table angle: `first..=last` (a move's resting sample belongs to
 /// the ranges on both sides: the arm rests there while the table turns).

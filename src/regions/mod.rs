@@ -7,8 +7,10 @@
 //! above tolerance is Σ share × (|distance| - tolerance). Material in excess (distance > 0)
 //! can be ground away: repairable; pits cannot.
 //!
-//! Coverage: the share of the area to inspect (by the core points' area shares) whose core
-//! points got a distance; below `min_coverage` the verdict is [`Verdict::Incomplete`]. Per
+//! Coverage: the share of the area to inspect (by the core points' area shares) that was
+//! resolved ([`resolution`]: measured, with a cylinder narrow enough and a LoD within the
+//! tolerance to see the smallest repairable defect); below `min_coverage` the verdict is
+//! [`Verdict::Incomplete`]. Per
 //! region, the measured share of its neighbourhood (the core points within the connection
 //! distance of a member) and whether an unmeasured core point lies in it (then its peak and
 //! area are lower bounds).
@@ -19,6 +21,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::compare::{area_shares, Deviation, Deviations, Reason, PEAK_LOD_RATIO};
 use crate::spatial::Neighbours;
+
+mod resolution;
+pub use resolution::{Shortfall, MAX_RESOLVING_RADIUS_MM, MAX_SHARE_MM2, SMALLEST_DEFECT_MM};
 
 /// Settings of [`find_regions`].
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -119,10 +124,14 @@ pub struct Regions {
     pub gap: f64,
     /// Overall verdict.
     pub verdict: Verdict,
-    /// Share of the area to inspect (by area) whose core points got a distance. Absent in
+    /// Share of the area to inspect (by area) that was resolved: measured densely and
+    /// precisely enough to see the smallest repairable defect ([`resolution`]). Absent in
     /// files from before 2026-12-02: 1.
     #[serde(default = "full")]
     pub coverage: f64,
+    /// Where the rest of the area to inspect went, by reason. Absent in older files: none.
+    #[serde(default)]
+    pub shortfall: Shortfall,
     /// Least coverage for a verdict (`min_coverage`). Absent in older files: 0.
     #[serde(default)]
     pub min_coverage: f64,
@@ -211,7 +220,7 @@ pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[b
         neighbourhoods(dev, &share, gap, &mut regions);
     }
     let regions: Vec<Region> = regions.into_iter().map(|r| r.0).collect();
-    let coverage = coverage(dev, &share, in_area);
+    let (coverage, shortfall) = resolution::coverage(dev, &share, in_area, cfg.tolerance);
     // A NaN minimum gives no verdict either.
     let enough = coverage >= cfg.min_coverage;
     let verdict = if !enough {
@@ -229,6 +238,7 @@ pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[b
         gap,
         verdict,
         coverage,
+        shortfall,
         min_coverage: cfg.min_coverage,
         regions,
         labels,
@@ -238,23 +248,6 @@ pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[b
 /// Whether core point `i` got a distance.
 fn measured(dev: &Deviations, i: usize) -> bool {
     dev.values[i].distance.is_finite()
-}
-
-/// The measured share, by area (`share` per core point), of the core points in the area to
-/// inspect (`in_area`; None: all); 0 when the area holds none.
-fn coverage(dev: &Deviations, share: &[f64], in_area: Option<&[bool]>) -> f64 {
-    let inside = |i: &usize| in_area.is_none_or(|a| a[*i]);
-    let (mut total, mut seen) = (0.0, 0.0);
-    for i in (0..dev.values.len()).filter(inside) {
-        total += share[i];
-        if measured(dev, i) {
-            seen += share[i];
-        }
-    }
-    match total > 0.0 {
-        true => seen / total,
-        false => 0.0,
-    }
 }
 
 /// Sets each region's `measured_share` and `touches_unmeasured` from its neighbourhood: the

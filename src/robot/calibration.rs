@@ -76,6 +76,19 @@ impl Tool {
                 "must be finite and under 0.5 m",
             ));
         }
+        let reach = Vector3::from(tool.tip_offset).norm();
+        if reach < tool.radius {
+            return Err(RobotError::bad(
+                file,
+                "tip_offset",
+                format!(
+                    "the ball centre is {:.4} mm from the flange, less than the ball radius {:.4} mm: \
+                     the ball would sit inside the flange (tip_offset is in metres, flange frame)",
+                    reach * 1e3,
+                    tool.radius * 1e3
+                ),
+            ));
+        }
         if let Some(r) = tool.shank_radius {
             if !(r > 0.0 && r <= tool.radius) {
                 let msg = "must be in (0, radius] m (the shank is no wider than the ball)";

@@ -128,25 +128,43 @@ const MAX_SAG_MM: f64 = 50.0;
 /// not on the fixture.
 const MAX_MOUNT_MM: f64 = 50.0;
 const MAX_MOUNT_DEG: f64 = 45.0;
+/// Accepted Preston coefficients, mm^2/N: the shipped tool's 5e-6 and the former simulator
+/// default 1e-4 (which ground 3 mm deep in one pass) lie well inside; 1e300 made NaN
+/// rescans, and below 1e-10 nothing measurable is ground in any run.
+const PRESTON_K_RANGE: (f64, f64) = (1e-10, 1e-2);
+/// Accepted Hertz moduli of the abrasive (and reference pressures), MPa: from a soft foam
+/// (1e-3 MPa) to steel (2e5 MPa); 1e-300 made the contact solve run without end.
+const MODULUS_RANGE: (f64, f64) = (1e-3, 1e6);
+/// Accepted ball radii, mm: grinding balls on a DOFBOT are a few millimetres; 0.1-50 mm
+/// covers every burr that fits the arm (1e300 made the simulated contact run without end).
+const BALL_RADIUS_RANGE: (f64, f64) = (0.1, 50.0);
 /// Largest exponent accepted: Preston exponents seen in the literature lie within 0.5..2.
 const MAX_EXPONENT: f64 = 3.0;
 
 impl GrindConfig {
     /// Checks every setting; the message names the key in backticks.
     pub fn check(&self) -> Result<(), String> {
-        let positive = |key: &str, v: f64, unit: &str| {
-            (!(v.is_finite() && v > 0.0))
-                .then(|| format!("`{key}` = {v:?} {unit} must be a positive number"))
-        };
         let within = |key: &str, v: f64, lo: f64, hi: f64, unit: &str| {
             (!(v.is_finite() && (lo..=hi).contains(&v)))
-                .then(|| format!("`{key}` = {v:?} {unit} is outside {lo}..={hi} {unit}"))
+                .then(|| format!("`{key}` = {v:?} {unit} is outside {lo:?}..={hi:?} {unit}"))
         };
         let mut found = [
-            positive("preston_k", self.preston_k, "mm^2/N"),
-            positive("k_factor", self.k_factor, ""),
+            within(
+                "preston_k",
+                self.preston_k,
+                PRESTON_K_RANGE.0,
+                PRESTON_K_RANGE.1,
+                "mm^2/N",
+            ),
+            within("k_factor", self.k_factor, 0.01, 100.0, ""),
             within("k_noise", self.k_noise, 0.0, 0.99, "(share)"),
-            positive("k_noise_wavelength_mm", self.k_noise_wavelength_mm, "mm"),
+            within(
+                "k_noise_wavelength_mm",
+                self.k_noise_wavelength_mm,
+                0.01,
+                1e4,
+                "mm",
+            ),
             within(
                 "pressure_exponent",
                 self.pressure_exponent,
@@ -155,12 +173,36 @@ impl GrindConfig {
                 "",
             ),
             within("speed_exponent", self.speed_exponent, 0.0, MAX_EXPONENT, ""),
-            positive("reference_pressure_mpa", self.reference_pressure_mpa, "MPa"),
-            positive("reference_speed_mm_s", self.reference_speed_mm_s, "mm/s"),
-            positive("spring_rate_n_mm", self.spring_rate_n_mm, "N/mm"),
-            positive("modulus_mpa", self.modulus_mpa, "MPa"),
+            within(
+                "reference_pressure_mpa",
+                self.reference_pressure_mpa,
+                1e-3,
+                MODULUS_RANGE.1,
+                "MPa",
+            ),
+            within(
+                "reference_speed_mm_s",
+                self.reference_speed_mm_s,
+                1e-3,
+                1e6,
+                "mm/s",
+            ),
+            within("spring_rate_n_mm", self.spring_rate_n_mm, 1e-3, 1e4, "N/mm"),
+            within(
+                "modulus_mpa",
+                self.modulus_mpa,
+                MODULUS_RANGE.0,
+                MODULUS_RANGE.1,
+                "MPa",
+            ),
             within("spindle_rpm", self.spindle_rpm, 0.0, 1e6, "rev/min"),
-            positive("ball_radius_mm", self.ball_radius_mm, "mm"),
+            within(
+                "ball_radius_mm",
+                self.ball_radius_mm,
+                BALL_RADIUS_RANGE.0,
+                BALL_RADIUS_RANGE.1,
+                "mm",
+            ),
             within("rescan_noise_mm", self.rescan_noise_mm, 0.0, 5.0, "mm"),
             within(
                 "rescan_outliers",

@@ -55,14 +55,15 @@ impl Default for ToolModel {
 
 /// Accepted ranges per key (inclusive, the lower end excluded where the name says `(`): wide
 /// around physical tools, narrow enough that a typo (a rate in N/m, a speed in rad/s of 0)
-/// is caught.
+/// is caught. k: the shipped tool's 5e-6 mm^2/N; above 1e-2 one pass at the slowest feed
+/// would remove metres (k = 1 planned "0 passes" with a self-contradicting reason).
 const RANGES: [(&str, f64, f64, &str); 7] = [
     ("spring_rate_n_mm", 1e-3, 1e3, "N/mm"),
     ("preload_mm", 1e-3, 10.0, "mm"),
     ("modulus_mpa", 1e-2, 1e6, "MPa"),
     ("spindle_rpm", 1.0, 100_000.0, "rpm"),
     ("tilt_deg", 1.0, 80.0, "deg"),
-    ("preston_k_mm2_n", 1e-12, 1.0, "mm^2/N"),
+    ("preston_k_mm2_n", 1e-12, 1e-2, "mm^2/N"),
     ("preston_k_rel_sd", 0.0, 1.0, ""),
 ];
 
@@ -167,7 +168,7 @@ pub(super) fn out_of_range(
         .map(|((name, lo, hi, unit), v)| {
             (
                 name.to_string(),
-                format!("{v:?} is outside {lo}..={hi} {unit}"),
+                format!("{v:?} is outside {lo:?}..={hi:?} {unit}"),
             )
         })
 }

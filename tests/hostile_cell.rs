@@ -1,0 +1,277 @@
+//! Hostile inputs of issue 52 against the built binary, on the cell side: a plan streamed to a
+//! cell or an inspection it was not made for, a cycle into a used folder, merge's angles and
+//! centre, the simulator's settings out of physical range and a tool whose ball sits in the
+//! flange. Each case ends with a one-line refusal naming the file and the place, and the
+//! valid case beside it is accepted.
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+use common::{one_line_failure, polishbot, succeed};
+
+/// synth -> inspect -> plan once (hostile.rs's case, smaller: one layer per region).
+fn case() -> &'static PathBuf {
+    static CASE: OnceLock<PathBuf> = OnceLock::new();
+    CASE.get_or_init(|| {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile_cell");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(
+            dir.join("plan.toml"),
+            "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
+        )
+        .unwrap();
+        let d = dir.display();
+        let steps = [
+            format!(
+                "synth --out {d} --seed 9 --defects 3 --reference-points 100000 \
+                 --scan-points 80000 --height-range 0.15,0.35 --width-range 2,3"
+            ),
+            format!(
+                "inspect --reference {d}/reference.ply --scan {d}/scan.ply --pose {d}/truth.json \
+                 -o {d}/inspection"
+            ),
+            format!("--config {d}/plan.toml plan --inspection {d}/inspection -o {d}/plan.json"),
+        ];
+        for step in steps {
+            succeed(polishbot().args(step.split_whitespace()));
+        }
+        dir
+    })
+}
+
+/// A copy of the shipped cell (calibration/) in `dir`, with `edit` applied to the text of
+/// the file `name`.
+fn cell_copy(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> PathBuf {
+    let cell = dir.join("cell");
+    std::fs::create_dir_all(&cell).unwrap();
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration");
+    for f in [
+        "dofbot.urdf",
+        "tool.toml",
+        "servos.toml",
+        "workcell.toml",
+        "solids.toml",
+    ] {
+        let text = std::fs::read_to_string(shipped.join(f)).unwrap();
+        let text = if f == name { edit(&text) } else { text };
+        std::fs::write(cell.join(f), text).unwrap();
+    }
+    cell
+}
+
+fn dry_run(plan: &Path, cell: &Path) -> Command {
+    let mut cmd = polishbot();
+    cmd.args(["run", "--dry-run", "--sim", "--plan"])
+        .arg(plan)
+        .arg("--cell")
+        .arg(cell);
+    cmd
+}
+
+#[test]
+fn a_plan_is_refused_on_a_cell_or_inspection_it_was_not_made_for() {
+    let dir = case();
+    let plan = dir.join("plan.json");
+    let tmp = common::tempdir();
+    // the same files in another folder: accepted
+    let same = cell_copy(tmp.path(), "", |t| t.to_string());
+    succeed(&mut dry_run(&plan, &same));
+    // the part moved 20 mm after planning (workcell.toml's placement edited by hand)
+    let moved = common::tempdir();
+    let cell = cell_copy(moved.path(), "workcell.toml", |t| {
+        format!("{t}\n# the fixture was moved 20 mm after planning\n")
+    });
+    let line = one_line_failure(&dry_run(&plan, &cell).output().unwrap());
+    assert!(
+        line.contains("workcell.toml") && line.contains("re-plan after calibrating"),
+        "{line}"
+    );
+    // a stale plan: the inspection it names was redone (regions.json changed)
+    let stale = common::tempdir();
+    let insp = stale.path().join("inspection");
+    std::fs::create_dir_all(&insp).unwrap();
+    for f in ["regions.json", "deviations.csv"] {
+        std::fs::copy(dir.join("inspection").join(f), insp.join(f)).unwrap();
+    }
+    let regions = insp.join("regions.json");
+    let text = std::fs::read_to_string(&regions).unwrap();
+    std::fs::write(&regions, format!("{text}\n")).unwrap();
+    let mut value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&plan).unwrap()).unwrap();
+    value["inspection"] = insp.display().to_string().into();
+    let other = stale.path().join("plan.json");
+    std::fs::write(&other, value.to_string()).unwrap();
+    let line = one_line_failure(&dry_run(&other, &same).output().unwrap());
+    assert!(
+        line.contains("regions.json") && line.contains("re-plan from the current inspection"),
+        "{line}"
+    );
+}
+
+#[test]
+fn cycle_refuses_a_used_output_folder_unless_told_to_replace_it() {
+    let tmp = common::tempdir();
+    let out = tmp.path().join("out");
+    std::fs::create_dir_all(out.join("iter-1")).unwrap();
+    std::fs::write(out.join("iter-1/plan.json"), "{}").unwrap();
+    let cycle = |extra: &[&str]| {
+        let mut cmd = polishbot();
+        cmd.args([
+            "cycle",
+            "--sim",
+            "--reference",
+            "missing.ply",
+            "--scan",
+            "missing.ply",
+        ])
+        .arg("-o")
+        .arg(&out)
+        .args(extra);
+        cmd.output().unwrap()
+    };
+    let line = one_line_failure(&cycle(&[]));
+    assert!(
+        line.contains("not empty") && line.contains("--replace"),
+        "{line}"
+    );
+    // with --replace the old iteration goes and the loop starts (here to stop at the
+    // missing reference)
+    let line = one_line_failure(&cycle(&["--replace"]));
+    assert!(line.contains("missing.ply"), "{line}");
+    assert!(!out.join("iter-1/plan.json").exists());
+}
+
+#[test]
+fn merge_refuses_non_finite_and_duplicate_angles_and_absurd_centres() {
+    let dir = case();
+    let scan = dir.join("scan.ply");
+    let tmp = common::tempdir();
+    let merge = |extra: &[&str]| {
+        let mut cmd = polishbot();
+        cmd.arg("merge")
+            .arg(&scan)
+            .arg(&scan)
+            .arg("-o")
+            .arg(tmp.path().join("m.ply"))
+            .args(extra);
+        one_line_failure(&cmd.output().unwrap())
+    };
+    let inf = merge(&["--angles", "0,inf"]);
+    assert!(
+        inf.contains("--angles: view 1") && inf.contains("finite"),
+        "{inf}"
+    );
+    let twice = merge(&["--angles", "10,370"]);
+    assert!(twice.contains("views 0 and 1"), "{twice}");
+    let nan = merge(&["--angles", "0,180", "--centre", "NaN,0,0"]);
+    assert!(nan.contains("centre"), "{nan}");
+    let far = merge(&["--angles", "0,180", "--centre", "1e300,0,0"]);
+    assert!(far.contains("centre") && far.contains("100000 mm"), "{far}");
+    let cal = tmp.path().join("cal.json");
+    std::fs::write(&cal, r#"{"axis": [0, 0, 1], "centre": [1e300, 0, 0]}"#).unwrap();
+    let file = merge(&["--angles", "0,180", "--calibration", cal.to_str().unwrap()]);
+    assert!(
+        file.contains("cal.json") && file.contains("centre"),
+        "{file}"
+    );
+}
+
+#[test]
+fn simulator_settings_outside_physical_ranges_are_refused_naming_the_key() {
+    let dir = case();
+    let tmp = common::tempdir();
+    let cell = cell_copy(tmp.path(), "", |t| t.to_string());
+    for (key, value) in [
+        ("ball_radius_mm", "1e300"),
+        ("modulus_mpa", "1e-300"),
+        ("preston_k", "1e300"),
+    ] {
+        let cfg = tmp.path().join(format!("{key}.toml"));
+        std::fs::write(&cfg, format!("[sim.grinding]\n{key} = {value}\n")).unwrap();
+        let mut cmd = polishbot();
+        cmd.arg("--config").arg(&cfg);
+        let out = cmd
+            .args(["run", "--dry-run", "--sim", "--plan"])
+            .arg(dir.join("plan.json"))
+            .arg("--cell")
+            .arg(&cell)
+            .output()
+            .unwrap();
+        let line = one_line_failure(&out);
+        assert!(
+            line.contains(&format!("{key}.toml")) && line.contains(key) && line.contains("outside"),
+            "{line}"
+        );
+    }
+}
+
+/// `plan` with the shipped cell's tool.toml edited by `edit`: its one-line refusal.
+fn plan_with_tool(edit: impl Fn(&str) -> String) -> String {
+    let dir = case();
+    let tmp = common::tempdir();
+    let cell = cell_copy(tmp.path(), "tool.toml", edit);
+    let out = polishbot()
+        .args(["plan", "--inspection"])
+        .arg(dir.join("inspection"))
+        .arg("--cell")
+        .arg(&cell)
+        .arg("-o")
+        .arg(tmp.path().join("plan.json"))
+        .output()
+        .unwrap();
+    one_line_failure(&out)
+}
+
+#[test]
+fn a_tool_whose_ball_sits_in_the_flange_is_refused_at_tip_offset() {
+    let line =
+        plan_with_tool(|t| t.replace("tip_offset = [0.0, 0.0, 0.0193]", "tip_offset = [0, 0, 0]"));
+    assert!(
+        line.contains("cell/tool.toml") && line.contains("tip_offset") && line.contains("flange"),
+        "{line}"
+    );
+}
+
+#[test]
+fn a_preston_k_of_one_is_refused_at_its_key() {
+    let line = plan_with_tool(|t| t.replace("preston_k_mm2_n = 5e-6", "preston_k_mm2_n = 1"));
+    assert!(
+        line.contains("cell/tool.toml") && line.contains("preston_k_mm2_n"),
+        "{line}"
+    );
+}
+
+#[test]
+fn a_part_file_that_is_not_the_inspected_part_is_refused() {
+    // the inspected scan with nine points in ten moved 20 mm off: another part that shares a
+    // patch with this one (the probe's other parts kept 0.1-1 % of their points)
+    let dir = case();
+    let tmp = common::tempdir();
+    let mut other = polishbot::cloud::load_cloud(&dir.join("scan.ply"), None, None).unwrap();
+    for (i, p) in other.points.iter_mut().enumerate() {
+        if i % 10 != 0 {
+            p.x += 20.0;
+        }
+    }
+    let part = tmp.path().join("other.ply");
+    polishbot::cloud::write_ply(&part, &other, None, polishbot::cloud::PlyPrecision::F64).unwrap();
+    let out = polishbot()
+        .args(["run", "--sim", "--plan"])
+        .arg(dir.join("plan.json"))
+        .arg("--part")
+        .arg(&part)
+        .arg("--ground-out")
+        .arg(tmp.path().join("after.ply"))
+        .arg("--journal")
+        .arg(tmp.path().join("journal.jsonl"))
+        .output()
+        .unwrap();
+    let line = one_line_failure(&out);
+    assert!(
+        line.contains("other.ply") && line.contains("not the part"),
+        "{line}"
+    );
+}
