@@ -26,9 +26,11 @@ pub struct InspectArgs {
     /// propagation, with a notice.
     #[arg(long)]
     pub reference: PathBuf,
-    /// Scan point cloud.
-    #[arg(long)]
-    pub scan: PathBuf,
+    /// Scan point cloud; several (`--scan A --scan B`, or `--scan A B`) are scans of one part
+    /// in several setups: each filtered and registered to the reference on its own, measured
+    /// jointly (deviations.ply's `scans` says which supported each core point).
+    #[arg(long, required = true, num_args = 1..)]
+    pub scan: Vec<PathBuf>,
     /// Output folder.
     #[arg(short = 'o', long = "out")]
     pub out: PathBuf,
@@ -81,6 +83,11 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
             "--registration-error: {e} mm is not a non-negative number of mm"
         );
     }
+    anyhow::ensure!(
+        args.pose.is_none() || args.scan.len() == 1,
+        "--pose gives one scan's pose: with {} scans each is registered, leave --pose out",
+        args.scan.len()
+    );
     if let Some(t) = args.tolerance {
         cfg.regions.tolerance = t;
     }
@@ -103,7 +110,8 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
 fn inputs(args: &InspectArgs) -> inspect::Inputs {
     inspect::Inputs {
         reference: args.reference.clone(),
-        scan: args.scan.clone(),
+        scan: args.scan[0].clone(),
+        more_scans: args.scan[1..].to_vec(),
         files: inspect::FileInput {
             format: args.input.format,
             units: args.input.units,
@@ -168,8 +176,22 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
         )?,
     }
     provenance.stamp_json(&reg_file)?;
+    for (k, pose) in found.more_poses.iter().enumerate() {
+        let file = out.join(format!("registration_scan{}.json", k + 2));
+        if let PoseSource::Registered(reg) = pose {
+            let scan = inputs.more_scans[k].as_path();
+            super::register::record_ok(reg, &file, (scan, inputs.reference.as_path()))?;
+            provenance.stamp_json(&file)?;
+        }
+    }
     let lines = std::mem::take(&mut found.provenance);
-    write_outputs(out, &found.deviations, &found.regions, lines, &provenance)?;
+    let support = std::mem::take(&mut found.support);
+    let written = Written {
+        dev: &found.deviations,
+        found: &found.regions,
+        support: &support,
+    };
+    write_outputs(out, written, lines, &provenance)?;
     found.times.lap("files and report");
     print_summary(
         &found.deviations,
@@ -187,19 +209,35 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
     }
 }
 
+/// What [`write_outputs`] writes: the deviations, the regions and, with several scans, the
+/// scans that supported each core point.
+struct Written<'a> {
+    dev: &'a compare::Deviations,
+    found: &'a Regions,
+    support: &'a [u32],
+}
+
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
 /// (formatting is most of their time, and each is single-threaded).
 fn write_outputs(
     out: &Path,
-    dev: &compare::Deviations,
-    found: &Regions,
+    written: Written,
     report_summary: Vec<(String, String)>,
     provenance: &Provenance,
 ) -> Result<()> {
+    let Written {
+        dev,
+        found,
+        support,
+    } = written;
     let table = compare::to_cloud(dev, &found.labels);
-    // deviations.csv keeps its columns (a contract); the PLY also maps what was measured.
+    // deviations.csv keeps its columns (a contract); the PLY also maps what was measured and,
+    // with several scans, which supported each row.
     let mut ply_table = table.clone();
     compare::add_coverage_fields(dev, &mut ply_table);
+    if !support.is_empty() {
+        ply_table.set_field("scans", support.iter().map(|&m| m as f64).collect());
+    }
     let write_regions = || -> Result<()> {
         let text = serde_json::to_string_pretty(found)?;
         let path = out.join("regions.json");

@@ -51,6 +51,9 @@ pub struct Inputs {
     pub reference: PathBuf,
     /// Scan point cloud.
     pub scan: PathBuf,
+    /// Further scans of the same part (other setups), each registered to the reference on its
+    /// own and measured jointly with `scan` (default none).
+    pub more_scans: Vec<PathBuf>,
     /// Format and units of every input file.
     pub files: FileInput,
     /// Skip registration: `scan_to_reference` from this registration.json or truth.json.

@@ -6,6 +6,7 @@ pub mod area;
 pub mod checks;
 mod config;
 mod load;
+pub mod scans;
 
 pub use config::{
     FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
@@ -14,12 +15,11 @@ pub use config::{
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use nalgebra::Isometry3;
 
 use crate::cloud;
 use crate::compare::{self, CompareConfig, Deviations};
-use crate::preprocess;
 use crate::regions::{self, Regions};
 use crate::register::{self, RegisterConfig, Registration};
 
@@ -42,6 +42,11 @@ pub enum PoseSource {
 pub struct Inspection {
     /// The pose of the scan and where it came from.
     pub pose: PoseSource,
+    /// The poses of the further scans (`Inputs::more_scans`), in order.
+    pub more_poses: Vec<PoseSource>,
+    /// With further scans, per core point the scans that supported its measurement (bit k:
+    /// scan k, the first scan 0; [`scans::support`]); empty with one scan.
+    pub support: Vec<u32>,
     /// Per core point: distance, uncertainty, significance.
     pub deviations: Deviations,
     /// Defect regions and the verdict.
@@ -64,46 +69,61 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     spin.finish_and_clear();
     times.lap("load");
 
-    let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
-        .with_context(|| format!("{}", inputs.scan.display()))?;
-    let mut scan_cloud = sor.apply(&scan);
-    checks::check_sizes(
-        (&inputs.reference, &reference.cloud),
-        (&inputs.scan, &scan_cloud),
+    let more = scans::load_more(&inputs.more_scans, inputs.files)?;
+    let reference_in = (inputs.reference.as_path(), &reference.cloud);
+    let first = scans::prepare(
+        cfg,
+        reference_in,
+        &inputs.scan,
+        &scan,
+        inputs.pose.as_deref(),
     )?;
-    times.lap("filter");
+    let rest = inputs
+        .more_scans
+        .iter()
+        .zip(&more)
+        .map(|(path, s)| {
+            // A further scan's failed registration is no record of the first scan's.
+            scans::prepare(cfg, reference_in, path, s, None)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    times.lap("filter and register");
 
-    let pose = match &inputs.pose {
-        Some(file) => PoseSource::Given {
-            pose: checks::read_pose(file)?,
-            source: file.clone(),
-        },
-        None => PoseSource::Registered(Box::new(register_scan(
-            &scan_cloud,
-            &reference.cloud,
-            &cfg.register,
-        )?)),
-    };
-    scan_cloud.transform(&pose.pose());
-    times.lap("register");
-
-    let removed = format!(
-        "{} of {} scan points removed",
-        sor.removed,
-        sor.removed + sor.kept.len()
-    );
     let mut provenance = vec![
         ("reference normals".to_string(), reference.note),
-        ("registration".to_string(), pose.line()),
-        ("outlier filter".to_string(), removed),
+        ("registration".to_string(), first.pose.line()),
+        ("outlier filter".to_string(), first.filter_line),
     ];
+    for (k, (path, s)) in inputs.more_scans.iter().zip(&rest).enumerate() {
+        let what = format!("scan {} ({})", k + 2, path.display());
+        provenance.push((format!("{what}: registration"), s.pose.line()));
+        provenance.push((format!("{what}: outlier filter"), s.filter_line.clone()));
+    }
+    let clouds: Vec<&cloud::PointCloud> = std::iter::once(&first.cloud)
+        .chain(rest.iter().map(|s| &s.cloud))
+        .collect();
+    let pooled;
+    let scan_cloud = match clouds.len() {
+        1 => &first.cloud,
+        _ => {
+            pooled = scans::pool(&clouds);
+            &pooled
+        }
+    };
+    let pose = first.pose.clone();
+    let more_poses: Vec<PoseSource> = rest.iter().map(|s| s.pose.clone()).collect();
     let (core, core_line) = load::core(cfg, inputs, &reference.cloud, scan_cloud.len())?;
     notices.extend(core.notice);
     provenance.push(("core point sample".to_string(), core_line));
     times.lap("core points");
 
-    let compare_cfg = compare_settings(cfg, inputs, &pose);
-    let deviations = compare::compare(&core.cloud, &reference.cloud, &scan_cloud, &compare_cfg)?;
+    let compare_cfg = compare_settings(cfg, inputs, std::iter::once(&pose).chain(&more_poses));
+    let deviations = compare::compare(&core.cloud, &reference.cloud, scan_cloud, &compare_cfg)?;
+    let support = match clouds.len() {
+        1 => Vec::new(),
+        _ => scans::support(&deviations, &clouds),
+    };
     times.lap("compare");
 
     let in_area = match &inputs.inspect_area {
@@ -114,6 +134,8 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     times.lap("regions");
     Ok(Inspection {
         pose,
+        more_poses,
+        support,
         deviations,
         regions,
         provenance,
@@ -134,17 +156,23 @@ pub fn register_scan(
 }
 
 /// The comparison's settings for this run: the registration error of the level of detection
-/// (the flag's, else the pose's own uncertainty, else the setting's) and the tolerance's
-/// thresholds.
-fn compare_settings(cfg: &InspectConfig, inputs: &Inputs, pose: &PoseSource) -> CompareConfig {
+/// (the flag's, else the largest of the poses' own uncertainties, else the setting's) and the
+/// tolerance's thresholds.
+fn compare_settings<'a>(
+    cfg: &InspectConfig,
+    inputs: &Inputs,
+    poses: impl Iterator<Item = &'a PoseSource>,
+) -> CompareConfig {
     let mut c = cfg.compare.clone();
     // The registration error of the level of detection is the pose's own uncertainty on the
     // surface (`Registration::registration_error`), not a residual RMSE: those hold the scan
     // noise, which the LoD already counts, and the reference's sampling spacing.
-    let registered = match pose {
-        PoseSource::Registered(reg) => Some(reg.registration_error),
-        PoseSource::Given { .. } => None,
-    };
+    let registered = poses
+        .filter_map(|pose| match pose {
+            PoseSource::Registered(reg) => Some(reg.registration_error),
+            PoseSource::Given { .. } => None,
+        })
+        .reduce(f64::max);
     c.registration_error = inputs
         .registration_error
         .or(registered)
