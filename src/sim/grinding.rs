@@ -1,7 +1,7 @@
 //! The simulated cell's grinding settings (`[sim.grinding]` of `run`'s config): the true tool,
-//! removal law and part mounting that `crate::grind_sim` grinds a virtual part with. They live
-//! with the simulated board's other settings ([`crate::bus::SimOptions`]) so that the flow runs
-//! one way: `grind_sim` (above the bus) reads them; nothing under `plan/` does.
+//! removal law and part mounting that `crate::sim::grind` grinds a virtual part with. They live
+//! with the simulated board's other settings ([`crate::sim::SimOptions`]) so that the flow runs
+//! one way: the simulator reads them; nothing under `plan/` does.
 use nalgebra::{Isometry3, Matrix4, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
