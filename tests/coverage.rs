@@ -547,10 +547,7 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
     let support = dev.field("scans").expect("scans field");
     let measured = dev.field("measured").unwrap();
     for bit in [1.0, 2.0] {
-        assert!(
-            support.iter().any(|&m| m == bit),
-            "no core point of scan {bit} alone"
-        );
+        assert!(support.contains(&bit), "no core point of scan {bit} alone");
     }
     assert!(support
         .iter()

@@ -6,36 +6,22 @@ pub mod area;
 pub mod checks;
 mod config;
 mod load;
+mod pose;
 pub mod scans;
+
+pub use pose::{register_scan, PoseSource};
 
 pub use config::{
     FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
 };
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Result;
-use nalgebra::Isometry3;
 
 use crate::cloud;
 use crate::compare::{self, CompareConfig, Deviations};
 use crate::regions::{self, Regions};
-use crate::register::{self, RegisterConfig, Registration};
-
-/// Where the pose came from.
-#[derive(Debug, Clone)]
-pub enum PoseSource {
-    /// Found by registration (its diagnostics).
-    Registered(Box<Registration>),
-    /// Read from a file.
-    Given {
-        /// The pose, scan to reference.
-        pose: Isometry3<f64>,
-        /// The file it came from.
-        source: PathBuf,
-    },
-}
 
 /// The outcome of [`run`].
 #[derive(Debug)]
@@ -60,7 +46,7 @@ pub struct Inspection {
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
-/// [`register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
+/// [`crate::register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
 pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     let mut times = StageTimes::default();
     let mut notices = Vec::new();
@@ -144,17 +130,6 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     })
 }
 
-/// Registers the filtered scan onto the reference with a progress bar.
-pub fn register_scan(
-    scan: &cloud::PointCloud,
-    reference: &cloud::PointCloud,
-    cfg: &RegisterConfig,
-) -> Result<Registration, register::RegisterError> {
-    crate::progress::stepped(register::PROGRESS_STEPS, "register", |step| {
-        register::register_with_progress(scan, reference, cfg, step)
-    })
-}
-
 /// The comparison's settings for this run: the registration error of the level of detection
 /// (the flag's, else the largest of the poses' own uncertainties, else the setting's) and the
 /// tolerance's thresholds.
@@ -180,31 +155,6 @@ fn compare_settings<'a>(
     // The comparison works to the regions' tolerance (peaks, densification, narrow defects).
     c.tolerance = cfg.regions.tolerance;
     c
-}
-
-impl PoseSource {
-    /// Scan to reference.
-    pub fn pose(&self) -> Isometry3<f64> {
-        match self {
-            PoseSource::Registered(reg) => reg.pose,
-            PoseSource::Given { pose, .. } => *pose,
-        }
-    }
-
-    /// The report's line on the pose.
-    fn line(&self) -> String {
-        match self {
-            PoseSource::Registered(reg) => format!(
-                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, registration error {:.5} mm, {:.2} s",
-                reg.fitness,
-                reg.inlier_rmse,
-                reg.fine.map_or(f64::NAN, |f| f.plane_rmse),
-                reg.registration_error,
-                reg.times.total
-            ),
-            PoseSource::Given { source, .. } => format!("pose given in {}", source.display()),
-        }
-    }
 }
 
 /// Wall time per stage of an inspection, for the closing `times:` line.

@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 
-use super::{checks, register_scan, InspectConfig, PoseSource};
+use super::checks;
+use super::config::{FileInput, InspectConfig};
+use super::pose::{register_scan, PoseSource};
 use crate::cloud::{self, PointCloud};
 use crate::compare::Deviations;
 use crate::preprocess;
@@ -63,7 +65,7 @@ pub fn prepare(
 }
 
 /// Reads the further scans (in parallel).
-pub fn load_more(paths: &[PathBuf], files: super::FileInput) -> Result<Vec<PointCloud>> {
+pub fn load_more(paths: &[PathBuf], files: FileInput) -> Result<Vec<PointCloud>> {
     anyhow::ensure!(
         paths.len() < MAX_SCANS,
         "{} scans: at most {MAX_SCANS} in one inspection",
