@@ -480,7 +480,8 @@ fn run_ok(cmd: &mut std::process::Command, incomplete: bool) -> String {
 /// Issue 53's case in the suite: `synth --views 12 --setups 2 --elevation 35` (the scanner
 /// 35 degrees above the table; setup 2 the part turned over), small views (30,000 points),
 /// each setup merged on its own, then inspected against synth's articular surface
-/// (articular.ply): one setup alone is incomplete (it sees about 70 % of it); both together
+/// (articular.ply): one setup alone is incomplete (it sees about 70 % of it) and the suggested
+/// views ask for a second setup for all but under 5 % of the area to inspect; both together
 /// (`inspect --scan A --scan B`) measure at least 95 % of it, with IoU >= 0.96 on measured
 /// core points, no error above 0.2 mm, a verdict, and deviations.ply says that both scans
 /// supported core points.
@@ -531,7 +532,19 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
         cmd.arg("--inspect-area").arg(d.join("articular.ply"));
         run_ok(cmd.arg("-o").arg(out), incomplete)
     };
-    inspect(&merged[..1], &d.join("one"), true);
+    // One setup: the suggestion asks for a second setup for all but under 5 % of the area.
+    let one = inspect(&merged[..1], &d.join("one"), true);
+    let number_before = |text: &str, tail: &str| -> f64 {
+        let head = text.split(tail).next().expect(tail);
+        head.rsplit(' ').next().unwrap().parse().expect(tail)
+    };
+    let line = one
+        .lines()
+        .find(|l| l.starts_with("suggested views: "))
+        .expect("suggested views");
+    let unmeasured = number_before(line, " % of the area to inspect not measured");
+    let other_setup = number_before(line, " % faces no table angle of this setup");
+    assert!(unmeasured - other_setup < 5.0, "{line}");
     let insp = d.join("both");
     let stdout = inspect(&merged, &insp, false);
     let truth = Truth::load(&d.join("truth.json")).unwrap();

@@ -83,6 +83,20 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
             "--registration-error: {e} mm is not a non-negative number of mm"
         );
     }
+    let sg = &cfg.suggest;
+    let finite = |v: [f64; 3]| v.iter().all(|x| x.is_finite()) && v != [0.0; 3];
+    anyhow::ensure!(
+        finite(sg.table_axis) && finite(sg.scanner_direction),
+        "[suggest] table_axis and scanner_direction must be finite non-zero vectors"
+    );
+    anyhow::ensure!(
+        sg.max_incidence_deg > 0.0 && sg.max_incidence_deg <= 90.0,
+        "[suggest] max_incidence_deg must be in (0, 90]"
+    );
+    anyhow::ensure!(
+        sg.step_deg >= 1.0 && sg.step_deg <= 360.0,
+        "[suggest] step_deg must be in 1..=360"
+    );
     anyhow::ensure!(
         args.pose.is_none() || args.scan.len() == 1,
         "--pose gives one scan's pose: with {} scans each is registered, leave --pose out",
@@ -199,6 +213,9 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
         start.elapsed().as_secs_f64(),
     );
     println!("times: {}", found.times.line());
+    if let Some(sg) = &found.suggestion {
+        print_suggestion(sg);
+    }
     match found.regions.verdict {
         regions::Verdict::Incomplete => Err(super::inspect_report::Incomplete {
             coverage: found.regions.coverage,
@@ -302,4 +319,27 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
         println!("† {}", super::inspect_report::UNMEASURED_NOTE);
     }
     println!("verdict: {}", super::inspect_report::verdict_line(found));
+}
+
+/// The suggested views of an incomplete inspection, one line.
+fn print_suggestion(sg: &inspect::suggest::Suggestion) {
+    let angles: Vec<String> = sg
+        .table_angles
+        .iter()
+        .map(|(deg, share)| format!("{deg:.0} deg ({:.1} %)", 100.0 * share))
+        .collect();
+    let here = match angles.is_empty() {
+        true => "no table angle of this setup faces it".to_string(),
+        false => format!(
+            "this setup faces it at table angles {} (where those views exist the part hid it)",
+            angles.join(", ")
+        ),
+    };
+    println!(
+        "suggested views: {:.1} % of the area to inspect not measured; {here}; {:.1} % faces \
+         no table angle of this setup: scan it in a second setup, the part turned over \
+         ([suggest] in --config: table axis and scanner direction)",
+        100.0 * sg.unmeasured,
+        100.0 * sg.other_setup
+    );
 }

@@ -25,6 +25,8 @@ pub struct InspectConfig {
     pub filter: SorConfig,
     /// Registration (skipped when a pose is given).
     pub register: RegisterConfig,
+    /// The cell the suggested views are for (printed with an incomplete verdict).
+    pub suggest: super::suggest::SuggestConfig,
 }
 
 /// Points sampled on a mesh reference when `reference_points` is 0: about 0.07 mm apart on a

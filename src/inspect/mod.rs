@@ -8,6 +8,7 @@ mod config;
 mod load;
 mod pose;
 pub mod scans;
+pub mod suggest;
 
 pub use pose::{register_scan, PoseSource};
 
@@ -43,6 +44,8 @@ pub struct Inspection {
     pub notices: Vec<String>,
     /// Wall time per stage.
     pub times: StageTimes,
+    /// With an incomplete verdict, the views that would measure the rest ([`suggest`]).
+    pub suggestion: Option<suggest::Suggestion>,
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
@@ -117,6 +120,8 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
         None => None,
     };
     let regions = regions::find_regions_in(&deviations, &cfg.regions, in_area.as_deref());
+    let suggestion = (regions.verdict == regions::Verdict::Incomplete)
+        .then(|| suggest::suggest(&deviations, in_area.as_deref(), &pose.pose(), &cfg.suggest));
     times.lap("regions");
     Ok(Inspection {
         pose,
@@ -127,6 +132,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
         provenance,
         notices,
         times,
+        suggestion,
     })
 }
 
