@@ -235,7 +235,7 @@ fn inspect_scan(l: &Loop, scan: &Path, dir: &Path) -> anyhow::Result<()> {
     inspect::run(
         inspect::InspectArgs {
             reference: l.reference.clone(),
-            scan: scan.to_path_buf(),
+            scan: vec![scan.to_path_buf()],
             out: dir.to_path_buf(),
             tolerance: None,
             method: None,

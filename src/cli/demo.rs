@@ -122,6 +122,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         &crate::inspect::Inputs {
             reference: out.join("reference.ply"),
             scan: out.join("scan.ply"),
+            more_scans: Vec::new(),
             files: crate::inspect::FileInput {
                 units: Some(crate::cloud::Units::Mm),
                 format: None,

@@ -26,9 +26,11 @@ pub struct InspectArgs {
     /// propagation, with a notice.
     #[arg(long)]
     pub reference: PathBuf,
-    /// Scan point cloud.
-    #[arg(long)]
-    pub scan: PathBuf,
+    /// Scan point cloud; several (`--scan A --scan B`, or `--scan A B`) are scans of one part
+    /// in several setups: each filtered and registered to the reference on its own, measured
+    /// jointly (deviations.ply's `scans` says which supported each core point).
+    #[arg(long, required = true, num_args = 1..)]
+    pub scan: Vec<PathBuf>,
     /// Output folder.
     #[arg(short = 'o', long = "out")]
     pub out: PathBuf,
@@ -90,6 +92,25 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
             "--registration-error: {e} mm is not a non-negative number of mm"
         );
     }
+    let sg = &cfg.suggest;
+    let finite = |v: [f64; 3]| v.iter().all(|x| x.is_finite()) && v != [0.0; 3];
+    anyhow::ensure!(
+        finite(sg.table_axis) && finite(sg.scanner_direction),
+        "[suggest] table_axis and scanner_direction must be finite non-zero vectors"
+    );
+    anyhow::ensure!(
+        sg.max_incidence_deg > 0.0 && sg.max_incidence_deg <= 90.0,
+        "[suggest] max_incidence_deg must be in (0, 90]"
+    );
+    anyhow::ensure!(
+        sg.step_deg >= 1.0 && sg.step_deg <= 360.0,
+        "[suggest] step_deg must be in 1..=360"
+    );
+    anyhow::ensure!(
+        args.pose.is_none() || args.scan.len() == 1,
+        "--pose gives one scan's pose: with {} scans each is registered, leave --pose out",
+        args.scan.len()
+    );
     let tolerance = |t: f64| {
         super::settings::in_range("tolerance", t, MIN_TOLERANCE_MM, MAX_TOLERANCE_MM, "mm")
     };
@@ -115,7 +136,8 @@ fn settings(args: &InspectArgs, config: Option<&Path>) -> Result<InspectConfig> 
 fn inputs(args: &InspectArgs) -> inspect::Inputs {
     inspect::Inputs {
         reference: args.reference.clone(),
-        scan: args.scan.clone(),
+        scan: args.scan[0].clone(),
+        more_scans: args.scan[1..].to_vec(),
         files: inspect::FileInput {
             format: args.input.format,
             units: args.input.units,
@@ -180,8 +202,22 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
         )?,
     }
     provenance.stamp_json(&reg_file)?;
+    for (k, pose) in found.more_poses.iter().enumerate() {
+        let file = out.join(format!("registration_scan{}.json", k + 2));
+        if let PoseSource::Registered(reg) = pose {
+            let scan = inputs.more_scans[k].as_path();
+            super::register::record_ok(reg, &file, (scan, inputs.reference.as_path()))?;
+            provenance.stamp_json(&file)?;
+        }
+    }
     let lines = std::mem::take(&mut found.provenance);
-    write_outputs(out, &found.deviations, &found.regions, lines, &provenance)?;
+    let support = std::mem::take(&mut found.support);
+    let written = Written {
+        dev: &found.deviations,
+        found: &found.regions,
+        support: &support,
+    };
+    write_outputs(out, written, lines, &provenance)?;
     found.times.lap("files and report");
     print_summary(
         &found.deviations,
@@ -189,6 +225,9 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
         start.elapsed().as_secs_f64(),
     );
     println!("times: {}", found.times.line());
+    if let Some(sg) = &found.suggestion {
+        print_suggestion(sg);
+    }
     match found.regions.verdict {
         regions::Verdict::Incomplete => Err(super::inspect_report::Incomplete {
             coverage: found.regions.coverage,
@@ -200,19 +239,35 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
     }
 }
 
+/// What [`write_outputs`] writes: the deviations, the regions and, with several scans, the
+/// scans that supported each core point.
+struct Written<'a> {
+    dev: &'a compare::Deviations,
+    found: &'a Regions,
+    support: &'a [u32],
+}
+
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
 /// (formatting is most of their time, and each is single-threaded).
 fn write_outputs(
     out: &Path,
-    dev: &compare::Deviations,
-    found: &Regions,
+    written: Written,
     report_summary: Vec<(String, String)>,
     provenance: &Provenance,
 ) -> Result<()> {
+    let Written {
+        dev,
+        found,
+        support,
+    } = written;
     let table = compare::to_cloud(dev, &found.labels);
-    // deviations.csv keeps its columns (a contract); the PLY also maps what was measured.
+    // deviations.csv keeps its columns (a contract); the PLY also maps what was measured and,
+    // with several scans, which supported each row.
     let mut ply_table = table.clone();
     compare::add_coverage_fields(dev, &mut ply_table);
+    if !support.is_empty() {
+        ply_table.set_field("scans", support.iter().map(|&m| m as f64).collect());
+    }
     let write_regions = || -> Result<()> {
         let text = serde_json::to_string_pretty(found)?;
         let path = out.join("regions.json");
@@ -277,4 +332,27 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
         println!("† {}", super::inspect_report::UNMEASURED_NOTE);
     }
     println!("verdict: {}", super::inspect_report::verdict_line(found));
+}
+
+/// The suggested views of an incomplete inspection, one line.
+fn print_suggestion(sg: &inspect::suggest::Suggestion) {
+    let angles: Vec<String> = sg
+        .table_angles
+        .iter()
+        .map(|(deg, share)| format!("{deg:.0} deg ({:.1} %)", 100.0 * share))
+        .collect();
+    let here = match angles.is_empty() {
+        true => "no table angle of this setup faces it".to_string(),
+        false => format!(
+            "this setup faces it at table angles {} (where those views exist the part hid it)",
+            angles.join(", ")
+        ),
+    };
+    println!(
+        "suggested views: {:.1} % of the area to inspect not measured; {here}; {:.1} % faces \
+         no table angle of this setup: scan it in a second setup, the part turned over \
+         ([suggest] in --config: table axis and scanner direction)",
+        100.0 * sg.unmeasured,
+        100.0 * sg.other_setup
+    );
 }

@@ -47,6 +47,7 @@ pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
         ("reference", inputs.reference.as_path()),
         ("scan", inputs.scan.as_path()),
     ];
+    files.extend(inputs.more_scans.iter().map(|p| ("scan", p.as_path())));
     let optional = [
         ("pose", &inputs.pose),
         ("core points", &inputs.core),

@@ -60,6 +60,15 @@ pub struct SynthArgs {
     /// Points per turntable view [default: 100000].
     #[arg(long, requires = "views")]
     pub view_points: Option<usize>,
+    /// Setups of the turntable views: setup k (from 0) has the part tilted by k * 360 / N
+    /// degrees about the table's x axis (2: the part turned over), each with --views views;
+    /// setup 2's files are setup2_view_000.ply.. [default: 1].
+    #[arg(long, requires = "views")]
+    pub setups: Option<usize>,
+    /// Scanner elevation above the table plane, degrees (the scanner looks from -y, tilted
+    /// down by this much) [default: the config's scanner_direction, about 19.3].
+    #[arg(long, requires = "views", allow_hyphen_values = true)]
+    pub elevation: Option<f64>,
 }
 
 fn parse_range(s: &str) -> Result<[f64; 2], String> {
@@ -104,6 +113,18 @@ pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<
         t.step_deg = args.step.or(t.step_deg);
         t.angle_error_deg = args.angle_error.unwrap_or(t.angle_error_deg);
         t.points_per_view = args.view_points.unwrap_or(t.points_per_view);
+        if let Some(n) = args.setups {
+            let turn = 360.0 / n.max(1) as f64;
+            t.setup_tilts_deg = (0..n).map(|k| k as f64 * turn).collect();
+        }
+        if let Some(e) = args.elevation {
+            anyhow::ensure!(
+                e.is_finite() && e.abs() < 90.0,
+                "--elevation: {e} deg is not between -90 and 90"
+            );
+            let e = e.to_radians();
+            t.scanner_direction = [0.0, -e.cos(), e.sin()];
+        }
     }
     cfg.check().map_err(|m| file.refuse("", &m))?;
     let case = synth(&cfg)?;

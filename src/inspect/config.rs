@@ -25,6 +25,8 @@ pub struct InspectConfig {
     pub filter: SorConfig,
     /// Registration (skipped when a pose is given).
     pub register: RegisterConfig,
+    /// The cell the suggested views are for (printed with an incomplete verdict).
+    pub suggest: super::suggest::SuggestConfig,
 }
 
 /// Points sampled on a mesh reference when `reference_points` is 0: about 0.07 mm apart on a
@@ -51,6 +53,9 @@ pub struct Inputs {
     pub reference: PathBuf,
     /// Scan point cloud.
     pub scan: PathBuf,
+    /// Further scans of the same part (other setups), each registered to the reference on its
+    /// own and measured jointly with `scan` (default none).
+    pub more_scans: Vec<PathBuf>,
     /// Format and units of every input file.
     pub files: FileInput,
     /// Skip registration: `scan_to_reference` from this registration.json or truth.json.

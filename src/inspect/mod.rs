@@ -6,42 +6,34 @@ pub mod area;
 pub mod checks;
 mod config;
 mod load;
+mod pose;
+pub mod scans;
+pub mod suggest;
+
+pub use pose::{register_scan, PoseSource};
 
 pub use config::{
     FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
 };
 
-use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
-use nalgebra::Isometry3;
+use anyhow::Result;
 
 use crate::cloud;
 use crate::compare::{self, CompareConfig, Deviations};
-use crate::preprocess;
 use crate::regions::{self, Regions};
-use crate::register::{self, RegisterConfig, Registration};
-
-/// Where the pose came from.
-#[derive(Debug, Clone)]
-pub enum PoseSource {
-    /// Found by registration (its diagnostics).
-    Registered(Box<Registration>),
-    /// Read from a file.
-    Given {
-        /// The pose, scan to reference.
-        pose: Isometry3<f64>,
-        /// The file it came from.
-        source: PathBuf,
-    },
-}
 
 /// The outcome of [`run`].
 #[derive(Debug)]
 pub struct Inspection {
     /// The pose of the scan and where it came from.
     pub pose: PoseSource,
+    /// The poses of the further scans (`Inputs::more_scans`), in order.
+    pub more_poses: Vec<PoseSource>,
+    /// With further scans, per core point the scans that supported its measurement (bit k:
+    /// scan k, the first scan 0; [`scans::support`]); empty with one scan.
+    pub support: Vec<u32>,
     /// Per core point: distance, uncertainty, significance.
     pub deviations: Deviations,
     /// Defect regions and the verdict.
@@ -52,10 +44,12 @@ pub struct Inspection {
     pub notices: Vec<String>,
     /// Wall time per stage.
     pub times: StageTimes,
+    /// With an incomplete verdict, the views that would measure the rest ([`suggest`]).
+    pub suggestion: Option<suggest::Suggestion>,
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
-/// [`register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
+/// [`crate::register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
 pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     let mut times = StageTimes::default();
     let mut notices = Vec::new();
@@ -64,50 +58,61 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     spin.finish_and_clear();
     times.lap("load");
 
-    let sor = preprocess::statistical_outlier_filter(&scan, &cfg.filter)
-        .with_context(|| format!("{}", inputs.scan.display()))?;
-    let mut scan_cloud = sor.apply(&scan);
-    checks::check_sizes(
-        (&inputs.reference, &reference.cloud),
-        (&inputs.scan, &scan_cloud),
+    let more = scans::load_more(&inputs.more_scans, inputs.files)?;
+    let reference_in = (inputs.reference.as_path(), &reference.cloud);
+    let first = scans::prepare(
+        cfg,
+        reference_in,
+        &inputs.scan,
+        &scan,
+        inputs.pose.as_deref(),
     )?;
-    checks::check_scan_density(&inputs.scan, &scan_cloud)?;
-    times.lap("filter");
+    let rest = inputs
+        .more_scans
+        .iter()
+        .zip(&more)
+        .map(|(path, s)| {
+            // A further scan's failed registration is no record of the first scan's.
+            scans::prepare(cfg, reference_in, path, s, None)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    times.lap("filter and register");
 
-    let pose = match &inputs.pose {
-        Some(file) => PoseSource::Given {
-            pose: checks::read_pose(file)?,
-            source: file.clone(),
-        },
-        None => PoseSource::Registered(Box::new(register_scan(
-            &scan_cloud,
-            &reference.cloud,
-            &cfg.register,
-        )?)),
-    };
-    scan_cloud.transform(&pose.pose());
-    if let PoseSource::Given { source, .. } = &pose {
-        checks::check_overlap((&inputs.reference, &reference.cloud), (source, &scan_cloud))?;
-    }
-    times.lap("register");
-
-    let removed = format!(
-        "{} of {} scan points removed",
-        sor.removed,
-        sor.removed + sor.kept.len()
-    );
     let mut provenance = vec![
         ("reference normals".to_string(), reference.note),
-        ("registration".to_string(), pose.line()),
-        ("outlier filter".to_string(), removed),
+        ("registration".to_string(), first.pose.line()),
+        ("outlier filter".to_string(), first.filter_line),
     ];
+    for (k, (path, s)) in inputs.more_scans.iter().zip(&rest).enumerate() {
+        let what = format!("scan {} ({})", k + 2, path.display());
+        provenance.push((format!("{what}: registration"), s.pose.line()));
+        provenance.push((format!("{what}: outlier filter"), s.filter_line.clone()));
+    }
+    let clouds: Vec<&cloud::PointCloud> = std::iter::once(&first.cloud)
+        .chain(rest.iter().map(|s| &s.cloud))
+        .collect();
+    let pooled;
+    let scan_cloud = match clouds.len() {
+        1 => &first.cloud,
+        _ => {
+            pooled = scans::pool(&clouds);
+            &pooled
+        }
+    };
+    let pose = first.pose.clone();
+    let more_poses: Vec<PoseSource> = rest.iter().map(|s| s.pose.clone()).collect();
     let (core, core_line) = load::core(cfg, inputs, &reference.cloud, scan_cloud.len())?;
     notices.extend(core.notice);
     provenance.push(("core point sample".to_string(), core_line));
     times.lap("core points");
 
-    let compare_cfg = compare_settings(cfg, inputs, &pose);
-    let deviations = compare::compare(&core.cloud, &reference.cloud, &scan_cloud, &compare_cfg)?;
+    let compare_cfg = compare_settings(cfg, inputs, std::iter::once(&pose).chain(&more_poses));
+    let deviations = compare::compare(&core.cloud, &reference.cloud, scan_cloud, &compare_cfg)?;
+    let support = match clouds.len() {
+        1 => Vec::new(),
+        _ => scans::support(&deviations, &clouds),
+    };
     times.lap("compare");
 
     let in_area = match &inputs.inspect_area {
@@ -115,40 +120,40 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
         None => None,
     };
     let regions = regions::find_regions_in(&deviations, &cfg.regions, in_area.as_deref());
+    let suggestion = (regions.verdict == regions::Verdict::Incomplete)
+        .then(|| suggest::suggest(&deviations, in_area.as_deref(), &pose.pose(), &cfg.suggest));
     times.lap("regions");
     Ok(Inspection {
         pose,
+        more_poses,
+        support,
         deviations,
         regions,
         provenance,
         notices,
         times,
-    })
-}
-
-/// Registers the filtered scan onto the reference with a progress bar.
-pub fn register_scan(
-    scan: &cloud::PointCloud,
-    reference: &cloud::PointCloud,
-    cfg: &RegisterConfig,
-) -> Result<Registration, register::RegisterError> {
-    crate::progress::stepped(register::PROGRESS_STEPS, "register", |step| {
-        register::register_with_progress(scan, reference, cfg, step)
+        suggestion,
     })
 }
 
 /// The comparison's settings for this run: the registration error of the level of detection
-/// (the flag's, else the pose's own uncertainty, else the setting's) and the tolerance's
-/// thresholds.
-fn compare_settings(cfg: &InspectConfig, inputs: &Inputs, pose: &PoseSource) -> CompareConfig {
+/// (the flag's, else the largest of the poses' own uncertainties, else the setting's) and the
+/// tolerance's thresholds.
+fn compare_settings<'a>(
+    cfg: &InspectConfig,
+    inputs: &Inputs,
+    poses: impl Iterator<Item = &'a PoseSource>,
+) -> CompareConfig {
     let mut c = cfg.compare.clone();
     // The registration error of the level of detection is the pose's own uncertainty on the
     // surface (`Registration::registration_error`), not a residual RMSE: those hold the scan
     // noise, which the LoD already counts, and the reference's sampling spacing.
-    let registered = match pose {
-        PoseSource::Registered(reg) => Some(reg.registration_error),
-        PoseSource::Given { .. } => None,
-    };
+    let registered = poses
+        .filter_map(|pose| match pose {
+            PoseSource::Registered(reg) => Some(reg.registration_error),
+            PoseSource::Given { .. } => None,
+        })
+        .reduce(f64::max);
     c.registration_error = inputs
         .registration_error
         .or(registered)
@@ -156,31 +161,6 @@ fn compare_settings(cfg: &InspectConfig, inputs: &Inputs, pose: &PoseSource) -> 
     // The comparison works to the regions' tolerance (peaks, densification, narrow defects).
     c.tolerance = cfg.regions.tolerance;
     c
-}
-
-impl PoseSource {
-    /// Scan to reference.
-    pub fn pose(&self) -> Isometry3<f64> {
-        match self {
-            PoseSource::Registered(reg) => reg.pose,
-            PoseSource::Given { pose, .. } => *pose,
-        }
-    }
-
-    /// The report's line on the pose.
-    fn line(&self) -> String {
-        match self {
-            PoseSource::Registered(reg) => format!(
-                "FPFH + MAC + ICP: fitness {:.4}, inlier RMSE {:.4} mm, point-to-plane RMSE {:.4} mm, registration error {:.5} mm, {:.2} s",
-                reg.fitness,
-                reg.inlier_rmse,
-                reg.fine.map_or(f64::NAN, |f| f.plane_rmse),
-                reg.registration_error,
-                reg.times.total
-            ),
-            PoseSource::Given { source, .. } => format!("pose given in {}", source.display()),
-        }
-    }
 }
 
 /// Wall time per stage of an inspection, for the closing `times:` line.

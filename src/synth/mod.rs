@@ -25,7 +25,7 @@ pub use femoral::{build as build_femoral, FemoralPart, FemoralShape};
 pub use limits::MAX_POINTS;
 use random::gauss;
 pub use truth::{OutlierTruth, Truth};
-pub use turntable::{TurntableConfig, TurntableTruth, ViewTruth};
+pub use turntable::{view_file, SetupTruth, TurntableConfig, TurntableTruth, ViewTruth};
 
 use crate::cloud::{self, Geometry, Mesh, PlyPrecision, PointCloud};
 
@@ -42,7 +42,13 @@ pub struct SynthCase {
     pub truth: Truth,
     /// Turntable views (table frame) and their truth, when asked for.
     pub turntable: Option<(Vec<PointCloud>, TurntableTruth)>,
+    /// The articular surface defects were planted on (reference frame), when known.
+    pub articular: Option<Mesh>,
 }
+
+/// Points of articular.ply, written with turntable views (the area to inspect): about 0.1 mm
+/// apart on a femoral component's 2,000 mm² articular surface, finer than any core spacing.
+const ARTICULAR_POINTS: usize = 200_000;
 
 impl SynthCase {
     /// Writes reference.ply, scan.ply and truth.json into `dir` (created if missing).
@@ -61,6 +67,10 @@ impl SynthCase {
                 cloud::write_ply(&dir.join(&t.file), view, None, PlyPrecision::F64)?;
             }
             truth.save(&dir.join("turntable.json"))?;
+            if let Some(mesh) = &self.articular {
+                let area = cloud::sample_mesh(mesh, ARTICULAR_POINTS, 1)?.cloud;
+                cloud::write_ply(&dir.join("articular.ply"), &area, None, PlyPrecision::F64)?;
+            }
         }
         self.truth.save(&dir.join("truth.json"))
     }
@@ -203,5 +213,6 @@ pub fn synth_at(cfg: &SynthConfig, accept: &SiteFilter) -> Result<SynthCase> {
         mesh: part.mesh,
         truth,
         turntable,
+        articular: part.articular,
     })
 }
