@@ -12,6 +12,7 @@ use crate::bus::sim::ReceivedFrame;
 use crate::bus::SimOptions;
 
 /// The board's state over time, queried at non-decreasing times.
+#[derive(Clone)]
 pub struct ServoTrace {
     board: Board,
     frames: Vec<ReceivedFrame>,
