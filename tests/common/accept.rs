@@ -294,6 +294,10 @@ fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
 /// normal turns by up to 10 degrees over a grind's 0.25 mm, 0.04 mm off; the points lie
 /// 0.3 mm apart).
 const MATCH_MM: f64 = 0.1;
+/// More of that distance per mm removed at the point (0.35, sin 20 degrees): a cut far below
+/// the planned depth (issue 50: 0.4-0.6 mm with 1 degree of backlash) turns the normal by up to
+/// 20 degrees, so its point lies farther off than 0.1 mm and the walk ran off the end.
+const MATCH_PER_MM_REMOVED: f64 = 0.35;
 
 #[derive(Default)]
 struct TruePart {
@@ -364,7 +368,7 @@ impl TruePart {
                 let earlier = self.points.get(at);
                 let earlier =
                     earlier.unwrap_or_else(|| panic!("grind {k}: a point of no earlier grind"));
-                if (earlier - before).norm() <= MATCH_MM {
+                if (earlier - before).norm() <= MATCH_MM + MATCH_PER_MM_REMOVED * r.abs() {
                     break;
                 }
                 at += 1;
