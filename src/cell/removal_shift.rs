@@ -9,7 +9,7 @@
 //! Method: docs/ALGORITHMS.md, "Where the tool really ground".
 //!
 //! Front function: [`register`] with a [`ShiftConfig`]; result: one [`RegionShift`] per region.
-use nalgebra::{Matrix4, Point3, Translation3, Vector3};
+use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
 use super::matching::{partners, repairable_ids};
@@ -219,59 +219,26 @@ pub fn shifted_prediction(
     out
 }
 
-/// The shift common to the regions: their shifts' mean weighted by their points, reference
-/// frame, mm (zero without regions). What repeats from grind to grind (the arm's flanks under
-/// the contact force, its sag) moves every region alike; the loop carries it into the next
-/// plan ([`corrected_placement`]).
-pub fn common_shift(shifts: &[RegionShift]) -> Vector3<f64> {
-    let w: f64 = shifts.iter().map(|r| r.points as f64).sum();
-    if w <= 0.0 {
-        return Vector3::zeros();
-    }
-    shifts
-        .iter()
-        .map(|r| r.shift_mm * r.points as f64)
-        .sum::<Vector3<f64>>()
-        / w
-}
-
-/// The part's placement `robot_from_reference` (metres) the next plan is made with so that
-/// the tool, landing `shift_mm` (reference frame, mm) off where it is sent, lands on its
-/// contacts: the contacts sent `shift_mm` back.
-pub fn corrected_placement(
-    robot_from_reference: &Matrix4<f64>,
-    shift_mm: &Vector3<f64>,
-) -> Matrix4<f64> {
-    robot_from_reference * Translation3::from(-shift_mm * 1e-3).to_homogeneous()
-}
-
 /// The stop rule on the registration: a one-line reason naming the region and its measured
-/// shift when a region's removal landed farther than `limit_mm` from where the common shift
-/// ([`common_shift`], which the next plan corrects) puts it, at the edge of the search (the
-/// shift may be larger than the search saw), or removed where nothing was planned; None when
-/// the loop may grind again.
+/// shift when a region's removal landed farther than `limit_mm` from its plan, at the edge of
+/// the search (the shift may be larger than the search saw), or removed where nothing was
+/// planned; None when the loop may grind again.
 pub fn judge(shifts: &[RegionShift], cfg: &ShiftConfig) -> Option<String> {
-    let common = common_shift(shifts);
     let edge = cfg.search_mm - 0.5 * cfg.step_mm;
     let r = shifts.iter().find(|r| {
-        (r.shift_mm - common).norm() > cfg.limit_mm
-            || r.shift_mm.norm() > edge
-            || r.unplanned > cfg.unplanned_points
+        r.shift_mm.norm() > cfg.limit_mm.min(edge) || r.unplanned > cfg.unplanned_points
     })?;
     let s = r.shift_mm;
     Some(format!(
-        "region {}: the removal landed {:.2} mm from the plan (shift [{:.2}, {:.2}, {:.2}] mm; \
-         {:.2} mm from the regions' common shift, limit {} mm; search up to {} mm) with {} \
-         points removed where nothing was planned (limit {}): the arm is not where the model \
-         puts it; not grinding again on that model",
+        "region {}: the removal landed {:.2} mm from the plan (shift [{:.2}, {:.2}, {:.2}] mm, \
+         limit {} mm) with {} points removed where nothing was planned (limit {}): the arm is \
+         not where the model puts it; not grinding again on that model",
         r.region,
         s.norm(),
         s.x,
         s.y,
         s.z,
-        (s - common).norm(),
         cfg.limit_mm,
-        cfg.search_mm,
         r.unplanned,
         cfg.unplanned_points
     ))

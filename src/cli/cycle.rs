@@ -20,8 +20,6 @@ use crate::cell::removal_fit::{self, Agreement, Evidence, FitConfig, RemovalFit}
 use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
 use crate::plan::{Inspection, Plan, PlanMode};
 use crate::regions::Regions;
-use crate::robot::Workcell;
-use nalgebra::Vector3;
 
 /// Exit code of a loop that ended without the part within tolerance (no progress, iterations
 /// used up, nothing left the arm can grind); an inspection's incomplete verdict keeps its 3.
@@ -289,10 +287,9 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
     // the simulator's virtual part: the first scan, then the ground part itself (its truth
     // file, reference frame), so that it keeps its shape between grinds
     let mut part = (l.scan.clone(), false);
-    let robot = load_config::<plan::PlanFileConfig>(l.configs.plan.as_deref())?.robot;
-    let mut tool = robot.tool;
-    // the shift of where the tool grinds, measured over the grinds so far (reference frame, mm)
-    let mut carried = Vector3::zeros();
+    let mut tool = load_config::<plan::PlanFileConfig>(l.configs.plan.as_deref())?
+        .robot
+        .tool;
     for k in 1.. {
         let dir = l.out.join(format!("iter-{k}"));
         std::fs::create_dir_all(&dir)
@@ -310,8 +307,7 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
         if let (Some(last), Some(before)) = (records.last_mut(), &previous) {
             last.followed_by(&measured, &before.inspection, &inspection);
             let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
-            let shift;
-            (last.k_fitted, last.agreement, off_plan, shift) = refit(
+            (last.k_fitted, last.agreement, off_plan) = refit(
                 before,
                 (&inspection_dir, &inspection),
                 &ids,
@@ -319,7 +315,6 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
                 &mut tool,
                 &mut pooled,
             );
-            carried += shift;
         }
         records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&records, &l.config);
@@ -329,8 +324,7 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
         }
         if outcome == Outcome::Continue {
             if l.first.is_none() || k > 1 {
-                let workcell = corrected_workcell(&robot.workcell, &carried, &dir)?;
-                plan_into(l, &inspection_dir, &plan_file, (&tool, workcell), &dir)?;
+                plan_into(l, &inspection_dir, &plan_file, &tool, &dir)?;
             }
             let plan = Plan::load(&plan_file)?;
             let last = records.last_mut().expect("pushed above");
@@ -362,9 +356,9 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
 /// with it and makes it the `tool` of the next plan; re-predicts the grind with the fitted k
 /// over the defect points of the regions `ids` against the `after` inspection (folder and
 /// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
-/// evidence), the agreement (None for a rigid plan), the registration's reason to stop
-/// (`removal_shift::judge`) and the regions' common shift (reference frame, mm): k is fitted on
-/// the prediction moved by each region's measured shift.
+/// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
+/// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
+/// shift.
 fn refit(
     before: &Ground,
     after: (&Path, &Inspection),
@@ -372,7 +366,7 @@ fn refit(
     dir: &Path,
     tool: &mut PathBuf,
     pooled: &mut Vec<Evidence>,
-) -> (Option<f64>, Option<Agreement>, Option<String>, Vector3<f64>) {
+) -> (Option<f64>, Option<Agreement>, Option<String>) {
     let inputs = Inputs {
         before: before.inspection_dir.clone(),
         after: after.0.to_path_buf(),
@@ -383,14 +377,12 @@ fn refit(
     let prediction = calib::prediction(&before.plan, &before.tool, &before.inspection);
     let shift_cfg = ShiftConfig::default();
     let mut off_plan = None;
-    let mut common = Vector3::zeros();
     let prediction = prediction.map(|(p, k)| {
         let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
         shifts
             .iter()
             .for_each(|r| println!("{}", describe_shift(r)));
         off_plan = removal_shift::judge(&shifts, &shift_cfg);
-        common = removal_shift::common_shift(&shifts);
         let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
         (moved, k)
     });
@@ -420,47 +412,7 @@ fn refit(
     let agreement = prediction.ok().and_then(|(p, plan_k)| {
         removal_fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
-    (k, agreement, off_plan, common)
-}
-
-/// The workcell file the next plan is made with: `workcell` itself while no shift is carried,
-/// else DIR/workcell.toml with the part's placement corrected by the carried shift `carried`
-/// (reference frame, mm; `removal_shift::corrected_placement`) and a copy of the solids.toml
-/// beside it.
-fn corrected_workcell(
-    workcell: &Path,
-    carried: &Vector3<f64>,
-    dir: &Path,
-) -> anyhow::Result<PathBuf> {
-    if carried.norm() == 0.0 {
-        return Ok(workcell.to_path_buf());
-    }
-    let cell = Workcell::load(workcell)?;
-    let m = removal_shift::corrected_placement(&cell.robot_from_reference, carried);
-    let mut table: toml::Table = std::fs::read_to_string(workcell)
-        .with_context(|| format!("{}: cannot read", workcell.display()))?
-        .parse()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", workcell.display()))?;
-    let rows: Vec<toml::Value> = (0..4)
-        .map(|r| toml::Value::Array((0..4).map(|c| m[(r, c)].into()).collect()))
-        .collect();
-    table.insert("robot_from_reference".into(), toml::Value::Array(rows));
-    let out = dir.join("workcell.toml");
-    std::fs::write(&out, toml::to_string(&table)?)
-        .with_context(|| format!("{}: cannot write", out.display()))?;
-    let solids = workcell.with_file_name("solids.toml");
-    if solids.exists() {
-        std::fs::copy(&solids, dir.join("solids.toml"))
-            .with_context(|| format!("{}: cannot copy", solids.display()))?;
-    }
-    println!(
-        "cycle: the next plan sends the tool [{:.2}, {:.2}, {:.2}] mm back (the shift measured so far): {}",
-        -carried.x,
-        -carried.y,
-        -carried.z,
-        out.display()
-    );
-    Ok(out)
+    (k, agreement, off_plan)
 }
 
 /// One line on a region's registration for the loop's log.
@@ -525,13 +477,12 @@ fn clone_error(e: &anyhow::Error) -> anyhow::Error {
 }
 
 /// Plans from `inspection` into `plan_file` with `plan`'s settings and the tool file `tool`
-/// and the workcell file `workcell` (DIR/plan.toml: the `[plan]` settings with `robot.tool` and
-/// `robot.workcell` set).
+/// (DIR/plan.toml: the `[plan]` settings with `robot.tool` set).
 fn plan_into(
     l: &Loop,
     inspection: &Path,
     plan_file: &Path,
-    (tool, workcell): (&Path, PathBuf),
+    tool: &Path,
     dir: &Path,
 ) -> anyhow::Result<()> {
     println!("== cycle: plan");
@@ -547,7 +498,6 @@ fn plan_into(
         .or_insert_with(|| toml::Value::Table(toml::Table::new()));
     if let Some(r) = robot.as_table_mut() {
         r.insert("tool".into(), tool.display().to_string().into());
-        r.insert("workcell".into(), workcell.display().to_string().into());
     }
     let settings = dir.join("plan.toml");
     std::fs::write(&settings, toml::to_string(&table)?)

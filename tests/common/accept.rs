@@ -128,8 +128,17 @@ pub struct Acceptance {
 pub const GROUND_REACH_MM: f64 = 2.0;
 
 /// Runs `cycle --mode removal` on synth case `seed` with the simulator's true k 1.3 x the
-/// planner's (`super::SIM_TOOL`), up to 3 grinds, and collects the numbers.
+/// planner's (`super::SIM_TOOL`) on the cell's default (documented) arm, up to 3 grinds, and
+/// collects the numbers.
 pub fn acceptance(seed: u64) -> Acceptance {
+    acceptance_with(seed, "")
+}
+
+/// `[sim.grinding]` line of a cell whose arm has no backlash, sag or lag (issue 50).
+pub const IDEAL_ARM: &str = "ideal_arm = true\n";
+
+/// [`acceptance`] with more `[sim.grinding]` lines `sim` (e.g. [`IDEAL_ARM`]).
+pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
     let dir = super::scratch(&format!("accept-{seed}"));
     let truth = super::case(seed, &dir);
     let cfg = dir.join("cycle.toml");
@@ -141,7 +150,7 @@ pub fn acceptance(seed: u64) -> Acceptance {
         .replace(';', "\n");
     std::fs::write(
         &cfg,
-        format!("[run.sim.grinding]\n{}{extra}\n", super::SIM_TOOL),
+        format!("[run.sim.grinding]\n{}{sim}{extra}\n", super::SIM_TOOL),
     )
     .unwrap();
     let mut command = cycle(&dir, "cycle");
