@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use dofbot_protocol::servo::ServoId;
 use dofbot_protocol::Pose;
-use polishbot::bus::{Bus, BusConfig, Journal, SerialTransport, SimArm, SimOptions, Transport};
+use polishbot::bus::{Bus, BusConfig, Journal, SerialTransport, Transport};
+use polishbot::sim::{SimArm, SimOptions};
 
 const BATCH: u64 = 100;
 

@@ -9,7 +9,7 @@ reads it), pings as --ping says (none: no reply, as the serial Arm_ping_servo ne
 status: TYPE 0x38 with one status byte 0xDA, the default; id-status: TYPE 0x38 with id, 0xDA),
 version (0x01) and offset state (0x33), and logs every frame it got to a JSONL file.
 
-The servo model and fault counters mirror src/bus/model.rs line for line, so the Rust
+The servo model and fault counters mirror src/sim/model.rs line for line, so the Rust
 in-process simulator (`--sim`) and this mock behave alike. Timing: 10 bit times per byte at
 the baud rate, a reply latency (default 3 ms, Yahboom's), moves that last the commanded time or
 longer when the speed bound requires.

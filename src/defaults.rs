@@ -206,14 +206,14 @@ fn every_stated_default_is_the_default_impl() {
         crate::plan::CollisionConfig => "src/plan/contact.rs",
         crate::robot::IkConfig => "src/robot/ik.rs",
         crate::bus::BusConfig => "src/bus/config.rs",
-        crate::bus::SimTiming => "src/bus/model.rs",
-        crate::bus::Faults => "src/bus/model.rs",
-        crate::bus::Mechanics => "src/bus/model.rs",
-        crate::bus::SimOptions => "src/bus/sim.rs",
+        crate::sim::SimTiming => "src/sim/model.rs",
+        crate::sim::Faults => "src/sim/model.rs",
+        crate::sim::Mechanics => "src/sim/model.rs",
+        crate::sim::SimOptions => "src/sim/arm.rs",
         crate::calibrate::CalibrationConfig => "src/calibrate/config.rs",
         crate::cell::RunConfig => "src/cell/stream.rs",
         crate::plan::removal::RemovalConfig => "src/plan/removal/mod.rs",
-        crate::bus::GrindConfig => "src/bus/grinding.rs",
+        crate::sim::GrindConfig => "src/sim/grinding.rs",
     );
     assert!(bad.is_empty(), "{}", bad.join("\n"));
     assert!(checked >= 50, "only {checked} stated defaults found");

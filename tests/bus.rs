@@ -9,9 +9,10 @@ use std::path::Path;
 use std::time::Duration;
 
 use polishbot::bus::{
-    Bus, BusConfig, BusError, Entry, EntryKind, Faults, Journal, ResumePoint, SerialTransport,
-    ServoMap, SimArm, SimOptions, JOINT_COUNT,
+    Bus, BusConfig, BusError, Entry, EntryKind, Journal, ResumePoint, SerialTransport, ServoMap,
+    JOINT_COUNT,
 };
+use polishbot::sim::{Faults, SimArm, SimOptions};
 use proptest::prelude::*;
 
 const Q: [f64; JOINT_COUNT] = [0.5, -0.3, 0.2, 0.1, 1.0];

@@ -12,12 +12,13 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use nalgebra::{Matrix4, Point3, Rotation3, Vector3};
-use polishbot::bus::model::raw_at_deg;
-use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, ServoMap, SimArm, SimOptions};
+use polishbot::bus::{Bus, BusConfig, Journal, ServoMap};
 use polishbot::calibrate::jog::Cell;
 use polishbot::calibrate::{self, files, CalibrationConfig, Fiducial, Fixture, Scripted};
 use polishbot::plan::frames;
 use polishbot::robot::{self, Robot, RobotConfig, Servos, Tool, Workcell};
+use polishbot::sim::model::raw_at_deg;
+use polishbot::sim::{Mechanics, SimArm, SimOptions};
 
 /// Hidden mounting offsets of servos 1..6, degrees.
 const OFFSETS: [f64; 6] = [6.5, -7.8, 3.2, -5.1, 7.9, 0.0];
@@ -193,7 +194,7 @@ fn robot_from(tool: &Path, servos: &Path) -> Robot {
     Robot::load(&shipped("dofbot.urdf"), tool, servos).unwrap()
 }
 
-fn bus_for(arm: &SimArm, robot: &Robot) -> Bus<polishbot::bus::SimTransport> {
+fn bus_for(arm: &SimArm, robot: &Robot) -> Bus<polishbot::sim::SimTransport> {
     let cfg = BusConfig {
         servo_map: frames::servo_map(robot).unwrap(),
         ..BusConfig::default()
@@ -340,7 +341,7 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
 
 fn cell_run<F>(f: F)
 where
-    F: FnOnce(&mut Bus<polishbot::bus::SimTransport>, &Cell),
+    F: FnOnce(&mut Bus<polishbot::sim::SimTransport>, &Cell),
 {
     let robot = robot_from(&shipped("tool.toml"), &shipped("servos.toml"));
     let map = frames::servo_map(&robot).unwrap();

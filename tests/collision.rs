@@ -8,17 +8,17 @@ mod heldout;
 mod sweep;
 
 use nalgebra::{Matrix4, Point3, Vector3};
-use polishbot::grind_sim::fk::chain;
 use polishbot::plan::{
     plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind, Solid,
     SurfacePoint,
 };
 use polishbot::robot::{Robot, Workcell};
+use polishbot::sim::grind::fk::chain;
 
 use common::{calib, dofbot};
 
 /// The joint origins (robot frame, m) and the ball centre and tool axis at `q`: the
-/// simulator's own chain from the joint table of DOFBOT.md (`grind_sim::fk`, independent of
+/// simulator's own chain from the joint table of DOFBOT.md (`sim::grind::fk`, independent of
 /// `robot/` and k); the tool tip sits at tool.toml's `tip_offset` in the last frame, its axis
 /// along `axis`.
 fn arm(q: &[f64], robot: &Robot) -> ([Vector3<f64>; 5], Vector3<f64>, Vector3<f64>) {

@@ -9,8 +9,9 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, SimArm, SimOptions};
-use polishbot::grind_sim::{fk, GrindConfig, ServoTrace, ToolState, VirtualPart};
+use polishbot::bus::{Bus, BusConfig, Journal};
+use polishbot::sim::grind::{fk, GrindConfig, ServoTrace, ToolState, VirtualPart};
+use polishbot::sim::{Mechanics, SimArm, SimOptions};
 use polishbot::spatial::Neighbours;
 
 use common::{dofbot, polishbot};
@@ -188,7 +189,7 @@ fn the_true_k_varies_by_at_most_its_amplitude_around_nominal_times_the_factor() 
 
 #[test]
 fn backlash_sits_on_the_loaded_flank_and_trails_an_unloaded_joint_by_half_its_band() {
-    use polishbot::grind_sim::slack::{Backlash, HOLD_TORQUE_NM};
+    use polishbot::sim::grind::slack::{Backlash, HOLD_TORQUE_NM};
     let deg = |v: f64| v.to_radians();
     // a 1 degree band on joints 1 and 2; joint 1 unloaded, joint 2 under a load torque
     let mut b = Backlash::new(&[1.0, 1.0, 0.0, 0.0, 0.0]);
@@ -220,7 +221,7 @@ fn backlash_sits_on_the_loaded_flank_and_trails_an_unloaded_joint_by_half_its_ba
 
 #[test]
 fn the_sag_is_the_documented_droop_at_full_reach_and_follows_the_gravity_torque() {
-    use polishbot::grind_sim::slack::{load_torques, Arm, HORIZONTAL};
+    use polishbot::sim::grind::slack::{load_torques, Arm, HORIZONTAL};
     let cfg = GrindConfig {
         backlash_deg: [0.0; 5],
         ..GrindConfig::default()
@@ -286,7 +287,7 @@ fn the_sims_kinematics_agree_with_ks_chain_on_the_shipped_urdf() {
     for _ in 0..200 {
         let q: [f64; 5] = std::array::from_fn(|_| {
             let u =
-                (polishbot::bus::model::splitmix64(&mut state) >> 11) as f64 / (1u64 << 53) as f64;
+                (polishbot::sim::model::splitmix64(&mut state) >> 11) as f64 / (1u64 << 53) as f64;
             (u - 0.5) * PI
         });
         let (c, axis) = fk::tool(&q, &tip);
@@ -383,11 +384,11 @@ fn the_planner_and_the_simulator_keep_their_parameters_apart() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     for (file, text) in sources(&src.join("plan")) {
         assert!(
-            !text.contains("grind_sim") && !text.contains("GrindConfig"),
+            !text.contains("crate::sim") && !text.contains("GrindConfig"),
             "{file}"
         );
     }
-    for (file, text) in sources(&src.join("grind_sim")) {
+    for (file, text) in sources(&src.join("sim")) {
         for banned in ["crate::plan", "crate::robot", "use k::", " k::"] {
             assert!(!text.contains(banned), "{file} uses {banned}");
         }

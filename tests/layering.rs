@@ -1,17 +1,7 @@
-//! The data-flow rule of DESIGN.md read from the source tree: no import against the flow.
-//! A lower stage never imports a higher one (the shared neighbour search lives in
-//! `src/spatial/`, not in `compare`), and a plan is data (nothing in `src/plan` imports `bus`).
+//! The data-flow rules of docs/ARCHITECTURE.md read from the source tree: every room imports
+//! only the rooms its row of the table "What each room may import" lists, the table runs one
+//! way, and no two files import each other.
 use std::path::{Path, PathBuf};
-
-/// Folders below the comparison in the flow: none of them may import `compare`.
-const BELOW_COMPARE: [&str; 6] = [
-    "cloud",
-    "spatial",
-    "preprocess",
-    "register",
-    "acquire",
-    "synth",
-];
 
 /// Every `.rs` file under `dir`, sorted (empty when `dir` does not exist).
 fn rust_files(dir: &Path) -> Vec<PathBuf> {
@@ -98,21 +88,121 @@ fn imports_of(text: &str, module: &str) -> Vec<usize> {
     lines
 }
 
-/// "file:line" of every import of `module` by the files under `src/<folder>` for each folder.
-fn violations(folders: &[&str], module: &str) -> Vec<String> {
+/// The files of the room `room`: `src/<room>/**.rs`, or the single file `src/<room>.rs`.
+fn room_files(room: &str) -> Vec<PathBuf> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let file = src.join(format!("{room}.rs"));
+    if file.is_file() {
+        return vec![file];
+    }
+    let dir = src.join(room);
+    assert!(
+        dir.is_dir(),
+        "room {room} of docs/ARCHITECTURE.md is not in src/"
+    );
+    rust_files(&dir)
+}
+
+/// "file:line" of every import of `module` by the files of room `room`.
+fn violations(room: &str, module: &str) -> Vec<String> {
     let mut found = Vec::new();
-    for folder in folders {
-        let dir = src.join(folder);
-        assert!(dir.is_dir(), "{} is not a folder", dir.display());
-        for file in rust_files(&dir) {
-            let text = std::fs::read_to_string(&file).expect("a readable source file");
-            for line in imports_of(&text, module) {
-                found.push(format!("{}:{line}", file.display()));
-            }
+    for file in room_files(room) {
+        let text = std::fs::read_to_string(&file).expect("a readable source file");
+        for line in imports_of(&text, module) {
+            found.push(format!("{}:{line} imports {module}", file.display()));
         }
     }
     found
+}
+
+/// The rows of the table "What each room may import" in docs/ARCHITECTURE.md, in order: each
+/// room and the rooms it may import (`None`: `*`, every room).
+fn architecture_rules() -> Vec<(String, Option<Vec<String>>)> {
+    let doc = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/ARCHITECTURE.md");
+    let text = std::fs::read_to_string(&doc).expect("docs/ARCHITECTURE.md");
+    let table = text
+        .split("## What each room may import")
+        .nth(1)
+        .expect("the section \"What each room may import\" in docs/ARCHITECTURE.md");
+    table
+        .lines()
+        .filter(|l| l.starts_with('|'))
+        .skip(2)
+        .map(|row| {
+            let cells: Vec<&str> = row.trim_matches('|').split('|').map(str::trim).collect();
+            assert_eq!(cells.len(), 2, "a table row of two cells: {row}");
+            let allowed = (cells[1] != "*").then(|| {
+                cells[1]
+                    .split(',')
+                    .map(str::trim)
+                    .filter(|m| !m.is_empty())
+                    .map(str::to_string)
+                    .collect()
+            });
+            (cells[0].to_string(), allowed)
+        })
+        .collect()
+}
+
+/// The crate's rooms as src/ has them: its folders and its files but lib.rs and main.rs.
+fn rooms_in_src() -> Vec<String> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut rooms: Vec<String> = std::fs::read_dir(&src)
+        .expect("src/")
+        .map(|e| e.expect("a readable directory entry").path())
+        .filter(|p| p.is_dir() || p.extension().is_some_and(|x| x == "rs"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .filter(|n| n != "lib" && n != "main")
+        .collect();
+    rooms.sort();
+    rooms
+}
+
+#[test]
+fn the_architecture_table_names_every_room_once_and_runs_one_way() {
+    let rules = architecture_rules();
+    let mut named: Vec<String> = rules.iter().map(|(r, _)| r.clone()).collect();
+    named.sort();
+    let before = named.len();
+    named.dedup();
+    assert_eq!(
+        before,
+        named.len(),
+        "a room named twice in docs/ARCHITECTURE.md"
+    );
+    assert_eq!(
+        named,
+        rooms_in_src(),
+        "the rooms of docs/ARCHITECTURE.md against src/"
+    );
+    for (at, (room, allowed)) in rules.iter().enumerate() {
+        for m in allowed.iter().flatten() {
+            assert!(
+                rules[..at].iter().any(|(r, _)| r == m),
+                "{room} may import {m}, which is not a row above it: the table runs one way"
+            );
+        }
+    }
+}
+
+// A plan is data (no bus, no sim, no cell), nothing below the comparison imports compare, the
+// simulator shares nothing with the planner: all of it is the table of docs/ARCHITECTURE.md.
+#[test]
+fn every_room_imports_only_what_the_architecture_allows() {
+    let rules = architecture_rules();
+    let mut found = Vec::new();
+    for (room, allowed) in &rules {
+        let Some(allowed) = allowed else { continue };
+        for (other, _) in &rules {
+            if other != room && !allowed.contains(other) {
+                found.extend(violations(room, other));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "imports docs/ARCHITECTURE.md does not allow: {found:#?}"
+    );
 }
 
 #[test]
@@ -129,43 +219,6 @@ fn the_scanner_finds_imports_in_every_form() {
     assert!(imports_of("use crate::bus::Bus;", "bus") == [1]);
     assert!(imports_of("use crate::busy::Bus; // crate::bus", "bus").is_empty());
     assert!(imports_of("use dofbot_protocol::bus::Frame;", "bus").is_empty());
-}
-
-#[test]
-fn no_stage_below_the_comparison_imports_compare() {
-    let found = violations(&BELOW_COMPARE, "compare");
-    assert!(
-        found.is_empty(),
-        "imports of compare against the flow: {found:?}"
-    );
-}
-
-// A plan is data: its frames are made through dofbot-protocol and streamed by src/cell.
-#[test]
-fn the_plan_does_not_import_bus() {
-    let found = violations(&["plan"], "bus");
-    assert!(found.is_empty(), "imports of bus by the plan: {found:?}");
-}
-
-/// The motion half's floors, lowest first, as DESIGN.md's flow has them: the board's driver
-/// and simulator (`bus`) and the arm's model (`robot`) know nothing of a plan, the cell that
-/// streams it or the simulated grind that runs above the simulator.
-const MOTION_RULES: [(&str, &[&str]); 4] = [
-    ("robot", &["bus", "plan", "cell", "grind_sim", "inspect"]),
-    ("bus", &["plan", "cell", "grind_sim", "inspect"]),
-    ("plan", &["cell", "grind_sim", "inspect"]),
-    ("grind_sim", &["plan", "cell"]),
-];
-
-#[test]
-fn the_motion_floors_import_only_downwards() {
-    let mut found = Vec::new();
-    for (folder, above) in MOTION_RULES {
-        for module in above {
-            found.extend(violations(&[folder], module));
-        }
-    }
-    assert!(found.is_empty(), "imports against the flow: {found:?}");
 }
 
 /// One source file of the crate: its module path (`src/a/b.rs` and `src/a/b/mod.rs` are

@@ -15,10 +15,9 @@ use dofbot_protocol::i2c::Transaction as T;
 use dofbot_protocol::{Pose, ServoId};
 use polishbot::bus::EntryKind;
 use polishbot::bus::{Bus, JOINT_COUNT};
-use polishbot::bus::{
-    BusConfig, FakeI2c, I2cRecord, I2cTransport, Journal, ServoMap, SimArm, SimOptions,
-};
+use polishbot::bus::{BusConfig, I2cTransport, Journal, ServoMap};
 use polishbot::robot::Servos;
+use polishbot::sim::{FakeI2c, I2cRecord, SimArm, SimOptions};
 
 use common::{raw_array, read_journal, Mock};
 

@@ -182,7 +182,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 #[test]
 fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
-    use polishbot::bus::{Bus, BusConfig, Journal, SimArm, SimOptions};
+    use polishbot::bus::{Bus, BusConfig, Journal};
+    use polishbot::sim::{SimArm, SimOptions};
     let tmp = common::tempdir();
     let (_, path) = small_plan(tmp.path());
     let (robot, _) = dofbot();

@@ -221,7 +221,7 @@ fn the_plate_at_every_spindle_tilt_matches_the_integration() {
 }
 
 /// A contact's spindle axis is the one the arm holds: the simulator's own forward kinematics
-/// (grind_sim::fk, from DOFBOT.md's joint table, not the planner's k chain) at the piece's
+/// (sim::grind::fk, from DOFBOT.md's joint table, not the planner's k chain) at the piece's
 /// first and last joint angles, averaged, turned into the reference frame by the inverse of
 /// the workcell's rotation; the tilt it reports is that axis's angle from the inward normal.
 #[test]
@@ -254,7 +254,7 @@ fn a_contacts_spindle_axis_is_the_arms_at_its_joint_angles() {
         .robot_from_reference
         .fixed_slice::<3, 3>(0, 0)
         .into_owned();
-    let sim_axis = |q: [f64; 5]| polishbot::grind_sim::fk::tool(&q, &tip).1;
+    let sim_axis = |q: [f64; 5]| polishbot::sim::grind::fk::tool(&q, &tip).1;
     let want = (r.transpose() * (sim_axis(qa) + sim_axis(qb))).normalize();
     assert!((c.spin - want).norm() < 1e-12, "{} vs {want}", c.spin);
     let (tilt, lean) = c.tilt();

@@ -1,6 +1,6 @@
 //! The planner's removal prediction against the simulated cell's true law (issues 28/29): a
 //! demo-like plan (the demo's defect settings placed where the arm reaches, a perfect
-//! inspection) is ground along its exact joint trajectory by `grind_sim`'s own kinematics and
+//! inspection) is ground along its exact joint trajectory by `sim::grind`'s own kinematics and
 //! removal law (not the planner's) on the part as it is (nominal + deviation, normals by PCA
 //! as `run --sim` gives them). With the linear law (exponents 1/1), the true k the planner's
 //! (factor 1) and no k field, each planned region's removal must match the prediction within
@@ -27,11 +27,11 @@ mod common;
 use std::path::Path;
 
 use nalgebra::Point3;
-use polishbot::grind_sim::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
 use polishbot::plan::preston::{contact, reference_from_robot};
 use polishbot::plan::{plan, Inspection, Plan, PlanConfig, SegmentKind};
 use polishbot::preprocess::{estimate_normals, NormalConfig, Orientation};
 use polishbot::robot::{Robot, Workcell};
+use polishbot::sim::grind::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
 use polishbot::spatial::Neighbours;
 
 /// Largest relative difference between the simulator's removal on the part and the plan's per
@@ -42,7 +42,7 @@ use polishbot::spatial::Neighbours;
 /// 0.46-0.61 / 0.79-0.96 / 1.07-1.17 under 0.02 / 0.02-0.1 / 0.1-0.2 mm before that, and
 /// 1.02-1.24 / 1.00-1.03 / 0.93-0.98 after. The force at preload on the nominal surface was
 /// 8-36 % off. Widened from 0.05 to 0.1 when the simulator's normals began to follow the
-/// grind (`grind_sim::part`, re-estimated every 0.005 mm of removal) while the planner's stay
+/// grind (`sim::grind::part`, re-estimated every 0.005 mm of removal) while the planner's stay
 /// those measured before the pass: per region 0.910-1.059, per band 1.42-2.19 / 1.02-1.11 /
 /// 0.78-0.97. A mid-pass normal in the planner (the surface with half the target gone, as its
 /// force) gave 0.939-1.080 and was not kept; the planner's model of it is open (issue 28).

@@ -6,11 +6,12 @@ mod common;
 
 use common::femoral::{cell, inspection};
 use nalgebra::Point3;
-use polishbot::bus::{Bus, BusConfig, ExtraServo, Journal, ResumePoint, SimArm, SimOptions};
+use polishbot::bus::{Bus, BusConfig, Journal, ResumePoint};
 use polishbot::cell::{execute, steps, RunConfig, Step};
 use polishbot::plan::file::CheckedPlan;
 use polishbot::plan::{plan_cell, table_file};
 use polishbot::robot::{Robot, Turntable};
+use polishbot::sim::{ExtraServo, SimArm, SimOptions};
 
 /// Covered and total repairable area of a plan, mm^2 (coverage of all the region's points
 /// times its area).

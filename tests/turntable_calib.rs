@@ -4,12 +4,13 @@
 mod common;
 
 use nalgebra::{Point3, Rotation3, Unit, UnitQuaternion, Vector3};
-use polishbot::bus::{Bus, BusConfig, Journal, Mechanics, SimArm, SimOptions};
+use polishbot::bus::{Bus, BusConfig, Journal};
 use polishbot::calibrate::jog::{Cell, Scripted, Touch};
 use polishbot::calibrate::turntable::{fit_turntable, patch_workcell, turntable};
 use polishbot::calibrate::{CalibError, CalibrationConfig};
 use polishbot::plan::frames;
 use polishbot::robot::{IkConfig, IkTarget, Robot, Turntable, Workcell};
+use polishbot::sim::{Mechanics, SimArm, SimOptions};
 
 /// The planted table: an axis tilted off robot x and its centre, metres.
 fn planted() -> (Unit<Vector3<f64>>, Point3<f64>) {
@@ -65,7 +66,7 @@ fn target_line(q: &[f64; 5]) -> String {
     v.join(", ") + "\n"
 }
 
-fn sim_bus(robot: &Robot) -> (SimArm, Bus<polishbot::bus::SimTransport>) {
+fn sim_bus(robot: &Robot) -> (SimArm, Bus<polishbot::sim::SimTransport>) {
     let cfg = BusConfig {
         servo_map: frames::servo_map(robot).unwrap(),
         ..BusConfig::default()

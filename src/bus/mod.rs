@@ -1,11 +1,12 @@
 //! The DOFBOT bus: a [`Transport`] (serial port, the Python mock on a pseudo-terminal, the
-//! board's I2C interface ([`I2cTransport`] over Linux i2c-dev or the [`FakeI2c`]), or the
-//! in-process [`SimArm`]), the [`Bus`] driver over it and the journal; the servo map is robot's
+//! board's I2C interface ([`I2cTransport`] over Linux i2c-dev or the simulator's
+//! [`crate::sim::FakeI2c`]), or the in-process [`crate::sim::SimArm`]), the [`Bus`] driver over it and the journal; the servo map is robot's
 //! ([`crate::robot::ServoMap`], re-exported here).
 //! Frames come only from `dofbot-protocol`'s validated commands.
 //!
 //! ```no_run
-//! use polishbot::bus::{Bus, BusConfig, Journal, SimArm, SimOptions};
+//! use polishbot::bus::{Bus, BusConfig, Journal};
+//! use polishbot::sim::{SimArm, SimOptions};
 //! let config = BusConfig::default();
 //! let arm = SimArm::new(&SimOptions::default(), &config.servo_map).unwrap();
 //! let mut bus = Bus::connect(arm.transport(), config, Journal::none()).unwrap();
@@ -15,13 +16,9 @@ pub mod alive;
 pub mod config;
 pub mod driver;
 pub mod error;
-pub mod fake_i2c;
-pub mod grinding;
 pub mod i2c;
 pub mod journal;
-pub mod model;
 pub mod serial;
-pub mod sim;
 pub mod table;
 pub mod transport;
 
@@ -32,15 +29,11 @@ pub use alive::{Liveness, ServoAnswer};
 pub use config::{BusConfig, GripperCalib, JointCalib, JointState, ServoMap, JOINT_COUNT};
 pub use driver::Bus;
 pub use error::BusError;
-pub use fake_i2c::{FakeI2c, I2cRecord};
-pub use grinding::GrindConfig;
 #[cfg(target_os = "linux")]
 pub use i2c::LinuxI2c;
 pub use i2c::{I2cBus, I2cTransport};
 pub use journal::{Entry, EntryKind, Journal, ResumePoint};
-pub use model::{ExtraServo, Faults, Mechanics, PingReply, SimTiming};
 pub use serial::SerialTransport;
-pub use sim::{SimArm, SimOptions, SimTransport};
 pub use transport::Transport;
 
 /// The flag the Ctrl-C handler sets: the last one given to [`install_ctrlc`].

@@ -9,11 +9,11 @@ use serde::Deserialize;
 use serde_json::json;
 
 use crate::bus::{
-    self, Bus, BusConfig, Journal, SerialTransport, ServoMap, SimArm, SimOptions, Transport,
-    JOINT_COUNT,
+    self, Bus, BusConfig, Journal, SerialTransport, ServoMap, Transport, JOINT_COUNT,
 };
 use crate::plan::frames;
 use crate::robot::{Robot, RobotConfig, Turntable};
+use crate::sim::{self, SimArm, SimOptions};
 
 /// Arguments of `polishbot arm`.
 #[derive(Debug, Args)]
@@ -127,7 +127,7 @@ pub fn sim_with_table(
             let start_raw = t
                 .raw(0.0)
                 .map_err(|m| anyhow::anyhow!("turntable servo {}: {m}", t.servo.id))?;
-            options.extra_servos.push(bus::ExtraServo {
+            options.extra_servos.push(sim::ExtraServo {
                 id: t.servo.id,
                 start_raw,
             });
@@ -149,11 +149,11 @@ fn open_i2c(
     if let Some(log) = std::env::var_os(FAKE_I2C_ENV) {
         // The I2C board always answers a ping with its status byte.
         let options = SimOptions {
-            ping_reply: bus::PingReply::Status,
+            ping_reply: sim::PingReply::Status,
             ..options.clone()
         };
         let fake =
-            bus::FakeI2c::new(SimArm::new(&options, map)?, address).logging_to(Path::new(&log))?;
+            sim::FakeI2c::new(SimArm::new(&options, map)?, address).logging_to(Path::new(&log))?;
         return Ok(Box::new(bus::I2cTransport::new(fake)));
     }
     #[cfg(target_os = "linux")]

@@ -10,7 +10,7 @@ use serde::Deserialize;
 
 use super::arm::LinkArgs;
 use super::common::say;
-use crate::bus::{Bus, BusConfig, SimOptions, Transport, JOINT_COUNT};
+use crate::bus::{Bus, BusConfig, Transport, JOINT_COUNT};
 use crate::calibrate::jog::{Cell, RawTerminal};
 use crate::calibrate::verify::DEFAULT_CHECK_POSES;
 use crate::calibrate::{
@@ -19,6 +19,7 @@ use crate::calibrate::{
 };
 use crate::plan::frames;
 use crate::robot::{Robot, RobotConfig};
+use crate::sim::SimOptions;
 
 /// Arguments of `calibrate`.
 #[derive(Debug, Args)]

@@ -7,12 +7,13 @@ use anyhow::Context;
 use nalgebra::Vector3;
 use serde::Serialize;
 
-use crate::bus::{ServoMap, SimArm, SimOptions};
+use crate::bus::ServoMap;
 use crate::cloud::{self, PlyPrecision, PointCloud, ScalarField};
-use crate::grind_sim::{grind, GrindReport, ServoTrace, VirtualPart};
 use crate::plan::Inspection;
 use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
 use crate::robot::Workcell;
+use crate::sim::grind::{grind, GrindReport, ServoTrace, VirtualPart};
+use crate::sim::{SimArm, SimOptions};
 use crate::spatial::Neighbours;
 
 /// Farthest a point of the part file may lie from the inspected surface (along the nearest
@@ -41,7 +42,7 @@ struct GroundTruth<'a> {
     /// What the grind did.
     grind: &'a GrindReport,
     /// The simulated cell's truth used.
-    settings: &'a crate::grind_sim::GrindConfig,
+    settings: &'a crate::sim::GrindConfig,
 }
 
 /// The truth files beside `out`: `<stem>_truth.ply` and `<stem>_truth.json`.

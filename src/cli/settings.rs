@@ -209,7 +209,7 @@ const MAX_MOUNT_OFFSET_DEG: f64 = 90.0;
 pub fn check_link(
     file: &ConfigFile,
     bus: &crate::bus::BusConfig,
-    sim: &crate::bus::SimOptions,
+    sim: &crate::sim::SimOptions,
 ) -> anyhow::Result<()> {
     bus.check()
         .map_err(|e| file.refuse("bus", &e.to_string()))?;

@@ -299,7 +299,7 @@ pub fn case(seed: u64, dir: &Path) -> polishbot::synth::Truth {
 }
 
 /// The simulated cell's true tool as the shipped tool.toml's `[removal]` (spring 1 N/mm, modulus,
-/// spindle) with a true k 1.3 x its k: the simulator's defaults (src/bus/grinding.rs), written
+/// spindle) with a true k 1.3 x its k: the simulator's defaults (src/sim/grinding.rs), written
 /// out so that the acceptance cases keep the planner "30 % off" whatever those become.
 pub const SIM_TOOL: &str = "preston_k = 5e-6\nk_factor = 1.3\nspring_rate_n_mm = 1.0\n\
                             modulus_mpa = 20.0\nspindle_rpm = 10000.0\n";

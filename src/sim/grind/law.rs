@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::GrindConfig;
-use crate::bus::model::splitmix64;
+use crate::sim::model::splitmix64;
 
 /// A contact of the ball on the surface: force and Hertz patch.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -14,7 +14,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::fk;
-use crate::bus::GrindConfig;
+use crate::sim::GrindConfig;
 
 /// Mass of a bus servo, kg: 0.065, a 15 kg.cm serial bus servo of the DOFBOT's class
 /// (chosen; Yahboom publishes no mass). The servos of joints 3 and 4 sit on those joints' axes.

@@ -1,5 +1,5 @@
 //! Where the simulated arm's servos physically were over virtual time: the frames the
-//! simulated board received ([`crate::bus::SimArm::received`], with their arrival times)
+//! simulated board received ([`crate::sim::SimArm::received`], with their arrival times)
 //! replayed through a fresh copy of the same board model, so the servo speed bound, the raw
 //! count quantisation of every target and the hidden mounting offsets all act as in the run,
 //! without touching the simulator while it runs.
@@ -7,9 +7,8 @@ use dofbot_protocol::frame::Frame;
 use dofbot_protocol::servo::SERVO_COUNT;
 use dofbot_protocol::Command;
 
-use crate::bus::model::Board;
-use crate::bus::sim::ReceivedFrame;
-use crate::bus::SimOptions;
+use crate::sim::arm::{ReceivedFrame, SimOptions};
+use crate::sim::model::Board;
 
 /// The board's state over time, queried at non-decreasing times.
 #[derive(Clone)]
@@ -21,7 +20,7 @@ pub struct ServoTrace {
 
 impl ServoTrace {
     /// A replay of `frames` on a board that started at `home` raw positions with `options`
-    /// (the same that made the run's [`crate::bus::SimArm`]).
+    /// (the same that made the run's [`crate::sim::SimArm`]).
     pub fn new(options: &SimOptions, home: [u16; SERVO_COUNT], frames: Vec<ReceivedFrame>) -> Self {
         let board = Board::new(
             home,

@@ -17,9 +17,9 @@ use dofbot_protocol::i2c::{Transaction, REG_MOVE_ALL_TIME};
 use dofbot_protocol::servo::SERVO_COUNT;
 use dofbot_protocol::{Command, Frame, OffsetState, Reply};
 
-use super::error::BusError;
-use super::i2c::I2cBus;
-use super::sim::SimArm;
+use super::arm::SimArm;
+use crate::bus::error::BusError;
+use crate::bus::i2c::I2cBus;
 
 /// One transaction the fake device took: when (s, sim clock), which, and the value it read.
 #[derive(Debug, Clone, PartialEq)]

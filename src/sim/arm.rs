@@ -9,10 +9,10 @@ use serde::{Deserialize, Serialize};
 use dofbot_protocol::servo::SERVO_COUNT;
 use dofbot_protocol::{Command, Decoder, Reply};
 
-use super::config::ServoMap;
-use super::error::BusError;
 use super::model::{Board, ExtraServo, Faults, Mechanics, PingReply, SimTiming};
-use super::transport::{RealClock, Transport};
+use crate::bus::config::ServoMap;
+use crate::bus::error::BusError;
+use crate::bus::transport::{RealClock, Transport};
 
 /// Settings of the simulated arm.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,7 +1,7 @@
 //! The simulated cell's grinding settings (`[sim.grinding]` of `run`'s config): the true tool,
-//! removal law and part mounting that `crate::grind_sim` grinds a virtual part with. They live
-//! with the simulated board's other settings ([`crate::bus::SimOptions`]) so that the flow runs
-//! one way: `grind_sim` (above the bus) reads them; nothing under `plan/` does.
+//! removal law and part mounting that `crate::sim::grind` grinds a virtual part with. They live
+//! with the simulated board's other settings ([`crate::sim::SimOptions`]) so that the flow runs
+//! one way: the simulator reads them; nothing under `plan/` does.
 use nalgebra::{Isometry3, Matrix4, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -62,7 +62,7 @@ pub struct GrindConfig {
     /// Gear backlash per joint (servos 1-5), the full width of the dead band, degrees
     /// (default [`DEFAULT_BACKLASH_DEG`], 0.5 each: shared/DOFBOT.md's simulated-arm default;
     /// up to 1 on a worn arm). The gear rests on the flank its load torque pushes it to
-    /// (`crate::grind_sim::slack`).
+    /// (`crate::sim::grind::slack`).
     pub backlash_deg: [f64; 5],
     /// Droop of the tool under gravity with the stretched arm held horizontal, mm (default
     /// [`DEFAULT_SAG_MM`], 5: shared/DOFBOT.md's "5..10 mm at full reach"): sets the joints'
