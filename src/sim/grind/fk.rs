@@ -38,9 +38,12 @@ pub fn tool(q: &[f64; 5], tip_m: &[f64; 3]) -> (Point3<f64>, Vector3<f64>) {
     )
 }
 
+/// A joint's origin and unit axis in the robot frame (m).
+pub type JointAxis = (Vector3<f64>, Vector3<f64>);
+
 /// Each joint's origin and unit axis in the robot frame (m) at joint angles `q` (rad), and
 /// the last link's pose: what the load torques about the joints are taken with.
-pub fn joints(q: &[f64; 5]) -> ([(Vector3<f64>, Vector3<f64>); 5], Isometry3<f64>) {
+pub fn joints(q: &[f64; 5]) -> ([JointAxis; 5], Isometry3<f64>) {
     let mut t = Isometry3::identity();
     let mut out = [(Vector3::zeros(), Vector3::z()); 5];
     for (k, (xyz, rpy, axis)) in DOFBOT_JOINTS.iter().enumerate() {
