@@ -373,10 +373,12 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
         )
     };
     plan("removal", "plan.json");
-    // the simulator's true k 1.3 x the planner's (issue 29's "30 % off")
+    // the simulator's true k 1.3 x the planner's (issue 29's "30 % off"), on an ideal arm: on
+    // the documented arm (the cell's default) the removal lands 0.8-1.2 mm off its plan and
+    // the force falls, so k fits at 0.34-0.68 x even after the shift (issue 50)
     std::fs::write(
         dir.join("run.toml"),
-        format!("[sim.grinding]\n{}", common::SIM_TOOL),
+        format!("[sim.grinding]\n{}ideal_arm = true\n", common::SIM_TOOL),
     )
     .unwrap();
     common::succeed(polishbot().args(["run", "--config", &d("run.toml")]).args([
@@ -459,4 +461,58 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
         std::fs::read_to_string(dir.join("tool.toml")).unwrap(),
         written
     );
+}
+
+/// The removal field `p` moved by `s` (mm, in the plane) and scaled by `scale`, plus Gaussian
+/// noise of `sigma` mm: what a grind did whose tool landed `s` off its plan.
+fn landed(b: &Inspection, scale: f64, s: [f64; 2], sigma: f64, seed: u64) -> Vec<f64> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    b.points
+        .iter()
+        .map(|pt| {
+            let (x, y) = (pt.position.x - s[0], pt.position.y - s[1]);
+            let bump = |cx: f64| 0.2 * (-((x - cx).powi(2) + y * y) / 4.0).exp();
+            // Box-Muller
+            let (u1, u2): (f64, f64) = (rng.gen_range(1e-12..1.0), rng.gen());
+            let noise = sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+            scale * (bump(-2.5) + bump(2.5)) + noise
+        })
+        .collect()
+}
+
+#[test]
+fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shift() {
+    use polishbot::cell::removal_shift::{judge, register, shifted_prediction, ShiftConfig};
+    let (b, p) = before();
+    let cfg = ShiftConfig::default();
+    // 0.3 mm along x, -0.2 along y, the tool 1.3 x faster than planned, the rescan's noise
+    let a = after(&b, &landed(&b, 1.3, [0.3, -0.2], 0.015, 5));
+    let shifts = register(&b, &a, &p, &cfg);
+    assert_eq!(shifts.len(), 2, "{shifts:?}");
+    for r in &shifts {
+        let e = (r.shift_mm - Vector3::new(0.3, -0.2, 0.0)).norm();
+        assert!(
+            e <= 0.11,
+            "region {}: shift {} off by {e} mm",
+            r.region,
+            r.shift_mm
+        );
+        assert!((r.scale - 1.3).abs() < 0.05 * 1.3, "{r:?}");
+        assert!(r.rms_mm[1] < 0.02 && r.rms_mm[0] > r.rms_mm[1], "{r:?}");
+    }
+    assert_eq!(judge(&shifts, &cfg), None);
+    // k on the prediction as planned reads the misplaced removal as a slower tool; moved by
+    // the measured shift it finds the tool's 1.3 x
+    let fit_k = |pred: &[f64]| fit(&b, &a, pred, PLAN_K, &FitConfig::default()).unwrap();
+    let plain = fit_k(&p).k_mm2_n / PLAN_K;
+    let moved = fit_k(&shifted_prediction(&b, &p, &shifts, &cfg)).k_mm2_n / PLAN_K;
+    assert!(
+        (moved - 1.3).abs() < 0.03 * 1.3,
+        "moved {moved} plain {plain}"
+    );
+    assert!(plain < moved - 0.02, "moved {moved} plain {plain}");
+    // 0.8 mm off: the loop stops naming the region and the shift
+    let far = after(&b, &landed(&b, 1.0, [0.8, 0.0], 0.015, 6));
+    let why = judge(&register(&b, &far, &p, &cfg), &cfg).expect("a stop");
+    assert!(why.starts_with("region 0: the removal landed 0.8"), "{why}");
 }

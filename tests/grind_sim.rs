@@ -188,35 +188,94 @@ fn the_true_k_varies_by_at_most_its_amplitude_around_nominal_times_the_factor() 
 }
 
 #[test]
-fn backlash_trails_a_moving_servo_by_half_its_band_and_sag_drops_with_reach_squared() {
-    use polishbot::sim::grind::slack::{full_reach_m, Backlash, Sag};
+fn backlash_sits_on_the_loaded_flank_and_trails_an_unloaded_joint_by_half_its_band() {
+    use polishbot::sim::grind::slack::{Backlash, HOLD_TORQUE_NM};
     let deg = |v: f64| v.to_radians();
-    // a 1 degree band on joint 1, none on the others
-    let mut b = Backlash::new(&[1.0, 0.0, 0.0, 0.0, 0.0]);
-    let at = |b: &mut Backlash, q1: f64| b.follow([deg(q1), deg(q1), 0.0, 0.0, 0.0]);
-    assert_eq!(at(&mut b, 0.0)[0], 0.0);
-    // moving up 2 degrees: the output trails by half the band; joint 2 follows exactly
-    let q = at(&mut b, 2.0);
-    assert!((q[0] - deg(1.5)).abs() < 1e-15 && (q[1] - deg(2.0)).abs() < 1e-15);
-    // a reversal of 0.8 degrees stays inside the band: the output does not move
-    assert!((at(&mut b, 1.2)[0] - deg(1.5)).abs() < 1e-15);
-    // past the band the output trails on the other side
-    assert!((at(&mut b, 0.0)[0] - deg(0.5)).abs() < 1e-15);
-    // the stretched DOFBOT: 82.9 + 82.9 + 174.56 mm of links, the ball 19.3 mm past them
-    let reach = full_reach_m(0.0193);
-    let links = 0.0829 + 0.0829 + 0.00215f64.hypot(0.17455);
-    assert!((reach - links - 0.0193).abs() < 1e-12, "{reach}");
-    // 5 mm at full reach, absorbed at the part's origin 0.2 m out: nothing there, (r/R)^2
-    // growth elsewhere, horizontal position kept
-    let sag = Sag::new(5.0, 0.0193, 0.2);
-    let c = Point3::new(0.2 * 0.6, 0.2 * 0.8, 0.05);
-    assert!((sag.apply(c) - c).norm() < 1e-15);
-    let far = Point3::new(0.0, 0.25, 0.05);
-    let want = 5e-3 * ((0.25 / reach).powi(2) - (0.2 / reach).powi(2));
-    let got = sag.apply(far);
+    // a 1 degree band on joints 1 and 2; joint 1 unloaded, joint 2 under a load torque
+    let mut b = Backlash::new(&[1.0, 1.0, 0.0, 0.0, 0.0]);
+    let load = 10.0 * HOLD_TORQUE_NM;
+    let at = |b: &mut Backlash, q: f64, t: f64| {
+        b.follow([deg(q), deg(q), 0.0, 0.0, 0.0], [0.0, t, 0.0, 0.0, 0.0])
+    };
+    let q = at(&mut b, 0.0, load);
+    assert!(q[0] == 0.0 && (q[1] - deg(0.5)).abs() < 1e-15, "{q:?}");
+    // moving up 2 degrees: the unloaded output trails by half the band, the loaded one
+    // stays half a band ahead of its servo (the load pushes it)
+    let q = at(&mut b, 2.0, load);
     assert!(
-        (far.z - got.z - want).abs() < 1e-15 && got.y == far.y,
-        "{got}"
+        (q[0] - deg(1.5)).abs() < 1e-15 && (q[1] - deg(2.5)).abs() < 1e-15,
+        "{q:?}"
+    );
+    // a reversal of 0.8 degrees: the unloaded output stays, the loaded one follows its flank
+    let q = at(&mut b, 1.2, load);
+    assert!(
+        (q[0] - deg(1.5)).abs() < 1e-15 && (q[1] - deg(1.7)).abs() < 1e-15,
+        "{q:?}"
+    );
+    // the load reverses: joint 2 crosses its band without any motion
+    let q = at(&mut b, 1.2, -load);
+    assert!((q[1] - deg(0.7)).abs() < 1e-15, "{q:?}");
+    // past the band the unloaded output trails on the other side
+    assert!((at(&mut b, 0.0, -load)[0] - deg(0.5)).abs() < 1e-15);
+}
+
+#[test]
+fn the_sag_is_the_documented_droop_at_full_reach_and_follows_the_gravity_torque() {
+    use polishbot::sim::grind::slack::{load_torques, Arm, HORIZONTAL};
+    let cfg = GrindConfig {
+        backlash_deg: [0.0; 5],
+        ..GrindConfig::default()
+    };
+    let tip = cfg.tip_offset_mm.map(|v| v * 1e-3);
+    // the stretched arm: the ball level with the shoulder (joint 2, 0.1105 m up), 82.9 +
+    // 82.9 + 174.56 + 19.3 mm out
+    let (rigid, _) = fk::tool(&HORIZONTAL, &tip);
+    let reach = 0.0829 + 0.0829 + 0.00215f64.hypot(0.17455) + 0.0193;
+    assert!(
+        (rigid.z - 0.1105).abs() < 3e-3 && (rigid.coords.xy().norm() - reach).abs() < 3e-3,
+        "{rigid}"
+    );
+    // its shoulder torque by hand: every mass times g times its horizontal lever
+    let levers = [
+        (0.03, 0.0829 / 2.0),
+        (0.065, 0.0829),
+        (0.03, 0.0829 * 1.5),
+        (0.065, 0.1658),
+        (0.095, 0.1658 + 0.1746 / 2.0),
+        (0.15, reach),
+    ];
+    let by_hand: f64 = levers.iter().map(|(m, r)| m * 9.81 * r).sum();
+    let torque = load_torques(&HORIZONTAL, &tip, Vector3::zeros());
+    assert!(
+        (torque[1].abs() - by_hand).abs() < 0.02 * by_hand,
+        "{torque:?} vs {by_hand}"
+    );
+    assert!(
+        torque[0].abs() < 1e-12 && torque[4].abs() < 1e-12,
+        "{torque:?}"
+    );
+    // the documented droop there, 5 mm
+    let arm = Arm::new(&cfg);
+    let droop = |q: [f64; 5], f: Vector3<f64>| (fk::tool(&q, &tip).0 - arm.held(q, f).0) * 1e3;
+    let d = droop(HORIZONTAL, Vector3::zeros());
+    assert!((d.z - 5.0).abs() < 0.1, "{d}");
+    // the arm folded down to a part 0.2 m out droops less; pushing the ball up by its weight
+    // and more (a 4 N contact) lifts it
+    let folded = [0.0, 1.0, 1.2, 0.6, 0.0];
+    let less = droop(folded, Vector3::zeros());
+    let pushed = droop(folded, Vector3::new(0.0, 0.0, 4.0));
+    assert!(
+        less.z > 0.0 && less.z < d.z && pushed.z < 0.0,
+        "{less} {pushed}"
+    );
+    // the ideal arm does not bend
+    let ideal = Arm::new(&GrindConfig {
+        ideal_arm: true,
+        ..GrindConfig::default()
+    });
+    assert!(
+        (ideal.held(folded, Vector3::new(0.0, 0.0, 4.0)).0 - fk::tool(&folded, &tip).0).norm()
+            < 1e-15
     );
 }
 

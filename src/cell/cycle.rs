@@ -236,6 +236,9 @@ pub enum Outcome {
     NoProgress,
     /// `max_iterations` grinds were made and the part is not within tolerance.
     MaxIterations,
+    /// The last grind's removal landed off its plan (`removal_shift::judge`; the loop printed
+    /// the region and its shift): no grind on a wrong model.
+    OffPlan,
 }
 
 impl Outcome {
@@ -250,6 +253,9 @@ impl Outcome {
             Outcome::NothingPlanned => "not finished: the plan reaches none of the regions",
             Outcome::NoProgress => "not finished: no progress (less removed than --min-progress)",
             Outcome::MaxIterations => "not finished: --max-iterations reached",
+            Outcome::OffPlan => {
+                "stopped: the last grind's removal landed off its plan (region and shift above)"
+            }
         }
     }
 }

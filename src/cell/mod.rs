@@ -9,6 +9,7 @@ pub mod cycle;
 mod matching;
 mod reach;
 pub mod removal_fit;
+pub mod removal_shift;
 mod stream;
 
 pub use reach::{reachable_sites, SITE_AXIS_MARGIN_DEG};

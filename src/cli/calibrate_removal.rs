@@ -10,6 +10,7 @@ use anyhow::Context;
 
 use crate::calibrate::files;
 use crate::cell::removal_fit::{self, Evidence, FitConfig, RemovalFit};
+use crate::cell::removal_shift::{self, ShiftConfig};
 use crate::plan::removal::ToolModel;
 use crate::plan::{Inspection, Plan};
 
@@ -27,11 +28,16 @@ pub struct Inputs {
     pub tool: PathBuf,
 }
 
-/// Fits k from the files of `inputs`; every refusal is one line naming the file.
+/// Fits k from the files of `inputs`, on the prediction moved by each region's registered
+/// shift (`removal_shift`); every refusal is one line naming the file.
 pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
     let before = Inspection::load(&inputs.before)?;
     let (predicted, plan_k) = prediction(&inputs.plan, &inputs.tool, &before)?;
     let after = Inspection::load(&inputs.after)?;
+    // k after the shift of where the tool really ground (issue 50)
+    let shift_cfg = ShiftConfig::default();
+    let shifts = removal_shift::register(&before, &after, &predicted, &shift_cfg);
+    let predicted = removal_shift::shifted_prediction(&before, &predicted, &shifts, &shift_cfg);
     removal_fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 

@@ -17,6 +17,7 @@ use crate::cell::cycle::{
     Measured, Outcome, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
 };
 use crate::cell::removal_fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
+use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
 use crate::plan::{Inspection, Plan, PlanMode};
 use crate::regions::Regions;
 
@@ -351,10 +352,11 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
             inspect_scan(l, &scan, &inspection_dir)?;
         }
         let (measured, inspection) = measure(&inspection_dir)?;
+        let mut off_plan = None;
         if let (Some(last), Some(before)) = (records.last_mut(), &previous) {
             last.followed_by(&measured, &before.inspection, &inspection);
             let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
-            (last.k_fitted, last.agreement) = refit(
+            (last.k_fitted, last.agreement, off_plan) = refit(
                 before,
                 (&inspection_dir, &inspection),
                 &ids,
@@ -365,6 +367,10 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
         }
         records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&records, &l.config);
+        if let (Outcome::Continue, Some(reason)) = (outcome, &off_plan) {
+            println!("cycle: stop: {reason}");
+            outcome = Outcome::OffPlan;
+        }
         if outcome == Outcome::Continue {
             if l.first.is_none() || k > 1 {
                 plan_into(l, &inspection_dir, &plan_file, &tool, &dir)?;
@@ -399,7 +405,9 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
 /// with it and makes it the `tool` of the next plan; re-predicts the grind with the fitted k
 /// over the defect points of the regions `ids` against the `after` inspection (folder and
 /// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
-/// evidence), and the agreement (None for a rigid plan).
+/// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
+/// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
+/// shift.
 fn refit(
     before: &Ground,
     after: (&Path, &Inspection),
@@ -407,7 +415,7 @@ fn refit(
     dir: &Path,
     tool: &mut PathBuf,
     pooled: &mut Vec<Evidence>,
-) -> (Option<f64>, Option<Agreement>) {
+) -> (Option<f64>, Option<Agreement>, Option<String>) {
     let inputs = Inputs {
         before: before.inspection_dir.clone(),
         after: after.0.to_path_buf(),
@@ -416,6 +424,17 @@ fn refit(
     };
     let written = dir.join("tool.toml");
     let prediction = calib::prediction(&before.plan, &before.tool, &before.inspection);
+    let shift_cfg = ShiftConfig::default();
+    let mut off_plan = None;
+    let prediction = prediction.map(|(p, k)| {
+        let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
+        shifts
+            .iter()
+            .for_each(|r| println!("{}", describe_shift(r)));
+        off_plan = removal_shift::judge(&shifts, &shift_cfg);
+        let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
+        (moved, k)
+    });
     let fitted = prediction.as_ref().map_err(clone_error).and_then(|(p, k)| {
         let cfg = FitConfig::default();
         let grind = calib::evidence_loaded(&inputs, &before.inspection, after.1, p, *k, &cfg)?;
@@ -442,7 +461,28 @@ fn refit(
     let agreement = prediction.ok().and_then(|(p, plan_k)| {
         removal_fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
-    (k, agreement)
+    (k, agreement, off_plan)
+}
+
+/// One line on a region's registration for the loop's log.
+fn describe_shift(r: &RegionShift) -> String {
+    let s = r.shift_mm;
+    format!(
+        "cycle: region {}: removal shift {:.2} mm [{:.2}, {:.2}, {:.2}], depth scale {:.3} \
+         (unshifted {:.3}), residual RMS {:.4} -> {:.4} mm over {} points, {} removed where \
+         nothing was planned",
+        r.region,
+        s.norm(),
+        s.x,
+        s.y,
+        s.z,
+        r.scale,
+        r.scale_unshifted,
+        r.rms_mm[0],
+        r.rms_mm[1],
+        r.points,
+        r.unplanned
+    )
 }
 
 /// Prints the last grind's own fit (or why it cannot fit alone, when it has earlier grinds to

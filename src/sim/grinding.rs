@@ -60,12 +60,21 @@ pub struct GrindConfig {
     /// Largest translation of the rescan's random pose, mm (default 60, synth's).
     pub rescan_max_translation_mm: f64,
     /// Gear backlash per joint (servos 1-5), the full width of the dead band, degrees
-    /// (default [`DEFAULT_BACKLASH_DEG`], off; shared/DOFBOT.md's arm: up to 1).
+    /// (default [`DEFAULT_BACKLASH_DEG`], 0.5 each: shared/DOFBOT.md's simulated-arm default;
+    /// up to 1 on a worn arm). The gear rests on the flank its load torque pushes it to
+    /// (`crate::sim::grind::slack`).
     pub backlash_deg: [f64; 5],
-    /// Droop of the tool under gravity at the arm's full horizontal reach, mm (default
-    /// [`DEFAULT_SAG_MM`], off; shared/DOFBOT.md's arm: 5..10); the droop at the part's
-    /// origin is absorbed by the workcell calibration.
+    /// Droop of the tool under gravity with the stretched arm held horizontal, mm (default
+    /// [`DEFAULT_SAG_MM`], 5: shared/DOFBOT.md's "5..10 mm at full reach"): sets the joints'
+    /// stiffness, the sag of any pose follows from its gravity torques; what the workcell
+    /// calibration saw near the part is absorbed.
     pub sag_full_reach_mm: f64,
+    /// The servos' tracking lag behind their commands, ms (default [`DEFAULT_LAG_MS`], 20:
+    /// one bus period, shared/DOFBOT.md's "a command lag of one bus period or more").
+    pub tracking_lag_ms: f64,
+    /// An ideal arm: no backlash, no sag, no lag whatever the keys above say (default false;
+    /// for tests that take the planner's own errors apart from the arm's).
+    pub ideal_arm: bool,
 }
 
 impl Default for GrindConfig {
@@ -92,6 +101,8 @@ impl Default for GrindConfig {
             rescan_max_translation_mm: 60.0,
             backlash_deg: [DEFAULT_BACKLASH_DEG; 5],
             sag_full_reach_mm: DEFAULT_SAG_MM,
+            tracking_lag_ms: DEFAULT_LAG_MS,
+            ideal_arm: false,
         }
     }
 }
@@ -112,14 +123,20 @@ pub const NOMINAL_MODULUS_MPA: f64 = 20.0;
 /// `[removal] spindle_rpm` (10000).
 pub const NOMINAL_SPINDLE_RPM: f64 = 10000.0;
 
-/// Default backlash per joint, degrees: 0 (off). shared/DOFBOT.md reports "up to 1 deg per
-/// servo"; with 1 degree and 5 mm of sag a removal grind of tests/cycle.rs's seed-3 case fits
-/// k at 0.56 x the planner's instead of 1.57 x (true 1.3 x) and grinds a new pit to -0.159 mm
-/// (measured, issue 29): the loop cannot meet a 0.05 mm tolerance on such an arm, so the
-/// board's mechanics are opt-in (`backlash_deg = [1, 1, 1, 1, 1]`, `sag_full_reach_mm = 5`).
-pub const DEFAULT_BACKLASH_DEG: f64 = 0.0;
-/// Default sag at full reach, mm: 0 (off; shared/DOFBOT.md: "sag 5..10 mm at full reach").
-pub const DEFAULT_SAG_MM: f64 = 0.0;
+/// Default backlash per joint, degrees: 0.5, the full dead band shared/DOFBOT.md gives the
+/// simulated arm by default (its "Reported accuracy": up to 1 deg per servo; an open ROS 2
+/// driver for this arm left 0.3-0.9 deg of joint error under load). Before issue 50 it was 0:
+/// with 1 degree and 5 mm of centred sag a grind of tests/cycle.rs's seed-3 case fitted k at
+/// 0.56 x the planner's instead of 1.57 x and ground a pit to -0.159 mm (issue 29).
+pub const DEFAULT_BACKLASH_DEG: f64 = 0.5;
+/// Default droop at full horizontal reach, mm: 5, shared/DOFBOT.md's "sag 5..10 mm at full
+/// reach", its simulated-arm default.
+pub const DEFAULT_SAG_MM: f64 = 5.0;
+/// Default tracking lag, ms: 20, one period of the stream's 20 ms bus period
+/// (shared/DOFBOT.md: "a command lag of one bus period or more").
+pub const DEFAULT_LAG_MS: f64 = 20.0;
+/// Largest tracking lag accepted, ms: a second behind is a stalled servo.
+const MAX_LAG_MS: f64 = 1000.0;
 /// Largest backlash, degrees, and sag, mm, accepted: more is a broken arm, not a worn one.
 const MAX_BACKLASH_DEG: f64 = 10.0;
 const MAX_SAG_MM: f64 = 50.0;
@@ -219,6 +236,13 @@ impl GrindConfig {
                 "mm",
             ),
             within(
+                "tracking_lag_ms",
+                self.tracking_lag_ms,
+                0.0,
+                MAX_LAG_MS,
+                "ms",
+            ),
+            within(
                 "sag_full_reach_mm",
                 self.sag_full_reach_mm,
                 0.0,
@@ -258,6 +282,14 @@ impl GrindConfig {
         match found.into_iter().next() {
             Some(m) => Err(m),
             None => Ok(()),
+        }
+    }
+
+    /// The servos' tracking lag, s (0 on an ideal arm).
+    pub fn tracking_lag_s(&self) -> f64 {
+        match self.ideal_arm {
+            true => 0.0,
+            false => self.tracking_lag_ms * 1e-3,
         }
     }
 

@@ -94,19 +94,35 @@ pub struct Faults {
 }
 
 /// The physical truth of the simulated arm that the host does not know (for calibration tests).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Mechanics {
     /// Per-servo mounting offset, degrees (servos 1..6): the servo reads and moves to the raw
     /// position of servo angle `physical + offset`. Default 0.
     pub mount_offset_deg: [f64; SERVO_COUNT],
-    /// Read-back noise, counts: every read adds a uniform integer in `-n..=n`. Default 0.
+    /// Read-back noise, counts: every read adds a uniform integer in `-n..=n`. Default
+    /// [`DEFAULT_READ_NOISE_COUNTS`] (1).
     pub read_noise_counts: u16,
     /// Seed of the noise generator (splitmix64). Default 0.
     pub noise_seed: u64,
     /// Start with the arm held by hand at these physical servo angles (degrees, 90 = joint
     /// zero), torque off. Default none (home pose, torque on).
     pub start_physical_deg: Option<[f64; SERVO_COUNT]>,
+}
+
+/// Default read-back noise, counts: 1, shared/DOFBOT.md's measured "read-back noise 1 count
+/// (0.082 deg)" on the bus servos (2 on servo 5; one count kept for all).
+pub const DEFAULT_READ_NOISE_COUNTS: u16 = 1;
+
+impl Default for Mechanics {
+    fn default() -> Self {
+        Mechanics {
+            mount_offset_deg: [0.0; SERVO_COUNT],
+            read_noise_counts: DEFAULT_READ_NOISE_COUNTS,
+            noise_seed: 0,
+            start_physical_deg: None,
+        }
+    }
 }
 
 /// A bus servo beyond the arm's six: its id and where it rests at start.

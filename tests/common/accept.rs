@@ -128,8 +128,17 @@ pub struct Acceptance {
 pub const GROUND_REACH_MM: f64 = 2.0;
 
 /// Runs `cycle --mode removal` on synth case `seed` with the simulator's true k 1.3 x the
-/// planner's (`super::SIM_TOOL`), up to 3 grinds, and collects the numbers.
+/// planner's (`super::SIM_TOOL`) on the cell's default (documented) arm, up to 3 grinds, and
+/// collects the numbers.
 pub fn acceptance(seed: u64) -> Acceptance {
+    acceptance_with(seed, "")
+}
+
+/// `[sim.grinding]` line of a cell whose arm has no backlash, sag or lag (issue 50).
+pub const IDEAL_ARM: &str = "ideal_arm = true\n";
+
+/// [`acceptance`] with more `[sim.grinding]` lines `sim` (e.g. [`IDEAL_ARM`]).
+pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
     let dir = super::scratch(&format!("accept-{seed}"));
     let truth = super::case(seed, &dir);
     let cfg = dir.join("cycle.toml");
@@ -141,7 +150,7 @@ pub fn acceptance(seed: u64) -> Acceptance {
         .replace(';', "\n");
     std::fs::write(
         &cfg,
-        format!("[run.sim.grinding]\n{}{extra}\n", super::SIM_TOOL),
+        format!("[run.sim.grinding]\n{}{sim}{extra}\n", super::SIM_TOOL),
     )
     .unwrap();
     let mut command = cycle(&dir, "cycle");
@@ -294,6 +303,10 @@ fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
 /// normal turns by up to 10 degrees over a grind's 0.25 mm, 0.04 mm off; the points lie
 /// 0.3 mm apart).
 const MATCH_MM: f64 = 0.1;
+/// More of that distance per mm removed at the point (0.35, sin 20 degrees): a cut far below
+/// the planned depth (issue 50: 0.4-0.6 mm with 1 degree of backlash) turns the normal by up to
+/// 20 degrees, so its point lies farther off than 0.1 mm and the walk ran off the end.
+const MATCH_PER_MM_REMOVED: f64 = 0.35;
 
 #[derive(Default)]
 struct TruePart {
@@ -364,7 +377,7 @@ impl TruePart {
                 let earlier = self.points.get(at);
                 let earlier =
                     earlier.unwrap_or_else(|| panic!("grind {k}: a point of no earlier grind"));
-                if (earlier - before).norm() <= MATCH_MM {
+                if (earlier - before).norm() <= MATCH_MM + MATCH_PER_MM_REMOVED * r.abs() {
                     break;
                 }
                 at += 1;

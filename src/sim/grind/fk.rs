@@ -18,19 +18,8 @@ pub const DOFBOT_JOINTS: [([f64; 3], [f64; 3], [f64; 3]); 5] = {
 /// The joint origins (robot frame, m) and the last link's pose at joint angles `q` (rad):
 /// URDF composition, origin then rpy (Rz Ry Rx) then the joint's rotation about its axis.
 pub fn chain(q: &[f64; 5]) -> ([Vector3<f64>; 5], Isometry3<f64>) {
-    let mut t = Isometry3::identity();
-    let mut origins = [Vector3::zeros(); 5];
-    for (k, (xyz, rpy, axis)) in DOFBOT_JOINTS.iter().enumerate() {
-        t *= Isometry3::from_parts(
-            Translation3::new(xyz[0], xyz[1], xyz[2]),
-            UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
-        );
-        origins[k] = t.translation.vector;
-        let turn =
-            UnitQuaternion::from_axis_angle(&Unit::new_normalize(Vector3::from(*axis)), q[k]);
-        t *= Isometry3::from_parts(Translation3::identity(), turn);
-    }
-    (origins, t)
+    let (j, t) = joints(q);
+    (j.map(|(o, _)| o), t)
 }
 
 /// Joint angle (rad) of a physical servo angle (degrees), DOFBOT.md's convention: servo 90
@@ -47,4 +36,27 @@ pub fn tool(q: &[f64; 5], tip_m: &[f64; 3]) -> (Point3<f64>, Vector3<f64>) {
         t * Point3::from(Vector3::from(*tip_m)),
         t.rotation * Vector3::z(),
     )
+}
+
+/// A joint's origin and unit axis in the robot frame (m).
+pub type JointAxis = (Vector3<f64>, Vector3<f64>);
+
+/// Each joint's origin and unit axis in the robot frame (m) at joint angles `q` (rad), and
+/// the last link's pose: what the load torques about the joints are taken with.
+pub fn joints(q: &[f64; 5]) -> ([JointAxis; 5], Isometry3<f64>) {
+    let mut t = Isometry3::identity();
+    let mut out = [(Vector3::zeros(), Vector3::z()); 5];
+    for (k, (xyz, rpy, axis)) in DOFBOT_JOINTS.iter().enumerate() {
+        t *= Isometry3::from_parts(
+            Translation3::new(xyz[0], xyz[1], xyz[2]),
+            UnitQuaternion::from_euler_angles(rpy[0], rpy[1], rpy[2]),
+        );
+        let a = Unit::new_normalize(Vector3::from(*axis));
+        out[k] = (t.translation.vector, t.rotation * a.into_inner());
+        t *= Isometry3::from_parts(
+            Translation3::identity(),
+            UnitQuaternion::from_axis_angle(&a, q[k]),
+        );
+    }
+    (out, t)
 }

@@ -19,7 +19,7 @@ pub mod part;
 pub mod slack;
 pub mod trace;
 
-use nalgebra::{Matrix4, Point3};
+use nalgebra::{Matrix4, Point3, Vector3};
 use serde::Serialize;
 
 pub use super::grinding::GrindConfig;
@@ -62,38 +62,70 @@ pub fn grind(
     let reference_from_robot = mount
         .try_inverse()
         .expect("a rigid transform has an inverse");
-    let tip_m = cfg.tip_offset_mm.map(|v| v * 1e-3);
-    let mut backlash = slack::Backlash::new(&cfg.backlash_deg);
-    let r0 = nominal[(0, 3)].hypot(nominal[(1, 3)]);
-    let sag = slack::Sag::new(cfg.sag_full_reach_mm, tip_m[2], r0);
-    let mut tool_at = |trace: &mut ServoTrace, t: f64| {
-        let deg = trace.physical_deg(t);
-        let q = backlash.follow(std::array::from_fn(|k| fk::joint_of_servo_deg(deg[k])));
-        let (c, axis) = fk::tool(&q, &tip_m);
-        let c = sag.apply(c);
-        let c_ref = reference_from_robot.transform_point(&c) * 1e3;
-        let axis_ref = reference_from_robot.transform_vector(&axis).normalize();
-        (Point3::from(c_ref.coords), axis_ref)
+    let mut arm = slack::Arm::new(cfg);
+    let lag = cfg.tracking_lag_s();
+    let joints_at = |trace: &mut ServoTrace, t: f64| {
+        let deg = trace.physical_deg((t - lag).max(0.0));
+        std::array::from_fn(|k| fk::joint_of_servo_deg(deg[k]))
     };
+    let origin = Point3::new(mount[(0, 3)], mount[(1, 3)], mount[(2, 3)]);
+    let absorbed = absorbed_offset(&arm, &mut trace.clone(), t_end, &origin, &joints_at);
+    let mut force = Vector3::zeros();
     let mut report = GrindReport::default();
     let steps = (t_end / SIM_STEP_S).ceil().max(0.0) as usize;
-    let (mut prev, _) = tool_at(trace, 0.0);
-    for s in 1..=steps {
+    let mut prev = None;
+    for s in 0..=steps {
         let t = s as f64 * SIM_STEP_S;
-        let (centre, axis) = tool_at(trace, t);
+        let (c, axis) = arm.tool(joints_at(trace, t), force);
+        let centre =
+            Point3::from(reference_from_robot.transform_point(&(c - absorbed)).coords * 1e3);
+        let axis = reference_from_robot.transform_vector(&axis).normalize();
+        let Some(before) = prev.replace(centre) else {
+            continue;
+        };
         let tool = ToolState {
             centre,
             axis,
-            velocity: (centre - prev) / SIM_STEP_S,
+            velocity: (centre - before) / SIM_STEP_S,
         };
-        prev = centre;
         report.steps += 1;
+        force = Vector3::zeros();
         if let Some(c) = part.grind_step(&tool, SIM_STEP_S, cfg) {
             report.contact_steps += 1;
             report.peak_force_n = report.peak_force_n.max(c.force_n);
+            if let Some((i, _)) = part.penetration(&centre, cfg.ball_radius_mm) {
+                force = mount.transform_vector(&part.normals()[i]).normalize() * c.force_n;
+            }
         }
     }
     report.peak_removal_mm = part.removal().iter().copied().fold(0.0, f64::max);
     report.points_ground = part.removal().iter().filter(|r| **r > 0.0).count();
     report
+}
+
+/// Step between the poses [`absorbed_offset`] looks at, s: one bus period (20 ms).
+const ABSORB_STEP_S: f64 = 0.02;
+
+/// What the workcell calibration absorbed of the arm's sag and backlash, m (robot frame): the
+/// cell was calibrated by touching the fixture with the arm loaded by its weight, so the
+/// ball's offset there (gravity on each loaded joint's flank, no contact force) went into the
+/// calibrated part pose. Taken at the pose of the run nearest the part's origin `origin`.
+fn absorbed_offset(
+    arm: &slack::Arm,
+    trace: &mut ServoTrace,
+    t_end: f64,
+    origin: &Point3<f64>,
+    joints_at: &dyn Fn(&mut ServoTrace, f64) -> [f64; 5],
+) -> Vector3<f64> {
+    let tip_m = arm.tip_m();
+    let n = (t_end / ABSORB_STEP_S).ceil().max(0.0) as usize;
+    let nearest = (0..=n)
+        .map(|s| joints_at(trace, s as f64 * ABSORB_STEP_S))
+        .min_by(|a, b| {
+            let d = |q: &[f64; 5]| (fk::tool(q, &tip_m).0 - origin).norm();
+            d(a).total_cmp(&d(b))
+        });
+    nearest.map_or(Vector3::zeros(), |q| {
+        arm.held(q, Vector3::zeros()).0 - fk::tool(&q, &tip_m).0
+    })
 }

@@ -11,6 +11,7 @@ use crate::sim::arm::{ReceivedFrame, SimOptions};
 use crate::sim::model::Board;
 
 /// The board's state over time, queried at non-decreasing times.
+#[derive(Clone)]
 pub struct ServoTrace {
     board: Board,
     frames: Vec<ReceivedFrame>,
