@@ -161,104 +161,103 @@ const MAX_EXPONENT: f64 = 3.0;
 impl GrindConfig {
     /// Checks every setting; the message names the key in backticks.
     pub fn check(&self) -> Result<(), String> {
-        let within = |key: &str, v: f64, lo: f64, hi: f64, unit: &str| {
-            (!(v.is_finite() && (lo..=hi).contains(&v)))
-                .then(|| format!("`{key}` = {v:?} {unit} is outside {lo:?}..={hi:?} {unit}"))
-        };
-        let mut found = [
-            within(
-                "preston_k",
-                self.preston_k,
-                PRESTON_K_RANGE.0,
-                PRESTON_K_RANGE.1,
-                "mm^2/N",
-            ),
-            within("k_factor", self.k_factor, 0.01, 100.0, ""),
-            within("k_noise", self.k_noise, 0.0, 0.99, "(share)"),
-            within(
+        let scalars: [(&str, f64, (f64, f64), &str); 17] = [
+            ("preston_k", self.preston_k, PRESTON_K_RANGE, "mm^2/N"),
+            ("k_factor", self.k_factor, (0.01, 100.0), ""),
+            ("k_noise", self.k_noise, (0.0, 0.99), "(share)"),
+            (
                 "k_noise_wavelength_mm",
                 self.k_noise_wavelength_mm,
-                0.01,
-                1e4,
+                (0.01, 1e4),
                 "mm",
             ),
-            within(
+            (
                 "pressure_exponent",
                 self.pressure_exponent,
-                0.0,
-                MAX_EXPONENT,
+                (0.0, MAX_EXPONENT),
                 "",
             ),
-            within("speed_exponent", self.speed_exponent, 0.0, MAX_EXPONENT, ""),
-            within(
+            (
+                "speed_exponent",
+                self.speed_exponent,
+                (0.0, MAX_EXPONENT),
+                "",
+            ),
+            (
                 "reference_pressure_mpa",
                 self.reference_pressure_mpa,
-                1e-3,
-                MODULUS_RANGE.1,
+                (1e-3, MODULUS_RANGE.1),
                 "MPa",
             ),
-            within(
+            (
                 "reference_speed_mm_s",
                 self.reference_speed_mm_s,
-                1e-3,
-                1e6,
+                (1e-3, 1e6),
                 "mm/s",
             ),
-            within("spring_rate_n_mm", self.spring_rate_n_mm, 1e-3, 1e4, "N/mm"),
-            within(
-                "modulus_mpa",
-                self.modulus_mpa,
-                MODULUS_RANGE.0,
-                MODULUS_RANGE.1,
-                "MPa",
+            (
+                "spring_rate_n_mm",
+                self.spring_rate_n_mm,
+                (1e-3, 1e4),
+                "N/mm",
             ),
-            within("spindle_rpm", self.spindle_rpm, 0.0, 1e6, "rev/min"),
-            within(
+            ("modulus_mpa", self.modulus_mpa, MODULUS_RANGE, "MPa"),
+            ("spindle_rpm", self.spindle_rpm, (0.0, 1e6), "rev/min"),
+            (
                 "ball_radius_mm",
                 self.ball_radius_mm,
-                BALL_RADIUS_RANGE.0,
-                BALL_RADIUS_RANGE.1,
+                BALL_RADIUS_RANGE,
                 "mm",
             ),
-            within("rescan_noise_mm", self.rescan_noise_mm, 0.0, 5.0, "mm"),
-            within(
+            ("rescan_noise_mm", self.rescan_noise_mm, (0.0, 5.0), "mm"),
+            (
                 "rescan_outliers",
                 self.rescan_outliers,
-                0.0,
-                0.49,
+                (0.0, 0.49),
                 "(share)",
             ),
-            within(
+            (
                 "rescan_max_translation_mm",
                 self.rescan_max_translation_mm,
-                0.0,
-                1e4,
+                (0.0, 1e4),
                 "mm",
             ),
-            within(
+            (
                 "tracking_lag_ms",
                 self.tracking_lag_ms,
-                0.0,
-                MAX_LAG_MS,
+                (0.0, MAX_LAG_MS),
                 "ms",
             ),
-            within(
+            (
                 "sag_full_reach_mm",
                 self.sag_full_reach_mm,
-                0.0,
-                MAX_SAG_MM,
+                (0.0, MAX_SAG_MM),
                 "mm",
             ),
-        ]
-        .into_iter()
-        .flatten()
-        .collect::<Vec<_>>();
+        ];
+        let scalar = scalars.iter().find_map(|&(key, v, (lo, hi), unit)| {
+            (!(v.is_finite() && (lo..=hi).contains(&v)))
+                .then(|| format!("`{key}` = {v:?} {unit} is outside {lo:?}..={hi:?} {unit}"))
+        });
+        match scalar.or_else(|| self.array_problem()) {
+            Some(m) => Err(m),
+            None => Ok(()),
+        }
+    }
+
+    /// The first array setting out of its range, named with its key.
+    fn array_problem(&self) -> Option<String> {
         let arrays = [
-            ("tip_offset_mm", self.tip_offset_mm, 1000.0, "mm"),
-            ("mount_offset_mm", self.mount_offset_mm, MAX_MOUNT_MM, "mm"),
+            ("tip_offset_mm", &self.tip_offset_mm[..], 1000.0, "mm"),
+            (
+                "mount_offset_mm",
+                &self.mount_offset_mm[..],
+                MAX_MOUNT_MM,
+                "mm",
+            ),
             (
                 "mount_rotation_deg",
-                self.mount_rotation_deg,
+                &self.mount_rotation_deg[..],
                 MAX_MOUNT_DEG,
                 "deg",
             ),
@@ -268,21 +267,15 @@ impl GrindConfig {
             .iter()
             .find(|x| !(x.is_finite() && (0.0..=MAX_BACKLASH_DEG).contains(*x)))
         {
-            found.push(format!(
+            return Some(format!(
                 "`backlash_deg` has {x:?} deg, outside 0..={MAX_BACKLASH_DEG} deg"
             ));
         }
-        for (key, v, max, unit) in arrays {
-            if let Some(x) = v.iter().find(|x| !(x.is_finite() && x.abs() <= max)) {
-                found.push(format!(
-                    "`{key}` has {x:?} {unit}, outside -{max}..={max} {unit}"
-                ));
-            }
-        }
-        match found.into_iter().next() {
-            Some(m) => Err(m),
-            None => Ok(()),
-        }
+        arrays.into_iter().find_map(|(key, v, max, unit)| {
+            v.iter()
+                .find(|x| !(x.is_finite() && x.abs() <= max))
+                .map(|x| format!("`{key}` has {x:?} {unit}, outside -{max}..={max} {unit}"))
+        })
     }
 
     /// The servos' tracking lag, s (0 on an ideal arm).
