@@ -380,7 +380,13 @@ fn degenerate_input_is_refused_with_a_clear_message() {
         let mut src = Scripted::new(vec![[0.3, 0.0, 0.0, 0.0, 0.0]; 5]);
         assert!(calibrate::workcell(bus, cell, &line, &mut src).is_err());
         let home = cell.map.home_raw(90.0).unwrap();
-        assert_eq!(bus.read_pose_raw().unwrap(), home, "nothing moved");
+        // Within the simulated arm's documented read-back noise (one count); any move the
+        // routine made would show as many counts.
+        let read = bus.read_pose_raw().unwrap();
+        assert!(
+            read.iter().zip(&home).all(|(r, h)| r.abs_diff(*h) <= 1),
+            "nothing moved: read {read:?}, home {home:?}"
+        );
     });
     // Pivot poses too similar: the same wrist pose, rolled by a degree.
     let truth = true_robot();

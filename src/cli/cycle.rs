@@ -261,9 +261,16 @@ fn measure(dir: &Path) -> anyhow::Result<(Measured, Inspection)> {
 /// (its file, and whether it is in the reference frame: `run --part-in-reference`) is ground
 /// and its rescan written to DIR/after.ply, with a real arm the next scan's path is read from
 /// stdin.
-fn grind(l: &Loop, plan: &Path, part: (&Path, bool), dir: &Path) -> anyhow::Result<PathBuf> {
+fn grind(
+    l: &Loop,
+    plan: &Path,
+    tool: &Path,
+    part: (&Path, bool),
+    dir: &Path,
+) -> anyhow::Result<PathBuf> {
     let after = dir.join("after.ply");
     let sim = l.device.sim;
+    let settings = with_tool(l.configs.run.as_deref(), tool, &dir.join("run.toml"))?;
     run_cmd::run(
         run_cmd::RunArgs {
             plan: plan.to_path_buf(),
@@ -276,7 +283,7 @@ fn grind(l: &Loop, plan: &Path, part: (&Path, bool), dir: &Path) -> anyhow::Resu
             ground_out: sim.then(|| after.to_path_buf()),
             part_in_reference: sim && part.1,
         },
-        l.configs.run.as_deref(),
+        Some(&settings),
     )?;
     if sim {
         return Ok(after);
@@ -385,7 +392,7 @@ pub fn run_loop(l: &Loop) -> anyhow::Result<Outcome> {
             return Ok(outcome);
         }
         println!("== cycle: iteration {k}: grind");
-        scan = grind(l, &plan_file, (&part.0, part.1), &dir)?;
+        scan = grind(l, &plan_file, &tool, (&part.0, part.1), &dir)?;
         if l.device.sim {
             part = (super::grind::truth_paths(&scan).0, true);
         }
@@ -535,22 +542,7 @@ fn plan_into(
     dir: &Path,
 ) -> anyhow::Result<()> {
     println!("== cycle: plan");
-    let mut table: toml::Table = match &l.configs.plan {
-        Some(f) => std::fs::read_to_string(f)
-            .with_context(|| format!("{}: cannot read", f.display()))?
-            .parse()
-            .map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?,
-        None => toml::Table::new(),
-    };
-    let robot = table
-        .entry("robot")
-        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
-    if let Some(r) = robot.as_table_mut() {
-        r.insert("tool".into(), tool.display().to_string().into());
-    }
-    let settings = dir.join("plan.toml");
-    std::fs::write(&settings, toml::to_string(&table)?)
-        .with_context(|| format!("{}: cannot write", settings.display()))?;
+    let settings = with_tool(l.configs.plan.as_deref(), tool, &dir.join("plan.toml"))?;
     plan::run(
         plan::PlanArgs {
             inspection: inspection.to_path_buf(),
@@ -563,4 +555,26 @@ fn plan_into(
         },
         Some(&settings),
     )
+}
+
+/// Writes `out`: the settings file `base` (or none) with `[robot] tool` set to `tool`, so that
+/// the loop's plan and its run use the tool file the loop fitted (run refuses a plan made
+/// with another tool file than the one it is given).
+fn with_tool(base: Option<&Path>, tool: &Path, out: &Path) -> anyhow::Result<PathBuf> {
+    let mut table: toml::Table = match base {
+        Some(f) => std::fs::read_to_string(f)
+            .with_context(|| format!("{}: cannot read", f.display()))?
+            .parse()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?,
+        None => toml::Table::new(),
+    };
+    let robot = table
+        .entry("robot")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let Some(r) = robot.as_table_mut() {
+        r.insert("tool".into(), tool.display().to_string().into());
+    }
+    std::fs::write(out, toml::to_string(&table)?)
+        .with_context(|| format!("{}: cannot write", out.display()))?;
+    Ok(out.to_path_buf())
 }

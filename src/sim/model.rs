@@ -101,7 +101,7 @@ pub struct Mechanics {
     /// position of servo angle `physical + offset`. Default 0.
     pub mount_offset_deg: [f64; SERVO_COUNT],
     /// Read-back noise, counts: every read adds a uniform integer in `-n..=n`. Default
-    /// [`DEFAULT_READ_NOISE_COUNTS`] (1).
+    /// [`DEFAULT_READ_NOISE_COUNTS`] (0; the documented arm's is 1).
     pub read_noise_counts: u16,
     /// Seed of the noise generator (splitmix64). Default 0.
     pub noise_seed: u64,
@@ -110,9 +110,12 @@ pub struct Mechanics {
     pub start_physical_deg: Option<[f64; SERVO_COUNT]>,
 }
 
-/// Default read-back noise, counts: 1, shared/DOFBOT.md's measured "read-back noise 1 count
-/// (0.082 deg)" on the bus servos (2 on servo 5; one count kept for all).
-pub const DEFAULT_READ_NOISE_COUNTS: u16 = 1;
+/// Default read-back noise, counts: 0. shared/DOFBOT.md measured "read-back noise 1 count
+/// (0.082 deg)" on the bus servos (2 on servo 5); `read_noise_counts = 1` simulates it. It is
+/// not the default yet: the link, plan and CLI tests compare read-backs with the frames sent
+/// byte for byte (Arm_Lib's transactions), and moving them to a one-count tolerance is left
+/// for a later change (issue 50).
+pub const DEFAULT_READ_NOISE_COUNTS: u16 = 0;
 
 impl Default for Mechanics {
     fn default() -> Self {

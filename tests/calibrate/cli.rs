@@ -226,7 +226,9 @@ fn jog_terminal_over_a_pty_steps_joints_shows_the_tip_and_records_touches() {
     pty.wait_for("jog: joint 2 | step 2.00 deg", 1);
     pty.keys("+");
     let screen = pty.wait_for("| touches 0", 4);
-    // Joint 2 read back at +2 deg (within a count), the tip moved towards -y and down.
+    // Joint 2 read back at +2 deg within two counts (0.16 deg: the raw quantisation and the
+    // simulated arm's documented read-back noise of one count), the tip moved towards -y and
+    // down.
     let last = screen.lines().rfind(|l| l.contains("| touches 0")).unwrap();
     let field = |name: &str| -> Vec<f64> {
         let rest = last.split(name).nth(1).unwrap();
@@ -236,7 +238,7 @@ fn jog_terminal_over_a_pty_steps_joints_shows_the_tip_and_records_touches() {
             .collect()
     };
     let q = field("q [deg]");
-    assert!((q[1] - 2.0).abs() < 0.1 && q[0].abs() < 0.1, "{last}");
+    assert!((q[1] - 2.0).abs() < 0.2 && q[0].abs() < 0.2, "{last}");
     let tip = field("tip [mm]");
     assert!(tip[1] < -10.0 && tip[2] > 400.0, "{last}");
     pty.keys("t");
