@@ -585,3 +585,55 @@ fn calibration_files_come_from_the_working_directory_not_the_source_tree() {
     assert!(err.contains("calibration/"), "{err}");
     assert!(!err.contains(env!("CARGO_MANIFEST_DIR")), "{err}");
 }
+
+/// A thin-walled reference as the issue's probe gave it: the parametric femoral part's
+/// articular sheet and a copy of it offset 3 mm inward along its normals with flipped normals
+/// (the wall's inner face), sampled with correct outward normals (away from the material), as
+/// CAD sampling tools export them. The orientation check must keep them at any sample
+/// density (issue 52: such a reference refused because the propagation crossed the wall), and
+/// still refuse the same cloud with the normals of one patch of the outer sheet flipped.
+#[test]
+fn a_thin_walled_reference_with_correct_normals_is_kept_and_a_flipped_patch_refused() {
+    use polishbot::inspect::checks::orient_outward;
+    use polishbot::synth::{build_femoral, FemoralShape};
+    let part = build_femoral(&FemoralShape::default());
+    let mut outer = part.mesh.clone();
+    outer.faces = (0..part.mesh.faces.len())
+        .filter(|&f| part.articular[f])
+        .map(|f| part.mesh.faces[f])
+        .collect();
+    let wall = |wall_mm: f64, n: usize, seed: u64| {
+        let mut c = cloud::sample_mesh(&outer, n / 2, seed).unwrap().cloud;
+        let normals = c.normals.clone().unwrap();
+        for (p, m) in c.points.clone().iter().zip(&normals) {
+            c.points.push(p - wall_mm * m);
+            c.normals.as_mut().unwrap().push(-m);
+        }
+        c
+    };
+    let path = Path::new("thin.ply");
+    for (wall_mm, n, seed) in [(3.0, 40_000, 1), (3.0, 20_000, 2), (6.0, 8_000, 3)] {
+        let mut c = wall(wall_mm, n, seed);
+        let before = c.normals.clone();
+        let note = orient_outward(path, &mut c);
+        assert!(
+            matches!(note, Ok(None)),
+            "{wall_mm} mm, {n} points: {note:?}"
+        );
+        assert_eq!(c.normals, before);
+    }
+    // The outer sheet's lateral third (x > 10 mm) flipped: one sheet whose normals disagree.
+    let mut c = wall(3.0, 20_000, 5);
+    let half = c.len() / 2;
+    let flipped = c.normals.as_mut().unwrap();
+    for (i, n) in flipped.iter_mut().enumerate().take(half) {
+        if c.points[i].x > 10.0 {
+            *n = -*n;
+        }
+    }
+    let err = orient_outward(path, &mut c).unwrap_err().to_string();
+    assert!(
+        err.contains("thin.ply") && err.contains("not consistently oriented"),
+        "{err}"
+    );
+}
