@@ -141,10 +141,9 @@ pub fn orient_outward(path: &Path, cloud: &mut PointCloud) -> Result<Option<Stri
 
 /// Largest lean of an edge of the orientation check's propagation graph
 /// ([`orient_sheets`]'s `max_lean`, the cosine of the angle between the edge and a normal):
-/// 0.5 leaves out edges more than 30 degrees off either point's tangent plane. Neighbours on
-/// one smooth sheet lean by about spacing / (2 x radius of curvature), under 0.25 for 2 mm
-/// apart on the part's 4 mm edge roundings; an edge across a wall or a sharp edge leans 0.7
-/// to 1.
+/// 0.3 leaves out edges more than 17 degrees off either point's tangent plane. Neighbours on
+/// one smooth sheet lean by about their distance / (2 x radius of curvature): under 0.25 for
+/// 2 mm apart on a 4 mm rounding; an edge across a wall or a sharp edge leans 0.7 to 1.
 const ORIENTATION_MAX_LEAN: f64 = 0.3;
 
 /// What [`agreement`] found on a sample.
