@@ -8,7 +8,8 @@ use nalgebra::{Isometry3, Point3};
 use serde::Deserialize;
 
 use crate::cloud::{transform, PointCloud};
-use crate::preprocess::{estimate_normals, orient_sheets, NormalConfig, Orientation};
+
+pub use super::orientation::orient_outward;
 
 /// Accepted ratio of the scan's to the reference's robust bounding-box diagonal: a scan of
 /// the part (a partial view included) spans about the part; a unit slip (mm read as m) is a
@@ -17,22 +18,6 @@ pub const SIZE_RATIO: (f64, f64) = (0.5, 2.0);
 /// Share of the points farthest from the centre left out of the robust extent (stray
 /// outliers left by the filter do not widen it).
 const EXTENT_TRIM: f64 = 0.01;
-/// Points of the reference whose normals are compared with a propagated orientation (a
-/// sample along the file's order; the sign test needs no more).
-const ORIENTATION_SAMPLE: usize = 20_000;
-/// Fewest sampled points for the orientation test (PCA takes 20 neighbours; with fewer the
-/// propagated orientation says nothing).
-const ORIENTATION_MIN_POINTS: usize = 200;
-/// Share of sampled normals that must agree in sign with the propagated orientation for the
-/// normals to be taken as they are (or disagree, for them to be turned round): PCA normals
-/// near sharp edges and on thin walls may disagree with correct normals now and then.
-const ORIENTATION_AGREEMENT: f64 = 0.9;
-/// Points of the quick first orientation test: a tenth of [`ORIENTATION_SAMPLE`] (its PCA
-/// and propagation cost about a tenth).
-const ORIENTATION_QUICK_SAMPLE: usize = 2_000;
-/// Share of the quick sample's normals that must agree for the normals to be kept without
-/// the full test.
-const ORIENTATION_QUICK_AGREEMENT: f64 = 0.97;
 /// Largest accepted deviation of a normal's length from 1 (as the comparison's own check).
 const UNIT_TOLERANCE: f64 = 1e-3;
 
@@ -91,116 +76,6 @@ pub fn check_unit_normals(path: &Path, what: &str, cloud: &PointCloud) -> Result
         );
     }
     Ok(())
-}
-
-/// Compares a reference cloud's own normals with a propagated orientation sheet by sheet (PCA
-/// normals of a sample oriented by [`orient_sheets`], which never carries a sign across a
-/// wall): kept when at least [`ORIENTATION_AGREEMENT`] of the sampled normals agree with
-/// their sheet's orientation taken with the sign most of that sheet's normals have, and the
-/// largest sheet's normals agree with its propagated outward orientation; turned round (with
-/// a note) when that largest sheet's normals oppose it; refused when they are not consistent.
-/// Each sheet takes its own sign because a thin-walled part's inner faces (box cuts) form
-/// sheets of their own whose outward sign the seed of the propagation cannot tell (issue 52:
-/// a femoral part with a 3 mm wall, its correct normals refused). Returns the note of a turn.
-pub fn orient_outward(path: &Path, cloud: &mut PointCloud) -> Result<Option<String>> {
-    if cloud.normals.is_none() {
-        return Ok(None);
-    }
-    // A small sample that agrees clearly settles it; anything else gets the full check.
-    if let Some(a) = agreement(path, cloud, ORIENTATION_QUICK_SAMPLE)? {
-        if a.consistent >= ORIENTATION_QUICK_AGREEMENT && a.largest_outward {
-            return Ok(None);
-        }
-    }
-    let Some(a) = agreement(path, cloud, ORIENTATION_SAMPLE)? else {
-        return Ok(None);
-    };
-    if a.consistent < ORIENTATION_AGREEMENT {
-        bail!(
-            "{}: reference normals are not consistently oriented: {:.0} % of {} sampled normals \
-             agree with a propagated orientation of their own smooth sheet (need {:.0} %)",
-            path.display(),
-            100.0 * a.consistent,
-            a.picked,
-            100.0 * ORIENTATION_AGREEMENT
-        );
-    }
-    if a.largest_outward {
-        return Ok(None);
-    }
-    let normals = cloud.normals.as_mut().expect("normals");
-    normals.iter_mut().for_each(|n| *n = -*n);
-    Ok(Some(format!(
-        "{}: the reference normals point inward (those of its largest smooth sheet, {} of {} \
-         sampled points, oppose a propagated outward orientation): turned round",
-        path.display(),
-        a.largest,
-        a.picked
-    )))
-}
-
-/// Largest lean of an edge of the orientation check's propagation graph
-/// ([`orient_sheets`]'s `max_lean`, the cosine of the angle between the edge and a normal):
-/// 0.3 leaves out edges more than 17 degrees off either point's tangent plane. Neighbours on
-/// one smooth sheet lean by about their distance / (2 x radius of curvature): under 0.25 for
-/// 2 mm apart on a 4 mm rounding; an edge across a wall or a sharp edge leans 0.7 to 1.
-const ORIENTATION_MAX_LEAN: f64 = 0.3;
-
-/// What [`agreement`] found on a sample.
-struct Agreement {
-    /// Share of the sampled normals that agree with their sheet's propagated orientation
-    /// taken with the sign most of the sheet's normals have.
-    consistent: f64,
-    /// Whether most of the largest sheet's normals agree with its propagated outward
-    /// orientation (seeded up at its highest point).
-    largest_outward: bool,
-    /// Points of the largest sheet.
-    largest: usize,
-    /// Sampled points.
-    picked: usize,
-}
-
-/// Compares the normals of about `size` points of `cloud` (evenly along the file's order)
-/// with PCA normals of that sample oriented sheet by sheet ([`orient_sheets`]); None when the
-/// sample has fewer than [`ORIENTATION_MIN_POINTS`] points or the cloud no normals.
-fn agreement(path: &Path, cloud: &PointCloud, size: usize) -> Result<Option<Agreement>> {
-    let step = cloud.len().div_ceil(size).max(1);
-    let picked: Vec<usize> = (0..cloud.len()).step_by(step).collect();
-    let Some(normals) = cloud.normals.as_ref() else {
-        return Ok(None);
-    };
-    if picked.len() < ORIENTATION_MIN_POINTS {
-        return Ok(None);
-    }
-    let sample = PointCloud::from_points(picked.iter().map(|&i| cloud.points[i]).collect());
-    let cfg = NormalConfig {
-        orientation: Orientation::Unoriented,
-        ..NormalConfig::default()
-    };
-    let mut est = estimate_normals(&sample, &cfg)
-        .with_context(|| format!("{}: reference normals: orientation check", path.display()))?;
-    let sheets = orient_sheets(
-        &sample.points,
-        &mut est.normals,
-        cfg.propagate_k,
-        ORIENTATION_MAX_LEAN,
-    );
-    // Per sheet: (points, of which agree).
-    let count = sheets.iter().map(|&s| s as usize + 1).max().unwrap_or(0);
-    let mut tally = vec![(0usize, 0usize); count];
-    for ((&i, e), &s) in picked.iter().zip(&est.normals).zip(&sheets) {
-        let t = &mut tally[s as usize];
-        t.0 += 1;
-        t.1 += usize::from(normals[i].dot(e) > 0.0);
-    }
-    let consistent = tally.iter().map(|&(n, a)| a.max(n - a)).sum::<usize>();
-    let &(largest, agree) = tally.iter().max_by_key(|t| t.0).expect("a sample point");
-    Ok(Some(Agreement {
-        consistent: consistent as f64 / picked.len() as f64,
-        largest_outward: 2 * agree >= largest,
-        largest,
-        picked: picked.len(),
-    }))
 }
 
 /// Refuses a scan whose robust extent ([`robust_extent`]) is not within [`SIZE_RATIO`] of the

@@ -6,6 +6,7 @@ pub mod area;
 pub mod checks;
 mod config;
 mod load;
+mod orientation;
 mod pose;
 pub mod scans;
 pub mod suggest;
