@@ -33,29 +33,8 @@ fn arg(p: &Path) -> &str {
 
 fn case() -> &'static Case {
     static CASE: OnceLock<Case> = OnceLock::new();
-    CASE.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile");
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(
-            dir.join("plan.toml"),
-            "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
-        )
-        .unwrap();
-        // Run from the package root, whose calibration/ the plan reads.
-        let d = dir.display();
-        let steps = [
-            format!(
-                "synth --out {d} --seed 9 --defects 3 --reference-points 200000 \
-                 --scan-points 150000 --height-range 0.15,0.35 --width-range 2,3"
-            ),
-            format!("inspect --reference {d}/reference.ply --scan {d}/scan.ply -o {d}/inspection"),
-            format!("--config {d}/plan.toml plan --inspection {d}/inspection -o {d}/plan.json"),
-        ];
-        for step in steps {
-            succeed(polishbot().args(step.split_whitespace()));
-        }
-        Case { dir }
+    CASE.get_or_init(|| Case {
+        dir: common::hostile::synth_inspect_plan("hostile", 200_000, 150_000, false),
     })
 }
 

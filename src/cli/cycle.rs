@@ -213,6 +213,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
     cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;
     prepare_out(&args.out, args.replace)?;
     let configs = Configs::split(config, &args.out)?;
+    let out = args.out.clone();
     let outcome = run_loop(&Loop {
         reference: args.reference,
         scan: args.scan,
@@ -223,10 +224,22 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         configs,
         first: None,
         mode: args.mode,
-    })?;
+    })
+    .map_err(|e| blame_config(e, &out, config))?;
     match outcome {
         Outcome::WithinTolerance => Ok(()),
         o => Err(NotFinished(o).into()),
+    }
+}
+
+/// `e` said of the user's `--config` when it is about a settings file cycle derived from it
+/// ([`super::settings::blame_source`]).
+fn blame_config(e: anyhow::Error, out: &Path, config: Option<&Path>) -> anyhow::Error {
+    let Some(source) = config else { return e };
+    let text = std::fs::read_to_string(source).unwrap_or_default();
+    match super::settings::blame_source(&e.to_string(), out, source, &text) {
+        Some(m) => anyhow::anyhow!(m),
+        None => e,
     }
 }
 

@@ -156,6 +156,37 @@ fn unknown_key(given: &toml::Table, known: &toml::Table, prefix: &str) -> Option
     None
 }
 
+/// An error `message` about a settings file `cycle` derived from the user's `--config`
+/// (`OUT/inspect.toml`, `OUT/plan.toml`, `OUT/iter-K/run.toml`: the `[inspect]`, `[plan]` and
+/// `[run]` tables of `source`) said again of `source`: its path, the line of the key in
+/// backticks within that table, the table. None when the message is about no derived file
+/// under `out` (issue 52: cycle blamed its own iter-1/run.toml for the user's setting).
+pub fn blame_source(message: &str, out: &Path, source: &Path, text: &str) -> Option<String> {
+    let (file, rest) = message.split_once(": ")?;
+    let file = Path::new(file);
+    let section = file.file_stem()?.to_str()?;
+    let derived = ["inspect", "plan", "run"].contains(&section)
+        && file.extension().is_some_and(|e| e == "toml")
+        && file.starts_with(out);
+    if !derived {
+        return None;
+    }
+    let rest = match rest.strip_prefix("line ") {
+        Some(r) => r.split_once(": ").map_or(r, |(_, m)| m),
+        None => rest,
+    };
+    let (scope, rest) = match rest.strip_prefix('[').and_then(|r| r.split_once("] ")) {
+        Some((inner, m)) => (format!("{section}.{inner}"), m),
+        None => (section.to_string(), rest),
+    };
+    let key = rest.split('`').nth(1).unwrap_or("");
+    let line = line_of_key(text, &scope, key)
+        .or_else(|| line_of_key(text, section, key))
+        .map(|l| format!("line {l}: "))
+        .unwrap_or_default();
+    Some(format!("{}: {line}[{scope}] {rest}", source.display()))
+}
+
 /// 1-based line where `key` (a name, or a dotted path ending in one) is set inside `section`
 /// or one of its sub-tables.
 pub fn line_of_key(text: &str, section: &str, key: &str) -> Option<usize> {
