@@ -581,8 +581,9 @@ fn calibration_files_come_from_the_working_directory_not_the_source_tree() {
 /// and its facet normals (outward: the mesh is closed and oriented by its volume).
 fn femoral_dm(file: &str, n: usize, seed: u64) -> PointCloud {
     let path = common::shared_data(file);
-    let cloud::Geometry::Mesh { mut mesh, .. } =
-        cloud::load(&path, None, Some(cloud::Units::M)).unwrap().geometry
+    let cloud::Geometry::Mesh { mut mesh, .. } = cloud::load(&path, None, Some(cloud::Units::M))
+        .unwrap()
+        .geometry
     else {
         panic!("{file} is a mesh")
     };
@@ -602,7 +603,10 @@ fn orientation(c: &PointCloud) -> Result<bool, String> {
             Ok(true)
         }
         Ok(Some(note)) => {
-            assert!(note.contains("thin.ply") && note.contains("turned round"), "{note}");
+            assert!(
+                note.contains("thin.ply") && note.contains("turned round"),
+                "{note}"
+            );
             Ok(false)
         }
         Err(e) => Err(e.to_string()),
@@ -650,7 +654,10 @@ fn a_thin_walled_reference_with_correct_normals_is_kept_and_a_flipped_sheet_refu
         assert_eq!(orientation(&c), Ok(true), "{wall_mm} mm, {n} points");
         assert_eq!(orientation(&flipped(&c, |_, _| true)), Ok(false));
         let inner = orientation(&flipped(&c, |i, _| i >= half)).unwrap_err();
-        assert!(inner.contains("point into the material on one sheet"), "{inner}");
+        assert!(
+            inner.contains("point into the material on one sheet"),
+            "{inner}"
+        );
         let patch = orientation(&flipped(&c, |i, p| i < half && p.x > 10.0)).unwrap_err();
         assert!(patch.contains("not consistently oriented"), "{patch}");
     }

@@ -163,7 +163,11 @@ fn merge_refuses_non_finite_and_duplicate_angles_and_absurd_centres() {
     );
     let mut cmd = polishbot();
     cmd.arg("merge").arg(&scan).arg(&scan).args(axis);
-    succeed(cmd.arg("--skip-bad").arg("-o").arg(tmp.path().join("s.ply")));
+    succeed(
+        cmd.arg("--skip-bad")
+            .arg("-o")
+            .arg(tmp.path().join("s.ply")),
+    );
     let report = std::fs::read_to_string(tmp.path().join("s.json")).unwrap();
     let report: serde_json::Value = serde_json::from_str(&report).unwrap();
     assert_eq!(report["skipped"][0].as_str(), scan.to_str(), "{report}");
@@ -175,8 +179,16 @@ fn merge_refuses_non_finite_and_duplicate_angles_and_absurd_centres() {
     let small = tmp.path().join("small.ply");
     polishbot::cloud::write_ply(&small, &few, None, polishbot::cloud::PlyPrecision::F64).unwrap();
     let mut cmd = polishbot();
-    cmd.arg("merge").arg(&scan).arg(&small).args(["--angles", "0,30"]);
-    let line = one_line_failure(&cmd.arg("-o").arg(tmp.path().join("t.ply")).output().unwrap());
+    cmd.arg("merge")
+        .arg(&scan)
+        .arg(&small)
+        .args(["--angles", "0,30"]);
+    let line = one_line_failure(
+        &cmd.arg("-o")
+            .arg(tmp.path().join("t.ply"))
+            .output()
+            .unwrap(),
+    );
     assert!(line.contains("small.ply: 10 points"), "{line}");
 }
 
@@ -185,6 +197,27 @@ fn simulator_settings_outside_physical_ranges_are_refused_naming_the_key() {
     let dir = case();
     let tmp = common::tempdir();
     let cell = cell_copy(tmp.path(), "", |t| t.to_string());
+    // A table given as a number: said in words, not serde's type name (issue 52).
+    let cfg = tmp.path().join("table.toml");
+    std::fs::write(&cfg, "[sim]\ngrinding = 5\n").unwrap();
+    let mut cmd = polishbot();
+    cmd.arg("--config")
+        .arg(&cfg)
+        .args(["run", "--dry-run", "--sim", "--plan"]);
+    let out = cmd
+        .arg(dir.join("plan.json"))
+        .arg("--cell")
+        .arg(&cell)
+        .output();
+    let line = one_line_failure(&out.unwrap());
+    assert!(
+        line.contains("table.toml: line 2") && line.contains("expected a table of settings"),
+        "{line}"
+    );
+    assert!(
+        !line.contains("struct") && !line.contains("GrindConfig"),
+        "{line}"
+    );
     for (key, value) in [
         ("ball_radius_mm", "1e300"),
         ("modulus_mpa", "1e-300"),
@@ -300,8 +333,12 @@ fn cycle_blames_a_bad_setting_on_the_users_file_and_line() {
         let cfg = tmp.path().join(format!("cycle{n}.toml"));
         std::fs::write(&cfg, text).unwrap();
         let mut cmd = polishbot();
-        cmd.arg("--config").arg(&cfg).args(["cycle", "--sim", "--reference"]);
-        cmd.arg(dir.join("reference.ply")).arg("--scan").arg(dir.join("scan.ply"));
+        cmd.arg("--config")
+            .arg(&cfg)
+            .args(["cycle", "--sim", "--reference"]);
+        cmd.arg(dir.join("reference.ply"))
+            .arg("--scan")
+            .arg(dir.join("scan.ply"));
         cmd.arg("-o").arg(tmp.path().join(format!("out{n}")));
         let line = one_line_failure(&cmd.output().unwrap());
         let name = format!("cycle{n}.toml: ");

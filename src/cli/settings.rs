@@ -47,7 +47,7 @@ impl ConfigFile {
                 .span()
                 .map(|s| format!("line {}: ", line_at(&self.text, s.start)))
                 .unwrap_or_default();
-            let message = e.message().trim().replace('\n', " ");
+            let message = plain(&e.message().trim().replace('\n', " "));
             let message = match e.span() {
                 Some(s) => unknown_key_message(&self.text, s.start, &message),
                 None => message,
@@ -97,6 +97,25 @@ impl ConfigFile {
             None => "settings (flags and defaults)".to_string(),
         }
     }
+}
+
+/// `message` without serde's Rust type names (issue 52: "expected struct GrindConfig",
+/// "unsupported rust type"): a struct is a table of settings to the user, an enum one of
+/// its names.
+fn plain(message: &str) -> String {
+    let mut out = message.replace("unsupported rust type", "a value no setting takes");
+    for (rust, user) in [
+        ("expected struct ", "expected a table of settings"),
+        ("expected enum ", "expected one of the setting's names"),
+    ] {
+        while let Some(at) = out.find(rust) {
+            let name_end = out[at + rust.len()..]
+                .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .map_or(out.len(), |e| at + rust.len() + e);
+            out.replace_range(at..name_end, user);
+        }
+    }
+    out
 }
 
 /// Largest `--config` file read, bytes (a settings file is a few kB; this bounds the read).
@@ -298,6 +317,17 @@ pub fn check_filter(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn serde_type_names_become_words() {
+        let m = plain("invalid type: integer `5`, expected struct GrindConfig");
+        assert_eq!(m, "invalid type: integer `5`, expected a table of settings");
+        let m = plain("unsupported rust type; expected enum Mode_2 here");
+        assert_eq!(
+            m,
+            "a value no setting takes; expected one of the setting's names here"
+        );
+    }
 
     #[test]
     fn keys_are_found_in_their_section() {

@@ -33,7 +33,9 @@ pub fn synth_inspect_plan(
             "synth --out {d} --seed 9 --defects 3 --reference-points {reference_points} \
              --scan-points {scan_points} --height-range 0.15,0.35 --width-range 2,3"
         ),
-        format!("inspect --reference {d}/reference.ply --scan {d}/scan.ply{pose} -o {d}/inspection"),
+        format!(
+            "inspect --reference {d}/reference.ply --scan {d}/scan.ply{pose} -o {d}/inspection"
+        ),
         format!("--config {d}/plan.toml plan --inspection {d}/inspection -o {d}/plan.json"),
     ];
     // Run from the package root, whose calibration/ the plan reads.
