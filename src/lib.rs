@@ -17,6 +17,7 @@ pub mod plan;
 pub mod preprocess;
 pub mod progress;
 pub mod regions;
+pub mod repair;
 pub mod register;
 pub mod report;
 pub mod robot;

@@ -6,7 +6,7 @@ use super::collide::{Allow, CollisionConfig, Scene};
 pub use super::contact::Collision;
 use super::error::PlanError;
 use super::file::Plan;
-use super::inspection::Inspection;
+use crate::repair::Inspection;
 use super::program::{Segment, SegmentKind};
 use crate::robot::{Robot, Workcell};
 

@@ -12,7 +12,7 @@ use nalgebra::{Matrix4, Point3, Vector3};
 
 use super::contact::{segment_box_distance, spacing};
 pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, Solid};
-use super::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 use crate::robot::{angle_between, Robot, Workcell};
 use crate::spatial::{Neighbour, Neighbours};
 use sweep::Carry;

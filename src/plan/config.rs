@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::collide::CollisionConfig;
 use super::error::PlanError;
-use super::inspection::Inspection;
+use crate::repair::Inspection;
 use super::raster::RasterGeometry;
 use super::removal;
 use super::trajectory::TrajectoryConfig;

@@ -12,8 +12,8 @@ use nalgebra::{Point3, Vector3};
 
 use super::error::PlanError;
 use super::free_motion::{pressed, Cell};
-use super::inspection::Inspection;
-use super::inspection::SurfacePoint;
+use crate::repair::Inspection;
+use crate::repair::SurfacePoint;
 use super::preston::{
     cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, DwellPoint,
     PredictedRow, RegionPrediction, RemovalReport, Setup,

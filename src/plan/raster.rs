@@ -3,7 +3,7 @@
 use nalgebra::{Matrix2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::inspection::{RegionInfo, SurfacePoint};
+use crate::repair::{RegionInfo, SurfacePoint};
 use super::surface::Surface;
 
 /// What a stroke does.

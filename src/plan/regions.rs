@@ -7,7 +7,7 @@ use nalgebra::Point3;
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::free_motion::Cell;
-use super::inspection::{Inspection, RegionInfo, SurfacePoint};
+use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
 use super::{collide, order, predict, preston, program, raster, removal, surface};

@@ -11,7 +11,7 @@ use super::check::tool_reaches;
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::file::Plan;
-use super::inspection::{Inspection, RegionInfo};
+use crate::repair::{Inspection, RegionInfo};
 use super::raster;
 use super::report::Metrics;
 use super::table_file::{table_move, RegionTable, TablePlan};

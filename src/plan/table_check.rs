@@ -5,7 +5,7 @@
 use super::collide::CollisionConfig;
 use super::error::PlanError;
 use super::file::{CheckedPlan, Plan};
-use super::inspection::Inspection;
+use crate::repair::Inspection;
 use super::program::SegmentKind;
 use super::table_file::{check, TablePlan};
 use super::validate::ValidationConfig;

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 pub use influence::{Contact, Influence, Tilt};
 pub use tool::ToolModel;
 
-use super::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 
 /// Settings of the dwell solve.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
