@@ -5,9 +5,9 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Point3, Vector3};
-use polishbot::plan::clearance::check_samples;
-use polishbot::plan::collide::Scene;
-use polishbot::plan::{plan, Inspection, PlanConfig, RegionInfo, SurfacePoint};
+use polishbot::motion::clearance::check_samples;
+use polishbot::motion::collide::Scene;
+use polishbot::motion::{plan, Inspection, PlanConfig, RegionInfo, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
 fn calib(n: &str) -> std::path::PathBuf {

@@ -200,10 +200,10 @@ fn every_stated_default_is_the_default_impl() {
         crate::acquire::MergeConfig => "src/acquire/config.rs",
         crate::synth::TurntableConfig => "src/synth/turntable.rs",
         crate::synth::FemoralShape => "src/synth/femoral.rs",
-        crate::plan::PlanConfig => "src/plan/config.rs",
-        crate::plan::TrajectoryConfig => "src/plan/trajectory.rs",
-        crate::plan::ValidationConfig => "src/plan/validate.rs",
-        crate::plan::CollisionConfig => "src/plan/contact.rs",
+        crate::motion::PlanConfig => "src/motion/config.rs",
+        crate::motion::TrajectoryConfig => "src/motion/trajectory.rs",
+        crate::motion::ValidationConfig => "src/motion/validate.rs",
+        crate::motion::CollisionConfig => "src/motion/contact.rs",
         crate::robot::IkConfig => "src/robot/ik.rs",
         crate::bus::BusConfig => "src/bus/config.rs",
         crate::sim::SimTiming => "src/sim/model.rs",
@@ -212,7 +212,7 @@ fn every_stated_default_is_the_default_impl() {
         crate::sim::SimOptions => "src/sim/arm.rs",
         crate::calibrate::CalibrationConfig => "src/calibrate/config.rs",
         crate::cell::RunConfig => "src/cell/stream.rs",
-        crate::plan::removal::RemovalConfig => "src/plan/removal/mod.rs",
+        crate::removal::RemovalConfig => "src/removal/mod.rs",
         crate::sim::GrindConfig => "src/sim/grinding.rs",
     );
     assert!(bad.is_empty(), "{}", bad.join("\n"));

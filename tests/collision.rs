@@ -10,7 +10,7 @@ mod sweep;
 mod uniform;
 
 use nalgebra::{Matrix4, Point3, Vector3};
-use polishbot::plan::{
+use polishbot::motion::{
     plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind, Solid,
     SurfacePoint,
 };
@@ -542,7 +542,7 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
 /// scene answers every sample exactly as a fresh scene does, refusals included.
 #[test]
 fn a_scene_answers_a_sample_it_has_seen_as_a_fresh_scene_does() {
-    use polishbot::plan::collide::{Allow, Scene};
+    use polishbot::motion::collide::{Allow, Scene};
     let robot = dofbot();
     let (insp, wc) = wedge();
     let cfg = PlanConfig::rigid();

@@ -389,7 +389,7 @@ fn the_planner_and_the_simulator_keep_their_parameters_apart() {
         );
     }
     for (file, text) in sources(&src.join("sim")) {
-        for banned in ["crate::plan", "crate::robot", "use k::", " k::"] {
+        for banned in ["crate::motion", "crate::robot", "use k::", " k::"] {
             assert!(!text.contains(banned), "{file} uses {banned}");
         }
     }

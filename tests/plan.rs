@@ -5,7 +5,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use polishbot::plan::{plan, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
+use polishbot::motion::{plan, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 
 fn calib(name: &str) -> PathBuf {
@@ -57,7 +57,7 @@ fn worst_derivative_ratio(plan: &Plan, robot: &Robot) -> f64 {
 }
 
 fn polyline_distance(p: &Vector3<f64>, line: &[Vector3<f64>]) -> f64 {
-    polishbot::plan::check::polyline_distance(p, line)
+    polishbot::motion::check::polyline_distance(p, line)
 }
 
 #[test]
@@ -190,7 +190,7 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     let p = Plan::load(&path).expect("load");
     let checked = p.check(&robot, &Default::default()).expect("re-check");
     let cfg = BusConfig {
-        servo_map: polishbot::plan::frames::servo_map(&robot).expect("map"),
+        servo_map: polishbot::motion::frames::servo_map(&robot).expect("map"),
         ..BusConfig::default()
     };
     let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).expect("sim");
@@ -372,11 +372,11 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
     let mut bad = p.clone();
     bad.samples[k].q[1] += 0.01;
     let qs: Vec<Vec<f64>> = bad.samples.iter().map(|s| s.q.clone()).collect();
-    let map = polishbot::plan::frames::servo_map(&robot).unwrap();
-    bad.frames = polishbot::plan::frames::encode(&qs, &map, 90.0, bad.period)
+    let map = polishbot::motion::frames::servo_map(&robot).unwrap();
+    bad.frames = polishbot::motion::frames::encode(&qs, &map, 90.0, bad.period)
         .unwrap()
         .iter()
-        .map(|f| polishbot::plan::frames::to_hex(f))
+        .map(|f| polishbot::motion::frames::to_hex(f))
         .collect();
     assert!(matches!(
         bad.check(&robot, &Default::default()),

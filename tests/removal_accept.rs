@@ -8,7 +8,7 @@
 //! are not within it yet (docs/ALGORITHMS.md, "What one pass can promise").
 mod common;
 
-use polishbot::plan::{plan, Inspection, PlanConfig, PlanError};
+use polishbot::motion::{plan, Inspection, PlanConfig, PlanError};
 use polishbot::synth::SynthConfig;
 
 /// The defect heights, mm: reachable bumps of 0.08-0.5 mm.

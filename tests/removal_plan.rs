@@ -9,11 +9,11 @@ use std::path::Path;
 use common::polishbot;
 use common::removal::TOLERANCE_MM;
 use nalgebra::{Point3, Vector3};
-use polishbot::plan::removal::ALLOWANCE_STEP_SHARE;
-use polishbot::plan::{
+use polishbot::motion::{
     collide, plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo,
     SegmentKind, SurfacePoint,
 };
+use polishbot::removal::ALLOWANCE_STEP_SHARE;
 use polishbot::robot::Workcell;
 
 /// The shipped tool.toml's preload, mm.

@@ -27,8 +27,8 @@ mod common;
 use std::path::Path;
 
 use nalgebra::Point3;
-use polishbot::plan::preston::{contact, reference_from_robot};
-use polishbot::plan::{plan, Inspection, Plan, PlanConfig, SegmentKind};
+use polishbot::motion::dwell::{contact, reference_from_robot};
+use polishbot::motion::{plan, Inspection, Plan, PlanConfig, SegmentKind};
 use polishbot::preprocess::{estimate_normals, NormalConfig, Orientation};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::sim::grind::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
@@ -191,7 +191,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
             let d = Path::new(&demo);
             let mut plan = Plan::load(&d.join("plan.json")).unwrap();
             let text = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
-            let rows = polishbot::cell::removal_fit::parse_predicted(&text).unwrap();
+            let rows = polishbot::removal::fit::parse_predicted(&text).unwrap();
             plan.removal.as_mut().expect("a removal plan").rows = rows;
             (Inspection::load(&d.join("inspection")).unwrap(), plan)
         }

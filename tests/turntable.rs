@@ -8,8 +8,8 @@ use common::femoral::{cell, inspection};
 use nalgebra::Point3;
 use polishbot::bus::{Bus, BusConfig, Journal, ResumePoint};
 use polishbot::cell::{execute, steps, RunConfig, Step};
-use polishbot::plan::file::CheckedPlan;
-use polishbot::plan::{plan_cell, table_file};
+use polishbot::motion::file::CheckedPlan;
+use polishbot::motion::{plan_cell, table_file};
 use polishbot::robot::{Robot, Turntable};
 use polishbot::sim::{ExtraServo, SimArm, SimOptions};
 
@@ -82,7 +82,7 @@ fn a_cell_without_a_table_plans_as_before() {
     assert!(table.is_none());
     let insp = inspection(7, 3);
     let a = plan_cell(&insp, &robot, &wc, None, &config).unwrap();
-    let b = polishbot::plan::plan(&insp, &robot, &wc, &config).unwrap();
+    let b = polishbot::motion::plan(&insp, &robot, &wc, &config).unwrap();
     assert_eq!(a, b);
     let text = serde_json::to_string(&a).unwrap();
     assert!(!text.contains("turntable"));
@@ -215,7 +215,7 @@ fn board_table() -> board::TableServo {
 
 fn bus_config(robot: &Robot) -> BusConfig {
     BusConfig {
-        servo_map: polishbot::plan::frames::servo_map(robot).unwrap(),
+        servo_map: polishbot::motion::frames::servo_map(robot).unwrap(),
         ..BusConfig::default()
     }
 }

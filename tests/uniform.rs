@@ -7,7 +7,7 @@ mod common;
 
 use std::collections::BTreeMap;
 
-use polishbot::plan::{plan_cell, Inspection, PlanMode};
+use polishbot::motion::{plan_cell, Inspection, PlanMode};
 
 use common::femoral::{cell, parametric_case, planned_area, reasons, uniform_case};
 

@@ -5,8 +5,8 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use super::part::{Part, SampleVerdict};
-use crate::plan::collide::{Allow, Hit, Obstacle, Scene};
-use crate::plan::{PlanConfig, Solid};
+use crate::motion::collide::{Allow, Hit, Obstacle, Scene};
+use crate::motion::{PlanConfig, Solid};
 use crate::robot::{IkTarget, Robot, Servo, Turntable, Unreachable, Workcell};
 
 /// Half width of the table's spindle (a square bar along the axis from the part's centroid

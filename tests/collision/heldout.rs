@@ -4,7 +4,7 @@
 //! turned by this test from workcell.toml's `[turntable]` axis and centre at each sample's
 //! table angle (plan.json's `turntable`), not by the planner's placement.
 use nalgebra::{Point3, Rotation3, Translation3, Unit, Vector3};
-use polishbot::plan::{plan_cell, Inspection, Plan, SegmentKind};
+use polishbot::motion::{plan_cell, Inspection, Plan, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::synth::synth;
 

@@ -2,8 +2,8 @@
 //! part to the next sample and skips the body's search while that bound allows: it skips
 //! searches, never an answer.
 use nalgebra::{Matrix4, Point3};
-use polishbot::plan::collide::{Allow, Body, Scene};
-use polishbot::plan::{plan, CollisionConfig, Plan, PlanConfig, SurfacePoint};
+use polishbot::motion::collide::{Allow, Body, Scene};
+use polishbot::motion::{plan, CollisionConfig, Plan, PlanConfig, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
 use super::{arm, grid, measure, point, to_ref, wedge};

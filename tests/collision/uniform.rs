@@ -6,7 +6,7 @@
 //! presses the ball its preload (2 mm) into the part on purpose, which this check (ball depth,
 //! shank from the ball centre) reads as a collision; removal mode's planned share is in
 //! tests/uniform.rs.
-use polishbot::plan::plan_cell;
+use polishbot::motion::plan_cell;
 
 use super::heldout::{accept, turned_tally};
 use crate::common::femoral::{cell, planned_area, reasons, uniform_case};

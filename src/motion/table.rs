@@ -11,10 +11,10 @@ use super::check::tool_reaches;
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::file::Plan;
-use crate::repair::{Inspection, RegionInfo};
 use super::raster;
 use super::report::Metrics;
 use super::table_file::{table_move, RegionTable, TablePlan};
+use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
 /// Spacing of the candidate table angles, degrees: the IK accepts the tool axis within a cone

@@ -10,18 +10,18 @@ use std::collections::HashMap;
 
 use nalgebra::{Point3, Vector3};
 
+use super::dwell::{
+    cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, Setup,
+};
 use super::error::PlanError;
 use super::free_motion::{pressed, Cell};
+use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
+use super::trajectory::{JointTrajectory, Move};
+use crate::removal::montecarlo::{spread, JointError};
+use crate::removal::prediction::{DwellPoint, PredictedRow, RegionPrediction, RemovalReport};
+use crate::removal::{self, Influence, Stats};
 use crate::repair::Inspection;
 use crate::repair::SurfacePoint;
-use super::preston::{
-    cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, DwellPoint,
-    PredictedRow, RegionPrediction, RemovalReport, Setup,
-};
-use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
-use super::removal::montecarlo::{spread, JointError};
-use super::removal::{self, Influence, Stats};
-use super::trajectory::{JointTrajectory, Move};
 use crate::robot::{Robot, Workcell};
 
 /// One region's prediction: its report entry and predicted.csv rows, or why it over-grinds.

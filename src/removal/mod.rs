@@ -4,9 +4,12 @@
 //!
 //! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`].
 pub mod dwell;
+pub mod fit;
 pub mod force;
 pub mod influence;
+pub mod matching;
 pub mod montecarlo;
+pub mod prediction;
 pub mod press;
 pub mod sequence;
 pub mod tool;

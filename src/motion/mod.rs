@@ -5,11 +5,13 @@
 //!
 //! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
 mod assemble;
+mod by_region;
 pub mod check;
 pub mod clearance;
 pub mod collide;
 mod config;
 pub mod contact;
+pub mod dwell;
 pub mod error;
 pub mod feed;
 pub mod file;
@@ -17,11 +19,8 @@ pub mod frames;
 mod free_motion;
 pub mod order;
 mod predict;
-pub mod preston;
 pub mod program;
 pub mod raster;
-mod regions;
-pub mod removal;
 pub mod report;
 pub mod ros;
 mod stroke;
@@ -32,12 +31,12 @@ pub mod table_file;
 pub mod trajectory;
 pub mod validate;
 
+pub use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 pub use clearance::Collision;
 pub use collide::{CollisionConfig, Solid};
 pub use config::{PlanConfig, PlanMode, DEFAULT_TOLERANCE_MM, MAX_CONTACT_POINTS, MAX_LAYERS};
 pub use error::PlanError;
 pub use file::{Plan, Sample};
-pub use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
 pub use raster::{RasterGeometry, StrokeKind};
 pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
@@ -46,6 +45,7 @@ pub use table_file::TablePlan;
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
 
+use crate::removal;
 use crate::robot::{Robot, Workcell};
 use config::check_work;
 
@@ -59,7 +59,7 @@ pub fn plan(
     config.check(robot)?;
     let tool = match config.mode {
         PlanMode::Rigid => None,
-        PlanMode::Removal => Some(preston::tool_model(robot)?),
+        PlanMode::Removal => Some(dwell::tool_model(robot)?),
     };
     // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
     // collision model (grinding, pressing in and out) accepts that much more penetration
@@ -72,7 +72,7 @@ pub fn plan(
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = match &tool {
         None => config.geometry(radius_mm),
-        Some(t) => regions::removal_geometry(t, radius_mm, config),
+        Some(t) => by_region::removal_geometry(t, radius_mm, config),
     };
     check_work(inspection, &geometry)?;
     let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
@@ -80,7 +80,7 @@ pub fn plan(
     let positions: Vec<nalgebra::Point3<f64>> =
         inspection.points.iter().map(|p| p.position).collect();
     let index = crate::spatial::Neighbours::new(&positions);
-    let ctx = preston::Setup {
+    let ctx = dwell::Setup {
         tool: tool.as_ref().unwrap_or(&fallback),
         robot,
         workcell,
@@ -89,9 +89,9 @@ pub fn plan(
     };
     let mut reachability = Reachability::default();
     let planned =
-        regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
+        by_region::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
     let counts = planned.counts.clone();
-    let (mut prog, removal) = regions::assemble_and_predict(
+    let (mut prog, removal) = by_region::assemble_and_predict(
         planned,
         inspection,
         &ctx,
