@@ -57,7 +57,7 @@ struct Measured {
 }
 
 fn measure(q: &[f64], robot: &Robot, wc: &Workcell, points: &[SurfacePoint]) -> Measured {
-    let r = robot.tool.radius * 1e3;
+    let r = robot.tool.radius_mm();
     let (origins, tip, axis) = arm(q, robot);
     let c = to_ref(wc, &tip);
     let mut nearest = (f64::INFINITY, 0usize);

@@ -6,7 +6,7 @@ use nalgebra::Point3;
 
 use super::config::PlanConfig;
 use super::error::PlanError;
-use super::free_motion::Cell;
+use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
 use super::{collide, dwell, order, predict, program, raster, surface};
@@ -41,7 +41,7 @@ pub(crate) struct Planned {
 struct Bench<'a> {
     inspection: &'a Inspection,
     ctx: &'a dwell::Setup<'a>,
-    cell: &'a Cell<'a>,
+    cell: &'a Assembly<'a>,
 }
 
 /// Rasters, solves and (in removal mode) sets the dwell of every repairable region in
@@ -54,7 +54,7 @@ pub(crate) fn plan_regions(
     reachability: &mut Reachability,
 ) -> Result<Planned, PlanError> {
     let (robot, workcell, config) = (ctx.robot, ctx.workcell, ctx.config);
-    let radius_mm = robot.tool.radius * 1e3;
+    let radius_mm = robot.tool.radius_mm();
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = match tool {
         None => config.geometry(radius_mm),
@@ -78,7 +78,7 @@ pub(crate) fn plan_regions(
         settled: Vec::new(),
         rehearsed: predict::Rehearsed::new(),
     };
-    let cell = Cell::new(robot, workcell, config, scene);
+    let cell = Assembly::new(robot, workcell, config, scene);
     let bench = Bench {
         inspection,
         ctx,
@@ -287,7 +287,7 @@ pub(crate) fn assemble_and_predict(
     ),
     PlanError,
 > {
-    let cell = Cell::new(ctx.robot, ctx.workcell, ctx.config, scene);
+    let cell = Assembly::new(ctx.robot, ctx.workcell, ctx.config, scene);
     let bench = Bench {
         inspection,
         ctx,

@@ -127,7 +127,7 @@ impl<'a> Scene<'a> {
             hi,
             ref_from_robot,
             robot_from_ref,
-            ball: robot.tool.radius * 1e3,
+            ball: robot.tool.radius_mm(),
             shank: (
                 robot.tool.shank_radius() * 1e3,
                 robot.tool.shank_length() * 1e3,

@@ -18,20 +18,6 @@ use crate::repair::{Inspection, SurfacePoint};
 use crate::robot::{Robot, Workcell};
 use crate::spatial::Neighbours;
 
-/// The compliant tool of `robot` (tool.toml `[removal]`, defaults when absent).
-pub fn tool_model(robot: &Robot) -> Result<ToolModel, PlanError> {
-    let model: ToolModel = match &robot.tool.removal {
-        None => ToolModel::default(),
-        Some(v) => v.clone().try_into().map_err(|e: toml::de::Error| {
-            PlanError::Config(format!("tool.toml [removal]: {}", e.message()))
-        })?,
-    };
-    model
-        .check()
-        .map_err(|(key, msg)| PlanError::Config(format!("tool.toml `{key}`: {msg}")))?;
-    Ok(model)
-}
-
 /// Rotation from the robot frame to the reference frame.
 pub fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
     let r = Matrix3::from_columns(&[
@@ -84,7 +70,7 @@ pub(crate) fn pressed_contacts(
     allowance: f64,
 ) -> Vec<Contact> {
     let mut contacts = placed.to_vec();
-    let influence = Influence::new(setup.tool, setup.robot.tool.radius * 1e3);
+    let influence = Influence::new(setup.tool, setup.robot.tool.radius_mm());
     let cores = (inspection.points.as_slice(), setup.index);
     removal::press::press(&mut contacts, setup.tool, &influence, cores, allowance);
     contacts
@@ -201,7 +187,7 @@ pub fn set_dwell(
     let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
-    let influence = Influence::new(tool, robot.tool.radius * 1e3);
+    let influence = Influence::new(tool, robot.tool.radius_mm());
     let bench = (inspection, setup);
     let placed = placed_contacts(&pieces, setup);
     let (mut contacts, mut cores) = in_reach(&placed, bench, &influence, allowance);

@@ -59,7 +59,7 @@ pub fn plan(
     config.check(robot)?;
     let tool = match config.mode {
         PlanMode::Rigid => None,
-        PlanMode::Removal => Some(dwell::tool_model(robot)?),
+        PlanMode::Removal => Some(removal::ToolModel::of_robot(robot).map_err(PlanError::Config)?),
     };
     // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
     // collision model (grinding, pressing in and out) accepts that much more penetration
@@ -68,7 +68,7 @@ pub fn plan(
         adjusted.collision.press_mm = t.preload_mm;
     }
     let config = &adjusted;
-    let radius_mm = robot.tool.radius * 1e3;
+    let radius_mm = robot.tool.radius_mm();
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = match &tool {
         None => config.geometry(radius_mm),

@@ -53,7 +53,7 @@ pub fn plan_cell(
     config.check(robot)?;
     let ranked = rank_angles(inspection, robot, workcell, table, config);
     let choices: Vec<RegionTable> = ranked.iter().map(|r| r.choice.clone()).collect();
-    let mut cell = Cell {
+    let mut cell = GroupedPlan {
         inspection,
         robot,
         workcell,
@@ -73,7 +73,7 @@ pub fn plan_cell(
     for (angle, regions) in groups {
         cell.plan_group(angle, regions, &ranked)?;
     }
-    let Cell {
+    let GroupedPlan {
         merged, table_plan, ..
     } = cell;
     let mut plan = merged.ok_or_else(|| PlanError::Config("no region to plan".into()))?;
@@ -93,7 +93,7 @@ struct Ranked {
 }
 
 /// The plan being built group by group.
-struct Cell<'a> {
+struct GroupedPlan<'a> {
     inspection: &'a Inspection,
     robot: &'a Robot,
     workcell: &'a Workcell,
@@ -103,7 +103,7 @@ struct Cell<'a> {
     table_plan: TablePlan,
 }
 
-impl Cell<'_> {
+impl GroupedPlan<'_> {
     /// `regions` planned as today with the part turned to `angle`.
     fn plan_at(&self, angle: f64, regions: Vec<RegionInfo>) -> Result<Plan, PlanError> {
         let mut part = self.inspection.clone();
@@ -249,7 +249,7 @@ fn tidy_deg(angle: f64) -> f64 {
 
 /// Whether `region` gets strokes (the filter of [`super::plan`]).
 fn planned(region: &RegionInfo, config: &PlanConfig, robot: &Robot) -> bool {
-    let geometry = config.geometry(robot.tool.radius * 1e3);
+    let geometry = config.geometry(robot.tool.radius_mm());
     region.repairable && !raster::layer_offsets(region.peak, &geometry).is_empty()
 }
 
@@ -277,7 +277,7 @@ fn rank_angles(
     table: &Turntable,
     config: &PlanConfig,
 ) -> Vec<Ranked> {
-    let reach = robot.tool.radius * 1e3 + config.contact_offset_mm;
+    let reach = robot.tool.radius_mm() + config.contact_offset_mm;
     let [lo, hi] = table.range();
     let step = CANDIDATE_STEP_DEG.to_radians();
     let candidates: Vec<f64> = ((lo / step).ceil() as i64..=(hi / step).floor() as i64)

@@ -141,7 +141,7 @@ pub(super) fn sweep_answers_as_plain(
 #[test]
 fn a_ball_inside_the_part_between_two_clear_samples_is_caught_by_the_sweep() {
     let (robot, wc, cfg) = bare_cell();
-    let r = robot.tool.radius * 1e3;
+    let r = robot.tool.radius_mm();
     let q = |phi: f64| vec![phi, 0.6, 0.4, 0.3, 0.0];
     // the ball centre and tool axis at base angle phi (reference frame, mm)
     let ball = |phi: f64| {
