@@ -5,7 +5,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use polishbot::motion::{plan, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
+use polishbot::motion::{plan_part, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 
 fn calib(name: &str) -> PathBuf {
@@ -67,7 +67,7 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
     let inspection = Inspection::load(tmp.path()).expect("load inspection");
     let (robot, wc) = dofbot();
     let cfg = PlanConfig::rigid();
-    let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&inspection, &robot, &wc, &cfg).expect("plan");
     println!(
         "defects: {:?}",
         truth
@@ -168,7 +168,7 @@ fn small_plan(dir: &Path) -> (Plan, PathBuf) {
         depth_step_mm: 1.0,
         ..PlanConfig::rigid()
     };
-    let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&inspection, &robot, &wc, &cfg).expect("plan");
     assert!(p.passes.len() > 2, "the case must have reachable passes");
     let path = dir.join("plan.json");
     p.save(&path).expect("save");
@@ -403,7 +403,7 @@ fn unreachable_regions_are_reported_point_by_point() {
     let inspection = Inspection::load(tmp.path()).unwrap();
     let (robot, mut wc) = dofbot();
     wc.robot_from_reference[(1, 3)] += 1.0; // the part 1 m farther away
-    let p = plan(&inspection, &robot, &wc, &PlanConfig::rigid()).unwrap();
+    let p = plan_part(&inspection, &robot, &wc, &PlanConfig::rigid()).unwrap();
     assert!(p.passes.is_empty());
     let total: usize = p.reachability.regions.iter().map(|r| r.path_points).sum();
     assert!(total > 0);
@@ -425,7 +425,7 @@ fn unreachable_regions_are_reported_point_by_point() {
         require_full_reach: true,
         ..PlanConfig::rigid()
     };
-    let err = plan(&inspection, &robot, &wc, &strict).unwrap_err();
+    let err = plan_part(&inspection, &robot, &wc, &strict).unwrap_err();
     assert!(matches!(err, PlanError::Unreachable(ref v) if v.len() == total));
     assert!(err.to_string().contains("out of reach"));
 }

@@ -28,7 +28,7 @@ use std::path::Path;
 
 use nalgebra::Point3;
 use polishbot::motion::dwell::{contact, reference_from_robot};
-use polishbot::motion::{plan, Inspection, Plan, PlanConfig, SegmentKind};
+use polishbot::motion::{plan_part, Inspection, Plan, PlanConfig, SegmentKind};
 use polishbot::preprocess::{estimate_normals, NormalConfig, Orientation};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::sim::grind::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
@@ -198,7 +198,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
         Err(_) => {
             let inspection = demo_like(dir.path());
             let started = std::time::Instant::now();
-            let plan = plan(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
+            let plan = plan_part(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
             println!("planned in {:.2} s", started.elapsed().as_secs_f64());
             (inspection, plan)
         }

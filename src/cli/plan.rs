@@ -72,7 +72,7 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     cfg.plan.collision.solids.extend(solids);
     let inspection = Inspection::load(&args.inspection)?;
     let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
-    let plan = motion::plan_cell(&inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
+    let plan = motion::plan(&inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     plan.save(&args.out)?;
     let provenance = super::plan_report::provenance(&args.inspection, &cfg.robot, &cfg.plan)?;
     provenance.stamp_json(&args.out)?;

@@ -1,9 +1,13 @@
-//! Planning: grinding passes over the repairable regions of an inspection, tool poses in the
-//! robot frame, IK along every pass (split where the arm cannot reach or follow), one
-//! continuous time-optimal joint trajectory sampled at the bus period, validated before any
-//! motion, and the reachability report. Method: docs/ALGORITHMS.md, "Grinding planner".
+//! Motion planning: grinding passes over the repairable regions of the repair work, tool poses
+//! in the robot frame, IK along every pass (split where the arm cannot reach or follow), in
+//! removal mode the dwell of each contact from the `removal` room turned into the feed along
+//! each stroke, one continuous time-optimal joint trajectory sampled at the bus period,
+//! validated before any motion, and the reachability report. Method: docs/ALGORITHMS.md,
+//! "Grinding planner".
 //!
-//! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
+//! Front function: [`plan`] (the cell with its turntable, if any) with a [`PlanConfig`];
+//! result: [`Plan`] (plan.json). [`plan_part`] plans the part where it sits, the step `plan`
+//! makes once per table angle.
 mod assemble;
 mod by_region;
 pub mod check;
@@ -40,7 +44,7 @@ pub use file::{Plan, Sample};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
 pub use raster::{RasterGeometry, StrokeKind};
 pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
-pub use table::plan_cell;
+pub use table::plan;
 pub use table_file::TablePlan;
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
@@ -49,8 +53,9 @@ use crate::removal;
 use crate::robot::{Robot, Workcell};
 use config::check_work;
 
-/// Plans grinding for every repairable region of `inspection` and validates the result.
-pub fn plan(
+/// Plans grinding for every repairable region of `inspection` with the part where the
+/// workcell puts it (no table move) and validates the result.
+pub fn plan_part(
     inspection: &Inspection,
     robot: &Robot,
     workcell: &Workcell,

@@ -3,7 +3,7 @@
 //! searches, never an answer.
 use nalgebra::{Matrix4, Point3};
 use polishbot::motion::collide::{Allow, Body, Scene};
-use polishbot::motion::{plan, CollisionConfig, Plan, PlanConfig, SurfacePoint};
+use polishbot::motion::{plan_part, CollisionConfig, Plan, PlanConfig, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
 use super::{arm, grid, measure, point, to_ref, wedge};
@@ -82,7 +82,7 @@ fn a_sweep_over_a_plan_answers_every_sample_as_the_plain_check_does() {
     let robot = dofbot();
     let (insp, wc) = wedge();
     let cfg = PlanConfig::rigid();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&insp, &robot, &wc, &cfg).expect("plan");
     for (allow, clear, hits, skipped) in
         sweep_answers_as_plain(&p, &insp.points, &wc, &cfg.collision)
     {
