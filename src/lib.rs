@@ -10,7 +10,6 @@ pub mod cell;
 pub mod cli;
 pub mod cloud;
 pub mod compare;
-mod defaults;
 pub mod design;
 pub mod inspect;
 pub mod motion;
