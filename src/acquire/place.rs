@@ -222,7 +222,10 @@ pub(super) fn place_views(inp: &Inputs, cfg: &MergeConfig) -> Result<Placements>
         match place_one(inp, &placed, i, cfg) {
             // Held at a pose that fits too little of it: a wrong pose, not a merge (issue 52:
             // a view given twice at another angle merged at fitness 0.04, RMS 5.76 mm).
-            Some(p) if p.placement == Placement::Held && !(p.fitness >= cfg.min_fitness) => {
+            Some(p)
+                if p.placement == Placement::Held
+                    && (p.fitness.is_nan() || p.fitness < cfg.min_fitness) =>
+            {
                 if !cfg.skip_bad {
                     bail!(
                         "{}: no match within the angle tolerance ({} deg) and at its predicted \

@@ -193,7 +193,7 @@ fn votes(cloud: &PointCloud, s: &Sheets) -> Vec<Vote> {
             let rays: Vec<usize> = m.iter().step_by(step).copied().collect();
             let even = rays
                 .iter()
-                .filter(|&&j| crossings(&index, &points, &dirs, j, radius, reach) % 2 == 0)
+                .filter(|&&j| crossings(&index, &points, &dirs, j, radius, reach).is_multiple_of(2))
                 .count();
             Vote {
                 points: m.len(),
