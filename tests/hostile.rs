@@ -662,3 +662,85 @@ fn a_thin_walled_reference_with_correct_normals_is_kept_and_a_flipped_sheet_refu
         assert!(patch.contains("not consistently oriented"), "{patch}");
     }
 }
+
+/// The issue's hang list, inspect side: `--tolerance 0` is refused at its floor; the floor
+/// itself (0.01 mm: regions all over the part's noise) gets an answer from inspect and from
+/// plan over all its regions (issue 52: 19 s, then plan past 200 s); a 100-point scan with
+/// `--pose` is refused as too sparse by both methods (was 65 s, classic past 45 s); `--units
+/// m` on millimetre files names the scan's spacing, not a 309-digit `depth_step_mm`.
+#[test]
+fn tolerance_at_its_floor_sparse_scans_and_a_unit_slip_answer() {
+    let c = case();
+    let tmp = common::tempdir();
+    let truth = c.path("truth.json");
+    let pose = ["--pose", arg(&truth)];
+    refused(
+        &mut inspect(
+            &c.path("reference.ply"),
+            &tmp.path().join("t0"),
+            &["--tolerance", "0"],
+        ),
+        &[
+            "--tolerance",
+            "`tolerance` = 0.0 mm is outside 0.01..=10.0 mm",
+        ],
+    );
+    let floor = tmp.path().join("floor");
+    let mut cmd = inspect(
+        &c.path("reference.ply"),
+        &floor,
+        &[&pose[..], &["--tolerance", "0.01"]].concat(),
+    );
+    let out = cmd.output().unwrap();
+    assert!(matches!(out.status.code(), Some(0 | 3)), "{out:?}");
+    let regions = read_json(&floor.join("regions.json"))["regions"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert!(regions > 20, "{regions} regions at 0.01 mm");
+    let plan = tmp.path().join("plan.json");
+    let mut cmd = polishbot();
+    cmd.arg("--config").arg(c.path("plan.toml"));
+    succeed(cmd.args(["plan", "--inspection", arg(&floor), "-o", arg(&plan)]));
+    // Every 1,500th point of the scan: 100 points.
+    let sparse = {
+        let mut s = cloud::load_cloud(&c.path("scan.ply"), None, None).unwrap();
+        s.points = s.points.iter().step_by(s.len() / 100).copied().collect();
+        s.normals = None;
+        s.fields.clear();
+        let path = tmp.path().join("s100.ply");
+        cloud::write_ply(&path, &s, None, PlyPrecision::F64).unwrap();
+        path
+    };
+    for method in [&[][..], &["--method", "classic"][..]] {
+        let mut cmd = polishbot();
+        cmd.args([
+            "inspect",
+            "--reference",
+            arg(&c.path("reference.ply")),
+            "--scan",
+        ])
+        .arg(&sparse)
+        .args(["-o", arg(&tmp.path().join("sparse"))])
+        .args(pose)
+        .args(method);
+        refused(&mut cmd, &["s100.ply", "too sparse"]);
+    }
+    let line = refused(
+        &mut inspect(
+            &c.path("reference.ply"),
+            &tmp.path().join("m"),
+            &["--units", "m"],
+        ),
+        &["scan.ply"],
+    );
+    assert!(
+        !line.contains("config") && !line.contains("depth_step_mm"),
+        "{line}"
+    );
+    assert!(
+        line.split(|ch: char| !ch.is_ascii_digit())
+            .all(|d| d.len() <= 12),
+        "{line}"
+    );
+}
