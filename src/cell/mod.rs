@@ -1,10 +1,10 @@
-//! The cell: a checked plan streamed to the arm. It sits above `plan` (which makes the plan and
-//! its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
+//! The cell: a checked plan streamed to the arm. It sits above `motion` (which makes the plan
+//! and its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
 //! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
 //!
 //! Front functions: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the closed
-//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`]; the removal calibration
-//! [`removal_fit::fit`] with a [`removal_fit::FitConfig`].
+//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`]. The removal calibration
+//! (the k fit) is `removal::fit`.
 pub mod cycle;
 mod reach;
 pub mod removal_shift;

@@ -81,7 +81,7 @@ pub fn prediction(
     Ok((predicted, k))
 }
 
-/// One grind's evidence (`removal_fit::evidence`) from inspections already read from
+/// One grind's evidence (`removal::fit::evidence`) from inspections already read from
 /// `inputs`' folders; the refusal names both folders.
 pub fn evidence_loaded(
     inputs: &Inputs,
@@ -94,7 +94,7 @@ pub fn evidence_loaded(
     fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
-/// `removal_fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
+/// `removal::fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
 fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
     anyhow::anyhow!(
         "{} -> {}: {m}",
