@@ -6,8 +6,8 @@
 use std::path::Path;
 
 use crate::cell::removal_fit::FitConfig;
-use crate::cycle::refit::{describe, fit_files, write_fit};
 pub use crate::cycle::refit::Inputs;
+use crate::cycle::refit::{describe, fit_files, write_fit};
 
 /// Runs `calibrate removal`: fits, prints, writes `out` (tool.toml) from `inputs.tool`.
 pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {

@@ -61,7 +61,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
-
 /// polishbot: finds where a part deviates from its reference and grinds it with a DOFBOT arm.
 #[derive(Debug, Parser)]
 #[command(name = "polishbot", version, about, long_about = None)]

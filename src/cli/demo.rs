@@ -13,7 +13,7 @@ use super::run::{Job, LoopArm, PlanSource};
 use super::settings::ConfigFile;
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::cycle::{plan_into, run_cycle, CycleConfig, First, PlanFileConfig};
-use crate::inspect::{FileInput, Inspection, InspectConfig};
+use crate::inspect::{FileInput, InspectConfig, Inspection};
 use crate::plan::Plan;
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
@@ -141,7 +141,13 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let plan_file = out.join("plan.json");
     let refuse = |m: &str| anyhow::anyhow!("plan settings: {m}");
     let ros = out.join("trajectory.yaml");
-    let planned = plan_into(&PlanFileConfig::default(), &inspection, &plan_file, Some(&ros), &refuse)?;
+    let planned = plan_into(
+        &PlanFileConfig::default(),
+        &inspection,
+        &plan_file,
+        Some(&ros),
+        &refuse,
+    )?;
     step("run: stream the plan to the simulated arm");
     // The demo overwrites its files: run refuses a journal of an earlier demo's plan (no two
     // plans are alike: plan.json records when it was made).

@@ -26,6 +26,18 @@ const OFF_SURFACE_MM: f64 = 0.5;
 /// few percent) and the part beyond the inspected area; another part kept 0.1-1 % (issue 52).
 const MIN_ON_SURFACE_SHARE: f64 = 0.5;
 
+/// A virtual part for the simulated arm to grind (`--part`, `--ground-out`).
+pub struct Part<'a> {
+    /// The part's points.
+    pub file: &'a Path,
+    /// Whether they are in the reference frame already (`--part-in-reference`).
+    pub in_reference: bool,
+    /// Where the rescan goes.
+    pub ground_out: &'a Path,
+    /// The inspected scan's pose (registration.json's); None: read from the inspection folder.
+    pub scan_to_reference: Option<[[f64; 4]; 4]>,
+}
+
 /// A virtual part ready to be ground, and where its rescan goes.
 pub struct Ground {
     part: VirtualPart,
@@ -68,7 +80,7 @@ impl Ground {
     /// nearest core point's.
     pub fn prepare(
         options: &SimOptions,
-        given: &super::run::Part,
+        given: &Part,
         inspection: &Inspection,
     ) -> anyhow::Result<Ground> {
         let (part, in_reference, out) = (given.file, given.in_reference, given.ground_out);

@@ -147,4 +147,3 @@ pub fn run(args: InspectArgs, config: Option<&Path>) -> Result<()> {
     let cfg = settings(Some(&args), &super::settings::ConfigFile::read(config)?)?;
     inspect::inspect_into(&cfg, &inputs(&args), &args.out).map(drop)
 }
-

@@ -23,4 +23,3 @@ mod table;
 
 pub use command::{main, Cli, Command};
 pub use common::{load_config, one_line, GeometryInput};
-

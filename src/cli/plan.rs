@@ -3,8 +3,8 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 
-pub use crate::cycle::PlanFileConfig;
 use crate::cycle::plan_into;
+pub use crate::cycle::PlanFileConfig;
 use crate::plan::{self, Inspection};
 
 /// Arguments of `plan`.
@@ -52,5 +52,12 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     }
     let inspection = Inspection::load(&args.inspection)?;
     let refuse = |m: &str| file.refuse("plan", m);
-    plan_into(&cfg, &inspection, &args.out, args.export_ros.as_deref(), &refuse).map(drop)
+    plan_into(
+        &cfg,
+        &inspection,
+        &args.out,
+        args.export_ros.as_deref(),
+        &refuse,
+    )
+    .map(drop)
 }

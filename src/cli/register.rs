@@ -72,4 +72,3 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     );
     Ok(())
 }
-

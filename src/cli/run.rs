@@ -6,6 +6,7 @@ use clap::Args;
 use serde::Deserialize;
 
 use super::arm::DeviceArgs;
+pub use super::grind::Part;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
@@ -224,18 +225,6 @@ pub enum PlanSource<'a> {
         /// The plan.
         plan: &'a Plan,
     },
-}
-
-/// A virtual part for the simulated arm to grind (`--part`, `--ground-out`).
-pub struct Part<'a> {
-    /// The part's points.
-    pub file: &'a Path,
-    /// Whether they are in the reference frame already (`--part-in-reference`).
-    pub in_reference: bool,
-    /// Where the rescan goes.
-    pub ground_out: &'a Path,
-    /// The inspected scan's pose (registration.json's); None: read from the inspection folder.
-    pub scan_to_reference: Option<[[f64; 4]; 4]>,
 }
 
 /// One run: a plan streamed to an arm.

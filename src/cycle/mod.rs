@@ -15,11 +15,12 @@ pub mod refit;
 
 pub use config::{CycleConfig, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS};
 pub use engine::{
-    planner_input, pose_rows, run_cycle, with_tool, CycleOutcome, Executor, First, GrindJob, Inputs, Rescan,
+    planner_input, pose_rows, run_cycle, with_tool, CycleOutcome, Executor, First, GrindJob,
+    Inputs, Rescan,
 };
 pub use plan_stage::{plan_inputs, plan_into, PlanFileConfig, Planned};
 pub use record::{
-    achieved_residual, decide, decide_plan, planned_regions, predicted_rms, table_html,
-    table_json, table_row, table_text, IterationRecord, Measured, Outcome, TABLE_HEADER,
+    achieved_residual, decide, decide_plan, planned_regions, predicted_rms, table_html, table_json,
+    table_row, table_text, IterationRecord, Measured, Outcome, TABLE_HEADER,
 };
 pub use refit::one_line;

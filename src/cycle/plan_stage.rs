@@ -61,8 +61,8 @@ pub fn plan_into(
     cfg.plan.collision.solids.extend(solids);
     let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
     let plan = plan::plan_cell(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
-    let compact = serde_json::to_string(&plan)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    let compact =
+        serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let provenance = provenance(&inspection.dir, &cfg.robot, &cfg.plan)?;
     let text = provenance.stamp(&compact, out)?;
     std::fs::write(out, &text).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;

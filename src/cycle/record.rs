@@ -354,5 +354,10 @@ pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
          inspection's lowest distance where the plan ground."
             .to_string(),
     ];
-    table_page("polishbot cycle", &TABLE_HEADER.map(str::to_string), &rows, &paragraphs)
+    table_page(
+        "polishbot cycle",
+        &TABLE_HEADER.map(str::to_string),
+        &rows,
+        &paragraphs,
+    )
 }

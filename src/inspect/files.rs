@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 
-use super::{suggest, Inputs, Inspection, InspectConfig, PoseSource};
+use super::{suggest, Inputs, InspectConfig, Inspection, PoseSource};
 use crate::cloud::{self, transform, PlyPrecision};
 use crate::compare;
 use crate::regions::{self, Regions};
@@ -31,10 +31,7 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let reg_file = out.join("registration.json");
     let files = (inputs.scan.as_path(), inputs.reference.as_path());
-    let (found, provenance) = rayon::join(
-        || super::run(cfg, inputs),
-        || provenance(cfg, inputs),
-    );
+    let (found, provenance) = rayon::join(|| super::run(cfg, inputs), || provenance(cfg, inputs));
     let mut found = match found {
         Ok(found) => found,
         Err(e) => match e.downcast::<RegisterError>() {
@@ -335,4 +332,3 @@ fn write_json_line(path: &Path, value: &Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text + "\n").with_context(|| format!("{}: cannot write", path.display()))
 }
-

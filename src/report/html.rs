@@ -121,7 +121,12 @@ img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeu
 
 /// A plain page without scripts or figures: `title`, one table (`header`, `rows`; cells
 /// escaped) and `paragraphs` after it (given as HTML). The closed loop's cycle.html.
-pub fn table_page(title: &str, header: &[String], rows: &[Vec<String>], paragraphs: &[String]) -> String {
+pub fn table_page(
+    title: &str,
+    header: &[String],
+    rows: &[Vec<String>],
+    paragraphs: &[String],
+) -> String {
     let cells = |row: &[String], tag: &str| {
         row.iter()
             .map(|c| format!("<{tag}>{}</{tag}>", escape(c)))
