@@ -1,13 +1,13 @@
 //! `polishbot calibrate removal --before DIR1 --after DIR2 --plan plan.json [--tool FILE]`:
 //! Preston's k fitted from two inspections and the plan ground between them
-//! (`cell::removal_fit`), written into tool.toml's `[removal] preston_k_mm2_n` with its
+//! (`removal::fit`), written into tool.toml's `[removal] preston_k_mm2_n` with its
 //! uncertainty `preston_k_rel_sd`. No arm is needed. The fit itself is `crate::cycle::refit`'s,
 //! which the loop shares.
 use std::path::Path;
 
-use crate::cell::removal_fit::FitConfig;
 pub use crate::cycle::refit::Inputs;
 use crate::cycle::refit::{describe, fit_files, write_fit};
+use crate::removal::fit::FitConfig;
 
 /// Runs `calibrate removal`: fits, prints, writes `out` (tool.toml) from `inputs.tool`.
 pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {

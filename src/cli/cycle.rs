@@ -17,7 +17,7 @@ use crate::cycle::{
     DEFAULT_MIN_PROGRESS,
 };
 use crate::inspect::FileInput;
-use crate::plan::PlanMode;
+use crate::motion::PlanMode;
 
 /// Exit code of a loop that ended without the part within tolerance (no progress, iterations
 /// used up, nothing left the arm can grind); an inspection's incomplete verdict keeps its 3.

@@ -13,8 +13,8 @@ use super::run::{Job, LoopArm, PlanSource};
 use super::settings::ConfigFile;
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::cycle::{plan_into, run_cycle, CycleConfig, First, PlanFileConfig};
-use crate::inspect::{FileInput, InspectConfig, Inspection};
-use crate::plan::Plan;
+use crate::inspect::{FileInput, Findings, InspectConfig};
+use crate::motion::Plan;
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
 /// The demo's files: synth writes millimetres in PLY.
@@ -215,7 +215,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
 }
 
 /// Scores the run (the inspection `found` and the plan) against the truth and prints it.
-fn summary(out: &Path, found: &Inspection, plan: &Plan, truth: &Truth) -> Result<()> {
+fn summary(out: &Path, found: &Findings, plan: &Plan, truth: &Truth) -> Result<()> {
     let rows = crate::cycle::pose_rows(&found.pose);
     let (deg, mm) = pose_difference(&isometry_from_rows(&rows)?, &truth.pose()?);
     let regions = &found.regions;

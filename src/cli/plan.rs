@@ -5,7 +5,8 @@ use clap::Args;
 
 use crate::cycle::plan_into;
 pub use crate::cycle::PlanFileConfig;
-use crate::plan::{self, Inspection};
+use crate::motion;
+use crate::repair::Inspection;
 
 /// Arguments of `plan`.
 #[derive(Debug, Args)]
@@ -33,7 +34,7 @@ pub struct PlanArgs {
     /// Rigid (depth layers) or removal (a compliant tool's dwell map)
     /// [default: `mode` of [plan], else removal].
     #[arg(long, value_enum)]
-    pub mode: Option<plan::PlanMode>,
+    pub mode: Option<motion::PlanMode>,
 }
 
 /// Runs `plan`.

@@ -12,10 +12,10 @@ use super::record::{
     decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
 };
 use super::refit::{refit, Ground};
-use crate::cell::removal_fit::Evidence;
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::{self, FileInput, PoseSource};
-use crate::plan::{Inspection, SurfacePoint};
+use crate::removal::fit::Evidence;
+use crate::repair::{Inspection, SurfacePoint};
 
 /// What the loop starts from.
 pub struct Inputs {
@@ -34,7 +34,7 @@ pub struct Inputs {
 /// Iteration 1's inspection and plan, made by the caller.
 pub struct First {
     /// The inspection of the first scan.
-    pub found: inspect::Inspection,
+    pub found: inspect::Findings,
     /// Its folder.
     pub inspection_dir: PathBuf,
     /// The plan made from it (a `plan::plan_into` output).
@@ -211,7 +211,7 @@ impl Loop<'_> {
 
     /// Inspects the scan into `into` with the loop's inspection settings; an incomplete
     /// verdict ends the loop with the inspection's error.
-    fn inspect(&self, into: &Path) -> anyhow::Result<inspect::Inspection> {
+    fn inspect(&self, into: &Path) -> anyhow::Result<inspect::Findings> {
         let inputs = inspect::Inputs {
             reference: self.inputs.reference.clone(),
             scan: self.scan.clone(),
@@ -261,7 +261,7 @@ impl Loop<'_> {
 
 /// The planner's view of an inspection held in memory (the values deviations.csv and
 /// regions.json carry, as `plan::Inspection::load` reads them back), its folder `dir`.
-pub fn planner_input(found: &inspect::Inspection, dir: &Path) -> Inspection {
+pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
     let dev = &found.deviations;
     let points = (dev.points.iter().zip(&dev.normals))
         .zip(dev.values.iter().zip(&found.regions.labels))

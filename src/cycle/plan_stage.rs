@@ -1,5 +1,5 @@
 //! The planning stage with its files: [`plan_into`] plans from an inspection held in memory
-//! (`plan::plan_cell`) and writes plan.json with its provenance, plan.html, predicted.csv
+//! (`motion::plan`) and writes plan.json with its provenance, plan.html, predicted.csv
 //! (removal plans) and optionally the ROS trajectory, then prints what was planned.
 //! `polishbot plan`, `demo` and the loop call it.
 use std::path::{Path, PathBuf};
@@ -7,8 +7,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use serde::Deserialize;
 
-use crate::plan::removal::ToolModel;
-use crate::plan::{self, ros, Inspection, Plan, PlanConfig};
+use crate::motion::{self, ros, Plan, PlanConfig};
+use crate::removal::prediction::{predicted_csv, RemovalReport};
+use crate::removal::ToolModel;
+use crate::repair::Inspection;
 use crate::report::plan_html::write_plan_html;
 use crate::report::provenance::Provenance;
 use crate::robot::{self, RobotConfig};
@@ -54,13 +56,13 @@ pub fn plan_into(
     // the tool file's [removal] checked here, so that its errors name the file's full path
     ToolModel::load(&cfg.robot.tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
-        plan::PlanError::Config(m) => refuse(&m),
+        motion::PlanError::Config(m) => refuse(&m),
         e => e.into(),
     })?;
-    let solids = plan::collide::solids_beside(&cfg.robot.workcell)?;
+    let solids = motion::collide::solids_beside(&cfg.robot.workcell)?;
     cfg.plan.collision.solids.extend(solids);
     let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
-    let plan = plan::plan_cell(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
+    let plan = motion::plan(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let provenance = provenance(&inspection.dir, &cfg.robot, &cfg.plan)?;
@@ -118,13 +120,9 @@ pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> 
 
 /// Removal mode: writes predicted.csv beside the plan, prints each region's prediction and
 /// returns the file's text.
-fn write_removal(
-    removal: &plan::preston::RemovalReport,
-    out: &Path,
-    cfg: &PlanConfig,
-) -> anyhow::Result<String> {
+fn write_removal(removal: &RemovalReport, out: &Path, cfg: &PlanConfig) -> anyhow::Result<String> {
     let csv = out.with_file_name("predicted.csv");
-    let text = plan::preston::predicted_csv(removal, &cfg.monte_carlo);
+    let text = predicted_csv(removal, &cfg.monte_carlo);
     std::fs::write(&csv, &text).map_err(|e| anyhow::anyhow!("{}: {e}", csv.display()))?;
     for r in &removal.regions {
         println!(
@@ -146,7 +144,7 @@ fn write_removal(
 }
 
 /// Prints what was planned: totals, accuracy, per region reach and warnings, table moves.
-fn print_summary(plan: &plan::Plan, inspection: &Path, out: &Path) {
+fn print_summary(plan: &Plan, inspection: &Path, out: &Path) {
     let m = &plan.metrics;
     let planned: Vec<_> = plan
         .reachability

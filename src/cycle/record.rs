@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::config::CycleConfig;
-use crate::cell::removal_fit::{Agreement, SAME_POINT_MM};
-use crate::plan::{Inspection, Plan};
+use crate::motion::{Inspection, Plan};
 use crate::regions::{Region, Verdict};
+use crate::removal::fit::{Agreement, SAME_POINT_MM};
 use crate::report::{escape, table_page};
 use crate::spatial::Neighbours;
 
@@ -108,7 +108,7 @@ pub struct IterationRecord {
     /// Share of the planned excess volume that the next inspection found removed.
     pub progress: Option<f64>,
     /// Preston's k fitted after this iteration's grind to the points of every grind so far
-    /// (`removal_fit::pool`), the next plan's k, mm^2/N (None: not fitted).
+    /// (`removal::fit::pool`), the next plan's k, mm^2/N (None: not fitted).
     pub k_fitted: Option<f64>,
     /// The grind's prediction at the plan's and at the fitted k against the achieved
     /// residual, over the same defect points (removal plans only).

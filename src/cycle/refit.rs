@@ -1,6 +1,6 @@
 //! Preston's k refitted from grinds: `calibrate removal` fits it from the files of one grind
 //! ([`fit_files`]); the loop ([`refit`]) from the grinds it made, held in memory, pooled
-//! (`cell::removal_fit::pool`) on the prediction moved by each region's measured shift
+//! (`removal::fit::pool`) on the prediction moved by each region's measured shift
 //! (`cell::removal_shift`). Either writes the fitted k into a copy of the tool file.
 use std::path::{Path, PathBuf};
 
@@ -8,10 +8,11 @@ use anyhow::Context;
 
 use super::plan_stage::Planned;
 use crate::calibrate::files;
-use crate::cell::removal_fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
 use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
-use crate::plan::removal::ToolModel;
-use crate::plan::{Inspection, Plan};
+use crate::motion::Plan;
+use crate::removal::fit::{self as removal_fit, Agreement, Evidence, FitConfig, RemovalFit};
+use crate::removal::ToolModel;
+use crate::repair::Inspection;
 
 /// What `calibrate removal` reads.
 #[derive(Debug, Clone)]

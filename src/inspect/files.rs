@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde_json::{json, Value};
 
-use super::{suggest, Inputs, InspectConfig, Inspection, PoseSource};
+use super::{suggest, Findings, Inputs, InspectConfig, PoseSource};
 use crate::cloud::{self, transform, PlyPrecision};
 use crate::compare;
 use crate::regions::{self, Regions};
@@ -26,7 +26,7 @@ fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
 
 /// Runs [`super::run`] and writes its files into `out` (created), then prints the summary
 /// table; returns the inspection, or for an incomplete verdict the error [`Incomplete`].
-pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<Inspection> {
+pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<Findings> {
     let start = Instant::now();
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let reg_file = out.join("registration.json");

@@ -10,7 +10,8 @@ use super::inspection::region_mark;
 use super::plan_page::{self, PlanPage, ToolPath};
 use super::provenance::Provenance;
 use super::{ReportConfig, ReportInput, Table};
-use crate::plan::{Inspection, Plan, Segment, SegmentKind, StrokeKind};
+use crate::motion::{Plan, Segment, SegmentKind, StrokeKind};
+use crate::repair::Inspection;
 
 /// Seconds of the samples `first..=last` at the bus period.
 fn seconds(s: &Segment, period: f64) -> f64 {
