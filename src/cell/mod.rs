@@ -1,11 +1,9 @@
-//! The cell: a checked plan streamed to the arm. It sits above `motion` (which makes the plan
-//! and its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
+//! The cell: a checked plan streamed to the arm. It sits above `plan` (which makes the plan and
+//! its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
 //! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
 //!
-//! Front functions: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the closed
-//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`]. The removal calibration
-//! (the k fit) is `removal::fit`.
-pub mod cycle;
+//! Front function: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the measured
+//! shift of a grind's removal, [`removal_shift::register`].
 mod reach;
 pub mod removal_shift;
 mod stream;
