@@ -11,35 +11,10 @@ use std::sync::OnceLock;
 
 use common::{one_line_failure, polishbot, succeed};
 
-/// synth -> inspect -> plan once (hostile.rs's case, smaller: one layer per region).
+/// synth -> inspect -> plan once (hostile.rs's case, smaller, with the true pose).
 fn case() -> &'static PathBuf {
     static CASE: OnceLock<PathBuf> = OnceLock::new();
-    CASE.get_or_init(|| {
-        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("hostile_cell");
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(
-            dir.join("plan.toml"),
-            "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n",
-        )
-        .unwrap();
-        let d = dir.display();
-        let steps = [
-            format!(
-                "synth --out {d} --seed 9 --defects 3 --reference-points 100000 \
-                 --scan-points 80000 --height-range 0.15,0.35 --width-range 2,3"
-            ),
-            format!(
-                "inspect --reference {d}/reference.ply --scan {d}/scan.ply --pose {d}/truth.json \
-                 -o {d}/inspection"
-            ),
-            format!("--config {d}/plan.toml plan --inspection {d}/inspection -o {d}/plan.json"),
-        ];
-        for step in steps {
-            succeed(polishbot().args(step.split_whitespace()));
-        }
-        dir
-    })
+    CASE.get_or_init(|| common::hostile::synth_inspect_plan("hostile_cell", 100_000, 80_000, true))
 }
 
 /// A copy of the shipped cell (calibration/) in `dir`, with `edit` applied to the text of
@@ -177,6 +152,44 @@ fn merge_refuses_non_finite_and_duplicate_angles_and_absurd_centres() {
         file.contains("cal.json") && file.contains("centre"),
         "{file}"
     );
+    // A view given twice at another angle: no match within the angle tolerance, and at its
+    // predicted pose 0.13 of it fits (issue 52: merged at fitness 0.04 without a word).
+    // Refused naming the view and its numbers; --skip-bad leaves it out and records it.
+    let axis = ["--angles", "0,90", "--axis", "0,0,1"];
+    let again = merge(&axis);
+    assert!(
+        again.contains("scan.ply") && again.contains("min_fitness 0.3") && again.contains("fit"),
+        "{again}"
+    );
+    let mut cmd = polishbot();
+    cmd.arg("merge").arg(&scan).arg(&scan).args(axis);
+    succeed(
+        cmd.arg("--skip-bad")
+            .arg("-o")
+            .arg(tmp.path().join("s.ply")),
+    );
+    let report = std::fs::read_to_string(tmp.path().join("s.json")).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+    assert_eq!(report["skipped"][0].as_str(), scan.to_str(), "{report}");
+    // A 10-point view (issue 52: fitted 1.0 anywhere and pulled the global RMS to 5-11 mm).
+    let mut few = polishbot::cloud::load_cloud(&scan, None, None).unwrap();
+    few.points.truncate(10);
+    few.normals = None;
+    few.fields.clear();
+    let small = tmp.path().join("small.ply");
+    polishbot::cloud::write_ply(&small, &few, None, polishbot::cloud::PlyPrecision::F64).unwrap();
+    let mut cmd = polishbot();
+    cmd.arg("merge")
+        .arg(&scan)
+        .arg(&small)
+        .args(["--angles", "0,30"]);
+    let line = one_line_failure(
+        &cmd.arg("-o")
+            .arg(tmp.path().join("t.ply"))
+            .output()
+            .unwrap(),
+    );
+    assert!(line.contains("small.ply: 10 points"), "{line}");
 }
 
 #[test]
@@ -184,6 +197,27 @@ fn simulator_settings_outside_physical_ranges_are_refused_naming_the_key() {
     let dir = case();
     let tmp = common::tempdir();
     let cell = cell_copy(tmp.path(), "", |t| t.to_string());
+    // A table given as a number: said in words, not serde's type name (issue 52).
+    let cfg = tmp.path().join("table.toml");
+    std::fs::write(&cfg, "[sim]\ngrinding = 5\n").unwrap();
+    let mut cmd = polishbot();
+    cmd.arg("--config")
+        .arg(&cfg)
+        .args(["run", "--dry-run", "--sim", "--plan"]);
+    let out = cmd
+        .arg(dir.join("plan.json"))
+        .arg("--cell")
+        .arg(&cell)
+        .output();
+    let line = one_line_failure(&out.unwrap());
+    assert!(
+        line.contains("table.toml: line 2") && line.contains("expected a table of settings"),
+        "{line}"
+    );
+    assert!(
+        !line.contains("struct") && !line.contains("GrindConfig"),
+        "{line}"
+    );
     for (key, value) in [
         ("ball_radius_mm", "1e300"),
         ("modulus_mpa", "1e-300"),
@@ -274,4 +308,43 @@ fn a_part_file_that_is_not_the_inspected_part_is_refused() {
         line.contains("other.ply") && line.contains("not the part"),
         "{line}"
     );
+}
+
+/// `cycle` splits its `--config` into per-command files in its output folder; a bad setting
+/// is still blamed on the user's file, its line and its table (issue 52: a bad
+/// `[inspect.regions] tolerance` named no file, and `[run.sim.grinding]` was blamed on
+/// cycle's own iter-1/run.toml).
+#[test]
+fn cycle_blames_a_bad_setting_on_the_users_file_and_line() {
+    let dir = case();
+    let tmp = common::tempdir();
+    for (n, text, needles) in [
+        (
+            1,
+            "# cycle settings\n[inspect.regions]\ntolerance = -1\n",
+            ["line 3: [inspect.regions] `tolerance`", "outside"],
+        ),
+        (
+            2,
+            "[run.sim.grinding]\n\nball_radius_mm = 1e300\n",
+            ["line 3: [run.sim.grinding] `ball_radius_mm`", "outside"],
+        ),
+    ] {
+        let cfg = tmp.path().join(format!("cycle{n}.toml"));
+        std::fs::write(&cfg, text).unwrap();
+        let mut cmd = polishbot();
+        cmd.arg("--config")
+            .arg(&cfg)
+            .args(["cycle", "--sim", "--reference"]);
+        cmd.arg(dir.join("reference.ply"))
+            .arg("--scan")
+            .arg(dir.join("scan.ply"));
+        cmd.arg("-o").arg(tmp.path().join(format!("out{n}")));
+        let line = one_line_failure(&cmd.output().unwrap());
+        let name = format!("cycle{n}.toml: ");
+        assert!(line.contains(&name), "{line}");
+        for w in needles {
+            assert!(line.contains(w), "{w:?} not in {line}");
+        }
+    }
 }

@@ -220,6 +220,25 @@ pub(super) fn place_views(inp: &Inputs, cfg: &MergeConfig) -> Result<Placements>
     let mut skipped = Vec::new();
     for i in 1..inp.views.len() {
         match place_one(inp, &placed, i, cfg) {
+            // Held at a pose that fits too little of it: a wrong pose, not a merge (issue 52:
+            // a view given twice at another angle merged at fitness 0.04, RMS 5.76 mm).
+            Some(p)
+                if p.placement == Placement::Held
+                    && (p.fitness.is_nan() || p.fitness < cfg.min_fitness) =>
+            {
+                if !cfg.skip_bad {
+                    bail!(
+                        "{}: no match within the angle tolerance ({} deg) and at its predicted \
+                         pose only {:.3} of its points fit (min_fitness {}): a wrong view or \
+                         angle; use --skip-bad to leave it out",
+                        inp.names[i],
+                        cfg.angle_tolerance,
+                        p.fitness,
+                        cfg.min_fitness
+                    );
+                }
+                skipped.push(inp.names[i].clone());
+            }
             Some(p) => placed.push(p),
             None if cfg.skip_bad => skipped.push(inp.names[i].clone()),
             None => {

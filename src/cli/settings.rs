@@ -47,7 +47,7 @@ impl ConfigFile {
                 .span()
                 .map(|s| format!("line {}: ", line_at(&self.text, s.start)))
                 .unwrap_or_default();
-            let message = e.message().trim().replace('\n', " ");
+            let message = plain(&e.message().trim().replace('\n', " "));
             let message = match e.span() {
                 Some(s) => unknown_key_message(&self.text, s.start, &message),
                 None => message,
@@ -97,6 +97,25 @@ impl ConfigFile {
             None => "settings (flags and defaults)".to_string(),
         }
     }
+}
+
+/// `message` without serde's Rust type names (issue 52: "expected struct GrindConfig",
+/// "unsupported rust type"): a struct is a table of settings to the user, an enum one of
+/// its names.
+fn plain(message: &str) -> String {
+    let mut out = message.replace("unsupported rust type", "a value no setting takes");
+    for (rust, user) in [
+        ("expected struct ", "expected a table of settings"),
+        ("expected enum ", "expected one of the setting's names"),
+    ] {
+        while let Some(at) = out.find(rust) {
+            let name_end = out[at + rust.len()..]
+                .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .map_or(out.len(), |e| at + rust.len() + e);
+            out.replace_range(at..name_end, user);
+        }
+    }
+    out
 }
 
 /// Largest `--config` file read, bytes (a settings file is a few kB; this bounds the read).
@@ -154,6 +173,37 @@ fn unknown_key(given: &toml::Table, known: &toml::Table, prefix: &str) -> Option
         }
     }
     None
+}
+
+/// An error `message` about a settings file `cycle` derived from the user's `--config`
+/// (`OUT/inspect.toml`, `OUT/plan.toml`, `OUT/iter-K/run.toml`: the `[inspect]`, `[plan]` and
+/// `[run]` tables of `source`) said again of `source`: its path, the line of the key in
+/// backticks within that table, the table. None when the message is about no derived file
+/// under `out` (issue 52: cycle blamed its own iter-1/run.toml for the user's setting).
+pub fn blame_source(message: &str, out: &Path, source: &Path, text: &str) -> Option<String> {
+    let (file, rest) = message.split_once(": ")?;
+    let file = Path::new(file);
+    let section = file.file_stem()?.to_str()?;
+    let derived = ["inspect", "plan", "run"].contains(&section)
+        && file.extension().is_some_and(|e| e == "toml")
+        && file.starts_with(out);
+    if !derived {
+        return None;
+    }
+    let rest = match rest.strip_prefix("line ") {
+        Some(r) => r.split_once(": ").map_or(r, |(_, m)| m),
+        None => rest,
+    };
+    let (scope, rest) = match rest.strip_prefix('[').and_then(|r| r.split_once("] ")) {
+        Some((inner, m)) => (format!("{section}.{inner}"), m),
+        None => (section.to_string(), rest),
+    };
+    let key = rest.split('`').nth(1).unwrap_or("");
+    let line = line_of_key(text, &scope, key)
+        .or_else(|| line_of_key(text, section, key))
+        .map(|l| format!("line {l}: "))
+        .unwrap_or_default();
+    Some(format!("{}: {line}[{scope}] {rest}", source.display()))
 }
 
 /// 1-based line where `key` (a name, or a dotted path ending in one) is set inside `section`
@@ -267,6 +317,17 @@ pub fn check_filter(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn serde_type_names_become_words() {
+        let m = plain("invalid type: integer `5`, expected struct GrindConfig");
+        assert_eq!(m, "invalid type: integer `5`, expected a table of settings");
+        let m = plain("unsupported rust type; expected enum Mode_2 here");
+        assert_eq!(
+            m,
+            "a value no setting takes; expected one of the setting's names here"
+        );
+    }
 
     #[test]
     fn keys_are_found_in_their_section() {

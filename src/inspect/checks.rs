@@ -8,7 +8,8 @@ use nalgebra::{Isometry3, Point3};
 use serde::Deserialize;
 
 use crate::cloud::{transform, PointCloud};
-use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
+
+pub use super::orientation::orient_outward;
 
 /// Accepted ratio of the scan's to the reference's robust bounding-box diagonal: a scan of
 /// the part (a partial view included) spans about the part; a unit slip (mm read as m) is a
@@ -17,22 +18,6 @@ pub const SIZE_RATIO: (f64, f64) = (0.5, 2.0);
 /// Share of the points farthest from the centre left out of the robust extent (stray
 /// outliers left by the filter do not widen it).
 const EXTENT_TRIM: f64 = 0.01;
-/// Points of the reference whose normals are compared with a propagated orientation (a
-/// sample along the file's order; the sign test needs no more).
-const ORIENTATION_SAMPLE: usize = 20_000;
-/// Fewest sampled points for the orientation test (PCA takes 20 neighbours; with fewer the
-/// propagated orientation says nothing).
-const ORIENTATION_MIN_POINTS: usize = 200;
-/// Share of sampled normals that must agree in sign with the propagated orientation for the
-/// normals to be taken as they are (or disagree, for them to be turned round): PCA normals
-/// near sharp edges and on thin walls may disagree with correct normals now and then.
-const ORIENTATION_AGREEMENT: f64 = 0.9;
-/// Points of the quick first orientation test: a tenth of [`ORIENTATION_SAMPLE`] (its PCA
-/// and propagation cost about a tenth).
-const ORIENTATION_QUICK_SAMPLE: usize = 2_000;
-/// Share of the quick sample's normals that must agree for the normals to be kept without
-/// the full test.
-const ORIENTATION_QUICK_AGREEMENT: f64 = 0.97;
 /// Largest accepted deviation of a normal's length from 1 (as the comparison's own check).
 const UNIT_TOLERANCE: f64 = 1e-3;
 
@@ -91,76 +76,6 @@ pub fn check_unit_normals(path: &Path, what: &str, cloud: &PointCloud) -> Result
         );
     }
     Ok(())
-}
-
-/// Compares a reference cloud's own normals with a consistently propagated orientation (PCA
-/// normals of a sample, oriented by [`Orientation::Propagate`]): kept when at least
-/// [`ORIENTATION_AGREEMENT`] agree, turned round (with a note) when as many disagree, refused
-/// otherwise. Returns the note of a turn.
-pub fn orient_outward(path: &Path, cloud: &mut PointCloud) -> Result<Option<String>> {
-    if cloud.normals.is_none() {
-        return Ok(None);
-    }
-    // A small sample that agrees clearly settles it; anything else gets the full check.
-    if let Some((agree, _)) = agreement(path, cloud, ORIENTATION_QUICK_SAMPLE)? {
-        if agree >= ORIENTATION_QUICK_AGREEMENT {
-            return Ok(None);
-        }
-    }
-    let Some((agree, picked)) = agreement(path, cloud, ORIENTATION_SAMPLE)? else {
-        return Ok(None);
-    };
-    if agree >= ORIENTATION_AGREEMENT {
-        return Ok(None);
-    }
-    if agree <= 1.0 - ORIENTATION_AGREEMENT {
-        let normals = cloud.normals.as_mut().expect("normals");
-        normals.iter_mut().for_each(|n| *n = -*n);
-        return Ok(Some(format!(
-            "{}: the reference normals point inward ({:.0} % of {} sampled normals oppose a \
-             propagated outward orientation): turned round",
-            path.display(),
-            100.0 * (1.0 - agree),
-            picked
-        )));
-    }
-    bail!(
-        "{}: reference normals are not consistently oriented: {:.0} % of {} sampled normals \
-         agree with a propagated outward orientation (need {:.0} % either way)",
-        path.display(),
-        100.0 * agree,
-        picked,
-        100.0 * ORIENTATION_AGREEMENT
-    )
-}
-
-/// The share of the normals of about `size` points of `cloud` (evenly along the file's
-/// order) that agree in sign with PCA normals of that sample oriented by
-/// [`Orientation::Propagate`]; None when the sample has fewer than
-/// [`ORIENTATION_MIN_POINTS`] points or the cloud no normals.
-fn agreement(path: &Path, cloud: &PointCloud, size: usize) -> Result<Option<(f64, usize)>> {
-    let step = cloud.len().div_ceil(size).max(1);
-    let picked: Vec<usize> = (0..cloud.len()).step_by(step).collect();
-    let Some(normals) = cloud.normals.as_ref() else {
-        return Ok(None);
-    };
-    if picked.len() < ORIENTATION_MIN_POINTS {
-        return Ok(None);
-    }
-    let sample = PointCloud::from_points(picked.iter().map(|&i| cloud.points[i]).collect());
-    let cfg = NormalConfig {
-        orientation: Orientation::Propagate,
-        ..NormalConfig::default()
-    };
-    let est = estimate_normals(&sample, &cfg)
-        .with_context(|| format!("{}: reference normals: orientation check", path.display()))?;
-    let agree = picked
-        .iter()
-        .zip(&est.normals)
-        .filter(|(&i, e)| normals[i].dot(e) > 0.0)
-        .count() as f64
-        / picked.len() as f64;
-    Ok(Some((agree, picked.len())))
 }
 
 /// Refuses a scan whose robust extent ([`robust_extent`]) is not within [`SIZE_RATIO`] of the

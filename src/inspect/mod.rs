@@ -8,6 +8,7 @@ pub mod checks;
 mod config;
 pub mod files;
 mod load;
+mod orientation;
 mod pose;
 pub mod scans;
 pub mod suggest;

@@ -9,7 +9,9 @@ mod sor;
 mod voxel;
 
 pub use curvature::{curvature_sample, CurvatureSample, CurvatureSampleConfig};
-pub use normals::{estimate_normals, pca_normal, NormalConfig, NormalEstimate, Orientation};
+pub use normals::{
+    estimate_normals, orient_sheets, pca_normal, NormalConfig, NormalEstimate, Orientation,
+};
 pub use pipeline::{preprocess, PreprocessConfig, Preprocessed};
 pub use sor::{
     check_coordinates, check_settings as check_sor_settings, mean_distances,

@@ -227,7 +227,8 @@ fn orient(
             "agreeing with the input's normals".into()
         }
         Orientation::Propagate => {
-            let components = propagate(p, normals, propagate_k);
+            let sheets = propagate(p, normals, propagate_k, f64::INFINITY);
+            let components = sheets.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
             format!(
                 "propagated over a {propagate_k}-NN graph (minimum spanning tree, cost 1-|n·n'|+|n·d|+|n'·d|), \
                  {components} component(s), each seeded with nz >= 0 at its highest point"
@@ -263,17 +264,50 @@ fn find(parent: &mut [u32], mut i: u32) -> u32 {
     i
 }
 
+/// How far either normal of an edge leans along it (`max(|na·d|, |nb·d|)`, d the unit edge
+/// direction); 0 for coincident points.
+fn lean(a: &Point3<f64>, na: &Vector3<f64>, b: &Point3<f64>, nb: &Vector3<f64>) -> f64 {
+    let d = (b - a).normalize();
+    match d.iter().all(|c| c.is_finite()) {
+        true => na.dot(&d).abs().max(nb.dot(&d).abs()),
+        false => 0.0,
+    }
+}
+
+/// Orients `normals` (PCA axes of `points`) sheet by sheet: [`Orientation::Propagate`]'s
+/// spanning forest over the `k`-NN graph without the edges along which either normal leans
+/// more than `max_lean` (see [`lean`]): an edge that crosses a thin wall (or a gap) runs
+/// along both normals and is left out, so propagation never carries a sign from one side of
+/// a wall to the other. Returns each point's sheet (tree) index, 0 the sheet of the highest
+/// point; each sheet is seeded with nz >= 0 at its highest point, which says nothing of an
+/// inner face's outward sign (a caller judges each sheet with its own sign).
+pub fn orient_sheets(
+    points: &[Point3<f64>],
+    normals: &mut [Vector3<f64>],
+    k: usize,
+    max_lean: f64,
+) -> Vec<u32> {
+    propagate(points, normals, k.max(1), max_lean)
+}
+
 /// Minimum spanning forest of the symmetric k-NN graph under [`edge_cost`] (Kruskal: edges
-/// sorted by cost, ties by index), then each tree is walked from its highest point (largest
-/// z; its normal turned up, nz >= 0), every normal flipped to agree with its parent's.
-/// Returns the number of trees (connected components).
-fn propagate(points: &[Point3<f64>], normals: &mut [Vector3<f64>], k: usize) -> usize {
+/// sorted by cost, ties by index; edges leaning more than `max_lean` left out), then each
+/// tree is walked from its highest point (largest z; its normal turned up, nz >= 0), every
+/// normal flipped to agree with its parent's. Returns each point's tree index, in the order
+/// the trees were seeded.
+fn propagate(
+    points: &[Point3<f64>],
+    normals: &mut [Vector3<f64>],
+    k: usize,
+    max_lean: f64,
+) -> Vec<u32> {
     let lists: Vec<Vec<(f64, u32, u32)>> =
         Grid::knn_among(points, k + 1, f64::INFINITY, |i, found| {
             found
                 .iter()
                 .map(|&(_, j)| j as usize)
                 .filter(|&j| j != i)
+                .filter(|&j| lean(&points[i], &normals[i], &points[j], &normals[j]) <= max_lean)
                 .map(|j| {
                     let (a, b) = (i.min(j), i.max(j));
                     let cost = edge_cost(&points[a], &normals[a], &points[b], &normals[b]);
@@ -296,24 +330,23 @@ fn propagate(points: &[Point3<f64>], normals: &mut [Vector3<f64>], k: usize) -> 
     }
     let mut seeds: Vec<usize> = (0..points.len()).collect();
     seeds.par_sort_unstable_by(|&a, &b| points[b].z.total_cmp(&points[a].z).then(a.cmp(&b)));
-    let mut done = vec![false; points.len()];
+    let mut sheet = vec![u32::MAX; points.len()];
     let mut stack = Vec::new();
     let mut components = 0;
     for seed in seeds {
-        if done[seed] {
+        if sheet[seed] != u32::MAX {
             continue;
         }
-        components += 1;
         if normals[seed].z < 0.0 {
             normals[seed] = -normals[seed];
         }
-        done[seed] = true;
+        sheet[seed] = components;
         stack.push(seed);
         while let Some(from) = stack.pop() {
             for &to in &tree[from] {
                 let to = to as usize;
-                if !done[to] {
-                    done[to] = true;
+                if sheet[to] == u32::MAX {
+                    sheet[to] = components;
                     if normals[to].dot(&normals[from]) < 0.0 {
                         normals[to] = -normals[to];
                     }
@@ -321,8 +354,9 @@ fn propagate(points: &[Point3<f64>], normals: &mut [Vector3<f64>], k: usize) -> 
                 }
             }
         }
+        components += 1;
     }
-    components
+    sheet
 }
 
 #[cfg(test)]

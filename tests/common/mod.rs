@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 pub mod accept;
 pub mod femoral;
+pub mod hostile;
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
