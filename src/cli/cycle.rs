@@ -205,17 +205,19 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
     cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;
     prepare_out(&args.out, args.replace)?;
     let configs = Configs::split(config, &args.out)?;
-    cfg.inspect = super::inspect::settings(None, &configs.inspect.file)?;
-    cfg.plan = configs.plan.file.parse()?;
+    let blame = |e| blame_config(e, &args.out, config);
+    cfg.inspect = super::inspect::settings(None, &configs.inspect.file).map_err(blame)?;
+    cfg.plan = configs.plan.file.parse().map_err(blame)?;
     if let Some(mode) = args.mode {
         cfg.plan.plan.mode = mode;
     }
     cfg.plan_table = configs.plan.table;
     let mut arm = LoopArm {
         device: args.device,
-        settings: super::run::settings(&configs.run.file, None)?,
+        settings: super::run::settings(&configs.run.file, None).map_err(blame)?,
         table: configs.run.table,
     };
+    let out = args.out.clone();
     let inputs = Inputs {
         reference: args.reference,
         scan: args.scan,
@@ -226,11 +228,22 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         out: args.out,
         first: None,
     };
-    let ended = run_cycle(&cfg, inputs, &mut arm)?;
+    let ended = run_cycle(&cfg, inputs, &mut arm).map_err(|e| blame_config(e, &out, config))?;
     print_outcome(&ended);
     match ended.outcome {
         Outcome::WithinTolerance => Ok(()),
         o => Err(NotFinished(o).into()),
+    }
+}
+
+/// `e` said of the user's `--config` when it is about a settings file cycle derived from it
+/// ([`super::settings::blame_source`]).
+fn blame_config(e: anyhow::Error, out: &Path, config: Option<&Path>) -> anyhow::Error {
+    let Some(source) = config else { return e };
+    let text = std::fs::read_to_string(source).unwrap_or_default();
+    match super::settings::blame_source(&e.to_string(), out, source, &text) {
+        Some(m) => anyhow::anyhow!(m),
+        None => e,
     }
 }
 
