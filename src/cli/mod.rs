@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod arm;
 mod calibrate;
+pub mod calibrate_compliance;
 mod calibrate_removal;
 mod calibrate_table;
 mod calibrate_verify;
