@@ -9,11 +9,11 @@ use std::path::Path;
 use std::process::Stdio;
 
 use nalgebra::Point3;
-use polishbot::cell::cycle::{
+use polishbot::cycle::{
     decide, decide_plan, planned_regions, predicted_rms, CycleConfig, IterationRecord, Measured,
     Outcome,
 };
-use polishbot::plan::Plan;
+use polishbot::motion::Plan;
 use polishbot::regions::Verdict;
 use polishbot::synth::DefectKind;
 
@@ -48,6 +48,7 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
     let cfg = CycleConfig {
         max_iterations: 2,
         min_progress: 0.05,
+        ..CycleConfig::default()
     };
     let fresh = |v| IterationRecord::new(9, measured(Verdict::Repairable, 2, 0, v));
     // a first inspection with excess: grind
@@ -85,13 +86,13 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
     assert_eq!(decide_plan(&ground(1, 1.0, 1.0, 0.5)), Outcome::Continue);
     assert!(CycleConfig {
         max_iterations: 0,
-        ..cfg
+        ..cfg.clone()
     }
     .check()
     .is_err());
     assert!(CycleConfig {
         min_progress: 1.5,
-        ..cfg
+        ..cfg.clone()
     }
     .check()
     .is_err());
@@ -100,7 +101,7 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
 /// A plan.json with the given reachability regions and optional removal object, the rest
 /// empty; read through `Plan::parse` (the one schema).
 fn plan_with(regions: serde_json::Value, removal: Option<serde_json::Value>) -> Plan {
-    let metrics = serde_json::to_value(polishbot::plan::Metrics::default()).unwrap();
+    let metrics = serde_json::to_value(polishbot::motion::Metrics::default()).unwrap();
     let report = |r: &serde_json::Value| {
         serde_json::json!({"id": r["id"], "repairable": true, "peak_mm": 0.1, "area_mm2": 1.0,
             "layers": r["layers"], "path_points": 0, "unreachable_path_points": 0,
@@ -345,7 +346,7 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
             a.agreement
         );
         assert!(
-            second.volume < first.volume * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
+            second.volume < first.volume * (1.0 - polishbot::cycle::DEFAULT_MIN_PROGRESS),
             "seed {seed}: volume {} -> {}",
             first.volume,
             second.volume

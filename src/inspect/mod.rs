@@ -1,15 +1,18 @@
 //! Inspection as a library function: a scan measured against its reference, from the files to
 //! the verdict. [`run`] reads top to bottom: load and check -> outlier filter -> register (or a
 //! given pose) -> core points -> compare -> regions and verdict. It prints nothing and writes
-//! nothing; `polishbot inspect` (and `demo`) write its [`Inspection`] to files.
+//! nothing; [`files::inspect_into`] (called by `polishbot inspect`, `demo` and the loop) writes
+//! its [`Findings`] to files.
 pub mod area;
 pub mod checks;
 mod config;
+pub mod files;
 mod load;
 mod pose;
 pub mod scans;
 pub mod suggest;
 
+pub use files::{inspect_into, Incomplete, INCOMPLETE_EXIT};
 pub use pose::{register_scan, PoseSource};
 
 pub use config::{
@@ -26,7 +29,7 @@ use crate::regions::{self, Regions};
 
 /// The outcome of [`run`].
 #[derive(Debug)]
-pub struct Inspection {
+pub struct Findings {
     /// The pose of the scan and where it came from.
     pub pose: PoseSource,
     /// The poses of the further scans (`Inputs::more_scans`), in order.
@@ -50,7 +53,7 @@ pub struct Inspection {
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
 /// [`crate::register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
-pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
+pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
     let mut times = StageTimes::default();
     let mut notices = Vec::new();
     let spin = crate::progress::spinner("load");
@@ -123,7 +126,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     let suggestion = (regions.verdict == regions::Verdict::Incomplete)
         .then(|| suggest::suggest(&deviations, in_area.as_deref(), &pose.pose(), &cfg.suggest));
     times.lap("regions");
-    Ok(Inspection {
+    Ok(Findings {
         pose,
         more_poses,
         support,

@@ -1,0 +1,363 @@
+//! The loop's records: what one inspection of the loop measured, what its plan set out to
+//! remove, the rule that ends the loop ([`decide`] with a [`CycleConfig`]) and the table of
+//! the records (text, cycle.json, cycle.html's rows). Nothing here touches a file or the arm;
+//! the engine (`super::engine`) feeds these types.
+use serde::{Deserialize, Serialize};
+
+use super::config::CycleConfig;
+use crate::motion::{Inspection, Plan};
+use crate::regions::{Region, Verdict};
+use crate::removal::fit::{Agreement, SAME_POINT_MM};
+use crate::report::{escape, table_page};
+use crate::spatial::Neighbours;
+
+/// What one inspection of the loop measured (over the repairable regions: pits are never
+/// ground and are only counted).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Measured {
+    /// The inspection's verdict.
+    pub verdict: Verdict,
+    /// Repairable regions (material in excess).
+    pub repairable: usize,
+    /// Pits (not repairable).
+    pub pits: usize,
+    /// Largest peak of a repairable region, mm (None: no repairable region).
+    pub peak_mm: Option<f64>,
+    /// RMS of the distance over the core points of repairable regions, mm.
+    pub rms_mm: Option<f64>,
+    /// Volume above the tolerance of the repairable regions, mm^3.
+    pub volume_mm3: f64,
+}
+
+impl Measured {
+    /// Summary of an inspection: its verdict (regions.json) and its regions and core points.
+    pub fn of(verdict: Verdict, inspection: &Inspection) -> Measured {
+        let repairable: Vec<&Region> = inspection.regions.iter().filter(|r| r.repairable).collect();
+        let ids: Vec<i64> = repairable.iter().map(|r| r.id as i64).collect();
+        let d: Vec<f64> = inspection
+            .points
+            .iter()
+            .filter(|p| ids.contains(&p.region) && p.distance.is_finite())
+            .map(|p| p.distance)
+            .collect();
+        Measured {
+            verdict,
+            repairable: repairable.len(),
+            pits: inspection.regions.len() - repairable.len(),
+            peak_mm: repairable.iter().map(|r| r.peak).reduce(f64::max),
+            rms_mm: rms(&d),
+            volume_mm3: repairable.iter().map(|r| r.volume).sum(),
+        }
+    }
+}
+
+/// Root mean square (None for no values).
+fn rms(d: &[f64]) -> Option<f64> {
+    (!d.is_empty()).then(|| (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt())
+}
+
+/// Ids of the regions `plan` grinds: depth layers planned (rigid mode), or a removal
+/// prediction (removal mode).
+pub fn planned_regions(plan: &Plan) -> Vec<usize> {
+    let mut ids: Vec<usize> = plan
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.layers > 0)
+        .map(|r| r.id)
+        .collect();
+    if let Some(rem) = &plan.removal {
+        ids.extend(rem.regions.iter().map(|r| r.region));
+    }
+    ids.sort_unstable();
+    ids.dedup();
+    ids
+}
+
+/// The predicted RMS residual over `plan`'s removal regions' points (weighted by their core
+/// points), mm; None for a rigid plan.
+pub fn predicted_rms(plan: &Plan) -> Option<f64> {
+    let rem = plan.removal.as_ref()?;
+    let n: usize = rem.regions.iter().map(|r| r.core_points).sum();
+    (n > 0).then(|| {
+        let s: f64 = rem
+            .regions
+            .iter()
+            .map(|r| r.core_points as f64 * r.after.rms_mm * r.after.rms_mm)
+            .sum();
+        (s / n as f64).sqrt()
+    })
+}
+
+/// One inspection of the loop and, when it was followed by a grind, what was planned and
+/// what the next inspection found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct IterationRecord {
+    /// 1-based iteration (the folder iter-k).
+    pub iteration: usize,
+    /// What the inspection measured.
+    pub measured: Measured,
+    /// Ids of the regions the plan grinds.
+    pub planned_regions: Vec<usize>,
+    /// Excess volume of the regions the plan grinds, mm^3 (None: not planned).
+    pub planned_volume_mm3: Option<f64>,
+    /// The plan's predicted RMS residual over its regions, mm (removal plans only).
+    pub predicted_residual_mm: Option<f64>,
+    /// RMS of the next inspection's distance over the core points of the planned regions, mm.
+    pub achieved_residual_mm: Option<f64>,
+    /// Share of the planned excess volume that the next inspection found removed.
+    pub progress: Option<f64>,
+    /// Preston's k fitted after this iteration's grind to the points of every grind so far
+    /// (`removal::fit::pool`), the next plan's k, mm^2/N (None: not fitted).
+    pub k_fitted: Option<f64>,
+    /// The grind's prediction at the plan's and at the fitted k against the achieved
+    /// residual, over the same defect points (removal plans only).
+    pub agreement: Option<Agreement>,
+}
+
+impl IterationRecord {
+    /// A record of a fresh inspection (nothing planned yet).
+    pub fn new(iteration: usize, measured: Measured) -> IterationRecord {
+        IterationRecord {
+            iteration,
+            measured,
+            planned_regions: Vec::new(),
+            planned_volume_mm3: None,
+            predicted_residual_mm: None,
+            achieved_residual_mm: None,
+            progress: None,
+            k_fitted: None,
+            agreement: None,
+        }
+    }
+
+    /// Records the plan made from this inspection.
+    pub fn planned(&mut self, inspection: &Inspection, plan: &Plan) {
+        let ids = planned_regions(plan);
+        let volume = inspection
+            .regions
+            .iter()
+            .filter(|r| r.repairable && ids.contains(&r.id))
+            .map(|r| r.volume)
+            .sum();
+        self.planned_volume_mm3 = Some(volume);
+        self.planned_regions = ids;
+        self.predicted_residual_mm = predicted_rms(plan);
+    }
+
+    /// Records what the next inspection found: the progress share of the planned excess
+    /// volume and the achieved residual over the planned regions' core points.
+    pub fn followed_by(&mut self, next: &Measured, before: &Inspection, after: &Inspection) {
+        if let Some(planned) = self.planned_volume_mm3.filter(|v| *v > 0.0) {
+            self.progress = Some((self.measured.volume_mm3 - next.volume_mm3) / planned);
+        }
+        let ids: Vec<i64> = self.planned_regions.iter().map(|&i| i as i64).collect();
+        self.achieved_residual_mm = achieved_residual(before, after, &ids);
+    }
+}
+
+/// RMS of `after`'s distance over `before`'s core points of the regions `ids`, matched by
+/// position ([`SAME_POINT_MM`]); None when no point matched.
+pub fn achieved_residual(before: &Inspection, after: &Inspection, ids: &[i64]) -> Option<f64> {
+    let pos: Vec<_> = after.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&pos);
+    let d: Vec<f64> = before
+        .points
+        .iter()
+        .filter(|p| ids.contains(&p.region))
+        .filter_map(|p| index.nearest(&p.position))
+        .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
+        .map(|nb| after.points[nb.index].distance)
+        .filter(|d| d.is_finite())
+        .collect();
+    rms(&d)
+}
+
+/// How the loop ended, or that it goes on.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// Grind again.
+    Continue,
+    /// The last inspection's verdict is "within tolerance".
+    WithinTolerance,
+    /// No repairable region is left but the part is not within tolerance (pits, or an
+    /// incomplete verdict): grinding cannot help.
+    NothingToGrind,
+    /// The plan grinds none of the repairable regions (all out of the arm's reach).
+    NothingPlanned,
+    /// The last grind removed less than `min_progress` of the planned excess volume.
+    NoProgress,
+    /// `max_iterations` grinds were made and the part is not within tolerance.
+    MaxIterations,
+    /// The last grind's removal landed off its plan (`removal_shift::judge`; the loop printed
+    /// the region and its shift): no grind on a wrong model.
+    OffPlan,
+}
+
+impl Outcome {
+    /// One line for the user.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Outcome::Continue => "continue",
+            Outcome::WithinTolerance => "within tolerance",
+            Outcome::NothingToGrind => {
+                "not finished: no repairable region left (pits remain: the part is rejected)"
+            }
+            Outcome::NothingPlanned => "not finished: the plan reaches none of the regions",
+            Outcome::NoProgress => "not finished: no progress (less removed than --min-progress)",
+            Outcome::MaxIterations => "not finished: --max-iterations reached",
+            Outcome::OffPlan => {
+                "stopped: the last grind's removal landed off its plan (region and shift above)"
+            }
+        }
+    }
+}
+
+/// The stop rule, applied after each inspection. `records` are the loop's inspections in
+/// order; every record but the last was planned and ground (and followed by the next).
+/// Order: within tolerance; nothing repairable left; the last grind's progress under
+/// `min_progress`; `max_iterations` grinds made; else grind again.
+pub fn decide(records: &[IterationRecord], cfg: &CycleConfig) -> Outcome {
+    let Some(last) = records.last() else {
+        return Outcome::Continue;
+    };
+    if last.measured.verdict == Verdict::WithinTolerance {
+        return Outcome::WithinTolerance;
+    }
+    if last.measured.repairable == 0 {
+        return Outcome::NothingToGrind;
+    }
+    let grinds = records.len() - 1;
+    if let Some(prev) = grinds.checked_sub(1).map(|i| &records[i]) {
+        if prev.progress.is_none_or(|p| p < cfg.min_progress) {
+            return Outcome::NoProgress;
+        }
+    }
+    if grinds >= cfg.max_iterations {
+        return Outcome::MaxIterations;
+    }
+    Outcome::Continue
+}
+
+/// After planning the last record: [`Outcome::NothingPlanned`] when the plan grinds no
+/// excess volume, else [`Outcome::Continue`].
+pub fn decide_plan(record: &IterationRecord) -> Outcome {
+    match record.planned_volume_mm3 {
+        Some(v) if v > 0.0 => Outcome::Continue,
+        _ => Outcome::NothingPlanned,
+    }
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |x| format!("{x:.digits$}"))
+}
+
+/// Columns of the table.
+const COLUMNS: usize = 11;
+
+/// The table's header cells.
+pub const TABLE_HEADER: [&str; COLUMNS] = [
+    "iter",
+    "verdict",
+    "regions (pits)",
+    "peak mm",
+    "RMS mm",
+    "volume mm3",
+    "removed %",
+    "residual pred/achieved mm",
+    "defect pts: pred k0/pred k fit/achieved (fit-achieved) mm",
+    "lowest ground mm",
+    "k mm2/N",
+];
+
+/// The agreement cell: the RMS residuals over the same defect points, predicted at the
+/// plan's k, at the fitted k and achieved, and the point-by-point RMS difference.
+fn agreement_cell(a: Option<&Agreement>) -> String {
+    a.map_or("-".into(), |a| {
+        format!(
+            "{:.4}/{}/{:.4} ({:.4})",
+            a.predicted_plan_k_mm,
+            opt(a.predicted_fitted_k_mm, 4),
+            a.achieved_mm,
+            a.difference_mm
+        )
+    })
+}
+
+/// The table's cells of one record.
+pub fn table_row(r: &IterationRecord) -> [String; COLUMNS] {
+    let m = &r.measured;
+    let verdict = serde_json::to_value(m.verdict)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    [
+        r.iteration.to_string(),
+        verdict,
+        format!("{} ({})", m.repairable, m.pits),
+        opt(m.peak_mm, 4),
+        opt(m.rms_mm, 4),
+        format!("{:.4}", m.volume_mm3),
+        opt(r.progress.map(|p| 100.0 * p), 1),
+        format!(
+            "{} / {}",
+            opt(r.predicted_residual_mm, 4),
+            opt(r.achieved_residual_mm, 4)
+        ),
+        agreement_cell(r.agreement.as_ref()),
+        opt(r.agreement.map(|a| a.lowest_ground_mm), 4),
+        r.k_fitted
+            .map_or("not fitted".into(), |k| format!("{k:.3e}")),
+    ]
+}
+
+/// The table as aligned text, one line per record.
+pub fn table_text(records: &[IterationRecord]) -> String {
+    let rows: Vec<[String; COLUMNS]> = records.iter().map(table_row).collect();
+    let mut width = TABLE_HEADER.map(str::len);
+    for row in &rows {
+        for (w, c) in width.iter_mut().zip(row) {
+            *w = (*w).max(c.len());
+        }
+    }
+    let line = |cells: &[String]| {
+        let padded: Vec<String> = cells
+            .iter()
+            .zip(&width)
+            .map(|(c, w)| format!("{c:>w$}"))
+            .collect();
+        padded.join("  ") + "\n"
+    };
+    let mut text = line(&TABLE_HEADER.map(str::to_string));
+    for row in &rows {
+        text.push_str(&line(row));
+    }
+    text
+}
+
+/// `cycle.json`: how the loop ended and every record (what the table shows, in full).
+pub fn table_json(records: &[IterationRecord], outcome: Outcome) -> serde_json::Value {
+    serde_json::json!({"format": "polishbot-cycle", "version": 1, "outcome": outcome,
+        "records": records})
+}
+
+/// `cycle.html`: the table and the outcome, plain HTML without scripts.
+pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
+    let rows: Vec<Vec<String>> = records.iter().map(|r| table_row(r).to_vec()).collect();
+    let paragraphs = [
+        format!("Outcome: {}.", escape(outcome.describe())),
+        "Each row is the inspection that began iteration k (folder iter-k); removed % and the \
+         achieved residual come from the next inspection. The defect points' column re-predicts \
+         the grind with the k fitted after it (the plan's removal x fitted k / plan's k) and \
+         compares it with the achieved residual at the same points; lowest ground is the next \
+         inspection's lowest distance where the plan ground."
+            .to_string(),
+    ];
+    table_page(
+        "polishbot cycle",
+        &TABLE_HEADER.map(str::to_string),
+        &rows,
+        &paragraphs,
+    )
+}

@@ -1,0 +1,62 @@
+//! Errors of the planner: bad input files (naming the file and the place), calibration
+//! faults, and plans that fail validation (listing every offending point).
+use std::path::Path;
+
+use super::report::UnreachablePoint;
+use super::trajectory::TrajectoryError;
+use super::validate::Violation;
+use crate::repair::InputError;
+use crate::robot::RobotError;
+
+/// Why a plan could not be made or loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// An input file is unreadable or holds a bad value.
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// The robot calibration files.
+    #[error(transparent)]
+    Robot(#[from] RobotError),
+    /// A move could not be computed.
+    #[error("{context}: {source}")]
+    Trajectory {
+        /// Which move.
+        context: String,
+        /// Ruckig's complaint.
+        source: TrajectoryError,
+    },
+    /// Samples break joint, servo or speed limits.
+    #[error("plan fails validation: {} violation(s): {}", .0.len(), list(.0))]
+    Invalid(Vec<Violation>),
+    /// Targets the arm cannot reach, when the configuration demands full reach.
+    #[error("{} unreachable target(s): {}", .0.len(), list(.0))]
+    Unreachable(Vec<UnreachablePoint>),
+    /// A free motion cannot be made without a collision.
+    #[error("collision: {0}")]
+    Collision(String),
+    /// Samples bring the tool or the arm into the part or a solid.
+    #[error("plan fails the collision check: {} sample(s): {}", .0.len(), list(.0))]
+    Collides(Vec<super::contact::Collision>),
+    /// The servo command stream cannot be built or does not match the samples.
+    #[error("servo frames: {0}")]
+    Frames(String),
+    /// A setting is out of range.
+    #[error("config: {0}")]
+    Config(String),
+}
+
+impl PlanError {
+    /// A bad value at `place` of `file`.
+    pub fn input(file: &Path, place: impl Into<String>, message: impl Into<String>) -> Self {
+        PlanError::Input(InputError::new(file, place, message))
+    }
+}
+
+/// The first ten items, `; `-separated, and how many more.
+fn list<T: std::fmt::Display>(items: &[T]) -> String {
+    let mut s: Vec<String> = items.iter().take(10).map(|v| v.to_string()).collect();
+    if items.len() > 10 {
+        s.push(format!("... and {} more", items.len() - 10));
+    }
+    s.join("; ")
+}

@@ -1,0 +1,209 @@
+//! plan.json on disk: writing, reading, and the full re-check a plan must pass before `run`
+//! sends anything (the file is never trusted).
+use std::path::Path;
+
+use dofbot_protocol::servo::SERVO_COUNT;
+
+use super::error::PlanError;
+use super::frames;
+use super::program::{PlannedPass, Segment};
+use super::report::{Metrics, Reachability};
+use super::table_file::TablePlan;
+use super::trajectory::JointTrajectory;
+use super::validate::{validate, ValidationConfig};
+use crate::robot::Robot;
+use serde::{Deserialize, Serialize};
+
+/// One joint-trajectory sample.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sample {
+    /// Time, s (index x period).
+    pub t: f64,
+    /// Joint angles, rad, URDF order.
+    pub q: Vec<f64>,
+}
+
+/// A grinding plan: the contents of plan.json (docs/FORMATS.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// "polishbot-plan".
+    pub format: String,
+    /// Format version (1).
+    pub version: u32,
+    /// The inspection folder planned from.
+    pub inspection: String,
+    /// Bus period, s: one sample and one frame per period.
+    pub period: f64,
+    /// URDF joint names, the order of every `q`.
+    pub joint_names: Vec<String>,
+    /// Tool (ball) radius, mm.
+    pub tool_radius_mm: f64,
+    /// The raster geometry used, mm.
+    pub stepover_mm: f64,
+    /// Footprint radius used for coverage, mm.
+    pub footprint_mm: f64,
+    /// Predicted duration of the motion, s.
+    pub predicted_duration_s: f64,
+    /// Reachable pieces of the passes with their tool poses and joint solutions.
+    pub passes: Vec<PlannedPass>,
+    /// What each stretch of samples does.
+    pub segments: Vec<Segment>,
+    /// The joint trajectory at the bus period.
+    pub samples: Vec<Sample>,
+    /// The servo command stream: one 0x1D frame per sample after the first (hex).
+    pub frames: Vec<String>,
+    /// Reach and coverage per region, every point left out and why.
+    pub reachability: Reachability,
+    /// Measured quality of the plan.
+    pub metrics: Metrics,
+    /// Removal mode: the dwell map and the predicted part per region (absent in rigid mode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub removal: Option<crate::removal::prediction::RemovalReport>,
+    /// The turntable's angles and moves (absent in a cell without a turntable).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub turntable: Option<TablePlan>,
+}
+
+/// A plan that passed [`Plan::check`]: its frames as bytes and their raw poses.
+#[derive(Debug, Clone)]
+pub struct CheckedPlan {
+    /// One 0x1D frame per sample.
+    pub frames: Vec<Vec<u8>>,
+    /// Raw positions of servos 1..6 per frame.
+    pub raw: Vec<[u16; SERVO_COUNT]>,
+    /// Move time of every frame, ms (the period).
+    pub time_ms: u16,
+    /// The turntable's moves (`None`: the plan turns no table; see [`Plan::check_cell`]).
+    pub table: Option<super::table_file::CheckedTable>,
+}
+
+impl Plan {
+    /// Writes plan.json.
+    pub fn save(&self, path: &Path) -> Result<(), PlanError> {
+        let text = serde_json::to_string(self)
+            .map_err(|e| PlanError::input(path, "file", e.to_string()))?;
+        std::fs::write(path, text).map_err(|e| PlanError::input(path, "file", e.to_string()))
+    }
+
+    /// Reads plan.json (no checks beyond the format: see [`Plan::check`]).
+    pub fn load(path: &Path) -> Result<Plan, PlanError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| PlanError::input(path, "file", e.to_string()))?;
+        Plan::parse(path, &text)
+    }
+
+    /// Parses a plan file's text; `path` names it in errors. The rules of [`Plan::load`]
+    /// (which reads the file and calls this), for callers that also need the bytes.
+    pub fn parse(path: &Path, text: &str) -> Result<Plan, PlanError> {
+        let plan: Plan = serde_json::from_str(text).map_err(|e| {
+            PlanError::input(
+                path,
+                format!("line {} column {}", e.line(), e.column()),
+                e.to_string(),
+            )
+        })?;
+        if plan.format != "polishbot-plan" || plan.version != 1 {
+            let msg = format!(
+                "format {:?} version {}, expected \"polishbot-plan\" 1",
+                plan.format, plan.version
+            );
+            return Err(PlanError::input(path, "format", msg));
+        }
+        Ok(plan)
+    }
+
+    /// Checks everything `run` relies on against `robot`: joint names and period, sample
+    /// times, every sample within joint limits, servo ranges and velocity / acceleration /
+    /// jerk limits, and every frame equal byte for byte to the frame the sample makes, with
+    /// raw steps between frames within the velocity limits.
+    pub fn check(
+        &self,
+        robot: &Robot,
+        config: &ValidationConfig,
+    ) -> Result<CheckedPlan, PlanError> {
+        let bad = |m: String| Err(PlanError::Frames(m));
+        if self.turntable.as_ref().is_some_and(|t| !t.moves.is_empty()) {
+            return bad(
+                "the plan turns the part turntable: it needs the cell's turntable to be checked (run --cell DIR)".into(),
+            );
+        }
+        let names: Vec<&str> = robot.joints.iter().map(|j| j.name.as_str()).collect();
+        if self.joint_names != names {
+            return bad(format!(
+                "joint names {:?} differ from the robot's {names:?}",
+                self.joint_names
+            ));
+        }
+        if (self.period - robot.servos.period).abs() > 1e-12 {
+            return bad(format!(
+                "period {} differs from servos.toml's {}",
+                self.period, robot.servos.period
+            ));
+        }
+        if self.samples.is_empty() {
+            return bad("no samples".into());
+        }
+        let mut traj = JointTrajectory::starting_at(&self.samples[0].q, self.period);
+        for (i, s) in self.samples.iter().enumerate() {
+            if s.q.len() != robot.dof() || s.q.iter().any(|v| !v.is_finite()) {
+                return bad(format!(
+                    "sample {i}: needs {} finite joint angles",
+                    robot.dof()
+                ));
+            }
+            if (s.t - i as f64 * self.period).abs() > 1e-9 {
+                return bad(format!("sample {i}: t {} is not {i} periods", s.t));
+            }
+            if i > 0 {
+                traj.push(&s.q);
+            }
+        }
+        let violations = validate(&traj, robot, config);
+        if !violations.is_empty() {
+            return Err(PlanError::Invalid(violations));
+        }
+        if self.frames.len() != self.samples.len() {
+            return bad(format!(
+                "{} frames for {} samples",
+                self.frames.len(),
+                self.samples.len()
+            ));
+        }
+        let map = frames::servo_map(robot)?;
+        let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+        let qs: Vec<Vec<f64>> = self.samples.iter().map(|s| s.q.clone()).collect();
+        let expected = frames::encode(&qs, &map, hold, self.period)?;
+        let time_ms = frames::frame_time_ms(self.period)?;
+        let mut raw = Vec::with_capacity(expected.len());
+        for (i, (text, want)) in self.frames.iter().zip(&expected).enumerate() {
+            let (pose, ms) =
+                frames::decode(text).map_err(|e| PlanError::Frames(format!("frame {i}: {e}")))?;
+            if ms != time_ms || frames::to_hex(want) != *text {
+                return bad(format!(
+                    "frame {i} is not the frame sample {i} makes ({})",
+                    frames::to_hex(want)
+                ));
+            }
+            raw.push(pose);
+        }
+        for (k, spec) in robot.joints.iter().enumerate() {
+            let servo = robot.servos.servos.iter().find(|s| s.id == spec.servo_id);
+            let per_rad = servo.map_or(0.0, |s| s.counts_per_degree().to_degrees());
+            let most = (spec.velocity * self.period * per_rad * (1.0 + config.derivative_tolerance))
+                .ceil() as u16
+                + 1;
+            for (i, w) in raw.windows(2).enumerate() {
+                let step = w[1][k].abs_diff(w[0][k]);
+                if step > most {
+                    return bad(format!("frames {i}..{}: servo {} steps {step} counts, the velocity limit allows {most}", i + 1, spec.servo_id));
+                }
+            }
+        }
+        Ok(CheckedPlan {
+            frames: expected,
+            raw,
+            time_ms,
+            table: None,
+        })
+    }
+}

@@ -1,0 +1,215 @@
+//! Motion planning: grinding passes over the repairable regions of the repair work, tool poses
+//! in the robot frame, IK along every pass (split where the arm cannot reach or follow), in
+//! removal mode the dwell of each contact from the `removal` room turned into the feed along
+//! each stroke, one continuous time-optimal joint trajectory sampled at the bus period,
+//! validated before any motion, and the reachability report. Method: docs/ALGORITHMS.md,
+//! "Grinding planner".
+//!
+//! Front function: [`plan`] (the cell with its turntable, if any) with a [`PlanConfig`];
+//! result: [`Plan`] (plan.json). [`plan_part`] plans the part where it sits, the step `plan`
+//! makes once per table angle.
+mod assemble;
+mod by_region;
+pub mod check;
+pub mod clearance;
+pub mod collide;
+mod config;
+pub mod contact;
+pub mod dwell;
+pub mod error;
+pub mod feed;
+pub mod file;
+pub mod frames;
+mod free_motion;
+pub mod order;
+mod predict;
+pub mod program;
+pub mod raster;
+pub mod report;
+pub mod ros;
+mod stroke;
+pub mod surface;
+pub mod table;
+pub mod table_check;
+pub mod table_file;
+pub mod trajectory;
+pub mod validate;
+
+pub use crate::repair::{Inspection, RegionInfo, SurfacePoint};
+pub use clearance::Collision;
+pub use collide::{CollisionConfig, Solid};
+pub use config::{PlanConfig, PlanMode, DEFAULT_TOLERANCE_MM, MAX_CONTACT_POINTS, MAX_LAYERS};
+pub use error::PlanError;
+pub use file::{Plan, Sample};
+pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
+pub use raster::{RasterGeometry, StrokeKind};
+pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
+pub use table::plan;
+pub use table_file::TablePlan;
+pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
+pub use validate::{validate, LimitKind, ValidationConfig, Violation};
+
+use crate::removal;
+use crate::robot::{Robot, Workcell};
+use config::check_work;
+
+/// Plans grinding for every repairable region of `inspection` with the part where the
+/// workcell puts it (no table move) and validates the result.
+pub fn plan_part(
+    inspection: &Inspection,
+    robot: &Robot,
+    workcell: &Workcell,
+    config: &PlanConfig,
+) -> Result<Plan, PlanError> {
+    config.check(robot)?;
+    let tool = match config.mode {
+        PlanMode::Rigid => None,
+        PlanMode::Removal => Some(removal::ToolModel::of_robot(robot).map_err(PlanError::Config)?),
+    };
+    // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
+    // collision model (grinding, pressing in and out) accepts that much more penetration
+    let mut adjusted = config.clone();
+    if let Some(t) = &tool {
+        adjusted.collision.press_mm = t.preload_mm;
+    }
+    let config = &adjusted;
+    let radius_mm = robot.tool.radius_mm();
+    let reach = radius_mm + config.contact_offset_mm;
+    let geometry = match &tool {
+        None => config.geometry(radius_mm),
+        Some(t) => by_region::removal_geometry(t, radius_mm, config),
+    };
+    check_work(inspection, &geometry)?;
+    let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
+    let fallback = removal::ToolModel::default();
+    let positions: Vec<nalgebra::Point3<f64>> =
+        inspection.points.iter().map(|p| p.position).collect();
+    let index = crate::spatial::Neighbours::new(&positions);
+    let ctx = dwell::Setup {
+        tool: tool.as_ref().unwrap_or(&fallback),
+        robot,
+        workcell,
+        config,
+        index: &index,
+    };
+    let mut reachability = Reachability::default();
+    let planned =
+        by_region::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
+    let counts = planned.counts.clone();
+    let (mut prog, removal) = by_region::assemble_and_predict(
+        planned,
+        inspection,
+        &ctx,
+        tool.is_some(),
+        &scene,
+        &mut reachability.unreachable,
+    )?;
+    for region in &inspection.regions {
+        let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
+        let left_out = reachability
+            .unreachable
+            .iter()
+            .filter(|u| u.region == region.id)
+            .count();
+        reachability.regions.push(check::region_report(
+            region,
+            inspection,
+            &prog.passes,
+            layers,
+            total,
+            left_out,
+            robot,
+            workcell,
+            config,
+            reach,
+            geometry.footprint,
+        ));
+    }
+    if config.require_full_reach && !reachability.unreachable.is_empty() {
+        return Err(PlanError::Unreachable(reachability.unreachable));
+    }
+    let metrics = check::measure(&prog, robot, config);
+    check_program(&prog, &metrics, robot, &scene, config)?;
+    let traj = std::mem::replace(
+        &mut prog.trajectory,
+        JointTrajectory::starting_at(&config.home, config.trajectory.period),
+    );
+    let (samples, stream) = samples_and_frames(&traj, robot)?;
+    Ok(Plan {
+        format: "polishbot-plan".into(),
+        version: 1,
+        // absolute, so that `run` finds the part for its collision re-check from any folder
+        inspection: std::fs::canonicalize(&inspection.dir)
+            .unwrap_or_else(|_| inspection.dir.clone())
+            .display()
+            .to_string(),
+        period: traj.period,
+        joint_names: robot.joints.iter().map(|j| j.name.clone()).collect(),
+        tool_radius_mm: radius_mm,
+        stepover_mm: geometry.stepover,
+        footprint_mm: geometry.footprint,
+        predicted_duration_s: traj.duration(),
+        passes: prog.passes,
+        segments: prog.segments,
+        samples,
+        frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
+        reachability,
+        metrics,
+        removal,
+        turntable: None,
+    })
+}
+
+/// The whole sampled program against the limits (validation), the scene (collisions) and the
+/// planned path (`max_path_error_mm`); the first failing check is the error.
+fn check_program(
+    prog: &program::Program,
+    metrics: &Metrics,
+    robot: &Robot,
+    scene: &collide::Scene,
+    config: &PlanConfig,
+) -> Result<(), PlanError> {
+    let violations = validate(&prog.trajectory, robot, &config.validation);
+    if !violations.is_empty() {
+        return Err(PlanError::Invalid(violations));
+    }
+    let traj = &prog.trajectory;
+    let collisions = clearance::check_samples(
+        (0..traj.len()).map(|i| traj.sample(i)),
+        &prog.segments,
+        robot,
+        scene,
+    );
+    if !collisions.is_empty() {
+        return Err(PlanError::Collides(collisions));
+    }
+    let worst = metrics
+        .sample_to_path_max_mm
+        .max(metrics.path_to_samples_max_mm);
+    if worst > config.max_path_error_mm {
+        return Err(PlanError::Config(format!(
+            "modelled tool tip strays {worst:.3} mm from the planned path (max_path_error_mm {})",
+            config.max_path_error_mm
+        )));
+    }
+    Ok(())
+}
+
+/// The trajectory's samples and the servo command stream they make (one frame per sample,
+/// through the robot's servo map, the gripper held at its `hold_deg`).
+fn samples_and_frames(
+    traj: &JointTrajectory,
+    robot: &Robot,
+) -> Result<(Vec<Sample>, Vec<Vec<u8>>), PlanError> {
+    let samples: Vec<Sample> = (0..traj.len())
+        .map(|i| Sample {
+            t: i as f64 * traj.period,
+            q: traj.sample(i).to_vec(),
+        })
+        .collect();
+    let map = frames::servo_map(robot)?;
+    let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
+    let stream = frames::encode(&qs, &map, hold, traj.period)?;
+    Ok((samples, stream))
+}
