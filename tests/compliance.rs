@@ -12,7 +12,7 @@ use polishbot::calibrate::compliance::{self, FITTED_JOINTS};
 use polishbot::calibrate::jog::Cell;
 use polishbot::calibrate::CalibrationConfig;
 use polishbot::cli::calibrate_compliance::SimTouch;
-use polishbot::plan::frames;
+use polishbot::motion::frames;
 use polishbot::robot::{Compliance, Robot};
 use polishbot::sim::grind::slack;
 use polishbot::sim::{GrindConfig, SimArm, SimOptions};
