@@ -14,8 +14,13 @@
 //! 5. [`verify()`]: moves through check poses, reads back, reports per-servo and tool-tip error;
 //!    [`verify::verify_table`] turns a cell's turntable to check angles and reads it back.
 //!
+//! 6. [`compliance::compliance`]: the tool tip touches fixed points from several tilts under
+//!    loads of both signs; a least-squares fit gives each joint's stiffness and backlash and
+//!    the arm's lumped masses (servos.toml's `[compliance]`).
+//!
 //! Touches come from a [`TouchSource`]: the interactive jog terminal ([`jog::JogTerminal`])
 //! or a list of joint targets ([`jog::Scripted`]). All settings: [`CalibrationConfig`].
+pub mod compliance;
 pub mod config;
 pub mod files;
 pub mod jog;

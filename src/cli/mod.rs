@@ -1,6 +1,7 @@
 //! Command-line interface: one file per subcommand; each only wires stages and files together.
 mod arm;
 mod calibrate;
+pub mod calibrate_compliance;
 mod calibrate_removal;
 mod calibrate_table;
 mod calibrate_verify;

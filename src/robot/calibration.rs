@@ -223,12 +223,19 @@ pub struct Servos {
     /// `calibration/turntable/`), if the cell has one: see [`super::turntable`].
     #[serde(default)]
     pub turntable: Option<Servo>,
+    /// The arm's joint stiffness, backlash and lumped masses (`[compliance]`, written by
+    /// `calibrate compliance`); without it the planner commands a rigid arm.
+    #[serde(default)]
+    pub compliance: Option<Compliance>,
 }
 
 impl Servos {
     /// Loads and checks `servos.toml`.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
         let s: Servos = read_toml(file)?;
+        if let Some((key, why)) = s.compliance.as_ref().and_then(|c| c.problem()) {
+            return Err(RobotError::bad(file, key, why));
+        }
         if !(s.period > 0.0 && s.period <= 1.0) {
             return Err(RobotError::bad(file, "period", "must be in (0, 1] s"));
         }
@@ -371,6 +378,47 @@ impl Workcell {
 }
 
 /// `a < b`, false when either is NaN.
+/// The arm's joint stiffness, gear backlash and lumped masses (servos.toml `[compliance]`).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Compliance {
+    /// Stiffness of each joint (base to wrist roll), N m per rad.
+    pub stiffness_nm_rad: [f64; 5],
+    /// Full width of each joint's gear dead band, degrees.
+    pub backlash_deg: [f64; 5],
+    /// The lumped masses, kg (see [`LUMPED_MASSES`]).
+    pub masses_kg: [f64; LUMPED_MASSES],
+}
+
+impl Compliance {
+    /// The first problem of the table (`[compliance]` key and why), if any.
+    pub fn problem(&self) -> Option<(String, String)> {
+        let bad =
+            |key: &str, i: usize, why: &str| Some((format!("compliance.{key}[{i}]"), why.into()));
+        for (i, k) in self.stiffness_nm_rad.iter().enumerate() {
+            if !(k.is_finite() && *k > 0.0) {
+                return bad("stiffness_nm_rad", i, "must be a finite number > 0");
+            }
+        }
+        for (i, b) in self.backlash_deg.iter().enumerate() {
+            if !(0.0..=10.0).contains(b) {
+                return bad("backlash_deg", i, "must be in 0..10 degrees");
+            }
+        }
+        for (i, m) in self.masses_kg.iter().enumerate() {
+            if !(0.0..=10.0).contains(m) {
+                return bad("masses_kg", i, "must be in 0..10 kg");
+            }
+        }
+        None
+    }
+}
+
+/// Lumped masses of the model: the elbow, wrist-pitch and wrist-roll joints' origins and the
+/// tool tip (a link's own mass splits exactly between its two ends for every joint upstream
+/// of both, so four points carry any mass distribution along the chain).
+pub const LUMPED_MASSES: usize = 4;
+
 pub(crate) fn less(a: f64, b: f64) -> bool {
     matches!(a.partial_cmp(&b), Some(std::cmp::Ordering::Less))
 }

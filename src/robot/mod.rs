@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 pub mod calibration;
+pub mod compliance;
 pub mod error;
 pub mod ik;
 pub mod model;
@@ -19,6 +20,7 @@ pub mod turntable;
 pub mod units;
 
 pub use calibration::{Servo, Servos, Tool, Workcell};
+pub use compliance::Compliance;
 pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
 pub use model::{JointSpec, Robot, ToolPose};
