@@ -14,7 +14,7 @@ use crate::compare::{self, Method};
 use crate::inspect::{self, InspectConfig, PoseSource, MAX_REFERENCE_POINTS};
 use crate::regions::{self, Regions};
 use crate::register::RegisterError;
-use crate::report::provenance::Provenance;
+use crate::report::{self, provenance::Provenance};
 
 /// Arguments of `inspect` (they override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -212,10 +212,15 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
     }
     let lines = std::mem::take(&mut found.provenance);
     let support = std::mem::take(&mut found.support);
+    let suggestion = found.suggestion.as_ref().map(suggestion_line);
     let written = Written {
         dev: &found.deviations,
         found: &found.regions,
         support: &support,
+        unmeasured: suggestion.as_ref().map(|words| report::Unmeasured {
+            in_area: found.in_area.as_deref(),
+            suggestion: words.clone(),
+        }),
     };
     write_outputs(out, written, lines, &provenance)?;
     found.times.lap("files and report");
@@ -225,8 +230,8 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &inspect::Inputs, out: &Path) -
         start.elapsed().as_secs_f64(),
     );
     println!("times: {}", found.times.line());
-    if let Some(sg) = &found.suggestion {
-        print_suggestion(sg);
+    if let Some(words) = &suggestion {
+        println!("suggested views: {words}");
     }
     match found.regions.verdict {
         regions::Verdict::Incomplete => Err(super::inspect_report::Incomplete {
@@ -245,6 +250,8 @@ struct Written<'a> {
     dev: &'a compare::Deviations,
     found: &'a Regions,
     support: &'a [u32],
+    /// With an incomplete verdict, the report's picture of the unmeasured area.
+    unmeasured: Option<report::Unmeasured<'a>>,
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
@@ -259,6 +266,7 @@ fn write_outputs(
         dev,
         found,
         support,
+        unmeasured,
     } = written;
     let table = compare::to_cloud(dev, &found.labels);
     // deviations.csv keeps its columns (a contract); the PLY also maps what was measured and,
@@ -286,7 +294,13 @@ fn write_outputs(
         },
         || {
             rayon::join(write_regions, || {
-                super::inspect_report::write(out, dev, found, report_summary, provenance)
+                super::inspect_report::write(
+                    out,
+                    (dev, found),
+                    report_summary,
+                    provenance,
+                    unmeasured,
+                )
             })
         },
     );
@@ -334,8 +348,9 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
     println!("verdict: {}", super::inspect_report::verdict_line(found));
 }
 
-/// The suggested views of an incomplete inspection, one line.
-fn print_suggestion(sg: &inspect::suggest::Suggestion) {
+/// The suggested views of an incomplete inspection in words (printed after "suggested
+/// views: " and under the report's picture of the unmeasured area).
+fn suggestion_line(sg: &inspect::suggest::Suggestion) -> String {
     let angles: Vec<String> = sg
         .table_angles
         .iter()
@@ -348,11 +363,11 @@ fn print_suggestion(sg: &inspect::suggest::Suggestion) {
             angles.join(", ")
         ),
     };
-    println!(
-        "suggested views: {:.1} % of the area to inspect not measured; {here}; {:.1} % faces \
+    format!(
+        "{:.1} % of the area to inspect not measured; {here}; {:.1} % faces \
          no table angle of this setup: scan it in a second setup, the part turned over \
          ([suggest] in --config: table axis and scanner direction)",
         100.0 * sg.unmeasured,
         100.0 * sg.other_setup
-    );
+    )
 }

@@ -200,6 +200,7 @@ pub fn write_page(
                 .map(super::inspect_report::region_mark)
                 .collect(),
             provenance: Some(provenance),
+            unmeasured: None,
         },
         paths: plan
             .passes

@@ -6,7 +6,7 @@ use clap::Args;
 use serde_json::{json, Value};
 
 use super::common::GeometryInput;
-use crate::cloud::{self, Geometry, PointCloud};
+use crate::cloud;
 use crate::register::{RegisterConfig, RegisterError, Registration};
 
 /// Arguments of `register` (flags override the `--config` file's values).
@@ -35,19 +35,6 @@ pub struct RegisterArgs {
     pub voxel: Option<f64>,
 }
 
-/// Loads a reference file: a cloud as is, a mesh sampled with facet normals.
-fn load_reference(args: &RegisterArgs) -> Result<PointCloud> {
-    let loaded = cloud::load(&args.reference, args.input.format, args.input.units)?;
-    Ok(match loaded.geometry {
-        Geometry::Cloud(c) => c,
-        Geometry::Mesh { mesh, .. } => {
-            cloud::sample_mesh(&mesh, args.reference_samples, args.seed)
-                .with_context(|| args.reference.display().to_string())?
-                .cloud
-        }
-    })
-}
-
 fn write_json(path: &Path, value: &Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
     std::fs::write(path, text + "\n").with_context(|| format!("{}: cannot write", path.display()))
@@ -59,7 +46,12 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     if args.voxel.is_some() {
         cfg.voxel = args.voxel;
     }
-    let reference = load_reference(&args)?;
+    let reference = super::common::load_reference(
+        &args.reference,
+        &args.input,
+        args.reference_samples,
+        args.seed,
+    )?;
     let scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;
