@@ -5,9 +5,9 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{Point3, Vector3};
-use polishbot::plan::clearance::check_samples;
-use polishbot::plan::collide::Scene;
-use polishbot::plan::{plan, Inspection, PlanConfig, RegionInfo, SurfacePoint};
+use polishbot::motion::clearance::check_samples;
+use polishbot::motion::collide::Scene;
+use polishbot::motion::{plan_part, Inspection, PlanConfig, RegionInfo, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
 fn calib(n: &str) -> std::path::PathBuf {
@@ -79,7 +79,7 @@ fn cell() -> (Robot, Workcell) {
 /// Plans `insp` once (printing what it made), then measures `plan` on it as bench `name`.
 fn measure(c: &mut Criterion, name: &str, insp: &Inspection, cfg: &PlanConfig) {
     let (robot, wc) = cell();
-    let p = plan(insp, &robot, &wc, cfg).expect("plan");
+    let p = plan_part(insp, &robot, &wc, cfg).expect("plan");
     let r = &p.reachability.regions[0];
     println!(
         "{name}: {} path points ({} left out), {} passes, {} samples, {:.1} s predicted",
@@ -92,7 +92,7 @@ fn measure(c: &mut Criterion, name: &str, insp: &Inspection, cfg: &PlanConfig) {
     let mut group = c.benchmark_group("plan");
     group.sample_size(10);
     group.bench_function(name, |b| {
-        b.iter(|| plan(insp, &robot, &wc, cfg).expect("plan"))
+        b.iter(|| plan_part(insp, &robot, &wc, cfg).expect("plan"))
     });
     // the collision check alone (issue 35's "10 us per checked sample"): every sample of the
     // plan under its segment's rule, a fresh scene per run (a scene remembers the samples it

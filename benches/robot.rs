@@ -4,7 +4,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Vector3;
-use polishbot::plan::{
+use polishbot::motion::{
     validate, JointTrajectory, Limits, Move, TrajectoryConfig, ValidationConfig,
 };
 use polishbot::robot::{IkConfig, IkTarget, Robot};

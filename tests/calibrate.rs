@@ -15,7 +15,7 @@ use nalgebra::{Matrix4, Point3, Rotation3, Vector3};
 use polishbot::bus::{Bus, BusConfig, Journal, ServoMap};
 use polishbot::calibrate::jog::Cell;
 use polishbot::calibrate::{self, files, CalibrationConfig, Fiducial, Fixture, Scripted};
-use polishbot::plan::frames;
+use polishbot::motion::frames;
 use polishbot::robot::{self, Robot, RobotConfig, Servos, Tool, Workcell};
 use polishbot::sim::model::raw_at_deg;
 use polishbot::sim::{Mechanics, SimArm, SimOptions};

@@ -6,11 +6,11 @@
 mod common;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::cell::removal_fit::{
+use polishbot::motion::{Inspection, RegionInfo, SurfacePoint};
+use polishbot::removal::fit::{
     agreement, evidence, fit, parse_predicted, pool, predicted_removal, Evidence, FitConfig,
 };
-use polishbot::plan::preston::PredictedRow;
-use polishbot::plan::{Inspection, RegionInfo, SurfacePoint};
+use polishbot::removal::prediction::PredictedRow;
 use rand::{Rng, SeedableRng};
 
 use common::polishbot;
@@ -176,7 +176,7 @@ fn a_pass_re_predicted_with_the_fitted_k_scales_the_predicted_removal_at_each_po
 fn the_planners_removal_rate_is_linear_in_k() {
     // what makes the re-prediction a scaling: the planner's removal is its influence rate
     // times the dwell, and the rate at every patch offset is proportional to k
-    use polishbot::plan::removal::{Influence, Tilt, ToolModel};
+    use polishbot::removal::{Influence, Tilt, ToolModel};
     let tool = ToolModel::default();
     let scaled = ToolModel {
         preston_k_mm2_n: tool.preston_k_mm2_n * 1.37,
@@ -415,7 +415,7 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
     assert_eq!(changed.len(), 2, "{changed:?}");
     assert!(changed[0].1.starts_with("preston_k_mm2_n = "));
     assert!(changed[1].1.starts_with("preston_k_rel_sd = "));
-    let tool = polishbot::plan::removal::ToolModel::load(&dir.join("tool.toml")).unwrap();
+    let tool = polishbot::removal::ToolModel::load(&dir.join("tool.toml")).unwrap();
     let k = tool.preston_k_mm2_n;
     // the uncertainty now the fit's (the shipped 30 % is a guess before any grind): the
     // simulator's k varies +-10 % over the part (5.8 % sd) and the model errs by a few percent
@@ -443,7 +443,7 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
     // run again on the tool file it just wrote: the plan's k comes from the plan, so the same
     // k is written (issue 52: it compounded 5.85e-6, 6.84e-6, 8.00e-6)
     common::succeed(&mut calibrate("plan.json"));
-    let again = polishbot::plan::removal::ToolModel::load(&dir.join("tool.toml")).unwrap();
+    let again = polishbot::removal::ToolModel::load(&dir.join("tool.toml")).unwrap();
     assert!(
         (again.preston_k_mm2_n / k - 1.0).abs() < 1e-9,
         "{} after {k}",

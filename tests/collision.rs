@@ -10,9 +10,9 @@ mod sweep;
 mod uniform;
 
 use nalgebra::{Matrix4, Point3, Vector3};
-use polishbot::plan::{
-    plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind, Solid,
-    SurfacePoint,
+use polishbot::motion::{
+    plan_part, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo, SegmentKind,
+    Solid, SurfacePoint,
 };
 use polishbot::robot::{Robot, Workcell};
 use polishbot::sim::grind::fk::chain;
@@ -57,7 +57,7 @@ struct Measured {
 }
 
 fn measure(q: &[f64], robot: &Robot, wc: &Workcell, points: &[SurfacePoint]) -> Measured {
-    let r = robot.tool.radius * 1e3;
+    let r = robot.tool.radius_mm();
     let (origins, tip, axis) = arm(q, robot);
     let c = to_ref(wc, &tip);
     let mut nearest = (f64::INFINITY, 0usize);
@@ -232,7 +232,7 @@ fn a_contact_in_a_slot_narrower_than_the_ball_is_left_out_because_the_tool_does_
     let robot = dofbot();
     let wc = Workcell::load(&calib("workcell.toml")).expect("workcell");
     let insp = slotted_face();
-    let p = plan(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
+    let p = plan_part(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
     let slot: Vec<_> = p
         .reachability
         .unreachable
@@ -296,7 +296,7 @@ fn a_transit_between_the_two_sides_of_a_wedge_goes_around_its_nose_with_the_marg
     let robot = dofbot();
     let (insp, wc) = wedge();
     let cfg = PlanConfig::rigid();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&insp, &robot, &wc, &cfg).expect("plan");
     for id in [0, 1] {
         let why: Vec<&String> = p
             .reachability
@@ -388,7 +388,7 @@ fn cylinder() -> (Inspection, Workcell) {
 fn a_turn_of_the_tool_at_a_contact_keeps_the_ball_centre_within_a_tenth_of_a_millimetre() {
     let robot = dofbot();
     let (insp, wc) = cylinder();
-    let p = plan(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
+    let p = plan_part(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
     let mut turns = 0;
     for seg in p
         .segments
@@ -431,7 +431,7 @@ fn a_tall_fixture_in_the_way_of_the_links_keeps_the_arm_out_and_run_refuses_a_pl
 {
     let robot = dofbot();
     let (insp, wc) = cylinder();
-    let open = plan(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
+    let open = plan_part(&insp, &robot, &wc, &PlanConfig::rigid()).expect("plan");
     assert!(!open.passes.is_empty());
     // a post beside the base, up to 0.4 m: the forearm reaches out over where it stands
     let post = Solid {
@@ -441,7 +441,7 @@ fn a_tall_fixture_in_the_way_of_the_links_keeps_the_arm_out_and_run_refuses_a_pl
     };
     let mut cfg = PlanConfig::rigid();
     cfg.collision.solids.push(post.clone());
-    let blocked = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let blocked = plan_part(&insp, &robot, &wc, &cfg).expect("plan");
     assert!(
         blocked.passes.is_empty(),
         "nothing can be ground past the post"
@@ -542,11 +542,11 @@ fn the_demo_plan_keeps_the_ball_out_of_the_part_except_at_the_contact() {
 /// scene answers every sample exactly as a fresh scene does, refusals included.
 #[test]
 fn a_scene_answers_a_sample_it_has_seen_as_a_fresh_scene_does() {
-    use polishbot::plan::collide::{Allow, Scene};
+    use polishbot::motion::collide::{Allow, Scene};
     let robot = dofbot();
     let (insp, wc) = wedge();
     let cfg = PlanConfig::rigid();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&insp, &robot, &wc, &cfg).expect("plan");
     let seen = Scene::new(&insp.points, &robot, &wc, &cfg.collision);
     let rules = [Allow::Free, Allow::Contact, Allow::Grind];
     let (mut clear, mut hits) = (0, 0);

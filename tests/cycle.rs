@@ -13,7 +13,7 @@ use polishbot::cell::cycle::{
     decide, decide_plan, planned_regions, predicted_rms, CycleConfig, IterationRecord, Measured,
     Outcome,
 };
-use polishbot::plan::Plan;
+use polishbot::motion::Plan;
 use polishbot::regions::Verdict;
 use polishbot::synth::DefectKind;
 
@@ -100,7 +100,7 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
 /// A plan.json with the given reachability regions and optional removal object, the rest
 /// empty; read through `Plan::parse` (the one schema).
 fn plan_with(regions: serde_json::Value, removal: Option<serde_json::Value>) -> Plan {
-    let metrics = serde_json::to_value(polishbot::plan::Metrics::default()).unwrap();
+    let metrics = serde_json::to_value(polishbot::motion::Metrics::default()).unwrap();
     let report = |r: &serde_json::Value| {
         serde_json::json!({"id": r["id"], "repairable": true, "peak_mm": 0.1, "area_mm2": 1.0,
             "layers": r["layers"], "path_points": 0, "unreachable_path_points": 0,

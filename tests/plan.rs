@@ -5,7 +5,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use nalgebra::Vector3;
-use polishbot::plan::{plan, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
+use polishbot::motion::{plan_part, Inspection, Plan, PlanConfig, PlanError, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 
 fn calib(name: &str) -> PathBuf {
@@ -57,7 +57,7 @@ fn worst_derivative_ratio(plan: &Plan, robot: &Robot) -> f64 {
 }
 
 fn polyline_distance(p: &Vector3<f64>, line: &[Vector3<f64>]) -> f64 {
-    polishbot::plan::check::polyline_distance(p, line)
+    polishbot::motion::check::polyline_distance(p, line)
 }
 
 #[test]
@@ -67,7 +67,7 @@ fn plan_from_a_synthetic_inspection_meets_every_acceptance_number() {
     let inspection = Inspection::load(tmp.path()).expect("load inspection");
     let (robot, wc) = dofbot();
     let cfg = PlanConfig::rigid();
-    let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&inspection, &robot, &wc, &cfg).expect("plan");
     println!(
         "defects: {:?}",
         truth
@@ -168,7 +168,7 @@ fn small_plan(dir: &Path) -> (Plan, PathBuf) {
         depth_step_mm: 1.0,
         ..PlanConfig::rigid()
     };
-    let p = plan(&inspection, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&inspection, &robot, &wc, &cfg).expect("plan");
     assert!(p.passes.len() > 2, "the case must have reachable passes");
     let path = dir.join("plan.json");
     p.save(&path).expect("save");
@@ -190,7 +190,7 @@ fn sim_run_receives_exactly_the_plan_frames_at_the_period() {
     let p = Plan::load(&path).expect("load");
     let checked = p.check(&robot, &Default::default()).expect("re-check");
     let cfg = BusConfig {
-        servo_map: polishbot::plan::frames::servo_map(&robot).expect("map"),
+        servo_map: polishbot::motion::frames::servo_map(&robot).expect("map"),
         ..BusConfig::default()
     };
     let arm = SimArm::new(&SimOptions::default(), &cfg.servo_map).expect("sim");
@@ -372,11 +372,11 @@ fn run_refuses_a_tampered_plan_before_sending_anything() {
     let mut bad = p.clone();
     bad.samples[k].q[1] += 0.01;
     let qs: Vec<Vec<f64>> = bad.samples.iter().map(|s| s.q.clone()).collect();
-    let map = polishbot::plan::frames::servo_map(&robot).unwrap();
-    bad.frames = polishbot::plan::frames::encode(&qs, &map, 90.0, bad.period)
+    let map = polishbot::motion::frames::servo_map(&robot).unwrap();
+    bad.frames = polishbot::motion::frames::encode(&qs, &map, 90.0, bad.period)
         .unwrap()
         .iter()
-        .map(|f| polishbot::plan::frames::to_hex(f))
+        .map(|f| polishbot::motion::frames::to_hex(f))
         .collect();
     assert!(matches!(
         bad.check(&robot, &Default::default()),
@@ -403,7 +403,7 @@ fn unreachable_regions_are_reported_point_by_point() {
     let inspection = Inspection::load(tmp.path()).unwrap();
     let (robot, mut wc) = dofbot();
     wc.robot_from_reference[(1, 3)] += 1.0; // the part 1 m farther away
-    let p = plan(&inspection, &robot, &wc, &PlanConfig::rigid()).unwrap();
+    let p = plan_part(&inspection, &robot, &wc, &PlanConfig::rigid()).unwrap();
     assert!(p.passes.is_empty());
     let total: usize = p.reachability.regions.iter().map(|r| r.path_points).sum();
     assert!(total > 0);
@@ -425,7 +425,7 @@ fn unreachable_regions_are_reported_point_by_point() {
         require_full_reach: true,
         ..PlanConfig::rigid()
     };
-    let err = plan(&inspection, &robot, &wc, &strict).unwrap_err();
+    let err = plan_part(&inspection, &robot, &wc, &strict).unwrap_err();
     assert!(matches!(err, PlanError::Unreachable(ref v) if v.len() == total));
     assert!(err.to_string().contains("out of reach"));
 }

@@ -5,11 +5,11 @@
 mod common;
 
 use nalgebra::{Point3, Vector3};
-use polishbot::plan::removal::force::{joint_torques, overload, DEFAULT_FORCE_SHARE};
-use polishbot::plan::removal::influence::Reach;
-use polishbot::plan::removal::montecarlo::{spread, JointError, MonteCarloConfig};
-use polishbot::plan::removal::{solve_region, Contact, Influence, RemovalConfig, ToolModel};
-use polishbot::plan::SurfacePoint;
+use polishbot::removal::force::{joint_torques, overload, DEFAULT_FORCE_SHARE};
+use polishbot::removal::influence::Reach;
+use polishbot::removal::montecarlo::{spread, JointError, MonteCarloConfig};
+use polishbot::removal::{solve_region, Contact, Influence, RemovalConfig, ToolModel};
+use polishbot::repair::SurfacePoint;
 
 /// Ball radius of the shipped tool, mm.
 const BALL_MM: f64 = 3.0;
@@ -226,8 +226,8 @@ fn the_plate_at_every_spindle_tilt_matches_the_integration() {
 /// the workcell's rotation; the tilt it reports is that axis's angle from the inward normal.
 #[test]
 fn a_contacts_spindle_axis_is_the_arms_at_its_joint_angles() {
-    use polishbot::plan::preston::{contact, reference_from_robot};
-    use polishbot::plan::{PlannedPass, PlannedPoint, StrokeKind};
+    use polishbot::motion::dwell::{contact, reference_from_robot};
+    use polishbot::motion::{PlannedPass, PlannedPoint, StrokeKind};
     let robot = common::dofbot();
     let wc = polishbot::robot::Workcell::load(&common::calib("workcell.toml")).unwrap();
     let tip = robot.tool.tip_offset;

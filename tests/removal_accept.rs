@@ -8,7 +8,7 @@
 //! are not within it yet (docs/ALGORITHMS.md, "What one pass can promise").
 mod common;
 
-use polishbot::plan::{plan, Inspection, PlanConfig, PlanError};
+use polishbot::motion::{plan_part, Inspection, PlanConfig, PlanError};
 use polishbot::synth::SynthConfig;
 
 /// The defect heights, mm: reachable bumps of 0.08-0.5 mm.
@@ -46,7 +46,7 @@ fn run_seed(seed: u64, k_rel_sd: Option<f64>) -> String {
     let config = PlanConfig::default();
     let started = std::time::Instant::now();
     let label = format!("seed {seed} (k sd {k_rel_sd:?})");
-    match plan(&inspection, &robot, &wc, &config) {
+    match plan_part(&inspection, &robot, &wc, &config) {
         Ok(p) => {
             let line = common::removal::accept(&p, &label);
             format!(

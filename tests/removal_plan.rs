@@ -9,11 +9,11 @@ use std::path::Path;
 use common::polishbot;
 use common::removal::TOLERANCE_MM;
 use nalgebra::{Point3, Vector3};
-use polishbot::plan::removal::ALLOWANCE_STEP_SHARE;
-use polishbot::plan::{
-    collide, plan, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo,
+use polishbot::motion::{
+    collide, plan_part, CollisionConfig, Inspection, Plan, PlanConfig, PlanError, RegionInfo,
     SegmentKind, SurfacePoint,
 };
+use polishbot::removal::ALLOWANCE_STEP_SHARE;
 use polishbot::robot::Workcell;
 
 /// The shipped tool.toml's preload, mm.
@@ -187,7 +187,7 @@ fn a_region_out_of_reach_is_left_out_with_reasons_not_planned_as_nothing() {
     };
     let robot = common::dofbot();
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
-    let p = plan(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
+    let p = plan_part(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
     let removal = p.removal.as_ref().expect("a removal report");
     let planned: Vec<usize> = removal.regions.iter().map(|r| r.region).collect();
     assert!(
@@ -228,7 +228,7 @@ fn tall_bump_plan(name: &str, max_pass: f64) -> (Plan, PlanConfig) {
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let mut config = PlanConfig::default();
     config.removal.max_pass_mm = max_pass;
-    let p = plan(&inspection, &robot, &wc, &config).expect("plan");
+    let p = plan_part(&inspection, &robot, &wc, &config).expect("plan");
     let planned = p.removal.as_ref().expect("a removal report").regions.len();
     assert_eq!(planned, 1, "{:?}", p.reachability.unreachable.first());
     (p, config)

@@ -27,8 +27,8 @@ mod common;
 use std::path::Path;
 
 use nalgebra::Point3;
-use polishbot::plan::preston::{contact, reference_from_robot};
-use polishbot::plan::{plan, Inspection, Plan, PlanConfig, SegmentKind};
+use polishbot::motion::dwell::{contact, reference_from_robot};
+use polishbot::motion::{plan_part, Inspection, Plan, PlanConfig, SegmentKind};
 use polishbot::preprocess::{estimate_normals, NormalConfig, Orientation};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::sim::grind::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
@@ -191,14 +191,14 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
             let d = Path::new(&demo);
             let mut plan = Plan::load(&d.join("plan.json")).unwrap();
             let text = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
-            let rows = polishbot::cell::removal_fit::parse_predicted(&text).unwrap();
+            let rows = polishbot::removal::fit::parse_predicted(&text).unwrap();
             plan.removal.as_mut().expect("a removal plan").rows = rows;
             (Inspection::load(&d.join("inspection")).unwrap(), plan)
         }
         Err(_) => {
             let inspection = demo_like(dir.path());
             let started = std::time::Instant::now();
-            let plan = plan(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
+            let plan = plan_part(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
             println!("planned in {:.2} s", started.elapsed().as_secs_f64());
             (inspection, plan)
         }

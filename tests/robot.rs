@@ -5,7 +5,7 @@ mod common;
 use std::path::Path;
 
 use nalgebra::{UnitQuaternion, Vector3};
-use polishbot::plan::{
+use polishbot::motion::{
     validate, JointTrajectory, LimitKind, Limits, Move, TrajectoryConfig, ValidationConfig,
 };
 use polishbot::robot::{

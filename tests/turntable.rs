@@ -8,8 +8,8 @@ use common::femoral::{cell, inspection};
 use nalgebra::Point3;
 use polishbot::bus::{Bus, BusConfig, Journal, ResumePoint};
 use polishbot::cell::{execute, steps, RunConfig, Step};
-use polishbot::plan::file::CheckedPlan;
-use polishbot::plan::{plan_cell, table_file};
+use polishbot::motion::file::CheckedPlan;
+use polishbot::motion::{plan, table_file};
 use polishbot::robot::{Robot, Turntable};
 use polishbot::sim::{ExtraServo, SimArm, SimOptions};
 
@@ -25,10 +25,10 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
     let (mut with, mut without, mut total) = (0.0, 0.0, 0.0);
     for seed in 0..10 {
         let insp = inspection(1000 + seed, 6);
-        let turned = plan_cell(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+        let turned = plan(&insp, &robot, &wc, Some(&table), &config).expect("plan");
         // today's planner refuses some of these parts outright (a retract it cannot clear):
         // that case counts as nothing covered
-        let (c0, t0) = match plan_cell(&insp, &plain_robot, &plain_wc, None, &plain) {
+        let (c0, t0) = match plan(&insp, &plain_robot, &plain_wc, None, &plain) {
             Ok(fixed) => common::femoral::planned_area(&fixed),
             Err(e) => {
                 println!("case {seed}: without the table: {e}");
@@ -81,8 +81,8 @@ fn a_cell_without_a_table_plans_as_before() {
     let (robot, wc, table, config) = cell("");
     assert!(table.is_none());
     let insp = inspection(7, 3);
-    let a = plan_cell(&insp, &robot, &wc, None, &config).unwrap();
-    let b = polishbot::plan::plan(&insp, &robot, &wc, &config).unwrap();
+    let a = plan(&insp, &robot, &wc, None, &config).unwrap();
+    let b = polishbot::motion::plan_part(&insp, &robot, &wc, &config).unwrap();
     assert_eq!(a, b);
     let text = serde_json::to_string(&a).unwrap();
     assert!(!text.contains("turntable"));
@@ -115,7 +115,7 @@ fn plans_without_the_table_survey() {
     let mut refused = 0;
     for seed in (1000..1010).chain(2000..2010) {
         let insp = inspection(seed, 6);
-        match plan_cell(&insp, &robot, &wc, None, &config) {
+        match plan(&insp, &robot, &wc, None, &config) {
             Ok(p) => {
                 let un = &p.reachability.unreachable;
                 let retract = un.iter().filter(|u| u.reason.contains("retract")).count();
@@ -144,7 +144,7 @@ fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
     let table = table.expect("a turntable");
     for seed in 2000..2010 {
         let insp = inspection(seed, 4);
-        let Ok(plan) = plan_cell(&insp, &robot, &wc, Some(&table), &config) else {
+        let Ok(plan) = plan(&insp, &robot, &wc, Some(&table), &config) else {
             continue;
         };
         let tp = plan.turntable.as_ref().expect("table part");
@@ -172,7 +172,7 @@ fn a_table_plan_without_its_table_moves_is_refused() {
     let table = table.expect("a turntable");
     for seed in 2000..2010 {
         let insp = inspection(seed, 4);
-        let Ok(plan) = plan_cell(&insp, &robot, &wc, Some(&table), &config) else {
+        let Ok(plan) = plan(&insp, &robot, &wc, Some(&table), &config) else {
             continue;
         };
         if plan.turntable.as_ref().is_none_or(|t| t.moves.is_empty()) {
@@ -215,7 +215,7 @@ fn board_table() -> board::TableServo {
 
 fn bus_config(robot: &Robot) -> BusConfig {
     BusConfig {
-        servo_map: polishbot::plan::frames::servo_map(robot).unwrap(),
+        servo_map: polishbot::motion::frames::servo_map(robot).unwrap(),
         ..BusConfig::default()
     }
 }

@@ -8,7 +8,7 @@ use polishbot::bus::{Bus, BusConfig, Journal};
 use polishbot::calibrate::jog::{Cell, Scripted, Touch};
 use polishbot::calibrate::turntable::{fit_turntable, patch_workcell, turntable};
 use polishbot::calibrate::{CalibError, CalibrationConfig};
-use polishbot::plan::frames;
+use polishbot::motion::frames;
 use polishbot::robot::{IkConfig, IkTarget, Robot, Turntable, Workcell};
 use polishbot::sim::{Mechanics, SimArm, SimOptions};
 

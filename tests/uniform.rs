@@ -7,7 +7,7 @@ mod common;
 
 use std::collections::BTreeMap;
 
-use polishbot::plan::{plan_cell, Inspection, PlanMode};
+use polishbot::motion::{plan, Inspection, PlanMode};
 
 use common::femoral::{cell, parametric_case, planned_area, reasons, uniform_case};
 
@@ -16,7 +16,7 @@ fn measure(dir: &str, insp: &Inspection, seed: u64) -> (f64, f64) {
     let (robot, wc, table, mut config) = cell(dir);
     // `plan`'s default mode, as a user runs it
     config.mode = PlanMode::Removal;
-    let plan = plan_cell(insp, &robot, &wc, table.as_ref(), &config).expect("plan");
+    let plan = plan(insp, &robot, &wc, table.as_ref(), &config).expect("plan");
     let (c, t) = planned_area(&plan);
     println!(
         "cell {dir:?} seed {seed}: repairable {t:.1} mm^2, planned {:.1} %, left out {:?}",

@@ -6,9 +6,9 @@
 //! Front function: [`decide`] with a [`CycleConfig`]; one [`IterationRecord`] per inspection.
 use serde::{Deserialize, Serialize};
 
-use super::removal_fit::{Agreement, SAME_POINT_MM};
-use crate::plan::{Inspection, Plan};
+use crate::motion::{Inspection, Plan};
 use crate::regions::{Region, Verdict};
+use crate::removal::fit::{Agreement, SAME_POINT_MM};
 use crate::report::escape;
 use crate::spatial::Neighbours;
 

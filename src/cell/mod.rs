@@ -6,9 +6,7 @@
 //! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`]; the removal calibration
 //! [`removal_fit::fit`] with a [`removal_fit::FitConfig`].
 pub mod cycle;
-mod matching;
 mod reach;
-pub mod removal_fit;
 pub mod removal_shift;
 mod stream;
 

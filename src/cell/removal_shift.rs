@@ -12,8 +12,8 @@
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
 
-use super::matching::{partners, repairable_ids};
-use crate::plan::Inspection;
+use crate::removal::matching::{partners, repairable_ids};
+use crate::repair::Inspection;
 use crate::spatial::{tangent_basis, Neighbours, SparseGrid};
 
 /// Settings of the registration and of the stop rule.

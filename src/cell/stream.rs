@@ -8,7 +8,7 @@ use dofbot_protocol::{AnyTarget, BusId, Pose};
 use serde::{Deserialize, Serialize};
 
 use crate::bus::{Bus, BusError, Transport};
-use crate::plan::file::CheckedPlan;
+use crate::motion::file::CheckedPlan;
 
 /// Settings of `run`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -11,7 +11,7 @@ use serde_json::json;
 use crate::bus::{
     self, Bus, BusConfig, Journal, SerialTransport, ServoMap, Transport, JOINT_COUNT,
 };
-use crate::plan::frames;
+use crate::motion::frames;
 use crate::robot::{Robot, RobotConfig, Turntable};
 use crate::sim::{self, SimArm, SimOptions};
 

@@ -17,7 +17,7 @@ use crate::calibrate::{
     self, files, load_targets, CalibError, CalibrationConfig, Fixture, JogTerminal, Scripted,
     TouchSource,
 };
-use crate::plan::frames;
+use crate::motion::frames;
 use crate::robot::{Robot, RobotConfig};
 use crate::sim::SimOptions;
 

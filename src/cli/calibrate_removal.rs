@@ -1,6 +1,6 @@
 //! `polishbot calibrate removal --before DIR1 --after DIR2 --plan plan.json [--tool FILE]`:
 //! Preston's k fitted from two inspections and the plan ground between them
-//! (`cell::removal_fit`), written into tool.toml's `[removal] preston_k_mm2_n` with its
+//! (`removal::fit`), written into tool.toml's `[removal] preston_k_mm2_n` with its
 //! uncertainty `preston_k_rel_sd`. No arm is
 //! needed. `cycle` collects every grind's points through [`prediction`] and
 //! [`evidence_loaded`], pools them and writes k with [`write_fit`].
@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 
 use crate::calibrate::files;
-use crate::cell::removal_fit::{self, Evidence, FitConfig, RemovalFit};
 use crate::cell::removal_shift::{self, ShiftConfig};
-use crate::plan::removal::ToolModel;
-use crate::plan::{Inspection, Plan};
+use crate::motion::{Inspection, Plan};
+use crate::removal::fit::{self, Evidence, FitConfig, RemovalFit};
+use crate::removal::ToolModel;
 
 /// What `calibrate removal` reads.
 #[derive(Debug, Clone)]
@@ -38,7 +38,7 @@ pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit>
     let shift_cfg = ShiftConfig::default();
     let shifts = removal_shift::register(&before, &after, &predicted, &shift_cfg);
     let predicted = removal_shift::shifted_prediction(&before, &predicted, &shifts, &shift_cfg);
-    removal_fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+    fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
 /// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
@@ -63,8 +63,8 @@ pub fn prediction(
     let csv = plan.with_file_name("predicted.csv");
     let text = std::fs::read_to_string(&csv)
         .with_context(|| format!("{}: cannot read (written beside plan.json)", csv.display()))?;
-    let rows = removal_fit::parse_predicted(&text)
-        .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
+    let rows =
+        fit::parse_predicted(&text).map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
     let recorded = serde_json::from_str::<serde_json::Value>(&plan_text)?["provenance"]["config"]
         ["removal_tool"]["preston_k_mm2_n"]
         .as_f64();
@@ -76,7 +76,7 @@ pub fn prediction(
         ),
         None => ToolModel::load(tool)?.preston_k_mm2_n,
     };
-    let predicted = removal_fit::predicted_removal(before, &rows)
+    let predicted = fit::predicted_removal(before, &rows)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv.display()))?;
     Ok((predicted, k))
 }
@@ -91,7 +91,7 @@ pub fn evidence_loaded(
     plan_k: f64,
     cfg: &FitConfig,
 ) -> anyhow::Result<Evidence> {
-    removal_fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+    fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
 /// `removal_fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.

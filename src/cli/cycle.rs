@@ -16,10 +16,10 @@ use crate::cell::cycle::{
     decide, decide_plan, table_html, table_json, table_text, CycleConfig, IterationRecord,
     Measured, Outcome, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS,
 };
-use crate::cell::removal_fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
 use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
-use crate::plan::{Inspection, Plan, PlanMode};
+use crate::motion::{Inspection, Plan, PlanMode};
 use crate::regions::Regions;
+use crate::removal::fit::{self as removal_fit, Agreement, Evidence, FitConfig, RemovalFit};
 
 /// Exit code of a loop that ended without the part within tolerance (no progress, iterations
 /// used up, nothing left the arm can grind); an inspection's incomplete verdict keeps its 3.

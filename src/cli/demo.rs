@@ -11,7 +11,7 @@ use nalgebra::Point3;
 use super::common::read_json;
 use super::{inspect, plan, run as run_cmd};
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
-use crate::plan::Plan;
+use crate::motion::Plan;
 use crate::regions::Regions;
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 

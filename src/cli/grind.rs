@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use crate::bus::ServoMap;
 use crate::cloud::{self, PlyPrecision, PointCloud, ScalarField};
-use crate::plan::Inspection;
 use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
+use crate::repair::Inspection;
 use crate::robot::Workcell;
 use crate::sim::grind::{grind, GrindReport, ServoTrace, VirtualPart};
 use crate::sim::{SimArm, SimOptions};

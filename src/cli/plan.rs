@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use serde::Deserialize;
 
-use crate::plan::{self, ros, Inspection, PlanConfig};
+use crate::motion::{self, ros, Inspection, PlanConfig};
 use crate::robot::{self, RobotConfig};
 
 /// Arguments of `plan`.
@@ -33,7 +33,7 @@ pub struct PlanArgs {
     /// Rigid (depth layers) or removal (a compliant tool's dwell map)
     /// [default: `mode` of [plan], else removal].
     #[arg(long, value_enum)]
-    pub mode: Option<plan::PlanMode>,
+    pub mode: Option<motion::PlanMode>,
 }
 
 /// `--config` TOML of `plan` and `run`: `[robot]` (RobotConfig: urdf, tool, servos, workcell,
@@ -63,16 +63,16 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     }
     let (robot, workcell) = robot::load(&cfg.robot)?;
     // the tool file's [removal] checked here, so that its errors name the file's full path
-    crate::plan::removal::ToolModel::load(&cfg.robot.tool)?;
+    crate::removal::ToolModel::load(&cfg.robot.tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
-        plan::PlanError::Config(m) => file.refuse("plan", &m),
+        motion::PlanError::Config(m) => file.refuse("plan", &m),
         e => e.into(),
     })?;
-    let solids = plan::collide::solids_beside(&cfg.robot.workcell)?;
+    let solids = motion::collide::solids_beside(&cfg.robot.workcell)?;
     cfg.plan.collision.solids.extend(solids);
     let inspection = Inspection::load(&args.inspection)?;
     let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
-    let plan = plan::plan_cell(&inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
+    let plan = motion::plan(&inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     plan.save(&args.out)?;
     let provenance = super::plan_report::provenance(&args.inspection, &cfg.robot, &cfg.plan)?;
     provenance.stamp_json(&args.out)?;
@@ -91,14 +91,14 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
 
 /// Removal mode: writes predicted.csv beside the plan and prints each region's prediction.
 fn write_removal(
-    removal: &plan::preston::RemovalReport,
+    removal: &crate::removal::prediction::RemovalReport,
     out: &Path,
     cfg: &PlanConfig,
 ) -> anyhow::Result<()> {
     let csv = out.with_file_name("predicted.csv");
     std::fs::write(
         &csv,
-        plan::preston::predicted_csv(removal, &cfg.monte_carlo),
+        crate::removal::prediction::predicted_csv(removal, &cfg.monte_carlo),
     )
     .map_err(|e| anyhow::anyhow!("{}: {e}", csv.display()))?;
     for r in &removal.regions {
@@ -121,7 +121,7 @@ fn write_removal(
 }
 
 /// Prints what was planned: totals, accuracy, per region reach and warnings, table moves.
-fn print_summary(plan: &plan::Plan, inspection: &Path, out: &Path) {
+fn print_summary(plan: &motion::Plan, inspection: &Path, out: &Path) {
     let m = &plan.metrics;
     let planned: Vec<_> = plan
         .reachability

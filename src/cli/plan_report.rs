@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use nalgebra::{Point3, Vector3};
 
-use crate::plan::{Inspection, Plan, PlanConfig, Segment, SegmentKind, StrokeKind};
+use crate::motion::{Inspection, Plan, PlanConfig, Segment, SegmentKind, StrokeKind};
 use crate::report::plan_page::{self, PlanPage, ToolPath};
 use crate::report::provenance::Provenance;
 use crate::report::{ReportConfig, ReportInput, Table};
@@ -33,7 +33,7 @@ pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> 
     let files: Vec<(&str, &Path)> = inputs.iter().map(|(r, p)| (*r, p.as_path())).collect();
     let existing: Vec<(&str, &Path)> = files.into_iter().filter(|(_, p)| p.is_file()).collect();
     // the removal model the plan used (its k is what `calibrate removal` scales from)
-    let tool = crate::plan::removal::ToolModel::load(&robot.tool).ok();
+    let tool = crate::removal::ToolModel::load(&robot.tool).ok();
     let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": tool });
     Provenance::new(
         "plan",

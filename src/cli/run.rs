@@ -9,8 +9,8 @@ use super::arm::DeviceArgs;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
-use crate::plan::file::CheckedPlan;
-use crate::plan::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
+use crate::motion::file::CheckedPlan;
+use crate::motion::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
 use crate::robot::{Robot, RobotConfig, Turntable, Workcell};
 use crate::sim::SimOptions;
 

@@ -9,8 +9,8 @@ use dofbot_protocol::{AnyTarget, BusId};
 use serde_json::json;
 
 use crate::bus::{Bus, BusError, Transport, JOINT_COUNT};
-use crate::plan::table_file::{self, TablePlan};
-use crate::plan::TrajectoryConfig;
+use crate::motion::table_file::{self, TablePlan};
+use crate::motion::TrajectoryConfig;
 use crate::robot::Turntable;
 
 /// The arm pose the table may turn under: every joint at zero (`[plan] home`'s default, the
@@ -74,7 +74,7 @@ pub fn turn<T: Transport>(
     };
     let checked = table_file::check(&plan, table, 1, period)?;
     let targets = &checked.moves[0].raw;
-    let time_ms = crate::plan::frames::frame_time_ms(period)?;
+    let time_ms = crate::motion::frames::frame_time_ms(period)?;
     let start = bus.transport().now();
     for (k, &r) in targets.iter().enumerate() {
         let due = start + Duration::from_secs_f64(k as f64 * period);

@@ -5,8 +5,8 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use super::part::{Part, SampleVerdict};
-use crate::plan::collide::{Allow, Hit, Obstacle, Scene};
-use crate::plan::{PlanConfig, Solid};
+use crate::motion::collide::{Allow, Hit, Obstacle, Scene};
+use crate::motion::{PlanConfig, Solid};
 use crate::robot::{IkTarget, Robot, Servo, Turntable, Unreachable, Workcell};
 
 /// Half width of the table's spindle (a square bar along the axis from the part's centroid
@@ -217,7 +217,7 @@ pub fn score(
     cc.solids = solids.clone();
     let mut scene = Scene::new(&part.points, robot, &wc0, &cc);
     let home = &ctx.plan.home;
-    let reach = robot.tool.radius * 1e3 + ctx.plan.contact_offset_mm + ctx.plan.allowance_mm;
+    let reach = robot.tool.radius_mm() + ctx.plan.contact_offset_mm + ctx.plan.allowance_mm;
     let samples = &part.surface[..n.min(part.surface.len())];
     let mut reached: Vec<Option<f64>> = vec![None; samples.len()];
     let mut nearest: Vec<(u8, String, f64)> = vec![(0, String::new(), 0.0); samples.len()];

@@ -21,7 +21,7 @@ use anyhow::{Context, Result};
 use nalgebra::Matrix4;
 use serde::Serialize;
 
-use crate::plan::{PlanConfig, Solid};
+use crate::motion::{PlanConfig, Solid};
 use crate::robot::{Robot, Servos, Tool};
 
 pub use config::DesignConfig;

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use super::config::DesignConfig;
 use crate::cloud::{self, Geometry, Mesh, Units};
-use crate::plan::SurfacePoint;
+use crate::repair::SurfacePoint;
 use crate::spatial::Neighbours;
 
 /// The part: its collision model and the articular surface's samples (reference frame, mm).

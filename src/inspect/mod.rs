@@ -1,7 +1,7 @@
 //! Inspection as a library function: a scan measured against its reference, from the files to
 //! the verdict. [`run`] reads top to bottom: load and check -> outlier filter -> register (or a
 //! given pose) -> core points -> compare -> regions and verdict. It prints nothing and writes
-//! nothing; `polishbot inspect` (and `demo`) write its [`Inspection`] to files.
+//! nothing; `polishbot inspect` (and `demo`) write its [`Findings`] to files.
 pub mod area;
 pub mod checks;
 mod config;
@@ -26,7 +26,7 @@ use crate::regions::{self, Regions};
 
 /// The outcome of [`run`].
 #[derive(Debug)]
-pub struct Inspection {
+pub struct Findings {
     /// The pose of the scan and where it came from.
     pub pose: PoseSource,
     /// The poses of the further scans (`Inputs::more_scans`), in order.
@@ -52,7 +52,7 @@ pub struct Inspection {
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
 /// [`crate::register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
-pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
+pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
     let mut times = StageTimes::default();
     let mut notices = Vec::new();
     let spin = crate::progress::spinner("load");
@@ -125,7 +125,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Inspection> {
     let suggestion = (regions.verdict == regions::Verdict::Incomplete)
         .then(|| suggest::suggest(&deviations, in_area.as_deref(), &pose.pose(), &cfg.suggest));
     times.lap("regions");
-    Ok(Inspection {
+    Ok(Findings {
         pose,
         more_poses,
         support,

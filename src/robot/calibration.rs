@@ -28,14 +28,19 @@ pub struct Tool {
     /// distance from the ball centre to the flange (`|tip_offset|`).
     #[serde(default)]
     pub shank_length: Option<f64>,
-    /// The `[removal]` table: the compliant tool's removal model, read and checked by
-    /// `plan::removal::ToolModel::load` (kept here unparsed so this file's other keys stay
-    /// strict).
+    /// The `[removal]` table: the compliant tool's removal model, typed and checked by its one
+    /// reader `removal::ToolModel::from_table` (kept here unparsed: `robot` sits below
+    /// `removal`, and this file's other keys stay strict).
     #[serde(default)]
     pub removal: Option<toml::Value>,
 }
 
 impl Tool {
+    /// Radius of the burr, mm (the planners' unit on the part).
+    pub fn radius_mm(&self) -> f64 {
+        super::units::mm(self.radius)
+    }
+
     /// Shank radius when tool.toml gives none, metres: 1.6 mm, the 3.2 mm (1/8 inch) shank of
     /// rotary-tool burrs with heads up to 6 mm (the default tool's 6 mm ball).
     pub const DEFAULT_SHANK_RADIUS: f64 = 0.0016;
@@ -84,8 +89,8 @@ impl Tool {
                 format!(
                     "the ball centre is {:.4} mm from the flange, less than the ball radius {:.4} mm: \
                      the ball would sit inside the flange (tip_offset is in metres, flange frame)",
-                    reach * 1e3,
-                    tool.radius * 1e3
+                    super::units::mm(reach),
+                    tool.radius_mm()
                 ),
             ));
         }

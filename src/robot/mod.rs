@@ -16,6 +16,7 @@ mod planar;
 pub mod resolution;
 pub mod servo_map;
 pub mod turntable;
+pub mod units;
 
 pub use calibration::{Servo, Servos, Tool, Workcell};
 pub use error::RobotError;

@@ -4,7 +4,7 @@
 //! turned by this test from workcell.toml's `[turntable]` axis and centre at each sample's
 //! table angle (plan.json's `turntable`), not by the planner's placement.
 use nalgebra::{Point3, Rotation3, Translation3, Unit, Vector3};
-use polishbot::plan::{plan_cell, Inspection, Plan, SegmentKind};
+use polishbot::motion::{plan, Inspection, Plan, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::synth::synth;
 
@@ -91,7 +91,7 @@ fn case(seed: u64, defects: usize) -> (Inspection, usize) {
 /// The default cell's plan of `insp`, checked.
 fn default_cell(insp: &Inspection) -> (Plan, Tally) {
     let (robot, wc, _, config) = cell("");
-    let plan = plan_cell(insp, &robot, &wc, None, &config).expect("plan");
+    let plan = plan(insp, &robot, &wc, None, &config).expect("plan");
     let t = tally(&plan, &robot, insp, |_| vec![wc.clone()]);
     (plan, t)
 }
@@ -100,7 +100,7 @@ fn default_cell(insp: &Inspection) -> (Plan, Tally) {
 fn turntable_cell(insp: &Inspection) -> (Plan, Tally) {
     let (robot, wc, table, config) = cell("turntable/");
     let table = table.expect("turntable");
-    let plan = plan_cell(insp, &robot, &wc, Some(&table), &config).expect("plan");
+    let plan = plan(insp, &robot, &wc, Some(&table), &config).expect("plan");
     let t = turned_tally(&plan, &robot, insp, &wc, "turntable/");
     (plan, t)
 }

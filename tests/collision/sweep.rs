@@ -2,8 +2,8 @@
 //! part to the next sample and skips the body's search while that bound allows: it skips
 //! searches, never an answer.
 use nalgebra::{Matrix4, Point3};
-use polishbot::plan::collide::{Allow, Body, Scene};
-use polishbot::plan::{plan, CollisionConfig, Plan, PlanConfig, SurfacePoint};
+use polishbot::motion::collide::{Allow, Body, Scene};
+use polishbot::motion::{plan_part, CollisionConfig, Plan, PlanConfig, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
 use super::{arm, grid, measure, point, to_ref, wedge};
@@ -82,7 +82,7 @@ fn a_sweep_over_a_plan_answers_every_sample_as_the_plain_check_does() {
     let robot = dofbot();
     let (insp, wc) = wedge();
     let cfg = PlanConfig::rigid();
-    let p = plan(&insp, &robot, &wc, &cfg).expect("plan");
+    let p = plan_part(&insp, &robot, &wc, &cfg).expect("plan");
     for (allow, clear, hits, skipped) in
         sweep_answers_as_plain(&p, &insp.points, &wc, &cfg.collision)
     {
@@ -141,7 +141,7 @@ pub(super) fn sweep_answers_as_plain(
 #[test]
 fn a_ball_inside_the_part_between_two_clear_samples_is_caught_by_the_sweep() {
     let (robot, wc, cfg) = bare_cell();
-    let r = robot.tool.radius * 1e3;
+    let r = robot.tool.radius_mm();
     let q = |phi: f64| vec![phi, 0.6, 0.4, 0.3, 0.0];
     // the ball centre and tool axis at base angle phi (reference frame, mm)
     let ball = |phi: f64| {

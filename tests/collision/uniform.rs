@@ -6,7 +6,7 @@
 //! presses the ball its preload (2 mm) into the part on purpose, which this check (ball depth,
 //! shank from the ball centre) reads as a collision; removal mode's planned share is in
 //! tests/uniform.rs.
-use polishbot::plan::plan_cell;
+use polishbot::motion::plan;
 
 use super::heldout::{accept, turned_tally};
 use crate::common::femoral::{cell, planned_area, reasons, uniform_case};
@@ -22,7 +22,7 @@ fn uniform_defects_on_the_femoral_component_in_the_designed_cell() {
     let insp = uniform_case(5100);
     let (robot, wc, table, config) = cell("femoral/");
     let table = table.expect("the designed cell has a turntable");
-    let plan = plan_cell(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+    let plan = plan(&insp, &robot, &wc, Some(&table), &config).expect("plan");
     let (c, t) = planned_area(&plan);
     println!(
         "designed cell: repairable {t:.1} mm^2, planned {:.1} %, left out {:?}",

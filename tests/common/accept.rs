@@ -180,7 +180,7 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
     let reach = polishbot::cell::reachable_sites(0.0).unwrap();
     for k in 1.. {
         let it = dir.join(format!("cycle/iter-{k}"));
-        let Ok(i) = polishbot::plan::Inspection::load(&it.join("inspection")) else {
+        let Ok(i) = polishbot::repair::Inspection::load(&it.join("inspection")) else {
             break;
         };
         let rep: Vec<_> = i.regions.iter().filter(|r| r.repairable).collect();
@@ -255,11 +255,11 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
 fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
     let refit = dir.join("cycle/iter-2/tool.toml");
     let fitted = refit.is_file().then(|| {
-        polishbot::plan::removal::ToolModel::load(&refit)
+        polishbot::removal::ToolModel::load(&refit)
             .unwrap()
             .preston_k_mm2_n
     });
-    let plan_k = polishbot::plan::removal::ToolModel::load(&super::calib("tool.toml"))
+    let plan_k = polishbot::removal::ToolModel::load(&super::calib("tool.toml"))
         .unwrap()
         .preston_k_mm2_n;
     let it = dir.join("cycle/iter-1");

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::Vector3;
-use polishbot::plan::{Inspection, Plan, PlanConfig, SurfacePoint};
+use polishbot::motion::{Inspection, Plan, PlanConfig, SurfacePoint};
 use polishbot::regions::Region;
 use polishbot::robot::{Robot, Turntable, Workcell};
 use polishbot::synth::{synth, SynthConfig};
@@ -21,7 +21,7 @@ pub fn cell(dir: &str) -> (Robot, Workcell, Option<Turntable>, PlanConfig) {
     let wc = Workcell::load(&f("workcell.toml")).unwrap();
     let table = Turntable::load(&f("servos.toml"), &f("workcell.toml")).unwrap();
     let mut config = PlanConfig::rigid();
-    let solids = polishbot::plan::collide::solids_beside(&f("workcell.toml")).unwrap();
+    let solids = polishbot::motion::collide::solids_beside(&f("workcell.toml")).unwrap();
     config.collision.solids.extend(solids);
     (robot, wc, table, config)
 }

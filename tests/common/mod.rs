@@ -251,14 +251,14 @@ pub const TRUTH_NEIGHBOURS: usize = 4;
 /// predicted.csv) over the repairable defect points of `inspection` (the plan's) where the
 /// plan predicts at least the fit's threshold, times the plan's k.
 pub fn true_k(inspection: &Path, predicted: &Path, truth: &Path, plan_k: f64) -> f64 {
-    use polishbot::cell::removal_fit::{parse_predicted, predicted_removal, FitConfig};
-    let b = polishbot::plan::Inspection::load(inspection).unwrap();
+    use polishbot::removal::fit::{parse_predicted, predicted_removal, FitConfig};
+    let b = polishbot::repair::Inspection::load(inspection).unwrap();
     let text = std::fs::read_to_string(predicted).unwrap();
     let p = predicted_removal(&b, &parse_predicted(&text).unwrap()).unwrap();
     let truth = polishbot::cloud::load_cloud(truth, None, None).unwrap();
     let removal = truth.field("removal").unwrap();
     let index = polishbot::spatial::Neighbours::new(&truth.points);
-    let ids = polishbot::cell::removal_fit::repairable_ids(&b);
+    let ids = polishbot::removal::fit::repairable_ids(&b);
     let (mut pm, mut pp) = (0.0, 0.0);
     for (pt, &pi) in b.points.iter().zip(&p) {
         if ids.contains(&pt.region) && pi >= FitConfig::default().min_predicted_mm {

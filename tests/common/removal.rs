@@ -1,7 +1,7 @@
 //! Issue 28's acceptance of a removal plan: no over-grind (nominal and at the Monte Carlo's
 //! quantile) over every planned region's reachable core points, and the predicted residual
 //! peaks (reported: not yet within the tolerance everywhere).
-use polishbot::plan::Plan;
+use polishbot::motion::Plan;
 
 /// The tolerance of the demo's and common::synthetic's inspections, mm.
 pub const TOLERANCE_MM: f64 = 0.05;

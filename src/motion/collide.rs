@@ -12,7 +12,7 @@ use nalgebra::{Matrix4, Point3, Vector3};
 
 use super::contact::{segment_box_distance, spacing};
 pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, Solid};
-use super::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 use crate::robot::{angle_between, Robot, Workcell};
 use crate::spatial::{Neighbour, Neighbours};
 use sweep::Carry;
@@ -127,7 +127,7 @@ impl<'a> Scene<'a> {
             hi,
             ref_from_robot,
             robot_from_ref,
-            ball: robot.tool.radius * 1e3,
+            ball: robot.tool.radius_mm(),
             shank: (
                 robot.tool.shank_radius() * 1e3,
                 robot.tool.shank_length() * 1e3,

@@ -5,11 +5,11 @@ use serde::{Deserialize, Serialize};
 
 use super::collide::CollisionConfig;
 use super::error::PlanError;
-use super::inspection::Inspection;
 use super::raster::RasterGeometry;
-use super::removal;
 use super::trajectory::TrajectoryConfig;
 use super::validate::ValidationConfig;
+use crate::removal;
+use crate::repair::Inspection;
 use crate::robot::{IkConfig, Robot};
 
 /// How `plan` removes material.

@@ -8,7 +8,7 @@
 use super::influence::{Contact, Influence, Reach};
 use super::press::press;
 use super::tool::ToolModel;
-use crate::plan::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 
 /// The removal at every one of `cores` (mm) of `contacts` (as the raster placed them: the
 /// nominal point and normal, not yet pressed) ground in order for `dwell` s each; `reach`

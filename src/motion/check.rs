@@ -3,10 +3,10 @@
 use nalgebra::{Point3, Vector3};
 
 use super::config::PlanConfig;
-use super::inspection::{Inspection, RegionInfo, SurfacePoint};
 use super::program::{PlannedPass, Program, SegmentKind};
 use super::raster::PathPoint;
 use super::report::{Metrics, RegionReport};
+use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::{resolution_error, IkTarget, Robot, Workcell};
 use crate::spatial::Neighbours;
 

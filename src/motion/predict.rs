@@ -10,18 +10,18 @@ use std::collections::HashMap;
 
 use nalgebra::{Point3, Vector3};
 
-use super::error::PlanError;
-use super::free_motion::{pressed, Cell};
-use super::inspection::Inspection;
-use super::inspection::SurfacePoint;
-use super::preston::{
-    cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, DwellPoint,
-    PredictedRow, RegionPrediction, RemovalReport, Setup,
+use super::dwell::{
+    cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, Setup,
 };
+use super::error::PlanError;
+use super::free_motion::{pressed, Assembly};
 use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
-use super::removal::montecarlo::{spread, JointError};
-use super::removal::{self, Influence, Stats};
 use super::trajectory::{JointTrajectory, Move};
+use crate::removal::montecarlo::{spread, JointError};
+use crate::removal::prediction::{DwellPoint, PredictedRow, RegionPrediction, RemovalReport};
+use crate::removal::{self, Influence, Stats};
+use crate::repair::Inspection;
+use crate::repair::SurfacePoint;
 use crate::robot::{Robot, Workcell};
 
 /// One region's prediction: its report entry and predicted.csv rows, or why it over-grinds.
@@ -103,7 +103,7 @@ fn press_dwell(prog: &Program, robot: &Robot, wc: &Workcell, preload: f64) -> Ve
 }
 
 /// Appends a press (a rest-to-rest joint move to `to`) to a rehearsal program.
-fn press(prog: &mut Program, to: &[f64], region: usize, cell: &Cell) -> Result<(), PlanError> {
+fn press(prog: &mut Program, to: &[f64], region: usize, cell: &Assembly) -> Result<(), PlanError> {
     let tc = &cell.cfg.trajectory;
     let from = prog.trajectory.last().to_vec();
     let mv = Move::new(&from, to, &cell.limits, tc).map_err(|source| PlanError::Trajectory {
@@ -132,7 +132,7 @@ fn press(prog: &mut Program, to: &[f64], region: usize, cell: &Cell) -> Result<(
 /// decides then).
 pub(crate) fn rehearse(
     runs: &[Run],
-    cell: &Cell,
+    cell: &Assembly,
     preload: f64,
 ) -> Result<(Vec<PlannedPass>, Vec<f64>), PlanError> {
     let (mut pieces, mut dwell) = (Vec::new(), Vec::new());
@@ -188,7 +188,7 @@ fn region_verdict(
 ) -> (Verdict, Quantiles) {
     let (tool, robot, config) = (setup.tool, setup.robot, setup.config);
     let back = reference_from_robot(setup.workcell);
-    let ball_mm = robot.tool.radius * 1e3;
+    let ball_mm = robot.tool.radius_mm();
     let influence = Influence::new(tool, ball_mm);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let placed = placed_contacts(pieces, setup);
@@ -316,7 +316,7 @@ fn over_grind(low: &[f64], before: &[f64], tolerance: f64, quantile: f64) -> Opt
 pub(crate) fn rehearse_region(
     runs: &[Run],
     (id, allowance): (usize, f64),
-    cell: &Cell,
+    cell: &Assembly,
     inspection: &Inspection,
     setup: &Setup,
     rehearsed: &mut Rehearsed,

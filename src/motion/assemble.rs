@@ -5,7 +5,7 @@
 use super::collide::{Allow, Scene};
 use super::config::PlanConfig;
 use super::error::PlanError;
-use super::free_motion::{pressed, Cell};
+use super::free_motion::{pressed, Assembly};
 use super::program::{Mark, PlannedPass, PlannedPoint, Program, Run};
 use super::report::UnreachablePoint;
 use super::trajectory::JointTrajectory;
@@ -21,7 +21,7 @@ pub(crate) fn assemble(
     scene: &Scene,
     unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Program, PlanError> {
-    let cell = Cell::new(robot, wc, cfg, scene);
+    let cell = Assembly::new(robot, wc, cfg, scene);
     let mut prog = Program {
         trajectory: JointTrajectory::starting_at(&cfg.home, cfg.trajectory.period),
         segments: Vec::new(),
@@ -105,7 +105,7 @@ impl Where {
     fn lift_off(
         &mut self,
         prog: &mut Program,
-        cell: &Cell,
+        cell: &Assembly,
         unreachable: &mut Vec<UnreachablePoint>,
     ) -> Result<(), PlanError> {
         while let Some((at, region)) = self.on.take() {
@@ -141,7 +141,7 @@ impl Where {
     fn go_home(
         &mut self,
         prog: &mut Program,
-        cell: &Cell,
+        cell: &Assembly,
         unreachable: &mut Vec<UnreachablePoint>,
     ) -> Result<(), PlanError> {
         loop {

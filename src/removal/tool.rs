@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::robot::error::read_toml;
-use crate::robot::RobotError;
+use crate::robot::{Robot, RobotError};
 
 /// The removal model of the tool (units in the key names: N, mm, MPa, rpm, degrees).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -74,19 +74,38 @@ struct ToolFile {
 }
 
 impl ToolModel {
+    /// The one reader of tool.toml's `[removal]` table (`None`: absent, the defaults), typed
+    /// and checked. `Err((place, message))`: `[removal]` when the table does not parse, else
+    /// the key (`removal.KEY`).
+    pub fn from_table(table: Option<&toml::Value>) -> Result<Self, (String, String)> {
+        let model = match table {
+            None => ToolModel::default(),
+            Some(v) => v
+                .clone()
+                .try_into()
+                .map_err(|e: toml::de::Error| ("[removal]".to_string(), e.message().to_string()))?,
+        };
+        model.check()?;
+        Ok(model)
+    }
+
     /// Reads the `[removal]` table of `file` (tool.toml); absent: the defaults.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
         let parsed: ToolFile = read_toml(file)?;
-        let model = match parsed.removal {
-            None => ToolModel::default(),
-            Some(v) => v
-                .try_into()
-                .map_err(|e: toml::de::Error| RobotError::bad(file, "[removal]", e.message()))?,
-        };
-        model
-            .check()
-            .map_err(|(key, msg)| RobotError::bad(file, key, msg))?;
-        Ok(model)
+        Self::from_table(parsed.removal.as_ref())
+            .map_err(|(key, msg)| RobotError::bad(file, key, msg))
+    }
+
+    /// The tool of a loaded robot (its tool.toml's `[removal]` table, kept by
+    /// `robot::calibration` unparsed); the message names `tool.toml` and the key.
+    pub fn of_robot(robot: &Robot) -> Result<Self, String> {
+        Self::from_table(robot.tool.removal.as_ref()).map_err(|(key, msg)| {
+            if key.starts_with('[') {
+                format!("tool.toml {key}: {msg}")
+            } else {
+                format!("tool.toml `{key}`: {msg}")
+            }
+        })
     }
 
     /// Checks every value: `Err((key, message))` names the key as `removal.KEY`.

@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::matching::partners;
-use crate::plan::Inspection;
+use crate::repair::Inspection;
 
 pub use super::matching::{
     agreement, parse_predicted, predicted_removal, repairable_ids, Agreement, SAME_POINT_MM,

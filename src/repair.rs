@@ -1,11 +1,36 @@
-//! The planner's input: an inspection folder's `regions.json` and `deviations.csv`
-//! (file contracts in DESIGN.md and docs/FORMATS.md), read and cross-checked.
+//! The repair work the planners consume: an inspection folder's `regions.json` and
+//! `deviations.csv` (file contracts in DESIGN.md and docs/FORMATS.md), read and cross-checked.
+//! A leaf below motion and removal planning; its one error is a bad input file.
+//!
+//! Front function: [`Inspection::load`]; no config.
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Point3, Vector3};
 use serde::Deserialize;
 
-use super::error::PlanError;
+/// An inspection file is unreadable or holds a bad value: the file, the place (line, row,
+/// region) and what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}: {place}: {message}", file.display())]
+pub struct InputError {
+    /// The file.
+    pub file: PathBuf,
+    /// Line, key or record at fault.
+    pub place: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl InputError {
+    /// A bad value at `place` of `file`.
+    pub fn new(file: &Path, place: impl Into<String>, message: impl Into<String>) -> Self {
+        InputError {
+            file: file.to_path_buf(),
+            place: place.into(),
+            message: message.into(),
+        }
+    }
+}
 
 /// One defect region of `regions.json`: the regions stage's own type (the file's contract).
 pub use crate::regions::Region as RegionInfo;
@@ -61,11 +86,11 @@ pub struct Inspection {
 
 impl Inspection {
     /// Reads `dir/regions.json` and `dir/deviations.csv` and checks that they agree.
-    pub fn load(dir: &Path) -> Result<Inspection, PlanError> {
+    pub fn load(dir: &Path) -> Result<Inspection, InputError> {
         let rfile = dir.join("regions.json");
         let text = read(&rfile)?;
         let parsed: RegionsFile = serde_json::from_str(&text)
-            .map_err(|e| PlanError::input(&rfile, format!("line {}", e.line()), e.to_string()))?;
+            .map_err(|e| InputError::new(&rfile, format!("line {}", e.line()), e.to_string()))?;
         let csv = dir.join("deviations.csv");
         let points = read_deviations(&csv)?;
         let known = |id: i64| parsed.regions.iter().any(|r| r.id as i64 == id);
@@ -77,7 +102,7 @@ impl Inspection {
                 "region {} is neither -1 nor an id of regions.json",
                 points[i].region
             );
-            return Err(PlanError::input(&csv, format!("row {}", i + 1), msg));
+            return Err(InputError::new(&csv, format!("row {}", i + 1), msg));
         }
         let inspection = Inspection {
             dir: dir.to_path_buf(),
@@ -89,7 +114,7 @@ impl Inspection {
         for (i, r) in inspection.regions.iter().enumerate() {
             inspection
                 .check_against_rows(r, parsed.spacing, parsed.gap)
-                .map_err(|m| PlanError::input(&rfile, format!("regions[{i}] (id {})", r.id), m))?;
+                .map_err(|m| InputError::new(&rfile, format!("regions[{i}] (id {})", r.id), m))?;
         }
         Ok(inspection)
     }
@@ -101,7 +126,7 @@ impl Inspection {
             .collect()
     }
 
-    fn check(&self, rfile: &Path) -> Result<(), PlanError> {
+    fn check(&self, rfile: &Path) -> Result<(), InputError> {
         for (i, r) in self.regions.iter().enumerate() {
             let place = format!("regions[{i}] (id {})", r.id);
             let finite = r.centroid.iter().chain(&r.normal).all(|v| v.is_finite())
@@ -109,18 +134,18 @@ impl Inspection {
                     .iter()
                     .all(|v| v.is_finite());
             if !finite {
-                return Err(PlanError::input(rfile, place, "values must be finite"));
+                return Err(InputError::new(rfile, place, "values must be finite"));
             }
             let n = Vector3::from(r.normal).norm();
             if (n - 1.0).abs() > 1e-3 {
-                return Err(PlanError::input(
+                return Err(InputError::new(
                     rfile,
                     place,
                     format!("normal has norm {n}"),
                 ));
             }
             if self.regions[..i].iter().any(|o| o.id == r.id) {
-                return Err(PlanError::input(rfile, place, "id repeats"));
+                return Err(InputError::new(rfile, place, "id repeats"));
             }
             let rows = self.region_points(r.id).len();
             if rows != r.points {
@@ -128,7 +153,7 @@ impl Inspection {
                     "{} points, but deviations.csv has {rows} rows with region {}",
                     r.points, r.id
                 );
-                return Err(PlanError::input(rfile, place, msg));
+                return Err(InputError::new(rfile, place, msg));
             }
         }
         Ok(())
@@ -206,25 +231,25 @@ impl Inspection {
     }
 }
 
-fn read(file: &Path) -> Result<String, PlanError> {
-    std::fs::read_to_string(file).map_err(|e| PlanError::input(file, "file", e.to_string()))
+fn read(file: &Path) -> Result<String, InputError> {
+    std::fs::read_to_string(file).map_err(|e| InputError::new(file, "file", e.to_string()))
 }
 
 /// Reads deviations.csv: a header naming the columns (any order, extra columns ignored), then
 /// one row per core point; x,y,z,nx,ny,nz,distance,region are required.
-fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, PlanError> {
+fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, InputError> {
     let text = read(file)?;
     let mut lines = text.lines().enumerate();
     let header = lines
         .next()
-        .ok_or_else(|| PlanError::input(file, "line 1", "empty file"))?
+        .ok_or_else(|| InputError::new(file, "line 1", "empty file"))?
         .1;
     let names: Vec<&str> = header.split(',').map(str::trim).collect();
     let need = ["x", "y", "z", "nx", "ny", "nz", "distance", "region"];
     let mut col = [0usize; 8];
     for (k, n) in need.iter().enumerate() {
         col[k] = names.iter().position(|h| h == n).ok_or_else(|| {
-            PlanError::input(file, "line 1", format!("header has no column `{n}`"))
+            InputError::new(file, "line 1", format!("header has no column `{n}`"))
         })?;
     }
     let mut out = Vec::new();
@@ -236,29 +261,29 @@ fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, PlanError> {
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
         if cells.len() != names.len() {
             let msg = format!("{} values, header has {}", cells.len(), names.len());
-            return Err(PlanError::input(file, place(), msg));
+            return Err(InputError::new(file, place(), msg));
         }
         let mut v = [0.0; 8];
         for (k, c) in col.iter().enumerate() {
             v[k] = cells[*c].parse::<f64>().map_err(|_| {
                 let msg = format!("column {}: not a number: {:?}", need[k], cells[*c]);
-                PlanError::input(file, place(), msg)
+                InputError::new(file, place(), msg)
             })?;
             // distance is NaN where the comparison found too few points (DESIGN.md)
             let allowed_nan = need[k] == "distance" && v[k].is_nan();
             if !(v[k].is_finite() || allowed_nan) {
                 let msg = format!("column {}: not finite", need[k]);
-                return Err(PlanError::input(file, place(), msg));
+                return Err(InputError::new(file, place(), msg));
             }
         }
         let normal = Vector3::new(v[3], v[4], v[5]);
         let norm = normal.norm();
         if (norm - 1.0).abs() > 1e-3 {
             let msg = format!("normal has norm {norm}");
-            return Err(PlanError::input(file, place(), msg));
+            return Err(InputError::new(file, place(), msg));
         }
         if v[7].fract() != 0.0 {
-            return Err(PlanError::input(file, place(), "region must be an integer"));
+            return Err(InputError::new(file, place(), "region must be an integer"));
         }
         out.push(SurfacePoint {
             position: Point3::new(v[0], v[1], v[2]),
@@ -268,7 +293,7 @@ fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, PlanError> {
         });
     }
     if out.is_empty() {
-        return Err(PlanError::input(file, "file", "no rows"));
+        return Err(InputError::new(file, "file", "no rows"));
     }
     Ok(out)
 }

@@ -5,8 +5,8 @@
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
-use crate::plan::preston::PredictedRow;
-use crate::plan::Inspection;
+use super::prediction::PredictedRow;
+use crate::repair::Inspection;
 use crate::spatial::Neighbours;
 
 /// Largest distance between a core point of two inspections for them to count as the same

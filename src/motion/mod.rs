@@ -1,28 +1,30 @@
-//! Planning: grinding passes over the repairable regions of an inspection, tool poses in the
-//! robot frame, IK along every pass (split where the arm cannot reach or follow), one
-//! continuous time-optimal joint trajectory sampled at the bus period, validated before any
-//! motion, and the reachability report. Method: docs/ALGORITHMS.md, "Grinding planner".
+//! Motion planning: grinding passes over the repairable regions of the repair work, tool poses
+//! in the robot frame, IK along every pass (split where the arm cannot reach or follow), in
+//! removal mode the dwell of each contact from the `removal` room turned into the feed along
+//! each stroke, one continuous time-optimal joint trajectory sampled at the bus period,
+//! validated before any motion, and the reachability report. Method: docs/ALGORITHMS.md,
+//! "Grinding planner".
 //!
-//! Front function: [`plan`] with a [`PlanConfig`]; result: [`Plan`] (plan.json).
+//! Front function: [`plan`] (the cell with its turntable, if any) with a [`PlanConfig`];
+//! result: [`Plan`] (plan.json). [`plan_part`] plans the part where it sits, the step `plan`
+//! makes once per table angle.
 mod assemble;
+mod by_region;
 pub mod check;
 pub mod clearance;
 pub mod collide;
 mod config;
 pub mod contact;
+pub mod dwell;
 pub mod error;
 pub mod feed;
 pub mod file;
 pub mod frames;
 mod free_motion;
-pub mod inspection;
 pub mod order;
 mod predict;
-pub mod preston;
 pub mod program;
 pub mod raster;
-mod regions;
-pub mod removal;
 pub mod report;
 pub mod ros;
 mod stroke;
@@ -33,25 +35,27 @@ pub mod table_file;
 pub mod trajectory;
 pub mod validate;
 
+pub use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 pub use clearance::Collision;
 pub use collide::{CollisionConfig, Solid};
 pub use config::{PlanConfig, PlanMode, DEFAULT_TOLERANCE_MM, MAX_CONTACT_POINTS, MAX_LAYERS};
 pub use error::PlanError;
 pub use file::{Plan, Sample};
-pub use inspection::{Inspection, RegionInfo, SurfacePoint};
 pub use program::{PlannedPass, PlannedPoint, Segment, SegmentKind};
 pub use raster::{RasterGeometry, StrokeKind};
 pub use report::{Metrics, Reachability, RegionReport, UnreachablePoint};
-pub use table::plan_cell;
+pub use table::plan;
 pub use table_file::TablePlan;
 pub use trajectory::{JointTrajectory, Limits, Move, TrajectoryConfig, TrajectoryError};
 pub use validate::{validate, LimitKind, ValidationConfig, Violation};
 
+use crate::removal;
 use crate::robot::{Robot, Workcell};
 use config::check_work;
 
-/// Plans grinding for every repairable region of `inspection` and validates the result.
-pub fn plan(
+/// Plans grinding for every repairable region of `inspection` with the part where the
+/// workcell puts it (no table move) and validates the result.
+pub fn plan_part(
     inspection: &Inspection,
     robot: &Robot,
     workcell: &Workcell,
@@ -60,7 +64,7 @@ pub fn plan(
     config.check(robot)?;
     let tool = match config.mode {
         PlanMode::Rigid => None,
-        PlanMode::Removal => Some(preston::tool_model(robot)?),
+        PlanMode::Removal => Some(removal::ToolModel::of_robot(robot).map_err(PlanError::Config)?),
     };
     // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
     // collision model (grinding, pressing in and out) accepts that much more penetration
@@ -69,11 +73,11 @@ pub fn plan(
         adjusted.collision.press_mm = t.preload_mm;
     }
     let config = &adjusted;
-    let radius_mm = robot.tool.radius * 1e3;
+    let radius_mm = robot.tool.radius_mm();
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = match &tool {
         None => config.geometry(radius_mm),
-        Some(t) => regions::removal_geometry(t, radius_mm, config),
+        Some(t) => by_region::removal_geometry(t, radius_mm, config),
     };
     check_work(inspection, &geometry)?;
     let scene = collide::Scene::new(&inspection.points, robot, workcell, &config.collision);
@@ -81,7 +85,7 @@ pub fn plan(
     let positions: Vec<nalgebra::Point3<f64>> =
         inspection.points.iter().map(|p| p.position).collect();
     let index = crate::spatial::Neighbours::new(&positions);
-    let ctx = preston::Setup {
+    let ctx = dwell::Setup {
         tool: tool.as_ref().unwrap_or(&fallback),
         robot,
         workcell,
@@ -90,9 +94,9 @@ pub fn plan(
     };
     let mut reachability = Reachability::default();
     let planned =
-        regions::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
+        by_region::plan_regions(inspection, &ctx, tool.as_ref(), &scene, &mut reachability)?;
     let counts = planned.counts.clone();
-    let (mut prog, removal) = regions::assemble_and_predict(
+    let (mut prog, removal) = by_region::assemble_and_predict(
         planned,
         inspection,
         &ctx,

@@ -58,7 +58,7 @@ pub struct Plan {
     pub metrics: Metrics,
     /// Removal mode: the dwell map and the predicted part per region (absent in rigid mode).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub removal: Option<super::preston::RemovalReport>,
+    pub removal: Option<crate::removal::prediction::RemovalReport>,
     /// The turntable's angles and moves (absent in a cell without a turntable).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turntable: Option<TablePlan>,

@@ -5,94 +5,18 @@
 //! contacts' dwells ask for (`stroke.rs`), the force checked at each contact's joint angles,
 //! and the predicted part from the dwell the trajectory really spends. Method: docs/ALGORITHMS.md, "Removal planning".
 use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
-use serde::{Deserialize, Serialize};
 
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::feed::JointSpline;
-use super::inspection::RegionInfo;
-use super::inspection::{Inspection, SurfacePoint};
 use super::program::{PlannedPass, Run};
-use super::removal::montecarlo::JointError;
-use super::removal::{self, force, Contact, Influence, Stats, ToolModel};
 use super::stroke::{chain_knots, chain_limits};
+use crate::removal::montecarlo::JointError;
+use crate::removal::{self, force, Contact, Influence, ToolModel};
+use crate::repair::RegionInfo;
+use crate::repair::{Inspection, SurfacePoint};
 use crate::robot::{Robot, Workcell};
 use crate::spatial::Neighbours;
-
-/// One contact of the dwell map in plan.json.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct DwellPoint {
-    /// Contact point (middle of its piece of stroke), reference frame, mm.
-    pub surface_mm: [f64; 3],
-    /// Time the trajectory spends on the piece, s, plus the dwell-equivalent of a press into
-    /// or out of it (`press_dwell`).
-    pub dwell_s: f64,
-    /// Mean speed over the piece, mm/s.
-    pub feed_mm_s: f64,
-}
-
-/// The removal planned over one region and the part predicted after it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RegionPrediction {
-    /// Region id.
-    pub region: usize,
-    /// Allowance the robust solve settled on, mm.
-    pub allowance_mm: f64,
-    /// The dwell map, one entry per contact in program order.
-    pub dwell: Vec<DwellPoint>,
-    /// Core points of the region and its neighbours in the tool's reach.
-    pub core_points: usize,
-    /// Deviation before grinding over those points.
-    pub before: Stats,
-    /// Predicted deviation after grinding (nominal model).
-    pub after: Stats,
-    /// Lowest 5th-percentile residual of the Monte Carlo, mm (below -tolerance: over-grind).
-    pub after_low_p95_mm: f64,
-}
-
-/// The removal part of plan.json.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RemovalReport {
-    /// Contact force at the preload, N.
-    pub force_n: f64,
-    /// The preload: how far the ball is pressed inside the surface while it grinds, mm
-    /// (`run` re-checks the grinding samples with it).
-    pub preload_mm: f64,
-    /// Tolerance, mm: over-grind is a residual below -tolerance.
-    pub tolerance_mm: f64,
-    /// Per planned region.
-    pub regions: Vec<RegionPrediction>,
-    /// One row per core point (predicted.csv; not in plan.json).
-    #[serde(skip)]
-    pub rows: Vec<PredictedRow>,
-}
-
-/// One row of predicted.csv.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PredictedRow {
-    /// Core point, reference frame, mm.
-    pub position: [f64; 3],
-    /// Deviation before grinding, mm.
-    pub deviation: f64,
-    /// Predicted residual (nominal model), mm.
-    pub residual: f64,
-    /// Width of the Monte Carlo's residual between its median and its low quantile, mm.
-    pub spread_p95: f64,
-}
-
-/// The compliant tool of `robot` (tool.toml `[removal]`, defaults when absent).
-pub fn tool_model(robot: &Robot) -> Result<ToolModel, PlanError> {
-    let model: ToolModel = match &robot.tool.removal {
-        None => ToolModel::default(),
-        Some(v) => v.clone().try_into().map_err(|e: toml::de::Error| {
-            PlanError::Config(format!("tool.toml [removal]: {}", e.message()))
-        })?,
-    };
-    model
-        .check()
-        .map_err(|(key, msg)| PlanError::Config(format!("tool.toml `{key}`: {msg}")))?;
-    Ok(model)
-}
 
 /// Rotation from the robot frame to the reference frame.
 pub fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
@@ -146,7 +70,7 @@ pub(crate) fn pressed_contacts(
     allowance: f64,
 ) -> Vec<Contact> {
     let mut contacts = placed.to_vec();
-    let influence = Influence::new(setup.tool, setup.robot.tool.radius * 1e3);
+    let influence = Influence::new(setup.tool, setup.robot.tool.radius_mm());
     let cores = (inspection.points.as_slice(), setup.index);
     removal::press::press(&mut contacts, setup.tool, &influence, cores, allowance);
     contacts
@@ -263,7 +187,7 @@ pub fn set_dwell(
     let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
-    let influence = Influence::new(tool, robot.tool.radius * 1e3);
+    let influence = Influence::new(tool, robot.tool.radius_mm());
     let bench = (inspection, setup);
     let placed = placed_contacts(&pieces, setup);
     let (mut contacts, mut cores) = in_reach(&placed, bench, &influence, allowance);
@@ -437,27 +361,6 @@ fn solve_config(
         )));
     }
     Ok(solve)
-}
-
-/// predicted.csv: a header and one row per core point, `spread_p95` empty when the Monte
-/// Carlo drew nothing.
-pub fn predicted_csv(
-    report: &RemovalReport,
-    mc: &super::removal::montecarlo::MonteCarloConfig,
-) -> String {
-    let mut out = String::from("x,y,z,deviation,predicted_residual,spread_p95\n");
-    for r in &report.rows {
-        let spread = if mc.draws > 0 {
-            format!("{:.6}", r.spread_p95)
-        } else {
-            String::new()
-        };
-        out.push_str(&format!(
-            "{:.6},{:.6},{:.6},{:.6},{:.6},{spread}\n",
-            r.position[0], r.position[1], r.position[2], r.deviation, r.residual
-        ));
-    }
-    out
 }
 
 /// Records every contact of `strokes` as left out for `reason` (`tip_m`: the contact itself in

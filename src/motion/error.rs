@@ -1,25 +1,19 @@
 //! Errors of the planner: bad input files (naming the file and the place), calibration
 //! faults, and plans that fail validation (listing every offending point).
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::report::UnreachablePoint;
 use super::trajectory::TrajectoryError;
 use super::validate::Violation;
+use crate::repair::InputError;
 use crate::robot::RobotError;
 
 /// Why a plan could not be made or loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum PlanError {
     /// An input file is unreadable or holds a bad value.
-    #[error("{}: {place}: {message}", file.display())]
-    Input {
-        /// The file.
-        file: PathBuf,
-        /// Line, key or record at fault.
-        place: String,
-        /// What is wrong.
-        message: String,
-    },
+    #[error(transparent)]
+    Input(#[from] InputError),
     /// The robot calibration files.
     #[error(transparent)]
     Robot(#[from] RobotError),
@@ -54,11 +48,7 @@ pub enum PlanError {
 impl PlanError {
     /// A bad value at `place` of `file`.
     pub fn input(file: &Path, place: impl Into<String>, message: impl Into<String>) -> Self {
-        PlanError::Input {
-            file: file.to_path_buf(),
-            place: place.into(),
-            message: message.into(),
-        }
+        PlanError::Input(InputError::new(file, place, message))
     }
 }
 

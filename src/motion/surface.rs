@@ -2,7 +2,7 @@
 //! onto it (local plane of the nearest core points), for raster points between core points.
 use nalgebra::{Point3, Vector3};
 
-use super::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 use crate::spatial::Neighbours;
 
 /// Core points and their k-d tree (reference frame, mm).

@@ -6,11 +6,12 @@ use nalgebra::Point3;
 
 use super::config::PlanConfig;
 use super::error::PlanError;
-use super::free_motion::Cell;
-use super::inspection::{Inspection, RegionInfo, SurfacePoint};
+use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{collide, order, predict, preston, program, raster, removal, surface};
+use super::{collide, dwell, order, predict, program, raster, surface};
+use crate::removal;
+use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 
 /// A region planned in removal mode whose verdict stands (so far): what solving it again needs.
 pub(crate) struct Settled {
@@ -39,21 +40,21 @@ pub(crate) struct Planned {
 /// grinds in.
 struct Bench<'a> {
     inspection: &'a Inspection,
-    ctx: &'a preston::Setup<'a>,
-    cell: &'a Cell<'a>,
+    ctx: &'a dwell::Setup<'a>,
+    cell: &'a Assembly<'a>,
 }
 
 /// Rasters, solves and (in removal mode) sets the dwell of every repairable region in
 /// visiting order, from the home tool tip over the region centroids.
 pub(crate) fn plan_regions(
     inspection: &Inspection,
-    ctx: &preston::Setup,
+    ctx: &dwell::Setup,
     tool: Option<&removal::ToolModel>,
     scene: &collide::Scene,
     reachability: &mut Reachability,
 ) -> Result<Planned, PlanError> {
     let (robot, workcell, config) = (ctx.robot, ctx.workcell, ctx.config);
-    let radius_mm = robot.tool.radius * 1e3;
+    let radius_mm = robot.tool.radius_mm();
     let reach = radius_mm + config.contact_offset_mm;
     let geometry = match tool {
         None => config.geometry(radius_mm),
@@ -77,7 +78,7 @@ pub(crate) fn plan_regions(
         settled: Vec::new(),
         rehearsed: predict::Rehearsed::new(),
     };
-    let cell = Cell::new(robot, workcell, config, scene);
+    let cell = Assembly::new(robot, workcell, config, scene);
     let bench = Bench {
         inspection,
         ctx,
@@ -137,10 +138,10 @@ fn dwell_region(
 ) -> Result<Vec<program::Run>, PlanError> {
     let (inspection, ctx) = (bench.inspection, bench.ctx);
     let allowance = ctx.config.allowance_mm;
-    let dwelled = match preston::set_dwell(runs.clone(), region, inspection, ctx, allowance)? {
+    let dwelled = match dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)? {
         Ok(dwelled) => dwelled,
         Err(reason) => {
-            preston::leave_out(strokes, &reason, ctx.workcell, unreachable);
+            dwell::leave_out(strokes, &reason, ctx.workcell, unreachable);
             return Ok(Vec::new());
         }
     };
@@ -236,9 +237,9 @@ fn resolve(
     region: &RegionInfo,
     reason: &str,
     inspection: &Inspection,
-    ctx: &preston::Setup,
+    ctx: &dwell::Setup,
     unreachable: &mut Vec<UnreachablePoint>,
-) -> Result<Option<preston::Dwelled>, PlanError> {
+) -> Result<Option<dwell::Dwelled>, PlanError> {
     let (allowance, highest) = (s.allowance, s.highest);
     let tolerance = inspection.tolerance.unwrap_or(ctx.config.tolerance_mm);
     let step = removal::ALLOWANCE_STEP_SHARE * tolerance;
@@ -251,7 +252,7 @@ fn resolve(
             let mut first_why = None;
             for halving in 0..=ALLOWANCE_STEP_HALVINGS {
                 let raised = allowance + step / f64::from(1u32 << halving);
-                match preston::set_dwell(s.walked.clone(), region, inspection, ctx, raised)? {
+                match dwell::set_dwell(s.walked.clone(), region, inspection, ctx, raised)? {
                     Ok(again) => return Ok(Some(again)),
                     Err(why) => {
                         first_why.get_or_insert(why);
@@ -275,12 +276,18 @@ fn resolve(
 pub(crate) fn assemble_and_predict(
     mut planned: Planned,
     inspection: &Inspection,
-    ctx: &preston::Setup,
+    ctx: &dwell::Setup,
     removal_mode: bool,
     scene: &collide::Scene,
     unreachable: &mut Vec<UnreachablePoint>,
-) -> Result<(program::Program, Option<preston::RemovalReport>), PlanError> {
-    let cell = Cell::new(ctx.robot, ctx.workcell, ctx.config, scene);
+) -> Result<
+    (
+        program::Program,
+        Option<crate::removal::prediction::RemovalReport>,
+    ),
+    PlanError,
+> {
+    let cell = Assembly::new(ctx.robot, ctx.workcell, ctx.config, scene);
     let bench = Bench {
         inspection,
         ctx,

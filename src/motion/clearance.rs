@@ -6,8 +6,8 @@ use super::collide::{Allow, CollisionConfig, Scene};
 pub use super::contact::Collision;
 use super::error::PlanError;
 use super::file::Plan;
-use super::inspection::Inspection;
 use super::program::{Segment, SegmentKind};
+use crate::repair::Inspection;
 use crate::robot::{Robot, Workcell};
 
 /// What each of `n` samples may touch, and the segment it belongs to (the later one at a

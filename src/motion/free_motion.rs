@@ -34,7 +34,7 @@ pub(super) struct Leg {
 }
 
 /// What assembling needs besides the program.
-pub(super) struct Cell<'a> {
+pub(super) struct Assembly<'a> {
     pub(super) robot: &'a Robot,
     pub(super) wc: &'a Workcell,
     pub(super) cfg: &'a PlanConfig,
@@ -42,7 +42,7 @@ pub(super) struct Cell<'a> {
     pub(super) limits: Limits,
 }
 
-impl<'a> Cell<'a> {
+impl<'a> Assembly<'a> {
     /// The cell of `robot` in `wc` with `cfg`'s settings and the part's `scene`.
     pub(super) fn new(
         robot: &'a Robot,
@@ -50,7 +50,7 @@ impl<'a> Cell<'a> {
         cfg: &'a PlanConfig,
         scene: &'a Scene<'a>,
     ) -> Self {
-        Cell {
+        Assembly {
             robot,
             wc,
             cfg,
@@ -94,7 +94,7 @@ pub(super) fn pressed(p: &PlannedPoint) -> f64 {
 impl Program {
     /// Appends `legs` from the last sample when every sample is clear for its leg; otherwise
     /// leaves the program as it was and returns the first hit.
-    fn try_legs(&mut self, legs: &[Leg], cell: &Cell) -> Result<Option<Hit>, PlanError> {
+    fn try_legs(&mut self, legs: &[Leg], cell: &Assembly) -> Result<Option<Hit>, PlanError> {
         let tc = &cell.cfg.trajectory;
         let mut trial = JointTrajectory::starting_at(self.trajectory.last(), tc.period);
         let mut ends = Vec::with_capacity(legs.len());
@@ -147,7 +147,7 @@ impl Program {
         left: Option<&PlannedPoint>,
         p: &PlannedPoint,
         region: usize,
-        cell: &Cell,
+        cell: &Assembly,
     ) -> Result<Result<(), String>, PlanError> {
         let press = pressed(p);
         let aboves = cell.lifted(p, cell.cfg.retract_mm + press);
@@ -212,7 +212,7 @@ impl Program {
         &mut self,
         p: &PlannedPoint,
         region: usize,
-        cell: &Cell,
+        cell: &Assembly,
     ) -> Result<Result<(), String>, PlanError> {
         let region = Some(region);
         let mut why = String::from("no retract pose above the contact");
@@ -265,7 +265,7 @@ impl Program {
         &mut self,
         dir: &Vector3<f64>,
         region: Option<usize>,
-        cell: &Cell,
+        cell: &Assembly,
     ) -> Result<Option<String>, PlanError> {
         let q0 = self.trajectory.last().to_vec();
         let pose = cell.robot.fk(&q0);
@@ -303,7 +303,7 @@ impl Program {
         samples: &[Vec<f64>],
         kind: SegmentKind,
         region: Option<usize>,
-        cell: &Cell,
+        cell: &Assembly,
     ) -> Option<Hit> {
         let mut sweep = cell.scene.sweep();
         if let Some(hit) = samples
@@ -334,7 +334,7 @@ impl Program {
     pub(super) fn home(
         &mut self,
         left: Option<&PlannedPoint>,
-        cell: &Cell,
+        cell: &Assembly,
     ) -> Result<Result<(), String>, PlanError> {
         let home = cell.leg(&cell.cfg.home, SegmentKind::Transit, None, Allow::Free);
         let mut tries = vec![vec![home.clone()]];
@@ -362,7 +362,7 @@ impl Program {
         a: &PlannedPoint,
         b: &PlannedPoint,
         region: usize,
-        cell: &Cell,
+        cell: &Assembly,
     ) -> Result<bool, PlanError> {
         let (ta, tb) = (Vector3::from(a.tip_m), Vector3::from(b.tip_m));
         let (ua, ub) = (cell.robot.fk(&a.q).axis, cell.robot.fk(&b.q).axis);
@@ -406,7 +406,7 @@ impl Program {
 /// Samples of the joint spline through `qs` (each waypoint's path length its largest joint
 /// step from the one before) as fast as the joints allow, rest to rest; None when they cannot
 /// follow it.
-fn follow(qs: Vec<Vec<f64>>, cell: &Cell) -> Option<Vec<Vec<f64>>> {
+fn follow(qs: Vec<Vec<f64>>, cell: &Assembly) -> Option<Vec<Vec<f64>>> {
     let mut s = vec![0.0];
     for w in qs.windows(2) {
         let last = s[s.len() - 1];

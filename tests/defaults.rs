@@ -4,7 +4,6 @@
 //! `Default::default()` serialised, so a default changed in one place and not the other fails.
 //! A default the doc derives from something else ("default 2 voxel" for a `None` field, "default
 //! [`VOXEL_SPACINGS`] mr") is not a literal and is left to the prose.
-#![cfg(test)]
 
 use serde::Serialize;
 
@@ -189,31 +188,31 @@ fn stated_defaults_are_parsed_as_written() {
 #[test]
 fn every_stated_default_is_the_default_impl() {
     let (bad, checked) = check_configs!(
-        crate::preprocess::SorConfig => "src/preprocess/sor.rs",
-        crate::preprocess::NormalConfig => "src/preprocess/normals.rs",
-        crate::preprocess::CurvatureSampleConfig => "src/preprocess/curvature.rs",
-        crate::preprocess::PreprocessConfig => "src/preprocess/pipeline.rs",
-        crate::register::RegisterConfig => "src/register/config.rs",
-        crate::regions::RegionConfig => "src/regions/mod.rs",
-        crate::report::ReportConfig => "src/report/input.rs",
-        crate::synth::SynthConfig => "src/synth/config.rs",
-        crate::acquire::MergeConfig => "src/acquire/config.rs",
-        crate::synth::TurntableConfig => "src/synth/turntable.rs",
-        crate::synth::FemoralShape => "src/synth/femoral.rs",
-        crate::plan::PlanConfig => "src/plan/config.rs",
-        crate::plan::TrajectoryConfig => "src/plan/trajectory.rs",
-        crate::plan::ValidationConfig => "src/plan/validate.rs",
-        crate::plan::CollisionConfig => "src/plan/contact.rs",
-        crate::robot::IkConfig => "src/robot/ik.rs",
-        crate::bus::BusConfig => "src/bus/config.rs",
-        crate::sim::SimTiming => "src/sim/model.rs",
-        crate::sim::Faults => "src/sim/model.rs",
-        crate::sim::Mechanics => "src/sim/model.rs",
-        crate::sim::SimOptions => "src/sim/arm.rs",
-        crate::calibrate::CalibrationConfig => "src/calibrate/config.rs",
-        crate::cell::RunConfig => "src/cell/stream.rs",
-        crate::plan::removal::RemovalConfig => "src/plan/removal/mod.rs",
-        crate::sim::GrindConfig => "src/sim/grinding.rs",
+        polishbot::preprocess::SorConfig => "src/preprocess/sor.rs",
+        polishbot::preprocess::NormalConfig => "src/preprocess/normals.rs",
+        polishbot::preprocess::CurvatureSampleConfig => "src/preprocess/curvature.rs",
+        polishbot::preprocess::PreprocessConfig => "src/preprocess/pipeline.rs",
+        polishbot::register::RegisterConfig => "src/register/config.rs",
+        polishbot::regions::RegionConfig => "src/regions/mod.rs",
+        polishbot::report::ReportConfig => "src/report/input.rs",
+        polishbot::synth::SynthConfig => "src/synth/config.rs",
+        polishbot::acquire::MergeConfig => "src/acquire/config.rs",
+        polishbot::synth::TurntableConfig => "src/synth/turntable.rs",
+        polishbot::synth::FemoralShape => "src/synth/femoral.rs",
+        polishbot::motion::PlanConfig => "src/motion/config.rs",
+        polishbot::motion::TrajectoryConfig => "src/motion/trajectory.rs",
+        polishbot::motion::ValidationConfig => "src/motion/validate.rs",
+        polishbot::motion::CollisionConfig => "src/motion/contact.rs",
+        polishbot::robot::IkConfig => "src/robot/ik.rs",
+        polishbot::bus::BusConfig => "src/bus/config.rs",
+        polishbot::sim::SimTiming => "src/sim/model.rs",
+        polishbot::sim::Faults => "src/sim/model.rs",
+        polishbot::sim::Mechanics => "src/sim/model.rs",
+        polishbot::sim::SimOptions => "src/sim/arm.rs",
+        polishbot::calibrate::CalibrationConfig => "src/calibrate/config.rs",
+        polishbot::cell::RunConfig => "src/cell/stream.rs",
+        polishbot::removal::RemovalConfig => "src/removal/mod.rs",
+        polishbot::sim::GrindConfig => "src/sim/grinding.rs",
     );
     assert!(bad.is_empty(), "{}", bad.join("\n"));
     assert!(checked >= 50, "only {checked} stated defaults found");

@@ -5,10 +5,10 @@
 use super::collide::CollisionConfig;
 use super::error::PlanError;
 use super::file::{CheckedPlan, Plan};
-use super::inspection::Inspection;
 use super::program::SegmentKind;
 use super::table_file::{check, TablePlan};
 use super::validate::ValidationConfig;
+use crate::repair::Inspection;
 use crate::robot::{Robot, Turntable, Workcell};
 
 /// Largest difference, rad, between the arm's pose while the table turns and its start pose.

@@ -4,9 +4,12 @@
 //!
 //! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`].
 pub mod dwell;
+pub mod fit;
 pub mod force;
 pub mod influence;
+pub mod matching;
 pub mod montecarlo;
+pub mod prediction;
 pub mod press;
 pub mod sequence;
 pub mod tool;
@@ -17,7 +20,7 @@ use serde::{Deserialize, Serialize};
 pub use influence::{Contact, Influence, Tilt};
 pub use tool::ToolModel;
 
-use super::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 
 /// Settings of the dwell solve.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

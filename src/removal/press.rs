@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Point3, Vector3};
 use super::influence::{Contact, Influence};
 use super::tool::ToolModel;
 use super::{known, target};
-use crate::plan::inspection::SurfacePoint;
+use crate::repair::SurfacePoint;
 use crate::spatial::Neighbours;
 
 /// Share of a contact's target removal taken as already gone when its force is evaluated

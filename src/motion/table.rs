@@ -1,20 +1,20 @@
 //! Planning with a part turntable (an indexing axis): per region the table angle that brings
 //! it into the arm's reach (most reachable area, then least turning away from the calibrated
 //! placement), chosen before the strokes; regions grouped by angle and the groups visited in
-//! one sweep of the table; each group planned as today ([`super::plan`]) with the part, and
+//! one sweep of the table; each group planned as today ([`super::plan_part`]) with the part, and
 //! the collision model's part, turned to its angle; between groups the arm rests at home while
 //! the table makes a rest-to-rest Ruckig move. Method: docs/ALGORITHMS.md, "Turntable".
 //!
-//! Front function: [`plan_cell`] (the cell's turntable, if any, beside [`super::plan`]'s
+//! Front function: [`plan`] (the cell's turntable, if any, beside [`super::plan_part`]'s
 //! arguments); result: [`Plan`] with its `turntable` part ([`TablePlan`]).
 use super::check::tool_reaches;
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::file::Plan;
-use super::inspection::{Inspection, RegionInfo};
 use super::raster;
 use super::report::Metrics;
 use super::table_file::{table_move, RegionTable, TablePlan};
+use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
 /// Spacing of the candidate table angles, degrees: the IK accepts the tool axis within a cone
@@ -39,8 +39,8 @@ const FALLBACK_SPREAD_DEG: f64 = 20.0;
 /// strokes can still split or be refused at the chosen angle).
 const GOOD_COVERAGE: f64 = 0.95;
 
-/// Plans `inspection` in a cell with `table` (`None`: exactly [`super::plan`]).
-pub fn plan_cell(
+/// Plans `inspection` in a cell with `table` (`None`: exactly [`super::plan_part`]).
+pub fn plan(
     inspection: &Inspection,
     robot: &Robot,
     workcell: &Workcell,
@@ -48,12 +48,12 @@ pub fn plan_cell(
     config: &PlanConfig,
 ) -> Result<Plan, PlanError> {
     let Some(table) = table else {
-        return super::plan(inspection, robot, workcell, config);
+        return super::plan_part(inspection, robot, workcell, config);
     };
     config.check(robot)?;
     let ranked = rank_angles(inspection, robot, workcell, table, config);
     let choices: Vec<RegionTable> = ranked.iter().map(|r| r.choice.clone()).collect();
-    let mut cell = Cell {
+    let mut cell = GroupedPlan {
         inspection,
         robot,
         workcell,
@@ -73,7 +73,7 @@ pub fn plan_cell(
     for (angle, regions) in groups {
         cell.plan_group(angle, regions, &ranked)?;
     }
-    let Cell {
+    let GroupedPlan {
         merged, table_plan, ..
     } = cell;
     let mut plan = merged.ok_or_else(|| PlanError::Config("no region to plan".into()))?;
@@ -93,7 +93,7 @@ struct Ranked {
 }
 
 /// The plan being built group by group.
-struct Cell<'a> {
+struct GroupedPlan<'a> {
     inspection: &'a Inspection,
     robot: &'a Robot,
     workcell: &'a Workcell,
@@ -103,13 +103,13 @@ struct Cell<'a> {
     table_plan: TablePlan,
 }
 
-impl Cell<'_> {
+impl GroupedPlan<'_> {
     /// `regions` planned as today with the part turned to `angle`.
     fn plan_at(&self, angle: f64, regions: Vec<RegionInfo>) -> Result<Plan, PlanError> {
         let mut part = self.inspection.clone();
         part.regions = regions;
         let wc = self.table.workcell_at(self.workcell, angle);
-        super::plan(&part, self.robot, &wc, self.config)
+        super::plan_part(&part, self.robot, &wc, self.config)
     }
 
     /// Appends `sub`, planned at `angle`, after a table move to it if needed.
@@ -247,9 +247,9 @@ fn tidy_deg(angle: f64) -> f64 {
     (angle.to_degrees() * 1e9).round() / 1e9
 }
 
-/// Whether `region` gets strokes (the filter of [`super::plan`]).
+/// Whether `region` gets strokes (the filter of [`super::plan_part`]).
 fn planned(region: &RegionInfo, config: &PlanConfig, robot: &Robot) -> bool {
-    let geometry = config.geometry(robot.tool.radius * 1e3);
+    let geometry = config.geometry(robot.tool.radius_mm());
     region.repairable && !raster::layer_offsets(region.peak, &geometry).is_empty()
 }
 
@@ -277,7 +277,7 @@ fn rank_angles(
     table: &Turntable,
     config: &PlanConfig,
 ) -> Vec<Ranked> {
-    let reach = robot.tool.radius * 1e3 + config.contact_offset_mm;
+    let reach = robot.tool.radius_mm() + config.contact_offset_mm;
     let [lo, hi] = table.range();
     let step = CANDIDATE_STEP_DEG.to_radians();
     let candidates: Vec<f64> = ((lo / step).ceil() as i64..=(hi / step).floor() as i64)

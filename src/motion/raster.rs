@@ -3,8 +3,8 @@
 use nalgebra::{Matrix2, Point3, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::inspection::{RegionInfo, SurfacePoint};
 use super::surface::Surface;
+use crate::repair::{RegionInfo, SurfacePoint};
 
 /// What a stroke does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
