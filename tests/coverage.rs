@@ -529,7 +529,8 @@ fn run_ok(cmd: &mut std::process::Command, incomplete: bool) -> String {
 /// outside defects narrower than 2 mm; those must be found):
 /// - one setup plus the suggested views (the second setup, merged on its own;
 ///   `inspect --scan A --scan B`);
-/// - both setups' 24 views joined by `merge --setups turntable.json`, inspected as one scan;
+/// - both setups' 24 views joined by `merge --setups turntable.json --reference` (each setup
+///   merged, joined through its registration onto the reference), inspected as one scan;
 ///
 /// each measures at least 95 % of the area, with IoU >= 0.96 on measured core points, no
 /// error above 0.2 mm, and a verdict; deviations.ply says that both scans supported core
@@ -582,6 +583,8 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
             .args(views("setup2_"))
             .arg("--setups")
             .arg(d.join("turntable.json"))
+            .arg("--reference")
+            .arg(d.join("reference.ply"))
             .args(table)
             .arg("-o")
             .arg(&joined),
