@@ -10,6 +10,7 @@ pub mod cell;
 pub mod cli;
 pub mod cloud;
 pub mod compare;
+pub mod cycle;
 pub mod design;
 pub mod inspect;
 pub mod motion;

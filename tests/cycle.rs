@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::Stdio;
 
 use nalgebra::Point3;
-use polishbot::cell::cycle::{
+use polishbot::cycle::{
     decide, decide_plan, planned_regions, predicted_rms, CycleConfig, IterationRecord, Measured,
     Outcome,
 };
@@ -48,6 +48,7 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
     let cfg = CycleConfig {
         max_iterations: 2,
         min_progress: 0.05,
+        ..CycleConfig::default()
     };
     let fresh = |v| IterationRecord::new(9, measured(Verdict::Repairable, 2, 0, v));
     // a first inspection with excess: grind
@@ -85,13 +86,13 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
     assert_eq!(decide_plan(&ground(1, 1.0, 1.0, 0.5)), Outcome::Continue);
     assert!(CycleConfig {
         max_iterations: 0,
-        ..cfg
+        ..cfg.clone()
     }
     .check()
     .is_err());
     assert!(CycleConfig {
         min_progress: 1.5,
-        ..cfg
+        ..cfg.clone()
     }
     .check()
     .is_err());
@@ -345,7 +346,7 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
             a.agreement
         );
         assert!(
-            second.volume < first.volume * (1.0 - polishbot::cell::cycle::DEFAULT_MIN_PROGRESS),
+            second.volume < first.volume * (1.0 - polishbot::cycle::DEFAULT_MIN_PROGRESS),
             "seed {seed}: volume {} -> {}",
             first.volume,
             second.volume

@@ -234,7 +234,7 @@ fn tall_bump_plan(name: &str, max_pass: f64) -> (Plan, PlanConfig) {
     (p, config)
 }
 
-/// The planner's real path to a region's allowance (`plan/regions.rs`: set_dwell, the
+/// The planner's real path to a region's allowance (`motion/by_region.rs`: set_dwell, the
 /// rehearsal's Monte Carlo, the re-solve): a bump that over-grinds at the Monte Carlo's quantile
 /// with the default allowance is planned, not left out, with its allowance raised by whole
 /// steps of `ALLOWANCE_STEP_SHARE` x tolerance until the quantile stays within the tolerance.

@@ -49,7 +49,7 @@ use polishbot::spatial::Neighbours;
 /// Widened from 0.1 to 0.12 when synth's site filter began to test a defect's rim with the
 /// rim's own normals (`cell::reachable_sites`), which moved this part's defects: per region
 /// 0.892-1.099 over its four regions; the mid-pass normal gave 0.892-1.247 on it. Narrowed to
-/// 0.08 when the planner began to grind its pass in order (`plan::removal::sequence`: each
+/// 0.08 when the planner began to grind its pass in order (`removal::sequence`: each
 /// contact pressed on the part as the contacts before it left it): 0.940-1.008 per region.
 const WITHIN: f64 = 0.08;
 

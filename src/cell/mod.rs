@@ -2,10 +2,8 @@
 //! its frames as data) and `bus` (which sends frames and reads servos back); `run` and `demo`
 //! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
 //!
-//! Front functions: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the closed
-//! loop's stop rule [`cycle::decide`] with a [`cycle::CycleConfig`]; the removal calibration
-//! [`removal_fit::fit`] with a [`removal_fit::FitConfig`].
-pub mod cycle;
+//! Front function: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the measured
+//! shift of a grind's removal, [`removal_shift::register`].
 mod reach;
 pub mod removal_shift;
 mod stream;

@@ -39,20 +39,7 @@ pub fn load_reference(
     })
 }
 
-/// Joins an error chain into one line: "outer: inner: root".
-pub fn one_line(err: &anyhow::Error) -> String {
-    let parts: Vec<String> = err.chain().map(|e| e.to_string()).collect();
-    let mut line = String::new();
-    for part in parts {
-        if !line.contains(&part) {
-            if !line.is_empty() {
-                line.push_str(": ");
-            }
-            line.push_str(&part);
-        }
-    }
-    line.replace('\n', " ")
-}
+pub use crate::cycle::one_line;
 
 /// Reads an optional TOML config file into `T` (missing file argument: `T::default()`);
 /// errors name the file and the line.

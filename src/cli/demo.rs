@@ -8,12 +8,20 @@ use anyhow::{Context, Result};
 use clap::Args;
 use nalgebra::Point3;
 
-use super::common::read_json;
-use super::{inspect, plan, run as run_cmd};
+use super::arm::DeviceArgs;
+use super::run::{Job, LoopArm, PlanSource};
+use super::settings::ConfigFile;
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
+use crate::cycle::{plan_into, run_cycle, CycleConfig, First, PlanFileConfig};
+use crate::inspect::{FileInput, Findings, InspectConfig};
 use crate::motion::Plan;
-use crate::regions::Regions;
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
+
+/// The demo's files: synth writes millimetres in PLY.
+const DEMO_FILES: FileInput = FileInput {
+    units: Some(crate::cloud::Units::Mm),
+    format: None,
+};
 
 /// Arguments of `demo`.
 #[derive(Debug, Args)]
@@ -115,38 +123,30 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let reachable = crate::cell::reachable_sites(crate::cell::SITE_AXIS_MARGIN_DEG)?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
     case.write(&out)?;
-    let inspection = out.join("inspection");
+    let inspection_dir = out.join("inspection");
     step("inspect: filter, register, compare, regions, report");
-    inspect::inspect_into(
-        &crate::inspect::InspectConfig::default(),
-        &crate::inspect::Inputs {
-            reference: out.join("reference.ply"),
-            scan: out.join("scan.ply"),
-            more_scans: Vec::new(),
-            files: crate::inspect::FileInput {
-                units: Some(crate::cloud::Units::Mm),
-                format: None,
-            },
-            pose: None,
-            core: None,
-            inspect_area: None,
-            registration_error: None,
-        },
-        &inspection,
-    )?;
+    let inputs = crate::inspect::Inputs {
+        reference: out.join("reference.ply"),
+        scan: out.join("scan.ply"),
+        more_scans: Vec::new(),
+        files: DEMO_FILES,
+        pose: None,
+        core: None,
+        inspect_area: None,
+        registration_error: None,
+    };
+    let found = crate::inspect::inspect_into(&InspectConfig::default(), &inputs, &inspection_dir)?;
+    let inspection = crate::cycle::planner_input(&found, &inspection_dir);
     step("plan: grinding passes and the joint trajectory");
     let plan_file = out.join("plan.json");
-    plan::run(
-        plan::PlanArgs {
-            inspection: inspection.clone(),
-            cell: None,
-            workcell: None,
-            out: plan_file.clone(),
-            export_ros: Some(out.join("trajectory.yaml")),
-            require_full_reach: false,
-            mode: None,
-        },
-        None,
+    let refuse = |m: &str| anyhow::anyhow!("plan settings: {m}");
+    let ros = out.join("trajectory.yaml");
+    let planned = plan_into(
+        &PlanFileConfig::default(),
+        &inspection,
+        &plan_file,
+        Some(&ros),
+        &refuse,
     )?;
     step("run: stream the plan to the simulated arm");
     // The demo overwrites its files: run refuses a journal of an earlier demo's plan (no two
@@ -156,21 +156,24 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         std::fs::remove_file(&journal)
             .with_context(|| format!("{}: cannot remove", journal.display()))?;
     }
-    run_cmd::run(
-        run_cmd::RunArgs {
-            plan: plan_file.clone(),
-            device: super::arm::DeviceArgs::sim(),
-            cell: None,
+    let run_settings = super::run::settings(&ConfigFile::default(), None)?;
+    super::run::stream_plan(
+        &run_settings,
+        &Job {
+            plan_file: &plan_file,
+            source: PlanSource::Made {
+                text: &planned.text,
+                plan: &planned.plan,
+            },
+            inspection: Some(&inspection),
+            device: &DeviceArgs::sim(),
             dry_run: false,
             resume: None,
             journal: Some(journal),
             part: None,
-            ground_out: None,
-            part_in_reference: false,
         },
-        None,
     )?;
-    summary(&out, &inspection, &plan_file, &case.truth)?;
+    summary(&out, &found, &planned.plan, &case.truth)?;
     step("cycle: grind the virtual part, rescan, inspect, plan again (the closed loop)");
     // The loop's folders are the demo's own: an earlier demo's journals (of other plans) and
     // iterations would be refused or mixed in, so the loop starts from an empty folder.
@@ -179,24 +182,30 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         std::fs::remove_dir_all(&cycle_dir)
             .with_context(|| format!("{}: cannot remove", cycle_dir.display()))?;
     }
-    let outcome = super::cycle::run_loop(&super::cycle::Loop {
+    let cfg = CycleConfig {
+        max_iterations: DEMO_ITERATIONS,
+        ..CycleConfig::default()
+    };
+    let inputs = crate::cycle::Inputs {
         reference: out.join("reference.ply"),
         scan: out.join("scan.ply"),
+        files: DEMO_FILES,
         out: cycle_dir,
-        config: crate::cell::cycle::CycleConfig {
-            max_iterations: DEMO_ITERATIONS,
-            ..Default::default()
-        },
-        device: super::arm::DeviceArgs::sim(),
-        input: super::common::GeometryInput {
-            units: Some(crate::cloud::Units::Mm),
-            format: None,
-        },
-        configs: super::cycle::Configs::default(),
-        first: Some((inspection.clone(), plan_file.clone())),
-        mode: None,
-    })?;
-    println!("demo: the loop ended: {}", outcome.describe());
+        first: Some(First {
+            found,
+            inspection_dir,
+            plan_file,
+            planned,
+        }),
+    };
+    let mut arm = LoopArm {
+        device: DeviceArgs::sim(),
+        settings: run_settings,
+        table: toml::Table::new(),
+    };
+    let ended = run_cycle(&cfg, inputs, &mut arm)?;
+    super::cycle::print_outcome(&ended);
+    println!("demo: the loop ended: {}", ended.outcome.describe());
     println!(
         "demo: done in {:.1} s; everything is in {}",
         start.elapsed().as_secs_f64(),
@@ -205,16 +214,11 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-/// Scores the run against the truth and prints it.
-fn summary(out: &Path, inspection: &Path, plan_file: &Path, truth: &Truth) -> Result<()> {
-    #[derive(serde::Deserialize)]
-    struct Registration {
-        scan_to_reference: [[f64; 4]; 4],
-    }
-    let reg: Registration = read_json(&inspection.join("registration.json"))?;
-    let (deg, mm) = pose_difference(&isometry_from_rows(&reg.scan_to_reference)?, &truth.pose()?);
-    let regions: Regions = read_json(&inspection.join("regions.json"))?;
-    let plan = Plan::load(plan_file)?;
+/// Scores the run (the inspection `found` and the plan) against the truth and prints it.
+fn summary(out: &Path, found: &Findings, plan: &Plan, truth: &Truth) -> Result<()> {
+    let rows = crate::cycle::pose_rows(&found.pose);
+    let (deg, mm) = pose_difference(&isometry_from_rows(&rows)?, &truth.pose()?);
+    let regions = &found.regions;
     println!("== summary ({})", out.display());
     println!("registration error against truth: {deg:.4} deg, {mm:.4} mm");
     println!(

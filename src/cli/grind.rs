@@ -26,6 +26,18 @@ const OFF_SURFACE_MM: f64 = 0.5;
 /// few percent) and the part beyond the inspected area; another part kept 0.1-1 % (issue 52).
 const MIN_ON_SURFACE_SHARE: f64 = 0.5;
 
+/// A virtual part for the simulated arm to grind (`--part`, `--ground-out`).
+pub struct Part<'a> {
+    /// The part's points.
+    pub file: &'a Path,
+    /// Whether they are in the reference frame already (`--part-in-reference`).
+    pub in_reference: bool,
+    /// Where the rescan goes.
+    pub ground_out: &'a Path,
+    /// The inspected scan's pose (registration.json's); None: read from the inspection folder.
+    pub scan_to_reference: Option<[[f64; 4]; 4]>,
+}
+
 /// A virtual part ready to be ground, and where its rescan goes.
 pub struct Ground {
     part: VirtualPart,
@@ -61,25 +73,31 @@ pub fn truth_paths(out: &Path) -> (PathBuf, PathBuf) {
 }
 
 impl Ground {
-    /// Loads the part `(file, in_reference)`: the file's points in the reference frame (by the
-    /// inspection's `registration.json`, or as they are when `in_reference`), those on the
+    /// Loads the part `given`: the file's points in the reference frame (by the inspected
+    /// scan's pose, given or read from the inspection's `registration.json`, or as they are
+    /// when `in_reference`), those on the
     /// inspected surface only (outliers dropped), with PCA normals turned outward as the
     /// nearest core point's.
     pub fn prepare(
         options: &SimOptions,
-        (part, in_reference): (&Path, bool),
-        out: &Path,
+        given: &Part,
         inspection: &Inspection,
     ) -> anyhow::Result<Ground> {
+        let (part, in_reference, out) = (given.file, given.in_reference, given.ground_out);
         let mut cloud = cloud::load_cloud(part, None, None)?;
         if !in_reference {
             #[derive(serde::Deserialize)]
             struct Registration {
                 scan_to_reference: [[f64; 4]; 4],
             }
-            let reg: Registration =
-                super::common::read_json(&inspection.dir.join("registration.json"))?;
-            let pose = cloud::transform::isometry_from_rows(&reg.scan_to_reference)
+            let rows = match given.scan_to_reference {
+                Some(rows) => rows,
+                None => {
+                    let file = inspection.dir.join("registration.json");
+                    super::common::read_json::<Registration>(&file)?.scan_to_reference
+                }
+            };
+            let pose = cloud::transform::isometry_from_rows(&rows)
                 .with_context(|| format!("{}: scan_to_reference", inspection.dir.display()))?;
             cloud.transform(&pose);
         }

@@ -6,6 +6,7 @@ use clap::Args;
 use serde::Deserialize;
 
 use super::arm::DeviceArgs;
+pub use super::grind::Part;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
@@ -56,7 +57,7 @@ pub struct RunArgs {
 
 /// `--config` TOML of `run`: `[robot]`, `[run]`, `[bus]` (timing; the servo map always comes
 /// from servos.toml), `[sim]`, `[validation]`.
-#[derive(Debug, Default, Deserialize)]
+#[derive(Debug, Default, Clone, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct RunFileConfig {
     /// Robot description and calibration files.
@@ -173,7 +174,7 @@ fn check_made_for(
     let Some(recorded) = value["provenance"]["inputs"].as_array() else {
         return Ok(());
     };
-    let now = super::plan_report::plan_inputs(Path::new(&plan.inspection), robot);
+    let now = crate::cycle::plan_inputs(Path::new(&plan.inspection), robot);
     for (role, path) in &now {
         let entry = recorded.iter().find(|e| e["role"] == *role);
         let advice = if role.starts_with("inspection") {
@@ -213,61 +214,139 @@ fn check_made_for(
     Ok(())
 }
 
-/// Runs `run`. `--dry-run` makes every check of a real run (settings, plan, servo map,
-/// resume point, journal) and stops before opening the link.
-pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
-    let file = ConfigFile::read(config)?;
-    let cfg: RunFileConfig = file.parse()?;
-    settings::check_link(&file, &cfg.bus, &cfg.sim)?;
+/// Where the plan to stream comes from.
+pub enum PlanSource<'a> {
+    /// A plan file: read, and checked against the files it was made from.
+    File,
+    /// A plan this process made and wrote to the job's file: its text and the plan.
+    Made {
+        /// plan.json as written.
+        text: &'a str,
+        /// The plan.
+        plan: &'a Plan,
+    },
+}
+
+/// One run: a plan streamed to an arm.
+pub struct Job<'a> {
+    /// plan.json.
+    pub plan_file: &'a Path,
+    /// The plan, from the file or in memory.
+    pub source: PlanSource<'a>,
+    /// The part to check collisions against; None: the inspection folder plan.json names.
+    pub inspection: Option<&'a Inspection>,
+    /// The arm.
+    pub device: &'a DeviceArgs,
+    /// Check everything, send nothing.
+    pub dry_run: bool,
+    /// Continue from this journal.
+    pub resume: Option<&'a Path>,
+    /// The journal file [default: the resume file, else journal.jsonl beside the plan].
+    pub journal: Option<PathBuf>,
+    /// A virtual part for the simulated arm.
+    pub part: Option<Part<'a>>,
+}
+
+/// The settings of `run` from its `--config` file (checked: link, grinding simulator, `[run]`)
+/// with `cell`'s files.
+pub fn settings(file: &ConfigFile, cell: Option<&Path>) -> anyhow::Result<RunFileConfig> {
+    let mut cfg: RunFileConfig = file.parse()?;
+    settings::check_link(file, &cfg.bus, &cfg.sim)?;
     cfg.sim
         .grinding
         .check()
         .map_err(|m| file.refuse("sim.grinding", &m))?;
-    check_run_settings(&file, &cfg.run)?;
-    let mut cfg = cfg;
-    if let Some(dir) = &args.cell {
+    check_run_settings(file, &cfg.run)?;
+    if let Some(dir) = cell {
         cfg.robot.use_cell(dir);
     }
+    Ok(cfg)
+}
+
+/// Runs `run`. `--dry-run` makes every check of a real run (settings, plan, servo map,
+/// resume point, journal) and stops before opening the link.
+pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
+    let cfg = settings(&ConfigFile::read(config)?, args.cell.as_deref())?;
+    let part = match (&args.part, &args.ground_out) {
+        (Some(file), Some(out)) => Some(Part {
+            file,
+            in_reference: args.part_in_reference,
+            ground_out: out,
+            scan_to_reference: None,
+        }),
+        _ => None,
+    };
+    stream_plan(
+        &cfg,
+        &Job {
+            plan_file: &args.plan,
+            source: PlanSource::File,
+            inspection: None,
+            device: &args.device,
+            dry_run: args.dry_run,
+            resume: args.resume.as_deref(),
+            journal: args.journal.clone(),
+            part,
+        },
+    )
+}
+
+/// Streams `job`'s plan with the settings `cfg`: checks the plan against the cell (joint and
+/// servo ranges, collisions), the resume point and the journal, then sends it.
+pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<()> {
     let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
-    // one read: the plan is parsed from the bytes its SHA-256 is taken of
-    let text = std::fs::read_to_string(&args.plan)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", args.plan.display()))?;
-    let plan = Plan::parse(&args.plan, &text)?;
+    let plan_path = job.plan_file;
+    let (text, parsed);
+    let (text, plan) = match job.source {
+        PlanSource::Made { text, plan } => (text, plan),
+        PlanSource::File => {
+            // one read: the plan is parsed from the bytes its SHA-256 is taken of
+            text = std::fs::read_to_string(plan_path)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", plan_path.display()))?;
+            parsed = Plan::parse(plan_path, &text)?;
+            check_made_for(plan_path, &text, &parsed, &cfg.robot)?;
+            (text.as_str(), &parsed)
+        }
+    };
     let sha = sha256_hex(text.as_bytes());
-    check_made_for(&args.plan, &text, &plan, &cfg.robot)?;
     let table = Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
     let checked = plan
         .check_cell(&robot, table.as_ref(), &cfg.validation)
-        .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
+        .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
     let steps = crate::cell::steps(&checked).len();
     let workcell = Workcell::load(&cfg.robot.workcell)?;
     let mut collision = cfg.collision.clone();
     collision
         .solids
         .extend(collide::solids_beside(&cfg.robot.workcell)?);
-    let inspection = Inspection::load(Path::new(&plan.inspection)).map_err(|e| {
-        anyhow::anyhow!(
-            "{}: refused: the part to check collisions against: {e}",
-            args.plan.display()
-        )
-    })?;
-    plan.check_clearance_cell(&inspection, &robot, &workcell, table.as_ref(), &collision)
-        .map_err(|e| anyhow::anyhow!("{}: refused: {e}", args.plan.display()))?;
-    let from = start_frame(args.resume.as_deref(), &sha, steps)?;
-    let journal_path = args
-        .journal
-        .clone()
-        .or(args.resume.clone())
-        .unwrap_or_else(|| args.plan.with_file_name("journal.jsonl"));
-    if args.resume.is_none() {
+    let loaded;
+    let inspection = match job.inspection {
+        Some(i) => i,
+        None => {
+            loaded = Inspection::load(Path::new(&plan.inspection)).map_err(|e| {
+                anyhow::anyhow!(
+                    "{}: refused: the part to check collisions against: {e}",
+                    plan_path.display()
+                )
+            })?;
+            &loaded
+        }
+    };
+    plan.check_clearance_cell(inspection, &robot, &workcell, table.as_ref(), &collision)
+        .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
+    let from = start_frame(job.resume, &sha, steps)?;
+    let journal_path = (job.journal.clone())
+        .or(job.resume.map(Path::to_path_buf))
+        .unwrap_or_else(|| plan_path.with_file_name("journal.jsonl"));
+    if job.resume.is_none() {
         check_fresh_journal(&journal_path, &sha)?;
     }
-    let mut bus_cfg = cfg.bus;
+    let mut bus_cfg = cfg.bus.clone();
     bus_cfg.servo_map = frames::servo_map(&robot)?;
     bus_cfg.servo_map.validate()?;
-    let ground = ground(&args, &cfg.sim, &inspection)?;
+    let ground = ground(job, &cfg.sim, inspection)?;
     let sim = super::arm::sim_with_table(&cfg.sim, table.as_ref())?;
-    if args.dry_run {
+    if job.dry_run {
         println!(
             "run: dry run: {} passes, {} frames from frame {from}, {:.2} s at {} ms per frame; nothing sent",
             plan.passes.len(),
@@ -288,14 +367,14 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
         );
         let arm = ground.arm(&map)?;
         let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
-        stream(bus, &checked, &plan, from, &cfg.run, stop, &journal_path)?;
+        stream(bus, &checked, plan, from, &cfg.run, stop, &journal_path)?;
         return ground.finish(&arm, &map, &workcell);
     }
-    let link = super::arm::open_link(&args.device, &sim, &bus_cfg.servo_map, "run")?;
+    let link = super::arm::open_link(job.device, &sim, &bus_cfg.servo_map, "run")?;
     stream(
         Bus::connect(link, bus_cfg, journal)?,
         &checked,
-        &plan,
+        plan,
         from,
         &cfg.run,
         stop,
@@ -306,22 +385,22 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
 /// The virtual part of `--part` / `--ground-out`, checked and loaded before anything moves;
 /// only the simulated arm grinds one, from the plan's first frame.
 fn ground(
-    args: &RunArgs,
+    job: &Job,
     sim: &SimOptions,
     inspection: &Inspection,
 ) -> anyhow::Result<Option<super::grind::Ground>> {
-    let (Some(part), Some(out)) = (&args.part, &args.ground_out) else {
+    let Some(part) = &job.part else {
         return Ok(None);
     };
     anyhow::ensure!(
-        args.device.sim,
+        job.device.sim,
         "run: --part and --ground-out need --sim (only the simulated arm grinds a virtual part)"
     );
     anyhow::ensure!(
-        args.resume.is_none(),
+        job.resume.is_none(),
         "run: --part cannot --resume: the virtual part's removal lives only in one run"
     );
-    super::grind::Ground::prepare(sim, (part, args.part_in_reference), out, inspection).map(Some)
+    super::grind::Ground::prepare(sim, part, inspection).map(Some)
 }
 
 fn stream<T: Transport>(
@@ -358,4 +437,81 @@ fn stream<T: Transport>(
             journal.display()
         )),
     }
+}
+
+/// The loop's arm (`cycle`, `demo`): `run`'s streaming with its settings held in memory; the
+/// simulated arm grinds the loop's virtual part and rescans it, a real arm's next scan is
+/// asked for on stdin.
+pub struct LoopArm {
+    /// The arm.
+    pub device: DeviceArgs,
+    /// `run`'s settings (cycle's `[run]`), checked.
+    pub settings: RunFileConfig,
+    /// The same as written (cycle's `[run]` table): each iteration's run.toml is it with the
+    /// plan's tool file.
+    pub table: toml::Table,
+}
+
+impl crate::cycle::Executor for LoopArm {
+    fn grind(&mut self, job: &crate::cycle::GrindJob) -> anyhow::Result<crate::cycle::Rescan> {
+        let after = job.dir.join("after.ply");
+        let sim = self.device.sim;
+        crate::cycle::with_tool(&self.table, job.tool, &job.dir.join("run.toml"))?;
+        let mut cfg = self.settings.clone();
+        cfg.robot.tool = job.tool.to_path_buf();
+        let part = sim.then(|| Part {
+            file: job.part,
+            in_reference: job.part_in_reference,
+            ground_out: &after,
+            scan_to_reference: Some(job.scan_to_reference),
+        });
+        let run = Job {
+            plan_file: job.plan_file,
+            source: PlanSource::Made {
+                text: &job.planned.text,
+                plan: &job.planned.plan,
+            },
+            inspection: Some(job.inspection),
+            device: &self.device,
+            dry_run: false,
+            resume: None,
+            journal: Some(job.dir.join("journal.jsonl")),
+            part,
+        };
+        stream_plan(&cfg, &run)?;
+        if sim {
+            let part = super::grind::truth_paths(&after).0;
+            return Ok(crate::cycle::Rescan {
+                scan: after,
+                part: Some(part),
+            });
+        }
+        Ok(crate::cycle::Rescan {
+            scan: next_scan(job.plan_file)?,
+            part: None,
+        })
+    }
+}
+
+/// The next scan's path, asked for on stdin after a real arm's run of `plan`.
+fn next_scan(plan: &Path) -> anyhow::Result<PathBuf> {
+    use std::io::BufRead;
+    println!("cycle: scan the part and enter the scan file's path:");
+    let mut line = String::new();
+    std::io::stdin()
+        .lock()
+        .read_line(&mut line)
+        .map_err(|e| anyhow::anyhow!("cycle: reading the next scan's path from stdin: {e}"))?;
+    let next = PathBuf::from(line.trim());
+    anyhow::ensure!(
+        !line.trim().is_empty(),
+        "cycle: no next scan given on stdin (the journal of {} is complete)",
+        plan.display()
+    );
+    anyhow::ensure!(
+        next.is_file(),
+        "{}: the next scan (read from stdin) is not a file",
+        next.display()
+    );
+    Ok(next)
 }

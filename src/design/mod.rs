@@ -4,7 +4,7 @@
 //! share of the articular surface the arm can grind. A surface sample counts as reached when
 //! at some table angle the planner's own IK (`Robot::ik`: reach, joint limits, the 45 degree
 //! cone of the tool axis about the arm plane) places the ball on its normal and the planner's
-//! collision model (`plan::collide::Scene`, rule `Grind`: no second face, shank and links
+//! collision model (`motion::collide::Scene`, rule `Grind`: no second face, shank and links
 //! clear of the part and of the cell's solids, including the table's fixture) accepts the
 //! pose. Front: [`design`]; files: [`write::write_cell`]. Method: docs/ALGORITHMS.md, "Cell
 //! design".

@@ -1,15 +1,18 @@
 //! Inspection as a library function: a scan measured against its reference, from the files to
 //! the verdict. [`run`] reads top to bottom: load and check -> outlier filter -> register (or a
 //! given pose) -> core points -> compare -> regions and verdict. It prints nothing and writes
-//! nothing; `polishbot inspect` (and `demo`) write its [`Findings`] to files.
+//! nothing; [`files::inspect_into`] (called by `polishbot inspect`, `demo` and the loop) writes
+//! its [`Findings`] to files.
 pub mod area;
 pub mod checks;
 mod config;
+pub mod files;
 mod load;
 mod pose;
 pub mod scans;
 pub mod suggest;
 
+pub use files::{inspect_into, Incomplete, INCOMPLETE_EXIT};
 pub use pose::{register_scan, PoseSource};
 
 pub use config::{

@@ -1,7 +1,7 @@
 //! Removal mode of the planner: the compliant tool pressed at its preload along one raster per
 //! region, the dwell of every contact solved (`set_dwell`; the region then rehearsed and,
 //! while the arm's error makes it over-grind, solved again with a raised allowance:
-//! `plan/predict.rs`, `plan/regions.rs`), each stroke ground without stopping at the feed its
+//! `predict.rs`, `by_region.rs`), each stroke ground without stopping at the feed its
 //! contacts' dwells ask for (`stroke.rs`), the force checked at each contact's joint angles,
 //! and the predicted part from the dwell the trajectory really spends. Method: docs/ALGORITHMS.md, "Removal planning".
 use nalgebra::{DMatrix, Matrix3, Point3, Vector3};

@@ -1,7 +1,7 @@
 //! What a grind's plan predicted against what the inspections measured, core point by core
 //! point: predicted.csv read and matched to the core points, the same core point found in two
 //! inspections, and the pass re-predicted with a fitted k ([`agreement`]). Used by the removal
-//! fit (`removal_fit`) and `cycle`.
+//! fit (`fit`) and `cycle`.
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 

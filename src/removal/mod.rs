@@ -1,8 +1,13 @@
-//! Removal planning: a compliant abrasive tool, Preston's law as an influence function, the
-//! dwell times that remove each core point's excess above the allowance, and the predicted part
-//! after grinding. Method: docs/ALGORITHMS.md, "Removal planning".
+//! Removal planning: what a compliant abrasive tool removes from the surface, with no arm in
+//! it: the tool (one typed reader of tool.toml's `[removal]`), Preston's law as an influence
+//! function, the dwell times that remove each core point's excess above the allowance, the
+//! arm's error by Monte Carlo, the predicted part as data ([`prediction`]), and Preston's k
+//! fitted back from a grind's rescan ([`fit`], [`matching`]). Motion planning (`motion`) calls
+//! it and turns the dwells into joint trajectories. Method: docs/ALGORITHMS.md, "Removal
+//! planning".
 //!
-//! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`].
+//! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`]. The k
+//! fit: [`fit::fit`] with a [`fit::FitConfig`].
 pub mod dwell;
 pub mod fit;
 pub mod force;
@@ -296,7 +301,7 @@ fn lifted(
 
 /// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the
 /// tolerance (0.5): small enough that the plan still removes all it safely can. The planner's
-/// re-solve (`plan/regions.rs`) raises a region's allowance by it.
+/// re-solve (`motion/by_region.rs`) raises a region's allowance by it.
 pub const ALLOWANCE_STEP_SHARE: f64 = 0.5;
 
 #[cfg(test)]

@@ -118,3 +118,35 @@ img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeu
     s += "</body></html>\n";
     std::fs::write(path, s).with_context(|| format!("{}: cannot write", path.display()))
 }
+
+/// A plain page without scripts or figures: `title`, one table (`header`, `rows`; cells
+/// escaped) and `paragraphs` after it (given as HTML). The closed loop's cycle.html.
+pub fn table_page(
+    title: &str,
+    header: &[String],
+    rows: &[Vec<String>],
+    paragraphs: &[String],
+) -> String {
+    let cells = |row: &[String], tag: &str| {
+        row.iter()
+            .map(|c| format!("<{tag}>{}</{tag}>", escape(c)))
+            .collect::<String>()
+    };
+    let title = escape(title);
+    let mut html = format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{title}</title>\n\
+         <style>body{{font-family:sans-serif;margin:2em}}table{{border-collapse:collapse}}\
+         td,th{{border:1px solid #999;padding:4px 8px;text-align:right}}</style></head><body>\n\
+         <h1>{title}</h1>\n<table>\n"
+    );
+    html += &format!("<tr>{}</tr>\n", cells(header, "th"));
+    for row in rows {
+        html += &format!("<tr>{}</tr>\n", cells(row, "td"));
+    }
+    html += "</table>\n";
+    for p in paragraphs {
+        html += &format!("<p>{p}</p>\n");
+    }
+    html += "</body></html>\n";
+    html
+}

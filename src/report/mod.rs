@@ -7,7 +7,9 @@ pub(crate) mod font;
 mod histogram;
 mod html;
 mod input;
+pub mod inspection;
 mod marks;
+pub mod plan_html;
 pub mod plan_page;
 pub mod provenance;
 mod raster;
@@ -19,7 +21,7 @@ use std::path::Path;
 use anyhow::Result;
 
 pub use colour::diverging;
-pub use html::escape;
+pub use html::{escape, table_page};
 pub use input::{
     colour_range, Figure, RegionMark, ReportConfig, ReportFiles, ReportInput, Table, Unmeasured,
 };

@@ -106,6 +106,14 @@ impl Provenance {
     pub fn stamp_json(&self, path: &Path) -> Result<()> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read", path.display()))?;
+        let out = self.stamp(&text, path)?;
+        std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
+    }
+
+    /// The JSON object `text` (the file `path`, named in errors) with this block added as its
+    /// last key, `provenance`: what [`Provenance::stamp_json`] writes, for a caller that holds
+    /// the text.
+    pub fn stamp(&self, text: &str, path: &Path) -> Result<String> {
         let end = text
             .trim_end()
             .strip_suffix('}')
@@ -113,8 +121,7 @@ impl Provenance {
         let block = serde_json::to_string_pretty(self)?.replace('\n', "\n  ");
         let body = end.trim_end();
         let sep = if body.ends_with('{') { "" } else { "," };
-        let out = format!("{body}{sep}\n  \"provenance\": {block}\n}}");
-        std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
+        Ok(format!("{body}{sep}\n  \"provenance\": {block}\n}}"))
     }
 }
 

@@ -1,47 +1,17 @@
-//! The report side of `plan`: the provenance block of plan.json and plan.html beside it (the
-//! tool path per region over the inspection's colour map, reach, durations). Reads only fields
-//! plan.json already has, so the planner's own files stay untouched.
+//! plan.html from a plan: the tool path per region over the inspection's colour map, reach
+//! and durations as tables ([`write_plan_html`]), drawn by [`super::plan_page`]. Reads only
+//! fields plan.json already has, so the planner's own files stay untouched.
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use nalgebra::{Point3, Vector3};
 
-use crate::motion::{Inspection, Plan, PlanConfig, Segment, SegmentKind, StrokeKind};
-use crate::report::plan_page::{self, PlanPage, ToolPath};
-use crate::report::provenance::Provenance;
-use crate::report::{ReportConfig, ReportInput, Table};
-use crate::robot::RobotConfig;
-
-/// The files a plan is made from, by role: the inspection's (under `inspection`) and the
-/// cell's. plan.json's provenance records their SHA-256; `run` compares them with the files
-/// it is given ([`super::run`]) and refuses a plan made for other files.
-pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str, PathBuf)> {
-    vec![
-        ("inspection regions", inspection.join("regions.json")),
-        ("inspection deviations", inspection.join("deviations.csv")),
-        ("robot description", robot.urdf.clone()),
-        ("tool", robot.tool.clone()),
-        ("servo calibration", robot.servos.clone()),
-        ("workcell", robot.workcell.clone()),
-        ("solids", robot.workcell.with_file_name("solids.toml")),
-    ]
-}
-
-/// The provenance of a plan: the inspection's files it read, the cell's files, the settings.
-pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> Result<Provenance> {
-    let inputs = plan_inputs(inspection, robot);
-    let files: Vec<(&str, &Path)> = inputs.iter().map(|(r, p)| (*r, p.as_path())).collect();
-    let existing: Vec<(&str, &Path)> = files.into_iter().filter(|(_, p)| p.is_file()).collect();
-    // the removal model the plan used (its k is what `calibrate removal` scales from)
-    let tool = crate::removal::ToolModel::load(&robot.tool).ok();
-    let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": tool });
-    Provenance::new(
-        "plan",
-        "inspection in mm (reference frame); robot in m and rad (URDF base frame)",
-        &existing,
-        &config,
-    )
-}
+use super::inspection::region_mark;
+use super::plan_page::{self, PlanPage, ToolPath};
+use super::provenance::Provenance;
+use super::{ReportConfig, ReportInput, Table};
+use crate::motion::{Plan, Segment, SegmentKind, StrokeKind};
+use crate::repair::Inspection;
 
 /// Seconds of the samples `first..=last` at the bus period.
 fn seconds(s: &Segment, period: f64) -> f64 {
@@ -131,7 +101,7 @@ fn tables(plan: &Plan) -> Vec<Table> {
 
 /// Writes plan.html (beside `plan_file`, same stem) with its figures and links the
 /// inspection's report.html to it; returns the page.
-pub fn write_page(
+pub fn write_plan_html(
     plan_file: &Path,
     inspection: &Inspection,
     plan: &Plan,
@@ -197,7 +167,7 @@ pub fn write_page(
             labels: &labels,
             regions: (inspection.regions.iter())
                 .filter(|r| planned.contains(&r.id))
-                .map(super::inspect_report::region_mark)
+                .map(region_mark)
                 .collect(),
             provenance: Some(provenance),
             unmeasured: None,

@@ -1,61 +1,15 @@
-//! The closed scan-grind-rescan loop (`polishbot cycle`) as data: what one inspection of the
-//! loop measured, what its plan set out to remove, and the rule that ends the loop. The
-//! command line (src/cli/cycle.rs) runs inspect, plan and run and feeds these types; nothing
-//! here touches a file or the arm.
-//!
-//! Front function: [`decide`] with a [`CycleConfig`]; one [`IterationRecord`] per inspection.
+//! The loop's records: what one inspection of the loop measured, what its plan set out to
+//! remove, the rule that ends the loop ([`decide`] with a [`CycleConfig`]) and the table of
+//! the records (text, cycle.json, cycle.html's rows). Nothing here touches a file or the arm;
+//! the engine (`super::engine`) feeds these types.
 use serde::{Deserialize, Serialize};
 
+use super::config::CycleConfig;
 use crate::motion::{Inspection, Plan};
 use crate::regions::{Region, Verdict};
 use crate::removal::fit::{Agreement, SAME_POINT_MM};
-use crate::report::escape;
+use crate::report::{escape, table_page};
 use crate::spatial::Neighbours;
-
-/// Default least share of the planned excess volume an iteration must remove to go on: a
-/// rigid depth-layer pass at the nominal k takes about 0.03 mm off a 0.14 mm region's mean
-/// (20 % of its excess, measured in tests/grind_sim.rs), while a rescan and a new
-/// registration alone move a region's volume by a few per cent; 5 % separates an iteration
-/// that ground from one that only re-measured the same part.
-pub const DEFAULT_MIN_PROGRESS: f64 = 0.05;
-
-/// Default number of grinding iterations (issue 29: "after `--max-iterations` (3)").
-pub const DEFAULT_MAX_ITERATIONS: usize = 3;
-
-/// Settings of the loop.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct CycleConfig {
-    /// Most grinding iterations (default [`DEFAULT_MAX_ITERATIONS`]).
-    pub max_iterations: usize,
-    /// Least share of the planned excess volume an iteration must remove (default
-    /// [`DEFAULT_MIN_PROGRESS`]).
-    pub min_progress: f64,
-}
-
-impl Default for CycleConfig {
-    fn default() -> Self {
-        CycleConfig {
-            max_iterations: DEFAULT_MAX_ITERATIONS,
-            min_progress: DEFAULT_MIN_PROGRESS,
-        }
-    }
-}
-
-impl CycleConfig {
-    /// Checks the settings; the message names the flag.
-    pub fn check(&self) -> Result<(), String> {
-        if self.max_iterations == 0 {
-            return Err("--max-iterations must be at least 1".into());
-        }
-        if !(0.0..=1.0).contains(&self.min_progress) {
-            return Err(format!(
-                "--min-progress must be a share between 0 and 1, not {}",
-                self.min_progress
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// What one inspection of the loop measured (over the repairable regions: pits are never
 /// ground and are only counted).
@@ -154,7 +108,7 @@ pub struct IterationRecord {
     /// Share of the planned excess volume that the next inspection found removed.
     pub progress: Option<f64>,
     /// Preston's k fitted after this iteration's grind to the points of every grind so far
-    /// (`removal_fit::pool`), the next plan's k, mm^2/N (None: not fitted).
+    /// (`removal::fit::pool`), the next plan's k, mm^2/N (None: not fitted).
     pub k_fitted: Option<f64>,
     /// The grind's prediction at the plan's and at the fitted k against the achieved
     /// residual, over the same defect points (removal plans only).
@@ -390,33 +344,20 @@ pub fn table_json(records: &[IterationRecord], outcome: Outcome) -> serde_json::
 
 /// `cycle.html`: the table and the outcome, plain HTML without scripts.
 pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
-    let cells = |row: &[String], tag: &str| {
-        row.iter()
-            .map(|c| format!("<{tag}>{}</{tag}>", escape(c)))
-            .collect::<String>()
-    };
-    let mut html = String::from(
-        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>polishbot cycle</title>\n\
-         <style>body{font-family:sans-serif;margin:2em}table{border-collapse:collapse}\
-         td,th{border:1px solid #999;padding:4px 8px;text-align:right}</style></head><body>\n\
-         <h1>polishbot cycle</h1>\n<table>\n",
-    );
-    html += &format!(
-        "<tr>{}</tr>\n",
-        cells(&TABLE_HEADER.map(str::to_string), "th")
-    );
-    for r in records {
-        html += &format!("<tr>{}</tr>\n", cells(&table_row(r), "td"));
-    }
-    html += &format!(
-        "</table>\n<p>Outcome: {}.</p>\n<p>Each row is the inspection that began iteration k \
-         (folder iter-k); removed % and the achieved residual come from the next inspection. \
-         The defect points' column re-predicts the grind with the k fitted after it (the \
-         plan's removal x fitted k / plan's k) and compares it with the achieved residual at \
-         the same points; lowest ground is the next inspection's lowest distance where the \
-         plan ground.</p>\n\
-         </body></html>\n",
-        escape(outcome.describe())
-    );
-    html
+    let rows: Vec<Vec<String>> = records.iter().map(|r| table_row(r).to_vec()).collect();
+    let paragraphs = [
+        format!("Outcome: {}.", escape(outcome.describe())),
+        "Each row is the inspection that began iteration k (folder iter-k); removed % and the \
+         achieved residual come from the next inspection. The defect points' column re-predicts \
+         the grind with the k fitted after it (the plan's removal x fitted k / plan's k) and \
+         compares it with the achieved residual at the same points; lowest ground is the next \
+         inspection's lowest distance where the plan ground."
+            .to_string(),
+    ];
+    table_page(
+        "polishbot cycle",
+        &TABLE_HEADER.map(str::to_string),
+        &rows,
+        &paragraphs,
+    )
 }

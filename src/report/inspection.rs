@@ -1,13 +1,13 @@
-//! The report part of `inspect`: turns deviations and regions into report.html and figures.
+//! The inspection's page: deviations and regions as report.html and its figures, and the
+//! verdict and region texts that the inspection's printed summary shares with it.
 use std::path::Path;
 
 use anyhow::Result;
 
+use super::provenance::Provenance;
+use super::{RegionMark, ReportConfig, ReportInput, Table};
 use crate::compare::Deviations;
-use crate::inspect::{Inputs, InspectConfig};
 use crate::regions::{Region, Regions, Verdict};
-use crate::report::provenance::Provenance;
-use crate::report::{self, RegionMark, ReportConfig, ReportInput, Table};
 
 /// The verdict as users read it.
 pub fn verdict_text(v: Verdict) -> &'static str {
@@ -40,67 +40,6 @@ pub fn verdict_line(found: &Regions) -> String {
         100.0 * found.coverage,
     )
 }
-
-/// The provenance of an inspection: its input files, units and effective settings.
-pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
-    let mut files = vec![
-        ("reference", inputs.reference.as_path()),
-        ("scan", inputs.scan.as_path()),
-    ];
-    files.extend(inputs.more_scans.iter().map(|p| ("scan", p.as_path())));
-    let optional = [
-        ("pose", &inputs.pose),
-        ("core points", &inputs.core),
-        ("area to inspect", &inputs.inspect_area),
-    ];
-    files.extend(
-        optional
-            .iter()
-            .filter_map(|(r, p)| p.as_deref().map(|p| (*r, p))),
-    );
-    let units = match inputs.files.units {
-        Some(u) => format!("results in mm, reference frame; inputs read as {u:?}"),
-        None => "results in mm, reference frame; inputs in mm (no --units)".to_string(),
-    };
-    let config = serde_json::json!({
-        "inspect": cfg,
-        "input_units": inputs.files.units,
-        "input_format": inputs.files.format.map(|f| format!("{f:?}")),
-        "registration_error": inputs.registration_error,
-        "report": ReportConfig::default(),
-    });
-    Provenance::new("inspect", &units, &files, &config)
-}
-
-/// Exit code of `inspect` when the verdict is incomplete (1 is an error, 2 a usage error).
-pub const INCOMPLETE_EXIT: u8 = 3;
-
-/// The error `inspect` ends with when the verdict is incomplete (exit [`INCOMPLETE_EXIT`]).
-#[derive(Debug)]
-pub struct Incomplete {
-    /// Resolved share of the area to inspect.
-    pub coverage: f64,
-    /// Where the rest went.
-    pub shortfall: crate::regions::Shortfall,
-    /// Share needed for a verdict.
-    pub min_coverage: f64,
-}
-
-impl std::fmt::Display for Incomplete {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "inspect: verdict incomplete: resolved {:.1} % of the area to inspect, below the \
-             {:.1} % needed ([regions] min_coverage): {} (docs/ALGORITHMS.md, \"Coverage and \
-             resolution\")",
-            100.0 * self.coverage,
-            100.0 * self.min_coverage,
-            self.shortfall.describe()
-        )
-    }
-}
-
-impl std::error::Error for Incomplete {}
 
 /// What a region marked `†` ([`Region::touches_unmeasured`]) means.
 pub const UNMEASURED_NOTE: &str = "touches an unmeasured area (a hole or the border of the \
@@ -149,12 +88,12 @@ pub fn region_mark(r: &Region) -> RegionMark {
 
 /// Writes `dir/report.html` with its figures; `summary` lines come first (registration...).
 /// With an incomplete verdict `unmeasured` adds the picture of the unmeasured area.
-pub fn write(
+pub fn write_inspection_page(
     dir: &Path,
     (dev, found): (&Deviations, &Regions),
     mut summary: Vec<(String, String)>,
     provenance: &Provenance,
-    unmeasured: Option<report::Unmeasured>,
+    unmeasured: Option<super::Unmeasured>,
 ) -> Result<()> {
     let distances: Vec<f64> = dev.values.iter().map(|v| v.distance).collect();
     let uncertainties: Vec<f64> = dev.values.iter().map(|v| v.uncertainty).collect();
@@ -231,6 +170,6 @@ pub fn write(
         provenance: Some(provenance),
         unmeasured,
     };
-    report::write_report(dir, &input, &ReportConfig::default())?;
+    super::write_report(dir, &input, &ReportConfig::default())?;
     Ok(())
 }

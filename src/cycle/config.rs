@@ -1,0 +1,59 @@
+//! The loop's one settings struct: the stop rule and the settings of the stages it calls.
+use super::plan_stage::PlanFileConfig;
+use crate::inspect::InspectConfig;
+
+/// Default least share of the planned excess volume an iteration must remove to go on: a
+/// rigid depth-layer pass at the nominal k takes about 0.03 mm off a 0.14 mm region's mean
+/// (20 % of its excess, measured in tests/grind_sim.rs), while a rescan and a new
+/// registration alone move a region's volume by a few per cent; 5 % separates an iteration
+/// that ground from one that only re-measured the same part.
+pub const DEFAULT_MIN_PROGRESS: f64 = 0.05;
+
+/// Default number of grinding iterations (issue 29: "after `--max-iterations` (3)").
+pub const DEFAULT_MAX_ITERATIONS: usize = 3;
+
+/// Settings of the loop: its stop rule and the settings every iteration's inspection and plan
+/// are made with (the run's are its executor's, [`super::Executor`]).
+#[derive(Debug, Clone)]
+pub struct CycleConfig {
+    /// Most grinding iterations (default [`DEFAULT_MAX_ITERATIONS`]).
+    pub max_iterations: usize,
+    /// Least share of the planned excess volume an iteration must remove (default
+    /// [`DEFAULT_MIN_PROGRESS`]).
+    pub min_progress: f64,
+    /// Every inspection's settings (`inspect`'s).
+    pub inspect: InspectConfig,
+    /// Every plan's settings (`plan`'s); the loop sets `robot.tool` to the tool file it fitted.
+    pub plan: PlanFileConfig,
+    /// The plan settings as the user wrote them (cycle's `[plan]` table), written with the
+    /// fitted tool to iter-K/plan.toml so that `plan --config` can make the plan again.
+    pub plan_table: toml::Table,
+}
+
+impl Default for CycleConfig {
+    fn default() -> Self {
+        CycleConfig {
+            max_iterations: DEFAULT_MAX_ITERATIONS,
+            min_progress: DEFAULT_MIN_PROGRESS,
+            inspect: InspectConfig::default(),
+            plan: PlanFileConfig::default(),
+            plan_table: toml::Table::new(),
+        }
+    }
+}
+
+impl CycleConfig {
+    /// Checks the settings; the message names the flag.
+    pub fn check(&self) -> Result<(), String> {
+        if self.max_iterations == 0 {
+            return Err("--max-iterations must be at least 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.min_progress) {
+            return Err(format!(
+                "--min-progress must be a share between 0 and 1, not {}",
+                self.min_progress
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,304 @@
+//! The loop's engine: [`run_cycle`] inspects, plans, has the executor grind and rescan, refits
+//! k, and again, until the stop rule ends it. The stages are called in memory (the inspection
+//! the plan is made from, the plan the run streams, the prediction the fit compares with);
+//! their files are outputs only. One iteration is [`Loop::iteration`].
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use super::config::CycleConfig;
+use super::plan_stage::{plan_into, Planned};
+use super::record::{
+    decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
+};
+use super::refit::{refit, Ground};
+use crate::cloud::transform::isometry_to_rows;
+use crate::inspect::{self, FileInput, PoseSource};
+use crate::removal::fit::Evidence;
+use crate::repair::{Inspection, SurfacePoint};
+
+/// What the loop starts from.
+pub struct Inputs {
+    /// Reference file.
+    pub reference: PathBuf,
+    /// The first scan.
+    pub scan: PathBuf,
+    /// Units and format of the reference and the scans.
+    pub files: FileInput,
+    /// Output folder: iter-1, iter-2, ..., cycle.html and cycle.json.
+    pub out: PathBuf,
+    /// Iteration 1's inspection and plan when the caller made them already (demo).
+    pub first: Option<First>,
+}
+
+/// Iteration 1's inspection and plan, made by the caller.
+pub struct First {
+    /// The inspection of the first scan.
+    pub found: inspect::Findings,
+    /// Its folder.
+    pub inspection_dir: PathBuf,
+    /// The plan made from it (a `plan::plan_into` output).
+    pub plan_file: PathBuf,
+    /// What was planned and written.
+    pub planned: Planned,
+}
+
+/// One grind the executor makes.
+pub struct GrindJob<'a> {
+    /// plan.json.
+    pub plan_file: &'a Path,
+    /// The plan and the bytes written to `plan_file`.
+    pub planned: &'a Planned,
+    /// The inspection the plan was made from (the part to check collisions against).
+    pub inspection: &'a Inspection,
+    /// The inspected scan's pose, scan to reference, 4x4 row-major (registration.json's).
+    pub scan_to_reference: [[f64; 4]; 4],
+    /// The tool file the plan was made with.
+    pub tool: &'a Path,
+    /// A simulated arm's part: the first scan, then the part it ground.
+    pub part: &'a Path,
+    /// Whether `part` is already in the reference frame (a ground part's truth file).
+    pub part_in_reference: bool,
+    /// The iteration's folder (journal, run settings, a simulated rescan).
+    pub dir: &'a Path,
+}
+
+/// What a grind left: the next scan, and with a simulated arm the ground part itself.
+pub struct Rescan {
+    /// The scan of the ground part.
+    pub scan: PathBuf,
+    /// The ground part in the reference frame (a simulated arm's truth file), the next grind's
+    /// part; None for a real part.
+    pub part: Option<PathBuf>,
+}
+
+/// The arm the loop grinds with: streams a plan and brings the next scan.
+pub trait Executor {
+    /// Grinds `job`'s plan and returns the rescan.
+    fn grind(&mut self, job: &GrindJob) -> anyhow::Result<Rescan>;
+}
+
+/// How the loop ended, its records and its page.
+pub struct CycleOutcome {
+    /// How it ended.
+    pub outcome: Outcome,
+    /// One record per inspection.
+    pub records: Vec<IterationRecord>,
+    /// cycle.html.
+    pub html: PathBuf,
+}
+
+/// Runs the loop from `inputs` with `cfg`, grinding with `executor`; writes iter-K folders,
+/// cycle.html and cycle.json into `inputs.out` and returns how it ended.
+pub fn run_cycle(
+    cfg: &CycleConfig,
+    inputs: Inputs,
+    executor: &mut dyn Executor,
+) -> anyhow::Result<CycleOutcome> {
+    let mut state = Loop {
+        tool: cfg.plan.robot.tool.clone(),
+        scan: inputs.scan.clone(),
+        part: (inputs.scan.clone(), false),
+        inputs,
+        cfg,
+        records: Vec::new(),
+        previous: None,
+        pooled: Vec::new(),
+    };
+    for k in 1.. {
+        if let Some(outcome) = state.iteration(k, executor)? {
+            return state.finish(outcome);
+        }
+    }
+    unreachable!("the loop returns")
+}
+
+/// The loop's state between iterations.
+struct Loop<'a> {
+    cfg: &'a CycleConfig,
+    inputs: Inputs,
+    records: Vec<IterationRecord>,
+    /// What the last grind was made from.
+    previous: Option<Ground>,
+    /// Every grind's removal evidence so far: k is fitted to all of it.
+    pooled: Vec<Evidence>,
+    /// The scan to inspect next.
+    scan: PathBuf,
+    /// The simulator's virtual part: the first scan, then the ground part itself (its truth
+    /// file, reference frame), so that it keeps its shape between grinds.
+    part: (PathBuf, bool),
+    /// The tool file of the next plan (refitted after each grind).
+    tool: PathBuf,
+}
+
+impl Loop<'_> {
+    /// Iteration `k`: inspect the scan, judge the last grind and refit k, decide, plan and
+    /// grind. Returns how the loop ended, or None to go on.
+    fn iteration(
+        &mut self,
+        k: usize,
+        executor: &mut dyn Executor,
+    ) -> anyhow::Result<Option<Outcome>> {
+        let dir = self.inputs.out.join(format!("iter-{k}"));
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        println!("== cycle: iteration {k}: inspect {}", self.scan.display());
+        let (found, inspection_dir, made) = match self.inputs.first.take() {
+            Some(f) => (f.found, f.inspection_dir, Some((f.plan_file, f.planned))),
+            None => {
+                let into = dir.join("inspection");
+                (self.inspect(&into)?, into, None)
+            }
+        };
+        let inspection = planner_input(&found, &inspection_dir);
+        let measured = Measured::of(found.regions.verdict, &inspection);
+        let mut off_plan = None;
+        if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
+            last.followed_by(&measured, &before.inspection, &inspection);
+            let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
+            (last.k_fitted, last.agreement, off_plan) = refit(
+                before,
+                (&inspection_dir, &inspection),
+                &ids,
+                &dir,
+                &mut self.tool,
+                &mut self.pooled,
+            );
+        }
+        self.records.push(IterationRecord::new(k, measured));
+        let mut outcome = decide(&self.records, self.cfg);
+        if let (Outcome::Continue, Some(reason)) = (outcome, &off_plan) {
+            println!("cycle: stop: {reason}");
+            outcome = Outcome::OffPlan;
+        }
+        if outcome != Outcome::Continue {
+            return Ok(Some(outcome));
+        }
+        let (plan_file, planned) = match made {
+            Some(made) => made,
+            None => self.plan(&inspection, &dir)?,
+        };
+        let last = self.records.last_mut().expect("pushed above");
+        last.planned(&inspection, &planned.plan);
+        let outcome = decide_plan(last);
+        if outcome != Outcome::Continue {
+            return Ok(Some(outcome));
+        }
+        println!("== cycle: iteration {k}: grind");
+        let rescan = executor.grind(&GrindJob {
+            plan_file: &plan_file,
+            planned: &planned,
+            inspection: &inspection,
+            scan_to_reference: pose_rows(&found.pose),
+            tool: &self.tool,
+            part: &self.part.0,
+            part_in_reference: self.part.1,
+            dir: &dir,
+        })?;
+        self.scan = rescan.scan;
+        if let Some(part) = rescan.part {
+            self.part = (part, true);
+        }
+        self.previous = Some(Ground {
+            inspection,
+            plan_file,
+            planned,
+            tool: self.tool.clone(),
+        });
+        print!("{}", table_text(&self.records));
+        Ok(None)
+    }
+
+    /// Inspects the scan into `into` with the loop's inspection settings; an incomplete
+    /// verdict ends the loop with the inspection's error.
+    fn inspect(&self, into: &Path) -> anyhow::Result<inspect::Findings> {
+        let inputs = inspect::Inputs {
+            reference: self.inputs.reference.clone(),
+            scan: self.scan.clone(),
+            more_scans: Vec::new(),
+            files: self.inputs.files,
+            pose: None,
+            core: None,
+            inspect_area: None,
+            registration_error: None,
+        };
+        inspect::inspect_into(&self.cfg.inspect, &inputs, into)
+    }
+
+    /// Plans from `inspection` into DIR/plan.json with the loop's plan settings and its tool
+    /// file (written as DIR/plan.toml: the `[plan]` settings with `robot.tool` set).
+    fn plan(&self, inspection: &Inspection, dir: &Path) -> anyhow::Result<(PathBuf, Planned)> {
+        println!("== cycle: plan");
+        let settings = dir.join("plan.toml");
+        with_tool(&self.cfg.plan_table, &self.tool, &settings)?;
+        let mut cfg = self.cfg.plan.clone();
+        cfg.robot.tool = self.tool.clone();
+        let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
+        let plan_file = dir.join("plan.json");
+        let planned = plan_into(&cfg, inspection, &plan_file, None, &refuse)?;
+        Ok((plan_file, planned))
+    }
+
+    /// Writes cycle.html and cycle.json and hands the records back.
+    fn finish(self, outcome: Outcome) -> anyhow::Result<CycleOutcome> {
+        let out = &self.inputs.out;
+        let html = out.join("cycle.html");
+        std::fs::write(&html, table_html(&self.records, outcome))
+            .with_context(|| format!("{}: cannot write", html.display()))?;
+        let json = out.join("cycle.json");
+        std::fs::write(
+            &json,
+            serde_json::to_string_pretty(&table_json(&self.records, outcome))?,
+        )
+        .with_context(|| format!("{}: cannot write", json.display()))?;
+        Ok(CycleOutcome {
+            outcome,
+            records: self.records,
+            html,
+        })
+    }
+}
+
+/// The planner's view of an inspection held in memory (the values deviations.csv and
+/// regions.json carry, as `plan::Inspection::load` reads them back), its folder `dir`.
+pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
+    let dev = &found.deviations;
+    let points = (dev.points.iter().zip(&dev.normals))
+        .zip(dev.values.iter().zip(&found.regions.labels))
+        .map(|((p, n), (v, &region))| SurfacePoint {
+            position: *p,
+            normal: n / n.norm(),
+            distance: v.distance,
+            region,
+        })
+        .collect();
+    Inspection {
+        dir: dir.to_path_buf(),
+        tolerance: Some(found.regions.tolerance),
+        regions: found.regions.regions.clone(),
+        points,
+    }
+}
+
+/// The scan's pose as registration.json records it.
+pub fn pose_rows(pose: &PoseSource) -> [[f64; 4]; 4] {
+    match pose {
+        PoseSource::Registered(reg) => reg.scan_to_reference,
+        PoseSource::Given { pose, .. } => isometry_to_rows(pose),
+    }
+}
+
+/// Writes `out`: the settings `base` with `[robot] tool` set to `tool`, so that the loop's
+/// plan and its run use the tool file the loop fitted (run refuses a plan made with another
+/// tool file than the one it is given).
+pub fn with_tool(base: &toml::Table, tool: &Path, out: &Path) -> anyhow::Result<()> {
+    let mut table = base.clone();
+    let robot = table
+        .entry("robot")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let Some(r) = robot.as_table_mut() {
+        r.insert("tool".into(), tool.display().to_string().into());
+    }
+    std::fs::write(out, toml::to_string(&table)?)
+        .with_context(|| format!("{}: cannot write", out.display()))
+}

@@ -1,0 +1,235 @@
+//! The planning stage with its files: [`plan_into`] plans from an inspection held in memory
+//! (`motion::plan`) and writes plan.json with its provenance, plan.html, predicted.csv
+//! (removal plans) and optionally the ROS trajectory, then prints what was planned.
+//! `polishbot plan`, `demo` and the loop call it.
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use serde::Deserialize;
+
+use crate::motion::{self, ros, Plan, PlanConfig};
+use crate::removal::prediction::{predicted_csv, RemovalReport};
+use crate::removal::ToolModel;
+use crate::repair::Inspection;
+use crate::report::plan_html::write_plan_html;
+use crate::report::provenance::Provenance;
+use crate::robot::{self, RobotConfig};
+
+/// `--config` TOML of `plan` and `run`: `[robot]` (RobotConfig: urdf, tool, servos, workcell,
+/// ik) and `[plan]` (PlanConfig).
+#[derive(Debug, Default, Clone, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PlanFileConfig {
+    /// Robot description and calibration files.
+    pub robot: RobotConfig,
+    /// Planner settings.
+    pub plan: PlanConfig,
+}
+
+/// A plan made and written by [`plan_into`].
+#[derive(Debug, Clone)]
+pub struct Planned {
+    /// The plan.
+    pub plan: Plan,
+    /// plan.json as written (with its provenance): a run's journal is tied to its SHA-256.
+    pub text: String,
+    /// predicted.csv as written (removal plans).
+    pub predicted_csv: Option<String>,
+    /// The tool's removal model the plan was made with (plan.json's
+    /// `provenance.config.removal_tool`); None when the tool file has none.
+    pub removal_tool: Option<ToolModel>,
+}
+
+/// Plans from `inspection` (read from or written to `inspection.dir`) with `cfg` and writes
+/// `out` (plan.json), its provenance, plan.html beside it, predicted.csv (removal plans) and
+/// `export_ros`; prints what was planned. A setting the planner refuses is reported through
+/// `refuse` (the caller names its settings file and line).
+pub fn plan_into(
+    cfg: &PlanFileConfig,
+    inspection: &Inspection,
+    out: &Path,
+    export_ros: Option<&Path>,
+    refuse: &dyn Fn(&str) -> anyhow::Error,
+) -> Result<Planned> {
+    let mut cfg = cfg.clone();
+    let (robot, workcell) = robot::load(&cfg.robot)?;
+    // the tool file's [removal] checked here, so that its errors name the file's full path
+    ToolModel::load(&cfg.robot.tool)?;
+    cfg.plan.check(&robot).map_err(|e| match e {
+        motion::PlanError::Config(m) => refuse(&m),
+        e => e.into(),
+    })?;
+    let solids = motion::collide::solids_beside(&cfg.robot.workcell)?;
+    cfg.plan.collision.solids.extend(solids);
+    let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
+    let plan = motion::plan(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
+    let compact =
+        serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    let provenance = provenance(&inspection.dir, &cfg.robot, &cfg.plan)?;
+    let text = provenance.stamp(&compact, out)?;
+    std::fs::write(out, &text).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
+    let page = write_plan_html(out, inspection, &plan, &provenance)?;
+    let predicted_csv = match &plan.removal {
+        Some(removal) => Some(write_removal(removal, out, &cfg.plan)?),
+        None => None,
+    };
+    if let Some(yaml) = export_ros {
+        std::fs::write(yaml, ros::joint_trajectory_yaml(&plan, "base_link"))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", yaml.display()))?;
+    }
+    println!("plan: report {}", page.display());
+    print_summary(&plan, &inspection.dir, out);
+    Ok(Planned {
+        plan,
+        text,
+        predicted_csv,
+        removal_tool: ToolModel::load(&cfg.robot.tool).ok(),
+    })
+}
+
+/// The files a plan is made from, by role: the inspection's (under `inspection`) and the
+/// cell's. plan.json's provenance records their SHA-256; `run` compares them with the files
+/// it is given and refuses a plan made for other files.
+pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str, PathBuf)> {
+    vec![
+        ("inspection regions", inspection.join("regions.json")),
+        ("inspection deviations", inspection.join("deviations.csv")),
+        ("robot description", robot.urdf.clone()),
+        ("tool", robot.tool.clone()),
+        ("servo calibration", robot.servos.clone()),
+        ("workcell", robot.workcell.clone()),
+        ("solids", robot.workcell.with_file_name("solids.toml")),
+    ]
+}
+
+/// The provenance of a plan: the inspection's files it read, the cell's files, the settings.
+pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> Result<Provenance> {
+    let inputs = plan_inputs(inspection, robot);
+    let files: Vec<(&str, &Path)> = inputs.iter().map(|(r, p)| (*r, p.as_path())).collect();
+    let existing: Vec<(&str, &Path)> = files.into_iter().filter(|(_, p)| p.is_file()).collect();
+    // the removal model the plan used (its k is what `calibrate removal` scales from)
+    let tool = ToolModel::load(&robot.tool).ok();
+    let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": tool });
+    Provenance::new(
+        "plan",
+        "inspection in mm (reference frame); robot in m and rad (URDF base frame)",
+        &existing,
+        &config,
+    )
+}
+
+/// Removal mode: writes predicted.csv beside the plan, prints each region's prediction and
+/// returns the file's text.
+fn write_removal(removal: &RemovalReport, out: &Path, cfg: &PlanConfig) -> anyhow::Result<String> {
+    let csv = out.with_file_name("predicted.csv");
+    let text = predicted_csv(removal, &cfg.monte_carlo);
+    std::fs::write(&csv, &text).map_err(|e| anyhow::anyhow!("{}: {e}", csv.display()))?;
+    for r in &removal.regions {
+        println!(
+            "plan: region {}: predicted peak {:+.4} -> {:+.4} mm, RMS {:.4} -> {:.4} mm, \
+             lowest {:+.4} mm (Monte Carlo low quantile {:+.4} mm), allowance {:.3} mm, {} \
+             contacts",
+            r.region,
+            r.before.peak_mm,
+            r.after.peak_mm,
+            r.before.rms_mm,
+            r.after.rms_mm,
+            r.after.lowest_mm,
+            r.after_low_p95_mm,
+            r.allowance_mm,
+            r.dwell.len()
+        );
+    }
+    Ok(text)
+}
+
+/// Prints what was planned: totals, accuracy, per region reach and warnings, table moves.
+fn print_summary(plan: &Plan, inspection: &Path, out: &Path) {
+    let m = &plan.metrics;
+    let planned: Vec<_> = plan
+        .reachability
+        .regions
+        .iter()
+        .filter(|r| r.layers > 0)
+        .collect();
+    println!(
+        "plan: {} -> {}: {} region(s) planned, {} passes, {} path points, {} samples, predicted duration {:.2} s",
+        inspection.display(),
+        out.display(),
+        planned.len(),
+        plan.passes.len(),
+        m.path_points,
+        m.samples,
+        m.predicted_duration_s
+    );
+    // no grinding sample at a steady cruise (every stroke too short to reach the set feed, or
+    // a dwell plan): say so instead of "0.00..0.00 mm/s"
+    let cruise = if m.cruise_feed_max_mm_s > 0.0 {
+        format!(
+            "cruise feed {:.4}..{:.4} mm/s (set {:.4})",
+            m.cruise_feed_min_mm_s, m.cruise_feed_max_mm_s, m.feed_mm_s
+        )
+    } else {
+        format!(
+            "no stroke reaches a steady cruise at the set feed {:.4} mm/s",
+            m.feed_mm_s
+        )
+    };
+    println!(
+        "plan: servo resolution alone moves the tool tip up to {:.3} mm (mean {:.3} mm); modelled tip within {:.4} mm of the path; {cruise}",
+        m.resolution_error_max_mm,
+        m.resolution_error_mean_mm,
+        m.sample_to_path_max_mm.max(m.path_to_samples_max_mm),
+    );
+    for r in &planned {
+        println!(
+            "plan: region {}: {} layer(s), {:.0}% of its area unreachable, {:.1}% of the reachable part covered, {} of {} path points left out",
+            r.id,
+            r.layers,
+            100.0 * r.unreachable_share,
+            100.0 * r.coverage_of_reachable,
+            r.unreachable_path_points,
+            r.path_points
+        );
+        if r.peak_lower_bound {
+            println!(
+                "plan: warning: region {}: its peak {:+.4} mm is a lower bound (the inspection \
+                 read it by single point pairs under a defect too narrow for a model): the \
+                 layers reach down to it only; inspect again after grinding",
+                r.id, r.peak_mm
+            );
+        }
+        if r.touches_unmeasured {
+            println!(
+                "plan: warning: region {}: it touches an unmeasured area of the scan, so its peak \
+                 {:+.4} mm and area are lower bounds and part of it may be unplanned; scan that \
+                 area and inspect again",
+                r.id, r.peak_mm
+            );
+        }
+    }
+    if let Some(t) = &plan.turntable {
+        for r in &t.regions {
+            println!(
+                "plan: region {}: table at {:+.1} deg, {:.0}% of it reachable there ({:.0}% at 0 deg)",
+                r.region,
+                r.angle_deg,
+                100.0 * r.reachable_share,
+                100.0 * r.reachable_share_at_zero
+            );
+        }
+        println!(
+            "plan: turntable (servo {}): {} move(s), {:.2} s, ends at {:+.1} deg",
+            t.servo_id,
+            t.moves.len(),
+            t.duration(plan.period),
+            t.end().to_degrees()
+        );
+    }
+    if let Some(u) = plan.reachability.unreachable.first() {
+        println!(
+            "plan: {} unreachable path point(s) left out (listed in plan.json), e.g. {u}",
+            plan.reachability.unreachable.len()
+        );
+    }
+}

@@ -1,0 +1,354 @@
+//! Preston's k refitted from grinds: `calibrate removal` fits it from the files of one grind
+//! ([`fit_files`]); the loop ([`refit`]) from the grinds it made, held in memory, pooled
+//! (`removal::fit::pool`) on the prediction moved by each region's measured shift
+//! (`cell::removal_shift`). Either writes the fitted k into a copy of the tool file.
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use super::plan_stage::Planned;
+use crate::calibrate::files;
+use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
+use crate::motion::Plan;
+use crate::removal::fit::{self as removal_fit, Agreement, Evidence, FitConfig, RemovalFit};
+use crate::removal::ToolModel;
+use crate::repair::Inspection;
+
+/// What `calibrate removal` reads.
+#[derive(Debug, Clone)]
+pub struct Inputs {
+    /// Inspection before the grind (the one the plan was made from).
+    pub before: PathBuf,
+    /// Inspection of the rescan after the grind.
+    pub after: PathBuf,
+    /// The plan that was ground (removal mode; predicted.csv beside it).
+    pub plan: PathBuf,
+    /// The tool file the fit is written from (a plan without a recorded k also takes its k
+    /// from it).
+    pub tool: PathBuf,
+}
+
+/// Fits k from the files of `inputs`, on the prediction moved by each region's registered
+/// shift (`removal_shift`); every refusal is one line naming the file.
+pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
+    let before = Inspection::load(&inputs.before)?;
+    let (predicted, plan_k) = prediction(&inputs.plan, &inputs.tool, &before)?;
+    let after = Inspection::load(&inputs.after)?;
+    // k after the shift of where the tool really ground (issue 50)
+    let shift_cfg = ShiftConfig::default();
+    let shifts = removal_shift::register(&before, &after, &predicted, &shift_cfg);
+    let predicted = removal_shift::shifted_prediction(&before, &predicted, &shifts, &shift_cfg);
+    removal_fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+}
+
+/// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
+/// plan `plan`, at the plan's k) and that k: the one plan.json's provenance records
+/// (`config.removal_tool.preston_k_mm2_n`), so that a tool file already rewritten by an
+/// earlier fit does not scale the prediction again; the tool file `tool` only for a plan
+/// without that record.
+pub fn prediction(
+    plan: &Path,
+    tool: &Path,
+    before: &Inspection,
+) -> anyhow::Result<(Vec<f64>, f64)> {
+    let plan_text = std::fs::read_to_string(plan)
+        .with_context(|| format!("{}: cannot read", plan.display()))?;
+    let loaded = Plan::parse(plan, &plan_text)?;
+    ensure_removal(plan, &loaded)?;
+    let csv = plan.with_file_name("predicted.csv");
+    let text = std::fs::read_to_string(&csv)
+        .with_context(|| format!("{}: cannot read (written beside plan.json)", csv.display()))?;
+    let recorded = serde_json::from_str::<serde_json::Value>(&plan_text)?["provenance"]["config"]
+        ["removal_tool"]["preston_k_mm2_n"]
+        .as_f64();
+    predicted_at_k(plan, &text, recorded, tool, before)
+}
+
+/// [`prediction`] of a plan the loop made and holds (`planned`, written to `plan`).
+pub fn prediction_of(
+    plan: &Path,
+    planned: &Planned,
+    tool: &Path,
+    before: &Inspection,
+) -> anyhow::Result<(Vec<f64>, f64)> {
+    ensure_removal(plan, &planned.plan)?;
+    let csv = planned.predicted_csv.as_deref().unwrap_or_default();
+    let recorded = planned.removal_tool.as_ref().map(|t| t.preston_k_mm2_n);
+    predicted_at_k(plan, csv, recorded, tool, before)
+}
+
+/// Refuses a rigid plan (`plan` its file): k is fitted against a removal plan's prediction.
+fn ensure_removal(plan: &Path, loaded: &Plan) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        loaded.removal.is_some(),
+        "{}: no `removal` prediction (a rigid plan): k is fitted against a plan made with \
+         --mode removal",
+        plan.display()
+    );
+    Ok(())
+}
+
+/// The prediction of predicted.csv's text `csv` (beside `plan`) per core point of `before`
+/// and the plan's k: `recorded` (plan.json's), else the tool file's.
+fn predicted_at_k(
+    plan: &Path,
+    csv: &str,
+    recorded: Option<f64>,
+    tool: &Path,
+    before: &Inspection,
+) -> anyhow::Result<(Vec<f64>, f64)> {
+    let csv_file = plan.with_file_name("predicted.csv");
+    let rows = removal_fit::parse_predicted(csv)
+        .map_err(|m| anyhow::anyhow!("{}: {m}", csv_file.display()))?;
+    let k = match recorded {
+        Some(k) if k.is_finite() && k > 0.0 => k,
+        Some(k) => anyhow::bail!(
+            "{}: provenance.config.removal_tool.preston_k_mm2_n {k:.4e} is not a positive k",
+            plan.display()
+        ),
+        None => ToolModel::load(tool)?.preston_k_mm2_n,
+    };
+    let predicted = removal_fit::predicted_removal(before, &rows)
+        .map_err(|m| anyhow::anyhow!("{}: {m}", csv_file.display()))?;
+    Ok((predicted, k))
+}
+
+/// One grind's evidence (`removal_fit::evidence`) from inspections already read from
+/// `inputs`' folders; the refusal names both folders.
+pub fn evidence_loaded(
+    inputs: &Inputs,
+    before: &Inspection,
+    after: &Inspection,
+    predicted: &[f64],
+    plan_k: f64,
+    cfg: &FitConfig,
+) -> anyhow::Result<Evidence> {
+    removal_fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+}
+
+/// `removal_fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
+fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{} -> {}: {m}",
+        inputs.before.display(),
+        inputs.after.display()
+    )
+}
+
+/// Writes `out` from the tool file `input` with the fit's `[removal] preston_k_mm2_n` and
+/// `preston_k_rel_sd` (`RemovalFit::k_rel_sd`, at most 1, the key's range) (two lines changed,
+/// comments kept) and reads them back through the planner's loader.
+pub fn write_fit(input: &Path, out: &Path, fit: &RemovalFit) -> anyhow::Result<()> {
+    let text = std::fs::read_to_string(input)
+        .with_context(|| format!("{}: cannot read", input.display()))?;
+    let (k, sd) = (fit.k_mm2_n, fit.k_rel_sd().min(1.0));
+    let set = [("preston_k_mm2_n", k), ("preston_k_rel_sd", sd)];
+    files::write(out, &files::patch_removal(&text, &set))?;
+    let back = ToolModel::load(out)?;
+    anyhow::ensure!(
+        back.preston_k_mm2_n == k && back.preston_k_rel_sd == sd,
+        "{}: preston_k_mm2_n, preston_k_rel_sd read back as {}, {}; wrote {k}, {sd}",
+        out.display(),
+        back.preston_k_mm2_n,
+        back.preston_k_rel_sd
+    );
+    Ok(())
+}
+
+/// The fit in lines for the user, each starting with `label`.
+pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
+    let per: Vec<String> = fit
+        .regions
+        .iter()
+        .map(|r| format!("{} {:.3e} ({} pts)", r.region, r.k_mm2_n, r.points))
+        .collect();
+    vec![
+        format!(
+            "{label}: k {:.4e} +- {:.2e} mm^2/N (plan's {:.4e}, x {:.3}) from {} \
+             defect points ({} unmatched); fit residual RMS {:.4} mm; measured mean removal \
+             {:.4} mm, predicted {:.4} mm at the plan's k; k varies {:.1} % from point to point \
+             over a measurement noise of {:.4} mm and {:.1} % between regions (the next plan's k \
+             uncertainty {:.1} %)",
+            fit.k_mm2_n,
+            fit.k_std_error_mm2_n,
+            fit.plan_k_mm2_n,
+            fit.k_mm2_n / fit.plan_k_mm2_n,
+            fit.points,
+            fit.unmatched,
+            fit.residual_rms_mm,
+            fit.measured_mean_mm,
+            fit.predicted_mean_mm,
+            100.0 * fit.k_local_rel_sd,
+            fit.noise_mm,
+            100.0 * fit.k_region_rel_sd,
+            100.0 * fit.k_rel_sd()
+        ),
+        format!(
+            "{label}: k per region [mm^2/N]: {}",
+            if per.is_empty() {
+                "none with enough points".into()
+            } else {
+                per.join(", ")
+            }
+        ),
+    ]
+}
+
+/// What a grind of the loop was made from: its inspection (in memory, its folder in
+/// `inspection.dir`), its plan (file and what was written) and the tool file.
+pub struct Ground {
+    /// The inspection the plan was made from.
+    pub inspection: Inspection,
+    /// plan.json.
+    pub plan_file: PathBuf,
+    /// The plan as made and written.
+    pub planned: Planned,
+    /// The tool file the plan was made with.
+    pub tool: PathBuf,
+}
+
+/// Refits k after the last grind from the points of every grind so far (`pooled`, which this
+/// grind's points join; `removal_fit::pool`) and, when the fit holds, writes DIR/tool.toml
+/// with it and makes it the `tool` of the next plan; re-predicts the grind with the fitted k
+/// over the defect points of the regions `ids` against the `after` inspection (folder and
+/// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
+/// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
+/// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
+/// shift.
+pub fn refit(
+    before: &Ground,
+    after: (&Path, &Inspection),
+    ids: &[i64],
+    dir: &Path,
+    tool: &mut PathBuf,
+    pooled: &mut Vec<Evidence>,
+) -> (Option<f64>, Option<Agreement>, Option<String>) {
+    let inputs = Inputs {
+        before: before.inspection.dir.clone(),
+        after: after.0.to_path_buf(),
+        plan: before.plan_file.clone(),
+        tool: before.tool.clone(),
+    };
+    let written = dir.join("tool.toml");
+    let prediction = prediction_of(
+        &before.plan_file,
+        &before.planned,
+        &before.tool,
+        &before.inspection,
+    );
+    let shift_cfg = ShiftConfig::default();
+    let mut off_plan = None;
+    let prediction = prediction.map(|(p, k)| {
+        let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
+        shifts
+            .iter()
+            .for_each(|r| println!("{}", describe_shift(r)));
+        off_plan = removal_shift::judge(&shifts, &shift_cfg);
+        let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
+        (moved, k)
+    });
+    let fitted = prediction.as_ref().map_err(clone_error).and_then(|(p, k)| {
+        let cfg = FitConfig::default();
+        let grind = evidence_loaded(&inputs, &before.inspection, after.1, p, *k, &cfg)?;
+        pooled.push(grind);
+        let fit = fit_pooled(pooled, &cfg)?;
+        write_fit(&before.tool, &written, &fit)?;
+        Ok(fit.k_mm2_n)
+    });
+    let k = match fitted {
+        Ok(k) => {
+            println!("cycle: the next plan uses k from {}", written.display());
+            *tool = written;
+            Some(k)
+        }
+        Err(e) => {
+            println!(
+                "cycle: k not refitted ({}); the next plan keeps {}",
+                one_line(&e),
+                tool.display()
+            );
+            None
+        }
+    };
+    let agreement = prediction.ok().and_then(|(p, plan_k)| {
+        removal_fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
+    });
+    (k, agreement, off_plan)
+}
+
+/// One line on a region's registration for the loop's log.
+fn describe_shift(r: &RegionShift) -> String {
+    let s = r.shift_mm;
+    format!(
+        "cycle: region {}: removal shift {:.2} mm [{:.2}, {:.2}, {:.2}], depth scale {:.3} \
+         (unshifted {:.3}), residual RMS {:.4} -> {:.4} mm over {} points, {} removed where \
+         nothing was planned",
+        r.region,
+        s.norm(),
+        s.x,
+        s.y,
+        s.z,
+        r.scale,
+        r.scale_unshifted,
+        r.rms_mm[0],
+        r.rms_mm[1],
+        r.points,
+        r.unplanned
+    )
+}
+
+/// Prints the last grind's own fit (or why it cannot fit alone, when it has earlier grinds to
+/// pool with) and fits k to the points of all grinds in `pooled`, printing that fit with the
+/// grinds and points it pooled.
+fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
+    let last = pooled.last().expect("the grind just pushed");
+    match removal_fit::pool(std::slice::from_ref(last), cfg) {
+        Ok(own) => describe(&own, "cycle: this grind alone")
+            .iter()
+            .for_each(|line| println!("{line}")),
+        // with no earlier grind the pool's refusal below says the same
+        Err(m) if pooled.len() > 1 => println!(
+            "cycle: this grind alone fits no k ({m}); its {} points join the pool",
+            last.points.len()
+        ),
+        Err(_) => {}
+    }
+    let fit = removal_fit::pool(pooled, cfg).map_err(|m| anyhow::anyhow!("{m}"))?;
+    println!(
+        "cycle: k {:.4e} +- {:.2e} mm^2/N pooled over {} grind{} / {} points (x {:.3} of the last \
+         plan's {:.4e}); fit residual RMS {:.4} mm; k uncertainty {:.1} % ({:.1} % point to point, {:.1} % between regions)",
+        fit.k_mm2_n,
+        fit.k_std_error_mm2_n,
+        fit.grinds,
+        if fit.grinds == 1 { "" } else { "s" },
+        fit.points,
+        fit.k_mm2_n / fit.plan_k_mm2_n,
+        fit.plan_k_mm2_n,
+        fit.residual_rms_mm,
+        100.0 * fit.k_rel_sd(),
+        100.0 * fit.k_local_rel_sd,
+        100.0 * fit.k_region_rel_sd
+    );
+    Ok(fit)
+}
+
+/// A copy of `e` (its one-line chain) to hand on while the original is kept.
+fn clone_error(e: &anyhow::Error) -> anyhow::Error {
+    anyhow::anyhow!("{}", one_line(e))
+}
+
+/// Joins an error chain into one line: "outer: inner: root" (a part already in the line is
+/// not repeated).
+pub fn one_line(err: &anyhow::Error) -> String {
+    let parts: Vec<String> = err.chain().map(|e| e.to_string()).collect();
+    let mut line = String::new();
+    for part in parts {
+        if !line.contains(&part) {
+            if !line.is_empty() {
+                line.push_str(": ");
+            }
+            line.push_str(&part);
+        }
+    }
+    line.replace('\n', " ")
+}
