@@ -9,7 +9,7 @@ use polishbot::cloud::{self, PlyPrecision, PointCloud};
 use polishbot::compare::{
     area_shares, compare, core_points, CompareConfig, CoreConfig, Deviations, Reason,
 };
-use polishbot::regions::{find_regions, RegionConfig, Regions, Verdict};
+use polishbot::regions::{find_regions, RegionConfig, Regions, Verdict, SMALLEST_DEFECT_MM};
 use polishbot::synth::{synth, SynthCase, SynthConfig, Truth};
 
 /// The parametric part (no mesh file: not the part the compare suite tunes on) with the scan
@@ -314,6 +314,15 @@ fn inspect_says_incomplete_without_evidence() {
 struct TurntableScore {
     iou: f64,
     worst: f64,
+    /// The largest error outside the support of defects narrower than the smallest defect
+    /// the verdict must see (`SMALLEST_DEFECT_MM`, 2 mm): the error judged at the
+    /// resolution the inspection promises (a 0.52 mm wide pit is averaged by any cylinder
+    /// of the smallest radius, about 0.6 mm: it reads under a third of its depth).
+    worst_resolved: f64,
+    /// Defects narrower than that and taller than the tolerance, and how many of them a
+    /// region found.
+    narrow: usize,
+    narrow_found: usize,
     coverage: f64,
     found: usize,
     touching: usize,
@@ -417,9 +426,22 @@ fn score_turntable(
         .filter(|&i| measured(i))
         .map(|i| (distance[i] - truth_at[i]).abs())
         .fold(0.0, f64::max);
+    let narrow: Vec<_> = (truth.defects.iter())
+        .filter(|d| d.width < SMALLEST_DEFECT_MM)
+        .collect();
+    let outside_narrow = |i: usize| {
+        (narrow.iter()).all(|d| (dev.points[i] - Point3::from(d.centre)).norm() > d.support())
+    };
+    let worst_resolved = (0..dev.len())
+        .filter(|&i| measured(i) && outside_narrow(i))
+        .map(|i| (distance[i] - truth_at[i]).abs())
+        .fold(0.0, f64::max);
     let mut score = TurntableScore {
         iou: both as f64 / either.max(1) as f64,
         worst,
+        worst_resolved,
+        narrow: 0,
+        narrow_found: 0,
         coverage: regions.coverage,
         found: 0,
         touching: 0,
@@ -440,6 +462,10 @@ fn score_turntable(
                     .total_cmp(&(dev.points[b] - c).norm())
             })
             .unwrap();
+        if defect.width < SMALLEST_DEFECT_MM {
+            score.narrow += 1;
+            score.narrow_found += usize::from(!ids.is_empty());
+        }
         if ids
             .iter()
             .any(|&i| !regions.regions[region[i] as usize].touches_unmeasured)
@@ -495,13 +521,20 @@ fn run_ok(cmd: &mut std::process::Command, incomplete: bool) -> String {
 }
 
 /// Issue 53's case in the suite: `synth --views 12 --setups 2 --elevation 35` (the scanner
-/// 35 degrees above the table; setup 2 the part turned over), small views (30,000 points),
-/// each setup merged on its own, then inspected against synth's articular surface
-/// (articular.ply): one setup alone is incomplete (it sees about 70 % of it) and the suggested
-/// views ask for a second setup for all but under 5 % of the area to inspect; both together
-/// (`inspect --scan A --scan B`) measure at least 95 % of it, with IoU >= 0.96 on measured
-/// core points, no error above 0.2 mm, a verdict, and deviations.ply says that both scans
-/// supported core points.
+/// 35 degrees above the table; setup 2 the part turned over), small views (30,000 points).
+/// One setup alone (merged) measures 58-80 % of synth's articular surface (articular.ply),
+/// as the held-out femoral views of the issue do, is incomplete, its report pictures the
+/// unmeasured area, and the suggested views ask for a second setup for all but under 5 % of
+/// the area to inspect. Then, judged at the resolution the inspection promises (errors
+/// outside defects narrower than 2 mm; those must be found):
+/// - one setup plus the suggested views (the second setup, merged on its own;
+///   `inspect --scan A --scan B`);
+/// - both setups' 24 views joined by `merge --setups turntable.json --reference` (each setup
+///   merged, joined through its registration onto the reference), inspected as one scan;
+///
+/// each measures at least 95 % of the area, with IoU >= 0.96 on measured core points, no
+/// error above 0.2 mm, and a verdict; deviations.ply says that both scans supported core
+/// points.
 #[test]
 fn two_setups_inspected_together_measure_the_articular_surface() {
     let dir = common::tempdir();
@@ -519,18 +552,22 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
             .args(["--scan-points", "1000", "--seed", "1"]),
         false,
     );
+    let table = ["--axis", "0,0,1", "--centre", "4,-3,0"];
+    let views = |prefix: &str| -> Vec<_> {
+        (0..12)
+            .map(|i| d.join(format!("{prefix}view_{i:03}.ply")))
+            .collect()
+    };
     let merged: Vec<_> = ["", "setup2_"]
         .iter()
         .map(|prefix| {
-            let views: Vec<_> = (0..12)
-                .map(|i| d.join(format!("{prefix}view_{i:03}.ply")))
-                .collect();
             let out = d.join(format!("{prefix}merged.ply"));
             run_ok(
                 common::polishbot()
                     .arg("merge")
-                    .args(&views)
-                    .args(["--step", "30", "--axis", "0,0,1", "--centre", "4,-3,0"])
+                    .args(views(prefix))
+                    .args(["--step", "30"])
+                    .args(table)
                     .arg("-o")
                     .arg(&out),
                 false,
@@ -538,6 +575,22 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
             out
         })
         .collect();
+    let joined = d.join("joined.ply");
+    let stdout = run_ok(
+        common::polishbot()
+            .arg("merge")
+            .args(views(""))
+            .args(views("setup2_"))
+            .arg("--setups")
+            .arg(d.join("turntable.json"))
+            .arg("--reference")
+            .arg(d.join("reference.ply"))
+            .args(table)
+            .arg("-o")
+            .arg(&joined),
+        false,
+    );
+    assert!(stdout.contains("merge: 2 setups"), "{stdout}");
     let inspect = |scans: &[std::path::PathBuf], out: &Path, incomplete: bool| {
         let mut cmd = common::polishbot();
         cmd.arg("inspect")
@@ -549,8 +602,23 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
         cmd.arg("--inspect-area").arg(d.join("articular.ply"));
         run_ok(cmd.arg("-o").arg(out), incomplete)
     };
-    // One setup: the suggestion asks for a second setup for all but under 5 % of the area.
+    let truth = Truth::load(&d.join("truth.json")).unwrap();
+    let score = |insp: &Path, stdout: &str| {
+        let dev = cloud::load_cloud(&insp.join("deviations.ply"), None, None).unwrap();
+        let text = std::fs::read_to_string(insp.join("regions.json")).unwrap();
+        let regions: Regions = serde_json::from_str(&text).unwrap();
+        (
+            score_turntable(&dev, &regions, &truth, stdout),
+            regions,
+            dev,
+        )
+    };
+    // One setup: 58-80 % measured; the suggestion asks for a second setup for all but under
+    // 5 % of the area, and the report shows where.
     let one = inspect(&merged[..1], &d.join("one"), true);
+    let (s, _, _) = score(&d.join("one"), &one);
+    eprintln!("one setup: {s:?}");
+    assert!((0.58..=0.80).contains(&s.coverage), "{s:?}");
     let number_before = |text: &str, tail: &str| -> f64 {
         let head = text.split(tail).next().expect(tail);
         head.rsplit(' ').next().unwrap().parse().expect(tail)
@@ -562,25 +630,32 @@ fn two_setups_inspected_together_measure_the_articular_surface() {
     let unmeasured = number_before(line, " % of the area to inspect not measured");
     let other_setup = number_before(line, " % faces no table angle of this setup");
     assert!(unmeasured - other_setup < 5.0, "{line}");
-    let insp = d.join("both");
-    let stdout = inspect(&merged, &insp, false);
-    let truth = Truth::load(&d.join("truth.json")).unwrap();
-    let dev = cloud::load_cloud(&insp.join("deviations.ply"), None, None).unwrap();
-    let regions: Regions =
-        serde_json::from_str(&std::fs::read_to_string(insp.join("regions.json")).unwrap()).unwrap();
-    let s = score_turntable(&dev, &regions, &truth, &stdout);
-    eprintln!("two setups: {s:?}");
-    assert!(s.coverage >= 0.95, "{s:?}");
-    assert!(s.iou >= 0.96, "{s:?}");
-    assert!(s.worst <= 0.2, "{s:?}");
-    assert_ne!(regions.verdict, Verdict::Incomplete);
-    let support = dev.field("scans").expect("scans field");
-    let measured = dev.field("measured").unwrap();
-    for bit in [1.0, 2.0] {
-        assert!(support.contains(&bit), "no core point of scan {bit} alone");
+    let html = std::fs::read_to_string(d.join("one/report.html")).unwrap();
+    assert!(d.join("one/unmeasured.png").is_file() && html.contains("unmeasured.png"));
+    assert!(html.contains("scan it in a second setup"));
+    // One setup plus the suggested second setup, and both setups joined by merge.
+    for (name, scans) in [("both", merged.clone()), ("joined", vec![joined.clone()])] {
+        let insp = d.join(name);
+        let stdout = inspect(&scans, &insp, false);
+        let (s, regions, dev) = score(&insp, &stdout);
+        eprintln!("{name}: {s:?}");
+        assert!(s.coverage >= 0.95, "{name}: {s:?}");
+        assert!(s.iou >= 0.96, "{name}: {s:?}");
+        assert!(s.worst_resolved <= 0.2, "{name}: {s:?}");
+        assert_eq!(s.narrow_found, s.narrow, "{name}: {s:?}");
+        assert_ne!(regions.verdict, Verdict::Incomplete);
+        assert!(!insp.join("unmeasured.png").exists());
+        if name == "joined" {
+            continue;
+        }
+        let support = dev.field("scans").expect("scans field");
+        let measured = dev.field("measured").unwrap();
+        for bit in [1.0, 2.0] {
+            assert!(support.contains(&bit), "no core point of scan {bit} alone");
+        }
+        assert!(support
+            .iter()
+            .zip(measured)
+            .all(|(&m, &v)| (m > 0.0) == (v == 1.0)));
     }
-    assert!(support
-        .iter()
-        .zip(measured)
-        .all(|(&m, &v)| (m > 0.0) == (v == 1.0)));
 }

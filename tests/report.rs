@@ -44,6 +44,7 @@ fn make_report(dir: &std::path::Path) {
         labels: &[],
         regions: Vec::new(),
         provenance: None,
+        unmeasured: None,
     };
     let files = write_report(dir, &input, &ReportConfig::default()).unwrap();
     assert_eq!(files.figures.len(), 2);
@@ -444,6 +445,7 @@ fn a_million_point_report_stays_under_30_mb_and_opens_in_under_3_s() {
         labels: &labels,
         regions,
         provenance: None,
+        unmeasured: None,
     };
     let dir = tempdir();
     let start = std::time::Instant::now();

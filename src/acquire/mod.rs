@@ -18,6 +18,7 @@ mod config;
 mod global;
 mod pair;
 mod place;
+mod setups;
 
 use std::time::Instant;
 
@@ -36,6 +37,7 @@ pub use axis::{estimate_axis, AxisEstimate};
 pub use config::{MergeConfig, DEFAULT_ANGLE_TOLERANCE};
 pub use global::GlobalRefinement;
 pub use place::{Placement, Rejected};
+pub use setups::{merge_setups, MergedSetups, SetupJoin, SetupViews};
 
 /// One view's outcome.
 #[derive(Debug, Clone, Serialize)]

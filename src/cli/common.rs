@@ -19,6 +19,26 @@ pub struct GeometryInput {
     pub format: Option<Format>,
 }
 
+/// Loads a reference file: a cloud as is, a mesh sampled with facet normals (`samples`
+/// points, seed `seed`).
+pub fn load_reference(
+    path: &Path,
+    input: &GeometryInput,
+    samples: usize,
+    seed: u64,
+) -> anyhow::Result<crate::cloud::PointCloud> {
+    use crate::cloud::{self, Geometry};
+    let loaded = cloud::load(path, input.format, input.units)?;
+    Ok(match loaded.geometry {
+        Geometry::Cloud(c) => c,
+        Geometry::Mesh { mesh, .. } => {
+            cloud::sample_mesh(&mesh, samples, seed)
+                .with_context(|| path.display().to_string())?
+                .cloud
+        }
+    })
+}
+
 pub use crate::cycle::one_line;
 
 /// Reads an optional TOML config file into `T` (missing file argument: `T::default()`);

@@ -8,8 +8,9 @@ use serde::Deserialize;
 use serde_json::json;
 
 use super::common::GeometryInput;
-use crate::acquire::{merge_views, MergeConfig, Placement};
+use crate::acquire::{merge_setups, merge_views, MergeConfig, Placement, SetupViews};
 use crate::cloud::{self, PlyPrecision};
+use crate::register::RegisterConfig;
 
 /// Arguments of `merge` (flags override the `--config` file's values).
 #[derive(Debug, Args)]
@@ -58,9 +59,35 @@ pub struct MergeArgs {
     /// Voxel of the joined cloud, mm [default: first view's mean spacing].
     #[arg(long)]
     pub voxel: Option<f64>,
+    /// Views of several setups: a JSON file whose `views` list gives each view's `file`
+    /// (matched by file name), `setup` (0 = the first) and `nominal_deg` (synth's
+    /// turntable.json): each setup is merged about the table on its own, then the setups are
+    /// joined by registration onto the first.
+    #[arg(long, conflicts_with_all = ["angles", "step"])]
+    pub setups: Option<PathBuf>,
+    /// With --setups: join each setup through this reference (cloud or mesh) instead of
+    /// registering it onto the first setup's cloud.
+    #[arg(long, requires = "setups")]
+    pub reference: Option<PathBuf>,
     /// Units and format of the views.
     #[command(flatten)]
     pub input: GeometryInput,
+}
+
+/// The part of a setups file `merge --setups` reads: per view its file, setup and nominal
+/// angle (other fields, such as synth's true angles, are not read).
+#[derive(Deserialize)]
+struct SetupsFile {
+    views: Vec<SetupEntry>,
+}
+
+/// One view of a setups file.
+#[derive(Deserialize)]
+struct SetupEntry {
+    file: String,
+    #[serde(default)]
+    setup: usize,
+    nominal_deg: f64,
 }
 
 /// The part of a calibration file `merge` reads.
@@ -88,6 +115,9 @@ fn check_tolerance(t: f64, place: &str) -> Result<()> {
     }
     Ok(())
 }
+
+/// Points sampled on a mesh `--reference` (register's default: enough for its coarse stage).
+const REFERENCE_SAMPLES: usize = 400_000;
 
 /// Largest accepted distance of the table centre from the views' origin, mm: a scanner sees
 /// a few metres at most, so 100 m is a typo or a unit slip (and a centre of 1e300 made the
@@ -182,6 +212,9 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
     cfg.skip_bad |= args.skip_bad;
     cfg.sor |= args.sor;
     cfg.voxel = args.voxel.or(cfg.voxel);
+    if let Some(file) = &args.setups {
+        return run_setups(&args, file, &cfg);
+    }
     let n = args.scans.len();
     let angles = match &args.angles {
         Some(a) if a.len() != n => bail!("--angles has {} values for {n} views", a.len()),
@@ -256,6 +289,119 @@ pub fn run(args: MergeArgs, config: Option<&Path>) -> Result<()> {
         println!("merge: skipped {s} (could not be aligned)");
     }
     print_views(&merged);
+    Ok(())
+}
+
+/// The setup and nominal angle of each of `scans` from the setups file `path`, the setups in
+/// order with their views' indices.
+fn read_setups(path: &Path, scans: &[PathBuf]) -> Result<Vec<(Vec<usize>, Vec<f64>)>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let file: SetupsFile = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: not a setups file (views: file, setup, nominal_deg)",
+            path.display()
+        )
+    })?;
+    let mut setups: Vec<(Vec<usize>, Vec<f64>)> = Vec::new();
+    for (i, scan) in scans.iter().enumerate() {
+        let name = scan.file_name().map(|n| n.to_string_lossy().to_string());
+        let entry = file
+            .views
+            .iter()
+            .find(|v| Some(&v.file) == name.as_ref())
+            .with_context(|| {
+                format!(
+                    "{}: no view named {:?} (view {i})",
+                    path.display(),
+                    name.unwrap_or_default()
+                )
+            })?;
+        if setups.len() <= entry.setup {
+            setups.resize_with(entry.setup + 1, Default::default);
+        }
+        setups[entry.setup].0.push(i);
+        setups[entry.setup].1.push(entry.nominal_deg);
+    }
+    if let Some(k) = setups.iter().position(|s| s.0.is_empty()) {
+        bail!("{}: setup {k} has none of the given views", path.display());
+    }
+    for (k, s) in setups.iter().enumerate() {
+        check_angles(&s.1, &format!("{}: setup {k}", path.display()))?;
+    }
+    Ok(setups)
+}
+
+/// `merge --setups`: each setup merged on its own, the setups joined by registration.
+fn run_setups(args: &MergeArgs, file: &Path, cfg: &MergeConfig) -> Result<()> {
+    let groups = read_setups(file, &args.scans)?;
+    let mut setups = Vec::new();
+    for (idx, angles) in &groups {
+        let names: Vec<String> = idx
+            .iter()
+            .map(|&i| args.scans[i].display().to_string())
+            .collect();
+        let views = idx
+            .iter()
+            .map(|&i| cloud::load_cloud(&args.scans[i], args.input.format, args.input.units))
+            .collect::<Result<Vec<_>>>()?;
+        setups.push(SetupViews {
+            views,
+            names,
+            angles: angles.clone(),
+        });
+    }
+    let reference = match &args.reference {
+        Some(r) => Some(super::common::load_reference(
+            r,
+            &args.input,
+            REFERENCE_SAMPLES,
+            1,
+        )?),
+        None => None,
+    };
+    let merged = merge_setups(&setups, cfg, reference.as_ref(), &RegisterConfig::default())?;
+    cloud::write_ply(&args.out, &merged.cloud, None, PlyPrecision::F64)?;
+    let report_path = args.out.with_extension("json");
+    let report = json!({
+        "units": "mm",
+        "cloud": args.out.display().to_string(),
+        "points": merged.cloud.len(),
+        "voxel": merged.voxel,
+        "setups": merged.setups,
+        "joins": merged.joins,
+    });
+    std::fs::write(&report_path, serde_json::to_string_pretty(&report)? + "\n")
+        .with_context(|| format!("{}: cannot write", report_path.display()))?;
+    for (k, m) in merged.setups.iter().enumerate() {
+        println!(
+            "merge: setup {}: {} of {} views, {} points",
+            k + 1,
+            m.views.len(),
+            groups[k].0.len(),
+            m.cloud.len()
+        );
+        print_views(m);
+    }
+    for j in &merged.joins {
+        let onto = if j.through_reference {
+            "through the reference"
+        } else {
+            "onto setup 1"
+        };
+        println!(
+            "merge: setup {} joined {onto}: fitness {:.3}, inlier RMSE {:.4} mm",
+            j.setup + 1,
+            j.fitness,
+            j.inlier_rmse
+        );
+    }
+    println!(
+        "merge: {} setups, {} points -> {}",
+        merged.setups.len(),
+        merged.cloud.len(),
+        args.out.display()
+    );
     Ok(())
 }
 

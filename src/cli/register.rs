@@ -5,7 +5,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::common::GeometryInput;
-use crate::cloud::{self, Geometry, PointCloud};
+use crate::cloud;
 use crate::register::RegisterConfig;
 
 /// Arguments of `register` (flags override the `--config` file's values).
@@ -34,26 +34,18 @@ pub struct RegisterArgs {
     pub voxel: Option<f64>,
 }
 
-/// Loads a reference file: a cloud as is, a mesh sampled with facet normals.
-fn load_reference(args: &RegisterArgs) -> Result<PointCloud> {
-    let loaded = cloud::load(&args.reference, args.input.format, args.input.units)?;
-    Ok(match loaded.geometry {
-        Geometry::Cloud(c) => c,
-        Geometry::Mesh { mesh, .. } => {
-            cloud::sample_mesh(&mesh, args.reference_samples, args.seed)
-                .with_context(|| args.reference.display().to_string())?
-                .cloud
-        }
-    })
-}
-
 /// Registers and writes registration.json (also on failure, with `"status": "failed"`).
 pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     let mut cfg: RegisterConfig = super::common::load_config(config)?;
     if args.voxel.is_some() {
         cfg.voxel = args.voxel;
     }
-    let reference = load_reference(&args)?;
+    let reference = super::common::load_reference(
+        &args.reference,
+        &args.input,
+        args.reference_samples,
+        args.seed,
+    )?;
     let scan = cloud::load_cloud(&args.scan, args.input.format, args.input.units)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("{}: cannot create", args.out.display()))?;

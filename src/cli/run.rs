@@ -483,35 +483,50 @@ impl crate::cycle::Executor for LoopArm {
             let part = super::grind::truth_paths(&after).0;
             return Ok(crate::cycle::Rescan {
                 scan: after,
+                more_scans: Vec::new(),
                 part: Some(part),
             });
         }
+        println!(
+            "cycle: rescan the ground area: {}",
+            crate::inspect::suggest::describe_rescan(job.rescan)
+        );
+        let mut scans = next_scans(job.plan_file)?;
         Ok(crate::cycle::Rescan {
-            scan: next_scan(job.plan_file)?,
+            scan: scans.remove(0),
+            more_scans: scans,
             part: None,
         })
     }
 }
 
-/// The next scan's path, asked for on stdin after a real arm's run of `plan`.
-fn next_scan(plan: &Path) -> anyhow::Result<PathBuf> {
+/// The next scans' paths (one per setup), asked for on stdin after a real arm's run of `plan`:
+/// one path a line, ended by an empty line or the end of the input.
+fn next_scans(plan: &Path) -> anyhow::Result<Vec<PathBuf>> {
     use std::io::BufRead;
-    println!("cycle: scan the part and enter the scan file's path:");
-    let mut line = String::new();
-    std::io::stdin()
-        .lock()
-        .read_line(&mut line)
-        .map_err(|e| anyhow::anyhow!("cycle: reading the next scan's path from stdin: {e}"))?;
-    let next = PathBuf::from(line.trim());
+    println!(
+        "cycle: scan the part and enter each scan file's path, one a line (an empty line ends):"
+    );
+    let mut scans = Vec::new();
+    for line in std::io::stdin().lock().lines() {
+        let line = line
+            .map_err(|e| anyhow::anyhow!("cycle: reading the next scan's path from stdin: {e}"))?;
+        let path = PathBuf::from(line.trim());
+        if line.trim().is_empty() {
+            break;
+        }
+        anyhow::ensure!(
+            path.is_file(),
+            "{}: the next scan (read from stdin, line {}) is not a file",
+            path.display(),
+            scans.len() + 1
+        );
+        scans.push(path);
+    }
     anyhow::ensure!(
-        !line.trim().is_empty(),
+        !scans.is_empty(),
         "cycle: no next scan given on stdin (the journal of {} is complete)",
         plan.display()
     );
-    anyhow::ensure!(
-        next.is_file(),
-        "{}: the next scan (read from stdin) is not a file",
-        next.display()
-    );
-    Ok(next)
+    Ok(scans)
 }

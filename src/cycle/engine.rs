@@ -13,6 +13,7 @@ use super::record::{
 };
 use super::refit::{refit, Ground};
 use crate::cloud::transform::isometry_to_rows;
+use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource};
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
@@ -61,12 +62,18 @@ pub struct GrindJob<'a> {
     pub part_in_reference: bool,
     /// The iteration's folder (journal, run settings, a simulated rescan).
     pub dir: &'a Path,
+    /// The setups and table angles whose scans see the area this plan grinds (issue 53's rule,
+    /// [`inspect::suggest::rescan_setups`]): a real arm's operator is told them; a simulated
+    /// rescan resamples the ground part at the first scan's points, which hold that area.
+    pub rescan: &'a [RescanSetup],
 }
 
 /// What a grind left: the next scan, and with a simulated arm the ground part itself.
 pub struct Rescan {
     /// The scan of the ground part.
     pub scan: PathBuf,
+    /// Further scans of it (other setups), inspected together with `scan`.
+    pub more_scans: Vec<PathBuf>,
     /// The ground part in the reference frame (a simulated arm's truth file), the next grind's
     /// part; None for a real part.
     pub part: Option<PathBuf>,
@@ -98,6 +105,7 @@ pub fn run_cycle(
     let mut state = Loop {
         tool: cfg.plan.robot.tool.clone(),
         scan: inputs.scan.clone(),
+        more_scans: Vec::new(),
         part: (inputs.scan.clone(), false),
         inputs,
         cfg,
@@ -124,6 +132,8 @@ struct Loop<'a> {
     pooled: Vec<Evidence>,
     /// The scan to inspect next.
     scan: PathBuf,
+    /// Further scans (other setups) inspected with it.
+    more_scans: Vec<PathBuf>,
     /// The simulator's virtual part: the first scan, then the ground part itself (its truth
     /// file, reference frame), so that it keeps its shape between grinds.
     part: (PathBuf, bool),
@@ -185,6 +195,7 @@ impl Loop<'_> {
             return Ok(Some(outcome));
         }
         println!("== cycle: iteration {k}: grind");
+        let setups = rescan_setups(&inspection, &last.planned_regions, &found, self.cfg);
         let rescan = executor.grind(&GrindJob {
             plan_file: &plan_file,
             planned: &planned,
@@ -194,8 +205,10 @@ impl Loop<'_> {
             part: &self.part.0,
             part_in_reference: self.part.1,
             dir: &dir,
+            rescan: &setups,
         })?;
         self.scan = rescan.scan;
+        self.more_scans = rescan.more_scans;
         if let Some(part) = rescan.part {
             self.part = (part, true);
         }
@@ -215,7 +228,7 @@ impl Loop<'_> {
         let inputs = inspect::Inputs {
             reference: self.inputs.reference.clone(),
             scan: self.scan.clone(),
-            more_scans: Vec::new(),
+            more_scans: self.more_scans.clone(),
             files: self.inputs.files,
             pose: None,
             core: None,
@@ -278,6 +291,29 @@ pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
         regions: found.regions.regions.clone(),
         points,
     }
+}
+
+/// The setups and table angles a rescan needs to see the points of the regions `planned` (the
+/// area the plan grinds), from the scan's pose and the inspection's `[suggest]` cell.
+fn rescan_setups(
+    inspection: &Inspection,
+    planned: &[usize],
+    found: &inspect::Findings,
+    cfg: &CycleConfig,
+) -> Vec<RescanSetup> {
+    let positions: Vec<_> = inspection.points.iter().map(|p| p.position).collect();
+    let normals: Vec<_> = inspection.points.iter().map(|p| p.normal).collect();
+    let wanted: Vec<bool> = (inspection.points.iter())
+        .map(|p| usize::try_from(p.region).is_ok_and(|r| planned.contains(&r)))
+        .collect();
+    let pose = found.pose.pose();
+    inspect::suggest::rescan_setups(
+        (&positions, &normals),
+        None,
+        &wanted,
+        &pose,
+        &cfg.inspect.suggest,
+    )
 }
 
 /// The scan's pose as registration.json records it.

@@ -17,7 +17,7 @@ use crate::report::inspection::{
     peak_text, touch_mark, verdict_line, write_inspection_page, LOWER_BOUND_NOTE, UNMEASURED_NOTE,
 };
 use crate::report::provenance::Provenance;
-use crate::report::ReportConfig;
+use crate::report::{ReportConfig, Unmeasured};
 
 fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
@@ -78,10 +78,15 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
     }
     let lines = std::mem::take(&mut found.provenance);
     let support = std::mem::take(&mut found.support);
+    let suggestion = found.suggestion.as_ref().map(suggestion_line);
     let written = Written {
         dev: &found.deviations,
         found: &found.regions,
         support: &support,
+        unmeasured: suggestion.as_ref().map(|words| Unmeasured {
+            in_area: found.in_area.as_deref(),
+            suggestion: words.clone(),
+        }),
     };
     write_outputs(out, written, lines, &provenance)?;
     found.times.lap("files and report");
@@ -91,8 +96,8 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
         start.elapsed().as_secs_f64(),
     );
     println!("times: {}", found.times.line());
-    if let Some(sg) = &found.suggestion {
-        print_suggestion(sg);
+    if let Some(words) = &suggestion {
+        println!("suggested views: {words}");
     }
     match found.regions.verdict {
         regions::Verdict::Incomplete => Err(Incomplete {
@@ -111,6 +116,8 @@ struct Written<'a> {
     dev: &'a compare::Deviations,
     found: &'a Regions,
     support: &'a [u32],
+    /// With an incomplete verdict, the report's picture of the unmeasured area.
+    unmeasured: Option<Unmeasured<'a>>,
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
@@ -125,6 +132,7 @@ fn write_outputs(
         dev,
         found,
         support,
+        unmeasured,
     } = written;
     let table = compare::to_cloud(dev, &found.labels);
     // deviations.csv keeps its columns (a contract); the PLY also maps what was measured and,
@@ -152,7 +160,7 @@ fn write_outputs(
         },
         || {
             rayon::join(write_regions, || {
-                write_inspection_page(out, dev, found, report_summary, provenance)
+                write_inspection_page(out, (dev, found), report_summary, provenance, unmeasured)
             })
         },
     );
@@ -200,8 +208,9 @@ fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
     println!("verdict: {}", verdict_line(found));
 }
 
-/// The suggested views of an incomplete inspection, one line.
-fn print_suggestion(sg: &suggest::Suggestion) {
+/// The suggested views of an incomplete inspection in words (printed after "suggested
+/// views: " and under the report's picture of the unmeasured area).
+fn suggestion_line(sg: &suggest::Suggestion) -> String {
     let angles: Vec<String> = sg
         .table_angles
         .iter()
@@ -214,13 +223,13 @@ fn print_suggestion(sg: &suggest::Suggestion) {
             angles.join(", ")
         ),
     };
-    println!(
-        "suggested views: {:.1} % of the area to inspect not measured; {here}; {:.1} % faces \
+    format!(
+        "{:.1} % of the area to inspect not measured; {here}; {:.1} % faces \
          no table angle of this setup: scan it in a second setup, the part turned over \
          ([suggest] in --config: table axis and scanner direction)",
         100.0 * sg.unmeasured,
         100.0 * sg.other_setup
-    );
+    )
 }
 /// The provenance of an inspection: its input files, units and effective settings.
 pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {

@@ -50,6 +50,8 @@ pub struct Findings {
     pub times: StageTimes,
     /// With an incomplete verdict, the views that would measure the rest ([`suggest`]).
     pub suggestion: Option<suggest::Suggestion>,
+    /// Per core point whether it lies in the area to inspect (None: no area given, all do).
+    pub in_area: Option<Vec<bool>>,
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
@@ -137,6 +139,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         notices,
         times,
         suggestion,
+        in_area,
     })
 }
 

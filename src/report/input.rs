@@ -67,6 +67,18 @@ pub struct ReportInput<'a> {
     pub regions: Vec<RegionMark>,
     /// Where the result came from (files, settings, version), shown as its own section.
     pub provenance: Option<&'a provenance::Provenance>,
+    /// With an incomplete verdict: the picture of the unmeasured area and what to scan next.
+    pub unmeasured: Option<Unmeasured<'a>>,
+}
+
+/// The unmeasured area's figure: which core points are in the area to inspect, and the
+/// suggested views as its caption.
+#[derive(Debug, Clone)]
+pub struct Unmeasured<'a> {
+    /// Per core point whether it is in the area to inspect (None: all are).
+    pub in_area: Option<&'a [bool]>,
+    /// The suggested setup and table angles, in words.
+    pub suggestion: String,
 }
 
 /// A defect region as the figures show it.

@@ -87,12 +87,13 @@ pub fn region_mark(r: &Region) -> RegionMark {
 }
 
 /// Writes `dir/report.html` with its figures; `summary` lines come first (registration...).
+/// With an incomplete verdict `unmeasured` adds the picture of the unmeasured area.
 pub fn write_inspection_page(
     dir: &Path,
-    dev: &Deviations,
-    found: &Regions,
+    (dev, found): (&Deviations, &Regions),
     mut summary: Vec<(String, String)>,
     provenance: &Provenance,
+    unmeasured: Option<super::Unmeasured>,
 ) -> Result<()> {
     let distances: Vec<f64> = dev.values.iter().map(|v| v.distance).collect();
     let uncertainties: Vec<f64> = dev.values.iter().map(|v| v.uncertainty).collect();
@@ -167,6 +168,7 @@ pub fn write_inspection_page(
         labels: &found.labels,
         regions: found.regions.iter().map(region_mark).collect(),
         provenance: Some(provenance),
+        unmeasured,
     };
     super::write_report(dir, &input, &ReportConfig::default())?;
     Ok(())

@@ -22,7 +22,9 @@ use anyhow::Result;
 
 pub use colour::diverging;
 pub use html::{escape, table_page};
-pub use input::{colour_range, Figure, RegionMark, ReportConfig, ReportFiles, ReportInput, Table};
+pub use input::{
+    colour_range, Figure, RegionMark, ReportConfig, ReportFiles, ReportInput, Table, Unmeasured,
+};
 
 /// Writes report.html and its figures into `dir`.
 pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Result<ReportFiles> {
@@ -86,6 +88,23 @@ pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Resu
             regions: Vec::new(),
         },
     ];
+    let mut whole = whole;
+    let unmeasured = dir.join("unmeasured.png");
+    if let Some(panels) = views::draw_unmeasured(&unmeasured, input, cfg)? {
+        let words = input
+            .unmeasured
+            .as_ref()
+            .map_or("", |u| u.suggestion.as_str());
+        whole.push(Figure {
+            path: unmeasured,
+            caption: format!(
+                "unmeasured area to inspect (orange; grey: measured, pale: outside the area) \
+                 from {}; {words}",
+                panels.join(", ")
+            ),
+            regions: Vec::new(),
+        });
+    }
     let closeups: Vec<Figure> = closeups?.into_iter().flatten().collect();
     let viewer = viewer::write(dir, input, range)?;
     let html = dir.join("report.html");

@@ -170,6 +170,7 @@ pub fn write_plan_html(
                 .map(region_mark)
                 .collect(),
             provenance: Some(provenance),
+            unmeasured: None,
         },
         paths: plan
             .passes

@@ -160,6 +160,85 @@ pub fn draw(path: &Path, input: &ReportInput, range: f64, cfg: &ReportConfig) ->
     Ok(Overview { panels })
 }
 
+/// Colour of core points measured, outside the area to inspect, and unmeasured in it.
+const MEASURED_GREY: RGBColor = RGBColor(200, 200, 200);
+/// Outside the area to inspect: paler, so the area reads as one shape.
+const OUTSIDE_GREY: RGBColor = RGBColor(236, 236, 236);
+/// Unmeasured in the area to inspect (the colour map's deep red end would read as a defect).
+const UNMEASURED_ORANGE: RGBColor = RGBColor(245, 130, 32);
+/// Panels of the unmeasured-area figure: the standard views that show most of it.
+const UNMEASURED_PANELS: usize = 3;
+
+/// Renders the unmeasured area (orange: core points of the area to inspect without a
+/// distance; grey: measured; pale: outside the area) from the standard views that show most
+/// of it, in one row, each titled with its share of the unmeasured pixels; returns the
+/// chosen views' names. Nothing is drawn (None) when no unmeasured point shows.
+pub fn draw_unmeasured(
+    path: &Path,
+    input: &ReportInput,
+    cfg: &ReportConfig,
+) -> Result<Option<Vec<String>>> {
+    let Some(un) = &input.unmeasured else {
+        return Ok(None);
+    };
+    let inside = |i: usize| un.in_area.is_none_or(|a| a[i]);
+    let missing = |i: usize| inside(i) && !input.distances[i].is_finite();
+    font::register();
+    let panel = cfg.panel_px.max(100) as usize;
+    let cams = cameras(input, panel);
+    let rasters: Vec<Raster> = cams
+        .par_iter()
+        .map(|cam| raster::raster(input, cam, |_| true))
+        .collect();
+    let count = |r: &Raster| {
+        r.idx
+            .iter()
+            .filter(|&&i| i != raster::NONE && missing(i as usize))
+            .count()
+    };
+    let counts: Vec<usize> = rasters.iter().map(count).collect();
+    let total: usize = counts.iter().sum();
+    if total == 0 {
+        return Ok(None);
+    }
+    let mut order: Vec<usize> = (0..counts.len()).filter(|&v| counts[v] > 0).collect();
+    order.sort_by_key(|&v| std::cmp::Reverse(counts[v]));
+    order.truncate(UNMEASURED_PANELS);
+    let (w, h) = (order.len() as u32 * panel as u32, panel as u32 + TITLE_H);
+    let root = BitMapBackend::new(path, (w, h)).into_drawing_area();
+    let err = |e: DrawingAreaErrorKind<_>| anyhow!("{}: drawing failed: {e:?}", path.display());
+    root.fill(&WHITE).map_err(err)?;
+    let title = TextStyle::from((font::FAMILY, 24).into_font()).color(&BLACK);
+    for (k, &v) in order.iter().enumerate() {
+        let cam = &cams[v];
+        let light = (cam.towards + cam.up * 0.3 + cam.right * 0.2).normalize();
+        let colours: Vec<Option<RGBColor>> = rasters[v]
+            .idx
+            .iter()
+            .map(|&i| {
+                (i != raster::NONE).then(|| {
+                    let i = i as usize;
+                    let c = match (inside(i), missing(i)) {
+                        (_, true) => UNMEASURED_ORANGE,
+                        (true, false) => MEASURED_GREY,
+                        (false, _) => OUTSIDE_GREY,
+                    };
+                    super::colour::shade(c, input.normals[i].dot(&light))
+                })
+            })
+            .collect();
+        let x0 = k as i32 * panel as i32;
+        marks::panel(&root, (x0, TITLE_H as i32), &colours, panel).map_err(err)?;
+        let share = 100.0 * counts[v] as f64 / total as f64;
+        let text = format!("{} ({share:.0} %)", VIEWS[v].0);
+        root.draw_text(&text, &title, (x0 + 12, 10)).map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(Some(
+        order.iter().map(|&v| VIEWS[v].0.to_string()).collect(),
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::choose;

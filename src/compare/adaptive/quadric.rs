@@ -64,7 +64,7 @@ const MAX_LEVERAGE: f64 = 1.0;
 
 /// A quadric (6 terms) needs at least this many points: 4 residual degrees of freedom to
 /// estimate the scatter from.
-const QUADRIC_MIN_POINTS: usize = 10;
+pub(super) const QUADRIC_MIN_POINTS: usize = 10;
 
 /// A plane (3 terms) needs at least this many points (one residual degree of freedom).
 const PLANE_MIN_POINTS: usize = 4;
