@@ -311,9 +311,14 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
     let stdout = String::from_utf8_lossy(&out.stdout);
     println!("{stdout}");
     assert!(
-        stdout.contains("enter the scan file's path"),
+        stdout.contains("enter each scan file's path"),
         "{}",
         String::from_utf8_lossy(&out.stderr)
+    );
+    // the operator is told which setups and table angles see the ground area (issue 53)
+    assert!(
+        stdout.contains("cycle: rescan the ground area: "),
+        "{stdout}"
     );
     assert!(stdout.contains(&format!("inspect {}", next.display())));
     assert!(dir.join("real/iter-2/inspection/regions.json").is_file());
