@@ -18,5 +18,5 @@ fuzz_target!(|data: &[u8]| {
             let _ = file.refuse("bus", &e.to_string());
         }
     }
-    let _ = file.parse_strict::<polishbot::plan::PlanConfig>();
+    let _ = file.parse_strict::<polishbot::motion::PlanConfig>();
 });
