@@ -236,16 +236,8 @@ fn inspect_says_incomplete_without_evidence() {
     // comparison grew cylinders of tens of mm and ran for a minute)
     let tiny_file = d.join("tiny.ply");
     cloud::write_ply(&tiny_file, &tiny, None, PlyPrecision::F64).unwrap();
-    let run = common::polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(d.join("reference.ply"))
-        .arg("--scan")
-        .arg(&tiny_file)
-        .arg("--pose")
-        .arg(d.join("pose.json"))
-        .arg("-o")
-        .arg(d.join("tiny"))
+    let (reference, pose) = (d.join("reference.ply"), d.join("pose.json"));
+    let run = common::inspect_cmd(&reference, &tiny_file, Some(&pose), &d.join("tiny"))
         .output()
         .unwrap();
     let line = common::one_line_failure(&run);
@@ -257,16 +249,7 @@ fn inspect_says_incomplete_without_evidence() {
         let scan_file = d.join(format!("{name}.ply"));
         cloud::write_ply(&scan_file, scan, None, PlyPrecision::F64).unwrap();
         let out = d.join(name);
-        let run = common::polishbot()
-            .arg("inspect")
-            .arg("--reference")
-            .arg(d.join("reference.ply"))
-            .arg("--scan")
-            .arg(&scan_file)
-            .arg("--pose")
-            .arg(d.join("pose.json"))
-            .arg("-o")
-            .arg(&out)
+        let run = common::inspect_cmd(&reference, &scan_file, Some(&pose), &out)
             .output()
             .unwrap();
         let stdout = String::from_utf8_lossy(&run.stdout);
@@ -370,14 +353,7 @@ fn turntable_case(seed: u64) -> TurntableScore {
         String::from_utf8_lossy(&out.stderr)
     );
     let insp = d.join("inspection");
-    let out = common::polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(d.join("reference.ply"))
-        .arg("--scan")
-        .arg(&merged)
-        .arg("-o")
-        .arg(&insp)
+    let out = common::inspect_cmd(&d.join("reference.ply"), &merged, None, &insp)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).to_string();

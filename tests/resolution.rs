@@ -42,16 +42,8 @@ fn case() -> &'static PathBuf {
 fn inspect(name: &str, scan: &str, extra: &[&str]) -> (Output, serde_json::Value) {
     let d = case();
     let out = d.join(name);
-    let run = polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(d.join("reference.ply"))
-        .arg("--scan")
-        .arg(d.join(scan))
-        .arg("--pose")
-        .arg(d.join("truth.json"))
-        .arg("-o")
-        .arg(&out)
+    let truth = d.join("truth.json");
+    let run = common::inspect_cmd(&d.join("reference.ply"), &d.join(scan), Some(&truth), &out)
         .args(extra)
         .output()
         .unwrap();
@@ -131,16 +123,8 @@ fn a_pose_far_off_and_a_hundred_point_scan_are_refused() {
         serde_json::json!({ "scan_to_reference": rows }).to_string(),
     )
     .unwrap();
-    let run = polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(d.join("reference.ply"))
-        .arg("--scan")
-        .arg(d.join("scan.ply"))
-        .arg("--pose")
-        .arg(&far)
-        .arg("-o")
-        .arg(d.join("far"))
+    let reference = d.join("reference.ply");
+    let run = common::inspect_cmd(&reference, &d.join("scan.ply"), Some(&far), &d.join("far"))
         .output()
         .unwrap();
     let line = common::one_line_failure(&run);
@@ -151,16 +135,8 @@ fn a_pose_far_off_and_a_hundred_point_scan_are_refused() {
     let scan = cloud::load_cloud(&d.join("scan.ply"), None, None).unwrap();
     let few = scan.select(&(0..100).map(|i| i * 997).collect::<Vec<usize>>());
     cloud::write_ply(&d.join("scan100.ply"), &few, None, PlyPrecision::F64).unwrap();
-    let run = polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(d.join("reference.ply"))
-        .arg("--scan")
-        .arg(d.join("scan100.ply"))
-        .arg("--pose")
-        .arg(d.join("truth.json"))
-        .arg("-o")
-        .arg(d.join("few"))
+    let (scan100, truth) = (d.join("scan100.ply"), d.join("truth.json"));
+    let run = common::inspect_cmd(&reference, &scan100, Some(&truth), &d.join("few"))
         .output()
         .unwrap();
     let line = common::one_line_failure(&run);

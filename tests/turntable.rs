@@ -9,8 +9,9 @@ use nalgebra::Point3;
 use polishbot::bus::{Bus, BusConfig, Journal, ResumePoint};
 use polishbot::cell::{execute, steps, RunConfig, Step};
 use polishbot::motion::file::CheckedPlan;
-use polishbot::motion::{plan, table_file};
-use polishbot::robot::{Robot, Turntable};
+use polishbot::motion::{plan, table_file, Plan, PlanConfig};
+use polishbot::repair::Inspection;
+use polishbot::robot::{Robot, Turntable, Workcell};
 use polishbot::sim::{ExtraServo, SimArm, SimOptions};
 
 /// Ten synth parts with random defects on the articular surface: the turntable cell covers at
@@ -136,38 +137,9 @@ fn plans_without_the_table_survey() {
     assert_eq!(refused, 0, "refused {refused} of 20");
 }
 
-/// A plan of the turntable cell that turns the table (the first synth case from seed 2000
-/// whose plan has a table move), checked as `run` checks it (frames, table frames, and the
-/// collision re-check at each stretch's table angle).
-fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
-    let (robot, wc, table, config) = cell("turntable/");
-    let table = table.expect("a turntable");
-    for seed in 2000..2010 {
-        let insp = inspection(seed, 4);
-        let Ok(plan) = plan(&insp, &robot, &wc, Some(&table), &config) else {
-            continue;
-        };
-        let tp = plan.turntable.as_ref().expect("table part");
-        if tp.moves.is_empty() {
-            continue;
-        }
-        let end = tp.end();
-        let checked = plan
-            .check_cell(&robot, Some(&table), &Default::default())
-            .expect("run's check");
-        // run's collision re-check: each stretch against the part at its table angle
-        plan.check_clearance_cell(&insp, &robot, &wc, Some(&table), &config.collision)
-            .expect("run's clearance check");
-        return (robot, table, checked, plan.period, end);
-    }
-    panic!("no case from seed 2000 turns the table");
-}
-
-/// A table plan whose table moves were deleted (issue 52: it streamed with the table never
-/// turning) is refused by run's check, naming the region and its angle; the plan as made
-/// passes the same check.
-#[test]
-fn a_table_plan_without_its_table_moves_is_refused() {
+/// The first synth case from seed 2000 whose plan on the turntable cell turns the table: the
+/// robot, workcell, table, plan settings, the inspection and the plan as made.
+fn first_table_case() -> (Robot, Workcell, Turntable, PlanConfig, Inspection, Plan) {
     let (robot, wc, table, config) = cell("turntable/");
     let table = table.expect("a turntable");
     for seed in 2000..2010 {
@@ -178,18 +150,40 @@ fn a_table_plan_without_its_table_moves_is_refused() {
         if plan.turntable.as_ref().is_none_or(|t| t.moves.is_empty()) {
             continue;
         }
-        plan.check_cell(&robot, Some(&table), &Default::default())
-            .expect("the plan as made");
-        let mut cut = plan.clone();
-        cut.turntable.as_mut().unwrap().moves.clear();
-        let err = cut
-            .check_cell(&robot, Some(&table), &Default::default())
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("are table moves missing"), "{err}");
-        return;
+        return (robot, wc, table, config, insp, plan);
     }
     panic!("no case from seed 2000 turns the table");
+}
+
+/// A plan of the turntable cell that turns the table ([`first_table_case`]), checked as `run`
+/// checks it (frames, table frames, and the collision re-check at each stretch's table angle).
+fn table_plan() -> (Robot, Turntable, CheckedPlan, f64, f64) {
+    let (robot, wc, table, config, insp, plan) = first_table_case();
+    let end = plan.turntable.as_ref().expect("table part").end();
+    let checked = plan
+        .check_cell(&robot, Some(&table), &Default::default())
+        .expect("run's check");
+    // run's collision re-check: each stretch against the part at its table angle
+    plan.check_clearance_cell(&insp, &robot, &wc, Some(&table), &config.collision)
+        .expect("run's clearance check");
+    (robot, table, checked, plan.period, end)
+}
+
+/// A table plan whose table moves were deleted (issue 52: it streamed with the table never
+/// turning) is refused by run's check, naming the region and its angle; the plan as made
+/// passes the same check.
+#[test]
+fn a_table_plan_without_its_table_moves_is_refused() {
+    let (robot, _, table, _, _, plan) = first_table_case();
+    plan.check_cell(&robot, Some(&table), &Default::default())
+        .expect("the plan as made");
+    let mut cut = plan.clone();
+    cut.turntable.as_mut().unwrap().moves.clear();
+    let err = cut
+        .check_cell(&robot, Some(&table), &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("are table moves missing"), "{err}");
 }
 
 /// The table servo as the board emulator knows it: read straight from the cell's servos.toml

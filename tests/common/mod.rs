@@ -64,6 +64,22 @@ pub fn polishbot() -> Command {
     Command::new(env!("CARGO_BIN_EXE_polishbot"))
 }
 
+/// `polishbot inspect --reference REFERENCE --scan SCAN [--pose POSE] -o OUT`; the caller adds
+/// further flags and runs it.
+pub fn inspect_cmd(reference: &Path, scan: &Path, pose: Option<&Path>, out: &Path) -> Command {
+    let mut cmd = polishbot();
+    cmd.arg("inspect")
+        .arg("--reference")
+        .arg(reference)
+        .arg("--scan")
+        .arg(scan);
+    if let Some(pose) = pose {
+        cmd.arg("--pose").arg(pose);
+    }
+    cmd.arg("-o").arg(out);
+    cmd
+}
+
 /// A fresh temporary directory.
 pub fn tempdir() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")

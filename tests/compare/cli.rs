@@ -15,19 +15,16 @@ fn synth_femoral_case(case: &Path, reference_points: &str, scan_points: &str) {
 
 /// `polishbot inspect` of a synth `case` at its true pose into `out`, with `extra` options.
 fn inspect_with_true_pose(case: &Path, out: &Path, extra: &[&str]) -> std::process::Output {
-    common::polishbot()
-        .arg("inspect")
-        .arg("--reference")
-        .arg(case.join("reference.ply"))
-        .arg("--scan")
-        .arg(case.join("scan.ply"))
-        .arg("--pose")
-        .arg(case.join("truth.json"))
-        .args(extra)
-        .arg("-o")
-        .arg(out)
-        .output()
-        .unwrap()
+    let truth = case.join("truth.json");
+    common::inspect_cmd(
+        &case.join("reference.ply"),
+        &case.join("scan.ply"),
+        Some(&truth),
+        out,
+    )
+    .args(extra)
+    .output()
+    .unwrap()
 }
 
 /// A reference cloud no larger than the core-point sample makes every reference point a core
@@ -175,17 +172,7 @@ fn synth_files(case: &Path, seed: u64) {
 
 /// Runs `polishbot inspect` with `extra` arguments into `out`; panics with its stderr.
 fn inspect(reference: &Path, scan: &Path, out: &Path, extra: &[&str]) {
-    common::succeed(
-        common::polishbot()
-            .arg("inspect")
-            .arg("--reference")
-            .arg(reference)
-            .arg("--scan")
-            .arg(scan)
-            .args(extra)
-            .arg("-o")
-            .arg(out),
-    );
+    common::succeed(common::inspect_cmd(reference, scan, None, out).args(extra));
 }
 
 /// The count printed in `stdout` right before `label`, after the last `start` before it
