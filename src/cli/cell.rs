@@ -84,9 +84,20 @@ pub fn run(args: CellArgs, _config: Option<&std::path::Path>) -> anyhow::Result<
     for (rule, n) in &d.refused {
         println!("cell design: not reached: {n} samples by {rule}");
     }
+    for (k, s) in d.setups.iter().enumerate() {
+        println!(
+            "cell design: setup {}: part direction {:?} along the table axis: {:.1} % alone, {:.1} % with the setups before it",
+            k + 1,
+            s.mount,
+            100.0 * s.coverage,
+            100.0 * s.union_coverage
+        );
+    }
     println!(
-        "cell design: articular surface reached {:.1} % ({} samples); cell written to {}",
+        "cell design: articular surface reached {:.1} % in setup 1, {:.1} % over {} setup(s) ({} samples); cell written to {}",
         100.0 * d.coverage,
+        100.0 * design::union_coverage(&d),
+        d.setups.len(),
         d.samples.len(),
         a.out.display()
     );
