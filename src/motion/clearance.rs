@@ -3,7 +3,7 @@
 //! (transits nothing, approach / retract / re-orientation a touch of the ball, grinding a touch
 //! of the ball on one face).
 use super::collide::{Allow, CollisionConfig, Scene};
-pub use super::contact::Collision;
+pub use super::report::Collision;
 use super::error::PlanError;
 use super::file::Plan;
 use super::program::{Segment, SegmentKind};

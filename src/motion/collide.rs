@@ -3,6 +3,7 @@
 //! robot frame), and the moving bodies at a joint sample: the tool's ball, its shank and the
 //! arm's links as capsules between the URDF joint origins. Method: docs/ALGORITHMS.md,
 //! "Collision model".
+mod solids;
 mod sweep;
 
 use std::collections::HashSet;
@@ -10,8 +11,9 @@ use std::sync::Mutex;
 
 use nalgebra::{Matrix4, Point3, Vector3};
 
-use super::contact::{segment_box_distance, spacing};
-pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, Solid};
+pub use super::report::{Body, Hit, Obstacle};
+use solids::{segment_box_distance, spacing};
+pub use solids::{solids_beside, CollisionConfig, Solid};
 use crate::repair::SurfacePoint;
 use crate::robot::units::{mm, MM_PER_M, M_PER_MM};
 use crate::robot::{angle_between, Robot, Workcell};

@@ -5,7 +5,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::config::PlanConfig;
-pub use super::contact::SegmentKind;
+pub use super::report::SegmentKind;
 use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
