@@ -12,12 +12,12 @@ use std::sync::Mutex;
 use nalgebra::{Matrix4, Point3, Vector3};
 
 pub use super::report::{Body, Hit, Obstacle};
-use solids::{segment_box_distance, spacing};
-pub use solids::{solids_beside, CollisionConfig, Solid};
 use crate::repair::SurfacePoint;
 use crate::robot::units::{mm, MM_PER_M, M_PER_MM};
 use crate::robot::{angle_between, Robot, Workcell};
 use crate::spatial::{Neighbour, Neighbours};
+use solids::{segment_box_distance, spacing};
+pub use solids::{solids_beside, CollisionConfig, Solid};
 use sweep::Carry;
 pub use sweep::Sweep;
 

@@ -5,10 +5,10 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::config::PlanConfig;
-pub use super::report::SegmentKind;
 use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
+pub use super::report::SegmentKind;
 use super::report::UnreachablePoint;
 use super::trajectory::JointTrajectory;
 use crate::robot::units::{metres, mm};
