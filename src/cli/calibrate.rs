@@ -18,6 +18,7 @@ use crate::calibrate::{
     TouchSource,
 };
 use crate::motion::frames;
+use crate::robot::units::mm;
 use crate::robot::{Robot, RobotConfig};
 use crate::sim::SimOptions;
 
@@ -304,7 +305,7 @@ fn routine(
             let fit = calibrate::tool_tip(bus, cell, src.as_mut())?;
             let file = ctx.out.join("tool.toml");
             files::write_tool(ctx.tool_in, &file, fit.tip_offset)?;
-            let t = fit.tip_offset.map(|v| v * 1000.0);
+            let t = fit.tip_offset.map(mm);
             say(&format!(
                 "calibrate tool: {} touches, orientation spread {:.1} deg; residual per touch [mm]: {}; RMS {:.3} mm",
                 fit.touches.len(),
@@ -318,9 +319,9 @@ fn routine(
                 t[1],
                 t[2],
                 t[0].hypot(t[1]),
-                fit.pivot[0] * 1000.0,
-                fit.pivot[1] * 1000.0,
-                fit.pivot[2] * 1000.0,
+                mm(fit.pivot[0]),
+                mm(fit.pivot[1]),
+                mm(fit.pivot[2]),
                 file.display()
             ));
             Ok(())

@@ -7,6 +7,7 @@ use clap::{Args, Subcommand};
 
 use crate::cloud::Units;
 use crate::design::{self, DesignConfig, Part, SourceCell};
+use crate::robot::units::mm;
 
 /// Arguments of `cell`.
 #[derive(Debug, Args)]
@@ -69,7 +70,7 @@ pub fn run(args: CellArgs, _config: Option<&std::path::Path>) -> anyhow::Result<
         c.axis,
         c.mount,
         c.centre,
-        c.shank_m * 1e3
+        mm(c.shank_m)
     );
     for (family, s, c) in &d.alternatives {
         println!(
@@ -78,7 +79,7 @@ pub fn run(args: CellArgs, _config: Option<&std::path::Path>) -> anyhow::Result<
             c.axis,
             c.mount,
             c.centre,
-            c.shank_m * 1e3
+            mm(c.shank_m)
         );
     }
     for (rule, n) in &d.refused {

@@ -14,7 +14,6 @@ pub mod check;
 pub mod clearance;
 pub mod collide;
 mod config;
-pub mod contact;
 pub mod dwell;
 pub mod error;
 pub mod feed;
