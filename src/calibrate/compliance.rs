@@ -341,7 +341,8 @@ fn rounds(
     for _ in 0..FIT_ROUNDS {
         let stuck = || {
             CalibError::Refused(
-                "compliance: the touches do not determine the model (too few with every                  joint loaded; check the loads)"
+                "compliance: the touches do not determine the model (too few with every joint \
+                 loaded; check the loads)"
                     .into(),
             )
         };
