@@ -7,7 +7,9 @@ mod common;
 use nalgebra::{Point3, Vector3};
 use polishbot::removal::force::{joint_torques, overload, DEFAULT_FORCE_SHARE};
 use polishbot::removal::influence::Reach;
-use polishbot::removal::montecarlo::{spread, JointError, MonteCarloConfig};
+use polishbot::removal::montecarlo::{
+    spread, tip_error, JointError, MonteCarloConfig, DEFAULT_TIP_ERROR_MM,
+};
 use polishbot::removal::{solve_region, targets, Contact, Influence, RemovalConfig, ToolModel};
 use polishbot::repair::SurfacePoint;
 
@@ -359,6 +361,30 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
             assert!((got - want).abs() < 1e-12, "{got} vs {want}");
         }
     }
+    // The tip error is the cell's record when it has one (tool.toml's verified_tip_error_mm,
+    // written by calibrate verify), not the setting: a record of 0 mm under the default
+    // setting (0.12 mm) draws the nominal, a record of 0.2 mm under a setting of 0 does not.
+    let recorded = |mm: f64| ToolModel {
+        verified_tip_error_mm: Some(mm),
+        ..tool.clone()
+    };
+    let draw = |tool: &ToolModel, mc: &MonteCarloConfig| {
+        let s = spread(tool, BALL_MM, &contacts, &joints, &plan.dwell, &geometry, mc);
+        let nominal = plan.residual();
+        (s.draws.iter().flatten().zip(nominal.iter().cycle()))
+            .map(|(got, want)| (got - want).abs())
+            .fold(0.0f64, f64::max)
+    };
+    let setting = MonteCarloConfig {
+        tip_error_mm: DEFAULT_TIP_ERROR_MM,
+        ..still.clone()
+    };
+    assert!(draw(&recorded(0.0), &setting) < 1e-12);
+    assert!(draw(&recorded(0.2), &still) > 1e-3);
+    assert_eq!(tip_error(&recorded(0.2), &still).mm, 0.2);
+    let fallback = tip_error(&tool, &setting);
+    assert_eq!(fallback.mm, DEFAULT_TIP_ERROR_MM);
+    assert!(fallback.source.contains("no calibrate verify record"));
     // 1 degree of backlash on a 0.2 m lever moves the patch up to 1.7 mm: the nominal plan
     // over-grinds beside the peak at the Monte Carlo's quantile (what makes the planner raise
     // a region's allowance: tests/removal_plan.rs), while the nominal residual does not
