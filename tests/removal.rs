@@ -143,7 +143,14 @@ fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
         config.stepover_share * a,
         leaning(),
     );
-    let plan = solve_region(&influence, &contacts, &cores, &targets(&cores, 0.0, 0.0), &config).expect("dwell");
+    let plan = solve_region(
+        &influence,
+        &contacts,
+        &cores,
+        &targets(&cores, 0.0, 0.0),
+        &config,
+    )
+    .expect("dwell");
     let residual = plan.residual();
     let mut worst_diff = 0.0f64;
     let (mut worst_inside, mut lowest) = (0.0f64, f64::INFINITY);
@@ -199,7 +206,14 @@ fn the_plate_at_every_spindle_tilt_matches_the_integration() {
     for tilt in [0.0, 2.0, 20.0, 45.0] {
         let spin = spindle(tilt, 30.0);
         let contacts = raster(config.spacing_share * a, config.stepover_share * a, spin);
-        let plan = solve_region(&influence, &contacts, &cores, &targets(&cores, 0.0, 0.0), &config).expect("dwell");
+        let plan = solve_region(
+            &influence,
+            &contacts,
+            &cores,
+            &targets(&cores, 0.0, 0.0),
+            &config,
+        )
+        .expect("dwell");
         let (mut worst, mut most) = (0.0f64, 0.0f64);
         for (j, c) in cores.iter().enumerate() {
             let removed = integrate(&tool, &contacts, &plan.dwell, &c.position);
@@ -332,7 +346,14 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
         config.stepover_share * a,
         leaning(),
     );
-    let plan = solve_region(&influence, &contacts, &cores, &targets(&cores, 0.0, 0.0), &config).unwrap();
+    let plan = solve_region(
+        &influence,
+        &contacts,
+        &cores,
+        &targets(&cores, 0.0, 0.0),
+        &config,
+    )
+    .unwrap();
     let still = MonteCarloConfig {
         draws: 3,
         backlash_deg: 0.0,
@@ -369,7 +390,15 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
         ..tool.clone()
     };
     let draw = |tool: &ToolModel, mc: &MonteCarloConfig| {
-        let s = spread(tool, BALL_MM, &contacts, &joints, &plan.dwell, &geometry, mc);
+        let s = spread(
+            tool,
+            BALL_MM,
+            &contacts,
+            &joints,
+            &plan.dwell,
+            &geometry,
+            mc,
+        );
         let nominal = plan.residual();
         (s.draws.iter().flatten().zip(nominal.iter().cycle()))
             .map(|(got, want)| (got - want).abs())
@@ -468,7 +497,14 @@ fn contacts_that_need_nothing_are_lifted_over_and_the_floor_goes() {
     let far = |p: &Point3<f64>| p.coords.norm() > 2.5;
     let mut floors = Vec::new();
     for config in [&grinding, &lifting] {
-        let plan = solve_region(&influence, &contacts, &cores, &targets(&cores, 0.0, 0.0), config).expect("dwell");
+        let plan = solve_region(
+            &influence,
+            &contacts,
+            &cores,
+            &targets(&cores, 0.0, 0.0),
+            config,
+        )
+        .expect("dwell");
         let t_min = contacts[0].length / config.feed_max_mm_s;
         let lifted = plan.lifted.iter().filter(|l| **l).count();
         for ((t, l), c) in plan.dwell.iter().zip(&plan.lifted).zip(&contacts) {
@@ -556,5 +592,8 @@ fn no_removal_where_the_excess_is_within_its_uncertainty_of_the_tolerance() {
     let ground = cores.iter().zip(&plan.removal);
     let left = ground.filter(|(c, _)| c.position.x < -border && c.position.x > -2.5);
     let low = left.map(|(_, r)| *r).fold(f64::INFINITY, f64::min);
-    assert!(low > 0.5 * height, "unguarded removal {low} mm on the left half");
+    assert!(
+        low > 0.5 * height,
+        "unguarded removal {low} mm on the left half"
+    );
 }

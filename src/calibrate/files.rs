@@ -257,7 +257,10 @@ pub fn write_tool(input: &Path, out: &Path, tip: [f64; 3]) -> Result<Tool, Calib
 /// its tip error from it (`removal::montecarlo::tip_error`).
 pub fn write_verified_tip(input: &Path, out: &Path, worst_mm: f64) -> Result<(), CalibError> {
     let text = std::fs::read_to_string(input).map_err(|e| CalibError::file(input, e))?;
-    write(out, &patch_removal(&text, &[("verified_tip_error_mm", worst_mm)]))
+    write(
+        out,
+        &patch_removal(&text, &[("verified_tip_error_mm", worst_mm)]),
+    )
 }
 
 /// Writes workcell.toml and reads it back.

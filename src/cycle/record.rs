@@ -52,7 +52,10 @@ impl Measured {
             rms_mm: rms(&d),
             volume_mm3: repairable.iter().map(|r| r.volume).sum(),
             decision: Counts::of(
-                inspection.points.iter().map(|p| (p.distance, p.uncertainty)),
+                inspection
+                    .points
+                    .iter()
+                    .map(|p| (p.distance, p.uncertainty)),
                 inspection.tolerance.unwrap_or(f64::NAN),
             ),
         }

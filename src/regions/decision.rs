@@ -218,7 +218,10 @@ mod tests {
         // No uncertainty: undecided; no distance: not judged.
         assert_eq!(c(0.01, f64::NAN), Some(Conformity::Undecided));
         assert_eq!(c(f64::NAN, 0.01), None);
-        let n = Counts::of([(0.0, 0.01), (0.2, 0.01), (0.05, 0.01), (f64::NAN, 0.0)].into_iter(), 0.05);
+        let n = Counts::of(
+            [(0.0, 0.01), (0.2, 0.01), (0.05, 0.01), (f64::NAN, 0.0)].into_iter(),
+            0.05,
+        );
         assert_eq!((n.conform, n.nonconform, n.undecided), (1, 1, 1));
     }
 }

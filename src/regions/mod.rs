@@ -522,7 +522,10 @@ mod tests {
         // 0.045 +- 0.01 straddles the tolerance everywhere: undecided, no region.
         let r = judge(0.045, 0.01, &[], 0.0);
         assert_eq!((r.verdict, r.regions.len()), (Verdict::Undecided, 0));
-        assert_eq!((r.decision.undecided, r.decision.undecided_share), (25, 1.0));
+        assert_eq!(
+            (r.decision.undecided, r.decision.undecided_share),
+            (25, 1.0)
+        );
         // Two non-conform points (0.1 - 0.01 > 0.05), too few for a region: undecided.
         let r = judge(0.02, 0.01, &[0, 24], 0.1);
         assert_eq!((r.verdict, r.regions.len()), (Verdict::Undecided, 0));

@@ -149,7 +149,10 @@ pub fn write_plan_html(
     if let Some(rem) = &plan.removal {
         summary.push((
             "Monte Carlo tip error".to_string(),
-            format!("+-{} mm per axis, from {}", rem.tip_error_mm, rem.tip_error_source),
+            format!(
+                "+-{} mm per axis, from {}",
+                rem.tip_error_mm, rem.tip_error_source
+            ),
         ));
     }
     let report = inspection.dir.join("report.html");
