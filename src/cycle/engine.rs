@@ -287,6 +287,7 @@ pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
             position: *p,
             normal: n / n.norm(),
             distance: v.distance,
+            uncertainty: v.uncertainty,
             region,
         })
         .collect();
