@@ -13,7 +13,7 @@ use super::run::{Job, LoopArm, PlanSource};
 use super::settings::ConfigFile;
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
 use crate::cycle::{plan_into, run_cycle, CycleConfig, First, PlanFileConfig};
-use crate::inspect::{FileInput, Findings, InspectConfig};
+use crate::inspect::{FileInput, Findings, InspectConfig, Source};
 use crate::motion::Plan;
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
@@ -126,8 +126,8 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let inspection_dir = out.join("inspection");
     step("inspect: filter, register, compare, regions, report");
     let inputs = crate::inspect::Inputs {
-        reference: out.join("reference.ply"),
-        scan: out.join("scan.ply"),
+        reference: Source::file(out.join("reference.ply")),
+        scan: Source::file(out.join("scan.ply")),
         more_scans: Vec::new(),
         files: DEMO_FILES,
         pose: None,
@@ -191,8 +191,8 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         ..CycleConfig::default()
     };
     let inputs = crate::cycle::Inputs {
-        reference: out.join("reference.ply"),
-        scan: out.join("scan.ply"),
+        reference: Source::file(out.join("reference.ply")),
+        scan: Source::file(out.join("scan.ply")),
         files: DEMO_FILES,
         out: cycle_dir,
         first: Some(First {

@@ -6,6 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use rayon::prelude::*;
 use serde_json::{json, Value};
 
 use super::{suggest, Findings, Inputs, InspectConfig, PoseSource};
@@ -16,7 +17,7 @@ use crate::register::{RegisterError, Registration};
 use crate::report::inspection::{
     peak_text, touch_mark, verdict_line, write_inspection_page, LOWER_BOUND_NOTE, UNMEASURED_NOTE,
 };
-use crate::report::provenance::Provenance;
+use crate::report::provenance::{InputFile, Provenance};
 use crate::report::{ReportConfig, Unmeasured};
 
 /// Writes `value` as pretty JSON to `path`: with `provenance` added as its last key
@@ -244,21 +245,25 @@ fn suggestion_line(sg: &suggest::Suggestion) -> String {
 }
 /// The provenance of an inspection: its input files, units and effective settings.
 pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
-    let mut files = vec![
-        ("reference", inputs.reference.as_path()),
-        ("scan", inputs.scan.as_path()),
-    ];
-    files.extend(inputs.more_scans.iter().map(|p| ("scan", p.as_path())));
+    let mut sources = vec![("reference", &inputs.reference), ("scan", &inputs.scan)];
+    sources.extend(inputs.more_scans.iter().map(|s| ("scan", s)));
     let optional = [
         ("pose", &inputs.pose),
         ("core points", &inputs.core),
         ("area to inspect", &inputs.inspect_area),
     ];
-    files.extend(
-        optional
-            .iter()
-            .filter_map(|(r, p)| p.as_deref().map(|p| (*r, p))),
-    );
+    let files: Vec<(&str, &Path)> = optional
+        .iter()
+        .filter_map(|(r, p)| p.as_deref().map(|p| (*r, p)))
+        .collect();
+    // A file this process wrote is recorded from the bytes it holds, never read back.
+    let hashed = (sources.par_iter())
+        .map(|(role, s)| match s.held_bytes() {
+            Some(bytes) => Ok(InputFile::held(role, s.as_path(), bytes)),
+            None => InputFile::hash(role, s.as_path()),
+        })
+        .chain(files.par_iter().map(|(role, p)| InputFile::hash(role, p)))
+        .collect::<Result<Vec<_>>>()?;
     let units = match inputs.files.units {
         Some(u) => format!("results in mm, reference frame; inputs read as {u:?}"),
         None => "results in mm, reference frame; inputs in mm (no --units)".to_string(),
@@ -270,7 +275,7 @@ pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
         "registration_error": inputs.registration_error,
         "report": ReportConfig::default(),
     });
-    Provenance::new("inspect", &units, &files, &config)
+    Provenance::of_inputs("inspect", &units, hashed, &config)
 }
 
 /// Exit code of `inspect` when the verdict is incomplete (1 is an error, 2 a usage error).

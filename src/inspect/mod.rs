@@ -17,7 +17,7 @@ pub use files::{inspect_into, Incomplete, INCOMPLETE_EXIT};
 pub use pose::{register_scan, PoseSource};
 
 pub use config::{
-    FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
+    FileInput, Inputs, InspectConfig, Source, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
 };
 
 use std::time::Instant;
@@ -69,7 +69,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
     let first = scans::prepare(
         cfg,
         reference_in,
-        &inputs.scan,
+        inputs.scan.as_path(),
         &scan,
         inputs.pose.as_deref(),
     )?;
@@ -79,8 +79,8 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         .zip(&more)
         .map(|(path, s)| {
             // A further scan's failed registration is no record of the first scan's.
-            scans::prepare(cfg, reference_in, path, s, None)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+            scans::prepare(cfg, reference_in, path.as_path(), s, None)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.as_path().display()))
         })
         .collect::<Result<Vec<_>>>()?;
     times.lap("filter and register");
@@ -91,7 +91,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         ("outlier filter".to_string(), first.filter_line),
     ];
     for (k, (path, s)) in inputs.more_scans.iter().zip(&rest).enumerate() {
-        let what = format!("scan {} ({})", k + 2, path.display());
+        let what = format!("scan {} ({})", k + 2, path.as_path().display());
         provenance.push((format!("{what}: registration"), s.pose.line()));
         provenance.push((format!("{what}: outlier filter"), s.filter_line.clone()));
     }
