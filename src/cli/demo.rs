@@ -154,6 +154,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let planned = plan_into(
         &plan_cfg,
         &tool,
+        &found.written,
         &inspection,
         &plan_file,
         Some(&ros),

@@ -17,6 +17,7 @@ use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
+use crate::report::provenance::InputFile;
 use crate::robot::ToolText;
 
 /// What the loop starts from.
@@ -191,7 +192,7 @@ impl Loop<'_> {
         }
         let (plan_file, planned) = match made {
             Some(made) => made,
-            None => self.plan(&inspection, &dir)?,
+            None => self.plan(&inspection, &found.written, &dir)?,
         };
         let last = self.records.last_mut().expect("pushed above");
         last.planned(&inspection, &planned.plan);
@@ -244,7 +245,12 @@ impl Loop<'_> {
 
     /// Plans from `inspection` into DIR/plan.json with the loop's plan settings and its tool
     /// file (written as DIR/plan.toml, an output: the `[plan]` settings with `robot.tool` set).
-    fn plan(&self, inspection: &Inspection, dir: &Path) -> anyhow::Result<(PathBuf, Planned)> {
+    fn plan(
+        &self,
+        inspection: &Inspection,
+        written: &[InputFile],
+        dir: &Path,
+    ) -> anyhow::Result<(PathBuf, Planned)> {
         println!("== cycle: plan");
         let tool = match &self.tool {
             Some(t) => t.clone(),
@@ -256,7 +262,7 @@ impl Loop<'_> {
         cfg.robot.tool = tool.path.clone();
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
-        let planned = plan_into(&cfg, &tool, inspection, &plan_file, None, &refuse)?;
+        let planned = plan_into(&cfg, &tool, written, inspection, &plan_file, None, &refuse)?;
         Ok((plan_file, planned))
     }
 

@@ -27,12 +27,32 @@ fn write_json(
     value: &impl serde::Serialize,
     provenance: Option<&Provenance>,
 ) -> Result<()> {
+    write_text(path, &json_text(path, value, provenance)?)
+}
+
+/// The text [`write_json`] writes to `path`.
+fn json_text(
+    path: &Path,
+    value: &impl serde::Serialize,
+    provenance: Option<&Provenance>,
+) -> Result<String> {
     let text = serde_json::to_string_pretty(value)?;
-    let text = match provenance {
+    Ok(match provenance {
         Some(p) => p.stamp(&text, path)?,
         None => text + "\n",
-    };
+    })
+}
+
+/// Writes `text` to `path`.
+fn write_text(path: &Path, text: &str) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Writes `text` to `path` and returns its record as written (size, SHA-256; `role` its
+/// role), for the plan's provenance: the file is not read back.
+fn write_recorded(role: &str, path: &Path, text: &str) -> Result<InputFile> {
+    write_text(path, text)?;
+    Ok(InputFile::held(role, path, text.as_bytes()))
 }
 
 /// Runs [`super::run`] and writes its files into `out` (created), then prints the summary
@@ -104,7 +124,7 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
             suggestion: words.clone(),
         }),
     };
-    write_outputs(out, written, lines, &provenance)?;
+    found.written = write_outputs(out, written, lines, &provenance)?;
     found.times.lap("files and report");
     print_summary(
         &found.deviations,
@@ -137,13 +157,14 @@ struct Written<'a> {
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
-/// (formatting is most of their time, and each is single-threaded).
+/// (formatting is most of their time, and each is single-threaded); returns the records of
+/// regions.json and deviations.csv as written ([`Findings::written`]).
 fn write_outputs(
     out: &Path,
     written: Written,
     report_summary: Vec<(String, String)>,
     provenance: &Provenance,
-) -> Result<()> {
+) -> Result<Vec<InputFile>> {
     let Written {
         dev,
         found,
@@ -158,12 +179,21 @@ fn write_outputs(
     if !support.is_empty() {
         ply_table.set_field("scans", support.iter().map(|&m| m as f64).collect());
     }
-    let write_regions =
-        || -> Result<()> { write_json(&out.join("regions.json"), found, Some(provenance)) };
+    let write_regions = || -> Result<InputFile> {
+        let path = out.join("regions.json");
+        write_recorded(
+            "regions",
+            &path,
+            &json_text(&path, found, Some(provenance))?,
+        )
+    };
     let ((csv, ply), (regions, report)) = rayon::join(
         || {
             rayon::join(
-                || cloud::write_csv(&out.join("deviations.csv"), &table),
+                || {
+                    let path = out.join("deviations.csv");
+                    write_recorded("deviations", &path, &cloud::csv_text(&table))
+                },
                 || {
                     let path = out.join("deviations.ply");
                     cloud::write_ply(&path, &ply_table, None, PlyPrecision::F64)
@@ -176,10 +206,9 @@ fn write_outputs(
             })
         },
     );
-    csv?;
     ply?;
-    regions?;
-    report
+    report?;
+    Ok(vec![regions?, csv?])
 }
 
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {

@@ -52,6 +52,9 @@ pub struct Findings {
     pub suggestion: Option<suggest::Suggestion>,
     /// Per core point whether it lies in the area to inspect (None: no area given, all do).
     pub in_area: Option<Vec<bool>>,
+    /// regions.json and deviations.csv as [`inspect_into`] wrote them (size, SHA-256), for
+    /// the plan's provenance; empty from [`run`], which writes nothing.
+    pub written: Vec<crate::report::provenance::InputFile>,
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
@@ -140,6 +143,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         times,
         suggestion,
         in_area,
+        written: Vec::new(),
     })
 }
 
