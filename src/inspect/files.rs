@@ -392,3 +392,56 @@ pub fn record_failure(
         out.display()
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::{Geometry, PointCloud};
+    use crate::inspect::{FileInput, Source};
+    use nalgebra::Point3;
+
+    /// A cloud of a few millimetre-sized points, as a rescan has them.
+    fn cloud() -> PointCloud {
+        PointCloud::from_points(
+            (0..50)
+                .map(|i| Point3::new(i as f64 * 0.37, (i * i) as f64 * 0.011, 3.0 - i as f64))
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn a_held_input_is_loaded_and_recorded_as_written_without_reading_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let c = cloud();
+        let bytes = cloud::write_ply_bytes(&c, None, PlyPrecision::F64);
+        let written = dir.path().join("after.ply");
+        std::fs::write(&written, &bytes).unwrap();
+        // Held under a path that is not there: loading it must not read the file.
+        let gone = dir.path().join("removed.ply");
+        let held = Source::held(&gone, Geometry::Cloud(c.clone()), bytes.clone());
+        let files = FileInput::default();
+        assert_eq!(held.load_cloud(files).unwrap(), c);
+        // What the file reads back as (the parser, not the held copy) is the held cloud.
+        assert_eq!(Source::file(&written).load_cloud(files).unwrap(), c);
+        let err = Source::file(&gone).load_cloud(files).unwrap_err();
+        assert!(format!("{err:#}").contains("removed.ply"), "{err:#}");
+        // The provenance of the held input: the file's size and SHA-256, hashed from disk.
+        let inputs = Inputs {
+            reference: held.clone(),
+            scan: held,
+            more_scans: Vec::new(),
+            files,
+            pose: None,
+            core: None,
+            inspect_area: None,
+            registration_error: None,
+        };
+        let p = provenance(&InspectConfig::default(), &inputs).unwrap();
+        let on_disk = InputFile::hash("scan", &written).unwrap();
+        assert_eq!(p.inputs.len(), 2);
+        for f in &p.inputs {
+            assert_eq!((f.bytes, &f.sha256), (on_disk.bytes, &on_disk.sha256));
+            assert_eq!(f.path, gone.display().to_string());
+        }
+    }
+}
