@@ -10,7 +10,9 @@ use polishbot::removal::influence::Reach;
 use polishbot::removal::montecarlo::{
     spread, tip_error, JointError, MonteCarloConfig, DEFAULT_TIP_ERROR_MM,
 };
-use polishbot::removal::{solve_region, targets, Contact, Influence, RemovalConfig, ToolModel};
+use polishbot::removal::{
+    solve_region, targets, Contact, Influence, RegionRemoval, RemovalConfig, ToolModel,
+};
 use polishbot::repair::SurfacePoint;
 
 /// Ball radius of the shipped tool, mm.
@@ -130,6 +132,23 @@ fn integrate(tool: &ToolModel, contacts: &[Contact], dwell: &[f64], p: &Point3<f
         .sum()
 }
 
+/// The dwell solve asked to take every core point's whole excess (allowance and tolerance 0).
+fn solve_whole(
+    influence: &Influence,
+    contacts: &[Contact],
+    cores: &[SurfacePoint],
+    config: &RemovalConfig,
+) -> RegionRemoval {
+    solve_region(
+        influence,
+        contacts,
+        cores,
+        &targets(cores, 0.0, 0.0),
+        config,
+    )
+    .expect("dwell")
+}
+
 #[test]
 fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
     let tool = ToolModel::default();
@@ -143,14 +162,7 @@ fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
         config.stepover_share * a,
         leaning(),
     );
-    let plan = solve_region(
-        &influence,
-        &contacts,
-        &cores,
-        &targets(&cores, 0.0, 0.0),
-        &config,
-    )
-    .expect("dwell");
+    let plan = solve_whole(&influence, &contacts, &cores, &config);
     let residual = plan.residual();
     let mut worst_diff = 0.0f64;
     let (mut worst_inside, mut lowest) = (0.0f64, f64::INFINITY);
@@ -206,14 +218,7 @@ fn the_plate_at_every_spindle_tilt_matches_the_integration() {
     for tilt in [0.0, 2.0, 20.0, 45.0] {
         let spin = spindle(tilt, 30.0);
         let contacts = raster(config.spacing_share * a, config.stepover_share * a, spin);
-        let plan = solve_region(
-            &influence,
-            &contacts,
-            &cores,
-            &targets(&cores, 0.0, 0.0),
-            &config,
-        )
-        .expect("dwell");
+        let plan = solve_whole(&influence, &contacts, &cores, &config);
         let (mut worst, mut most) = (0.0f64, 0.0f64);
         for (j, c) in cores.iter().enumerate() {
             let removed = integrate(&tool, &contacts, &plan.dwell, &c.position);
@@ -346,14 +351,7 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
         config.stepover_share * a,
         leaning(),
     );
-    let plan = solve_region(
-        &influence,
-        &contacts,
-        &cores,
-        &targets(&cores, 0.0, 0.0),
-        &config,
-    )
-    .unwrap();
+    let plan = solve_whole(&influence, &contacts, &cores, &config);
     let still = MonteCarloConfig {
         draws: 3,
         backlash_deg: 0.0,
@@ -497,14 +495,7 @@ fn contacts_that_need_nothing_are_lifted_over_and_the_floor_goes() {
     let far = |p: &Point3<f64>| p.coords.norm() > 2.5;
     let mut floors = Vec::new();
     for config in [&grinding, &lifting] {
-        let plan = solve_region(
-            &influence,
-            &contacts,
-            &cores,
-            &targets(&cores, 0.0, 0.0),
-            config,
-        )
-        .expect("dwell");
+        let plan = solve_whole(&influence, &contacts, &cores, config);
         let t_min = contacts[0].length / config.feed_max_mm_s;
         let lifted = plan.lifted.iter().filter(|l| **l).count();
         for ((t, l), c) in plan.dwell.iter().zip(&plan.lifted).zip(&contacts) {
