@@ -10,7 +10,7 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 use polishbot::bus::{Bus, BusConfig, Journal};
-use polishbot::sim::grind::{fk, GrindConfig, ServoTrace, ToolState, VirtualPart};
+use polishbot::sim::grind::{fk, GrindConfig, MountGive, ServoTrace, ToolState, VirtualPart};
 use polishbot::sim::{Mechanics, SimArm, SimOptions};
 use polishbot::spatial::Neighbours;
 
@@ -36,9 +36,12 @@ fn plate(cfg: &GrindConfig) -> VirtualPart {
 
 /// The tool these closed-form cases were written for (the simulator's defaults before its
 /// tool became the shipped tool.toml's): k 1e-4 mm^2/N at its nominal (factor 1), a 10 MPa
-/// abrasive, 5000 rpm; patch radius 0.22 mm at 0.05 mm penetration, 11 plate points across.
+/// abrasive, 5000 rpm; patch radius 0.22 mm at 0.05 mm penetration, 11 plate points across;
+/// its mount gives along the surface normal (the spindle-axis mount's closed form:
+/// tests/mount_direction.rs).
 fn soft_tool() -> GrindConfig {
     GrindConfig {
+        compliance_direction: MountGive::SurfaceNormal,
         preston_k: 1e-4,
         k_factor: 1.0,
         modulus_mpa: 10.0,

@@ -23,7 +23,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 pub use influence::{Contact, Influence, Tilt};
-pub use tool::ToolModel;
+pub use tool::{ComplianceDirection, ToolModel};
 
 use crate::repair::SurfacePoint;
 

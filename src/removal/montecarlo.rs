@@ -2,14 +2,15 @@
 //! displaces each contact by its servo quantisation (per contact), backlash and a tool-tip
 //! error (both systematic within a draw) and scales Preston's k; a displacement along the
 //! normal changes the contact's penetration (its preload and the part's deviation there,
-//! `press.rs`), hence the force and the Hertz patch; along the surface it moves the patch.
+//! `press.rs`), hence the force and the Hertz patch; along the surface it moves the patch, and
+//! on a spring-loaded spindle the normal part slides it too (`press::axial_give`).
 use nalgebra::{DMatrix, DVector, Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::influence::{Contact, Influence, Reach};
-use super::tool::ToolModel;
+use super::tool::{ComplianceDirection, ToolModel};
 
 /// Radius of the core points gathered once per contact for all draws, as a multiple of its
 /// nominal reach (patch radius + half its piece) (2): a draw moves a contact by about a tenth
@@ -139,6 +140,32 @@ impl Spread {
     }
 }
 
+/// Contact `c` with the commanded ball centre moved by `shift` mm: its part along the normal
+/// changes the contact's penetration (its preload and the part's deviation there,
+/// `press.rs`), its part along the surface moves the patch; a spring-loaded spindle
+/// (`compliance_direction = "spindle_axis"`) also slides the patch by the normal part times
+/// tan(tilt) and changes the force as `press::axial_give` says.
+fn displaced(tool: &ToolModel, c: &Contact, shift: &Vector3<f64>) -> Contact {
+    let along_normal = shift.dot(&c.normal);
+    let across = shift - c.normal * along_normal;
+    if tool.compliance_direction == ComplianceDirection::SpindleAxis {
+        let (per_mm, slide) = super::press::axial_give(tool, c);
+        return Contact {
+            point: c.point + across + slide * along_normal,
+            force_ratio: (c.force_ratio - per_mm * along_normal).max(0.0),
+            ..*c
+        };
+    }
+    // the tool moved outward by `along_normal` presses that much less than the contact's own
+    // penetration (the part's deviation counted, `press.rs`)
+    let penetration = c.force_ratio * tool.preload_mm - along_normal;
+    Contact {
+        point: c.point + (shift - c.normal * along_normal),
+        force_ratio: tool.force_ratio(penetration),
+        ..*c
+    }
+}
+
 /// Residuals of `dwell` over `cores` (positions, normals, deviations) under `config`'s draws:
 /// `tool` on a ball of `ball_mm`, `joints[i]` the error model of contact i.
 pub fn spread(
@@ -184,15 +211,7 @@ pub fn spread(
                     DVector::from_fn(dof, |i, _| rng.gen_range(-1.0..=1.0) * je.half_count[i]);
                 let d = &je.sensitivity * (&backlash + quant);
                 let shift = Vector3::new(d[0], d[1], d[2]) + tip;
-                let along_normal = shift.dot(&c.normal);
-                // the tool moved outward by `along_normal` presses that much less than the
-                // contact's own penetration (the part's deviation counted, `press.rs`)
-                let penetration = c.force_ratio * tool.preload_mm - along_normal;
-                let moved = Contact {
-                    point: c.point + (shift - c.normal * along_normal),
-                    force_ratio: tool.force_ratio(penetration),
-                    ..*c
-                };
+                let moved = displaced(tool, c, &shift);
                 if moved.force_ratio <= 0.0 {
                     continue;
                 }

@@ -8,7 +8,7 @@
 use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::influence::{Contact, Influence};
-use super::tool::ToolModel;
+use super::tool::{ComplianceDirection, ToolModel};
 use super::{known, target};
 use crate::repair::SurfacePoint;
 use crate::spatial::Neighbours;
@@ -100,10 +100,17 @@ pub fn force_ratio(tool: &ToolModel, deviation: f64, allowance: f64) -> f64 {
     tool.force_ratio(tool.preload_mm + deviation - removed)
 }
 
-/// Sets every contact's `force_ratio` and `normal` from the part measured at the core points
-/// `cores` (indexed by `index`) under the patch of the preload's force (`influence`), the plan
-/// removing down to `allowance` mm: the ball presses the measured surface, at its deviation
-/// and along its normal.
+/// Smallest cosine of the spindle's tilt from the measured normal at which a spindle-axis
+/// mount is modelled (0.17, cos 80 degrees: tool.toml's largest `tilt_deg`): the spring's
+/// compression grows as depth / cos and the slide as tan, both without bound as the axis lies
+/// down on the surface; a contact tilted further counts as tilted 80 degrees.
+pub const MIN_AXIS_COS: f64 = 0.17;
+
+/// Sets every contact's `force_ratio`, `normal` and `offset` from the part measured at the
+/// core points `cores` (indexed by `index`) under the patch of the preload's force
+/// (`influence`), the plan removing down to `allowance` mm: the ball presses the measured
+/// surface, at its deviation and along its normal, and gives along the tool's
+/// `compliance_direction` ([`along_axis`] for a spring-loaded spindle).
 pub fn press(
     contacts: &mut [Contact],
     tool: &ToolModel,
@@ -114,6 +121,10 @@ pub fn press(
     let patch = influence.patch_radius();
     for c in contacts {
         let part = measured_at(cores, index, (&c.point, &c.normal), patch);
+        if tool.compliance_direction == ComplianceDirection::SpindleAxis {
+            along_axis(c, tool, influence.ball_mm(), &part, allowance);
+            continue;
+        }
         c.force_ratio = force_ratio(tool, part.deviation, allowance);
         let nominal = c.normal;
         c.normal = part.normal(&nominal);
@@ -125,6 +136,45 @@ pub fn press(
         let slide = across * height;
         c.offset = slide - nominal * nominal.dot(&slide);
     }
+}
+
+/// Contact `c` pressed by a spring-loaded spindle (docs/ALGORITHMS.md, "The mount's
+/// direction"): the arm commands the ball centre `preload` below the nominal surface along
+/// the nominal normal n, the point `(ball - preload) n` from `c.point`; the measured surface
+/// is the plane through `c.point + h n` (h the deviation less the mid-pass removal) with
+/// normal m. The rigid ball retreats along the spindle axis a by the compression s that
+/// leaves it touching: `s = (ball - m . (free - h n)) / cos`, `cos = -m . a`; the contact force
+/// is normal (friction at the patch runs across the lean plane, square to a), and its axial
+/// part balances the spring: `F = rate x s / cos`. The patch centre is the ball centre's foot
+/// on the plane, `free - s a - ball m`; its part along the surface is the offset.
+pub fn along_axis(
+    c: &mut Contact,
+    tool: &ToolModel,
+    ball_mm: f64,
+    part: &Measured,
+    allowance: f64,
+) {
+    let nominal = c.normal;
+    let m = part.normal(&nominal);
+    let a = c.spin.normalize();
+    let cos = (-m.dot(&a)).max(MIN_AXIS_COS);
+    let h = part.deviation - MID_PASS_SHARE * target(part.deviation, allowance);
+    let free = nominal * (ball_mm - tool.preload_mm);
+    let s = ((ball_mm - m.dot(&(free - nominal * h))) / cos).max(0.0);
+    c.force_ratio = tool.force_ratio(s / cos);
+    c.normal = m;
+    let touch = free - a * s - m * ball_mm;
+    c.offset = touch - nominal * nominal.dot(&touch);
+}
+
+/// How a spring-loaded spindle at the pressed contact `c` answers its commanded centre moved
+/// 1 mm outward along the normal (the Monte Carlo's position error): the force ratio falls by
+/// `1 / (preload cos^2)` and the patch slides `tan` along the lean (the tangent toward which
+/// the tip leans), the first-order change of [`along_axis`] on a flat surface.
+pub fn axial_give(tool: &ToolModel, c: &Contact) -> (f64, Vector3<f64>) {
+    let (tilt, lean) = c.tilt();
+    let cos = tilt.cos.max(MIN_AXIS_COS);
+    (1.0 / (tool.preload_mm * cos * cos), lean * (tilt.sin / cos))
 }
 
 #[cfg(test)]

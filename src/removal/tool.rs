@@ -35,6 +35,9 @@ pub struct ToolModel {
     pub preston_k_mm2_n: f64,
     /// Relative standard uncertainty of k (0.3 = 30 %).
     pub preston_k_rel_sd: f64,
+    /// The direction in which the compliant mount gives (default
+    /// [`ComplianceDirection::SurfaceNormal`], the model of files written before the key).
+    pub compliance_direction: ComplianceDirection,
     /// The worst tool-tip error `calibrate verify` measured on this cell, mm (it writes this
     /// key into the tool.toml of its `--out`): the Monte Carlo's tip error
     /// (`montecarlo::tip_error`). Absent: the cell has no such record and the Monte Carlo
@@ -54,9 +57,27 @@ impl Default for ToolModel {
             tilt_deg: 20.0,
             preston_k_mm2_n: 5e-6,
             preston_k_rel_sd: 0.3,
+            compliance_direction: ComplianceDirection::SurfaceNormal,
             verified_tip_error_mm: None,
         }
     }
+}
+
+/// The direction in which the compliant mount gives (tool.toml `[removal]
+/// compliance_direction`). Method: docs/ALGORITHMS.md, "The mount's direction".
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ComplianceDirection {
+    /// The ball centre gives along the surface normal: the force is the spring rate times the
+    /// normal depth and the patch lies under the commanded centre (an abrasive that is itself
+    /// the spring, or an ideal normal-following mount). The default for files that do not say.
+    #[default]
+    SurfaceNormal,
+    /// The ball centre gives along the spindle axis (a spring-loaded spindle or axial-float
+    /// holder): tilted by theta from the normal, the spring compresses depth / cos(theta), the
+    /// normal force is rate x depth / cos^2(theta) and the patch slides depth x tan(theta)
+    /// back toward the shank.
+    SpindleAxis,
 }
 
 /// Largest tool-tip error a record may hold, mm (50, as `[monte_carlo] tip_error_mm`): the
@@ -258,8 +279,14 @@ mod tests {
         assert_eq!(load_text("joint = \"x\"\n").unwrap(), ToolModel::default());
         let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration/tool.toml");
         let m = ToolModel::load(&shipped).unwrap();
+        // the shipped tool states its spring-loaded spindle; files that do not say keep the
+        // normal mount
+        assert_eq!(m.compliance_direction, ComplianceDirection::SpindleAxis);
         assert_eq!(
-            m,
+            ToolModel {
+                compliance_direction: ComplianceDirection::SurfaceNormal,
+                ..m.clone()
+            },
             ToolModel::default(),
             "tool.toml and the code's defaults agree"
         );

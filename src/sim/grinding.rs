@@ -45,6 +45,10 @@ pub struct GrindConfig {
     pub spindle_rpm: f64,
     /// Radius of the ball, mm (default 3, the shipped tool.toml's).
     pub ball_radius_mm: f64,
+    /// The direction in which the simulated tool's mount gives (default
+    /// [`MountGive::SpindleAxis`]: the shipped tool, a rotary tool on a spring-loaded,
+    /// axially floating holder).
+    pub compliance_direction: MountGive,
     /// Ball centre in the last link's frame (arm_link5), mm; the spindle turns about that
     /// frame's z (default [0, 0, 19.3], the shipped tool.toml's).
     pub tip_offset_mm: [f64; 3],
@@ -93,6 +97,7 @@ impl Default for GrindConfig {
             modulus_mpa: NOMINAL_MODULUS_MPA,
             spindle_rpm: NOMINAL_SPINDLE_RPM,
             ball_radius_mm: 3.0,
+            compliance_direction: MountGive::SpindleAxis,
             tip_offset_mm: [0.0, 0.0, 19.3],
             mount_offset_mm: [0.0; 3],
             mount_rotation_deg: [0.0; 3],
@@ -105,6 +110,19 @@ impl Default for GrindConfig {
             ideal_arm: false,
         }
     }
+}
+
+/// How the simulated tool's compliant mount gives (`[sim.grinding] compliance_direction`),
+/// the simulator's own statement of the tool, apart from the planner's tool.toml.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MountGive {
+    /// The ball centre stays where the arm puts it and the spring takes the penetration along
+    /// the surface normal (the simulator before issue 50).
+    SurfaceNormal,
+    /// The ball slides back along the spindle axis until it touches the surface
+    /// (`crate::sim::grind::part`, docs/ALGORITHMS.md "Simulated grinding").
+    SpindleAxis,
 }
 
 /// Nominal Preston coefficient of the simulated tool, mm^2/N: the shipped

@@ -21,5 +21,5 @@ pub mod virtual_part;
 
 pub use arm::{SimArm, SimOptions, SimTransport};
 pub use fake_i2c::{FakeI2c, I2cRecord};
-pub use grinding::GrindConfig;
+pub use grinding::{GrindConfig, MountGive};
 pub use model::{ExtraServo, Faults, Mechanics, PingReply, SimTiming};

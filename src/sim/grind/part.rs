@@ -3,7 +3,7 @@
 use nalgebra::{Point3, Vector3};
 
 use super::law::{preston_rate, Contact, KField};
-use super::GrindConfig;
+use super::{GrindConfig, MountGive};
 use crate::preprocess::pca_normal;
 use crate::spatial::Neighbours;
 
@@ -24,6 +24,11 @@ pub const PENETRATION_NEIGHBOURS: usize = 9;
 /// under the +-10 % of the true k's field. A grind flattens a bump's flanks by 9-14 degrees,
 /// which with the normals it started from changed the removal at the top by 2x.
 const NORMAL_REFRESH_MM: f64 = 0.005;
+
+/// Smallest cosine of the spindle's tilt from the surface normal at which the simulated
+/// axial mount is followed (0.1, 84 degrees): the slide grows as 1 / cos; a tool laid that
+/// flat on the part counts as tilted 84 degrees.
+const MIN_AXIAL_COS: f64 = 0.1;
 
 /// Surface points whose current positions give a refreshed normal (PCA), as `prepare`'s
 /// initial estimate (`NormalConfig`'s k, 20).
@@ -47,7 +52,8 @@ pub struct VirtualPart {
 /// The state of the tool at one step, reference frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToolState {
-    /// Ball centre, mm.
+    /// Ball centre where the arm holds it (the mount unloaded), mm: a spindle-axis mount lets
+    /// the ball slide back from it ([`VirtualPart::seat`]).
     pub centre: Point3<f64>,
     /// Spindle axis, unit (shank to tip).
     pub axis: Vector3<f64>,
@@ -124,11 +130,34 @@ impl VirtualPart {
         Some((i, ball_mm - height))
     }
 
+    /// Where the ball sits with the arm holding its mount at `tool`, and how hard it presses:
+    /// the surface point whose tangent plane it touches, the ball centre and the normal force
+    /// over the spring rate (mm). [`MountGive::SurfaceNormal`]: the centre where the arm puts
+    /// it and the penetration. [`MountGive::SpindleAxis`]: the rigid ball slides back along
+    /// the axis a until it touches, by `s = penetration / cos` (cos = -n . a, the tilt from
+    /// the inward normal), taken once more where it then sits (a curved part); the spring
+    /// pushes `rate x s` along a, and the normal contact force whose axial part balances it is
+    /// `rate x s / cos` (the friction at the patch runs across the plane of a and n).
+    pub fn seat(&self, tool: &ToolState, cfg: &GrindConfig) -> Option<(usize, Point3<f64>, f64)> {
+        let ball = cfg.ball_radius_mm;
+        let (i, depth) = self.penetration(&tool.centre, ball)?;
+        if cfg.compliance_direction == MountGive::SurfaceNormal || !(depth > 0.0) {
+            return Some((i, tool.centre, depth));
+        }
+        let cos = |k: usize| (-self.normals[k].dot(&tool.axis)).max(MIN_AXIAL_COS);
+        let first = depth / cos(i);
+        let (j, left) = self
+            .penetration(&(tool.centre - tool.axis * first), ball)
+            .unwrap_or((i, 0.0));
+        let s = (first + left / cos(j)).max(0.0);
+        Some((j, tool.centre - tool.axis * s, s / cos(j)))
+    }
+
     /// Grinds for `dt` seconds with the tool at `tool`: the spring force from the penetration,
     /// the Hertz patch centred under the ball, and at every point inside it the true Preston
     /// rate at its pressure and its speed relative to the turning ball. Returns the contact.
     pub fn grind_step(&mut self, tool: &ToolState, dt: f64, cfg: &GrindConfig) -> Option<Contact> {
-        let (i, depth) = self.penetration(&tool.centre, cfg.ball_radius_mm)?;
+        let (i, ball, depth) = self.seat(tool, cfg)?;
         let contact = Contact::hertz(
             depth,
             cfg.spring_rate_n_mm,
@@ -138,7 +167,7 @@ impl VirtualPart {
         let n = self.normals[i];
         let below = self.current(i);
         // patch centre: the ball centre's foot on the tangent plane of the nearest point
-        let centre = tool.centre - n * n.dot(&(tool.centre - below));
+        let centre = ball - n * n.dot(&(ball - below));
         let omega = tool.axis * cfg.spindle_rpm * std::f64::consts::TAU / 60.0;
         let reach = contact.radius_mm + CONTACT_SEARCH_MARGIN_MM;
         for nb in self.index.within_unsorted(&centre, reach) {
