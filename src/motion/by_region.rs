@@ -9,7 +9,7 @@ use super::error::PlanError;
 use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{collide, dwell, order, predict, program, raster, surface};
+use super::{aim, collide, dwell, order, predict, program, raster, surface};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::units::mm;
@@ -98,6 +98,26 @@ pub(crate) fn plan_regions(
             Some(t) => vec![-t.preload_mm],
         };
         let strokes = raster::raster_at(region, &members, &surface, &geometry, &offsets);
+        let strokes = match tool {
+            Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
+                // a first walk finds the axis held at each point (`aim`)
+                let trial = program::walk(
+                    &strokes,
+                    robot,
+                    workcell,
+                    config,
+                    reach,
+                    scene,
+                    &mut prev.clone(),
+                    &mut Vec::new(),
+                    &mut 0,
+                    Some(t.tilt_deg.to_radians()),
+                );
+                let back = dwell::reference_from_robot(workcell);
+                aim::aimed(&strokes, &trial, &back, &surface)
+            }
+            _ => strokes,
+        };
         let runs = program::walk(
             &strokes,
             robot,
