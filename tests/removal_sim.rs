@@ -31,7 +31,7 @@ use polishbot::motion::dwell::{contact, reference_from_robot};
 use polishbot::motion::{plan_part, Inspection, Plan, PlanConfig, SegmentKind};
 use polishbot::preprocess::{estimate_normals, NormalConfig, Orientation};
 use polishbot::robot::{Robot, Workcell};
-use polishbot::sim::grind::{fk, GrindConfig, ToolState, VirtualPart, SIM_STEP_S};
+use polishbot::sim::grind::{fk, GrindConfig, MountGive, ToolState, VirtualPart, SIM_STEP_S};
 use polishbot::spatial::Neighbours;
 
 /// Largest relative difference between the simulator's removal on the part and the plan's per
@@ -99,6 +99,22 @@ fn truth(robot: &Robot) -> GrindConfig {
         speed_exponent: exponents[1],
         tip_offset_mm: robot.tool.tip_offset.map(|v| v * 1e3),
         ..GrindConfig::default()
+    }
+}
+
+/// The mount's direction on both sides, the planner's tool.toml key and the simulator's:
+/// `POLISHBOT_SIM_MOUNT` (`surface_normal`, the default, or `spindle_axis`, the shipped tool's).
+/// Measured with `spindle_axis` (issue 50, the patch aimed `preload x tan` ahead,
+/// `motion/aim.rs`): on the part 0.970 / 0.670 / 0.993 / 0.938 (regions 4 / 0 / 3 / 1), per
+/// band 0.51-2.15: the planner measures the part's deviation and slope at the commanded point,
+/// 0.7-0.9 mm from where the patch lands; measured where it lands, one contact presses 3.11 N
+/// (the flank tilts the surface away from the axis, 1 / cos^2) and the force check refuses
+/// the plan. Open: the spindle mount on a bumpy part is not held here yet (the flat plate's
+/// closed form is, tests/mount_direction.rs).
+fn mount() -> (&'static str, MountGive) {
+    match std::env::var("POLISHBOT_SIM_MOUNT").as_deref() {
+        Ok("spindle_axis") => ("spindle_axis", MountGive::SpindleAxis),
+        _ => ("surface_normal", MountGive::SurfaceNormal),
     }
 }
 
@@ -183,7 +199,11 @@ fn tilts(plan: &Plan, region: usize, robot: &Robot, wc: &Workcell) -> (f64, f64)
 
 #[test]
 fn the_simulator_removes_what_the_plan_predicts_per_region() {
-    let robot = common::dofbot();
+    let mut robot = common::dofbot();
+    let give = mount();
+    if let Some(toml::Value::Table(t)) = robot.tool.removal.as_mut() {
+        t.insert("compliance_direction".into(), give.0.into());
+    }
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let dir = common::tempdir();
     let (inspection, plan) = match std::env::var("POLISHBOT_SIM_DEMO") {
@@ -204,7 +224,10 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
         }
     };
     let removal = plan.removal.as_ref().expect("a removal plan");
-    let cfg = truth(&robot);
+    let cfg = GrindConfig {
+        compliance_direction: give.1,
+        ..truth(&robot)
+    };
     // the part as it is (the excess presses the ball deeper: force rate x (preload +
     // deviation), which the plan models), and the nominal surface the arm is commanded to
     let mut nominal = part(&inspection, &cfg, |_| 0.0);
