@@ -141,7 +141,7 @@ impl VirtualPart {
     pub fn seat(&self, tool: &ToolState, cfg: &GrindConfig) -> Option<(usize, Point3<f64>, f64)> {
         let ball = cfg.ball_radius_mm;
         let (i, depth) = self.penetration(&tool.centre, ball)?;
-        if cfg.compliance_direction == MountGive::SurfaceNormal || !(depth > 0.0) {
+        if cfg.compliance_direction == MountGive::SurfaceNormal || depth.is_nan() || depth <= 0.0 {
             return Some((i, tool.centre, depth));
         }
         let cos = |k: usize| (-self.normals[k].dot(&tool.axis)).max(MIN_AXIAL_COS);
