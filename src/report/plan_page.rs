@@ -110,9 +110,18 @@ pub fn relative(from: &Path, to: &Path) -> Option<String> {
 
 /// Adds a link `text` -> `href` to the links paragraph of the page `report` (once); false
 /// when the page has no such paragraph (a report from before 2026-12-02), left as it is.
-pub fn add_link(report: &Path, text: &str, href: &str) -> Result<bool> {
-    let page = std::fs::read_to_string(report)
-        .with_context(|| format!("{}: cannot read", report.display()))?;
+/// `held`: the page's text when this process wrote it (edited in memory and written, not read
+/// back); None: the page is read from `report`.
+pub fn add_link(report: &Path, held: Option<&str>, text: &str, href: &str) -> Result<bool> {
+    let read;
+    let page = match held {
+        Some(page) => page,
+        None => {
+            read = std::fs::read_to_string(report)
+                .with_context(|| format!("{}: cannot read", report.display()))?;
+            &read
+        }
+    };
     let anchor = format!("<a href=\"{}\">", html::escape(href));
     if page.contains(&anchor) {
         return Ok(true);
