@@ -205,20 +205,6 @@ pub fn write_plan_html(
             .collect(),
     };
     plan_page::write_plan_page(&html, &page, &ReportConfig::default())?;
-    // The link from the inspection's report is a convenience: a report it cannot edit (an
-    // older one, a read-only folder) is said on stderr and left as it is.
-    if report.is_file() {
-        let linked = plan_page::relative(&inspection.dir, &html)
-            .map(|href| plan_page::add_link(&report, report_page, "grinding plan", &href));
-        match linked {
-            Some(Ok(true)) => {}
-            Some(Err(e)) => eprintln!("plan: notice: {e:#}; not linked to {}", html.display()),
-            _ => eprintln!(
-                "plan: notice: {} has no links paragraph (an older report); not linked to {}",
-                report.display(),
-                html.display()
-            ),
-        }
-    }
+    plan_page::link_report(&report, report_page, &inspection.dir, &html);
     Ok(html)
 }
