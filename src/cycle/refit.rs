@@ -228,7 +228,8 @@ pub struct Ground {
 /// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
 /// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
 /// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
-/// shift.
+/// shift. Also hands back what cycle.html draws: the plan's prediction per core point of
+/// `before` (unshifted) and the regions' shifts (None for a rigid plan).
 pub fn refit(
     before: &Ground,
     after: (&Path, &Inspection),
@@ -236,7 +237,7 @@ pub fn refit(
     dir: &Path,
     tool: &mut Option<ToolText>,
     pooled: &mut Vec<Evidence>,
-) -> (Option<f64>, Option<Agreement>, Option<String>) {
+) -> Refitted {
     let inputs = Inputs {
         before: before.inspection.dir.clone(),
         after: after.0.to_path_buf(),
@@ -247,6 +248,7 @@ pub fn refit(
     let prediction = prediction_of(&before.plan_file, &before.planned, &before.inspection);
     let shift_cfg = ShiftConfig::default();
     let mut off_plan = None;
+    let mut seen = None;
     let prediction = prediction.map(|(p, k)| {
         let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
         shifts
@@ -254,6 +256,7 @@ pub fn refit(
             .for_each(|r| println!("{}", describe_shift(r)));
         off_plan = removal_shift::judge(&shifts, &shift_cfg);
         let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
+        seen = Some((p, shifts));
         (moved, k)
     });
     let fitted = prediction.as_ref().map_err(clone_error).and_then(|(p, k)| {
@@ -282,8 +285,17 @@ pub fn refit(
     let agreement = prediction.ok().and_then(|(p, plan_k)| {
         fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
-    (k, agreement, off_plan)
+    (k, agreement, off_plan, seen)
 }
+
+/// What [`refit`] hands back: the fitted k, the agreement, the reason to stop (off plan), and
+/// the plan's unshifted prediction per core point with the regions' measured shifts.
+pub type Refitted = (
+    Option<f64>,
+    Option<Agreement>,
+    Option<String>,
+    Option<(Vec<f64>, Vec<RegionShift>)>,
+);
 
 /// One line on a region's registration for the loop's log.
 fn describe_shift(r: &RegionShift) -> String {

@@ -4,6 +4,7 @@
 mod closeup;
 mod colour;
 pub mod coverage;
+pub mod cycle_page;
 pub(crate) mod font;
 mod histogram;
 mod html;
