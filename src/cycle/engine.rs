@@ -289,8 +289,7 @@ impl Loop<'_> {
         let html = out.join("cycle.html");
         let table = table_html(&self.records, outcome);
         let page = figures::page(&table, out, &self.records, &self.figures);
-        std::fs::write(&html, page)
-            .with_context(|| format!("{}: cannot write", html.display()))?;
+        std::fs::write(&html, page).with_context(|| format!("{}: cannot write", html.display()))?;
         let json = out.join("cycle.json");
         std::fs::write(
             &json,

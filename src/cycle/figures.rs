@@ -44,7 +44,9 @@ pub fn grind(
             let j = partner[i]?;
             let achieved = pts[i].distance - after.points[j].distance;
             let region = usize::try_from(pts[i].region).ok()?;
-            achieved.is_finite().then_some((region, predicted[i], achieved))
+            achieved
+                .is_finite()
+                .then_some((region, predicted[i], achieved))
         })
         .filter(|p| planned.contains(&p.0))
         .collect();
