@@ -232,7 +232,13 @@ pub fn draw_convergence(path: &Path, c: &Convergence) -> Result<()> {
             .x_desc("iteration")
             .x_labels(n as usize + 1)
             .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.3e}"))
+            .y_label_formatter(&|v| {
+                if top < 1e-3 {
+                    format!("{v:.2e}")
+                } else {
+                    format!("{v:.3}")
+                }
+            })
             .label_style((font::FAMILY, 13))
             .draw()
             .map_err(|e| err(format!("{e:?}")))?;

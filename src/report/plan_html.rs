@@ -10,7 +10,7 @@ use plotters::style::RGBColor;
 
 use super::coverage::Class;
 use super::inspection::region_mark;
-use super::plan_page::{self, CoverageMap, PlanPage, ToolPath};
+use super::plan_page::{self, CoverageMap, PlanPage, PredictedRegion, ToolPath};
 use super::plan_reach::{self, Reach, PLANNED, RULE0};
 use super::provenance::Provenance;
 use super::{ReportConfig, ReportInput, Table};
@@ -110,7 +110,7 @@ fn coverage(reach: &Reach, inspection: &Inspection) -> (CoverageMap, Table) {
 /// `removal.regions`, `core_points` each) as (core point index, predicted after, low
 /// quantile: the prediction less the Monte Carlo's spread); empty when the rows do not add
 /// up to the regions' counts (a plan read back from plan.json has no rows).
-fn predicted(plan: &Plan, inspection: &Inspection) -> Vec<(usize, Vec<(usize, f64, f64)>)> {
+fn predicted(plan: &Plan, inspection: &Inspection) -> Vec<PredictedRegion> {
     let Some(rem) = &plan.removal else {
         return Vec::new();
     };

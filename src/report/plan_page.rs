@@ -48,8 +48,12 @@ pub struct PlanPage<'a> {
     pub coverage: Option<CoverageMap>,
     /// The predicted part per region: region id and, per core point in the tool's reach,
     /// (index in `surface.points`, predicted deviation after, Monte Carlo low quantile), mm.
-    pub predicted: Vec<(usize, Vec<(usize, f64, f64)>)>,
+    pub predicted: Vec<PredictedRegion>,
 }
+
+/// One region's predicted part: region id and, per core point in the tool's reach, (index in
+/// the page's points, predicted deviation after, Monte Carlo low quantile), mm.
+pub type PredictedRegion = (usize, Vec<(usize, f64, f64)>);
 
 /// The coverage map of plan.html.
 #[derive(Debug, Clone)]

@@ -218,13 +218,22 @@ fn best_tried(plan: &Plan, region: usize) -> String {
     let Some(r) = table.regions.iter().find(|r| r.region == region) else {
         return "none: the region was not grouped on the table".into();
     };
-    let best = (r.tried.iter())
+    let others: Vec<_> = (r.tried.iter())
         .filter(|t| (t.angle_deg - r.angle_deg).abs() > 1e-9)
-        .max_by(|a, b| a.coverage.total_cmp(&b.coverage));
+        .collect();
+    // the first of the best covered (the angles are tried nearest the planned one first)
+    let best = (others.iter()).fold(
+        None,
+        |best: Option<&&crate::motion::table_file::TriedAngle>, t| match best {
+            Some(b) if b.coverage >= t.coverage => Some(b),
+            _ => Some(t),
+        },
+    );
     let planned = format!(
-        "planned at table {:.0}° ({:.0} % reachable)",
+        "planned at table {:.0}° ({:.0} % reachable), {} other angles tried",
         r.angle_deg,
-        100.0 * r.reachable_share
+        100.0 * r.reachable_share,
+        others.len()
     );
     match best {
         None => format!("{planned}; no other angle tried"),
