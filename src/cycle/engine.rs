@@ -177,8 +177,7 @@ impl Loop<'_> {
         if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
             last.followed_by(&measured, &before.inspection, &inspection);
             let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
-            let seen;
-            (last.k_fitted, last.agreement, off_plan, seen) = refit(
+            let done = refit(
                 before,
                 (&inspection_dir, &inspection),
                 &ids,
@@ -186,7 +185,8 @@ impl Loop<'_> {
                 &mut self.tool,
                 &mut self.pooled,
             );
-            if let Some((predicted, shifts)) = seen {
+            (last.k_fitted, last.agreement, off_plan) = (done.k, done.agreement, done.off_plan);
+            if let Some((predicted, shifts)) = done.seen {
                 let ground = self.inputs.out.join(format!("iter-{}", last.iteration));
                 self.figures.extend(figures::grind(
                     &ground,
@@ -194,7 +194,7 @@ impl Loop<'_> {
                     (&before.inspection, &inspection),
                     &last.planned_regions,
                     &predicted,
-                    &shifts,
+                    (&shifts, &[]),
                 ));
             }
         }

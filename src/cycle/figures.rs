@@ -22,15 +22,16 @@ const LEAST_PREDICTED_MM: f64 = 0.005;
 
 /// The figures of the grind of iteration `iteration` (its folder `dir`): the regions
 /// `planned` of `before`, the plan's `predicted` removal per core point of `before`, the
-/// measured `shifts`, the removal achieved by `after`. A figure that cannot be drawn is said
-/// on stderr and left out (the figures are a view; the loop goes on).
+/// measured `shifts` and, per region, the correction `carried` into the next plan (region id,
+/// mm; empty: none carried), the removal achieved by `after`. A figure that cannot be drawn is
+/// said on stderr and left out (the figures are a view; the loop goes on).
 pub fn grind(
     dir: &Path,
     iteration: usize,
     (before, after): (&Inspection, &Inspection),
     planned: &[usize],
     predicted: &[f64],
-    shifts: &[RegionShift],
+    (shifts, carried): (&[RegionShift], &[(usize, [f64; 3])]),
 ) -> Vec<Figure> {
     let pts = &before.points;
     let points: Vec<Point3<f64>> = pts.iter().map(|p| p.position).collect();
@@ -71,10 +72,14 @@ pub fn grind(
         },
         shifts: (shifts.iter())
             .filter_map(|s| {
+                let region = usize::try_from(s.region).ok()?;
                 Some(RegionGrind {
-                    region: usize::try_from(s.region).ok()?,
+                    region,
                     shift_mm: s.shift_mm,
                     scale: s.scale,
+                    carried_mm: (carried.iter())
+                        .find(|c| c.0 == region)
+                        .map(|c| Vector3::from(c.1)),
                 })
             })
             .collect(),

@@ -228,8 +228,7 @@ pub struct Ground {
 /// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
 /// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
 /// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
-/// shift. Also hands back what cycle.html draws: the plan's prediction per core point of
-/// `before` (unshifted) and the regions' shifts (None for a rigid plan).
+/// shift. Also hands back what cycle.html draws ([`Refitted::seen`]).
 pub fn refit(
     before: &Ground,
     after: (&Path, &Inspection),
@@ -285,17 +284,26 @@ pub fn refit(
     let agreement = prediction.ok().and_then(|(p, plan_k)| {
         fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
-    (k, agreement, off_plan, seen)
+    Refitted {
+        k,
+        agreement,
+        off_plan,
+        seen,
+    }
 }
 
-/// What [`refit`] hands back: the fitted k, the agreement, the reason to stop (off plan), and
-/// the plan's unshifted prediction per core point with the regions' measured shifts.
-pub type Refitted = (
-    Option<f64>,
-    Option<Agreement>,
-    Option<String>,
-    Option<(Vec<f64>, Vec<RegionShift>)>,
-);
+/// What [`refit`] found after a grind.
+pub struct Refitted {
+    /// The fitted k, or None with the reason printed (a rigid plan, too little evidence).
+    pub k: Option<f64>,
+    /// The grind's prediction against the achieved residual (None for a rigid plan).
+    pub agreement: Option<Agreement>,
+    /// The registration's reason to stop (`removal_shift::judge`), or None.
+    pub off_plan: Option<String>,
+    /// What cycle.html draws: the plan's unshifted prediction per core point of the
+    /// inspection before the grind, and each region's measured shift (None for a rigid plan).
+    pub seen: Option<(Vec<f64>, Vec<RegionShift>)>,
+}
 
 /// One line on a region's registration for the loop's log.
 fn describe_shift(r: &RegionShift) -> String {

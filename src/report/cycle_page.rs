@@ -26,6 +26,8 @@ const REGION_COLOURS: [RGBColor; 6] = [
 ];
 /// Side of a chart, px.
 const CHART_PX: (u32, u32) = (560, 460);
+/// The carried correction's arrow: grey beside the measured shift's black.
+const CARRIED: RGBColor = RGBColor(120, 120, 120);
 /// Half-angle of the shift arrow's head, radians (30 degrees).
 const HEAD_RAD: f64 = std::f64::consts::FRAC_PI_6;
 
@@ -38,6 +40,8 @@ pub struct RegionGrind {
     pub shift_mm: Vector3<f64>,
     /// Depth scale at that shift (measured = scale x predicted).
     pub scale: f64,
+    /// The correction the next plan aims back by there, mm (None: none carried).
+    pub carried_mm: Option<Vector3<f64>>,
 }
 
 /// One grind as the loop saw it.
@@ -68,14 +72,22 @@ pub fn draw_grind(dir: &Path, view: &GrindView) -> Result<Vec<Figure>> {
         };
         let words = match shift {
             Some(s) => {
-                overlay.lines = arrow(&Point3::from(r.centroid), &r.normal, &s.shift_mm);
+                let from = Point3::from(r.centroid);
+                overlay.lines = arrow(&from, &r.normal, &s.shift_mm, BLACK);
+                let v = |v: &Vector3<f64>| format!("[{:+.2}, {:+.2}, {:+.2}]", v.x, v.y, v.z);
+                let carried = s.carried_mm.map_or(String::new(), |c| {
+                    overlay.lines.extend(arrow(&from, &r.normal, &c, CARRIED));
+                    format!(
+                        "; the next plan aims back by {:.2} mm {} (grey)",
+                        c.norm(),
+                        v(&c)
+                    )
+                });
                 format!(
-                    "measured shift {:.2} mm [{:+.2}, {:+.2}, {:+.2}] (arrow, from the region's \
-                     centre), depth scale {:.3}",
+                    "measured shift {:.2} mm {} (black arrow, from the region's centre), depth \
+                     scale {:.3}{carried}",
                     s.shift_mm.norm(),
-                    s.shift_mm.x,
-                    s.shift_mm.y,
-                    s.shift_mm.z,
+                    v(&s.shift_mm),
                     s.scale
                 )
             }
@@ -104,22 +116,23 @@ pub fn draw_grind(dir: &Path, view: &GrindView) -> Result<Vec<Figure>> {
     Ok(figures)
 }
 
-/// The arrow of `shift` from `from` (its head's two barbs turned about `normal`), as
-/// overlay lines.
+/// The arrow of `shift` from `from` in `colour` (its head's two barbs turned about
+/// `normal`), as overlay lines.
 fn arrow(
     from: &Point3<f64>,
     normal: &Vector3<f64>,
     shift: &Vector3<f64>,
+    colour: RGBColor,
 ) -> Vec<(Vec<Point3<f64>>, RGBColor, u32)> {
     let tip = from + shift;
-    let mut lines = vec![(vec![*from, tip], BLACK, 3)];
+    let mut lines = vec![(vec![*from, tip], colour, 3)];
     let len = shift.norm();
     if len > 1e-9 {
         let back = -shift / len;
         let side = normal.cross(&back).normalize();
         for s in [-1.0, 1.0] {
             let barb = (back * HEAD_RAD.cos() + side * s * HEAD_RAD.sin()) * (0.3 * len);
-            lines.push((vec![tip, tip + barb], BLACK, 3));
+            lines.push((vec![tip, tip + barb], colour, 3));
         }
     }
     lines
