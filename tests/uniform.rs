@@ -145,7 +145,8 @@ fn caption<'a>(page: &'a str, start: &str) -> &'a str {
 fn plan_page_says_what_is_left_out(insp: &Inspection, plan: &Plan, seed: u64) -> usize {
     let dir = common::tempdir();
     let provenance = Provenance::of_inputs("plan", "mm", Vec::new(), &"test").unwrap();
-    let html = write_plan_html(&dir.path().join("plan.json"), insp, plan, &provenance).unwrap();
+    let html =
+        write_plan_html(&dir.path().join("plan.json"), insp, plan, &provenance, None).unwrap();
     let page = std::fs::read_to_string(html).unwrap();
     let rules = reasons(plan);
     for (rule, n) in &rules {
