@@ -11,7 +11,7 @@ use super::plan_stage::{plan_into, Planned};
 use super::record::{
     decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
 };
-use super::refit::{refit, Ground};
+use super::refit::{refit, PlannedGrind};
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
@@ -131,7 +131,7 @@ struct Loop<'a> {
     inputs: Inputs,
     records: Vec<IterationRecord>,
     /// What the last grind was made from.
-    previous: Option<Ground>,
+    previous: Option<PlannedGrind>,
     /// Every grind's removal evidence so far: k is fitted to all of it.
     pooled: Vec<Evidence>,
     /// The scan to inspect next.
@@ -220,7 +220,7 @@ impl Loop<'_> {
         if let Some(part) = rescan.part {
             self.part = (Source::file(part), true);
         }
-        self.previous = Some(Ground {
+        self.previous = Some(PlannedGrind {
             inspection,
             plan_file,
             planned,

@@ -212,7 +212,7 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
 
 /// What a grind of the loop was made from: its inspection (in memory, its folder in
 /// `inspection.dir`), its plan (file and what was written, with the tool file it was made with).
-pub struct Ground {
+pub struct PlannedGrind {
     /// The inspection the plan was made from.
     pub inspection: Inspection,
     /// plan.json.
@@ -230,7 +230,7 @@ pub struct Ground {
 /// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
 /// shift.
 pub fn refit(
-    before: &Ground,
+    before: &PlannedGrind,
     after: (&Path, &Inspection),
     ids: &[i64],
     dir: &Path,
