@@ -20,7 +20,7 @@ use crate::repair::{Inspection, SurfacePoint};
 use crate::robot::{CellFiles, ToolText};
 
 /// What the loop starts from.
-pub struct Inputs {
+pub struct LoopInputs {
     /// Reference file (or the reference the caller wrote, held).
     pub reference: Source,
     /// The first scan (or the scan the caller wrote, held).
@@ -103,7 +103,7 @@ pub struct CycleOutcome {
 /// cycle.html and cycle.json into `inputs.out` and returns how it ended.
 pub fn run_cycle(
     cfg: &CycleConfig,
-    inputs: Inputs,
+    inputs: LoopInputs,
     executor: &mut dyn Executor,
 ) -> anyhow::Result<CycleOutcome> {
     let mut state = Loop {
@@ -128,7 +128,7 @@ pub fn run_cycle(
 /// The loop's state between iterations.
 struct Loop<'a> {
     cfg: &'a CycleConfig,
-    inputs: Inputs,
+    inputs: LoopInputs,
     records: Vec<IterationRecord>,
     /// What the last grind was made from.
     previous: Option<PlannedGrind>,
@@ -142,7 +142,7 @@ struct Loop<'a> {
     /// file, reference frame), so that it keeps its shape between grinds.
     part: (Source, bool),
     /// The tool file of the next plan, held in memory: refitted after each grind; None until
-    /// the first refit (the cell's tool file, `Inputs::cell`).
+    /// the first refit (the cell's tool file, `LoopInputs::cell`).
     tool: Option<ToolText>,
 }
 
