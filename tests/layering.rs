@@ -458,3 +458,62 @@ fn no_import_circle_between_files() {
         .collect();
     assert!(found.is_empty(), "files importing each other: {found:?}");
 }
+
+/// The names of the `pub struct|enum|type|trait` items `code` declares, with their lines
+/// (`pub(crate)` and narrower items are not public and are left out).
+fn public_type_names(code: &str) -> Vec<(String, usize)> {
+    let mut out = Vec::new();
+    for (i, line) in code.lines().enumerate() {
+        let Some(rest) = line.trim_start().strip_prefix("pub ") else {
+            continue;
+        };
+        let kinds = ["struct ", "enum ", "type ", "trait "];
+        let Some(rest) = kinds.iter().find_map(|k| rest.strip_prefix(k)) else {
+            continue;
+        };
+        let end = rest
+            .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+            .unwrap_or(rest.len());
+        if end > 0 {
+            out.push((rest[..end].to_string(), i + 1));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_scanner_finds_public_type_declarations() {
+    let code = "pub struct Part<'a> {\n\
+                pub(crate) struct Hidden;\n\
+                    pub enum Verdict {\n\
+                // pub struct InAComment;\n\
+                pub type Columns = Vec<f64>;\n\
+                pub trait Arm: Send {\n\
+                pub fn structure() {}\n\
+                struct Private;\n";
+    let found = public_type_names(&code_of(code));
+    let names: Vec<(&str, usize)> = found.iter().map(|(n, l)| (n.as_str(), *l)).collect();
+    assert_eq!(
+        names,
+        [("Part", 1), ("Verdict", 3), ("Columns", 5), ("Arm", 6)]
+    );
+}
+
+#[test]
+fn no_two_public_types_share_a_name() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut seen: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+    for file in rust_files(&src) {
+        let text = std::fs::read_to_string(&file).expect("a readable source file");
+        let text = text.split("#[cfg(test)]").next().unwrap_or_default();
+        for (name, line) in public_type_names(&code_of(text)) {
+            let at = format!("{}:{line}", file.display());
+            seen.entry(name).or_default().push(at);
+        }
+    }
+    let twice: Vec<_> = seen.into_iter().filter(|(_, at)| at.len() > 1).collect();
+    assert!(
+        twice.is_empty(),
+        "public types declared under one name more than once: {twice:#?}"
+    );
+}

@@ -89,7 +89,7 @@ fn simulate(
     cfg: &GrindConfig,
     preload: f64,
     deg: f64,
-) -> (Vec<f64>, polishbot::sim::grind::Contact) {
+) -> (Vec<f64>, polishbot::sim::grind::HertzContact) {
     let points = grid();
     let mut part = VirtualPart::new(points.clone(), vec![Vector3::z(); points.len()], cfg);
     let tool = ToolState {

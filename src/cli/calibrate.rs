@@ -163,7 +163,7 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         tool,
     } = &args.routine
     {
-        let inputs = super::calibrate_removal::Inputs {
+        let inputs = super::calibrate_removal::RefitInputs {
             before: before.clone(),
             after: after.clone(),
             plan: plan.clone(),

@@ -5,12 +5,12 @@
 //! which the loop shares.
 use std::path::Path;
 
-pub use crate::cycle::refit::Inputs;
+pub use crate::cycle::refit::RefitInputs;
 use crate::cycle::refit::{describe, fit_files, read_tool, write_fit};
 use crate::removal::fit::FitConfig;
 
 /// Runs `calibrate removal`: fits, prints, writes `out` (tool.toml) from `inputs.tool`.
-pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {
+pub fn run(inputs: &RefitInputs, out: &Path) -> anyhow::Result<()> {
     let fit = fit_files(inputs, &FitConfig::default())
         .map_err(|e| anyhow::anyhow!("calibrate removal: {}", crate::cycle::one_line(&e)))?;
     for line in describe(&fit, "calibrate removal") {

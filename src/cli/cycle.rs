@@ -13,7 +13,7 @@ use super::common::GeometryInput;
 use super::run::LoopArm;
 use super::settings::ConfigFile;
 use crate::cycle::{
-    run_cycle, table_text, CycleConfig, CycleOutcome, Inputs, Outcome, DEFAULT_MAX_ITERATIONS,
+    run_cycle, table_text, CycleConfig, CycleOutcome, LoopInputs, Outcome, DEFAULT_MAX_ITERATIONS,
     DEFAULT_MIN_PROGRESS,
 };
 use crate::inspect::{FileInput, Source};
@@ -223,7 +223,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         ground: None,
     };
     let out = args.out.clone();
-    let inputs = Inputs {
+    let inputs = LoopInputs {
         reference: Source::file(args.reference),
         scan: Source::file(args.scan),
         files: FileInput {

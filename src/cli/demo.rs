@@ -223,7 +223,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         max_iterations: DEMO_ITERATIONS,
         ..CycleConfig::default()
     };
-    let inputs = crate::cycle::Inputs {
+    let inputs = crate::cycle::LoopInputs {
         reference,
         scan,
         files: DEMO_FILES,

@@ -14,7 +14,7 @@ use crate::inspect::Source;
 use crate::motion::file::CheckedPlan;
 use crate::motion::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
 use crate::robot::{CellFiles, RobotConfig};
-use crate::sim::virtual_part::{self, Ground, GroundPart, Inspected, Part};
+use crate::sim::virtual_part::{self, Ground, GroundPart, Inspected, PartToGrind};
 use crate::sim::SimOptions;
 
 /// Arguments of `run`.
@@ -254,7 +254,7 @@ pub struct Job<'a> {
     /// The journal file [default: the resume file, else journal.jsonl beside the plan].
     pub journal: Option<PathBuf>,
     /// A virtual part for the simulated arm.
-    pub part: Option<Part<'a>>,
+    pub part: Option<PartToGrind<'a>>,
 }
 
 /// The settings of `run` from its `--config` file (checked: link, grinding simulator, `[run]`)
@@ -279,7 +279,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let cfg = settings(&ConfigFile::read(config)?, args.cell.as_deref())?;
     let cell = cfg.robot.read_cell()?;
     let part = match (&args.part, &args.ground_out) {
-        (Some(file), Some(out)) => Some(Part {
+        (Some(file), Some(out)) => Some(PartToGrind {
             file,
             held: None,
             in_reference: args.part_in_reference,
@@ -501,7 +501,7 @@ impl crate::cycle::Executor for LoopArm {
             .filter(|(file, _)| job.part_in_reference && file == job.part.as_path())
             .map(|(_, cloud)| cloud)
             .or_else(|| job.part.held_cloud());
-        let part = sim.then(|| Part {
+        let part = sim.then(|| PartToGrind {
             file: job.part.as_path(),
             held,
             in_reference: job.part_in_reference,

@@ -12,7 +12,7 @@ use super::plan_stage::{plan_into, Planned};
 use super::record::{
     decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
 };
-use super::refit::{refit, Ground};
+use super::refit::{refit, PlannedGrind};
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
@@ -22,7 +22,7 @@ use crate::report::Figure;
 use crate::robot::{CellFiles, ToolText};
 
 /// What the loop starts from.
-pub struct Inputs {
+pub struct LoopInputs {
     /// Reference file (or the reference the caller wrote, held).
     pub reference: Source,
     /// The first scan (or the scan the caller wrote, held).
@@ -105,7 +105,7 @@ pub struct CycleOutcome {
 /// cycle.html and cycle.json into `inputs.out` and returns how it ended.
 pub fn run_cycle(
     cfg: &CycleConfig,
-    inputs: Inputs,
+    inputs: LoopInputs,
     executor: &mut dyn Executor,
 ) -> anyhow::Result<CycleOutcome> {
     let mut state = Loop {
@@ -131,10 +131,10 @@ pub fn run_cycle(
 /// The loop's state between iterations.
 struct Loop<'a> {
     cfg: &'a CycleConfig,
-    inputs: Inputs,
+    inputs: LoopInputs,
     records: Vec<IterationRecord>,
     /// What the last grind was made from.
-    previous: Option<Ground>,
+    previous: Option<PlannedGrind>,
     /// Every grind's removal evidence so far: k is fitted to all of it.
     pooled: Vec<Evidence>,
     /// The scan to inspect next.
@@ -145,7 +145,7 @@ struct Loop<'a> {
     /// file, reference frame), so that it keeps its shape between grinds.
     part: (Source, bool),
     /// The tool file of the next plan, held in memory: refitted after each grind; None until
-    /// the first refit (the cell's tool file, `Inputs::cell`).
+    /// the first refit (the cell's tool file, `LoopInputs::cell`).
     tool: Option<ToolText>,
     /// cycle.html's figures of the grinds so far (drawn when each grind is judged).
     figures: Vec<Figure>,
@@ -237,7 +237,7 @@ impl Loop<'_> {
         if let Some(part) = rescan.part {
             self.part = (Source::file(part), true);
         }
-        self.previous = Some(Ground {
+        self.previous = Some(PlannedGrind {
             inspection,
             plan_file,
             planned,

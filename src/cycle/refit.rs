@@ -17,7 +17,7 @@ use crate::robot::ToolText;
 
 /// What `calibrate removal` reads.
 #[derive(Debug, Clone)]
-pub struct Inputs {
+pub struct RefitInputs {
     /// Inspection before the grind (the one the plan was made from).
     pub before: PathBuf,
     /// Inspection of the rescan after the grind.
@@ -31,7 +31,7 @@ pub struct Inputs {
 
 /// Fits k from the files of `inputs`, on the prediction moved by each region's registered
 /// shift (`removal_shift`); every refusal is one line naming the file.
-pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
+pub fn fit_files(inputs: &RefitInputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
     let before = Inspection::load(&inputs.before)?;
     let (predicted, plan_k) = prediction(&inputs.plan, &inputs.tool, &before)?;
     let after = Inspection::load(&inputs.after)?;
@@ -119,7 +119,7 @@ fn predicted_at_k(
 /// One grind's evidence (`removal::fit::evidence`) from inspections already read from
 /// `inputs`' folders; the refusal names both folders.
 pub fn evidence_loaded(
-    inputs: &Inputs,
+    inputs: &RefitInputs,
     before: &Inspection,
     after: &Inspection,
     predicted: &[f64],
@@ -130,7 +130,7 @@ pub fn evidence_loaded(
 }
 
 /// `removal::fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
-fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
+fn in_folders(inputs: &RefitInputs, m: String) -> anyhow::Error {
     anyhow::anyhow!(
         "{} -> {}: {m}",
         inputs.before.display(),
@@ -212,7 +212,7 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
 
 /// What a grind of the loop was made from: its inspection (in memory, its folder in
 /// `inspection.dir`), its plan (file and what was written, with the tool file it was made with).
-pub struct Ground {
+pub struct PlannedGrind {
     /// The inspection the plan was made from.
     pub inspection: Inspection,
     /// plan.json.
@@ -230,14 +230,14 @@ pub struct Ground {
 /// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
 /// shift. Also hands back what cycle.html draws ([`Refitted::seen`]).
 pub fn refit(
-    before: &Ground,
+    before: &PlannedGrind,
     after: (&Path, &Inspection),
     ids: &[i64],
     dir: &Path,
     tool: &mut Option<ToolText>,
     pooled: &mut Vec<Evidence>,
 ) -> Refitted {
-    let inputs = Inputs {
+    let inputs = RefitInputs {
         before: before.inspection.dir.clone(),
         after: after.0.to_path_buf(),
         plan: before.plan_file.clone(),

@@ -99,7 +99,7 @@ pub struct Design {
     pub alternatives: Vec<(String, f64, Candidate)>,
     /// The fixturings of the part: the candidate's mounting first, then the further ones
     /// (`setups::setups`), each with its own coverage and the coverage of all up to it.
-    pub setups: Vec<setups::Setup>,
+    pub setups: Vec<setups::Fixturing>,
 }
 
 /// Searches the cell for `part` from `source`'s arm, servos and tool.

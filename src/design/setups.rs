@@ -23,7 +23,7 @@ const AZIMUTH_STEP_DEG: f64 = 30.0;
 
 /// One fixturing of the part and what it reaches.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Setup {
+pub struct Fixturing {
     /// The part's direction along the table axis (reference frame, unit).
     pub mount: [f64; 3],
     /// Share of the samples this setup reaches alone.
@@ -66,11 +66,11 @@ pub fn setups(
     reached: &[bool],
     count: usize,
     step_deg: f64,
-) -> Vec<Setup> {
+) -> Vec<Fixturing> {
     let n = reached.len().max(1) as f64;
     let share = |r: &[bool]| r.iter().filter(|&&x| x).count() as f64 / n;
     let mut union = reached.to_vec();
-    let mut out = vec![Setup {
+    let mut out = vec![Fixturing {
         mount: first.mount,
         coverage: share(reached),
         union_coverage: share(reached),
@@ -101,7 +101,7 @@ pub fn setups(
         for (u, &a) in union.iter_mut().zip(&r) {
             *u |= a;
         }
-        out.push(Setup {
+        out.push(Fixturing {
             mount,
             coverage: share(&r),
             union_coverage: share(&union),

@@ -8,7 +8,7 @@ use crate::cloud::{self, Geometry, PointCloud};
 use crate::compare::{self, CoreConfig, Method};
 
 /// A loaded cloud and the report's line on it.
-pub struct Loaded {
+pub struct LoadedInput {
     /// The cloud.
     pub cloud: PointCloud,
     /// Where its points or normals came from.
@@ -28,7 +28,7 @@ pub fn inputs(
     cfg: &InspectConfig,
     inputs: &Inputs,
     notices: &mut Vec<String>,
-) -> Result<(Loaded, PointCloud)> {
+) -> Result<(LoadedInput, PointCloud)> {
     let samples = if cfg.reference_points == 0 {
         DEFAULT_REFERENCE_POINTS
     } else {
@@ -50,9 +50,9 @@ fn reference(
     source: &Source,
     input: FileInput,
     samples: usize,
-) -> Result<(Loaded, Option<String>)> {
+) -> Result<(LoadedInput, Option<String>)> {
     let path = source.as_path();
-    let loaded = |cloud, note| Loaded { cloud, note };
+    let loaded = |cloud, note| LoadedInput { cloud, note };
     match source.load(input)? {
         Geometry::Mesh { mesh, .. } => Ok((
             loaded(

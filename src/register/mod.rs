@@ -33,7 +33,7 @@ use mac::{MacParams, MacStats};
 
 /// A hypothesis ranked by the short ICP.
 #[derive(Debug, Clone, Serialize)]
-pub struct Candidate {
+pub struct PoseCandidate {
     /// MAE score of the MAC pose.
     pub score: f64,
     /// Inlying correspondences of the MAC pose.
@@ -74,7 +74,7 @@ pub struct Coarse {
     /// MAC counters and times.
     pub mac: MacStats,
     /// Ranked hypotheses, in MAC score order.
-    pub candidates: Vec<Candidate>,
+    pub candidates: Vec<PoseCandidate>,
     /// Index of the chosen candidate.
     pub chosen: usize,
     /// MAE score of the chosen hypothesis.
@@ -480,7 +480,7 @@ fn rank_hypotheses(
     coarse.candidates = hyps
         .iter()
         .zip(&ranked)
-        .map(|(h, r)| Candidate {
+        .map(|(h, r)| PoseCandidate {
             score: h.score,
             inliers: h.inliers,
             icp_fitness: r.fitness,

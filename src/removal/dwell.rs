@@ -8,7 +8,7 @@ use clarabel::solver::{
     DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT::NonnegativeConeT,
 };
 
-use super::influence::Columns;
+use super::influence::InfluenceColumns;
 
 /// Clarabel's iteration cap: its interior-point method converges in 10-40 iterations on these
 /// problems; 200 is its own default.
@@ -18,7 +18,7 @@ const MAX_ITER: u32 = 200;
 /// `|A t - target|^2 + lambda_rel x mean(diag A^T A) x |t|^2` within `lower..=upper`.
 /// `Err` says why the solver failed.
 pub fn solve(
-    a: &Columns,
+    a: &InfluenceColumns,
     n: usize,
     target: &[f64],
     lower: &[f64],
@@ -106,7 +106,7 @@ mod tests {
     /// A diagonal A: the bounded answer is r_i / a_i clamped, which the solver must find.
     #[test]
     fn diagonal_problem_gives_the_clamped_quotients() {
-        let a: Columns = vec![vec![(0, 2.0)], vec![(1, 0.5)], vec![(2, 1.0)]];
+        let a: InfluenceColumns = vec![vec![(0, 2.0)], vec![(1, 0.5)], vec![(2, 1.0)]];
         let r = [1.0, 4.0, -1.0];
         let t = solve(&a, 3, &r, &[0.1; 3], &[5.0; 3], 0.0).unwrap();
         for (got, want) in t.iter().zip([0.5, 5.0, 0.1]) {
@@ -118,7 +118,7 @@ mod tests {
     #[test]
     fn overlapping_columns_match_the_normal_equations() {
         // A = [[1, 0.5], [0.5, 1]], r = [1, 1]: t = A^-1 r = [2/3, 2/3]
-        let a: Columns = vec![vec![(0, 1.0), (1, 0.5)], vec![(0, 0.5), (1, 1.0)]];
+        let a: InfluenceColumns = vec![vec![(0, 1.0), (1, 0.5)], vec![(0, 0.5), (1, 1.0)]];
         let t = solve(&a, 2, &[1.0, 1.0], &[0.0; 2], &[10.0; 2], 0.0).unwrap();
         assert!(t.iter().all(|v| (v - 2.0 / 3.0).abs() < 1e-6), "{t:?}");
     }

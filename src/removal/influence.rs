@@ -223,7 +223,7 @@ impl Contact {
 
 /// A is stored by columns: for each contact, the (core index, removal per second, mm/s)
 /// pairs it reaches.
-pub type Columns = Vec<Vec<(usize, f64)>>;
+pub type InfluenceColumns = Vec<Vec<(usize, f64)>>;
 
 /// Core points (positions and outward normals, mm) indexed for the columns of A.
 pub struct Reach<'a> {
@@ -247,7 +247,7 @@ impl<'a> Reach<'a> {
     }
 
     /// A by columns: one [`Reach::column`] per contact of `contacts`.
-    pub fn matrix(&self, influence: &Influence, contacts: &[Contact]) -> Columns {
+    pub fn matrix(&self, influence: &Influence, contacts: &[Contact]) -> InfluenceColumns {
         contacts.iter().map(|c| self.column(influence, c)).collect()
     }
 
@@ -324,12 +324,12 @@ pub fn matrix(
     influence: &Influence,
     contacts: &[Contact],
     cores: &[(Point3<f64>, Vector3<f64>)],
-) -> Columns {
+) -> InfluenceColumns {
     Reach::new(cores).matrix(influence, contacts)
 }
 
 /// A t: the removal depth at every one of `n` core points, mm.
-pub fn apply(columns: &Columns, t: &[f64], n: usize) -> Vec<f64> {
+pub fn apply(columns: &InfluenceColumns, t: &[f64], n: usize) -> Vec<f64> {
     let mut out = vec![0.0; n];
     for (col, ti) in columns.iter().zip(t) {
         for &(j, v) in col {

@@ -236,7 +236,7 @@ pub fn solve_region(
     );
     let keep: Vec<usize> = (0..contacts.len()).filter(|&i| !lift[i]).collect();
     let pick = |v: &[f64]| -> Vec<f64> { keep.iter().map(|&i| v[i]).collect() };
-    let kept: influence::Columns = keep.iter().map(|&i| a[i].clone()).collect();
+    let kept: influence::InfluenceColumns = keep.iter().map(|&i| a[i].clone()).collect();
     let solved = dwell::solve(
         &kept,
         n,
@@ -309,7 +309,7 @@ const JOIN_MM: f64 = 1e-6;
 /// than its shortest pass or not at all; this decides which, and the kept ones are solved again
 /// within their bounds. None lifted when `lift_share` is 0.
 fn lifted(
-    a: &influence::Columns,
+    a: &influence::InfluenceColumns,
     n: usize,
     r: &[f64],
     (lower, upper): (&[f64], &[f64]),

@@ -26,14 +26,14 @@ const MIN_SPREAD: f64 = 1e-4;
 
 /// The part as measured around a contact: its deviation there and the deviation's slope.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Measured {
+pub struct ContactDeviation {
     /// Deviation at the contact point, mm (+ = excess).
     pub deviation: f64,
     /// Gradient of the deviation along the surface, mm/mm (tangent to the nominal normal).
     pub slope: Vector3<f64>,
 }
 
-impl Measured {
+impl ContactDeviation {
     /// Outward unit normal of the measured surface at a point whose nominal normal is `n`:
     /// the surface moved out by `d` along `n` has tangents `t + (grad d . t) n`.
     pub fn normal(&self, n: &Vector3<f64>) -> Vector3<f64> {
@@ -51,7 +51,7 @@ pub fn measured_at(
     index: &Neighbours,
     (point, normal): (&Point3<f64>, &Vector3<f64>),
     radius: f64,
-) -> Measured {
+) -> ContactDeviation {
     let near: Vec<(Vector3<f64>, f64)> = index
         .within_unsorted(point, radius)
         .iter()
@@ -59,7 +59,7 @@ pub fn measured_at(
         .filter(|c| c.distance.is_finite())
         .map(|c| (c.position - point, c.distance))
         .collect();
-    let flat = |deviation| Measured {
+    let flat = |deviation| ContactDeviation {
         deviation,
         slope: Vector3::zeros(),
     };
@@ -83,7 +83,7 @@ pub fn measured_at(
     {
         Some(inv) => {
             let f = inv * rhs;
-            Measured {
+            ContactDeviation {
                 deviation: f[0],
                 slope: (tx * f[1] + ty * f[2]) / radius,
             }
@@ -151,7 +151,7 @@ pub fn along_axis(
     c: &mut Contact,
     tool: &ToolModel,
     ball_mm: f64,
-    part: &Measured,
+    part: &ContactDeviation,
     allowance: f64,
 ) {
     let nominal = c.normal;

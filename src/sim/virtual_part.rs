@@ -28,7 +28,7 @@ const MIN_ON_SURFACE_SHARE: f64 = 0.5;
 
 /// A virtual part for the simulated arm to grind (`--part`, `--ground-out`).
 #[derive(Clone, Copy)]
-pub struct Part<'a> {
+pub struct PartToGrind<'a> {
     /// The part's points.
     pub file: &'a Path,
     /// `file`'s cloud when this process holds it (the surface an earlier grind left and wrote
@@ -97,7 +97,7 @@ impl Ground {
     /// (outliers dropped), with PCA normals turned outward as the nearest core point's.
     pub fn prepare(
         options: &SimOptions,
-        given: &Part,
+        given: &PartToGrind,
         inspection: &Inspected,
     ) -> anyhow::Result<Ground> {
         let (part, in_reference, out) = (given.file, given.in_reference, given.ground_out);

@@ -8,7 +8,7 @@ use crate::sim::model::splitmix64;
 
 /// A contact of the ball on the surface: force and Hertz patch.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Contact {
+pub struct HertzContact {
     /// Normal force, N (spring rate x penetration).
     pub force_n: f64,
     /// Radius of the contact patch, mm.
@@ -17,7 +17,7 @@ pub struct Contact {
     pub peak_mpa: f64,
 }
 
-impl Contact {
+impl HertzContact {
     /// The contact of a ball of radius `ball_mm` pressed `penetration_mm` into a flat surface
     /// through a spring of `spring_n_mm`, on a pair of effective modulus `modulus_mpa`
     /// (Hertz, Johnson's Contact Mechanics eq. 4.22-4.23: a = (3 F R / (4 E*))^(1/3),
@@ -27,14 +27,14 @@ impl Contact {
         spring_n_mm: f64,
         ball_mm: f64,
         modulus_mpa: f64,
-    ) -> Option<Contact> {
+    ) -> Option<HertzContact> {
         if penetration_mm.is_nan() || penetration_mm <= 0.0 {
             return None;
         }
         let force_n = spring_n_mm * penetration_mm;
         let radius_mm = (3.0 * force_n * ball_mm / (4.0 * modulus_mpa)).cbrt();
         let peak_mpa = 3.0 * force_n / (2.0 * std::f64::consts::PI * radius_mm * radius_mm);
-        Some(Contact {
+        Some(HertzContact {
             force_n,
             radius_mm,
             peak_mpa,

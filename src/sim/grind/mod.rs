@@ -23,7 +23,7 @@ use nalgebra::{Matrix4, Point3, Vector3};
 use serde::Serialize;
 
 pub use super::grinding::{GrindConfig, MountGive};
-pub use law::{preston_rate, Contact, KField};
+pub use law::{preston_rate, HertzContact, KField};
 pub use part::{ToolState, VirtualPart};
 pub use trace::ServoTrace;
 

@@ -2,7 +2,7 @@
 //! removes material under the simulated tool.
 use nalgebra::{Point3, Vector3};
 
-use super::law::{preston_rate, Contact, KField};
+use super::law::{preston_rate, HertzContact, KField};
 use super::{GrindConfig, MountGive};
 use crate::preprocess::pca_normal;
 use crate::spatial::Neighbours;
@@ -156,9 +156,14 @@ impl VirtualPart {
     /// Grinds for `dt` seconds with the tool at `tool`: the spring force from the penetration,
     /// the Hertz patch centred under the ball, and at every point inside it the true Preston
     /// rate at its pressure and its speed relative to the turning ball. Returns the contact.
-    pub fn grind_step(&mut self, tool: &ToolState, dt: f64, cfg: &GrindConfig) -> Option<Contact> {
+    pub fn grind_step(
+        &mut self,
+        tool: &ToolState,
+        dt: f64,
+        cfg: &GrindConfig,
+    ) -> Option<HertzContact> {
         let (i, ball, depth) = self.seat(tool, cfg)?;
-        let contact = Contact::hertz(
+        let contact = HertzContact::hertz(
             depth,
             cfg.spring_rate_n_mm,
             cfg.ball_radius_mm,
