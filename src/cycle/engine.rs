@@ -15,6 +15,7 @@ use super::refit::{refit, Ground};
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
+use crate::motion::aim::Aim;
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
 use crate::report::provenance::InputFile;
@@ -114,6 +115,7 @@ pub fn run_cycle(
         records: Vec::new(),
         previous: None,
         pooled: Vec::new(),
+        aim: Aim::unmeasured(),
     };
     for k in 1.. {
         if let Some(outcome) = state.iteration(k, executor)? {
@@ -142,6 +144,9 @@ struct Loop<'a> {
     /// The tool file of the next plan, held in memory: refitted after each grind; None until
     /// the first refit (the plan settings' tool file, read when planning).
     tool: Option<ToolText>,
+    /// Where the next plan aims: the removal shift measured and carried so far (none before
+    /// the first grind: that plan's pass is capped, `motion::aim`).
+    aim: Aim,
 }
 
 impl Loop<'_> {
@@ -172,14 +177,16 @@ impl Loop<'_> {
         if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
             last.followed_by(&measured, &before.inspection, &inspection);
             let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
-            (last.k_fitted, last.agreement, off_plan) = refit(
+            let done = refit(
                 before,
                 (&inspection_dir, &inspection),
                 &ids,
                 &dir,
-                &mut self.tool,
+                (&mut self.tool, &mut self.aim),
                 &mut self.pooled,
             );
+            (last.k_fitted, last.agreement, off_plan) = (done.k, done.agreement, done.off_plan);
+            last.shifts = done.shifts;
         }
         self.records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&self.records, self.cfg);
@@ -260,6 +267,7 @@ impl Loop<'_> {
         with_tool(&self.cfg.plan_table, &tool.path, &settings)?;
         let mut cfg = self.cfg.plan.clone();
         cfg.robot.tool = tool.path.clone();
+        cfg.plan.aim = self.aim.clone();
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
         let planned = plan_into(&cfg, &tool, written, inspection, &plan_file, None, &refuse)?;
