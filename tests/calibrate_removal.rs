@@ -512,10 +512,19 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
     // carried into the next plan: each region's shift, the cell-wide one their mean
     let next = carry(&shifts, &Aim::default(), &cfg).expect("consistent shifts are carried");
     let common = Vector3::from(next.aim.common_mm);
-    assert!((common - Vector3::new(0.3, -0.2, 0.0)).norm() <= 0.11, "{common}");
+    assert!(
+        (common - Vector3::new(0.3, -0.2, 0.0)).norm() <= 0.11,
+        "{common}"
+    );
     assert_eq!(next.aim.regions.len(), 2);
-    assert!(next.regions.iter().all(|r| r.measured_mm.is_some()), "{next:?}");
-    assert_eq!(next.aim.first_pass_share, None, "a shift is known: no first-pass cap");
+    assert!(
+        next.regions.iter().all(|r| r.measured_mm.is_some()),
+        "{next:?}"
+    );
+    assert_eq!(
+        next.aim.first_pass_share, None,
+        "a shift is known: no first-pass cap"
+    );
     // k on the prediction as planned reads the misplaced removal as a slower tool; moved by
     // the measured shift it finds the tool's 1.3 x
     let fit_k = |pred: &[f64]| fit(&b, &a, pred, PLAN_K, &FitConfig::default()).unwrap();
@@ -531,7 +540,10 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
     let far = register(&b, &far, &p, &cfg);
     let next = carry(&far, &Aim::default(), &cfg).expect("one arm error, carried");
     let common = Vector3::from(next.aim.common_mm);
-    assert!((common - Vector3::new(0.8, 0.0, 0.0)).norm() <= 0.11, "{common}");
+    assert!(
+        (common - Vector3::new(0.8, 0.0, 0.0)).norm() <= 0.11,
+        "{common}"
+    );
     // ... but not on top of 1.8 mm already carried: 2.6 mm is over what the plan aims back by
     let carried = Aim {
         common_mm: [1.8, 0.0, 0.0],
@@ -542,8 +554,12 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
         why.starts_with("region 0: the removal landed 0.8") && why.contains("over the 2.4 mm"),
         "{why}"
     );
-    // the two regions landed 1.4 mm apart: not one arm error, the loop stops naming one
-    let apart = after(&b, &landed_each(&b, 1.0, [[0.0, 0.0], [1.4, 0.0]], 0.015, 7));
+    // the two regions landed 1.8 mm apart (one in place, one off along y, away from the
+    // other): not one arm error, the loop stops naming one
+    let apart = after(
+        &b,
+        &landed_each(&b, 1.0, [[0.0, 0.0], [0.0, 1.8]], 0.015, 7),
+    );
     let apart = register(&b, &apart, &p, &cfg);
     let why = carry(&apart, &Aim::default(), &cfg).expect_err("a stop");
     assert!(

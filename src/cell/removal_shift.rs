@@ -307,12 +307,20 @@ pub fn carry(shifts: &[RegionShift], aim: &Aim, cfg: &ShiftConfig) -> Result<Car
     }
     let measured = |r: &&RegionShift| r.peak_predicted_mm >= cfg.measurable_mm && r.scale > 0.0;
     let edge = cfg.search_mm - 0.5 * cfg.step_mm;
-    if let Some(r) = shifts.iter().filter(measured).find(|r| r.shift_mm.norm() > edge) {
+    if let Some(r) = shifts
+        .iter()
+        .filter(measured)
+        .find(|r| r.shift_mm.norm() > edge)
+    {
         let why = format!("at the edge of the {} mm search", cfg.search_mm);
         return Err(stop(r, why));
     }
     let total = |r: &RegionShift| aim.shift_at(&r.centre, &r.normal) + r.shift_mm;
-    if let Some(r) = shifts.iter().filter(measured).find(|r| total(r).norm() > cfg.carry_mm) {
+    if let Some(r) = shifts
+        .iter()
+        .filter(measured)
+        .find(|r| total(r).norm() > cfg.carry_mm)
+    {
         let why = format!(
             "{} with the shift carried, over the {} mm the plan can aim back by",
             v(&total(r)),
@@ -330,8 +338,8 @@ pub fn carry(shifts: &[RegionShift], aim: &Aim, cfg: &ShiftConfig) -> Result<Car
             sum / w as f64
         }
     };
-    if let Some(r) = (shifts.iter().filter(measured))
-        .find(|r| (total(r) - common).norm() > cfg.agree_mm)
+    if let Some(r) =
+        (shifts.iter().filter(measured)).find(|r| (total(r) - common).norm() > cfg.agree_mm)
     {
         let why = format!(
             "{} from the cell-wide shift {}, over the {} mm regions may disagree",
@@ -373,8 +381,5 @@ pub fn carry(shifts: &[RegionShift], aim: &Aim, cfg: &ShiftConfig) -> Result<Car
                 .collect(),
         },
     };
-    Ok(Carried {
-        aim: next,
-        regions,
-    })
+    Ok(Carried { aim: next, regions })
 }

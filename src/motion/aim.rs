@@ -88,7 +88,10 @@ impl Aim {
 
     /// Checks the values; the message names the key.
     pub fn check(&self) -> Result<(), String> {
-        if let Some(s) = self.first_pass_share.filter(|s| !(0.01..=100.0).contains(s)) {
+        if let Some(s) = self
+            .first_pass_share
+            .filter(|s| !(0.01..=100.0).contains(s))
+        {
             return Err(format!(
                 "`aim.first_pass_share` = {s} is outside 0.01..=100 (x tolerance)"
             ));
@@ -128,7 +131,11 @@ mod tests {
         let own = aim.shift_at(&Point3::new(11.0, 1.0, 0.0), &z);
         assert_eq!(own, Vector3::new(0.0, 2.0, 0.0));
         let far = aim.shift_at(&Point3::new(20.0, 0.0, 0.0), &Vector3::x());
-        assert_eq!(far, Vector3::zeros(), "the common shift is along this normal");
+        assert_eq!(
+            far,
+            Vector3::zeros(),
+            "the common shift is along this normal"
+        );
         let far = aim.shift_at(&Point3::new(20.0, 0.0, 0.0), &z);
         assert_eq!(far, Vector3::new(1.0, 0.0, 0.0));
         assert!(Aim::default().is_empty() && !Aim::unmeasured().is_empty());

@@ -99,7 +99,8 @@ pub(crate) fn max_step(a: &[f64], b: &[f64]) -> f64 {
 /// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it, moved
 /// back by the removal shift `aim` measured there (`motion::aim`).
 fn tool_target(p: &PathPoint, reach: f64, lift: f64, wc: &Workcell, aim: &Aim) -> IkTarget {
-    let tip_mm = p.surface + p.normal * (p.offset + reach + lift) - aim.shift_at(&p.surface, &p.normal);
+    let tip_mm =
+        p.surface + p.normal * (p.offset + reach + lift) - aim.shift_at(&p.surface, &p.normal);
     IkTarget {
         position: wc.point_from_reference_mm(&tip_mm).coords,
         axis: -wc.direction_from_reference(&p.normal),
