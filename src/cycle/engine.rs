@@ -264,7 +264,17 @@ impl Loop<'_> {
             None => ToolText::read(&self.cfg.plan.robot.tool)?,
         };
         let settings = dir.join("plan.toml");
-        with_tool(&self.cfg.plan_table, &tool.path, &settings)?;
+        let mut table = self.cfg.plan_table.clone();
+        if !self.aim.is_empty() {
+            // the carried shift, so that `plan --config plan.toml` makes this plan again
+            let plan = table
+                .entry("plan")
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            if let (Some(p), Ok(aim)) = (plan.as_table_mut(), toml::Value::try_from(&self.aim)) {
+                p.insert("aim".into(), aim);
+            }
+        }
+        with_tool(&table, &tool.path, &settings)?;
         let mut cfg = self.cfg.plan.clone();
         cfg.robot.tool = tool.path.clone();
         cfg.plan.aim = self.aim.clone();
