@@ -554,11 +554,11 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
         why.starts_with("region 0: the removal landed 0.8") && why.contains("over the 2.4 mm"),
         "{why}"
     );
-    // the two regions landed 1.8 mm apart (one in place, one off along y, away from the
-    // other): not one arm error, the loop stops naming one
+    // the two regions landed 2.8 mm apart (1.4 mm off along -y and +y): each 1.4 mm from the
+    // cell-wide shift, over the 1.2 mm bound: not one arm error, the loop stops naming one
     let apart = after(
         &b,
-        &landed_each(&b, 1.0, [[0.0, 0.0], [0.0, 1.8]], 0.015, 7),
+        &landed_each(&b, 1.0, [[0.0, -1.4], [0.0, 1.4]], 0.015, 7),
     );
     let apart = register(&b, &apart, &p, &cfg);
     let why = carry(&apart, &Aim::default(), &cfg).expect_err("a stop");
