@@ -467,23 +467,31 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
 /// The removal field `p` moved by `s` (mm, in the plane) and scaled by `scale`, plus Gaussian
 /// noise of `sigma` mm: what a grind did whose tool landed `s` off its plan.
 fn landed(b: &Inspection, scale: f64, s: [f64; 2], sigma: f64, seed: u64) -> Vec<f64> {
+    landed_each(b, scale, [s, s], sigma, seed)
+}
+
+/// [`landed`] with the bump at x = -2.5 mm moved by `s[0]`, the one at +2.5 mm by `s[1]`.
+fn landed_each(b: &Inspection, scale: f64, s: [[f64; 2]; 2], sigma: f64, seed: u64) -> Vec<f64> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     b.points
         .iter()
         .map(|pt| {
-            let (x, y) = (pt.position.x - s[0], pt.position.y - s[1]);
-            let bump = |cx: f64| 0.2 * (-((x - cx).powi(2) + y * y) / 4.0).exp();
+            let bump = |cx: f64, s: [f64; 2]| {
+                let (x, y) = (pt.position.x - s[0], pt.position.y - s[1]);
+                0.2 * (-((x - cx).powi(2) + y * y) / 4.0).exp()
+            };
             // Box-Muller
             let (u1, u2): (f64, f64) = (rng.gen_range(1e-12..1.0), rng.gen());
             let noise = sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-            scale * (bump(-2.5) + bump(2.5)) + noise
+            scale * (bump(-2.5, s[0]) + bump(2.5, s[1])) + noise
         })
         .collect()
 }
 
 #[test]
 fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shift() {
-    use polishbot::cell::removal_shift::{judge, register, shifted_prediction, ShiftConfig};
+    use polishbot::cell::removal_shift::{carry, register, shifted_prediction, ShiftConfig};
+    use polishbot::motion::aim::Aim;
     let (b, p) = before();
     let cfg = ShiftConfig::default();
     // 0.3 mm along x, -0.2 along y, the tool 1.3 x faster than planned, the rescan's noise
@@ -501,7 +509,22 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
         assert!((r.scale - 1.3).abs() < 0.05 * 1.3, "{r:?}");
         assert!(r.rms_mm[1] < 0.02 && r.rms_mm[0] > r.rms_mm[1], "{r:?}");
     }
-    assert_eq!(judge(&shifts, &cfg), None);
+    // carried into the next plan: each region's shift, the cell-wide one their mean
+    let next = carry(&shifts, &Aim::default(), &cfg).expect("consistent shifts are carried");
+    let common = Vector3::from(next.aim.common_mm);
+    assert!(
+        (common - Vector3::new(0.3, -0.2, 0.0)).norm() <= 0.11,
+        "{common}"
+    );
+    assert_eq!(next.aim.regions.len(), 2);
+    assert!(
+        next.regions.iter().all(|r| r.measured_mm.is_some()),
+        "{next:?}"
+    );
+    assert_eq!(
+        next.aim.first_pass_share, None,
+        "a shift is known: no first-pass cap"
+    );
     // k on the prediction as planned reads the misplaced removal as a slower tool; moved by
     // the measured shift it finds the tool's 1.3 x
     let fit_k = |pred: &[f64]| fit(&b, &a, pred, PLAN_K, &FitConfig::default()).unwrap();
@@ -512,8 +535,49 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
         "moved {moved} plain {plain}"
     );
     assert!(plain < moved - 0.02, "moved {moved} plain {plain}");
-    // 0.8 mm off: the loop stops naming the region and the shift
+    // 0.8 mm off in both regions: carried (the next plan aims back by it) ...
     let far = after(&b, &landed(&b, 1.0, [0.8, 0.0], 0.015, 6));
-    let why = judge(&register(&b, &far, &p, &cfg), &cfg).expect("a stop");
-    assert!(why.starts_with("region 0: the removal landed 0.8"), "{why}");
+    let far = register(&b, &far, &p, &cfg);
+    let next = carry(&far, &Aim::default(), &cfg).expect("one arm error, carried");
+    let common = Vector3::from(next.aim.common_mm);
+    assert!(
+        (common - Vector3::new(0.8, 0.0, 0.0)).norm() <= 0.11,
+        "{common}"
+    );
+    // ... but not on top of 1.8 mm already carried: 2.6 mm is over what the plan aims back by
+    let carried = Aim {
+        common_mm: [1.8, 0.0, 0.0],
+        ..Aim::default()
+    };
+    let why = carry(&far, &carried, &cfg).expect_err("a stop");
+    assert!(
+        why.starts_with("region 0: the removal landed 0.8") && why.contains("over the 2.4 mm"),
+        "{why}"
+    );
+    // the two regions landed 2.8 mm apart (1.4 mm off along -y and +y): each 1.4 mm from the
+    // cell-wide shift, over the 1.2 mm bound: not one arm error, the loop stops naming one
+    let apart = after(
+        &b,
+        &landed_each(&b, 1.0, [[0.0, -1.4], [0.0, 1.4]], 0.015, 7),
+    );
+    let apart = register(&b, &apart, &p, &cfg);
+    let why = carry(&apart, &Aim::default(), &cfg).expect_err("a stop");
+    assert!(
+        why.starts_with("region ") && why.contains("regions may disagree"),
+        "{why}"
+    );
+    // regions ground too little to measure (0.03 mm at most) keep the shift carried to them
+    let small: Vec<f64> = p.iter().map(|v| 0.15 * v).collect();
+    let faint = after(&b, &landed(&b, 0.15, [0.8, 0.0], 0.015, 8));
+    let faint = register(&b, &faint, &small, &cfg);
+    let carried = Aim {
+        common_mm: [0.5, 0.0, 0.0],
+        ..Aim::default()
+    };
+    let next = carry(&faint, &carried, &cfg).expect("nothing measured: nothing to stop on");
+    assert_eq!(next.regions.len(), 2, "{next:?}");
+    for r in &next.regions {
+        assert_eq!(r.measured_mm, None, "{r:?}");
+        assert!((Vector3::from(r.carried_mm) - Vector3::new(0.5, 0.0, 0.0)).norm() < 1e-9);
+    }
 }

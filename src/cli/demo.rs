@@ -49,10 +49,11 @@ fn demo_config(seed: u64) -> SynthConfig {
     }
 }
 
-/// Grinding iterations of the demo's loop: one grind, rescan and re-inspection adds about
-/// 20 s on the 2-core machine under load (a second added 34 s more: the demo took 71 s,
-/// over its 60 s); `polishbot cycle` runs the full loop.
-const DEMO_ITERATIONS: usize = 1;
+/// Grinding iterations of the demo's loop (3, issue 50's acceptance: the demo ends "within
+/// tolerance" in at most 3 grinds): the first grind's removal shift is measured and carried
+/// into the next plans (`motion::aim`); a grind with its rescan and re-inspection takes
+/// about 5-10 s on the 2-core machine.
+const DEMO_ITERATIONS: usize = 3;
 
 fn step(name: &str) {
     println!("== {name}");
@@ -174,7 +175,9 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let plan_file = out.join("plan.json");
     let refuse = |m: &str| anyhow::anyhow!("plan settings: {m}");
     let ros = out.join("trajectory.yaml");
-    let plan_cfg = PlanFileConfig::default();
+    // the loop's first plan: no removal shift measured yet, the pass capped (motion::aim)
+    let mut plan_cfg = PlanFileConfig::default();
+    plan_cfg.plan.aim = crate::motion::aim::Aim::unmeasured();
     let planned = plan_into(
         &plan_cfg,
         &cell,

@@ -16,6 +16,7 @@ use super::refit::{refit, PlannedGrind};
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
+use crate::motion::aim::Aim;
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
 use crate::report::Figure;
@@ -119,6 +120,7 @@ pub fn run_cycle(
         previous: None,
         pooled: Vec::new(),
         figures: Vec::new(),
+        aim: Aim::unmeasured(),
     };
     for k in 1.. {
         if let Some(outcome) = state.iteration(k, executor)? {
@@ -149,6 +151,9 @@ struct Loop<'a> {
     tool: Option<ToolText>,
     /// cycle.html's figures of the grinds so far (drawn when each grind is judged).
     figures: Vec<Figure>,
+    /// Where the next plan aims: the removal shift measured and carried so far (none before
+    /// the first grind: that plan's pass is capped, `motion::aim`).
+    aim: Aim,
 }
 
 impl Loop<'_> {
@@ -184,10 +189,13 @@ impl Loop<'_> {
                 (&inspection_dir, &inspection),
                 &ids,
                 &dir,
-                &mut self.tool,
+                (&mut self.tool, &mut self.aim),
                 &mut self.pooled,
             );
             (last.k_fitted, last.agreement, off_plan) = (done.k, done.agreement, done.off_plan);
+            let carried: Vec<(usize, [f64; 3])> = (done.shifts.iter())
+                .filter_map(|s| Some((usize::try_from(s.region).ok()?, s.carried_mm)))
+                .collect();
             if let Some((predicted, shifts)) = done.seen {
                 let ground = self.inputs.out.join(format!("iter-{}", last.iteration));
                 self.figures.extend(figures::grind(
@@ -196,9 +204,10 @@ impl Loop<'_> {
                     (&before.inspection, &inspection),
                     &last.planned_regions,
                     &predicted,
-                    (&shifts, &[]),
+                    (&shifts, &carried),
                 ));
             }
+            last.shifts = done.shifts;
         }
         self.records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&self.records, self.cfg);
@@ -277,9 +286,20 @@ impl Loop<'_> {
         };
         let tool = &cell.tool;
         let settings = dir.join("plan.toml");
-        with_tool(&self.cfg.plan_table, &tool.path, &settings)?;
+        let mut table = self.cfg.plan_table.clone();
+        if !self.aim.is_empty() {
+            // the carried shift, so that `plan --config plan.toml` makes this plan again
+            let plan = table
+                .entry("plan")
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            if let (Some(p), Ok(aim)) = (plan.as_table_mut(), toml::Value::try_from(&self.aim)) {
+                p.insert("aim".into(), aim);
+            }
+        }
+        with_tool(&table, &tool.path, &settings)?;
         let mut cfg = self.cfg.plan.clone();
         cfg.robot.tool = tool.path.clone();
+        cfg.plan.aim = self.aim.clone();
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
         let found = Some(found);

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::config::CycleConfig;
+use crate::cell::removal_shift::CarriedShift;
 use crate::motion::{Inspection, Plan};
 use crate::regions::{Counts, Region, Verdict};
 use crate::removal::fit::{Agreement, SAME_POINT_MM};
@@ -124,6 +125,11 @@ pub struct IterationRecord {
     /// The grind's prediction at the plan's and at the fitted k against the achieved
     /// residual, over the same defect points (removal plans only).
     pub agreement: Option<Agreement>,
+    /// Each region's removal shift this iteration's grind measured and the correction the
+    /// next plan aims back by there (`cell::removal_shift::carry`); empty when none was
+    /// registered or the loop stopped on it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub shifts: Vec<CarriedShift>,
 }
 
 impl IterationRecord {
@@ -139,6 +145,7 @@ impl IterationRecord {
             progress: None,
             k_fitted: None,
             agreement: None,
+            shifts: Vec::new(),
         }
     }
 

@@ -8,7 +8,8 @@ use anyhow::Context;
 
 use super::plan_stage::Planned;
 use crate::calibrate::files;
-use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
+use crate::cell::removal_shift::{self, CarriedShift, RegionShift, ShiftConfig};
+use crate::motion::aim::Aim;
 use crate::motion::Plan;
 use crate::removal::fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
 use crate::removal::ToolModel;
@@ -221,20 +222,35 @@ pub struct PlannedGrind {
     pub planned: Planned,
 }
 
+/// What [`refit`] found after a grind.
+pub struct Refitted {
+    /// The fitted k, or None with the reason printed (a rigid plan, too little evidence).
+    pub k: Option<f64>,
+    /// The grind's prediction against the achieved residual (None for a rigid plan).
+    pub agreement: Option<Agreement>,
+    /// The registration's reason to stop (`removal_shift::carry`), or None.
+    pub off_plan: Option<String>,
+    /// Each registered region's measured and carried shift (empty when stopped or rigid).
+    pub shifts: Vec<CarriedShift>,
+    /// What cycle.html draws: the plan's unshifted prediction per core point of the
+    /// inspection before the grind, and each region's measured shift (None for a rigid plan).
+    pub seen: Option<(Vec<f64>, Vec<RegionShift>)>,
+}
+
 /// Refits k after the last grind from the points of every grind so far (`pooled`, which this
 /// grind's points join; `removal::fit::pool`) and, when the fit holds, writes DIR/tool.toml
 /// with it and makes it (held in memory) the `tool` of the next plan; re-predicts the grind with the fitted k
 /// over the defect points of the regions `ids` against the `after` inspection (folder and
-/// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
-/// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
-/// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
-/// shift. Also hands back what cycle.html draws ([`Refitted::seen`]).
+/// points). k is fitted on the prediction moved by each region's measured shift; the shift is
+/// carried into `aim`, the next plan's, unless the registration stops the loop
+/// (`removal_shift::carry`, the grind's plan aimed by `aim`). Also hands back what cycle.html
+/// draws ([`Refitted::seen`]).
 pub fn refit(
     before: &PlannedGrind,
     after: (&Path, &Inspection),
     ids: &[i64],
     dir: &Path,
-    tool: &mut Option<ToolText>,
+    (tool, aim): (&mut Option<ToolText>, &mut Aim),
     pooled: &mut Vec<Evidence>,
 ) -> Refitted {
     let inputs = RefitInputs {
@@ -246,14 +262,20 @@ pub fn refit(
     let written = dir.join("tool.toml");
     let prediction = prediction_of(&before.plan_file, &before.planned, &before.inspection);
     let shift_cfg = ShiftConfig::default();
-    let mut off_plan = None;
+    let (mut off_plan, mut carried) = (None, Vec::new());
     let mut seen = None;
     let prediction = prediction.map(|(p, k)| {
         let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
         shifts
             .iter()
             .for_each(|r| println!("{}", describe_shift(r)));
-        off_plan = removal_shift::judge(&shifts, &shift_cfg);
+        match removal_shift::carry(&shifts, aim, &shift_cfg) {
+            Ok(next) => {
+                print_carried(&next);
+                (*aim, carried) = (next.aim, next.regions);
+            }
+            Err(why) => off_plan = Some(why),
+        }
         let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
         seen = Some((p, shifts));
         (moved, k)
@@ -289,20 +311,24 @@ pub fn refit(
         agreement,
         off_plan,
         seen,
+        shifts: carried,
     }
 }
 
-/// What [`refit`] found after a grind.
-pub struct Refitted {
-    /// The fitted k, or None with the reason printed (a rigid plan, too little evidence).
-    pub k: Option<f64>,
-    /// The grind's prediction against the achieved residual (None for a rigid plan).
-    pub agreement: Option<Agreement>,
-    /// The registration's reason to stop (`removal_shift::judge`), or None.
-    pub off_plan: Option<String>,
-    /// What cycle.html draws: the plan's unshifted prediction per core point of the
-    /// inspection before the grind, and each region's measured shift (None for a rigid plan).
-    pub seen: Option<(Vec<f64>, Vec<RegionShift>)>,
+/// Prints the correction the next plan aims by.
+fn print_carried(c: &removal_shift::Carried) {
+    let v = |s: &[f64; 3]| format!("[{:.2}, {:.2}, {:.2}]", s[0], s[1], s[2]);
+    let per: Vec<String> = (c.regions.iter())
+        .map(|r| match r.measured_mm {
+            Some(_) => format!("{} {}", r.region, v(&r.carried_mm)),
+            None => format!("{} {} (not measured: kept)", r.region, v(&r.carried_mm)),
+        })
+        .collect();
+    println!(
+        "cycle: the next plan aims back by the removal shift: cell-wide {} mm; per region {}",
+        v(&c.aim.common_mm),
+        per.join(", ")
+    );
 }
 
 /// One line on a region's registration for the loop's log.

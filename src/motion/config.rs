@@ -3,6 +3,7 @@
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
+use super::aim::Aim;
 use super::collide::CollisionConfig;
 use super::error::PlanError;
 use super::raster::RasterGeometry;
@@ -88,6 +89,10 @@ pub struct PlanConfig {
     pub force_share: f64,
     /// Tolerance of the removal mode when the inspection names none, mm (0.05, issue 28).
     pub tolerance_mm: f64,
+    /// Where to aim the contacts: the removal shift measured on earlier grinds, carried by
+    /// the loop (`motion::aim`; empty: aim where the removal is wanted).
+    #[serde(skip_serializing_if = "Aim::is_empty")]
+    pub aim: Aim,
 }
 
 impl Default for PlanConfig {
@@ -121,6 +126,7 @@ impl Default for PlanConfig {
             monte_carlo: removal::montecarlo::MonteCarloConfig::default(),
             force_share: removal::force::DEFAULT_FORCE_SHARE,
             tolerance_mm: DEFAULT_TOLERANCE_MM,
+            aim: Aim::default(),
         }
     }
 }
@@ -197,6 +203,7 @@ impl PlanConfig {
             .map_err(PlanError::Config)?;
         self.removal.check().map_err(PlanError::Config)?;
         self.monte_carlo.check().map_err(PlanError::Config)?;
+        self.aim.check().map_err(PlanError::Config)?;
         for (name, v) in [
             ("force_share", self.force_share),
             ("tolerance_mm", self.tolerance_mm),

@@ -217,6 +217,8 @@ pub fn set_dwell(
     let bounds = (&influence, &solve);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let aim = removal::targets(&cores, allowance, tolerance);
+    // no removal shift measured yet: the whole region, at most the first pass's depth
+    let aim: Vec<f64> = aim.iter().map(|t| config.aim.cap(*t, tolerance)).collect();
     let plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),

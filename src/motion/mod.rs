@@ -8,7 +8,7 @@
 //! Front function: [`plan`] (the cell with its turntable, if any) with a [`PlanConfig`];
 //! result: [`Plan`] (plan.json). [`plan_part`] plans the part where it sits, the step `plan`
 //! makes once per table angle.
-mod aim;
+pub mod aim;
 mod assemble;
 mod by_region;
 pub mod check;

@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use super::aim::Aim;
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
@@ -95,9 +96,11 @@ pub(crate) fn max_step(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Tool tip (m) and axis in the robot frame for a contact point, `lift` mm above the contact
-/// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it.
-fn tool_target(p: &PathPoint, reach: f64, lift: f64, wc: &Workcell) -> IkTarget {
-    let tip_mm = p.surface + p.normal * (p.offset + reach + lift);
+/// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it, moved
+/// back by the removal shift `aim` measured there (`motion::aim`).
+fn tool_target(p: &PathPoint, reach: f64, lift: f64, wc: &Workcell, aim: &Aim) -> IkTarget {
+    let tip_mm =
+        p.surface + p.normal * (p.offset + reach + lift) - aim.shift_at(&p.surface, &p.normal);
     IkTarget {
         position: wc.point_from_reference_mm(&tip_mm).coords,
         axis: -wc.direction_from_reference(&p.normal),
@@ -134,7 +137,7 @@ pub(crate) fn walk(
         let mut targets: Vec<IkTarget> = stroke
             .points
             .iter()
-            .map(|p| tool_target(p, reach, 0.0, wc))
+            .map(|p| tool_target(p, reach, 0.0, wc, &cfg.aim))
             .collect();
         let normals: Vec<Vector3<f64>> = targets.iter().map(|t| -t.axis).collect();
         if let Some(axis) = stroke_axis(&targets, cfg.axis_spread_deg) {
@@ -142,7 +145,7 @@ pub(crate) fn walk(
         }
         let mut solved = solve_stroke(&targets, &normals, robot, cfg, prev, min_tilt);
         for (sol, p) in solved.iter_mut().zip(&stroke.points) {
-            if let Some(why) = misfit(p, reach, scene) {
+            if let Some(why) = misfit(p, reach, scene, &cfg.aim) {
                 *sol = Err(why);
             }
         }
@@ -211,9 +214,10 @@ pub(crate) fn walk(
 /// Why the ball cannot sit on contact `p` (`reach` mm off it along the normal): it would
 /// touch a second face of the part or enter it beyond the contact tolerance. A pressed ball
 /// (removal mode, negative offset) is placed touching: it stops at the surface and its spring
-/// takes the preload.
-fn misfit(p: &PathPoint, reach: f64, scene: &Scene) -> Option<String> {
-    let centre = p.surface + p.normal * (p.offset.max(0.0) + reach);
+/// takes the preload. The ball is where it is commanded: moved back by the shift `aim`.
+fn misfit(p: &PathPoint, reach: f64, scene: &Scene, aim: &Aim) -> Option<String> {
+    let centre =
+        p.surface + p.normal * (p.offset.max(0.0) + reach) - aim.shift_at(&p.surface, &p.normal);
     if let Some(hit) = scene.second_face(&centre, Some(&p.normal)) {
         return Some(hit.to_string());
     }
