@@ -52,6 +52,12 @@ pub struct Plan {
     pub samples: Vec<Sample>,
     /// The servo command stream: one 0x1D frame per sample after the first (hex).
     pub frames: Vec<String>,
+    /// The joint angles the servos are commanded per sample, rad, when the plan compensates
+    /// the arm's compliance (servos.toml `[compliance]`; `samples` are then the loaded joints
+    /// the plan wants, and the frames are made from these); absent: the frames are made from
+    /// `samples`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commands: Option<Vec<Vec<f64>>>,
     /// Reach and coverage per region, every point left out and why.
     pub reachability: Reachability,
     /// Measured quality of the plan.
@@ -162,6 +168,7 @@ impl Plan {
         if !violations.is_empty() {
             return Err(PlanError::Invalid(violations));
         }
+        let qs = self.commanded(robot, config)?;
         if self.frames.len() != self.samples.len() {
             return bad(format!(
                 "{} frames for {} samples",
@@ -171,7 +178,6 @@ impl Plan {
         }
         let map = frames::servo_map(robot)?;
         let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
-        let qs: Vec<Vec<f64>> = self.samples.iter().map(|s| s.q.clone()).collect();
         let expected = frames::encode(&qs, &map, hold, self.period)?;
         let time_ms = frames::frame_time_ms(self.period)?;
         let mut raw = Vec::with_capacity(expected.len());
@@ -206,4 +212,58 @@ impl Plan {
             table: None,
         })
     }
+
+    /// The joint angles the frames must encode: `commands` when present (checked: one per
+    /// sample, finite, within [`MAX_COMMAND_OFFSET_RAD`] of its sample, within the limits, and
+    /// only for a robot whose servos.toml has `[compliance]`), else the samples.
+    fn commanded(
+        &self,
+        robot: &Robot,
+        config: &ValidationConfig,
+    ) -> Result<Vec<Vec<f64>>, PlanError> {
+        let bad = |m: String| Err(PlanError::Frames(m));
+        let Some(commands) = &self.commands else {
+            return Ok(self.samples.iter().map(|s| s.q.clone()).collect());
+        };
+        if robot.servos.compliance.is_none() {
+            return bad(
+                "the plan compensates the arm's compliance (`commands`) but servos.toml has no [compliance]"
+                    .into(),
+            );
+        }
+        if commands.len() != self.samples.len() {
+            return bad(format!(
+                "{} commands for {} samples",
+                commands.len(),
+                self.samples.len()
+            ));
+        }
+        let mut traj = JointTrajectory::starting_at(&self.samples[0].q, self.period);
+        traj.positions.clear();
+        for (i, (c, s)) in commands.iter().zip(&self.samples).enumerate() {
+            if c.len() != s.q.len() || c.iter().any(|v| !v.is_finite()) {
+                return bad(format!(
+                    "command {i}: needs {} finite joint angles",
+                    s.q.len()
+                ));
+            }
+            let off = super::program::max_step(c, &s.q);
+            if off > MAX_COMMAND_OFFSET_RAD {
+                return bad(format!(
+                    "command {i} lies {off:.4} rad from its sample, more than the {MAX_COMMAND_OFFSET_RAD} rad a compliance correction makes"
+                ));
+            }
+            traj.push(c);
+        }
+        let violations = validate(&traj, robot, config);
+        if !violations.is_empty() {
+            return Err(PlanError::Invalid(violations));
+        }
+        Ok(commands.clone())
+    }
 }
+
+/// Largest joint difference between a command and its sample a plan may hold, rad (0.05,
+/// 2.9 degrees: three times the largest correction the DOFBOT's model makes, a 0.5 degree
+/// band plus the bending of 2 N and the arm's weight, about 0.015 rad; more is a damaged file).
+pub const MAX_COMMAND_OFFSET_RAD: f64 = 0.05;

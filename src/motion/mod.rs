@@ -13,6 +13,7 @@ mod by_region;
 pub mod check;
 pub mod clearance;
 pub mod collide;
+pub mod compensate;
 mod config;
 pub mod contact;
 pub mod dwell;
@@ -134,7 +135,29 @@ pub fn plan_part(
         &mut prog.trajectory,
         JointTrajectory::starting_at(&config.home, config.trajectory.period),
     );
-    let (samples, stream) = samples_and_frames(&traj, robot)?;
+    let loads = compensate::Loads {
+        segments: &prog.segments,
+        passes: &prog.passes,
+        force_n: tool.as_ref().map_or(0.0, |t| t.force_n()),
+    };
+    let keeps = |c: &JointTrajectory| {
+        let violations = validate(c, robot, &config.validation);
+        violations.is_empty().then_some(()).ok_or(violations)
+    };
+    // a correction that no smoothing keeps within the limits (a contact next to a joint
+    // limit) is left out, said on stderr: the plan then commands the loaded joints as before
+    let commanded = match compensate::commands(&traj, &loads, robot, workcell, &keeps) {
+        Some(Err(violations)) => {
+            tracing::warn!(
+                "compliance compensation left out: the corrected commands break {} limit(s), first {}",
+                violations.len(),
+                violations[0]
+            );
+            None
+        }
+        other => other.and_then(Result::ok),
+    };
+    let (samples, stream) = samples_and_frames(&traj, commanded.as_ref(), robot)?;
     Ok(Plan {
         format: "polishbot-plan".into(),
         version: 1,
@@ -153,6 +176,7 @@ pub fn plan_part(
         segments: prog.segments,
         samples,
         frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
+        commands: commanded.map(|c| (0..c.len()).map(|i| c.sample(i).to_vec()).collect()),
         reachability,
         metrics,
         removal,
@@ -195,10 +219,12 @@ fn check_program(
     Ok(())
 }
 
-/// The trajectory's samples and the servo command stream they make (one frame per sample,
-/// through the robot's servo map, the gripper held at its `hold_deg`).
+/// The trajectory's samples and the servo command stream they make (one frame per sample of
+/// `commanded` when the plan compensates the arm's compliance, else of `traj`, through the
+/// robot's servo map, the gripper held at its `hold_deg`).
 fn samples_and_frames(
     traj: &JointTrajectory,
+    commanded: Option<&JointTrajectory>,
     robot: &Robot,
 ) -> Result<(Vec<Sample>, Vec<Vec<u8>>), PlanError> {
     let samples: Vec<Sample> = (0..traj.len())
@@ -209,7 +235,8 @@ fn samples_and_frames(
         .collect();
     let map = frames::servo_map(robot)?;
     let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
-    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
+    let sent = commanded.unwrap_or(traj);
+    let qs: Vec<Vec<f64>> = (0..sent.len()).map(|i| sent.sample(i).to_vec()).collect();
     let stream = frames::encode(&qs, &map, hold, traj.period)?;
     Ok((samples, stream))
 }
