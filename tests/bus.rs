@@ -410,6 +410,29 @@ fn stop_flag_sends_no_further_motion() {
     assert_eq!(rp.last_error.unwrap().0, "stopped");
 }
 
+/// A write that failed may still have reached the board (a pty write timing out on a loaded
+/// machine after delivering its bytes): the resume re-sends that frame rather than driving the
+/// arm back to the last one logged as written.
+#[test]
+fn a_resume_starts_at_the_frame_whose_write_failed() {
+    let line = |seq: u64, kind: &str, motion: u64| {
+        format!(r#"{{"seq":{seq},"t":0.0,"unix_ms":0,"kind":"{kind}","motion":{motion}}}"#)
+    };
+    let text = [
+        line(0, "tx", 3),
+        line(1, "tx", 4),
+        line(2, "error", 5),
+        String::new(),
+    ]
+    .join("\n");
+    let rp = ResumePoint::parse(Path::new("j.jsonl"), text.as_bytes()).unwrap();
+    assert_eq!((rp.last_sent, rp.last_failed_write), (Some(4), Some(5)));
+    assert_eq!(rp.resume_from(), 5);
+    let stopped = [line(0, "tx", 4), line(1, "stop", 5), String::new()].join("\n");
+    let rp = ResumePoint::parse(Path::new("j.jsonl"), stopped.as_bytes()).unwrap();
+    assert_eq!(rp.resume_from(), 4, "a stop sends nothing");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
 

@@ -19,7 +19,10 @@ fn femoral_part(cfg: &DesignConfig) -> Part {
 #[test]
 #[ignore]
 fn survey_of_hand_picked_cells() {
-    let cfg = DesignConfig::default();
+    let cfg = DesignConfig {
+        setups: 1,
+        ..DesignConfig::default()
+    };
     let part = femoral_part(&cfg);
     let source = SourceCell::load(&calib("turntable")).unwrap();
     let mut cases = Vec::new();
@@ -63,9 +66,10 @@ fn survey_of_hand_picked_cells() {
 
 /// The shipped cell for femoral components (calibration/femoral/, written by `cell design`)
 /// scores again what its design.json says when assessed apart from the search (same samples,
-/// same rules), and no less than the 85 % the design reached (issue 51 asks 95 %: the notch
-/// walls and the condyles' side faces stay out, docs/ALGORITHMS.md "Cell design"); every
-/// sample it leaves out names a rule and a table angle.
+/// same rules), and no less than the 85 % the design reached with the part mounted once (the
+/// notch walls and the condyles' side faces stay out, docs/ALGORITHMS.md "Cell design"); with
+/// the second setup design.json names, the two reach issue 51's 95 %; every sample it leaves
+/// out names a rule and a table angle.
 #[test]
 fn the_shipped_femoral_cell_reaches_what_its_design_says() {
     let text = std::fs::read_to_string(calib("femoral/design.json")).unwrap();
@@ -95,6 +99,23 @@ fn the_shipped_femoral_cell_reaches_what_its_design_says() {
         d.coverage
     );
     assert!(d.coverage >= 0.85, "{}", d.coverage);
+    // a second fixturing (the part turned on the table) brings the faces along the table
+    // axis into reach: issue 51's 95 % over the two setups, as design.json says
+    for (k, s) in d.setups.iter().enumerate() {
+        println!(
+            "setup {}: part direction {:?}: {:.1} % alone, {:.1} % together",
+            k + 1,
+            s.mount,
+            100.0 * s.coverage,
+            100.0 * s.union_coverage
+        );
+    }
+    assert_eq!(d.setups.len(), 2);
+    assert_eq!(d.setups[0].mount, candidate.mount);
+    let union = design::union_coverage(&d);
+    let said = doc["setups"][1]["union_coverage"].as_f64().unwrap();
+    assert!((union - said).abs() < 1e-12, "{union} vs {said}");
+    assert!(union >= 0.95, "{union}");
     for s in d.samples.iter().filter(|s| s.angle_deg.is_none()) {
         assert!(s.refused_by.is_some() && s.nearest_angle_deg.is_some());
     }

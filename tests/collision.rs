@@ -57,6 +57,19 @@ struct Measured {
 }
 
 fn measure(q: &[f64], robot: &Robot, wc: &Workcell, points: &[SurfacePoint]) -> Measured {
+    measure_shank_from(q, robot, wc, points, 0.0)
+}
+
+/// [`measure`] with the shank measured from `shank_from_mm` along the axis from the ball
+/// centre: where the ball is pressed into the part on purpose (removal mode's grinding), the
+/// stretch of the shank inside the ball is the ball, checked by the ball's own depth.
+fn measure_shank_from(
+    q: &[f64],
+    robot: &Robot,
+    wc: &Workcell,
+    points: &[SurfacePoint],
+    shank_from_mm: f64,
+) -> Measured {
     let r = robot.tool.radius_mm();
     let (origins, tip, axis) = arm(q, robot);
     let c = to_ref(wc, &tip);
@@ -75,7 +88,12 @@ fn measure(q: &[f64], robot: &Robot, wc: &Workcell, points: &[SurfacePoint]) -> 
     });
     let radii = CollisionConfig::default().link_radius_mm;
     let shank_end = tip - axis * robot.tool.shank_length();
-    let mut capsules = vec![(c, to_ref(wc, &shank_end), robot.tool.shank_radius() * 1e3)];
+    let shank_start = to_ref(wc, &(tip - axis.normalize() * (shank_from_mm * 1e-3)));
+    let mut capsules = vec![(
+        shank_start,
+        to_ref(wc, &shank_end),
+        robot.tool.shank_radius() * 1e3,
+    )];
     for (k, rad) in radii.iter().enumerate().skip(1) {
         capsules.push((to_ref(wc, &origins[k]), to_ref(wc, &origins[k + 1]), *rad));
     }

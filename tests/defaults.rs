@@ -202,7 +202,7 @@ fn every_stated_default_is_the_default_impl() {
         polishbot::motion::PlanConfig => "src/motion/config.rs",
         polishbot::motion::TrajectoryConfig => "src/motion/trajectory.rs",
         polishbot::motion::ValidationConfig => "src/motion/validate.rs",
-        polishbot::motion::CollisionConfig => "src/motion/contact.rs",
+        polishbot::motion::CollisionConfig => "src/motion/collide/solids.rs",
         polishbot::robot::IkConfig => "src/robot/ik.rs",
         polishbot::bus::BusConfig => "src/bus/config.rs",
         polishbot::sim::SimTiming => "src/sim/model.rs",

@@ -7,12 +7,33 @@ mod common;
 
 use std::collections::BTreeMap;
 
-use polishbot::motion::{plan, Inspection, PlanMode};
+use polishbot::motion::{plan, Inspection, Plan, PlanMode};
 
 use common::femoral::{cell, parametric_case, planned_area, reasons, uniform_case};
 
+/// Least share of the repairable area planned in removal mode in the shipped designed cell,
+/// on each seed of [`uniform_defects_in_the_designed_cell_in_removal_mode`]. Issue 51 asks
+/// 0.90; measured 0.906 (seed 5100) and 0.833 (seed 5101). Seed 5101 loses 9.3 % on one
+/// region on the lateral rim (x = -27.4 mm, a thin edge: at the table angles that reach it the
+/// way in is refused, and where the strokes are planned the whole-trajectory check finds the
+/// pressed ball over the edge, nearer the far face than its radius) and 2.7 % on a region no
+/// table angle brings within the 45 degree cone (a second setup's, `cell design`); both seeds
+/// lose 4-8 % on regions' rims whose contacts the removal planner lifts over (passing at full
+/// feed would remove more than they ask). A regression floor under the lower seed, not the
+/// acceptance.
+const REMOVAL_FLOOR: f64 = 0.83;
+
+/// Coverage below which a region counts as left out: plan.json must say why.
+const LEFT_OUT: f64 = 0.5;
+
 /// Plans the seed's case in `calibration/DIR` and prints the planned share and the reasons.
 fn measure(dir: &str, insp: &Inspection, seed: u64) -> (f64, f64) {
+    let (c, t, _) = measure_plan(dir, insp, seed);
+    (c, t)
+}
+
+/// [`measure`], with the plan.
+fn measure_plan(dir: &str, insp: &Inspection, seed: u64) -> (f64, f64, Plan) {
     let (robot, wc, table, mut config) = cell(dir);
     // `plan`'s default mode, as a user runs it
     config.mode = PlanMode::Removal;
@@ -23,7 +44,7 @@ fn measure(dir: &str, insp: &Inspection, seed: u64) -> (f64, f64) {
         100.0 * c / t.max(1e-9),
         reasons(&plan)
     );
-    (c, t)
+    (c, t, plan)
 }
 
 /// The baseline of issue 51 on two uniform cases in the default and the turntable cell
@@ -51,5 +72,50 @@ fn uniform_defects_in_the_shipped_cells() {
             "{part}, cell {dir:?}: {:.1} % of the repairable area planned",
             100.0 * c / t
         );
+    }
+}
+
+/// Issue 51's acceptance case in removal mode (`plan`'s default) in the shipped designed cell,
+/// seeds 5100 and 5101: the planned share on each (at least [`REMOVAL_FLOOR`]), and every
+/// region left mostly unground names the rules that refused its contacts (plan.json's
+/// unreachable list) and the other table angles tried for it with what each covered or why
+/// it was refused (`turntable.regions[].tried`).
+#[test]
+fn uniform_defects_in_the_designed_cell_in_removal_mode() {
+    for seed in [5100, 5101] {
+        let insp = uniform_case(seed);
+        let (c, t, plan) = measure_plan("femoral/", &insp, seed);
+        assert!(c / t >= REMOVAL_FLOOR, "seed {seed}: planned {:.3}", c / t);
+        let table = plan.turntable.as_ref().expect("a table part");
+        for r in &plan.reachability.regions {
+            if !r.repairable || r.coverage_of_all >= LEFT_OUT {
+                continue;
+            }
+            let why: Vec<_> = plan
+                .reachability
+                .unreachable
+                .iter()
+                .filter(|u| u.region == r.id)
+                .collect();
+            assert!(
+                !why.is_empty() && why.iter().all(|u| !u.reason.is_empty()),
+                "seed {seed}: region {} left out without a reason",
+                r.id
+            );
+            let entry = table.regions.iter().find(|e| e.region == r.id).unwrap();
+            println!(
+                "seed {seed}: region {} ({:.1} mm^2) left out at {} deg: {}; tried {:?}",
+                r.id, r.area_mm2, entry.angle_deg, why[0].reason, entry.tried
+            );
+            assert!(
+                !entry.tried.is_empty(),
+                "seed {seed}: region {}: no other table angle tried",
+                r.id
+            );
+            // every angle tried covers it no better, and says why
+            for a in &entry.tried {
+                assert!(a.coverage < LEFT_OUT && a.refused.is_some(), "{a:?}");
+            }
+        }
     }
 }

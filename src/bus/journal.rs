@@ -160,6 +160,10 @@ fn journal_err(path: &Path, e: impl std::fmt::Display) -> BusError {
 pub struct ResumePoint {
     /// Highest motion index whose frame was written.
     pub last_sent: Option<u64>,
+    /// Highest motion index whose write failed: the bytes may still have reached the board
+    /// (a write that times out on a loaded machine may have been delivered), so a resume
+    /// starts no earlier than it.
+    pub last_failed_write: Option<u64>,
     /// Highest motion index confirmed by a read-back.
     pub last_verified: Option<u64>,
     /// Code and message of the last error or stop line, if any.
@@ -220,6 +224,9 @@ impl ResumePoint {
             EntryKind::Tx => self.last_sent = self.last_sent.max(entry.motion),
             EntryKind::Verified => self.last_verified = self.last_verified.max(entry.motion),
             EntryKind::Error | EntryKind::Stop => {
+                if entry.kind == EntryKind::Error {
+                    self.last_failed_write = self.last_failed_write.max(entry.motion);
+                }
                 self.last_error = Some((
                     entry.code.unwrap_or_default(),
                     entry.message.unwrap_or_default(),
@@ -236,9 +243,10 @@ impl ResumePoint {
         }
     }
 
-    /// First motion index to send when resuming: the last one written (re-sent, since motion
-    /// frames carry absolute targets and the interrupted one may not have arrived), or 0.
+    /// First motion index to send when resuming: the last one written or whose write failed
+    /// (re-sent, since motion frames carry absolute targets and the interrupted one may or may
+    /// not have arrived), or 0. Starting earlier would drive the arm back along its path.
     pub fn resume_from(&self) -> u64 {
-        self.last_sent.unwrap_or(0)
+        self.last_sent.max(self.last_failed_write).unwrap_or(0)
     }
 }

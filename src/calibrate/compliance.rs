@@ -1,16 +1,25 @@
 //! Compliance calibration (issue 50): the tool tip touches a few fixed points, each from
-//! several tool tilts and under loads of both signs (pushed up, down, sideways both ways and
-//! along the arm both ways); the touches' read-back joint angles, the known loads and the
-//! unknown points give the joints' stiffness, backlash and the arm's lumped masses by
-//! nonlinear least squares (Levenberg-Marquardt on [`Compliance::loaded_tip`]), written to
-//! servos.toml's `[compliance]` table. The wrist roll's stiffness and backlash are not
-//! observable from the tip (the tip sits on its axis) and keep the file's values.
-use nalgebra::{DMatrix, DVector, Vector3};
+//! several tool tilts and under loads of both signs (pushed up, down and along the arm both
+//! ways, each with a push across the arm one way or the other, of two sizes); the touches'
+//! read-back joint angles, the known loads and the unknown points give the joints'
+//! stiffness, backlash and the arm's lumped masses, written to servos.toml's `[compliance]`
+//! table. The wrist roll's stiffness and backlash are not observable from the tip (the tip
+//! sits on its axis) and keep the file's values.
+//!
+//! The fit ([`fit_compliance`]) alternates two linear least-squares solves, linearised at the
+//! current loaded joint angles: with the masses fixed (so every touch's load torque and gear
+//! flank are known) the compliances, half bands and points; with the compliances fixed the
+//! masses, half bands and points. A joint's backlash shows as a step of its whole band
+//! between touches whose load torque on it has opposite signs, its stiffness as the slope
+//! over touches of one sign, so the loads are sized to give both on every joint. Touches
+//! where a joint's load torque is under [`TRUST_TORQUE_NM`] (its gear may sit anywhere in the
+//! band) do not enter the fit.
+use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
 
 use super::config::{CalibError, CalibrationConfig};
 use super::jog::{Cell, Touch, TouchSource};
 use crate::bus::{Bus, Transport, JOINT_COUNT};
-use crate::robot::compliance::LUMPED_MASSES;
+use crate::robot::compliance::{FLANK_TORQUE_NM, LUMPED_MASSES};
 use crate::robot::{Compliance, IkConfig, IkTarget, Robot};
 
 /// Joints whose stiffness and backlash the touches observe: base yaw, shoulder, elbow and
@@ -22,36 +31,53 @@ pub const FITTED_JOINTS: usize = 4;
 pub const TOUCH_LOAD_N: f64 = 4.0;
 /// Tool tilts (rad, in the arm plane, from the base pose's) each point is touched from.
 const TILTS_DEG: [f64; 5] = [-12.0, -6.0, 0.0, 6.0, 12.0];
+/// Directions of a touch's load in the arm plane (degrees from the outward radial towards
+/// up): out, up, in, down.
+const IN_PLANE_DEG: [f64; 4] = [0.0, 90.0, 180.0, 270.0];
+/// The push across the arm plane added to each in-plane load, relative to it: both ways, at
+/// two sizes (the base yaw's torque then takes two sizes of each sign, which separates its
+/// stiffness from its backlash; 0.35 and 1: torques of 0.1-0.3 and 0.3-0.6 N m at the
+/// DOFBOT's reach).
+const ACROSS: [f64; 4] = [1.0, -1.0, 0.35, -0.35];
 /// How far inside its limits every joint of a touch pose stays, rad (0.15: the loads and the
 /// jogging move the joints by a few hundredths).
 const POSE_MARGIN: f64 = 0.15;
 /// Base poses of the touched points (joint angles, rad): spread over the working volume
-/// (left, middle and right; near and far; high and low).
-const POINT_POSES: [[f64; JOINT_COUNT]; 3] = [
+/// (left, middle and right; near and far; high and low). Six azimuths: the base yaw's whole
+/// count (0.08 deg, 0.3 mm across the arm at its reach) leaves the same miss on every touch
+/// of a point under one across push, so its stiffness and backlash average over the points
+/// (with three, the documented arm's base yaw came out 8 % and 0.06 deg off).
+const POINT_POSES: [[f64; JOINT_COUNT]; 6] = [
     [-0.5, 0.1, 0.8, 0.7, 0.0],
     [0.0, 0.35, 0.7, 0.5, 0.0],
     [0.45, -0.1, 0.9, 0.8, 0.0],
+    [-0.25, 0.2, 0.75, 0.6, 0.0],
+    [0.2, 0.0, 0.85, 0.75, 0.0],
+    [0.7, 0.25, 0.65, 0.55, 0.0],
 ];
-/// Levenberg-Marquardt iterations (the fit converges in under 10 from the start values).
-const FIT_ITERATIONS: usize = 40;
-/// Central-difference step of the fit's Jacobian (compliances in rad per N m around 1e-2,
-/// half bands in rad around 1e-3, masses in kg around 0.1, points in m): 1e-6.
-const JACOBIAN_STEP: f64 = 1e-6;
+/// Rounds of the alternating fit (it settles to 1e-3 deg and 0.1 N m/rad within 6 on the
+/// simulated cell).
+const FIT_ROUNDS: usize = 12;
+/// Load torque, N m, under which a touch is left out of the fit: 0.05, ten times the torque
+/// under which a gear was seen to leave its flank and five times the planner's
+/// [`FLANK_TORQUE_NM`] (the fitted masses may be a few tens of grams off while they settle).
+pub const TRUST_TORQUE_NM: f64 = 0.05;
 /// A touch whose residual after the first fit exceeds this many times the median is set
 /// aside (3: a gear that jumped its band misses by the band, 5-10 times the read-back's
 /// quantisation error).
 pub const OUTLIER_FACTOR: f64 = 3.0;
 /// ... and exceeds this, mm (0.2: the tip error of one raw count on two joints at full reach).
 pub const OUTLIER_FLOOR_MM: f64 = 0.2;
-/// Levenberg-Marquardt's first damping (1: small, gradient-like first steps, so that the
-/// backlash flanks, which follow the masses, do not jump to a wrong basin).
-const LM_START_DAMPING: f64 = 1.0;
 /// Start value of every stiffness, N m/rad: 100, near the DOFBOT's (about 120 for 5 mm of
-/// sag at full reach); from 200 the fit was seen to end in a wrong basin (one joint rigid,
-/// another twice as soft).
+/// sag at full reach).
 const START_STIFFNESS: f64 = 100.0;
-/// Start value of every lumped mass, kg.
+/// Start value of every lumped mass, kg, and the value the masses are weakly drawn to.
 const START_MASS: f64 = 0.1;
+/// Weight of the pull towards [`START_MASS`], m of tip per kg: 1e-4 (0.1 kg off costs as much
+/// as one touch missing by 0.01 mm; it only holds masses the touches cannot tell apart).
+const MASS_PRIOR_M_PER_KG: f64 = 1e-4;
+/// Largest lumped mass, kg (a DOFBOT link with its servo weighs under 0.2 kg).
+const MAX_MASS_KG: f64 = 2.0;
 
 /// One touch to make: which point, the joint angles near it, and the load on the tip.
 #[derive(Debug, Clone, PartialEq)]
@@ -69,21 +95,24 @@ pub struct LoadedPose {
 pub struct ComplianceFit {
     /// The fitted model (the wrist roll's values from the input).
     pub compliance: Compliance,
+    /// One standard deviation of each fitted joint's stiffness, N m/rad.
+    pub stiffness_sd: [f64; FITTED_JOINTS],
+    /// One standard deviation of each fitted joint's backlash, degrees.
+    pub backlash_sd: [f64; FITTED_JOINTS],
     /// The touched points, robot frame, m.
     pub points: Vec<[f64; 3]>,
     /// Distance between each touch's modelled loaded tip and its point, mm.
     pub residuals_mm: Vec<f64>,
     /// RMS of the residuals of the touches kept, mm.
     pub rms_mm: f64,
-    /// Touches set aside: residual over [`OUTLIER_FACTOR`] times the median (and over
-    /// [`OUTLIER_FLOOR_MM`]) after a first fit (a joint whose load torque was near zero at the
-    /// touch: its gear sat anywhere in the band).
+    /// Touches left out: a joint's load torque under [`TRUST_TORQUE_NM`], or a residual over
+    /// [`OUTLIER_FACTOR`] times the median (and over [`OUTLIER_FLOOR_MM`]) after a first fit.
     pub set_aside: usize,
 }
 
 /// The built-in touch plan: each point of [`POINT_POSES`] from each tilt of [`TILTS_DEG`]
-/// under six loads of [`TOUCH_LOAD_N`] (up, down, both ways across the arm plane, both ways
-/// along the arm); tilts the IK cannot reach [`POSE_MARGIN`] inside the limits are left out.
+/// under loads of [`TOUCH_LOAD_N`] in each direction of [`IN_PLANE_DEG`] with each push
+/// [`ACROSS`]; tilts the IK cannot reach [`POSE_MARGIN`] inside the limits are left out.
 pub fn default_poses(robot: &Robot) -> Vec<LoadedPose> {
     let mut out = Vec::new();
     let exact = IkConfig {
@@ -106,24 +135,31 @@ pub fn default_poses(robot: &Robot) -> Vec<LoadedPose> {
                 continue;
             };
             let q: [f64; JOINT_COUNT] = std::array::from_fn(|k| sol.q[k]);
-            for dir in [
-                Vector3::z(),
-                -Vector3::z(),
-                across,
-                -across,
-                radial,
-                -radial,
-            ] {
-                let f = dir * TOUCH_LOAD_N;
-                out.push(LoadedPose {
-                    point,
-                    q,
-                    force_n: [f.x, f.y, f.z],
-                });
+            for a in IN_PLANE_DEG.map(f64::to_radians) {
+                for side in ACROSS {
+                    let dir = Vector3::z() * a.sin() + radial * a.cos() + across * side;
+                    let f = dir.normalize() * TOUCH_LOAD_N;
+                    out.push(LoadedPose {
+                        point,
+                        q,
+                        force_n: [f.x, f.y, f.z],
+                    });
+                }
             }
         }
     }
     out
+}
+
+/// The model a cell without a `[compliance]` table starts from: every stiffness
+/// [`START_STIFFNESS`], no backlash, every mass [`START_MASS`] (the wrist roll keeps these:
+/// the touches do not observe it).
+pub fn start_model() -> Compliance {
+    Compliance {
+        stiffness_nm_rad: [START_STIFFNESS; 5],
+        backlash_deg: [0.0; 5],
+        masses_kg: [START_MASS; LUMPED_MASSES],
+    }
 }
 
 /// Touches every pose of `poses` (the operator loads the tip as each says) and fits the model,
@@ -157,49 +193,169 @@ pub fn compliance<T: Transport>(
     fit_compliance(cell.robot, poses, &touches, start, cell.cfg)
 }
 
-/// Parameters of the fit: compliance (rad per N m) and half band (rad) of the fitted joints,
-/// the masses, then each point's coordinates.
-fn unpack(theta: &DVector<f64>, start: &Compliance) -> (Compliance, Vec<Vector3<f64>>) {
-    let mut c = start.clone();
-    for k in 0..FITTED_JOINTS {
-        c.stiffness_nm_rad[k] = 1.0 / theta[k].max(1e-9);
-        c.backlash_deg[k] = 2.0 * theta[FITTED_JOINTS + k].to_degrees();
-    }
-    for i in 0..LUMPED_MASSES {
-        c.masses_kg[i] = theta[2 * FITTED_JOINTS + i];
-    }
-    let first = 2 * FITTED_JOINTS + LUMPED_MASSES;
-    let points = (first..theta.len())
-        .step_by(3)
-        .map(|i| Vector3::new(theta[i], theta[i + 1], theta[i + 2]))
-        .collect();
-    (c, points)
+/// What the fit needs of one touch: read-back joints, the load's torques about each joint,
+/// and each lumped mass's torques per kg.
+struct Sample {
+    point: usize,
+    q: Vec<f64>,
+    contact: Vec<f64>,
+    per_kg: [Vec<f64>; LUMPED_MASSES],
 }
 
-/// Each touch's modelled loaded tip minus its point, stacked (m).
-fn residuals(
-    robot: &Robot,
-    poses: &[LoadedPose],
-    touches: &[Touch],
-    theta: &DVector<f64>,
-    start: &Compliance,
-    used: &[bool],
-) -> DVector<f64> {
-    let (c, points) = unpack(theta, start);
-    let mut r = DVector::zeros(3 * touches.len());
-    for (i, (p, t)) in poses.iter().zip(touches).enumerate() {
-        if !used[i] {
-            continue;
-        }
-        let tip = c.loaded_tip(robot, &t.joints, &Vector3::from(p.force_n));
-        r.fixed_rows_mut::<3>(3 * i)
-            .copy_from(&(tip - points[p.point]));
+/// The current estimate: compliance (rad per N m) and half band (rad) of the fitted joints,
+/// the masses (kg) and the points (m).
+#[derive(Clone)]
+struct Estimate {
+    c: [f64; FITTED_JOINTS],
+    h: [f64; FITTED_JOINTS],
+    m: [f64; LUMPED_MASSES],
+    points: Vec<Vector3<f64>>,
+}
+
+impl Estimate {
+    fn torques(&self, s: &Sample) -> [f64; FITTED_JOINTS] {
+        std::array::from_fn(|k| {
+            s.contact[k]
+                + (0..LUMPED_MASSES)
+                    .map(|j| self.m[j] * s.per_kg[j][k])
+                    .sum::<f64>()
+        })
     }
-    r
+
+    /// Output minus servo angle of the fitted joints at a touch, and the flank signs.
+    fn deflection(&self, s: &Sample) -> ([f64; FITTED_JOINTS], [f64; FITTED_JOINTS]) {
+        let tau = self.torques(s);
+        let flank = tau.map(|t| (t / FLANK_TORQUE_NM).clamp(-1.0, 1.0));
+        (
+            std::array::from_fn(|k| self.c[k] * tau[k] + self.h[k] * flank[k]),
+            flank,
+        )
+    }
+
+    fn trusted(&self, s: &Sample) -> bool {
+        self.torques(s).iter().all(|t| t.abs() >= TRUST_TORQUE_NM)
+    }
+
+    fn compliance(&self, start: &Compliance) -> Compliance {
+        let mut c = start.clone();
+        for k in 0..FITTED_JOINTS {
+            c.stiffness_nm_rad[k] = 1.0 / self.c[k].max(1e-9);
+            c.backlash_deg[k] = 2.0 * self.h[k].max(0.0).to_degrees();
+        }
+        c.masses_kg = self.m;
+        c
+    }
+}
+
+/// Which parameters a linear solve fits (besides the half bands and the points).
+#[derive(Clone, Copy, PartialEq)]
+enum Unknown {
+    Compliances,
+    Masses,
+}
+
+/// One linearised least-squares solve over the touches marked in `used` (and trusted): the
+/// new estimate and the standard deviations of its first 2 x [`FITTED_JOINTS`] parameters.
+fn solve(
+    robot: &Robot,
+    samples: &[Sample],
+    used: &[bool],
+    est: &Estimate,
+    unknown: Unknown,
+) -> Option<(Estimate, Vec<f64>)> {
+    let rows: Vec<&Sample> = samples
+        .iter()
+        .zip(used)
+        .filter(|(s, u)| **u && est.trusted(s))
+        .map(|(s, _)| s)
+        .collect();
+    let first = 2 * FITTED_JOINTS;
+    let n = first + 3 * est.points.len();
+    let prior = if unknown == Unknown::Masses {
+        LUMPED_MASSES
+    } else {
+        0
+    };
+    let mut a = DMatrix::zeros(3 * rows.len() + prior, n);
+    let mut b = DVector::zeros(3 * rows.len() + prior);
+    for (i, s) in rows.iter().enumerate() {
+        let (d, flank) = est.deflection(s);
+        let mut at = s.q.clone();
+        for (a, dk) in at.iter_mut().zip(d) {
+            *a += dk;
+        }
+        let jac: Matrix3xX<f64> = robot.jacobian(&at).fixed_rows::<3>(0).into_owned();
+        let mut known = robot.fk(&at).position;
+        for (k, dk) in d.iter().enumerate() {
+            known -= jac.column(k) * *dk;
+            if unknown == Unknown::Masses {
+                known += jac.column(k) * est.c[k] * s.contact[k];
+            }
+        }
+        let tau = est.torques(s);
+        for r in 0..3 {
+            for k in 0..FITTED_JOINTS {
+                a[(3 * i + r, k)] = match unknown {
+                    Unknown::Compliances => jac[(r, k)] * tau[k],
+                    Unknown::Masses => (0..FITTED_JOINTS)
+                        .map(|kk| jac[(r, kk)] * est.c[kk] * s.per_kg[k][kk])
+                        .sum(),
+                };
+                a[(3 * i + r, FITTED_JOINTS + k)] = jac[(r, k)] * flank[k];
+            }
+            a[(3 * i + r, first + 3 * s.point + r)] = -1.0;
+            b[3 * i + r] = -known[r];
+        }
+    }
+    for j in 0..prior {
+        a[(3 * rows.len() + j, j)] = MASS_PRIOR_M_PER_KG;
+        b[3 * rows.len() + j] = MASS_PRIOR_M_PER_KG * START_MASS;
+    }
+    let x = a.clone().svd(true, true).solve(&b, 1e-15).ok()?;
+    let dof = (3 * rows.len()).checked_sub(n).filter(|d| *d > 0)?;
+    let var = (&a * &x - &b).norm_squared() / dof as f64;
+    let cov = (a.transpose() * &a).try_inverse()?;
+    let sd = (0..first).map(|j| (var * cov[(j, j)]).sqrt()).collect();
+    let mut next = est.clone();
+    for k in 0..FITTED_JOINTS {
+        match unknown {
+            Unknown::Compliances => next.c[k] = x[k].max(1e-6),
+            Unknown::Masses => next.m[k] = x[k].clamp(0.0, MAX_MASS_KG),
+        }
+        next.h[k] = x[FITTED_JOINTS + k];
+    }
+    for (p, pt) in next.points.iter_mut().enumerate() {
+        *pt = Vector3::new(x[first + 3 * p], x[first + 3 * p + 1], x[first + 3 * p + 2]);
+    }
+    Some((next, sd))
+}
+
+/// [`FIT_ROUNDS`] rounds of the two solves from `est`; the compliance solve's deviations.
+fn rounds(
+    robot: &Robot,
+    samples: &[Sample],
+    used: &[bool],
+    mut est: Estimate,
+) -> Result<(Estimate, Vec<f64>), CalibError> {
+    let mut sd = Vec::new();
+    for _ in 0..FIT_ROUNDS {
+        let stuck = || {
+            CalibError::Refused(
+                "compliance: the touches do not determine the model (too few with every joint \
+                 loaded; check the loads)"
+                    .into(),
+            )
+        };
+        (est, sd) = solve(robot, samples, used, &est, Unknown::Compliances).ok_or_else(stuck)?;
+        est = solve(robot, samples, used, &est, Unknown::Masses)
+            .ok_or_else(stuck)?
+            .0;
+    }
+    Ok((est, sd))
 }
 
 /// Fits the model to `touches` (one per pose of `poses`): a first fit over all, the touches
-/// it leaves far off set aside, a second fit over the rest ([`solve`]).
+/// it leaves far off set aside, a second fit over the rest.
 pub fn fit_compliance(
     robot: &Robot,
     poses: &[LoadedPose],
@@ -218,43 +374,72 @@ pub fn fit_compliance(
             (2 * n).div_ceil(3)
         )));
     }
-    let mut theta: DVector<f64> = DVector::zeros(n);
-    for k in 0..FITTED_JOINTS {
-        theta[k] = 1.0 / START_STIFFNESS;
-    }
-    for i in 0..LUMPED_MASSES {
-        theta[2 * FITTED_JOINTS + i] = START_MASS;
-    }
-    for pt in 0..n_points {
+    let unit = |j: Option<usize>| Compliance {
+        stiffness_nm_rad: [1.0; 5],
+        backlash_deg: [0.0; 5],
+        masses_kg: std::array::from_fn(|i| f64::from(u8::from(Some(i) == j))),
+    };
+    let samples: Vec<Sample> = poses
+        .iter()
+        .zip(touches)
+        .map(|(p, t)| Sample {
+            point: p.point,
+            q: t.joints.to_vec(),
+            contact: unit(None).torques(robot, &t.joints, &Vector3::from(p.force_n)),
+            per_kg: std::array::from_fn(|j| {
+                unit(Some(j)).torques(robot, &t.joints, &Vector3::zeros())
+            }),
+        })
+        .collect();
+    let mut points = vec![Vector3::zeros(); n_points];
+    for (pt, sum) in points.iter_mut().enumerate() {
         let tips: Vec<Vector3<f64>> = poses
             .iter()
             .zip(touches)
             .filter(|(p, _)| p.point == pt)
             .map(|(_, t)| t.tip())
             .collect();
-        let mean = tips.iter().sum::<Vector3<f64>>() / tips.len().max(1) as f64;
-        let first = 2 * FITTED_JOINTS + LUMPED_MASSES + 3 * pt;
-        theta.fixed_rows_mut::<3>(first).copy_from(&mean);
+        *sum = tips.iter().sum::<Vector3<f64>>() / tips.len().max(1) as f64;
     }
+    let est = Estimate {
+        c: [1.0 / START_STIFFNESS; FITTED_JOINTS],
+        h: [0.0; FITTED_JOINTS],
+        m: [START_MASS; LUMPED_MASSES],
+        points,
+    };
     let all = vec![true; touches.len()];
-    let theta = solve(robot, poses, touches, theta, start, &all);
-    let per_touch = |th: &DVector<f64>, used: &[bool]| -> Vec<f64> {
-        let r = residuals(robot, poses, touches, th, start, used);
-        (0..touches.len())
-            .map(|i| r.fixed_rows::<3>(3 * i).norm() * 1e3)
+    let (est, _) = rounds(robot, &samples, &all, est)?;
+    let per_touch = |e: &Estimate| -> Vec<f64> {
+        let c = e.compliance(start);
+        poses
+            .iter()
+            .zip(touches)
+            .map(|(p, t)| {
+                let tip = c.loaded_tip(robot, &t.joints, &Vector3::from(p.force_n));
+                (tip - e.points[p.point]).norm() * 1e3
+            })
             .collect()
     };
-    let first = per_touch(&theta, &all);
-    let mut sorted = first.clone();
+    let first = per_touch(&est);
+    let trusted: Vec<bool> = samples.iter().map(|s| est.trusted(s)).collect();
+    let mut sorted: Vec<f64> = first
+        .iter()
+        .zip(&trusted)
+        .filter(|(_, t)| **t)
+        .map(|(r, _)| *r)
+        .collect();
     sorted.sort_by(f64::total_cmp);
-    let limit = (OUTLIER_FACTOR * sorted[sorted.len() / 2]).max(OUTLIER_FLOOR_MM);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let limit = (OUTLIER_FACTOR * median).max(OUTLIER_FLOOR_MM);
     let used: Vec<bool> = first.iter().map(|r| *r <= limit).collect();
-    let theta = solve(robot, poses, touches, theta, start, &used);
-    let (compliance, points) = unpack(&theta, start);
-    let residuals_mm = per_touch(&theta, &used);
+    let (est, sd) = rounds(robot, &samples, &used, est)?;
+    let kept_mask: Vec<bool> = (0..samples.len())
+        .map(|i| used[i] && est.trusted(&samples[i]))
+        .collect();
+    let residuals_mm = per_touch(&est);
     let kept: Vec<f64> = residuals_mm
         .iter()
-        .zip(&used)
+        .zip(&kept_mask)
         .filter(|(_, u)| **u)
         .map(|(r, _)| *r)
         .collect();
@@ -269,66 +454,14 @@ pub fn fit_compliance(
         )));
     }
     Ok(ComplianceFit {
-        compliance,
-        points: points.iter().map(|p| [p.x, p.y, p.z]).collect(),
+        compliance: est.compliance(start),
+        stiffness_sd: std::array::from_fn(|k| sd[k] / (est.c[k] * est.c[k])),
+        backlash_sd: std::array::from_fn(|k| 2.0 * sd[FITTED_JOINTS + k].to_degrees()),
+        points: est.points.iter().map(|p| [p.x, p.y, p.z]).collect(),
         residuals_mm,
         rms_mm,
-        set_aside: used.iter().filter(|u| !**u).count(),
+        set_aside: kept_mask.iter().filter(|u| !**u).count(),
     })
-}
-
-/// Levenberg-Marquardt from `theta` over the touches marked in `used`, with a
-/// central-difference Jacobian; the compliances stay > 0, the half bands and masses >= 0.
-fn solve(
-    robot: &Robot,
-    poses: &[LoadedPose],
-    touches: &[Touch],
-    mut theta: DVector<f64>,
-    start: &Compliance,
-    used: &[bool],
-) -> DVector<f64> {
-    let n = theta.len();
-    let res = |th: &DVector<f64>| residuals(robot, poses, touches, th, start, used);
-    let mut lambda = LM_START_DAMPING;
-    for _ in 0..FIT_ITERATIONS {
-        let r = res(&theta);
-        let mut jac = DMatrix::zeros(r.len(), n);
-        for j in 0..n {
-            let (mut a, mut b) = (theta.clone(), theta.clone());
-            a[j] += JACOBIAN_STEP;
-            b[j] -= JACOBIAN_STEP;
-            jac.set_column(j, &((res(&a) - res(&b)) / (2.0 * JACOBIAN_STEP)));
-        }
-        let jtj = jac.transpose() * &jac;
-        let g = jac.transpose() * &r;
-        let before = r.norm_squared();
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut m = jtj.clone();
-            for j in 0..n {
-                m[(j, j)] += lambda * jtj[(j, j)].max(1e-12);
-            }
-            let Some(step) = m.lu().solve(&(-&g)) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let mut next = &theta + step;
-            for j in 0..2 * FITTED_JOINTS + LUMPED_MASSES {
-                next[j] = next[j].max(if j < FITTED_JOINTS { 1e-6 } else { 0.0 });
-            }
-            if res(&next).norm_squared() < before {
-                theta = next;
-                lambda = (lambda * 0.3).max(1e-9);
-                improved = true;
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
-        }
-    }
-    theta
 }
 
 /// The servos.toml text `text` with its `[compliance]` table replaced by (or appended as)

@@ -9,6 +9,7 @@ use nalgebra::Vector3;
 use super::config::{CalibError, CalibrationConfig};
 use super::read::{joints_of, read_mean};
 use crate::bus::{Bus, BusError, ServoMap, Transport, JOINT_COUNT};
+use crate::robot::units::mm;
 use crate::robot::Robot;
 
 /// The cell a routine works in: the robot model, the bus's servo map, the gripper's hold angle
@@ -199,7 +200,7 @@ impl<R: Read, W: Write> JogTerminal<R, W> {
 
     fn status(&mut self, cell: &Cell) -> Result<(), CalibError> {
         let q = self.seen;
-        let tip = cell.robot.fk(&q).position * 1000.0;
+        let tip = mm(cell.robot.fk(&q).position);
         let deg: Vec<String> = q
             .iter()
             .map(|v| format!("{:+.2}", v.to_degrees()))
@@ -269,7 +270,7 @@ impl<T: Transport, R: Read, W: Write> TouchSource<T> for JogTerminal<R, W> {
                 Key::Touch => {
                     let t = record(bus, cell, label)?;
                     self.touches += 1;
-                    let p = t.tip() * 1000.0;
+                    let p = mm(t.tip());
                     self.say(&format!(
                         "touch {} recorded ({label}): tip [mm] {:.2} {:.2} {:.2}",
                         self.touches, p.x, p.y, p.z

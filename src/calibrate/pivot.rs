@@ -8,6 +8,7 @@ use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Vector3};
 use super::config::{CalibError, CalibrationConfig};
 use super::jog::{Cell, Touch, TouchSource};
 use crate::bus::{Bus, Transport};
+use crate::robot::units::mm;
 use crate::robot::Robot;
 
 /// Most touches a routine collects before it stops asking.
@@ -108,7 +109,7 @@ pub fn fit_pivot(
     let c = Vector3::new(x[3], x[4], x[5]);
     let residuals_mm: Vec<f64> = poses
         .iter()
-        .map(|p| (p.rotation * t + p.translation.vector - c).norm() * 1000.0)
+        .map(|p| mm((p.rotation * t + p.translation.vector - c).norm()))
         .collect();
     let rms_mm = rms(&residuals_mm);
     if rms_mm > cfg.max_pivot_rms_mm {

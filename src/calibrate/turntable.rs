@@ -13,6 +13,7 @@ use super::config::{CalibError, CalibrationConfig};
 use super::jog::{Cell, Touch, TouchSource};
 use super::pivot::rms;
 use crate::bus::{Bus, Transport};
+use crate::robot::units::mm;
 
 /// The result of the turntable calibration.
 #[derive(Debug, Clone, PartialEq)]
@@ -154,7 +155,7 @@ pub fn fit_turntable(
             let d = p - centre;
             let off = d.dot(&axis);
             let radial = (d - axis * off).norm() - radius;
-            (off * off + radial * radial).sqrt() * 1000.0
+            mm((off * off + radial * radial).sqrt())
         })
         .collect();
     let rms_mm = rms(&residuals_mm);
@@ -171,11 +172,11 @@ pub fn fit_turntable(
                 .join(", ")
         )));
     }
-    check_arc(angles_deg, &pts, (&centre, &axis, &u), radius * 1000.0)?;
+    check_arc(angles_deg, &pts, (&centre, &axis, &u), mm(radius))?;
     Ok(TableFit {
         axis: axis.into(),
         centre: centre.into(),
-        radius_mm: radius * 1000.0,
+        radius_mm: mm(radius),
         residuals_mm,
         rms_mm,
         span_deg,

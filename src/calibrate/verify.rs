@@ -12,6 +12,7 @@ use super::files::Fixture;
 use super::jog::{record, Cell};
 use super::turntable::TurnTable;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
+use crate::robot::units::mm;
 use crate::robot::{Turntable, Workcell};
 
 /// Check poses `verify` uses when none are given, rad: zero, then spread over the joint
@@ -79,12 +80,12 @@ pub fn verify<T: Transport>(
         let touch = record(bus, cell, &format!("check pose {}", k + 1))?;
         let servo_error_deg: [f64; JOINT_COUNT] =
             std::array::from_fn(|i| (touch.joints[i] - q[i]).to_degrees());
-        let tip_error_mm = (touch.tip() - cell.robot.fk(q).position).norm() * 1000.0;
+        let tip_error_mm = mm((touch.tip() - cell.robot.fk(q).position).norm());
         let (fiducial, fiducial_error_mm) = match fiducials {
             Some((fixture, w)) => {
                 let f = &fixture.fiducials[k];
                 let at = w.point_from_reference_mm(&Point3::from(f.position));
-                let e = (touch.tip() - at.coords).norm() * 1000.0;
+                let e = mm((touch.tip() - at.coords).norm());
                 (Some(f.name.clone()), Some(e))
             }
             None => (None, None),

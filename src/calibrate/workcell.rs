@@ -11,6 +11,7 @@ use super::jog::{Cell, Touch, TouchSource};
 use super::pivot::rms;
 use crate::bus::{Bus, Transport};
 use crate::register::mac::pose::weighted_svd;
+use crate::robot::units::{metres, mm};
 
 /// The result of the workcell calibration.
 #[derive(Debug, Clone, PartialEq)]
@@ -105,7 +106,7 @@ pub fn fit_workcell(
     let src: Vec<Point3<f64>> = fixture
         .fiducials
         .iter()
-        .map(|f| Point3::from(Vector3::from(f.position) * 1e-3))
+        .map(|f| Point3::from(metres(Vector3::from(f.position))))
         .collect();
     let dst: Vec<Point3<f64>> = touches.iter().map(|t| Point3::from(t.tip())).collect();
     let pose = weighted_svd(&src, &dst, &vec![1.0; src.len()]).ok_or_else(|| {
@@ -114,7 +115,7 @@ pub fn fit_workcell(
     let residuals_mm: Vec<f64> = src
         .iter()
         .zip(&dst)
-        .map(|(s, d)| (pose * s - d).norm() * 1000.0)
+        .map(|(s, d)| mm((pose * s - d).norm()))
         .collect();
     let rms_mm = rms(&residuals_mm);
     if rms_mm > cfg.max_workcell_rms_mm {

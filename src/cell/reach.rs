@@ -28,7 +28,7 @@ pub fn reachable_sites(axis_margin_deg: f64) -> Result<impl Fn(&[SiteProbe]) -> 
         max_axis_miss_deg: robot_cfg.ik.max_axis_miss_deg - axis_margin_deg,
         ..robot_cfg.ik
     };
-    let ball_mm = robot.tool.radius * 1000.0;
+    let ball_mm = robot.tool.radius_mm();
     let home = vec![0.0; robot.dof()];
     Ok(move |probes: &[SiteProbe]| {
         probes.iter().all(|(contact, n)| {

@@ -1,5 +1,5 @@
-//! `polishbot calibrate (servos | tool | workcell | turntable | verify) (--port DEV | --i2c DEV
-//! | --sim) [--out DIR] [--cell DIR]`:
+//! `polishbot calibrate (servos | tool | compliance | workcell | turntable | verify) (--port DEV
+//! | --i2c DEV | --sim) [--out DIR] [--cell DIR]`:
 //! the calibration routines of docs/CALIBRATION.md. Each reads the cell's files from `--out`
 //! where they exist there (so servos -> tool -> workcell -> verify chain in one folder), else
 //! from `[robot]`, and writes its own file into `--out`.
@@ -18,6 +18,7 @@ use crate::calibrate::{
     TouchSource,
 };
 use crate::motion::frames;
+use crate::robot::units::mm;
 use crate::robot::{Robot, RobotConfig};
 use crate::sim::SimOptions;
 
@@ -59,6 +60,9 @@ pub enum Routine {
         #[arg(long, value_name = "FILE")]
         targets: Option<PathBuf>,
     },
+    /// Joint stiffness, backlash and lumped masses: touch three fixed points from several
+    /// tilts under listed loads -> servos.toml's [compliance] (before workcell).
+    Compliance,
     /// Workcell: touch the fixture's fiducials -> workcell.toml (robot_from_reference).
     Workcell {
         /// Fixture file: [[fiducial]] name, position (mm, part reference frame).
@@ -211,7 +215,7 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
             Some(t) => load_targets(t)?,
             None => DEFAULT_CHECK_POSES.to_vec(),
         }),
-        Routine::Servos { .. } | Routine::Removal { .. } => None,
+        Routine::Servos { .. } | Routine::Removal { .. } | Routine::Compliance => None,
     };
     let prefix = format!("calibrate {name}");
     let sim = super::arm::sim_with_table(&cfg.sim, table.as_ref())?;
@@ -236,6 +240,7 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         servos_in: &servos_in,
         workcell_in,
         table,
+        sim: args.link.device.sim.then_some(&cfg.sim.grinding),
     };
     routine(&mut bus, &cell, &args.routine, fixture, targets, &ctx)
         .map_err(|e| anyhow::anyhow!("calibrate {name}: {e}"))
@@ -245,6 +250,7 @@ fn routine_name(r: &Routine) -> &'static str {
     match r {
         Routine::Servos { .. } => "servos",
         Routine::Tool { .. } => "tool",
+        Routine::Compliance => "compliance",
         Routine::Workcell { .. } => "workcell",
         Routine::Turntable { .. } => "turntable",
         Routine::Verify { .. } => "verify",
@@ -260,6 +266,9 @@ struct Ctx<'a> {
     workcell_in: PathBuf,
     /// The cell's turntable (`calibrate turntable`, and `verify` on a cell with one).
     table: Option<crate::robot::Turntable>,
+    /// The simulated arm's mechanics with `--sim` (`calibrate compliance`'s simulated
+    /// operator touches with them).
+    sim: Option<&'a crate::sim::GrindConfig>,
 }
 
 /// The touch source: the script, or the jog terminal on standard input and output.
@@ -291,6 +300,7 @@ fn routine(
         Routine::Tool { .. } | Routine::Workcell { .. } | Routine::Turntable { .. } => {
             targets.is_none()
         }
+        Routine::Compliance => ctx.sim.is_none(),
         Routine::Verify { .. } | Routine::Removal { .. } => false,
     };
     let _raw = interactive.then(RawTerminal::enable).flatten();
@@ -304,7 +314,7 @@ fn routine(
             let fit = calibrate::tool_tip(bus, cell, src.as_mut())?;
             let file = ctx.out.join("tool.toml");
             files::write_tool(ctx.tool_in, &file, fit.tip_offset)?;
-            let t = fit.tip_offset.map(|v| v * 1000.0);
+            let t = fit.tip_offset.map(mm);
             say(&format!(
                 "calibrate tool: {} touches, orientation spread {:.1} deg; residual per touch [mm]: {}; RMS {:.3} mm",
                 fit.touches.len(),
@@ -318,12 +328,16 @@ fn routine(
                 t[1],
                 t[2],
                 t[0].hypot(t[1]),
-                fit.pivot[0] * 1000.0,
-                fit.pivot[1] * 1000.0,
-                fit.pivot[2] * 1000.0,
+                mm(fit.pivot[0]),
+                mm(fit.pivot[1]),
+                mm(fit.pivot[2]),
                 file.display()
             ));
             Ok(())
+        }
+        Routine::Compliance => {
+            let out = ctx.out.join("servos.toml");
+            super::calibrate_compliance::run(bus, cell, ctx.sim, ctx.servos_in, &out)
         }
         Routine::Workcell { fixture: path, .. } => {
             let fixture = fixture.expect("loaded in run");

@@ -1,15 +1,21 @@
-//! `calibrate compliance`'s touches on the simulated cell: [`SimTouch`] is the operator who
+//! `polishbot calibrate compliance (--port DEV | --i2c DEV | --sim)`: the compliance
+//! calibration (crate::calibrate::compliance) with the jog terminal's operator, or with
+//! `--sim` the simulated one, written into servos.toml's `[compliance]`.
+//!
+//! The touches on the simulated cell: [`SimTouch`] is the operator who
 //! jogs the simulated arm until its true, loaded tool tip (the simulator's own kinematics,
 //! backlash and sag, `[sim.grinding]`) sits on the touched point, and then records the touch
 //! through the bus like any other touch source. The calibration itself sees only the
 //! read-back joint angles.
 use nalgebra::{Matrix4, Point3, Vector3, Vector4};
 
+use super::common::say;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
-use crate::calibrate::compliance::LoadedPose;
-use crate::calibrate::jog::{record, Cell, Touch, TouchSource};
+use crate::calibrate::compliance::{self, ComplianceFit, LoadedPose, FITTED_JOINTS};
+use crate::calibrate::jog::{record, Cell, JogTerminal, Touch, TouchSource};
 use crate::calibrate::CalibError;
 use crate::sim::grind::{fk, slack};
+use crate::sim::model::{deg_at_raw, raw_at_deg, round_raw};
 use crate::sim::GrindConfig;
 
 /// Newton iterations of the simulated operator's jogging (converges in 3-5).
@@ -18,6 +24,11 @@ const JOG_ITERATIONS: usize = 30;
 const JOG_MAX_STEP: f64 = 0.05;
 /// Step of the numeric derivative of the jogging, rad.
 const JOG_STEP: f64 = 1e-7;
+/// Whole counts either side of the jogged pose the operator tries on each of the four
+/// fitted joints before recording (2: 5^4 = 625 poses, the one whose loaded tip sits nearest
+/// the point wins, as an operator jogs count by count until the tip touches; the misses
+/// drop from 0.1-0.4 mm at the nearest counts to a few hundredths).
+const SNAP_COUNTS: i32 = 2;
 
 /// The simulated operator of `calibrate compliance`: for each pose, in order, the servo
 /// angles that put the simulated arm's loaded tip on the pose's point (the rigid arm's tip at
@@ -84,6 +95,30 @@ impl SimTouch {
         }
         x
     }
+
+    /// The whole-count servo pose within [`SNAP_COUNTS`] of the jogged pose `x` whose loaded
+    /// tip (under `force`) sits nearest `point`, as joint angles (rad).
+    fn snap(&self, x: &[f64; 5], force: Vector3<f64>, point: &Point3<f64>) -> [f64; 5] {
+        let near: [f64; 5] =
+            std::array::from_fn(|k| f64::from(round_raw(raw_at_deg(k, x[k].to_degrees() + 90.0))));
+        let at = |raw: &[f64; 5]| -> [f64; 5] {
+            std::array::from_fn(|k| fk::joint_of_servo_deg(deg_at_raw(k, raw[k])))
+        };
+        let side = 2 * SNAP_COUNTS + 1;
+        let mut best = (f64::INFINITY, at(&near));
+        for code in 0..side.pow(4) {
+            let mut raw = near;
+            for (k, r) in raw.iter_mut().enumerate().take(4) {
+                *r += f64::from(code / side.pow(k as u32) % side - SNAP_COUNTS);
+            }
+            let q = at(&raw);
+            let miss = (self.arm.held(q, force).0 - point).norm();
+            if miss < best.0 {
+                best = (miss, q);
+            }
+        }
+        best.1
+    }
 }
 
 impl<T: Transport> TouchSource<T> for SimTouch {
@@ -99,7 +134,7 @@ impl<T: Transport> TouchSource<T> for SimTouch {
         self.next += 1;
         let force = Vector3::from(p.force_n);
         let point = self.points[p.point];
-        let x = self.jog(&p.q, force, &point);
+        let x = self.snap(&self.jog(&p.q, force, &point), force, &point);
         // the simulator's joint angle -> servo degrees -> the planner's joint angle
         let mut q = [0.0; JOINT_COUNT];
         for (k, spec) in cell.robot.joints.iter().enumerate().take(JOINT_COUNT) {
@@ -115,4 +150,78 @@ impl<T: Transport> TouchSource<T> for SimTouch {
         bus.move_joints(&q, cell.gripper_deg, None)?;
         record(bus, cell, label).map(Some)
     }
+}
+
+/// Runs `calibrate compliance`: the built-in touch plan with the jog terminal (or with the
+/// simulated operator of `sim`, the simulated arm's mechanics), the fit from `servos_in`'s
+/// `[compliance]` (or the defaults), and `out` written as `servos_in` with the fitted table.
+pub fn run<T: Transport>(
+    bus: &mut Bus<T>,
+    cell: &Cell,
+    sim: Option<&GrindConfig>,
+    servos_in: &std::path::Path,
+    out: &std::path::Path,
+) -> Result<(), CalibError> {
+    let poses = compliance::default_poses(cell.robot);
+    let start = cell
+        .robot
+        .servos
+        .compliance
+        .clone()
+        .unwrap_or_else(compliance::start_model);
+    let mut source: Box<dyn TouchSource<T>> = match sim {
+        Some(g) => Box::new(SimTouch::new(g, &poses)),
+        None => {
+            say(&format!(
+                "calibrate compliance: {} touches on {} points. For each, jog the tool tip onto \
+                 the point (the first touch of a point fixes it: a hard mark the tip can rest \
+                 on) while a spring scale pulls the tip with the listed load (N, robot frame), \
+                 then record the touch",
+                poses.len(),
+                poses.iter().map(|p| p.point + 1).max().unwrap_or(0)
+            ));
+            Box::new(JogTerminal::new(
+                std::io::stdin(),
+                std::io::stdout(),
+                cell.cfg.jog_step_deg,
+            ))
+        }
+    };
+    let fit = compliance::compliance(bus, cell, &poses, &start, source.as_mut())?;
+    compliance::write_compliance(servos_in, out, &fit.compliance)?;
+    for line in describe(&fit) {
+        say(&format!("calibrate compliance: {line}"));
+    }
+    say(&format!("calibrate compliance: wrote {}", out.display()));
+    Ok(())
+}
+
+/// The fit's report: per joint stiffness and backlash with their standard deviations, the
+/// masses, the residuals.
+pub fn describe(fit: &ComplianceFit) -> Vec<String> {
+    let c = &fit.compliance;
+    let mut out: Vec<String> = (0..FITTED_JOINTS)
+        .map(|k| {
+            format!(
+                "joint {}: stiffness {:.1} +- {:.1} N m/rad, backlash {:.3} +- {:.3} deg",
+                k + 1,
+                c.stiffness_nm_rad[k],
+                fit.stiffness_sd[k],
+                c.backlash_deg[k],
+                fit.backlash_sd[k]
+            )
+        })
+        .collect();
+    out.push(format!(
+        "lumped masses [kg] {:.3?} (elbow, wrist pitch, wrist roll, tool tip)",
+        c.masses_kg
+    ));
+    out.push(format!(
+        "{} touches, {} set aside; residual per touch [mm]: {}; RMS {:.3} mm",
+        fit.residuals_mm.len(),
+        fit.set_aside,
+        crate::calibrate::pivot::list_mm(&fit.residuals_mm),
+        fit.rms_mm
+    ));
+    out
 }

@@ -6,7 +6,7 @@
 use std::path::Path;
 
 pub use crate::cycle::refit::Inputs;
-use crate::cycle::refit::{describe, fit_files, write_fit};
+use crate::cycle::refit::{describe, fit_files, read_tool, write_fit};
 use crate::removal::fit::FitConfig;
 
 /// Runs `calibrate removal`: fits, prints, writes `out` (tool.toml) from `inputs.tool`.
@@ -16,7 +16,8 @@ pub fn run(inputs: &Inputs, out: &Path) -> anyhow::Result<()> {
     for line in describe(&fit, "calibrate removal") {
         println!("{line}");
     }
-    write_fit(&inputs.tool, out, &fit)
+    read_tool(&inputs.tool)
+        .and_then(|tool| write_fit(&tool, out, &fit))
         .map_err(|e| anyhow::anyhow!("calibrate removal: {}", crate::cycle::one_line(&e)))?;
     println!("calibrate removal: wrote {}", out.display());
     Ok(())

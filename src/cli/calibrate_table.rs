@@ -8,6 +8,7 @@ use std::path::Path;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
 use crate::calibrate::jog::{Cell, TouchSource};
 use crate::calibrate::{turntable, CalibError};
+use crate::robot::units::mm;
 use crate::robot::Turntable;
 
 /// The joints the arm returns to before every table turn (the pose `arm move --table` asks
@@ -46,9 +47,9 @@ pub fn run<T: Transport>(
         fit.axis[0],
         fit.axis[1],
         fit.axis[2],
-        fit.centre[0] * 1000.0,
-        fit.centre[1] * 1000.0,
-        fit.centre[2] * 1000.0,
+        mm(fit.centre[0]),
+        mm(fit.centre[1]),
+        mm(fit.centre[2]),
         fit.radius_mm,
         workcell_out.display()
     );

@@ -7,6 +7,7 @@ use clap::{Args, Subcommand};
 
 use crate::cloud::Units;
 use crate::design::{self, DesignConfig, Part, SourceCell};
+use crate::robot::units::mm;
 
 /// Arguments of `cell`.
 #[derive(Debug, Args)]
@@ -69,7 +70,7 @@ pub fn run(args: CellArgs, _config: Option<&std::path::Path>) -> anyhow::Result<
         c.axis,
         c.mount,
         c.centre,
-        c.shank_m * 1e3
+        mm(c.shank_m)
     );
     for (family, s, c) in &d.alternatives {
         println!(
@@ -78,15 +79,26 @@ pub fn run(args: CellArgs, _config: Option<&std::path::Path>) -> anyhow::Result<
             c.axis,
             c.mount,
             c.centre,
-            c.shank_m * 1e3
+            mm(c.shank_m)
         );
     }
     for (rule, n) in &d.refused {
         println!("cell design: not reached: {n} samples by {rule}");
     }
+    for (k, s) in d.setups.iter().enumerate() {
+        println!(
+            "cell design: setup {}: part direction {:?} along the table axis: {:.1} % alone, {:.1} % with the setups before it",
+            k + 1,
+            s.mount,
+            100.0 * s.coverage,
+            100.0 * s.union_coverage
+        );
+    }
     println!(
-        "cell design: articular surface reached {:.1} % ({} samples); cell written to {}",
+        "cell design: articular surface reached {:.1} % in setup 1, {:.1} % over {} setup(s) ({} samples); cell written to {}",
         100.0 * d.coverage,
+        100.0 * design::union_coverage(&d),
+        d.setups.len(),
         d.samples.len(),
         a.out.display()
     );

@@ -216,6 +216,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         device: args.device,
         settings: super::run::settings(&configs.run.file, None).map_err(blame)?,
         table: configs.run.table,
+        ground: None,
     };
     let out = args.out.clone();
     let inputs = Inputs {

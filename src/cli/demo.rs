@@ -141,8 +141,11 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let plan_file = out.join("plan.json");
     let refuse = |m: &str| anyhow::anyhow!("plan settings: {m}");
     let ros = out.join("trajectory.yaml");
+    let plan_cfg = PlanFileConfig::default();
+    let tool = crate::robot::ToolText::read(&plan_cfg.robot.tool)?;
     let planned = plan_into(
-        &PlanFileConfig::default(),
+        &plan_cfg,
+        &tool,
         &inspection,
         &plan_file,
         Some(&ros),
@@ -166,6 +169,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
                 plan: &planned.plan,
             },
             inspection: Some(&inspection),
+            tool: Some(&planned.tool),
             device: &DeviceArgs::sim(),
             dry_run: false,
             resume: None,
@@ -202,6 +206,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         device: DeviceArgs::sim(),
         settings: run_settings,
         table: toml::Table::new(),
+        ground: None,
     };
     let ended = run_cycle(&cfg, inputs, &mut arm)?;
     super::cycle::print_outcome(&ended);

@@ -11,7 +11,6 @@ mod common;
 mod cycle;
 mod demo;
 mod filter;
-mod grind;
 mod info;
 mod inspect;
 mod merge;

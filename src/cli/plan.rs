@@ -53,8 +53,10 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     }
     let inspection = Inspection::load(&args.inspection)?;
     let refuse = |m: &str| file.refuse("plan", m);
+    let tool = crate::robot::ToolText::read(&cfg.robot.tool)?;
     plan_into(
         &cfg,
+        &tool,
         &inspection,
         &args.out,
         args.export_ros.as_deref(),

@@ -52,8 +52,8 @@ pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
     let out = args.out.join("registration.json");
     let files = (args.scan.as_path(), args.reference.as_path());
     let reg = crate::inspect::register_scan(&scan, &reference, &cfg)
-        .map_err(|e| crate::inspect::files::record_failure(e, &out, files))?;
-    crate::inspect::files::record_ok(&reg, &out, files)?;
+        .map_err(|e| crate::inspect::files::record_failure(e, &out, files, None))?;
+    crate::inspect::files::record_ok(&reg, &out, files, None)?;
     println!(
         "register: fitness {:.4}, inlier RMSE {:.4} mm, {} ICP iterations, {:.2} s -> {}",
         reg.fitness,

@@ -6,13 +6,14 @@ use clap::Args;
 use serde::Deserialize;
 
 use super::arm::DeviceArgs;
-pub use super::grind::Part;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
+use crate::cloud::PointCloud;
 use crate::motion::file::CheckedPlan;
 use crate::motion::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
-use crate::robot::{Robot, RobotConfig, Turntable, Workcell};
+use crate::robot::{Robot, RobotConfig, ToolText, Turntable, Workcell};
+use crate::sim::virtual_part::{self, Ground, Inspected, Part};
 use crate::sim::SimOptions;
 
 /// Arguments of `run`.
@@ -235,6 +236,8 @@ pub struct Job<'a> {
     pub source: PlanSource<'a>,
     /// The part to check collisions against; None: the inspection folder plan.json names.
     pub inspection: Option<&'a Inspection>,
+    /// The tool file the plan was made with, held in memory; None: the settings' tool file.
+    pub tool: Option<&'a ToolText>,
     /// The arm.
     pub device: &'a DeviceArgs,
     /// Check everything, send nothing.
@@ -270,6 +273,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let part = match (&args.part, &args.ground_out) {
         (Some(file), Some(out)) => Some(Part {
             file,
+            held: None,
             in_reference: args.part_in_reference,
             ground_out: out,
             scan_to_reference: None,
@@ -282,6 +286,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
             plan_file: &args.plan,
             source: PlanSource::File,
             inspection: None,
+            tool: None,
             device: &args.device,
             dry_run: args.dry_run,
             resume: args.resume.as_deref(),
@@ -289,12 +294,17 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
             part,
         },
     )
+    .map(drop)
 }
 
 /// Streams `job`'s plan with the settings `cfg`: checks the plan against the cell (joint and
-/// servo ranges, collisions), the resume point and the journal, then sends it.
-pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<()> {
-    let robot = Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?;
+/// servo ranges, collisions), the resume point and the journal, then sends it. Returns the
+/// virtual part's ground surface when the simulated arm ground one (`job.part`).
+pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<PointCloud>> {
+    let robot = match job.tool {
+        Some(tool) => Robot::with_tool(&cfg.robot.urdf, tool.tool()?, &cfg.robot.servos)?,
+        None => Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?,
+    };
     let plan_path = job.plan_file;
     let (text, parsed);
     let (text, plan) = match job.source {
@@ -354,7 +364,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<()> {
             (steps - from) as f64 * plan.period,
             checked.time_ms
         );
-        return Ok(());
+        return Ok(None);
     }
     let journal = Journal::append(&journal_path)?.for_plan(&sha);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
@@ -368,7 +378,9 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<()> {
         let arm = ground.arm(&map)?;
         let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
         stream(bus, &checked, plan, from, &cfg.run, stop, &journal_path)?;
-        return ground.finish(&arm, &map, &workcell);
+        return ground
+            .finish(&arm, &map, &workcell.robot_from_reference)
+            .map(Some);
     }
     let link = super::arm::open_link(job.device, &sim, &bus_cfg.servo_map, "run")?;
     stream(
@@ -380,15 +392,13 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<()> {
         stop,
         &journal_path,
     )
+    .map(|()| None)
 }
 
 /// The virtual part of `--part` / `--ground-out`, checked and loaded before anything moves;
-/// only the simulated arm grinds one, from the plan's first frame.
-fn ground(
-    job: &Job,
-    sim: &SimOptions,
-    inspection: &Inspection,
-) -> anyhow::Result<Option<super::grind::Ground>> {
+/// only the simulated arm grinds one, from the plan's first frame. Without a scan pose given
+/// (`run --part`), the pose is the inspection's registration.json.
+fn ground(job: &Job, sim: &SimOptions, inspection: &Inspection) -> anyhow::Result<Option<Ground>> {
     let Some(part) = &job.part else {
         return Ok(None);
     };
@@ -400,7 +410,23 @@ fn ground(
         job.resume.is_none(),
         "run: --part cannot --resume: the virtual part's removal lives only in one run"
     );
-    super::grind::Ground::prepare(sim, part, inspection).map(Some)
+    #[derive(serde::Deserialize)]
+    struct Registration {
+        scan_to_reference: [[f64; 4]; 4],
+    }
+    let mut part = *part;
+    if !part.in_reference && part.scan_to_reference.is_none() {
+        let file = inspection.dir.join("registration.json");
+        let read = super::common::read_json::<Registration>(&file)?;
+        part.scan_to_reference = Some(read.scan_to_reference);
+    }
+    let inspected = Inspected {
+        dir: &inspection.dir,
+        positions: inspection.points.iter().map(|p| p.position).collect(),
+        normals: inspection.points.iter().map(|p| p.normal).collect(),
+        distances: inspection.points.iter().map(|p| p.distance).collect(),
+    };
+    Ground::prepare(sim, &part, &inspected).map(Some)
 }
 
 fn stream<T: Transport>(
@@ -450,17 +476,24 @@ pub struct LoopArm {
     /// The same as written (cycle's `[run]` table): each iteration's run.toml is it with the
     /// plan's tool file.
     pub table: toml::Table,
+    /// The simulated arm's part as the last grind left it, and the truth file it wrote it to:
+    /// the next grind of that file takes it from here.
+    pub ground: Option<(PathBuf, PointCloud)>,
 }
 
 impl crate::cycle::Executor for LoopArm {
     fn grind(&mut self, job: &crate::cycle::GrindJob) -> anyhow::Result<crate::cycle::Rescan> {
         let after = job.dir.join("after.ply");
         let sim = self.device.sim;
-        crate::cycle::with_tool(&self.table, job.tool, &job.dir.join("run.toml"))?;
+        crate::cycle::with_tool(&self.table, &job.tool.path, &job.dir.join("run.toml"))?;
         let mut cfg = self.settings.clone();
-        cfg.robot.tool = job.tool.to_path_buf();
+        cfg.robot.tool = job.tool.path.clone();
+        let held = (self.ground.as_ref())
+            .filter(|(file, _)| job.part_in_reference && file == job.part)
+            .map(|(_, cloud)| cloud);
         let part = sim.then(|| Part {
             file: job.part,
+            held,
             in_reference: job.part_in_reference,
             ground_out: &after,
             scan_to_reference: Some(job.scan_to_reference),
@@ -472,15 +505,17 @@ impl crate::cycle::Executor for LoopArm {
                 plan: &job.planned.plan,
             },
             inspection: Some(job.inspection),
+            tool: Some(job.tool),
             device: &self.device,
             dry_run: false,
             resume: None,
             journal: Some(job.dir.join("journal.jsonl")),
             part,
         };
-        stream_plan(&cfg, &run)?;
+        let ground = stream_plan(&cfg, &run)?;
         if sim {
-            let part = super::grind::truth_paths(&after).0;
+            let part = virtual_part::truth_paths(&after).0;
+            self.ground = ground.map(|cloud| (part.clone(), cloud));
             return Ok(crate::cycle::Rescan {
                 scan: after,
                 more_scans: Vec::new(),

@@ -17,6 +17,7 @@ use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource};
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
+use crate::robot::ToolText;
 
 /// What the loop starts from.
 pub struct Inputs {
@@ -54,8 +55,8 @@ pub struct GrindJob<'a> {
     pub inspection: &'a Inspection,
     /// The inspected scan's pose, scan to reference, 4x4 row-major (registration.json's).
     pub scan_to_reference: [[f64; 4]; 4],
-    /// The tool file the plan was made with.
-    pub tool: &'a Path,
+    /// The tool file the plan was made with, as held in memory.
+    pub tool: &'a ToolText,
     /// A simulated arm's part: the first scan, then the part it ground.
     pub part: &'a Path,
     /// Whether `part` is already in the reference frame (a ground part's truth file).
@@ -103,7 +104,7 @@ pub fn run_cycle(
     executor: &mut dyn Executor,
 ) -> anyhow::Result<CycleOutcome> {
     let mut state = Loop {
-        tool: cfg.plan.robot.tool.clone(),
+        tool: None,
         scan: inputs.scan.clone(),
         more_scans: Vec::new(),
         part: (inputs.scan.clone(), false),
@@ -137,8 +138,9 @@ struct Loop<'a> {
     /// The simulator's virtual part: the first scan, then the ground part itself (its truth
     /// file, reference frame), so that it keeps its shape between grinds.
     part: (PathBuf, bool),
-    /// The tool file of the next plan (refitted after each grind).
-    tool: PathBuf,
+    /// The tool file of the next plan, held in memory: refitted after each grind; None until
+    /// the first refit (the plan settings' tool file, read when planning).
+    tool: Option<ToolText>,
 }
 
 impl Loop<'_> {
@@ -201,7 +203,7 @@ impl Loop<'_> {
             planned: &planned,
             inspection: &inspection,
             scan_to_reference: pose_rows(&found.pose),
-            tool: &self.tool,
+            tool: &planned.tool,
             part: &self.part.0,
             part_in_reference: self.part.1,
             dir: &dir,
@@ -216,7 +218,6 @@ impl Loop<'_> {
             inspection,
             plan_file,
             planned,
-            tool: self.tool.clone(),
         });
         print!("{}", table_text(&self.records));
         Ok(None)
@@ -239,16 +240,20 @@ impl Loop<'_> {
     }
 
     /// Plans from `inspection` into DIR/plan.json with the loop's plan settings and its tool
-    /// file (written as DIR/plan.toml: the `[plan]` settings with `robot.tool` set).
+    /// file (written as DIR/plan.toml, an output: the `[plan]` settings with `robot.tool` set).
     fn plan(&self, inspection: &Inspection, dir: &Path) -> anyhow::Result<(PathBuf, Planned)> {
         println!("== cycle: plan");
+        let tool = match &self.tool {
+            Some(t) => t.clone(),
+            None => ToolText::read(&self.cfg.plan.robot.tool)?,
+        };
         let settings = dir.join("plan.toml");
-        with_tool(&self.cfg.plan_table, &self.tool, &settings)?;
+        with_tool(&self.cfg.plan_table, &tool.path, &settings)?;
         let mut cfg = self.cfg.plan.clone();
-        cfg.robot.tool = self.tool.clone();
+        cfg.robot.tool = tool.path.clone();
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
-        let planned = plan_into(&cfg, inspection, &plan_file, None, &refuse)?;
+        let planned = plan_into(&cfg, &tool, inspection, &plan_file, None, &refuse)?;
         Ok((plan_file, planned))
     }
 

@@ -12,8 +12,8 @@ use crate::removal::prediction::{predicted_csv, RemovalReport};
 use crate::removal::ToolModel;
 use crate::repair::Inspection;
 use crate::report::plan_html::write_plan_html;
-use crate::report::provenance::Provenance;
-use crate::robot::{self, RobotConfig};
+use crate::report::provenance::{InputFile, Provenance};
+use crate::robot::{self, RobotConfig, ToolText};
 
 /// `--config` TOML of `plan` and `run`: `[robot]` (RobotConfig: urdf, tool, servos, workcell,
 /// ik) and `[plan]` (PlanConfig).
@@ -38,23 +38,27 @@ pub struct Planned {
     /// The tool's removal model the plan was made with (plan.json's
     /// `provenance.config.removal_tool`); None when the tool file has none.
     pub removal_tool: Option<ToolModel>,
+    /// The tool file the plan was made with, as held in memory.
+    pub tool: ToolText,
 }
 
-/// Plans from `inspection` (read from or written to `inspection.dir`) with `cfg` and writes
+/// Plans from `inspection` (read from or written to `inspection.dir`) with `cfg` and the tool
+/// file `tool` (held in memory; `cfg.robot.tool` names it) and writes
 /// `out` (plan.json), its provenance, plan.html beside it, predicted.csv (removal plans) and
 /// `export_ros`; prints what was planned. A setting the planner refuses is reported through
 /// `refuse` (the caller names its settings file and line).
 pub fn plan_into(
     cfg: &PlanFileConfig,
+    tool: &ToolText,
     inspection: &Inspection,
     out: &Path,
     export_ros: Option<&Path>,
     refuse: &dyn Fn(&str) -> anyhow::Error,
 ) -> Result<Planned> {
     let mut cfg = cfg.clone();
-    let (robot, workcell) = robot::load(&cfg.robot)?;
+    let (robot, workcell) = robot::load_with(&cfg.robot, tool.tool()?)?;
     // the tool file's [removal] checked here, so that its errors name the file's full path
-    ToolModel::load(&cfg.robot.tool)?;
+    let removal_tool = ToolModel::of_text(tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
         motion::PlanError::Config(m) => refuse(&m),
         e => e.into(),
@@ -65,7 +69,7 @@ pub fn plan_into(
     let plan = motion::plan(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    let provenance = provenance(&inspection.dir, &cfg.robot, &cfg.plan)?;
+    let provenance = provenance(&inspection.dir, &cfg.robot, tool, &cfg.plan)?;
     let text = provenance.stamp(&compact, out)?;
     std::fs::write(out, &text).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let page = write_plan_html(out, inspection, &plan, &provenance)?;
@@ -83,7 +87,8 @@ pub fn plan_into(
         plan,
         text,
         predicted_csv,
-        removal_tool: ToolModel::load(&cfg.robot.tool).ok(),
+        removal_tool: Some(removal_tool),
+        tool: tool.clone(),
     })
 }
 
@@ -102,18 +107,29 @@ pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str,
     ]
 }
 
-/// The provenance of a plan: the inspection's files it read, the cell's files, the settings.
-pub fn provenance(inspection: &Path, robot: &RobotConfig, plan: &PlanConfig) -> Result<Provenance> {
-    let inputs = plan_inputs(inspection, robot);
-    let files: Vec<(&str, &Path)> = inputs.iter().map(|(r, p)| (*r, p.as_path())).collect();
-    let existing: Vec<(&str, &Path)> = files.into_iter().filter(|(_, p)| p.is_file()).collect();
+/// The provenance of a plan: the inspection's files it read, the cell's files (the tool file
+/// as held, `tool`), the settings.
+pub fn provenance(
+    inspection: &Path,
+    robot: &RobotConfig,
+    tool: &ToolText,
+    plan: &PlanConfig,
+) -> Result<Provenance> {
+    use rayon::prelude::*;
+    let inputs = (plan_inputs(inspection, robot).into_par_iter())
+        .filter(|(role, p)| *role == "tool" || p.is_file())
+        .map(|(role, p)| match role {
+            "tool" => Ok(InputFile::held(role, &tool.path, tool.text.as_bytes())),
+            _ => InputFile::hash(role, &p),
+        })
+        .collect::<Result<Vec<_>>>()?;
     // the removal model the plan used (its k is what `calibrate removal` scales from)
-    let tool = ToolModel::load(&robot.tool).ok();
-    let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": tool });
-    Provenance::new(
+    let removal_tool = ToolModel::of_text(tool).ok();
+    let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": removal_tool });
+    Provenance::of_inputs(
         "plan",
         "inspection in mm (reference frame); robot in m and rad (URDF base frame)",
-        &existing,
+        inputs,
         &config,
     )
 }

@@ -10,9 +10,10 @@ use super::plan_stage::Planned;
 use crate::calibrate::files;
 use crate::cell::removal_shift::{self, RegionShift, ShiftConfig};
 use crate::motion::Plan;
-use crate::removal::fit::{self as removal_fit, Agreement, Evidence, FitConfig, RemovalFit};
+use crate::removal::fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
 use crate::removal::ToolModel;
 use crate::repair::Inspection;
+use crate::robot::ToolText;
 
 /// What `calibrate removal` reads.
 #[derive(Debug, Clone)]
@@ -38,7 +39,7 @@ pub fn fit_files(inputs: &Inputs, cfg: &FitConfig) -> anyhow::Result<RemovalFit>
     let shift_cfg = ShiftConfig::default();
     let shifts = removal_shift::register(&before, &after, &predicted, &shift_cfg);
     let predicted = removal_shift::shifted_prediction(&before, &predicted, &shifts, &shift_cfg);
-    removal_fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+    fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
 /// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
@@ -61,20 +62,22 @@ pub fn prediction(
     let recorded = serde_json::from_str::<serde_json::Value>(&plan_text)?["provenance"]["config"]
         ["removal_tool"]["preston_k_mm2_n"]
         .as_f64();
-    predicted_at_k(plan, &text, recorded, tool, before)
+    let tool_k = || Ok(ToolModel::load(tool)?.preston_k_mm2_n);
+    predicted_at_k(plan, &text, recorded, &tool_k, before)
 }
 
-/// [`prediction`] of a plan the loop made and holds (`planned`, written to `plan`).
+/// [`prediction`] of a plan the loop made and holds (`planned`, written to `plan`; its tool
+/// file as held).
 pub fn prediction_of(
     plan: &Path,
     planned: &Planned,
-    tool: &Path,
     before: &Inspection,
 ) -> anyhow::Result<(Vec<f64>, f64)> {
     ensure_removal(plan, &planned.plan)?;
     let csv = planned.predicted_csv.as_deref().unwrap_or_default();
     let recorded = planned.removal_tool.as_ref().map(|t| t.preston_k_mm2_n);
-    predicted_at_k(plan, csv, recorded, tool, before)
+    let tool_k = || Ok(ToolModel::of_text(&planned.tool)?.preston_k_mm2_n);
+    predicted_at_k(plan, csv, recorded, &tool_k, before)
 }
 
 /// Refuses a rigid plan (`plan` its file): k is fitted against a removal plan's prediction.
@@ -89,31 +92,31 @@ fn ensure_removal(plan: &Path, loaded: &Plan) -> anyhow::Result<()> {
 }
 
 /// The prediction of predicted.csv's text `csv` (beside `plan`) per core point of `before`
-/// and the plan's k: `recorded` (plan.json's), else the tool file's.
+/// and the plan's k: `recorded` (plan.json's), else the tool file's (`tool_k`).
 fn predicted_at_k(
     plan: &Path,
     csv: &str,
     recorded: Option<f64>,
-    tool: &Path,
+    tool_k: &dyn Fn() -> anyhow::Result<f64>,
     before: &Inspection,
 ) -> anyhow::Result<(Vec<f64>, f64)> {
     let csv_file = plan.with_file_name("predicted.csv");
-    let rows = removal_fit::parse_predicted(csv)
-        .map_err(|m| anyhow::anyhow!("{}: {m}", csv_file.display()))?;
+    let rows =
+        fit::parse_predicted(csv).map_err(|m| anyhow::anyhow!("{}: {m}", csv_file.display()))?;
     let k = match recorded {
         Some(k) if k.is_finite() && k > 0.0 => k,
         Some(k) => anyhow::bail!(
             "{}: provenance.config.removal_tool.preston_k_mm2_n {k:.4e} is not a positive k",
             plan.display()
         ),
-        None => ToolModel::load(tool)?.preston_k_mm2_n,
+        None => tool_k()?,
     };
-    let predicted = removal_fit::predicted_removal(before, &rows)
+    let predicted = fit::predicted_removal(before, &rows)
         .map_err(|m| anyhow::anyhow!("{}: {m}", csv_file.display()))?;
     Ok((predicted, k))
 }
 
-/// One grind's evidence (`removal_fit::evidence`) from inspections already read from
+/// One grind's evidence (`removal::fit::evidence`) from inspections already read from
 /// `inputs`' folders; the refusal names both folders.
 pub fn evidence_loaded(
     inputs: &Inputs,
@@ -123,10 +126,10 @@ pub fn evidence_loaded(
     plan_k: f64,
     cfg: &FitConfig,
 ) -> anyhow::Result<Evidence> {
-    removal_fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+    fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
-/// `removal_fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
+/// `removal::fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
 fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
     anyhow::anyhow!(
         "{} -> {}: {m}",
@@ -135,16 +138,29 @@ fn in_folders(inputs: &Inputs, m: String) -> anyhow::Error {
     )
 }
 
-/// Writes `out` from the tool file `input` with the fit's `[removal] preston_k_mm2_n` and
-/// `preston_k_rel_sd` (`RemovalFit::k_rel_sd`, at most 1, the key's range) (two lines changed,
-/// comments kept) and reads them back through the planner's loader.
-pub fn write_fit(input: &Path, out: &Path, fit: &RemovalFit) -> anyhow::Result<()> {
+/// Reads the tool file `input` (`calibrate removal`'s) to write a fit from.
+pub fn read_tool(input: &Path) -> anyhow::Result<ToolText> {
     let text = std::fs::read_to_string(input)
         .with_context(|| format!("{}: cannot read", input.display()))?;
+    Ok(ToolText {
+        path: input.to_path_buf(),
+        text,
+    })
+}
+
+/// Writes `out` from the tool file `input` (held) with the fit's `[removal] preston_k_mm2_n`
+/// and `preston_k_rel_sd` (`RemovalFit::k_rel_sd`, at most 1, the key's range) (two lines
+/// changed, comments kept), checks the text written through the planner's loader (in memory)
+/// and returns it.
+pub fn write_fit(input: &ToolText, out: &Path, fit: &RemovalFit) -> anyhow::Result<ToolText> {
     let (k, sd) = (fit.k_mm2_n, fit.k_rel_sd().min(1.0));
     let set = [("preston_k_mm2_n", k), ("preston_k_rel_sd", sd)];
-    files::write(out, &files::patch_removal(&text, &set))?;
-    let back = ToolModel::load(out)?;
+    let written = ToolText {
+        path: out.to_path_buf(),
+        text: files::patch_removal(&input.text, &set),
+    };
+    files::write(out, &written.text)?;
+    let back = ToolModel::of_text(&written)?;
     anyhow::ensure!(
         back.preston_k_mm2_n == k && back.preston_k_rel_sd == sd,
         "{}: preston_k_mm2_n, preston_k_rel_sd read back as {}, {}; wrote {k}, {sd}",
@@ -152,7 +168,7 @@ pub fn write_fit(input: &Path, out: &Path, fit: &RemovalFit) -> anyhow::Result<(
         back.preston_k_mm2_n,
         back.preston_k_rel_sd
     );
-    Ok(())
+    Ok(written)
 }
 
 /// The fit in lines for the user, each starting with `label`.
@@ -195,7 +211,7 @@ pub fn describe(fit: &RemovalFit, label: &str) -> Vec<String> {
 }
 
 /// What a grind of the loop was made from: its inspection (in memory, its folder in
-/// `inspection.dir`), its plan (file and what was written) and the tool file.
+/// `inspection.dir`), its plan (file and what was written, with the tool file it was made with).
 pub struct Ground {
     /// The inspection the plan was made from.
     pub inspection: Inspection,
@@ -203,13 +219,11 @@ pub struct Ground {
     pub plan_file: PathBuf,
     /// The plan as made and written.
     pub planned: Planned,
-    /// The tool file the plan was made with.
-    pub tool: PathBuf,
 }
 
 /// Refits k after the last grind from the points of every grind so far (`pooled`, which this
-/// grind's points join; `removal_fit::pool`) and, when the fit holds, writes DIR/tool.toml
-/// with it and makes it the `tool` of the next plan; re-predicts the grind with the fitted k
+/// grind's points join; `removal::fit::pool`) and, when the fit holds, writes DIR/tool.toml
+/// with it and makes it (held in memory) the `tool` of the next plan; re-predicts the grind with the fitted k
 /// over the defect points of the regions `ids` against the `after` inspection (folder and
 /// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
 /// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
@@ -220,22 +234,17 @@ pub fn refit(
     after: (&Path, &Inspection),
     ids: &[i64],
     dir: &Path,
-    tool: &mut PathBuf,
+    tool: &mut Option<ToolText>,
     pooled: &mut Vec<Evidence>,
 ) -> (Option<f64>, Option<Agreement>, Option<String>) {
     let inputs = Inputs {
         before: before.inspection.dir.clone(),
         after: after.0.to_path_buf(),
         plan: before.plan_file.clone(),
-        tool: before.tool.clone(),
+        tool: before.planned.tool.path.clone(),
     };
     let written = dir.join("tool.toml");
-    let prediction = prediction_of(
-        &before.plan_file,
-        &before.planned,
-        &before.tool,
-        &before.inspection,
-    );
+    let prediction = prediction_of(&before.plan_file, &before.planned, &before.inspection);
     let shift_cfg = ShiftConfig::default();
     let mut off_plan = None;
     let prediction = prediction.map(|(p, k)| {
@@ -252,26 +261,26 @@ pub fn refit(
         let grind = evidence_loaded(&inputs, &before.inspection, after.1, p, *k, &cfg)?;
         pooled.push(grind);
         let fit = fit_pooled(pooled, &cfg)?;
-        write_fit(&before.tool, &written, &fit)?;
-        Ok(fit.k_mm2_n)
+        let text = write_fit(&before.planned.tool, &written, &fit)?;
+        Ok((fit.k_mm2_n, text))
     });
     let k = match fitted {
-        Ok(k) => {
+        Ok((k, text)) => {
             println!("cycle: the next plan uses k from {}", written.display());
-            *tool = written;
+            *tool = Some(text);
             Some(k)
         }
         Err(e) => {
             println!(
                 "cycle: k not refitted ({}); the next plan keeps {}",
                 one_line(&e),
-                tool.display()
+                before.planned.tool.path.display()
             );
             None
         }
     };
     let agreement = prediction.ok().and_then(|(p, plan_k)| {
-        removal_fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
+        fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
     (k, agreement, off_plan)
 }
@@ -302,7 +311,7 @@ fn describe_shift(r: &RegionShift) -> String {
 /// grinds and points it pooled.
 fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit> {
     let last = pooled.last().expect("the grind just pushed");
-    match removal_fit::pool(std::slice::from_ref(last), cfg) {
+    match fit::pool(std::slice::from_ref(last), cfg) {
         Ok(own) => describe(&own, "cycle: this grind alone")
             .iter()
             .for_each(|line| println!("{line}")),
@@ -313,7 +322,7 @@ fn fit_pooled(pooled: &[Evidence], cfg: &FitConfig) -> anyhow::Result<RemovalFit
         ),
         Err(_) => {}
     }
-    let fit = removal_fit::pool(pooled, cfg).map_err(|m| anyhow::anyhow!("{m}"))?;
+    let fit = fit::pool(pooled, cfg).map_err(|m| anyhow::anyhow!("{m}"))?;
     println!(
         "cycle: k {:.4e} +- {:.2e} mm^2/N pooled over {} grind{} / {} points (x {:.3} of the last \
          plan's {:.4e}); fit residual RMS {:.4} mm; k uncertainty {:.1} % ({:.1} % point to point, {:.1} % between regions)",

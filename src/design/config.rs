@@ -47,6 +47,10 @@ pub struct DesignConfig {
     /// Table axes of the grid, robot frame (default: vertical; horizontal across and along
     /// the arm plane; tilted 45 degrees on a bracket towards, away from and across it).
     pub axes: Vec<[f64; 3]>,
+    /// Fixturings of the part scored for the designed cell, the first included (2: one
+    /// re-fixturing brings the faces along the table axis into reach; 1: the part is mounted
+    /// once). Scored after the search, which designs the cell for the first.
+    pub setups: usize,
 }
 
 impl Default for DesignConfig {
@@ -65,6 +69,7 @@ impl Default for DesignConfig {
             rounds: 3,
             seed: 1,
             axes: AXES.to_vec(),
+            setups: 2,
         }
     }
 }

@@ -12,6 +12,7 @@ mod config;
 mod eval;
 mod part;
 mod search;
+pub mod setups;
 pub mod write;
 
 use std::collections::BTreeMap;
@@ -96,6 +97,9 @@ pub struct Design {
     /// The best of each table-axis family (vertical, horizontal, tilted) and its coverage at
     /// the ranking stage: the alternatives tried.
     pub alternatives: Vec<(String, f64, Candidate)>,
+    /// The fixturings of the part: the candidate's mounting first, then the further ones
+    /// (`setups::setups`), each with its own coverage and the coverage of all up to it.
+    pub setups: Vec<setups::Setup>,
 }
 
 /// Searches the cell for `part` from `source`'s arm, servos and tool.
@@ -133,6 +137,11 @@ pub fn assess(
     assess_in(&ctx, &one, cfg)
 }
 
+/// The share of the final samples the setups of `d` reach together (its coverage with one).
+pub fn union_coverage(d: &Design) -> f64 {
+    d.setups.last().map_or(d.coverage, |s| s.union_coverage)
+}
+
 /// The scoring context of `part` in `source`'s cell with one arm per shank.
 fn context<'a>(
     part: &'a Part,
@@ -166,6 +175,8 @@ fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Resul
             *refused.entry(r.clone()).or_insert(0) += 1;
         }
     }
+    let reached: Vec<bool> = fin.verdicts.iter().map(|v| v.angle_deg.is_some()).collect();
+    let setups = setups::setups(ctx, best, &reached, cfg.setups, cfg.step_deg);
     let m: Matrix4<f64> = wc.robot_from_reference;
     Ok(Design {
         candidate: best.clone(),
@@ -176,5 +187,6 @@ fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Resul
         samples: fin.verdicts,
         candidates_scored: 1,
         alternatives: Vec::new(),
+        setups,
     })
 }

@@ -19,8 +19,18 @@ use crate::report::inspection::{
 use crate::report::provenance::Provenance;
 use crate::report::{ReportConfig, Unmeasured};
 
-fn write_json(path: &Path, value: &serde_json::Value) -> Result<()> {
+/// Writes `value` as pretty JSON to `path`: with `provenance` added as its last key
+/// ([`Provenance::stamp`], in memory: the file is never read back), else ending in a newline.
+fn write_json(
+    path: &Path,
+    value: &impl serde::Serialize,
+    provenance: Option<&Provenance>,
+) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
+    let text = match provenance {
+        Some(p) => p.stamp(&text, path)?,
+        None => text + "\n",
+    };
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
 }
 
@@ -36,13 +46,14 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
         Ok(found) => found,
         Err(e) => match e.downcast::<RegisterError>() {
             Ok(failed) => {
-                let e = record_failure(failed, &reg_file, files);
-                if let Ok(p) = &provenance {
-                    // The failure is the error to report; a record without provenance is
-                    // still a record.
-                    let _ = p.stamp_json(&reg_file);
-                }
-                return Err(e);
+                // The failure is the error to report; a record without provenance is still a
+                // record.
+                return Err(record_failure(
+                    failed,
+                    &reg_file,
+                    files,
+                    provenance.as_ref().ok(),
+                ));
             }
             Err(e) => return Err(e),
         },
@@ -53,7 +64,7 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
         eprintln!("{notice}");
     }
     match &found.pose {
-        PoseSource::Registered(reg) => record_ok(reg, &reg_file, files)?,
+        PoseSource::Registered(reg) => record_ok(reg, &reg_file, files, Some(&provenance))?,
         PoseSource::Given { pose, source } => write_json(
             &reg_file,
             &json!({
@@ -65,15 +76,19 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
                 "coarse": null,
                 "fine": null,
             }),
+            Some(&provenance),
         )?,
     }
-    provenance.stamp_json(&reg_file)?;
     for (k, pose) in found.more_poses.iter().enumerate() {
         let file = out.join(format!("registration_scan{}.json", k + 2));
         if let PoseSource::Registered(reg) = pose {
             let scan = inputs.more_scans[k].as_path();
-            record_ok(reg, &file, (scan, inputs.reference.as_path()))?;
-            provenance.stamp_json(&file)?;
+            record_ok(
+                reg,
+                &file,
+                (scan, inputs.reference.as_path()),
+                Some(&provenance),
+            )?;
         }
     }
     let lines = std::mem::take(&mut found.provenance);
@@ -142,12 +157,8 @@ fn write_outputs(
     if !support.is_empty() {
         ply_table.set_field("scans", support.iter().map(|&m| m as f64).collect());
     }
-    let write_regions = || -> Result<()> {
-        let text = serde_json::to_string_pretty(found)?;
-        let path = out.join("regions.json");
-        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
-        provenance.stamp_json(&path)
-    };
+    let write_regions =
+        || -> Result<()> { write_json(&out.join("regions.json"), found, Some(provenance)) };
     let ((csv, ply), (regions, report)) = rayon::join(
         || {
             rayon::join(
@@ -307,15 +318,25 @@ fn with_status<T: serde::Serialize>(
     Ok(v)
 }
 
-/// Records a registration that succeeded in `out` (registration.json, `"status": "ok"`);
-/// `files` are the scan's and the reference's.
-pub fn record_ok(reg: &Registration, out: &Path, files: (&Path, &Path)) -> Result<()> {
-    write_json_line(out, &with_status(reg, "ok", None, files)?)
+/// Records a registration that succeeded in `out` (registration.json, `"status": "ok"`, with
+/// `provenance` when given); `files` are the scan's and the reference's.
+pub fn record_ok(
+    reg: &Registration,
+    out: &Path,
+    files: (&Path, &Path),
+    provenance: Option<&Provenance>,
+) -> Result<()> {
+    write_json(out, &with_status(reg, "ok", None, files)?, provenance)
 }
 
-/// Records a registration that failed in `out` (`"status": "failed"` with the diagnostics)
-/// and returns the one-line error that says so.
-pub fn record_failure(err: RegisterError, out: &Path, files: (&Path, &Path)) -> anyhow::Error {
+/// Records a registration that failed in `out` (`"status": "failed"` with the diagnostics,
+/// and `provenance` when given) and returns the one-line error that says so.
+pub fn record_failure(
+    err: RegisterError,
+    out: &Path,
+    files: (&Path, &Path),
+    provenance: Option<&Provenance>,
+) -> anyhow::Error {
     let RegisterError::Failed {
         reason,
         diagnostics,
@@ -324,7 +345,7 @@ pub fn record_failure(err: RegisterError, out: &Path, files: (&Path, &Path)) -> 
         return err.into();
     };
     let value = with_status(&*diagnostics, "failed", Some(&reason), files);
-    if let Err(e) = value.and_then(|v| write_json_line(out, &v)) {
+    if let Err(e) = value.and_then(|v| write_json(out, &v, provenance)) {
         return e;
     }
     anyhow::anyhow!(
@@ -336,8 +357,4 @@ pub fn record_failure(err: RegisterError, out: &Path, files: (&Path, &Path)) -> 
         diagnostics.fitness,
         out.display()
     )
-}
-fn write_json_line(path: &Path, value: &Value) -> Result<()> {
-    let text = serde_json::to_string_pretty(value)?;
-    std::fs::write(path, text + "\n").with_context(|| format!("{}: cannot write", path.display()))
 }

@@ -12,6 +12,7 @@ use super::report::{Reachability, UnreachablePoint};
 use super::{collide, dwell, order, predict, program, raster, surface};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
+use crate::robot::units::mm;
 
 /// A region planned in removal mode whose verdict stands (so far): what solving it again needs.
 pub(crate) struct Settled {
@@ -68,9 +69,9 @@ pub(crate) fn plan_regions(
         .collect();
     let centroids: Vec<Point3<f64>> = planned
         .iter()
-        .map(|r| workcell.point_from_reference_mm(&r.centroid.into()) * 1e3)
+        .map(|r| mm(workcell.point_from_reference_mm(&r.centroid.into())))
         .collect();
-    let start = Point3::from(robot.fk(&config.home).position * 1e3);
+    let start = Point3::from(mm(robot.fk(&config.home).position));
     let visit = order::order(&start, &centroids);
     let mut out = Planned {
         runs: Vec::new(),

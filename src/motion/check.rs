@@ -7,6 +7,7 @@ use super::program::{PlannedPass, Program, SegmentKind};
 use super::raster::PathPoint;
 use super::report::{Metrics, RegionReport};
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
+use crate::robot::units::mm;
 use crate::robot::{resolution_error, IkTarget, Robot, Workcell};
 use crate::spatial::Neighbours;
 
@@ -42,8 +43,8 @@ pub fn measure(prog: &Program, robot: &Robot, cfg: &PlanConfig) -> Metrics {
         predicted_duration_s: traj.duration(),
         samples: traj.len(),
         path_points: prog.passes.iter().map(|p| p.points.len()).sum(),
-        resolution_error_max_mm: res.iter().copied().fold(0.0, f64::max) * 1e3,
-        resolution_error_mean_mm: res.iter().sum::<f64>() / res.len().max(1) as f64 * 1e3,
+        resolution_error_max_mm: mm(res.iter().copied().fold(0.0, f64::max)),
+        resolution_error_mean_mm: mm(res.iter().sum::<f64>() / res.len().max(1) as f64),
         feed_mm_s: cfg.feed_mm_s,
         cruise_feed_min_mm_s: f64::INFINITY,
         slowed_strokes: prog.slowed,
@@ -63,18 +64,18 @@ pub fn measure(prog: &Program, robot: &Robot, cfg: &PlanConfig) -> Metrics {
         for t in sampled {
             m.sample_to_path_max_mm = m
                 .sample_to_path_max_mm
-                .max(polyline_distance(t, &planned) * 1e3);
+                .max(mm(polyline_distance(t, &planned)));
         }
         for p in &planned {
             m.path_to_samples_max_mm = m
                 .path_to_samples_max_mm
-                .max(polyline_distance(p, sampled) * 1e3);
+                .max(mm(polyline_distance(p, sampled)));
         }
         for k in seg.first_sample + 1..=seg.last_sample {
             grind_samples += 1;
             if prog.cruise[k] && prog.cruise[k - 1] {
                 cruise_samples += 1;
-                let v = (tips[k] - tips[k - 1]).norm() / traj.period * 1e3;
+                let v = mm((tips[k] - tips[k - 1]).norm() / traj.period);
                 m.cruise_feed_min_mm_s = m.cruise_feed_min_mm_s.min(v);
                 m.cruise_feed_max_mm_s = m.cruise_feed_max_mm_s.max(v);
             }

@@ -3,10 +3,10 @@
 //! (transits nothing, approach / retract / re-orientation a touch of the ball, grinding a touch
 //! of the ball on one face).
 use super::collide::{Allow, CollisionConfig, Scene};
-pub use super::contact::Collision;
 use super::error::PlanError;
 use super::file::Plan;
 use super::program::{Segment, SegmentKind};
+pub use super::report::Collision;
 use crate::repair::Inspection;
 use crate::robot::{Robot, Workcell};
 

@@ -3,6 +3,7 @@
 //! robot frame), and the moving bodies at a joint sample: the tool's ball, its shank and the
 //! arm's links as capsules between the URDF joint origins. Method: docs/ALGORITHMS.md,
 //! "Collision model".
+mod solids;
 mod sweep;
 
 use std::collections::HashSet;
@@ -10,11 +11,13 @@ use std::sync::Mutex;
 
 use nalgebra::{Matrix4, Point3, Vector3};
 
-use super::contact::{segment_box_distance, spacing};
-pub use super::contact::{solids_beside, Body, CollisionConfig, Hit, Obstacle, Solid};
+pub use super::report::{Body, Hit, Obstacle};
 use crate::repair::SurfacePoint;
+use crate::robot::units::{mm, MM_PER_M, M_PER_MM};
 use crate::robot::{angle_between, Robot, Workcell};
 use crate::spatial::{Neighbour, Neighbours};
+use solids::{segment_box_distance, spacing};
+pub use solids::{solids_beside, CollisionConfig, Solid};
 use sweep::Carry;
 pub use sweep::Sweep;
 
@@ -116,8 +119,8 @@ impl<'a> Scene<'a> {
                 hi = hi.sup(p);
             }
         }
-        let scale = Matrix4::new_scaling(1e3);
-        let robot_from_ref = wc.robot_from_reference * Matrix4::new_scaling(1e-3);
+        let scale = Matrix4::new_scaling(MM_PER_M);
+        let robot_from_ref = wc.robot_from_reference * Matrix4::new_scaling(M_PER_MM);
         let ref_from_robot = robot_from_ref.try_inverse().unwrap_or(scale);
         Scene {
             points,
@@ -128,10 +131,7 @@ impl<'a> Scene<'a> {
             ref_from_robot,
             robot_from_ref,
             ball: robot.tool.radius_mm(),
-            shank: (
-                robot.tool.shank_radius() * 1e3,
-                robot.tool.shank_length() * 1e3,
-            ),
+            shank: (mm(robot.tool.shank_radius()), mm(robot.tool.shank_length())),
             cfg: cfg.clone(),
             clear: Mutex::new(HashSet::new()),
         }
@@ -141,11 +141,11 @@ impl<'a> Scene<'a> {
     /// kept: it lies in the reference frame): the cell design tries many placements of one
     /// part. Forgets the samples found clear.
     pub fn place(&mut self, wc: &Workcell, solids: &[Solid]) {
-        self.robot_from_ref = wc.robot_from_reference * Matrix4::new_scaling(1e-3);
+        self.robot_from_ref = wc.robot_from_reference * Matrix4::new_scaling(M_PER_MM);
         self.ref_from_robot = self
             .robot_from_ref
             .try_inverse()
-            .unwrap_or(Matrix4::new_scaling(1e3));
+            .unwrap_or(Matrix4::new_scaling(MM_PER_M));
         self.cfg.solids = solids.to_vec();
         if let Ok(c) = self.clear.get_mut() {
             c.clear();
@@ -449,11 +449,11 @@ impl<'a> Scene<'a> {
 
     /// The first solid `c` comes within `margin` of (answers exactly as the search alone).
     fn solid_hit(&self, c: &Capsule, margin: f64) -> Option<Hit> {
-        let to_robot_mm = |p: &Point3<f64>| self.robot_from_ref.transform_point(p) * 1e3;
+        let to_robot_mm = |p: &Point3<f64>| mm(self.robot_from_ref.transform_point(p));
         let (a, b) = (to_robot_mm(&c.a), to_robot_mm(&c.b));
         self.cfg.solids.iter().find_map(|s| {
-            let lo = Point3::from(Vector3::from(s.min) * 1e3);
-            let hi = Point3::from(Vector3::from(s.max) * 1e3);
+            let lo = Point3::from(mm(Vector3::from(s.min)));
+            let hi = Point3::from(mm(Vector3::from(s.max)));
             // every point of the segment is in its bounding box, so the gap between the two
             // boxes bounds the distance from below: beyond the margin there, the search
             // (whose value is a distance to points of the segment) cannot find a hit either

@@ -15,6 +15,7 @@ use crate::removal::montecarlo::JointError;
 use crate::removal::{self, force, Contact, Influence, ToolModel};
 use crate::repair::RegionInfo;
 use crate::repair::{Inspection, SurfacePoint};
+use crate::robot::units::mm;
 use crate::robot::{Robot, Workcell};
 use crate::spatial::Neighbours;
 
@@ -80,7 +81,7 @@ pub(crate) fn pressed_contacts(
 /// servo's half raw count (rad), as `robot/resolution.rs` quantises them.
 pub(crate) fn joint_error(robot: &Robot, q: &[f64], back: &Matrix3<f64>) -> JointError {
     let jac = robot.jacobian(q);
-    let position = jac.rows(0, 3).into_owned() * 1e3;
+    let position = mm(jac.rows(0, 3).into_owned());
     let sensitivity: DMatrix<f64> = DMatrix::from_fn(3, robot.dof(), |r, c| {
         (0..3).map(|k| back[(r, k)] * position[(k, c)]).sum()
     });
@@ -351,7 +352,7 @@ fn solve_config(
     for piece in runs.iter().flatten() {
         let (s, q, _) = chain_knots(&[piece]);
         let lim = chain_limits(&JointSpline::new(s, q), robot, config);
-        solve.feed_max_mm_s = solve.feed_max_mm_s.min(lim.velocity * 1e3);
+        solve.feed_max_mm_s = solve.feed_max_mm_s.min(mm(lim.velocity));
     }
     if solve.feed_min_mm_s >= solve.feed_max_mm_s {
         return Err(PlanError::Config(format!(

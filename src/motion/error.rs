@@ -36,7 +36,7 @@ pub enum PlanError {
     Collision(String),
     /// Samples bring the tool or the arm into the part or a solid.
     #[error("plan fails the collision check: {} sample(s): {}", .0.len(), list(.0))]
-    Collides(Vec<super::contact::Collision>),
+    Collides(Vec<super::report::Collision>),
     /// The servo command stream cannot be built or does not match the samples.
     #[error("servo frames: {0}")]
     Frames(String),

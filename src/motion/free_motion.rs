@@ -14,6 +14,7 @@ use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::program::{max_step, PlannedPoint, Program, Segment, SegmentKind};
 use super::trajectory::{JointTrajectory, Limits, Move};
+use crate::robot::units::{metres, mm};
 use crate::robot::{IkTarget, Robot, Workcell};
 
 /// Waypoint spacing of a straight retract, mm (0.25: the joint spline between two IK
@@ -84,7 +85,7 @@ impl<'a> Assembly<'a> {
         (0..3)
             .filter_map(|k| {
                 let target = IkTarget {
-                    position: Vector3::from(p.tip_m) + up * (lift / f64::from(1 << k) * 1e-3),
+                    position: Vector3::from(p.tip_m) + up * metres(lift / f64::from(1 << k)),
                     axis: Vector3::from(p.axis),
                     roll: None,
                 };
@@ -292,7 +293,7 @@ impl Program {
         let mut qs = vec![q0];
         for k in 1..=steps {
             let target = IkTarget {
-                position: pose.position + dir * (length * 1e-3 * k as f64 / steps as f64),
+                position: pose.position + dir * (metres(length) * k as f64 / steps as f64),
                 axis: pose.axis,
                 roll: None,
             };
@@ -385,7 +386,7 @@ impl Program {
         let (ta, tb) = (Vector3::from(a.tip_m), Vector3::from(b.tip_m));
         let (ua, ub) = (cell.robot.fk(&a.q).axis, cell.robot.fk(&b.q).axis);
         let last = self.trajectory.last().to_vec();
-        if (tb - ta).norm() * 1e3 > cell.scene.config().glide_mm || max_step(&last, &a.q) > 1e-12 {
+        if mm((tb - ta).norm()) > cell.scene.config().glide_mm || max_step(&last, &a.q) > 1e-12 {
             return Ok(false);
         }
         let turn =

@@ -15,7 +15,6 @@ pub mod clearance;
 pub mod collide;
 pub mod compensate;
 mod config;
-pub mod contact;
 pub mod dwell;
 pub mod error;
 pub mod feed;

@@ -22,6 +22,7 @@ use crate::removal::prediction::{DwellPoint, PredictedRow, RegionPrediction, Rem
 use crate::removal::{self, Influence, Stats};
 use crate::repair::Inspection;
 use crate::repair::SurfacePoint;
+use crate::robot::units::mm;
 use crate::robot::{Robot, Workcell};
 
 /// One region's prediction: its report entry and predicted.csv rows, or why it over-grinds.
@@ -93,7 +94,7 @@ fn press_dwell(prog: &Program, robot: &Robot, wc: &Workcell, preload: f64) -> Ve
         let contact = Vector3::from(point.tip_m);
         let depth = |k: usize| {
             let tip = robot.fk(prog.trajectory.sample(k)).position;
-            (preload - (tip - contact).dot(&normal) * 1e3).clamp(0.0, preload) / preload
+            (preload - mm((tip - contact).dot(&normal))).clamp(0.0, preload) / preload
         };
         let shares: Vec<f64> = (seg.first_sample..=seg.last_sample).map(depth).collect();
         let sum: f64 = shares.windows(2).map(|w| 0.5 * (w[0] + w[1])).sum();

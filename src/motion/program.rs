@@ -5,12 +5,13 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::config::PlanConfig;
-pub use super::contact::SegmentKind;
 use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
 use super::raster::{PathPoint, Stroke, StrokeKind};
+pub use super::report::SegmentKind;
 use super::report::UnreachablePoint;
 use super::trajectory::JointTrajectory;
+use crate::robot::units::{metres, mm};
 use crate::robot::{IkTarget, Robot, Workcell};
 
 /// A contact point with its tool pose and joint solution.
@@ -553,7 +554,7 @@ impl Program {
         }
         let spline = JointSpline::new(s, q);
         let wanted = PathLimits {
-            velocity: piece.feed_mm_s * 1e-3,
+            velocity: metres(piece.feed_mm_s),
             acceleration: cfg.path_acceleration,
             jerk: cfg.path_jerk,
         };
@@ -561,7 +562,7 @@ impl Program {
         if lim.velocity < wanted.velocity * (1.0 - 1e-9) {
             self.slowed += 1;
         }
-        piece.feed_mm_s = lim.velocity * 1e3;
+        piece.feed_mm_s = mm(lim.velocity);
         let first = self.trajectory.len() - 1;
         let mut added = 0;
         if spline.length() > 0.0 {

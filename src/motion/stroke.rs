@@ -11,6 +11,7 @@ use super::error::PlanError;
 use super::feed::{path_limits, JointSpline, PathLimits};
 use super::program::{max_step, PlannedPass, Program, Segment, SegmentKind};
 use super::trajectory::{Limits, Move, TrajectoryConfig, TrajectoryError};
+use crate::robot::units::{metres, mm};
 use crate::robot::Robot;
 
 /// Share of the path acceleration the speed planning between pieces assumes (0.5): Ruckig's
@@ -51,7 +52,7 @@ pub(crate) fn chain_knots(pieces: &[&PlannedPass]) -> (Vec<f64>, Vec<Vec<f64>>, 
 /// acceleration and jerk, lowered where the joints demand (`path_limits`).
 pub(crate) fn chain_limits(spline: &JointSpline, robot: &Robot, cfg: &PlanConfig) -> PathLimits {
     let wanted = PathLimits {
-        velocity: cfg.removal.feed_max_mm_s * 1e-3,
+        velocity: metres(cfg.removal.feed_max_mm_s),
         acceleration: cfg.path_acceleration,
         jerk: cfg.path_jerk,
     };
@@ -135,7 +136,7 @@ impl Program {
         }
         let spline = JointSpline::new(s, q);
         let lim = chain_limits(&spline, robot, cfg);
-        if lim.velocity < cfg.removal.feed_max_mm_s * 1e-3 * (1.0 - 1e-9) {
+        if lim.velocity < metres(cfg.removal.feed_max_mm_s) * (1.0 - 1e-9) {
             self.slowed += 1;
         }
         // the pieces of non-zero length, their knots and wanted speeds
@@ -238,7 +239,7 @@ impl Program {
                 .map(|w| (Vector3::from(w[1].tip_m) - Vector3::from(w[0].tip_m)).norm());
             let length: f64 = length.sum();
             piece.feed_mm_s = match durations[k] > 0.0 {
-                true => (length / durations[k] * 1e3).min(lim.velocity * 1e3),
+                true => mm(length / durations[k]).min(mm(lim.velocity)),
                 false => 0.0,
             };
             piece.dwell_s = Some(durations[k]);

@@ -13,7 +13,7 @@ use super::error::PlanError;
 use super::file::Plan;
 use super::raster;
 use super::report::Metrics;
-use super::table_file::{table_move, RegionTable, TablePlan};
+use super::table_file::{table_move, RegionTable, TablePlan, TriedAngle};
 use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
@@ -150,8 +150,10 @@ impl GroupedPlan<'_> {
                     .collect();
                 (Some(sub), weak)
             }
-            // a free move the collision model refuses at this angle: each region alone
-            Err(PlanError::Collision(first)) => {
+            // a free move the collision model refuses at this angle, or the check of the
+            // whole trajectory finds a sample against the part: each region alone
+            Err(e @ (PlanError::Collision(_) | PlanError::Collides(_))) => {
+                let first = first_clause(&e.to_string());
                 let mut alone = Vec::new();
                 for region in regions.iter() {
                     let best = self.best_alone(region, ranked, None);
@@ -201,9 +203,10 @@ impl GroupedPlan<'_> {
     }
 
     /// `region` planned alone at each of its first [`FALLBACK_ANGLES`] candidate angles but
-    /// `skip`: the plan covering most of it (angle, plan, index in regions.json order).
+    /// `skip`: the plan covering most of it (angle, plan, index in regions.json order). Every
+    /// angle tried goes into the region's `tried` list.
     fn best_alone(
-        &self,
+        &mut self,
         region: &RegionInfo,
         ranked: &[Ranked],
         skip: Option<f64>,
@@ -214,14 +217,35 @@ impl GroupedPlan<'_> {
             .iter()
             .position(|r| r.id == region.id)?;
         let mut best: Option<(f64, Plan, usize)> = None;
+        let mut tried = Vec::new();
         for &angle in ranked[k].candidates.iter().take(FALLBACK_ANGLES) {
             if skip.is_some_and(|s| (s - angle).abs() < 1e-9) {
                 continue;
             }
-            let Ok(sub) = self.plan_at(angle, vec![region.clone()]) else {
-                continue;
+            let sub = match self.plan_at(angle, vec![region.clone()]) {
+                Ok(sub) => sub,
+                Err(e) => {
+                    tried.push(TriedAngle {
+                        angle_deg: tidy_deg(angle),
+                        coverage: 0.0,
+                        refused: Some(first_clause(&e.to_string())),
+                    });
+                    continue;
+                }
             };
             let c = coverage(Some(&sub), region.id);
+            // short of good: the first reason the plan there gives for the region's contacts
+            let why = sub
+                .reachability
+                .unreachable
+                .iter()
+                .find(|u| u.region == region.id && c < GOOD_COVERAGE)
+                .map(|u| first_clause(&u.reason));
+            tried.push(TriedAngle {
+                angle_deg: tidy_deg(angle),
+                coverage: c,
+                refused: why,
+            });
             if best
                 .as_ref()
                 .is_none_or(|b| c > coverage(Some(&b.1), region.id))
@@ -232,8 +256,20 @@ impl GroupedPlan<'_> {
                 break;
             }
         }
+        tried.sort_by(|a, b| b.coverage.total_cmp(&a.coverage));
+        self.table_plan.regions[k].tried.extend(tried);
         best
     }
+}
+
+/// Longest reason kept for a refused table angle, characters (a collision error lists every
+/// sample; its first clause names the rule, the body and the place).
+const REASON_CHARS: usize = 240;
+
+/// The first clause of a planner error (up to the first `;`), at most [`REASON_CHARS`].
+fn first_clause(e: &str) -> String {
+    let first = e.split(';').next().unwrap_or(e).trim();
+    first.chars().take(REASON_CHARS).collect()
 }
 
 /// Share of region `id`'s core points a plan covers (0 without a plan).
@@ -323,6 +359,7 @@ fn rank_angles(
                     angle_deg: tidy_deg(order[0].0),
                     reachable_share: order[0].1,
                     reachable_share_at_zero: at_zero,
+                    tried: Vec::new(),
                 },
                 candidates: spread(&order),
             }

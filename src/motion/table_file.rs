@@ -25,6 +25,25 @@ pub struct RegionTable {
     pub reachable_share: f64,
     /// The same at table angle 0 (the cell without turning).
     pub reachable_share_at_zero: f64,
+    /// The other table angles the region was planned at alone because the plan at its first
+    /// angle left it short, best first: what would reach the rest, and why not. Absent in
+    /// plans from before 2026-12-05 and where none was needed: empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tried: Vec<TriedAngle>,
+}
+
+/// One table angle a region was planned at alone.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TriedAngle {
+    /// Table angle, degrees.
+    pub angle_deg: f64,
+    /// Share of the region's core points the plan there covers (0 when refused).
+    pub coverage: f64,
+    /// Why the region is short there: the planner's error (its first clause) when the plan
+    /// was refused, else the first reason the plan gives for the region's left-out contacts;
+    /// None when it covers enough or names no reason.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refused: Option<String>,
 }
 
 /// One table move: the arm rests at arm sample `at_sample` (retracted, at home) while the

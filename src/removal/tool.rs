@@ -6,8 +6,8 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::robot::error::read_toml;
-use crate::robot::{Robot, RobotError};
+use crate::robot::error::parse_toml;
+use crate::robot::{Robot, RobotError, ToolText};
 
 /// The removal model of the tool (units in the key names: N, mm, MPa, rpm, degrees).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -91,9 +91,14 @@ impl ToolModel {
 
     /// Reads the `[removal]` table of `file` (tool.toml); absent: the defaults.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
-        let parsed: ToolFile = read_toml(file)?;
+        Self::of_text(&ToolText::read(file)?)
+    }
+
+    /// Reads the `[removal]` table of a tool file held in memory; absent: the defaults.
+    pub fn of_text(tool: &ToolText) -> Result<Self, RobotError> {
+        let parsed: ToolFile = parse_toml(&tool.path, &tool.text)?;
         Self::from_table(parsed.removal.as_ref())
-            .map_err(|(key, msg)| RobotError::bad(file, key, msg))
+            .map_err(|(key, msg)| RobotError::bad(&tool.path, key, msg))
     }
 
     /// The tool of a loaded robot (its tool.toml's `[removal]` table, kept by

@@ -61,8 +61,19 @@ impl Provenance {
     ) -> Result<Provenance> {
         let inputs = inputs
             .par_iter()
-            .map(|(role, path)| hash_file(role, path))
+            .map(|(role, path)| InputFile::hash(role, path))
             .collect::<Result<Vec<_>>>()?;
+        Provenance::of_inputs(command, units, inputs, config)
+    }
+
+    /// Records the `inputs` already hashed ([`InputFile::hash`], [`InputFile::held`]) and the
+    /// rest now.
+    pub fn of_inputs(
+        command: &str,
+        units: &str,
+        inputs: Vec<InputFile>,
+        config: &impl Serialize,
+    ) -> Result<Provenance> {
         Ok(Provenance {
             command: command.to_string(),
             polishbot_version: env!("CARGO_PKG_VERSION").to_string(),
@@ -101,18 +112,8 @@ impl Provenance {
         lines
     }
 
-    /// Adds this block as the last key, `provenance`, of the JSON object in `path` (written
-    /// pretty by serde_json). The text before it stays byte for byte.
-    pub fn stamp_json(&self, path: &Path) -> Result<()> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
-        let out = self.stamp(&text, path)?;
-        std::fs::write(path, out).with_context(|| format!("{}: cannot write", path.display()))
-    }
-
-    /// The JSON object `text` (the file `path`, named in errors) with this block added as its
-    /// last key, `provenance`: what [`Provenance::stamp_json`] writes, for a caller that holds
-    /// the text.
+    /// The JSON object `text` (pretty, by serde_json; the file `path`, named in errors) with
+    /// this block added as its last key, `provenance`. The text before it stays byte for byte.
     pub fn stamp(&self, text: &str, path: &Path) -> Result<String> {
         let end = text
             .trim_end()
@@ -125,34 +126,47 @@ impl Provenance {
     }
 }
 
-/// Size and SHA-256 of one file.
-fn hash_file(role: &str, path: &Path) -> Result<InputFile> {
-    let mut f =
-        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
-    let mut hasher = Sha256::new();
-    let mut buf = vec![0u8; CHUNK];
-    let mut bytes = 0u64;
-    loop {
-        let n = f
-            .read(&mut buf)
-            .with_context(|| format!("{}: byte {bytes}: cannot read", path.display()))?;
-        if n == 0 {
-            break;
+impl InputFile {
+    /// A file this process holds in memory (`bytes`, as written to or read from `path`):
+    /// recorded without reading the file back.
+    pub fn held(role: &str, path: &Path, bytes: &[u8]) -> InputFile {
+        InputFile {
+            role: role.to_string(),
+            path: path.display().to_string(),
+            bytes: bytes.len() as u64,
+            sha256: hex(Sha256::digest(bytes).as_slice()),
         }
-        hasher.update(&buf[..n]);
-        bytes += n as u64;
     }
-    let sha256 = hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
-    Ok(InputFile {
-        role: role.to_string(),
-        path: path.display().to_string(),
-        bytes,
-        sha256,
-    })
+
+    /// Size and SHA-256 of the file `path`, read in chunks.
+    pub fn hash(role: &str, path: &Path) -> Result<InputFile> {
+        let mut f = std::fs::File::open(path)
+            .with_context(|| format!("{}: cannot open", path.display()))?;
+        let mut hasher = Sha256::new();
+        let mut buf = vec![0u8; CHUNK];
+        let mut bytes = 0u64;
+        loop {
+            let n = f
+                .read(&mut buf)
+                .with_context(|| format!("{}: byte {bytes}: cannot read", path.display()))?;
+            if n == 0 {
+                break;
+            }
+            hasher.update(&buf[..n]);
+            bytes += n as u64;
+        }
+        Ok(InputFile {
+            role: role.to_string(),
+            path: path.display().to_string(),
+            bytes,
+            sha256: hex(hasher.finalize().as_slice()),
+        })
+    }
+}
+
+/// Lower-case hex of `bytes`.
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// The host's name, or "unknown".
@@ -210,20 +224,20 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let f = dir.join("abc.txt");
         std::fs::write(&f, "abc").unwrap();
-        let h = hash_file("x", &f).unwrap();
+        let h = InputFile::hash("x", &f).unwrap();
         // FIPS 180-2, appendix B.1.
         assert_eq!(
             h.sha256,
             "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
         );
         assert_eq!(h.bytes, 3);
+        let held = InputFile::held("x", &f, b"abc");
+        assert_eq!((held.sha256.as_str(), held.bytes), (h.sha256.as_str(), 3));
         let json = dir.join("r.json");
-        std::fs::write(&json, "{\n  \"a\": 1\n}").unwrap();
         let p =
             Provenance::new("inspect", "mm", &[("x", &f)], &serde_json::json!({"k": 2})).unwrap();
-        p.stamp_json(&json).unwrap();
-        let v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let text = p.stamp("{\n  \"a\": 1\n}", &json).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
         assert_eq!(v["a"], 1);
         assert_eq!(v["provenance"]["inputs"][0]["sha256"], h.sha256);
         assert_eq!(v["provenance"]["config"]["k"], 2);

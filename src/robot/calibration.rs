@@ -1,12 +1,12 @@
 //! The calibration files of a cell: `tool.toml`, `servos.toml`, `workcell.toml`
 //! (formats documented in the files under `calibration/`).
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use dofbot_protocol::ServoScale;
 use nalgebra::{Matrix4, Point3, Vector3};
 use serde::Deserialize;
 
-use super::error::{read_toml, RobotError};
+use super::error::{parse_toml, read_text, read_toml, RobotError};
 
 /// `tool.toml`: the grinding tool on the wrist-roll flange.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -58,7 +58,12 @@ impl Tool {
 
     /// Loads and checks `tool.toml`.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
-        let tool: Tool = read_toml(file)?;
+        ToolText::read(file)?.tool()
+    }
+
+    /// Parses and checks the text of `tool.toml` (`file`, named in errors).
+    pub fn parse(file: &Path, text: &str) -> Result<Self, RobotError> {
+        let tool: Tool = parse_toml(file, text)?;
         let n = Vector3::from(tool.axis).norm();
         if (n - 1.0).abs() > 1e-9 {
             return Err(RobotError::bad(
@@ -110,6 +115,32 @@ impl Tool {
             }
         }
         Ok(tool)
+    }
+}
+
+/// A tool file held in memory: its path (named in messages and recorded in provenance) and its
+/// text. The loop hands the tool it refitted on this way: tool.toml is written as an output and
+/// never read back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ToolText {
+    /// Where the text is (or was written).
+    pub path: PathBuf,
+    /// The file's text.
+    pub text: String,
+}
+
+impl ToolText {
+    /// Reads `file`.
+    pub fn read(file: &Path) -> Result<Self, RobotError> {
+        Ok(ToolText {
+            path: file.to_path_buf(),
+            text: read_text(file)?,
+        })
+    }
+
+    /// The tool, parsed and checked ([`Tool::parse`]).
+    pub fn tool(&self) -> Result<Tool, RobotError> {
+        Tool::parse(&self.path, &self.text)
     }
 }
 
@@ -368,7 +399,8 @@ impl Workcell {
 
     /// A reference-frame point given in millimetres, in the robot base frame (metres).
     pub fn point_from_reference_mm(&self, p_mm: &Point3<f64>) -> Point3<f64> {
-        self.robot_from_reference.transform_point(&(p_mm * 1e-3))
+        self.robot_from_reference
+            .transform_point(&super::units::metres(*p_mm))
     }
 
     /// A reference-frame direction (unitless), in the robot base frame.

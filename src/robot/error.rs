@@ -37,11 +37,24 @@ impl RobotError {
 
 /// Reads a TOML file into `T`; parse errors name the line and quote it.
 pub fn read_toml<T: serde::de::DeserializeOwned>(file: &Path) -> Result<T, RobotError> {
-    let text = std::fs::read_to_string(file).map_err(|e| RobotError::Io {
+    parse_toml(file, &read_text(file)?)
+}
+
+/// Reads `file` as text; the error names it.
+pub fn read_text(file: &Path) -> Result<String, RobotError> {
+    std::fs::read_to_string(file).map_err(|e| RobotError::Io {
         file: file.to_path_buf(),
         message: e.to_string(),
-    })?;
-    toml::from_str(&text).map_err(|e| {
+    })
+}
+
+/// Parses `text` (the file `file`, named in errors) into `T`; parse errors name the line and
+/// quote it.
+pub fn parse_toml<T: serde::de::DeserializeOwned>(
+    file: &Path,
+    text: &str,
+) -> Result<T, RobotError> {
+    toml::from_str(text).map_err(|e| {
         let place = match e.span() {
             Some(span) => {
                 let line = text[..span.start.min(text.len())].matches('\n').count() + 1;

@@ -19,7 +19,7 @@ pub mod servo_map;
 pub mod turntable;
 pub mod units;
 
-pub use calibration::{Servo, Servos, Tool, Workcell};
+pub use calibration::{Servo, Servos, Tool, ToolText, Workcell};
 pub use compliance::Compliance;
 pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
@@ -79,7 +79,12 @@ impl RobotConfig {
 
 /// Loads the robot model (URDF + tool + servos) and the workcell named by `config`.
 pub fn load(config: &RobotConfig) -> Result<(Robot, Workcell), RobotError> {
-    let robot = Robot::load(&config.urdf, &config.tool, &config.servos)?;
+    load_with(config, Tool::load(&config.tool)?)
+}
+
+/// [`load`] with the tool given (held in memory) instead of read from `config.tool`.
+pub fn load_with(config: &RobotConfig, tool: Tool) -> Result<(Robot, Workcell), RobotError> {
+    let robot = Robot::with_tool(&config.urdf, tool, &config.servos)?;
     let workcell = Workcell::load(&config.workcell)?;
     Ok((robot, workcell))
 }

@@ -63,7 +63,11 @@ impl std::fmt::Debug for Robot {
 impl Robot {
     /// Builds the model from a URDF file, `tool.toml` and `servos.toml`.
     pub fn load(urdf: &Path, tool: &Path, servos: &Path) -> Result<Self, RobotError> {
-        let tool_cfg = Tool::load(tool)?;
+        Self::with_tool(urdf, Tool::load(tool)?, servos)
+    }
+
+    /// [`Robot::load`] with the tool given (held in memory) instead of read from a file.
+    pub fn with_tool(urdf: &Path, tool_cfg: Tool, servos: &Path) -> Result<Self, RobotError> {
         let servos_cfg = Servos::load(servos)?;
         let description = urdf_rs::read_file(urdf).map_err(|e| RobotError::Io {
             file: urdf.to_path_buf(),

@@ -8,7 +8,7 @@ use polishbot::motion::{plan, Inspection, Plan, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::synth::synth;
 
-use super::{kinds, measure};
+use super::{kinds, measure_shank_from};
 use crate::common::femoral::{cell, of_case};
 use crate::common::{calib, femoral_synth};
 
@@ -35,6 +35,21 @@ pub(super) struct Tally {
     arm_min: f64,
     /// Deepest ball in a free sample, mm.
     deepest_free: f64,
+    /// Removal mode: grinding and pressing samples, where the ball is pressed in on purpose.
+    pressed: usize,
+    /// Of those, the ball deeper than the plan's preload (plus 0.1 mm) inside the part.
+    too_deep: usize,
+    /// Deepest ball in a grinding or pressing sample, mm.
+    deepest_pressed: f64,
+}
+
+/// What a sample may do in the check: removal mode presses the ball its preload into the part
+/// where it grinds and while it presses in and out (plan.json `removal.preload_mm`); there
+/// the ball may be that much (plus 0.1 mm) inside, and the shank counts from where it leaves
+/// the ball. Everything else as in rigid mode.
+fn pressing(plan: &Plan, kind: SegmentKind) -> Option<f64> {
+    let preload = plan.removal.as_ref()?.preload_mm;
+    matches!(kind, SegmentKind::Grind | SegmentKind::Press).then_some(preload)
 }
 
 /// Every sample of `plan`, the part placed by `placed(sample)`.
@@ -48,15 +63,27 @@ fn tally(
     let mut t = Tally {
         arm_min: f64::INFINITY,
         deepest_free: f64::NEG_INFINITY,
+        deepest_pressed: f64::NEG_INFINITY,
         ..Tally::default()
     };
+    let r = robot.tool.radius_mm();
+    let rs = robot.tool.shank_radius() * 1e3;
+    // the shank's surface leaves the ball this far along the axis from its centre
+    let shank_out = (r * r - rs * rs).max(0.0).sqrt();
     for (i, s) in plan.samples.iter().enumerate() {
+        let press = pressing(plan, kinds[i]);
+        let from = if press.is_some() { shank_out } else { 0.0 };
         for wc in placed(i) {
-            let m = measure(&s.q, robot, &wc, &insp.points);
+            let m = measure_shank_from(&s.q, robot, &wc, &insp.points, from);
+            if let Some(preload) = press {
+                t.pressed += 1;
+                t.too_deep += usize::from(m.ball_depth > preload + 0.1);
+                t.deepest_pressed = t.deepest_pressed.max(m.ball_depth);
+            }
             if kinds[i] == SegmentKind::Grind {
                 t.grind += 1;
                 t.second += usize::from(m.second_face);
-            } else {
+            } else if press.is_none() {
                 t.free += 1;
                 t.inside += usize::from(m.ball_depth > 0.1);
                 t.deepest_free = t.deepest_free.max(m.ball_depth);
@@ -165,7 +192,17 @@ pub(super) fn accept(what: &str, plan: &Plan, t: &Tally) {
         t.second,
         t.arm_min
     );
+    if t.pressed > 0 {
+        println!(
+            "{what}: pressing and grinding {} (ball deeper than the preload + 0.1 mm: {}, deepest {:.3} mm)",
+            t.pressed, t.too_deep, t.deepest_pressed
+        );
+    }
     assert_eq!(t.inside, 0, "{what}: free samples with the ball inside");
+    assert_eq!(
+        t.too_deep, 0,
+        "{what}: samples pressed deeper than the preload"
+    );
     assert_eq!(t.second, 0, "{what}: grinding samples on a second face");
     assert!(t.arm_min >= 0.0, "{what}: shank/links {:.3} mm", t.arm_min);
 }

@@ -2,11 +2,11 @@
 //! the seed, not for the arm), planned in the shipped cell designed for femoral components
 //! (calibration/femoral/, by `polishbot cell design`): the share of the repairable area
 //! planned, and this suite's clearance check of every sample with the part turned by the test
-//! at each sample's table angle. Rigid mode, as the other cases of this check: removal mode
-//! presses the ball its preload (2 mm) into the part on purpose, which this check (ball depth,
-//! shank from the ball centre) reads as a collision; removal mode's planned share is in
-//! tests/uniform.rs.
-use polishbot::motion::plan;
+//! at each sample's table angle. In rigid mode and in removal mode (`plan`'s default), where
+//! the ball is pressed its preload (2 mm) into the part on purpose while it grinds and presses
+//! in and out: there the check lets it be that much (plus 0.1 mm) inside and counts the shank
+//! from where it leaves the ball (`heldout::pressing`); everything else as in rigid mode.
+use polishbot::motion::{plan, PlanMode};
 
 use super::heldout::{accept, turned_tally};
 use crate::common::femoral::{cell, planned_area, reasons, uniform_case};
@@ -32,4 +32,25 @@ fn uniform_defects_on_the_femoral_component_in_the_designed_cell() {
     let tally = turned_tally(&plan, &robot, &insp, &wc, "femoral/");
     accept("uniform defects, designed cell", &plan, &tally);
     assert!(c / t >= PLANNED_FLOOR, "planned {:.3}", c / t);
+}
+
+/// The same case planned in removal mode (`plan`'s default), through the same check with the
+/// preload the plan states: every free sample keeps the ball out of the part, every pressing
+/// and grinding sample keeps it within the preload, no ball on a second face, shank and links
+/// clear.
+#[test]
+fn uniform_defects_in_removal_mode_keep_the_ball_within_its_preload() {
+    let insp = uniform_case(5100);
+    let (robot, wc, table, mut config) = cell("femoral/");
+    config.mode = PlanMode::Removal;
+    let table = table.expect("the designed cell has a turntable");
+    let plan = plan(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+    let preload = plan.removal.as_ref().expect("removal mode").preload_mm;
+    assert!(preload > 0.5, "the ball is pressed in: {preload} mm");
+    let tally = turned_tally(&plan, &robot, &insp, &wc, "femoral/");
+    accept(
+        "uniform defects, designed cell, removal mode",
+        &plan,
+        &tally,
+    );
 }

@@ -1,19 +1,19 @@
-//! `run --sim --part FILE --ground-out OUT`: the simulated arm grinds a virtual part while it
-//! executes the plan; the ground part is rescanned into OUT (synth's scanner model, a new
-//! random pose) with the removal per point in OUT's `_truth.ply` and `_truth.json` beside it.
+//! The virtual part of `run --sim --part FILE --ground-out OUT` and of the loop's simulated
+//! arm: loaded from a part file and checked against the inspected surface ([`Ground::prepare`]),
+//! ground by the grinding simulator over the run's virtual time and rescanned into OUT (synth's
+//! scanner model, a new random pose) with the removal per point in OUT's `_truth.ply` and
+//! `_truth.json` beside it ([`Ground::finish`]).
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use nalgebra::Vector3;
+use nalgebra::{Matrix4, Point3, Vector3};
 use serde::Serialize;
 
+use super::grind::{grind, GrindReport, ServoTrace, VirtualPart};
+use super::{SimArm, SimOptions};
 use crate::bus::ServoMap;
 use crate::cloud::{self, PlyPrecision, PointCloud, ScalarField};
 use crate::preprocess::{estimate_normals, NormalConfig, Orientation};
-use crate::repair::Inspection;
-use crate::robot::Workcell;
-use crate::sim::grind::{grind, GrindReport, ServoTrace, VirtualPart};
-use crate::sim::{SimArm, SimOptions};
 use crate::spatial::Neighbours;
 
 /// Farthest a point of the part file may lie from the inspected surface (along the nearest
@@ -27,15 +27,34 @@ const OFF_SURFACE_MM: f64 = 0.5;
 const MIN_ON_SURFACE_SHARE: f64 = 0.5;
 
 /// A virtual part for the simulated arm to grind (`--part`, `--ground-out`).
+#[derive(Clone, Copy)]
 pub struct Part<'a> {
     /// The part's points.
     pub file: &'a Path,
+    /// `file`'s cloud when this process holds it (the surface an earlier grind left and wrote
+    /// there): used instead of reading the file back.
+    pub held: Option<&'a PointCloud>,
     /// Whether they are in the reference frame already (`--part-in-reference`).
     pub in_reference: bool,
     /// Where the rescan goes.
     pub ground_out: &'a Path,
-    /// The inspected scan's pose (registration.json's); None: read from the inspection folder.
+    /// The inspected scan's pose (registration.json's), 4x4 row-major; None only with
+    /// `in_reference`.
     pub scan_to_reference: Option<[[f64; 4]; 4]>,
+}
+
+/// The inspected surface a virtual part is checked against and oriented by: the inspection's
+/// core points (reference frame, mm), their unit outward normals and measured deviations (mm,
+/// NaN where none); `dir`, the inspection's folder, names it in messages.
+pub struct Inspected<'a> {
+    /// The inspection's folder.
+    pub dir: &'a Path,
+    /// Core points.
+    pub positions: Vec<Point3<f64>>,
+    /// Their normals.
+    pub normals: Vec<Vector3<f64>>,
+    /// Their deviations.
+    pub distances: Vec<f64>,
 }
 
 /// A virtual part ready to be ground, and where its rescan goes.
@@ -58,7 +77,7 @@ struct GroundTruth<'a> {
     /// What the grind did.
     grind: &'a GrindReport,
     /// The simulated cell's truth used.
-    settings: &'a crate::sim::GrindConfig,
+    settings: &'a super::GrindConfig,
 }
 
 /// The truth files beside `out`: `<stem>_truth.ply` and `<stem>_truth.json`.
@@ -74,48 +93,37 @@ pub fn truth_paths(out: &Path) -> (PathBuf, PathBuf) {
 
 impl Ground {
     /// Loads the part `given`: the file's points in the reference frame (by the inspected
-    /// scan's pose, given or read from the inspection's `registration.json`, or as they are
-    /// when `in_reference`), those on the
-    /// inspected surface only (outliers dropped), with PCA normals turned outward as the
-    /// nearest core point's.
+    /// scan's pose, or as they are when `in_reference`), those on the inspected surface only
+    /// (outliers dropped), with PCA normals turned outward as the nearest core point's.
     pub fn prepare(
         options: &SimOptions,
         given: &Part,
-        inspection: &Inspection,
+        inspection: &Inspected,
     ) -> anyhow::Result<Ground> {
         let (part, in_reference, out) = (given.file, given.in_reference, given.ground_out);
-        let mut cloud = cloud::load_cloud(part, None, None)?;
+        let mut cloud = match given.held {
+            Some(held) => held.clone(),
+            None => cloud::load_cloud(part, None, None)?,
+        };
         if !in_reference {
-            #[derive(serde::Deserialize)]
-            struct Registration {
-                scan_to_reference: [[f64; 4]; 4],
-            }
-            let rows = match given.scan_to_reference {
-                Some(rows) => rows,
-                None => {
-                    let file = inspection.dir.join("registration.json");
-                    super::common::read_json::<Registration>(&file)?.scan_to_reference
-                }
-            };
+            let rows = given.scan_to_reference.with_context(|| {
+                format!("{}: no scan_to_reference given", inspection.dir.display())
+            })?;
             let pose = cloud::transform::isometry_from_rows(&rows)
                 .with_context(|| format!("{}: scan_to_reference", inspection.dir.display()))?;
             cloud.transform(&pose);
         }
-        let core: Vec<_> = inspection.points.iter().map(|p| p.position).collect();
-        let index = Neighbours::new(&core);
+        let index = Neighbours::new(&inspection.positions);
         // the part's surface: points within OFF_SURFACE_MM of where the inspection measured
         // the surface (the core point's plane moved by its deviation); outliers lie farther
         let on_surface: Vec<usize> = (0..cloud.len())
             .filter(|&i| {
                 let p = cloud.points[i];
                 index.nearest(&p).is_some_and(|nb| {
-                    let c = &inspection.points[nb.index];
-                    let d = if c.distance.is_finite() {
-                        c.distance
-                    } else {
-                        0.0
-                    };
-                    (c.normal.dot(&(p - c.position)) - d).abs() <= OFF_SURFACE_MM
+                    let (c, n) = (inspection.positions[nb.index], inspection.normals[nb.index]);
+                    let d = inspection.distances[nb.index];
+                    let d = if d.is_finite() { d } else { 0.0 };
+                    (n.dot(&(p - c)) - d).abs() <= OFF_SURFACE_MM
                 })
             })
             .collect();
@@ -158,7 +166,7 @@ impl Ground {
         for (p, n) in cloud.points.iter().zip(&mut normals) {
             let outward = index
                 .nearest(p)
-                .map_or(Vector3::z(), |nb| inspection.points[nb.index].normal);
+                .map_or(Vector3::z(), |nb| inspection.normals[nb.index]);
             if n.dot(&outward) < 0.0 {
                 *n = -*n;
             }
@@ -176,14 +184,15 @@ impl Ground {
         Ok(SimArm::new(&self.options, map)?)
     }
 
-    /// After the run on `arm`: grinds the part over the run's virtual time, writes the rescan
-    /// and its truth, and prints one line.
+    /// After the run on `arm`: grinds the part (placed in the robot's base frame by the cell's
+    /// `robot_from_reference`, workcell.toml's) over the run's virtual time, writes the rescan
+    /// and its truth, prints one line and returns the ground surface (the truth PLY's cloud).
     pub fn finish(
         mut self,
         arm: &SimArm,
         map: &ServoMap,
-        workcell: &Workcell,
-    ) -> anyhow::Result<()> {
+        robot_from_reference: &Matrix4<f64>,
+    ) -> anyhow::Result<PointCloud> {
         let g = &self.options.grinding;
         let home = map.home_raw(self.options.home_gripper_deg)?;
         let mut trace = ServoTrace::new(&self.options, home, arm.received());
@@ -191,7 +200,7 @@ impl Ground {
             &mut self.part,
             &mut trace,
             arm.time(),
-            &workcell.robot_from_reference,
+            robot_from_reference,
             g,
         );
         let normals = self.part.normals().to_vec();
@@ -244,6 +253,6 @@ impl Ground {
             self.out.display(),
             ply.display()
         );
-        Ok(())
+        Ok(surface)
     }
 }
