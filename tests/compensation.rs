@@ -17,6 +17,10 @@ use polishbot::robot::{Robot, Workcell};
 use polishbot::sim::grind::{fk, slack};
 use polishbot::sim::GrindConfig;
 
+/// The compensated tip error's 95th percentile must stay under this, mm (0.5: the plan's
+/// Monte Carlo assumed 0.12 mm of tip error; uncompensated the documented arm is 2.2 mm off).
+const COMPENSATED_P95_MM: f64 = 0.5;
+
 /// The planner's joint angles as the simulator's (through the servo degrees of servos.toml
 /// and DOFBOT.md's convention).
 fn sim_joints(robot: &Robot, q: &[f64]) -> [f64; 5] {
@@ -26,10 +30,9 @@ fn sim_joints(robot: &Robot, q: &[f64]) -> [f64; 5] {
     })
 }
 
-/// The simulated loaded tip's error against the planned tip over every grinding sample of
-/// `plan` (robot frame, mm): RMS of its component along the surface, RMS along the normal,
-/// and the largest distance.
-fn tip_errors(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) -> [f64; 3] {
+/// The simulated loaded tip's distance from the planned tip at every grinding sample of
+/// `plan` (robot frame, mm).
+fn tip_errors(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) -> Vec<f64> {
     let sim = slack::Arm::new(arm);
     let tip = sim.tip_m();
     let sent: Vec<[f64; 5]> = match &plan.commands {
@@ -53,7 +56,7 @@ fn tip_errors(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) -> [
     let force = polishbot::removal::ToolModel::of_robot(robot)
         .unwrap()
         .force_n();
-    let (mut along, mut normal, mut most, mut n) = (0.0, 0.0, 0.0f64, 0usize);
+    let mut out = Vec::new();
     for seg in &plan.segments {
         let (SegmentKind::Grind, Some(pass)) = (seg.kind, seg.pass) else {
             continue;
@@ -73,36 +76,31 @@ fn tip_errors(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) -> [
                 .direction_from_reference(&Vector3::from(p.normal))
                 .normalize();
             let loaded = sim.held(*q, nrm * force).0 - absorbed;
-            let e = (loaded - planned) * 1e3;
-            let en = e.dot(&nrm);
-            along += (e - nrm * en).norm_squared();
-            normal += en * en;
-            most = most.max(e.norm());
-            n += 1;
+            out.push((loaded - planned).norm() * 1e3);
         }
     }
-    let n = n.max(1) as f64;
-    [(along / n).sqrt(), (normal / n).sqrt(), most]
+    out
 }
 
-/// The shipped cell's robot with `servos` as its servos.toml.
-fn robot_with(servos: &std::path::Path) -> Robot {
-    Robot::load(
-        &common::calib("dofbot.urdf"),
-        &common::calib("tool.toml"),
-        servos,
-    )
-    .unwrap()
+/// Median, 95th percentile and largest of `x`.
+fn quantiles(mut x: Vec<f64>) -> [f64; 3] {
+    assert!(!x.is_empty(), "no grinding sample");
+    x.sort_by(f64::total_cmp);
+    let at = |q: f64| x[((x.len() - 1) as f64 * q).round() as usize];
+    [at(0.5), at(0.95), x[x.len() - 1]]
 }
 
-/// Compensated with the table `calibrate compliance` fits on the simulator, the loaded tip
-/// lands nearer the plan along the surface than uncompensated (`POLISHBOT_COMPENSATION_SERVOS`
-/// plans with a servos.toml given by hand instead of the fitted one, to take the fit's error
-/// apart from the model's). NOT MET YET, so run by hand (`cargo test --release --test
-/// compensation -- --ignored --nocapture`): on this part the corrected commands break the
-/// elbow's lower joint limit (-pi/2) near a contact at every smoothing width, with the fitted
-/// and with the simulator's true table, and the planner leaves the compensation out (issue 50
-/// branch report, 2026-12-05).
+/// Compensated with the shipped cell's `[compliance]` (the table `calibrate compliance --sim`
+/// fitted on the documented arm; `POLISHBOT_COMPENSATION_SERVOS` plans with a servos.toml
+/// given by hand instead, to take the fit's error apart from the model's), the simulated
+/// loaded tip lands nearer the planned tip than uncompensated (the same cell without the
+/// table): the 95th percentile of the distance over every grinding sample below
+/// [`COMPENSATED_P95_MM`] and below half the uncompensated one. NOT MET YET, so run by hand
+/// (`cargo test --release --test compensation -- --ignored --nocapture`); measured
+/// 2026-12-05 with the limits kept by construction (RANGE_MARGIN 0.005 rad): median / p95 /
+/// max 1.066 / 1.876 / 3.503 mm compensated against 1.463 / 2.173 / 2.225 uncompensated,
+/// 4639 of 8154 grinding samples partial (least share 0.086: the elbow sits on its lower
+/// limit), so `[plan] compensate_compliance` stays off by default.
 #[test]
 #[ignore]
 fn compensation_puts_the_simulated_loaded_tip_nearer_the_planned_contacts() {
@@ -110,41 +108,39 @@ fn compensation_puts_the_simulated_loaded_tip_nearer_the_planned_contacts() {
     let inspection = common::synthetic::demo_like(&dir.path().join("inspection"));
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let arm = GrindConfig::default();
-    let servos = match std::env::var("POLISHBOT_COMPENSATION_SERVOS") {
-        Ok(path) => path.into(),
-        Err(_) => {
-            let fitted = common::compensation::fitted(&arm);
-            println!("fitted [compliance]: {fitted:?}");
-            common::compensation::servos_with(&fitted, dir.path())
-        }
+    let load = || match std::env::var("POLISHBOT_COMPENSATION_SERVOS") {
+        Ok(path) => Robot::load(
+            &common::calib("dofbot.urdf"),
+            &common::calib("tool.toml"),
+            std::path::Path::new(&path),
+        )
+        .unwrap(),
+        Err(_) => common::dofbot(),
     };
-    let rigid = common::dofbot();
-    let compliant = robot_with(&servos);
-    let cfg = PlanConfig::default();
+    let compliant = load();
+    println!("[compliance]: {:?}", compliant.servos.compliance);
+    let mut rigid = load();
+    rigid.servos.compliance = None;
+    let cfg = PlanConfig {
+        compensate_compliance: true,
+        ..PlanConfig::default()
+    };
     let plain = plan_part(&inspection, &rigid, &wc, &cfg).expect("plan");
     let compensated = plan_part(&inspection, &compliant, &wc, &cfg).expect("compensated plan");
     assert!(plain.commands.is_none());
-    let off = compensated
-        .commands
-        .as_ref()
-        .expect("commands (none: the corrected commands broke a limit, see the warning)");
-    let most = off
-        .iter()
-        .zip(&compensated.samples)
-        .map(|(c, s)| {
-            c.iter()
-                .zip(&s.q)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max);
-    let before = tip_errors(&plain, &rigid, &wc, &arm);
-    let after = tip_errors(&compensated, &compliant, &wc, &arm);
-    println!(
-        "largest correction {most:.4} rad; loaded tip against the plan over the grinding \
-         samples, RMS along the surface / along the normal / largest, mm: uncompensated \
-         {before:.3?}, compensated {after:.3?}"
+    assert!(
+        compensated.commands.is_some(),
+        "no commands: the corrected commands broke a limit, see the warning"
     );
-    assert!(before[0] > 0.8, "uncompensated {before:?}");
-    assert!(after[0] < 0.5 * before[0], "{after:?} against {before:?}");
+    let before = quantiles(tip_errors(&plain, &rigid, &wc, &arm));
+    let after = quantiles(tip_errors(&compensated, &compliant, &wc, &arm));
+    println!(
+        "loaded tip against the planned tip over the grinding samples, median / p95 / max, \
+         mm: uncompensated {before:.3?}, compensated {after:.3?}; {:?}",
+        compensated.compensation
+    );
+    assert!(
+        after[1] < COMPENSATED_P95_MM && after[1] < 0.5 * before[1],
+        "p95 compensated {after:?} against uncompensated {before:?}"
+    );
 }

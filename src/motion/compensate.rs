@@ -14,7 +14,7 @@
 //! out. Method: docs/ALGORITHMS.md, "Compliance compensation".
 use nalgebra::{Matrix4, Vector3, Vector4};
 
-use super::contact::SegmentKind;
+use super::program::SegmentKind;
 use super::program::{PlannedPass, Segment};
 use super::trajectory::JointTrajectory;
 use crate::robot::{Compliance, Robot, Workcell};
@@ -50,18 +50,36 @@ pub struct Loads<'a> {
     pub force_n: f64,
 }
 
+/// The servo-side commands of a compensated plan and how much of the correction they carry.
+pub struct Commanded {
+    /// The servo-side joint angles per sample.
+    pub traj: JointTrajectory,
+    /// Grinding samples whose correction is scaled down to keep a joint's limit (partial
+    /// compensation).
+    pub partial_samples: usize,
+    /// Grinding samples in all.
+    pub grinding_samples: usize,
+    /// The smallest share of the correction any grinding sample keeps (1: all whole).
+    pub least_share: f64,
+}
+
 /// The servo-side joint angles to command for the loaded joints `traj` (robot frame) under
 /// `loads`, smoothed by the first of [`SMOOTH_WIDTHS`] that `keeps` accepts (else the last
 /// one's error), or None when `robot` has no `[compliance]` (the plan commands `traj` itself).
+/// The limits hold by construction: with `c` the smoothed correction, each sample keeps the
+/// share `s` of it that stays [`RANGE_MARGIN`] inside every joint's limits; `s` is eroded
+/// (a running minimum over the smoothing's whole support) and then smoothed the same way, so
+/// the smoothed share never exceeds the sample's own and `q + s c` keeps the limits.
 pub fn commands<E>(
     traj: &JointTrajectory,
     loads: &Loads,
     robot: &Robot,
     wc: &Workcell,
     keeps: &dyn Fn(&JointTrajectory) -> Result<(), E>,
-) -> Option<Result<JointTrajectory, E>> {
+) -> Option<Result<Commanded, E>> {
     let model = robot.servos.compliance.as_ref()?;
     let n = traj.len();
+    let dof = traj.dof;
     let absorbed = absorbed_offset(model, traj, robot, wc);
     let kinds = sample_kinds(loads.segments, n);
     let exact: Vec<Option<Vec<f64>>> = (0..n)
@@ -76,30 +94,44 @@ pub fn commands<E>(
         .collect();
     let mut last = None;
     for width in SMOOTH_WIDTHS {
-        let mut delta = held(&exact, &kinds, traj.dof, HOLD_INTO_TRANSIT * width);
+        let mut delta = held(&exact, &kinds, dof, HOLD_INTO_TRANSIT * width);
         // the ends (home) stay where they are: no correction within the smoothing's reach
-        let ends = (2 * width * traj.dof).min(delta.len());
+        let ends = (2 * width * dof).min(delta.len());
         delta[..ends].fill(0.0);
         let len = delta.len();
         delta[len - ends..].fill(0.0);
-        // cut where the sample's own joints are near a limit, then smoothed: the
-        // neighbours' cuts differ by far less than the margin
-        for (i, d) in delta.chunks_mut(traj.dof).enumerate() {
-            let cut = within_range(robot, traj.sample(i), d.to_vec());
-            d.copy_from_slice(&cut);
-        }
-        smooth(&mut delta, traj.dof, n, width);
+        smooth(&mut delta, dof, n, width);
+        let raw: Vec<f64> = (0..n)
+            .map(|i| share_within_range(robot, traj.sample(i), &delta[i * dof..(i + 1) * dof]))
+            .collect();
+        let mut share = eroded(&raw, SMOOTH_PASSES * (width / 2));
+        smooth(&mut share, 1, n, width);
         let mut out = traj.clone();
-        for (o, d) in out.positions.iter_mut().zip(&delta) {
-            *o += d;
+        for (i, (o, d)) in out.positions.iter_mut().zip(&delta).enumerate() {
+            *o += share[i / dof] * d;
         }
         match keeps(&out) {
-            Ok(()) => return Some(Ok(out)),
+            Ok(()) => {
+                let grinding: Vec<f64> = (0..n)
+                    .filter(|&i| exact[i].is_some())
+                    .map(|i| share[i].min(1.0))
+                    .collect();
+                return Some(Ok(Commanded {
+                    traj: out,
+                    partial_samples: grinding.iter().filter(|&&s| s < WHOLE_SHARE).count(),
+                    grinding_samples: grinding.len(),
+                    least_share: grinding.iter().copied().fold(1.0, f64::min),
+                }));
+            }
             Err(e) => last = Some(Err(e)),
         }
     }
     last
 }
+
+/// A share of the correction at or above this counts as whole (1 - 1e-9: the moving
+/// averages of a run of ones round to within a few ulps of one).
+const WHOLE_SHARE: f64 = 1.0 - 1e-9;
 
 /// The servo angles minus the planned ones at loaded joints `q` under `force` (N, robot
 /// frame, on the tip): the loaded tip goes to the planned tip plus `absorbed` (where the
@@ -116,26 +148,46 @@ fn correction(
     cmd.iter().zip(q).map(|(c, a)| c - a).collect()
 }
 
-/// How far inside each joint's limits and servo range a corrected sample stays before the
-/// smoothing, rad (0.01, half a degree: a sample nearer its limit keeps only what fits of its
-/// correction, and the smoothing's average of neighbouring cuts stays inside the rest).
-const RANGE_MARGIN: f64 = 0.03;
+/// How far inside each joint's limits and servo range a corrected sample stays, rad (0.005,
+/// 0.29 degrees: over one servo count, 0.24 degrees, and half the IK's `limit_margin` of
+/// 0.01 rad, so that a contact the plan puts next to a limit keeps some of its correction).
+const RANGE_MARGIN: f64 = 0.005;
 
-/// The correction `d` at joints `q` cut so that `q + d` stays [`RANGE_MARGIN`] inside each
-/// joint's limits and servo range (never beyond where `q` already is): a contact at a joint
-/// limit keeps what it can of its correction.
-fn within_range(robot: &Robot, q: &[f64], d: Vec<f64>) -> Vec<f64> {
-    d.into_iter()
+/// The largest share `s` in [0, 1] of the correction `c` at joints `q` such that `q + s c`
+/// stays [`RANGE_MARGIN`] inside each joint's limits and servo range (the least over the
+/// joints; 0 for a joint already inside the margin that `c` pushes further out).
+fn share_within_range(robot: &Robot, q: &[f64], c: &[f64]) -> f64 {
+    c.iter()
         .enumerate()
-        .map(|(k, v)| {
+        .map(|(k, &v)| {
             let j = &robot.joints[k];
             let [slo, shi] = robot
                 .servos
                 .for_joint(&j.name)
                 .map_or([f64::NEG_INFINITY, f64::INFINITY], |s| s.joint_range());
-            let lo = (j.lower.max(slo) + RANGE_MARGIN).min(q[k]);
-            let hi = (j.upper.min(shi) - RANGE_MARGIN).max(q[k]);
-            (q[k] + v).clamp(lo, hi) - q[k]
+            let room = if v > 0.0 {
+                j.upper.min(shi) - RANGE_MARGIN - q[k]
+            } else {
+                q[k] - j.lower.max(slo) - RANGE_MARGIN
+            };
+            if v == 0.0 {
+                1.0
+            } else {
+                (room / v.abs()).clamp(0.0, 1.0)
+            }
+        })
+        .fold(1.0, f64::min)
+}
+
+/// The running minimum of `x` over `reach` samples on each side.
+fn eroded(x: &[f64], reach: usize) -> Vec<f64> {
+    (0..x.len())
+        .map(|i| {
+            let hi = (i + reach + 1).min(x.len());
+            x[i.saturating_sub(reach)..hi]
+                .iter()
+                .copied()
+                .fold(1.0, f64::min)
         })
         .collect()
 }

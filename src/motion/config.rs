@@ -88,6 +88,11 @@ pub struct PlanConfig {
     pub force_share: f64,
     /// Tolerance of the removal mode when the inspection names none, mm (0.05, issue 28).
     pub tolerance_mm: f64,
+    /// Command the servos so that the loaded joints sit on the plan where servos.toml has a
+    /// `[compliance]` table (false: off by default, because on the demo's part the elbow sits
+    /// on its joint limit and the compensation, kept inside the limits, barely moves the
+    /// simulated tip: docs/ALGORITHMS.md, "Compliance compensation").
+    pub compensate_compliance: bool,
 }
 
 impl Default for PlanConfig {
@@ -121,6 +126,7 @@ impl Default for PlanConfig {
             monte_carlo: removal::montecarlo::MonteCarloConfig::default(),
             force_share: removal::force::DEFAULT_FORCE_SHARE,
             tolerance_mm: DEFAULT_TOLERANCE_MM,
+            compensate_compliance: false,
         }
     }
 }

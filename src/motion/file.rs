@@ -23,6 +23,18 @@ pub struct Sample {
     pub q: Vec<f64>,
 }
 
+/// How much of the compliance correction a compensated plan's `commands` carry: near a joint
+/// limit a stretch keeps only a share of it (docs/ALGORITHMS.md, "Compliance compensation").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CompensationReport {
+    /// Grinding samples in the plan.
+    pub grinding_samples: usize,
+    /// Grinding samples commanded with only a share of their correction (partial).
+    pub partial_samples: usize,
+    /// The smallest share of its correction any grinding sample keeps (1: all whole).
+    pub least_share: f64,
+}
+
 /// A grinding plan: the contents of plan.json (docs/FORMATS.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plan {
@@ -58,6 +70,9 @@ pub struct Plan {
     /// `samples`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub commands: Option<Vec<Vec<f64>>>,
+    /// How much of the compliance correction `commands` carry (absent without `commands`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compensation: Option<CompensationReport>,
     /// Reach and coverage per region, every point left out and why.
     pub reachability: Reachability,
     /// Measured quality of the plan.

@@ -45,10 +45,11 @@ pub(super) struct Assembly<'a> {
 }
 
 /// The joints' limits for free motions: the whole limit, or [`FREE_LIMIT_SHARE`] of it when
-/// the plan compensates the arm's compliance (the smoothed correction adds to these moves).
-fn free_limits(robot: &Robot) -> Limits {
+/// the plan compensates the arm's compliance (`compensate_compliance` and a `[compliance]`
+/// table: the smoothed correction adds to these moves).
+fn free_limits(robot: &Robot, cfg: &PlanConfig) -> Limits {
     let mut limits = Limits::from_joints(&robot.joints);
-    if robot.servos.compliance.is_some() {
+    if cfg.compensate_compliance && robot.servos.compliance.is_some() {
         for v in limits
             .velocity
             .iter_mut()
@@ -74,7 +75,7 @@ impl<'a> Assembly<'a> {
             wc,
             cfg,
             scene,
-            limits: free_limits(robot),
+            limits: free_limits(robot, cfg),
         }
     }
 

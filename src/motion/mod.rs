@@ -145,7 +145,11 @@ pub fn plan_part(
     };
     // a correction that no smoothing keeps within the limits (a contact next to a joint
     // limit) is left out, said on stderr: the plan then commands the loaded joints as before
-    let commanded = match compensate::commands(&traj, &loads, robot, workcell, &keeps) {
+    let compensated = config
+        .compensate_compliance
+        .then(|| compensate::commands(&traj, &loads, robot, workcell, &keeps))
+        .flatten();
+    let commanded = match compensated {
         Some(Err(violations)) => {
             tracing::warn!(
                 "compliance compensation left out: the corrected commands break {} limit(s), first {}",
@@ -156,6 +160,12 @@ pub fn plan_part(
         }
         other => other.and_then(Result::ok),
     };
+    let compensation = commanded.as_ref().map(|c| file::CompensationReport {
+        grinding_samples: c.grinding_samples,
+        partial_samples: c.partial_samples,
+        least_share: c.least_share,
+    });
+    let commanded = commanded.map(|c| c.traj);
     let (samples, stream) = samples_and_frames(&traj, commanded.as_ref(), robot)?;
     Ok(Plan {
         format: "polishbot-plan".into(),
@@ -176,6 +186,7 @@ pub fn plan_part(
         samples,
         frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
         commands: commanded.map(|c| (0..c.len()).map(|i| c.sample(i).to_vec()).collect()),
+        compensation,
         reachability,
         metrics,
         removal,

@@ -10,12 +10,12 @@ use polishbot::calibrate::jog::Cell;
 use polishbot::calibrate::CalibrationConfig;
 use polishbot::cli::calibrate_compliance::SimTouch;
 use polishbot::motion::frames;
-use polishbot::robot::Compliance;
+use polishbot::robot::{Compliance, Robot};
 use polishbot::sim::{GrindConfig, SimArm, SimOptions};
 
 /// `calibrate compliance`'s fit on the simulated arm of `grinding` (the shipped cell, the
-/// built-in touch poses, a rigid start).
-pub fn fitted(grinding: &GrindConfig) -> Compliance {
+/// built-in touch poses, a rigid start): the cell's robot and the fit.
+pub fn run_fit(grinding: &GrindConfig) -> (Robot, compliance::ComplianceFit) {
     let robot = super::dofbot();
     let map = frames::servo_map(&robot).unwrap();
     let options = SimOptions {
@@ -42,9 +42,13 @@ pub fn fitted(grinding: &GrindConfig) -> Compliance {
         backlash_deg: [0.0; 5],
         masses_kg: [0.1; 4],
     };
-    compliance::compliance(&mut bus, &cell, &poses, &start, &mut source)
-        .unwrap()
-        .compliance
+    let fit = compliance::compliance(&mut bus, &cell, &poses, &start, &mut source).unwrap();
+    (robot, fit)
+}
+
+/// The `[compliance]` table of [`run_fit`].
+pub fn fitted(grinding: &GrindConfig) -> Compliance {
+    run_fit(grinding).1.compliance
 }
 
 /// The shipped servos.toml with `c` as its `[compliance]`, written to `dir/servos.toml`.
