@@ -134,38 +134,8 @@ pub fn plan_part(
         &mut prog.trajectory,
         JointTrajectory::starting_at(&config.home, config.trajectory.period),
     );
-    let loads = compensate::Loads {
-        segments: &prog.segments,
-        passes: &prog.passes,
-        force_n: tool.as_ref().map_or(0.0, |t| t.force_n()),
-    };
-    let keeps = |c: &JointTrajectory| {
-        let violations = validate(c, robot, &config.validation);
-        violations.is_empty().then_some(()).ok_or(violations)
-    };
-    // a correction that no smoothing keeps within the limits (a contact next to a joint
-    // limit) is left out, said on stderr: the plan then commands the loaded joints as before
-    let compensated = config
-        .compensate_compliance
-        .then(|| compensate::commands(&traj, &loads, robot, workcell, &keeps))
-        .flatten();
-    let commanded = match compensated {
-        Some(Err(violations)) => {
-            tracing::warn!(
-                "compliance compensation left out: the corrected commands break {} limit(s), first {}",
-                violations.len(),
-                violations[0]
-            );
-            None
-        }
-        other => other.and_then(Result::ok),
-    };
-    let compensation = commanded.as_ref().map(|c| file::CompensationReport {
-        grinding_samples: c.grinding_samples,
-        partial_samples: c.partial_samples,
-        least_share: c.least_share,
-    });
-    let commanded = commanded.map(|c| c.traj);
+    let force_n = tool.as_ref().map_or(0.0, |t| t.force_n());
+    let (commanded, compensation) = compensate_plan(&traj, &prog, force_n, robot, workcell, config);
     let (samples, stream) = samples_and_frames(&traj, commanded.as_ref(), robot)?;
     Ok(Plan {
         format: "polishbot-plan".into(),
@@ -192,6 +162,52 @@ pub fn plan_part(
         removal,
         turntable: None,
     })
+}
+
+/// The servo commands and their report when `config.compensate_compliance` and the robot has
+/// `[compliance]` (docs/ALGORITHMS.md, "Compliance compensation"); (None, None) otherwise.
+/// A correction that no smoothing keeps within the limits is left out, said on stderr: the
+/// plan then commands the loaded joints as before.
+fn compensate_plan(
+    traj: &JointTrajectory,
+    prog: &program::Program,
+    force_n: f64,
+    robot: &Robot,
+    workcell: &Workcell,
+    config: &PlanConfig,
+) -> (Option<JointTrajectory>, Option<file::CompensationReport>) {
+    let loads = compensate::Loads {
+        segments: &prog.segments,
+        passes: &prog.passes,
+        force_n,
+    };
+    let keeps = |c: &JointTrajectory| {
+        let violations = validate(c, robot, &config.validation);
+        violations.is_empty().then_some(()).ok_or(violations)
+    };
+    let compensated = config
+        .compensate_compliance
+        .then(|| compensate::commands(traj, &loads, robot, workcell, &keeps))
+        .flatten();
+    match compensated {
+        Some(Err(violations)) => {
+            tracing::warn!(
+                "compliance compensation left out: the corrected commands break {} limit(s), first {}",
+                violations.len(),
+                violations[0]
+            );
+            (None, None)
+        }
+        Some(Ok(c)) => {
+            let report = file::CompensationReport {
+                grinding_samples: c.grinding_samples,
+                partial_samples: c.partial_samples,
+                least_share: c.least_share,
+            };
+            (Some(c.traj), Some(report))
+        }
+        None => (None, None),
+    }
 }
 
 /// The whole sampled program against the limits (validation), the scene (collisions) and the
