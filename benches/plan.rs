@@ -35,6 +35,7 @@ fn inspection() -> Inspection {
                 } else {
                     0.0
                 },
+                uncertainty: 0.0,
                 region: if inside { 0 } else { -1 },
             });
         }

@@ -67,6 +67,11 @@ pub struct SurfacePoint {
     /// Signed distance along the normal, mm (+ = material in excess); NaN where the
     /// comparison had too few points.
     pub distance: f64,
+    /// Expanded uncertainty of `distance` (the comparison's LoD95), mm: the `uncertainty`
+    /// column of deviations.csv; 0 where the file has no such column (hand-made files: the
+    /// distance is taken as exact); NaN where the comparison gave none. A plan removes only
+    /// where `distance` exceeds the tolerance by more than it (`removal::targets`).
+    pub uncertainty: f64,
     /// Region id, -1 for none.
     pub region: i64,
 }
@@ -236,7 +241,8 @@ fn read(file: &Path) -> Result<String, InputError> {
 }
 
 /// Reads deviations.csv: a header naming the columns (any order, extra columns ignored), then
-/// one row per core point; x,y,z,nx,ny,nz,distance,region are required.
+/// one row per core point; x,y,z,nx,ny,nz,distance,region are required, `uncertainty` is read
+/// when present (NaN allowed, else at least 0).
 fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, InputError> {
     let text = read(file)?;
     let mut lines = text.lines().enumerate();
@@ -252,6 +258,7 @@ fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, InputError> {
             InputError::new(file, "line 1", format!("header has no column `{n}`"))
         })?;
     }
+    let lod = names.iter().position(|h| *h == "uncertainty");
     let mut out = Vec::new();
     for (i, line) in lines {
         if line.trim().is_empty() {
@@ -285,10 +292,21 @@ fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, InputError> {
         if v[7].fract() != 0.0 {
             return Err(InputError::new(file, place(), "region must be an integer"));
         }
+        let uncertainty = match lod {
+            Some(c) => match cells[c].parse::<f64>() {
+                Ok(u) if u.is_nan() || (u >= 0.0 && u.is_finite()) => u,
+                _ => {
+                    let msg = format!("column uncertainty: not a number >= 0: {:?}", cells[c]);
+                    return Err(InputError::new(file, place(), msg));
+                }
+            },
+            None => 0.0,
+        };
         out.push(SurfacePoint {
             position: Point3::new(v[0], v[1], v[2]),
             normal: normal / norm,
             distance: v[6],
+            uncertainty,
             region: v[7] as i64,
         });
     }

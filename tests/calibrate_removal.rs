@@ -49,6 +49,7 @@ fn before() -> (Inspection, Vec<f64>) {
                 position: Point3::new(x, y, 0.0),
                 normal: Vector3::z(),
                 distance: removal + 0.05,
+                uncertainty: 0.0,
                 region,
             });
             p.push(removal);

@@ -172,6 +172,7 @@ fn point(p: Point3<f64>, n: Vector3<f64>, distance: f64, region: i64) -> Surface
         position: p,
         normal: n.normalize(),
         distance,
+        uncertainty: 0.0,
         region,
     }
 }

@@ -31,6 +31,7 @@ fn measured(verdict: Verdict, repairable: usize, pits: usize, volume: f64) -> Me
         peak_mm: (repairable > 0).then_some(0.2),
         rms_mm: (repairable > 0).then_some(0.1),
         volume_mm3: volume,
+        decision: Default::default(),
     }
 }
 
@@ -73,6 +74,13 @@ fn the_stop_rule_ends_within_tolerance_on_no_progress_and_after_the_last_iterati
         fresh(0.25),
     ];
     assert_eq!(decide(&two, &cfg), Outcome::MaxIterations);
+    // undecided under ISO 14253-1 (nothing proven to grind nor proven conform): stop and
+    // rescan, before "nothing repairable left" and however much progress was made
+    let open = IterationRecord::new(2, measured(Verdict::Undecided, 1, 0, 0.01));
+    assert_eq!(
+        decide(&[ground(1, 1.0, 1.0, 1.0), open], &cfg),
+        Outcome::Undecided
+    );
     // only pits left: nothing to grind
     let pits = IterationRecord::new(2, measured(Verdict::Reject, 0, 1, 0.0));
     assert_eq!(

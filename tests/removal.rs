@@ -7,8 +7,12 @@ mod common;
 use nalgebra::{Point3, Vector3};
 use polishbot::removal::force::{joint_torques, overload, DEFAULT_FORCE_SHARE};
 use polishbot::removal::influence::Reach;
-use polishbot::removal::montecarlo::{spread, JointError, MonteCarloConfig};
-use polishbot::removal::{solve_region, Contact, Influence, RemovalConfig, ToolModel};
+use polishbot::removal::montecarlo::{
+    spread, tip_error, JointError, MonteCarloConfig, DEFAULT_TIP_ERROR_MM,
+};
+use polishbot::removal::{
+    solve_region, targets, Contact, Influence, RegionRemoval, RemovalConfig, ToolModel,
+};
 use polishbot::repair::SurfacePoint;
 
 /// Ball radius of the shipped tool, mm.
@@ -42,6 +46,7 @@ fn plate_of(sigma: f64) -> Vec<SurfacePoint> {
                 position: Point3::new(x, y, 0.0),
                 normal: Vector3::z(),
                 distance: PEAK_MM * (-(x * x + y * y) / (2.0 * sigma * sigma)).exp(),
+                uncertainty: 0.0,
                 region: 0,
             });
         }
@@ -127,6 +132,23 @@ fn integrate(tool: &ToolModel, contacts: &[Contact], dwell: &[f64], p: &Point3<f
         .sum()
 }
 
+/// The dwell solve asked to take every core point's whole excess (allowance and tolerance 0).
+fn solve_whole(
+    influence: &Influence,
+    contacts: &[Contact],
+    cores: &[SurfacePoint],
+    config: &RemovalConfig,
+) -> RegionRemoval {
+    solve_region(
+        influence,
+        contacts,
+        cores,
+        &targets(cores, 0.0, 0.0),
+        config,
+    )
+    .expect("dwell")
+}
+
 #[test]
 fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
     let tool = ToolModel::default();
@@ -140,7 +162,7 @@ fn gaussian_excess_on_a_plate_matches_an_independent_integration() {
         config.stepover_share * a,
         leaning(),
     );
-    let plan = solve_region(&influence, &contacts, &cores, 0.0, &config).expect("dwell");
+    let plan = solve_whole(&influence, &contacts, &cores, &config);
     let residual = plan.residual();
     let mut worst_diff = 0.0f64;
     let (mut worst_inside, mut lowest) = (0.0f64, f64::INFINITY);
@@ -196,7 +218,7 @@ fn the_plate_at_every_spindle_tilt_matches_the_integration() {
     for tilt in [0.0, 2.0, 20.0, 45.0] {
         let spin = spindle(tilt, 30.0);
         let contacts = raster(config.spacing_share * a, config.stepover_share * a, spin);
-        let plan = solve_region(&influence, &contacts, &cores, 0.0, &config).expect("dwell");
+        let plan = solve_whole(&influence, &contacts, &cores, &config);
         let (mut worst, mut most) = (0.0f64, 0.0f64);
         for (j, c) in cores.iter().enumerate() {
             let removed = integrate(&tool, &contacts, &plan.dwell, &c.position);
@@ -329,7 +351,7 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
         config.stepover_share * a,
         leaning(),
     );
-    let plan = solve_region(&influence, &contacts, &cores, 0.0, &config).unwrap();
+    let plan = solve_whole(&influence, &contacts, &cores, &config);
     let still = MonteCarloConfig {
         draws: 3,
         backlash_deg: 0.0,
@@ -358,6 +380,38 @@ fn monte_carlo_without_errors_is_the_nominal_and_errors_make_it_over_grind() {
             assert!((got - want).abs() < 1e-12, "{got} vs {want}");
         }
     }
+    // The tip error is the cell's record when it has one (tool.toml's verified_tip_error_mm,
+    // written by calibrate verify), not the setting: a record of 0 mm under the default
+    // setting (0.12 mm) draws the nominal, a record of 0.2 mm under a setting of 0 does not.
+    let recorded = |mm: f64| ToolModel {
+        verified_tip_error_mm: Some(mm),
+        ..tool.clone()
+    };
+    let draw = |tool: &ToolModel, mc: &MonteCarloConfig| {
+        let s = spread(
+            tool,
+            BALL_MM,
+            &contacts,
+            &joints,
+            &plan.dwell,
+            &geometry,
+            mc,
+        );
+        let nominal = plan.residual();
+        (s.draws.iter().flatten().zip(nominal.iter().cycle()))
+            .map(|(got, want)| (got - want).abs())
+            .fold(0.0f64, f64::max)
+    };
+    let setting = MonteCarloConfig {
+        tip_error_mm: DEFAULT_TIP_ERROR_MM,
+        ..still.clone()
+    };
+    assert!(draw(&recorded(0.0), &setting) < 1e-12);
+    assert!(draw(&recorded(0.2), &still) > 1e-3);
+    assert_eq!(tip_error(&recorded(0.2), &still).mm, 0.2);
+    let fallback = tip_error(&tool, &setting);
+    assert_eq!(fallback.mm, DEFAULT_TIP_ERROR_MM);
+    assert!(fallback.source.contains("no calibrate verify record"));
     // 1 degree of backlash on a 0.2 m lever moves the patch up to 1.7 mm: the nominal plan
     // over-grinds beside the peak at the Monte Carlo's quantile (what makes the planner raise
     // a region's allowance: tests/removal_plan.rs), while the nominal residual does not
@@ -441,7 +495,7 @@ fn contacts_that_need_nothing_are_lifted_over_and_the_floor_goes() {
     let far = |p: &Point3<f64>| p.coords.norm() > 2.5;
     let mut floors = Vec::new();
     for config in [&grinding, &lifting] {
-        let plan = solve_region(&influence, &contacts, &cores, 0.0, config).expect("dwell");
+        let plan = solve_whole(&influence, &contacts, &cores, config);
         let t_min = contacts[0].length / config.feed_max_mm_s;
         let lifted = plan.lifted.iter().filter(|l| **l).count();
         for ((t, l), c) in plan.dwell.iter().zip(&plan.lifted).zip(&contacts) {
@@ -471,4 +525,69 @@ fn contacts_that_need_nothing_are_lifted_over_and_the_floor_goes() {
     // seven times that floor
     assert!(floors[0].1 > 0.001, "no floor without lifting: {floors:?}");
     assert!(floors[1].1 < 0.1 * floors[0].1, "{floors:?}");
+}
+
+/// The LoD95 guard (issue 50: "no plan removes at a point that is not above the tolerance by
+/// more than its measurement uncertainty"), closed form: a plate 0.08 mm high everywhere at a
+/// tolerance of 0.05 mm, its left half (x < 0) measured with an uncertainty of 0.04 mm
+/// (0.08 - 0.04 < 0.05: not proven out of tolerance), its right half with 0.01 mm (0.07 >
+/// 0.05: proven). The target is 0.08 mm on the right and 0 on the left; the tool lifts over
+/// the left half, so the removal there is exactly 0 farther than a patch and a piece from
+/// the halves' border, while the right half is taken down to nominal. Without the guard the
+/// left half would be ground like the right.
+#[test]
+fn no_removal_where_the_excess_is_within_its_uncertainty_of_the_tolerance() {
+    let tool = ToolModel::default();
+    let influence = Influence::new(&tool, BALL_MM);
+    let config = RemovalConfig::default();
+    let (height, tolerance) = (0.08, TOLERANCE_MM);
+    let cores: Vec<SurfacePoint> = plate()
+        .into_iter()
+        .map(|c| SurfacePoint {
+            distance: height,
+            uncertainty: if c.position.x < 0.0 { 0.04 } else { 0.01 },
+            ..c
+        })
+        .collect();
+    let r = targets(&cores, 0.0, tolerance);
+    for (c, r) in cores.iter().zip(&r) {
+        assert_eq!(*r, if c.position.x < 0.0 { 0.0 } else { height });
+    }
+    let a = influence.patch_radius();
+    let contacts = raster(
+        config.spacing_share * a,
+        config.stepover_share * a,
+        leaning(),
+    );
+    let plan = solve_region(&influence, &contacts, &cores, &r, &config).expect("dwell");
+    let border = a + config.spacing_share * a + 0.5;
+    let (mut left_max, mut right) = (0.0f64, Vec::new());
+    for (c, removed) in cores.iter().zip(&plan.removal) {
+        let p = c.position;
+        if p.x < -border {
+            left_max = left_max.max(*removed);
+        } else if p.x > border && p.x < 2.5 && p.y.abs() < 2.5 {
+            right.push(*removed);
+        }
+    }
+    assert_eq!(left_max, 0.0, "removal on the guarded half");
+    let mean = right.iter().sum::<f64>() / right.len() as f64;
+    assert!(
+        (mean - height).abs() < 0.1 * height,
+        "mean removal {mean} mm on the proven half, target {height} mm"
+    );
+    // Without the guard (targets at a tolerance of 0 and no uncertainty) the left half is
+    // ground like the right.
+    let bare = targets(&cores, 0.0, 0.0);
+    let plan = solve_region(&influence, &contacts, &cores, &bare, &config).expect("dwell");
+    let left: Vec<f64> = (cores.iter().zip(&plan.removal))
+        .filter(|(c, _)| c.position.x < -border && c.position.x > -2.5)
+        .filter(|(c, _)| c.position.y.abs() < 2.5)
+        .map(|(_, r)| *r)
+        .collect();
+    let mean = left.iter().sum::<f64>() / left.len() as f64;
+    assert!(
+        mean > 0.5 * height,
+        "unguarded mean removal {mean} mm on the left half"
+    );
 }

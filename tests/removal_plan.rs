@@ -148,6 +148,7 @@ fn patch(centre: Point3<f64>, id: usize, height: f64) -> (Vec<SurfacePoint>, Reg
                 } else {
                     0.0
                 },
+                uncertainty: 0.0,
                 region: if inside { id as i64 } else { -1 },
             });
         }

@@ -252,6 +252,17 @@ pub fn write_tool(input: &Path, out: &Path, tip: [f64; 3]) -> Result<Tool, Calib
     Ok(tool)
 }
 
+/// Writes `out` from `input` (tool.toml) with `[removal] verified_tip_error_mm` set to
+/// `worst_mm`, the worst tool tip `calibrate verify` measured: the plans' Monte Carlo draws
+/// its tip error from it (`removal::montecarlo::tip_error`).
+pub fn write_verified_tip(input: &Path, out: &Path, worst_mm: f64) -> Result<(), CalibError> {
+    let text = std::fs::read_to_string(input).map_err(|e| CalibError::file(input, e))?;
+    write(
+        out,
+        &patch_removal(&text, &[("verified_tip_error_mm", worst_mm)]),
+    )
+}
+
 /// Writes workcell.toml and reads it back.
 pub fn write_workcell(out: &Path, m: &Matrix4<f64>, header: &str) -> Result<Workcell, CalibError> {
     write_and_check(out, &workcell_text(m, header), m)

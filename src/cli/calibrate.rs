@@ -375,7 +375,16 @@ fn routine(
             let poses = targets.expect("set in run");
             let table = ctx.table.as_ref();
             let w = &ctx.workcell_in;
-            super::calibrate_verify::run(bus, cell, table, &poses, fixture.as_ref(), w)
+            let worst =
+                super::calibrate_verify::run(bus, cell, table, &poses, fixture.as_ref(), w)?;
+            let file = ctx.out.join("tool.toml");
+            files::write_verified_tip(ctx.tool_in, &file, worst)?;
+            say(&format!(
+                "calibrate verify: worst tool tip {worst:.3} mm recorded in {} (`[removal] \
+                 verified_tip_error_mm`: the plans' Monte Carlo tip error)",
+                file.display()
+            ));
+            Ok(())
         }
     }
 }

@@ -38,7 +38,8 @@ pub fn prepare(
     Ok(Some(table))
 }
 
-/// Runs verify: the table (when the cell has one), then the check poses; prints every error.
+/// Runs verify: the table (when the cell has one), then the check poses; prints every error
+/// and returns the worst tool-tip error, mm (for the cell's record).
 pub fn run<T: Transport>(
     bus: &mut Bus<T>,
     cell: &Cell,
@@ -46,7 +47,7 @@ pub fn run<T: Transport>(
     poses: &[[f64; JOINT_COUNT]],
     fixture: Option<&Fixture>,
     workcell_in: &Path,
-) -> Result<(), CalibError> {
+) -> Result<f64, CalibError> {
     let mut failed = Vec::new();
     if let Some(table) = table {
         let angles = &cell.cfg.verify_table_angles_deg;
@@ -106,7 +107,7 @@ pub fn run<T: Transport>(
         );
     }
     match failed.is_empty() {
-        true => Ok(()),
+        true => Ok(r.max_tip_error_mm),
         false => Err(CalibError::Refused(failed.join("; "))),
     }
 }

@@ -16,7 +16,7 @@ use crate::cycle::{
     run_cycle, table_text, CycleConfig, CycleOutcome, Inputs, Outcome, DEFAULT_MAX_ITERATIONS,
     DEFAULT_MIN_PROGRESS,
 };
-use crate::inspect::FileInput;
+use crate::inspect::{FileInput, Source};
 use crate::motion::PlanMode;
 
 /// Exit code of a loop that ended without the part within tolerance (no progress, iterations
@@ -220,8 +220,8 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
     };
     let out = args.out.clone();
     let inputs = Inputs {
-        reference: args.reference,
-        scan: args.scan,
+        reference: Source::file(args.reference),
+        scan: Source::file(args.scan),
         files: FileInput {
             units: args.input.units,
             format: args.input.format,

@@ -12,8 +12,9 @@ use super::arm::DeviceArgs;
 use super::run::{Job, LoopArm, PlanSource};
 use super::settings::ConfigFile;
 use crate::cloud::transform::{isometry_from_rows, pose_difference};
+use crate::cloud::Geometry;
 use crate::cycle::{plan_into, run_cycle, CycleConfig, First, PlanFileConfig};
-use crate::inspect::{FileInput, Findings, InspectConfig};
+use crate::inspect::{FileInput, Findings, InspectConfig, Source};
 use crate::motion::Plan;
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
@@ -122,12 +123,19 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     step("synth: parametric femoral component with defects planted where the arm reaches");
     let reachable = crate::cell::reachable_sites(crate::cell::SITE_AXIS_MARGIN_DEG)?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
-    case.write(&out)?;
+    let [reference_ply, scan_ply] = case.write(&out)?;
+    // The part is handed on as written (inspect and the loop read no file back).
+    let reference = Source::held(
+        out.join("reference.ply"),
+        Geometry::Cloud(case.reference),
+        reference_ply,
+    );
+    let scan = Source::held(out.join("scan.ply"), Geometry::Cloud(case.scan), scan_ply);
     let inspection_dir = out.join("inspection");
     step("inspect: filter, register, compare, regions, report");
     let inputs = crate::inspect::Inputs {
-        reference: out.join("reference.ply"),
-        scan: out.join("scan.ply"),
+        reference: reference.clone(),
+        scan: scan.clone(),
         more_scans: Vec::new(),
         files: DEMO_FILES,
         pose: None,
@@ -146,6 +154,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let planned = plan_into(
         &plan_cfg,
         &tool,
+        &found.written,
         &inspection,
         &plan_file,
         Some(&ros),
@@ -191,8 +200,8 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         ..CycleConfig::default()
     };
     let inputs = crate::cycle::Inputs {
-        reference: out.join("reference.ply"),
-        scan: out.join("scan.ply"),
+        reference,
+        scan,
         files: DEMO_FILES,
         out: cycle_dir,
         first: Some(First {

@@ -128,9 +128,9 @@ pub fn settings(
 /// The library's inputs from the flags.
 fn inputs(args: &InspectArgs) -> inspect::Inputs {
     inspect::Inputs {
-        reference: args.reference.clone(),
-        scan: args.scan[0].clone(),
-        more_scans: args.scan[1..].to_vec(),
+        reference: inspect::Source::file(&args.reference),
+        scan: inspect::Source::file(&args.scan[0]),
+        more_scans: args.scan[1..].iter().map(inspect::Source::file).collect(),
         files: inspect::FileInput {
             format: args.input.format,
             units: args.input.units,

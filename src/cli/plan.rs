@@ -57,6 +57,7 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     plan_into(
         &cfg,
         &tool,
+        &[],
         &inspection,
         &args.out,
         args.export_ros.as_deref(),

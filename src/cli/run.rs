@@ -9,11 +9,12 @@ use super::arm::DeviceArgs;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
-use crate::cloud::PointCloud;
+use crate::cloud::{Geometry, PointCloud};
+use crate::inspect::Source;
 use crate::motion::file::CheckedPlan;
 use crate::motion::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
 use crate::robot::{Robot, RobotConfig, ToolText, Turntable, Workcell};
-use crate::sim::virtual_part::{self, Ground, Inspected, Part};
+use crate::sim::virtual_part::{self, Ground, GroundPart, Inspected, Part};
 use crate::sim::SimOptions;
 
 /// Arguments of `run`.
@@ -299,8 +300,9 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
 
 /// Streams `job`'s plan with the settings `cfg`: checks the plan against the cell (joint and
 /// servo ranges, collisions), the resume point and the journal, then sends it. Returns the
-/// virtual part's ground surface when the simulated arm ground one (`job.part`).
-pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<PointCloud>> {
+/// virtual part's ground surface and rescan, as written, when the simulated arm ground one
+/// (`job.part`).
+pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<GroundPart>> {
     let robot = match job.tool {
         Some(tool) => Robot::with_tool(&cfg.robot.urdf, tool.tool()?, &cfg.robot.servos)?,
         None => Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?,
@@ -489,10 +491,11 @@ impl crate::cycle::Executor for LoopArm {
         let mut cfg = self.settings.clone();
         cfg.robot.tool = job.tool.path.clone();
         let held = (self.ground.as_ref())
-            .filter(|(file, _)| job.part_in_reference && file == job.part)
-            .map(|(_, cloud)| cloud);
+            .filter(|(file, _)| job.part_in_reference && file == job.part.as_path())
+            .map(|(_, cloud)| cloud)
+            .or_else(|| job.part.held_cloud());
         let part = sim.then(|| Part {
-            file: job.part,
+            file: job.part.as_path(),
             held,
             in_reference: job.part_in_reference,
             ground_out: &after,
@@ -514,10 +517,14 @@ impl crate::cycle::Executor for LoopArm {
         };
         let ground = stream_plan(&cfg, &run)?;
         if sim {
+            let ground =
+                ground.ok_or_else(|| anyhow::anyhow!("cycle: the simulated arm ground no part"))?;
+            // The rescan is handed on as written: the next inspection does not read it back.
             let part = virtual_part::truth_paths(&after).0;
-            self.ground = ground.map(|cloud| (part.clone(), cloud));
+            self.ground = Some((part.clone(), ground.surface));
+            let scan = Geometry::Cloud(ground.rescan);
             return Ok(crate::cycle::Rescan {
-                scan: after,
+                scan: Source::held(after, scan, ground.rescan_ply),
                 more_scans: Vec::new(),
                 part: Some(part),
             });
@@ -526,7 +533,9 @@ impl crate::cycle::Executor for LoopArm {
             "cycle: rescan the ground area: {}",
             crate::inspect::suggest::describe_rescan(job.rescan)
         );
-        let mut scans = next_scans(job.plan_file)?;
+        let mut scans: Vec<Source> = (next_scans(job.plan_file)?.into_iter())
+            .map(Source::file)
+            .collect();
         Ok(crate::cycle::Rescan {
             scan: scans.remove(0),
             more_scans: scans,

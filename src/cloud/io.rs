@@ -232,8 +232,14 @@ pub fn write_ply(
         .with_context(|| format!("{}: cannot write", path.display()))
 }
 
-/// Writes a cloud as CSV: header `x,y,z[,nx,ny,nz][,field...]`, shortest round-trip numbers.
+/// Writes a cloud as CSV ([`csv_text`]).
 pub fn write_csv(path: &Path, cloud: &PointCloud) -> Result<()> {
+    std::fs::write(path, csv_text(cloud))
+        .with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// A cloud as CSV: header `x,y,z[,nx,ny,nz][,field...]`, shortest round-trip numbers.
+pub fn csv_text(cloud: &PointCloud) -> String {
     use std::fmt::Write as _;
     let mut s = String::from("x,y,z");
     if cloud.normals.is_some() {
@@ -266,5 +272,5 @@ pub fn write_csv(path: &Path, cloud: &PointCloud) -> Result<()> {
         })
         .collect();
     s.extend(blocks);
-    std::fs::write(path, s).with_context(|| format!("{}: cannot write", path.display()))
+    s
 }

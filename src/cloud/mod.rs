@@ -18,7 +18,8 @@ mod xyz;
 
 pub use error::{ParseError, Place};
 pub use io::{
-    load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units, MAX_COORD_MM,
+    csv_text, load, load_cloud, read_bytes, write_csv, write_ply, Format, Loaded, Units,
+    MAX_COORD_MM,
 };
 pub use ply::{write_ply_bytes, PlyPrecision};
 pub use sample::{sample_mesh, MeshSample};

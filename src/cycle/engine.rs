@@ -14,17 +14,18 @@ use super::record::{
 use super::refit::{refit, Ground};
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
-use crate::inspect::{self, FileInput, PoseSource};
+use crate::inspect::{self, FileInput, PoseSource, Source};
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
+use crate::report::provenance::InputFile;
 use crate::robot::ToolText;
 
 /// What the loop starts from.
 pub struct Inputs {
-    /// Reference file.
-    pub reference: PathBuf,
-    /// The first scan.
-    pub scan: PathBuf,
+    /// Reference file (or the reference the caller wrote, held).
+    pub reference: Source,
+    /// The first scan (or the scan the caller wrote, held).
+    pub scan: Source,
     /// Units and format of the reference and the scans.
     pub files: FileInput,
     /// Output folder: iter-1, iter-2, ..., cycle.html and cycle.json.
@@ -58,7 +59,7 @@ pub struct GrindJob<'a> {
     /// The tool file the plan was made with, as held in memory.
     pub tool: &'a ToolText,
     /// A simulated arm's part: the first scan, then the part it ground.
-    pub part: &'a Path,
+    pub part: &'a Source,
     /// Whether `part` is already in the reference frame (a ground part's truth file).
     pub part_in_reference: bool,
     /// The iteration's folder (journal, run settings, a simulated rescan).
@@ -71,10 +72,10 @@ pub struct GrindJob<'a> {
 
 /// What a grind left: the next scan, and with a simulated arm the ground part itself.
 pub struct Rescan {
-    /// The scan of the ground part.
-    pub scan: PathBuf,
+    /// The scan of the ground part (a simulated rescan held as written: not read back).
+    pub scan: Source,
     /// Further scans of it (other setups), inspected together with `scan`.
-    pub more_scans: Vec<PathBuf>,
+    pub more_scans: Vec<Source>,
     /// The ground part in the reference frame (a simulated arm's truth file), the next grind's
     /// part; None for a real part.
     pub part: Option<PathBuf>,
@@ -132,12 +133,12 @@ struct Loop<'a> {
     /// Every grind's removal evidence so far: k is fitted to all of it.
     pooled: Vec<Evidence>,
     /// The scan to inspect next.
-    scan: PathBuf,
+    scan: Source,
     /// Further scans (other setups) inspected with it.
-    more_scans: Vec<PathBuf>,
+    more_scans: Vec<Source>,
     /// The simulator's virtual part: the first scan, then the ground part itself (its truth
     /// file, reference frame), so that it keeps its shape between grinds.
-    part: (PathBuf, bool),
+    part: (Source, bool),
     /// The tool file of the next plan, held in memory: refitted after each grind; None until
     /// the first refit (the plan settings' tool file, read when planning).
     tool: Option<ToolText>,
@@ -154,7 +155,10 @@ impl Loop<'_> {
         let dir = self.inputs.out.join(format!("iter-{k}"));
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
-        println!("== cycle: iteration {k}: inspect {}", self.scan.display());
+        println!(
+            "== cycle: iteration {k}: inspect {}",
+            self.scan.as_path().display()
+        );
         let (found, inspection_dir, made) = match self.inputs.first.take() {
             Some(f) => (f.found, f.inspection_dir, Some((f.plan_file, f.planned))),
             None => {
@@ -188,7 +192,7 @@ impl Loop<'_> {
         }
         let (plan_file, planned) = match made {
             Some(made) => made,
-            None => self.plan(&inspection, &dir)?,
+            None => self.plan(&inspection, &found.written, &dir)?,
         };
         let last = self.records.last_mut().expect("pushed above");
         last.planned(&inspection, &planned.plan);
@@ -212,7 +216,7 @@ impl Loop<'_> {
         self.scan = rescan.scan;
         self.more_scans = rescan.more_scans;
         if let Some(part) = rescan.part {
-            self.part = (part, true);
+            self.part = (Source::file(part), true);
         }
         self.previous = Some(Ground {
             inspection,
@@ -241,7 +245,12 @@ impl Loop<'_> {
 
     /// Plans from `inspection` into DIR/plan.json with the loop's plan settings and its tool
     /// file (written as DIR/plan.toml, an output: the `[plan]` settings with `robot.tool` set).
-    fn plan(&self, inspection: &Inspection, dir: &Path) -> anyhow::Result<(PathBuf, Planned)> {
+    fn plan(
+        &self,
+        inspection: &Inspection,
+        written: &[InputFile],
+        dir: &Path,
+    ) -> anyhow::Result<(PathBuf, Planned)> {
         println!("== cycle: plan");
         let tool = match &self.tool {
             Some(t) => t.clone(),
@@ -253,7 +262,7 @@ impl Loop<'_> {
         cfg.robot.tool = tool.path.clone();
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
-        let planned = plan_into(&cfg, &tool, inspection, &plan_file, None, &refuse)?;
+        let planned = plan_into(&cfg, &tool, written, inspection, &plan_file, None, &refuse)?;
         Ok((plan_file, planned))
     }
 
@@ -287,6 +296,7 @@ pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
             position: *p,
             normal: n / n.norm(),
             distance: v.distance,
+            uncertainty: v.uncertainty,
             region,
         })
         .collect();

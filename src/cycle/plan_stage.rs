@@ -46,10 +46,13 @@ pub struct Planned {
 /// file `tool` (held in memory; `cfg.robot.tool` names it) and writes
 /// `out` (plan.json), its provenance, plan.html beside it, predicted.csv (removal plans) and
 /// `export_ros`; prints what was planned. A setting the planner refuses is reported through
-/// `refuse` (the caller names its settings file and line).
+/// `refuse` (the caller names its settings file and line). `written`: the inspection's files
+/// as this process wrote them ([`crate::inspect::Findings::written`]), recorded in the
+/// provenance without reading them back; the others are hashed from their files.
 pub fn plan_into(
     cfg: &PlanFileConfig,
     tool: &ToolText,
+    written: &[InputFile],
     inspection: &Inspection,
     out: &Path,
     export_ros: Option<&Path>,
@@ -69,7 +72,7 @@ pub fn plan_into(
     let plan = motion::plan(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    let provenance = provenance(&inspection.dir, &cfg.robot, tool, &cfg.plan)?;
+    let provenance = provenance(&inspection.dir, &cfg.robot, tool, written, &cfg.plan)?;
     let text = provenance.stamp(&compact, out)?;
     std::fs::write(out, &text).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let page = write_plan_html(out, inspection, &plan, &provenance)?;
@@ -107,19 +110,25 @@ pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str,
     ]
 }
 
-/// The provenance of a plan: the inspection's files it read, the cell's files (the tool file
-/// as held, `tool`), the settings.
-pub fn provenance(
+/// The provenance of a plan: the inspection's files it read (those in `written` as written),
+/// the cell's files (the tool file as held, `tool`), the settings.
+fn provenance(
     inspection: &Path,
     robot: &RobotConfig,
     tool: &ToolText,
+    written: &[InputFile],
     plan: &PlanConfig,
 ) -> Result<Provenance> {
     use rayon::prelude::*;
+    let held = |p: &Path| written.iter().find(|f| f.path == p.display().to_string());
     let inputs = (plan_inputs(inspection, robot).into_par_iter())
-        .filter(|(role, p)| *role == "tool" || p.is_file())
-        .map(|(role, p)| match role {
-            "tool" => Ok(InputFile::held(role, &tool.path, tool.text.as_bytes())),
+        .filter(|(role, p)| *role == "tool" || held(p).is_some() || p.is_file())
+        .map(|(role, p)| match (role, held(&p)) {
+            ("tool", _) => Ok(InputFile::held(role, &tool.path, tool.text.as_bytes())),
+            (_, Some(f)) => Ok(InputFile {
+                role: role.to_string(),
+                ..f.clone()
+            }),
             _ => InputFile::hash(role, &p),
         })
         .collect::<Result<Vec<_>>>()?;

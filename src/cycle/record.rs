@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use super::config::CycleConfig;
 use crate::motion::{Inspection, Plan};
-use crate::regions::{Region, Verdict};
+use crate::regions::{Counts, Region, Verdict};
 use crate::removal::fit::{Agreement, SAME_POINT_MM};
 use crate::report::{escape, table_page};
 use crate::spatial::Neighbours;
@@ -27,6 +27,10 @@ pub struct Measured {
     pub rms_mm: Option<f64>,
     /// Volume above the tolerance of the repairable regions, mm^3.
     pub volume_mm3: f64,
+    /// The decision rule with uncertainty (ISO 14253-1, `regions::decision`) over every
+    /// measured core point: conform, non-conform, undecided. Absent in older cycle.json: 0s.
+    #[serde(default)]
+    pub decision: Counts,
 }
 
 impl Measured {
@@ -47,6 +51,13 @@ impl Measured {
             peak_mm: repairable.iter().map(|r| r.peak).reduce(f64::max),
             rms_mm: rms(&d),
             volume_mm3: repairable.iter().map(|r| r.volume).sum(),
+            decision: Counts::of(
+                inspection
+                    .points
+                    .iter()
+                    .map(|p| (p.distance, p.uncertainty)),
+                inspection.tolerance.unwrap_or(f64::NAN),
+            ),
         }
     }
 }
@@ -179,8 +190,12 @@ pub fn achieved_residual(before: &Inspection, after: &Inspection, ids: &[i64]) -
 pub enum Outcome {
     /// Grind again.
     Continue,
-    /// The last inspection's verdict is "within tolerance".
+    /// The last inspection's verdict is "within tolerance" (the decision rule proves it).
     WithinTolerance,
+    /// The last inspection's verdict is "undecided": no region is evidence of a defect, but
+    /// the decision rule does not prove the part within tolerance (non-conform points too
+    /// few for a region, or too much of the area undecided): rescan, do not grind.
+    Undecided,
     /// No repairable region is left but the part is not within tolerance (pits, or an
     /// incomplete verdict): grinding cannot help.
     NothingToGrind,
@@ -201,6 +216,10 @@ impl Outcome {
         match self {
             Outcome::Continue => "continue",
             Outcome::WithinTolerance => "within tolerance",
+            Outcome::Undecided => {
+                "stopped: undecided under ISO 14253-1 (no region is a proven defect, but the \
+                 part is not proven within tolerance): rescan at a higher resolution"
+            }
             Outcome::NothingToGrind => {
                 "not finished: no repairable region left (pits remain: the part is rejected)"
             }
@@ -216,7 +235,8 @@ impl Outcome {
 
 /// The stop rule, applied after each inspection. `records` are the loop's inspections in
 /// order; every record but the last was planned and ground (and followed by the next).
-/// Order: within tolerance; nothing repairable left; the last grind's progress under
+/// Order: within tolerance; undecided (the verdict's decision rule, ISO 14253-1: nothing
+/// proven to grind, nothing proven conform); nothing repairable left; the last grind's progress under
 /// `min_progress`; `max_iterations` grinds made; else grind again.
 pub fn decide(records: &[IterationRecord], cfg: &CycleConfig) -> Outcome {
     let Some(last) = records.last() else {
@@ -224,6 +244,9 @@ pub fn decide(records: &[IterationRecord], cfg: &CycleConfig) -> Outcome {
     };
     if last.measured.verdict == Verdict::WithinTolerance {
         return Outcome::WithinTolerance;
+    }
+    if last.measured.verdict == Verdict::Undecided {
+        return Outcome::Undecided;
     }
     if last.measured.repairable == 0 {
         return Outcome::NothingToGrind;
@@ -254,7 +277,7 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 }
 
 /// Columns of the table.
-const COLUMNS: usize = 11;
+const COLUMNS: usize = 12;
 
 /// The table's header cells.
 pub const TABLE_HEADER: [&str; COLUMNS] = [
@@ -264,6 +287,7 @@ pub const TABLE_HEADER: [&str; COLUMNS] = [
     "peak mm",
     "RMS mm",
     "volume mm3",
+    "ISO conform/non/undecided",
     "removed %",
     "residual pred/achieved mm",
     "defect pts: pred k0/pred k fit/achieved (fit-achieved) mm",
@@ -299,6 +323,10 @@ pub fn table_row(r: &IterationRecord) -> [String; COLUMNS] {
         opt(m.peak_mm, 4),
         opt(m.rms_mm, 4),
         format!("{:.4}", m.volume_mm3),
+        format!(
+            "{}/{}/{}",
+            m.decision.conform, m.decision.nonconform, m.decision.undecided
+        ),
         opt(r.progress.map(|p| 100.0 * p), 1),
         format!(
             "{} / {}",
@@ -353,6 +381,12 @@ pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
          compares it with the achieved residual at the same points; lowest ground is the next \
          inspection's lowest distance where the plan ground."
             .to_string(),
+        format!(
+            "The verdict and the ISO column follow {}; within tolerance needs no non-conform \
+             point and at most {:.1} % of the measured area undecided.",
+            escape(crate::regions::decision::RULE),
+            100.0 * crate::regions::MAX_UNDECIDED_SHARE
+        ),
     ];
     table_page(
         "polishbot cycle",

@@ -39,6 +39,7 @@ impl Part {
                 position: *p,
                 normal: *n,
                 distance: 0.0,
+                uncertainty: 0.0,
                 region: -1,
             })
             .collect();

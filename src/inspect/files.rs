@@ -6,6 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
+use rayon::prelude::*;
 use serde_json::{json, Value};
 
 use super::{suggest, Findings, Inputs, InspectConfig, PoseSource};
@@ -16,7 +17,7 @@ use crate::register::{RegisterError, Registration};
 use crate::report::inspection::{
     peak_text, touch_mark, verdict_line, write_inspection_page, LOWER_BOUND_NOTE, UNMEASURED_NOTE,
 };
-use crate::report::provenance::Provenance;
+use crate::report::provenance::{InputFile, Provenance};
 use crate::report::{ReportConfig, Unmeasured};
 
 /// Writes `value` as pretty JSON to `path`: with `provenance` added as its last key
@@ -26,12 +27,32 @@ fn write_json(
     value: &impl serde::Serialize,
     provenance: Option<&Provenance>,
 ) -> Result<()> {
+    write_text(path, &json_text(path, value, provenance)?)
+}
+
+/// The text [`write_json`] writes to `path`.
+fn json_text(
+    path: &Path,
+    value: &impl serde::Serialize,
+    provenance: Option<&Provenance>,
+) -> Result<String> {
     let text = serde_json::to_string_pretty(value)?;
-    let text = match provenance {
+    Ok(match provenance {
         Some(p) => p.stamp(&text, path)?,
         None => text + "\n",
-    };
+    })
+}
+
+/// Writes `text` to `path`.
+fn write_text(path: &Path, text: &str) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("{}: cannot write", path.display()))
+}
+
+/// Writes `text` to `path` and returns its record as written (size, SHA-256; `role` its
+/// role), for the plan's provenance: the file is not read back.
+fn write_recorded(role: &str, path: &Path, text: &str) -> Result<InputFile> {
+    write_text(path, text)?;
+    Ok(InputFile::held(role, path, text.as_bytes()))
 }
 
 /// Runs [`super::run`] and writes its files into `out` (created), then prints the summary
@@ -103,7 +124,7 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
             suggestion: words.clone(),
         }),
     };
-    write_outputs(out, written, lines, &provenance)?;
+    found.written = write_outputs(out, written, lines, &provenance)?;
     found.times.lap("files and report");
     print_summary(
         &found.deviations,
@@ -136,13 +157,14 @@ struct Written<'a> {
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
-/// (formatting is most of their time, and each is single-threaded).
+/// (formatting is most of their time, and each is single-threaded); returns the records of
+/// regions.json and deviations.csv as written ([`Findings::written`]).
 fn write_outputs(
     out: &Path,
     written: Written,
     report_summary: Vec<(String, String)>,
     provenance: &Provenance,
-) -> Result<()> {
+) -> Result<Vec<InputFile>> {
     let Written {
         dev,
         found,
@@ -157,12 +179,21 @@ fn write_outputs(
     if !support.is_empty() {
         ply_table.set_field("scans", support.iter().map(|&m| m as f64).collect());
     }
-    let write_regions =
-        || -> Result<()> { write_json(&out.join("regions.json"), found, Some(provenance)) };
+    let write_regions = || -> Result<InputFile> {
+        let path = out.join("regions.json");
+        write_recorded(
+            "regions",
+            &path,
+            &json_text(&path, found, Some(provenance))?,
+        )
+    };
     let ((csv, ply), (regions, report)) = rayon::join(
         || {
             rayon::join(
-                || cloud::write_csv(&out.join("deviations.csv"), &table),
+                || {
+                    let path = out.join("deviations.csv");
+                    write_recorded("deviations", &path, &cloud::csv_text(&table))
+                },
                 || {
                     let path = out.join("deviations.ply");
                     cloud::write_ply(&path, &ply_table, None, PlyPrecision::F64)
@@ -175,10 +206,9 @@ fn write_outputs(
             })
         },
     );
-    csv?;
     ply?;
-    regions?;
-    report
+    report?;
+    Ok(vec![regions?, csv?])
 }
 
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {
@@ -244,21 +274,25 @@ fn suggestion_line(sg: &suggest::Suggestion) -> String {
 }
 /// The provenance of an inspection: its input files, units and effective settings.
 pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
-    let mut files = vec![
-        ("reference", inputs.reference.as_path()),
-        ("scan", inputs.scan.as_path()),
-    ];
-    files.extend(inputs.more_scans.iter().map(|p| ("scan", p.as_path())));
+    let mut sources = vec![("reference", &inputs.reference), ("scan", &inputs.scan)];
+    sources.extend(inputs.more_scans.iter().map(|s| ("scan", s)));
     let optional = [
         ("pose", &inputs.pose),
         ("core points", &inputs.core),
         ("area to inspect", &inputs.inspect_area),
     ];
-    files.extend(
-        optional
-            .iter()
-            .filter_map(|(r, p)| p.as_deref().map(|p| (*r, p))),
-    );
+    let files: Vec<(&str, &Path)> = optional
+        .iter()
+        .filter_map(|(r, p)| p.as_deref().map(|p| (*r, p)))
+        .collect();
+    // A file this process wrote is recorded from the bytes it holds, never read back.
+    let hashed = (sources.par_iter())
+        .map(|(role, s)| match s.held_bytes() {
+            Some(bytes) => Ok(InputFile::held(role, s.as_path(), bytes)),
+            None => InputFile::hash(role, s.as_path()),
+        })
+        .chain(files.par_iter().map(|(role, p)| InputFile::hash(role, p)))
+        .collect::<Result<Vec<_>>>()?;
     let units = match inputs.files.units {
         Some(u) => format!("results in mm, reference frame; inputs read as {u:?}"),
         None => "results in mm, reference frame; inputs in mm (no --units)".to_string(),
@@ -270,7 +304,7 @@ pub fn provenance(cfg: &InspectConfig, inputs: &Inputs) -> Result<Provenance> {
         "registration_error": inputs.registration_error,
         "report": ReportConfig::default(),
     });
-    Provenance::new("inspect", &units, &files, &config)
+    Provenance::of_inputs("inspect", &units, hashed, &config)
 }
 
 /// Exit code of `inspect` when the verdict is incomplete (1 is an error, 2 a usage error).
@@ -357,4 +391,57 @@ pub fn record_failure(
         diagnostics.fitness,
         out.display()
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cloud::{Geometry, PointCloud};
+    use crate::inspect::{FileInput, Source};
+    use nalgebra::Point3;
+
+    /// A cloud of a few millimetre-sized points, as a rescan has them.
+    fn cloud() -> PointCloud {
+        PointCloud::from_points(
+            (0..50)
+                .map(|i| Point3::new(i as f64 * 0.37, (i * i) as f64 * 0.011, 3.0 - i as f64))
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn a_held_input_is_loaded_and_recorded_as_written_without_reading_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let c = cloud();
+        let bytes = cloud::write_ply_bytes(&c, None, PlyPrecision::F64);
+        let written = dir.path().join("after.ply");
+        std::fs::write(&written, &bytes).unwrap();
+        // Held under a path that is not there: loading it must not read the file.
+        let gone = dir.path().join("removed.ply");
+        let held = Source::held(&gone, Geometry::Cloud(c.clone()), bytes.clone());
+        let files = FileInput::default();
+        assert_eq!(held.load_cloud(files).unwrap(), c);
+        // What the file reads back as (the parser, not the held copy) is the held cloud.
+        assert_eq!(Source::file(&written).load_cloud(files).unwrap(), c);
+        let err = Source::file(&gone).load_cloud(files).unwrap_err();
+        assert!(format!("{err:#}").contains("removed.ply"), "{err:#}");
+        // The provenance of the held input: the file's size and SHA-256, hashed from disk.
+        let inputs = Inputs {
+            reference: held.clone(),
+            scan: held,
+            more_scans: Vec::new(),
+            files,
+            pose: None,
+            core: None,
+            inspect_area: None,
+            registration_error: None,
+        };
+        let p = provenance(&InspectConfig::default(), &inputs).unwrap();
+        let on_disk = InputFile::hash("scan", &written).unwrap();
+        assert_eq!(p.inputs.len(), 2);
+        for f in &p.inputs {
+            assert_eq!((f.bytes, &f.sha256), (on_disk.bytes, &on_disk.sha256));
+            assert_eq!(f.path, gone.display().to_string());
+        }
+    }
 }

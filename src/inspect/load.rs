@@ -1,11 +1,9 @@
 //! Loading an inspection's inputs: the reference as a cloud with outward normals, the scan, and
 //! the core points, each checked, with the report's line on where they came from.
-use std::path::Path;
-
 use anyhow::{Context, Result};
 
 use super::checks;
-use super::config::{FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS};
+use super::config::{FileInput, Inputs, InspectConfig, Source, DEFAULT_REFERENCE_POINTS};
 use crate::cloud::{self, Geometry, PointCloud};
 use crate::compare::{self, CoreConfig, Method};
 
@@ -39,7 +37,7 @@ pub fn inputs(
     let f = inputs.files;
     let (reference, scan) = rayon::join(
         || reference(&inputs.reference, f, samples),
-        || cloud::load_cloud(&inputs.scan, f.format, f.units),
+        || inputs.scan.load_cloud(f),
     );
     let ((reference, notice), scan) = (reference?, scan?);
     notices.extend(notice);
@@ -48,9 +46,14 @@ pub fn inputs(
 
 /// The reference as a cloud with outward normals, and a notice when its normals were turned
 /// round or estimated.
-fn reference(path: &Path, input: FileInput, samples: usize) -> Result<(Loaded, Option<String>)> {
+fn reference(
+    source: &Source,
+    input: FileInput,
+    samples: usize,
+) -> Result<(Loaded, Option<String>)> {
+    let path = source.as_path();
     let loaded = |cloud, note| Loaded { cloud, note };
-    match cloud::load(path, input.format, input.units)?.geometry {
+    match source.load(input)? {
         Geometry::Mesh { mesh, .. } => Ok((
             loaded(
                 compare::mesh_reference(&mesh, samples, 1)?,

@@ -17,7 +17,7 @@ pub use files::{inspect_into, Incomplete, INCOMPLETE_EXIT};
 pub use pose::{register_scan, PoseSource};
 
 pub use config::{
-    FileInput, Inputs, InspectConfig, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
+    FileInput, Inputs, InspectConfig, Source, DEFAULT_REFERENCE_POINTS, MAX_REFERENCE_POINTS,
 };
 
 use std::time::Instant;
@@ -52,6 +52,9 @@ pub struct Findings {
     pub suggestion: Option<suggest::Suggestion>,
     /// Per core point whether it lies in the area to inspect (None: no area given, all do).
     pub in_area: Option<Vec<bool>>,
+    /// regions.json and deviations.csv as [`inspect_into`] wrote them (size, SHA-256), for
+    /// the plan's provenance; empty from [`run`], which writes nothing.
+    pub written: Vec<crate::report::provenance::InputFile>,
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
@@ -69,7 +72,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
     let first = scans::prepare(
         cfg,
         reference_in,
-        &inputs.scan,
+        inputs.scan.as_path(),
         &scan,
         inputs.pose.as_deref(),
     )?;
@@ -79,8 +82,8 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         .zip(&more)
         .map(|(path, s)| {
             // A further scan's failed registration is no record of the first scan's.
-            scans::prepare(cfg, reference_in, path, s, None)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+            scans::prepare(cfg, reference_in, path.as_path(), s, None)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.as_path().display()))
         })
         .collect::<Result<Vec<_>>>()?;
     times.lap("filter and register");
@@ -91,7 +94,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         ("outlier filter".to_string(), first.filter_line),
     ];
     for (k, (path, s)) in inputs.more_scans.iter().zip(&rest).enumerate() {
-        let what = format!("scan {} ({})", k + 2, path.display());
+        let what = format!("scan {} ({})", k + 2, path.as_path().display());
         provenance.push((format!("{what}: registration"), s.pose.line()));
         provenance.push((format!("{what}: outlier filter"), s.filter_line.clone()));
     }
@@ -140,6 +143,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         times,
         suggestion,
         in_area,
+        written: Vec::new(),
     })
 }
 

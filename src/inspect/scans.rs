@@ -2,15 +2,15 @@
 //! on a tilted fixture): each is filtered and registered to the reference on its own, then
 //! their points are pooled in the reference frame and measured jointly; per core point, which
 //! scans supported its measurement.
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{Context, Result};
 use rayon::prelude::*;
 
 use super::checks;
-use super::config::{FileInput, InspectConfig};
+use super::config::{FileInput, InspectConfig, Source};
 use super::pose::{register_scan, PoseSource};
-use crate::cloud::{self, PointCloud};
+use crate::cloud::PointCloud;
 use crate::compare::Deviations;
 use crate::preprocess;
 use crate::spatial::Neighbours;
@@ -69,16 +69,13 @@ pub fn prepare(
 }
 
 /// Reads the further scans (in parallel).
-pub fn load_more(paths: &[PathBuf], files: FileInput) -> Result<Vec<PointCloud>> {
+pub fn load_more(paths: &[Source], files: FileInput) -> Result<Vec<PointCloud>> {
     anyhow::ensure!(
         paths.len() < MAX_SCANS,
         "{} scans: at most {MAX_SCANS} in one inspection",
         paths.len() + 1
     );
-    paths
-        .par_iter()
-        .map(|p| cloud::load_cloud(p, files.format, files.units))
-        .collect()
+    paths.par_iter().map(|p| p.load_cloud(files)).collect()
 }
 
 /// The points of every scan in one cloud (points only: the comparison reads no more),

@@ -421,7 +421,19 @@ impl<'a> Scene<'a> {
                 let v = c.a + dir * along - p.position;
                 let dn = v.dot(&p.normal);
                 let lateral = (v - p.normal * dn).norm();
-                let dist = if lateral <= self.patch { dn } else { v.norm() };
+                let dist = if lateral > self.patch {
+                    v.norm()
+                } else if dn < 0.0
+                    && best.is_none_or(|(b, _)| dn - c.radius < b)
+                    && !self.behind_nearest(&(p.position + v), seen)
+                {
+                    // behind this point's plane but in front of the nearest face: the
+                    // point is a far face of a wall thinner than the reach, the distance
+                    // to its patch is unsigned
+                    -dn
+                } else {
+                    dn
+                };
                 if best.is_none_or(|(b, _)| dist - c.radius < b) {
                     best = Some((dist - c.radius, nb.index));
                 }
@@ -432,6 +444,25 @@ impl<'a> Scene<'a> {
             t += step;
         }
         best
+    }
+
+    /// Whether `at` (reference frame, mm) lies behind the face of its nearest reference point
+    /// (inside the part). A point's tangent plane says inside or outside only where its face
+    /// is the nearest: beyond a wall thinner than the reach, the far face's plane has the
+    /// outside behind it. `seen` caches the last query.
+    fn behind_nearest(&self, at: &Point3<f64>, seen: &mut Seen) -> bool {
+        let nearest = match *seen {
+            Some((q, found)) if q == *at => found,
+            _ => match self.index.nearest(at) {
+                Some(found) => {
+                    *seen = Some((*at, found));
+                    found
+                }
+                None => return false,
+            },
+        };
+        let p = &self.points[nearest.index];
+        (at - p.position).dot(&p.normal) < 0.0
     }
 
     /// How far from `c`'s axis `part_clearance` looks for reference points when it needs

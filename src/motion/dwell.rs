@@ -215,7 +215,9 @@ pub fn set_dwell(
         )));
     }
     let bounds = (&influence, &solve);
-    let plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), allowance) {
+    let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
+    let aim = removal::targets(&cores, allowance, tolerance);
+    let plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
     };
@@ -249,36 +251,30 @@ pub fn set_dwell(
 const IN_ORDER_ROUNDS: usize = 2;
 
 /// The dwell of one region solved for the pass as the tool grinds it: on the linear model
-/// first (`removal::solve_region`), then [`IN_ORDER_ROUNDS`] times again with each core
-/// point's target raised by what the linear model removes there beyond the contacts ground in
-/// order (r' = r + A t - S(t), S `removal::sequence::in_order` of the `placed` contacts),
+/// first (`removal::solve_region` at the targets `aim`, `removal::targets`: 0 where a point is
+/// not proven out of tolerance), then [`IN_ORDER_ROUNDS`] times again with each core point's
+/// target raised by what the linear model removes there beyond the contacts ground in order
+/// (r' = max(r + A t - S(t), 0), S `removal::sequence::in_order` of the `placed` contacts),
 /// so that the pass ground in order removes the target.
 fn solve_in_order(
     placed: &[Contact],
     tool: &ToolModel,
     (influence, solve): (&Influence, &removal::RemovalConfig),
     (contacts, cores): (&[Contact], &[SurfacePoint]),
-    allowance: f64,
+    aim: &[f64],
 ) -> Result<removal::RegionRemoval, String> {
-    let mut plan = removal::solve_region(influence, contacts, cores, allowance, solve)?;
+    let mut plan = removal::solve_region(influence, contacts, cores, aim, solve)?;
     let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
     let reach = removal::influence::Reach::new(&geometry);
     for _ in 0..IN_ORDER_ROUNDS {
         let ground = (cores, &reach);
         let order = removal::sequence::in_order(placed, &plan.dwell, tool, influence, ground);
-        let aimed: Vec<SurfacePoint> = cores
+        let aimed: Vec<f64> = aim
             .iter()
             .zip(plan.removal.iter().zip(&order))
-            .map(|(c, (linear, ground))| {
-                let want = removal::target(c.distance, allowance) + linear - ground;
-                let distance = match want > 0.0 {
-                    true => allowance + want,
-                    false => c.distance.min(allowance),
-                };
-                SurfacePoint { distance, ..*c }
-            })
+            .map(|(r, (linear, ground))| (r + linear - ground).max(0.0))
             .collect();
-        plan = removal::solve_region(influence, contacts, &aimed, allowance, solve)?;
+        plan = removal::solve_region(influence, contacts, cores, &aimed, solve)?;
     }
     Ok(plan)
 }

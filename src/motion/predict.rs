@@ -351,10 +351,13 @@ pub(crate) fn predict(
     rehearsed: &Rehearsed,
 ) -> Result<(RemovalReport, Vec<(usize, String)>), PlanError> {
     let tool = setup.tool;
+    let tip = removal::montecarlo::tip_error(tool, &setup.config.monte_carlo);
     let mut report = RemovalReport {
         force_n: tool.force_n(),
         preload_mm: tool.preload_mm,
         tolerance_mm: inspection.tolerance.unwrap_or(setup.config.tolerance_mm),
+        tip_error_mm: tip.mm,
+        tip_error_source: tip.source,
         regions: Vec::new(),
         rows: Vec::new(),
     };

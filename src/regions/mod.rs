@@ -22,7 +22,9 @@ use serde::{Deserialize, Serialize};
 use crate::compare::{area_shares, Deviation, Deviations, Reason, PEAK_LOD_RATIO};
 use crate::spatial::Neighbours;
 
+pub mod decision;
 mod resolution;
+pub use decision::{conformity, Conformity, Counts, Decision, MAX_UNDECIDED_SHARE};
 pub use resolution::{Shortfall, MAX_RESOLVING_RADIUS_MM, MAX_SHARE_MM2, SMALLEST_DEFECT_MM};
 
 /// Settings of [`find_regions`].
@@ -102,7 +104,9 @@ fn full() -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Verdict {
-    /// No region.
+    /// No region, and the decision rule ([`decision`], ISO 14253-1) proves it: no
+    /// non-conform core point and at most [`MAX_UNDECIDED_SHARE`] of the measured area
+    /// undecided.
     WithinTolerance,
     /// Every region is material in excess.
     Repairable,
@@ -111,6 +115,11 @@ pub enum Verdict {
     /// Less of the area to inspect was measured than `min_coverage`: no verdict (the
     /// regions found in the measured part are still listed).
     Incomplete,
+    /// No region is evidence of a defect (none has a non-conform member), but the decision
+    /// rule does not prove the part within tolerance either: non-conform core points too few
+    /// for a region, or more than [`MAX_UNDECIDED_SHARE`] of the area undecided. Rescan at a
+    /// higher resolution ([`Decision::undecided_reason`]).
+    Undecided,
 }
 
 /// The regions of a comparison.
@@ -135,6 +144,10 @@ pub struct Regions {
     /// Least coverage for a verdict (`min_coverage`). Absent in older files: 0.
     #[serde(default)]
     pub min_coverage: f64,
+    /// The decision rule with uncertainty over the measured core points ([`decision`]).
+    /// Absent in files from before 2026-12-05: every count 0.
+    #[serde(default)]
+    pub decision: Decision,
     /// The regions, largest volume first.
     pub regions: Vec<Region>,
     /// Region id per core point (-1 = none).
@@ -219,19 +232,38 @@ pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[b
     if !regions.is_empty() {
         neighbourhoods(dev, &share, gap, &mut regions);
     }
-    let regions: Vec<Region> = regions.into_iter().map(|r| r.0).collect();
     let (coverage, shortfall) = resolution::coverage(dev, &share, in_area, cfg.tolerance);
+    let mut decision = decision::decide(dev, &share, in_area, &labels, cfg.tolerance);
+    let evidence = |members: &[usize]| {
+        members.iter().any(|&i| {
+            let v = &dev.values[i];
+            vouched(dev, i, cfg)
+                || conformity(v.distance, v.uncertainty, cfg.tolerance)
+                    == Some(Conformity::NonConform)
+        })
+    };
+    decision.undecided_regions = (regions.iter())
+        .filter(|(_, m)| !evidence(m))
+        .map(|(r, _)| r.id)
+        .collect();
+    let decided: Vec<&Region> = (regions.iter())
+        .filter(|(r, _)| !decision.undecided_regions.contains(&r.id))
+        .map(|(r, _)| r)
+        .collect();
     // A NaN minimum gives no verdict either.
     let enough = coverage >= cfg.min_coverage;
     let verdict = if !enough {
         Verdict::Incomplete
-    } else if regions.is_empty() {
+    } else if decided.is_empty() && decision.proves_conform() {
         Verdict::WithinTolerance
-    } else if regions.iter().all(|r| r.repairable) {
+    } else if decided.is_empty() {
+        Verdict::Undecided
+    } else if decided.iter().all(|r| r.repairable) {
         Verdict::Repairable
     } else {
         Verdict::Reject
     };
+    let regions: Vec<Region> = regions.into_iter().map(|r| r.0).collect();
     Regions {
         tolerance: cfg.tolerance,
         spacing,
@@ -240,6 +272,7 @@ pub fn find_regions_in(dev: &Deviations, cfg: &RegionConfig, in_area: Option<&[b
         coverage,
         shortfall,
         min_coverage: cfg.min_coverage,
+        decision,
         regions,
         labels,
     }
@@ -465,5 +498,47 @@ mod tests {
         );
         // Not by more than the LoD: none.
         assert!(pair(0.15, true, 0.11).is_empty());
+    }
+
+    /// ISO 14253-1 on the patch (tolerance 0.05 mm): every verdict the rule can give, each
+    /// of which the verdict without it (no region: within tolerance; a region: repairable)
+    /// would get wrong except the first and the last.
+    #[test]
+    fn the_verdict_follows_the_decision_rule() {
+        let judge = |d: f64, u: f64, tops: &[usize], top: f64| {
+            let mut dev = patch(&[]);
+            for (i, v) in dev.values.iter_mut().enumerate() {
+                v.distance = if tops.contains(&i) { top } else { d };
+                (v.peak, v.uncertainty) = (v.distance, u);
+                v.significant = v.distance.abs() > u;
+            }
+            find_regions(&dev, &RegionConfig::default())
+        };
+        // |d| + U = 0.04 <= 0.05 everywhere: conform, within tolerance.
+        let r = judge(0.03, 0.01, &[], 0.0);
+        assert_eq!(r.verdict, Verdict::WithinTolerance);
+        let c = &r.decision;
+        assert_eq!((c.conform, c.nonconform, c.undecided), (25, 0, 0));
+        // 0.045 +- 0.01 straddles the tolerance everywhere: undecided, no region.
+        let r = judge(0.045, 0.01, &[], 0.0);
+        assert_eq!((r.verdict, r.regions.len()), (Verdict::Undecided, 0));
+        assert_eq!(
+            (r.decision.undecided, r.decision.undecided_share),
+            (25, 1.0)
+        );
+        // Two non-conform points (0.1 - 0.01 > 0.05), too few for a region: undecided.
+        let r = judge(0.02, 0.01, &[0, 24], 0.1);
+        assert_eq!((r.verdict, r.regions.len()), (Verdict::Undecided, 0));
+        assert_eq!(r.decision.nonconform_outside_regions, 2);
+        assert!(r.decision.undecided_reason().contains("2 non-conform"));
+        // A region beyond the tolerance but within its LoD (0.06 - 0.02 < 0.05): listed, not
+        // evidence; the verdict is undecided, not repairable.
+        let r = judge(0.06, 0.02, &[], 0.0);
+        assert_eq!((r.verdict, r.regions.len()), (Verdict::Undecided, 1));
+        assert_eq!(r.decision.undecided_regions, vec![0]);
+        // Beyond it by more than the LoD: repairable.
+        let r = judge(0.1, 0.02, &[], 0.0);
+        assert_eq!(r.verdict, Verdict::Repairable);
+        assert!(r.decision.undecided_regions.is_empty());
     }
 }

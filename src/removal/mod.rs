@@ -169,6 +169,30 @@ pub fn target(distance: f64, allowance: f64) -> f64 {
     (known(distance) - allowance).max(0.0)
 }
 
+/// Whether a plan may remove at core point `c` at `tolerance` mm: its distance exceeds the
+/// tolerance by more than its uncertainty (non-conform under ISO 14253-1, the verdict's
+/// decision rule, `regions::decision`). "No plan removes at a point that is not above the
+/// tolerance by more than its measurement uncertainty" (issue 50): a point within the
+/// uncertainty zone may be within tolerance already, and a point with no uncertainty (NaN)
+/// or no distance is not proven to hold excess.
+pub fn removable(c: &SurfacePoint, tolerance: f64) -> bool {
+    c.distance - c.uncertainty > tolerance
+}
+
+/// The dwell solve's target removal at each of `cores`, mm: its excess above `allowance`
+/// ([`target`]) where it is [`removable`] at `tolerance`, else 0 (the solve then keeps the
+/// removal there as near 0 as the contacts it must grind elsewhere allow, and lifts the
+/// tool over the contacts that reach only such points).
+pub fn targets(cores: &[SurfacePoint], allowance: f64, tolerance: f64) -> Vec<f64> {
+    cores
+        .iter()
+        .map(|c| match removable(c, tolerance) {
+            true => target(c.distance, allowance),
+            false => 0.0,
+        })
+        .collect()
+}
+
 /// A deviation, 0 where unknown (NaN: too few points to compare).
 fn known(distance: f64) -> f64 {
     if distance.is_finite() {
@@ -179,28 +203,32 @@ fn known(distance: f64) -> f64 {
 }
 
 /// Plans the dwell at every contact of `contacts` so that the removal at the core points
-/// `cores` (the region's and its neighbours' in reach of the tool) matches their excess above
-/// `allowance` mm: A from `influence`, dwell bounds from the feed limits of `config`. A
-/// contact the tool need not touch gets dwell 0 ([`lifted`]); the others are solved within
-/// their bounds.
+/// `cores` (the region's and its neighbours' in reach of the tool) matches `r`, one target
+/// per core point, mm ([`targets`]: the excess above the allowance where the point is proven
+/// out of tolerance, else 0): A from `influence`, dwell bounds from the feed limits of
+/// `config`. A contact the tool need not touch gets dwell 0 ([`lifted`]); the others are
+/// solved within their bounds.
 pub fn solve_region(
     influence: &Influence,
     contacts: &[Contact],
     cores: &[SurfacePoint],
-    allowance: f64,
+    r: &[f64],
     config: &RemovalConfig,
 ) -> Result<RegionRemoval, String> {
+    if r.len() != cores.len() {
+        return Err(format!(
+            "{} targets for {} core points",
+            r.len(),
+            cores.len()
+        ));
+    }
     let geometry: Vec<(Point3<f64>, Vector3<f64>)> =
         cores.iter().map(|c| (c.position, c.normal)).collect();
     let a = influence::matrix(influence, contacts, &geometry);
-    let r: Vec<f64> = cores
-        .iter()
-        .map(|c| target(c.distance, allowance))
-        .collect();
     let bounds = |feed: f64| -> Vec<f64> { contacts.iter().map(|c| c.length / feed).collect() };
     let (lower, upper) = (bounds(config.feed_max_mm_s), bounds(config.feed_min_mm_s));
     let n = cores.len();
-    let mut lift = lifted(&a, n, &r, (&lower, &upper), config)?;
+    let mut lift = lifted(&a, n, r, (&lower, &upper), config)?;
     bridge(
         &mut lift,
         contacts,
@@ -212,7 +240,7 @@ pub fn solve_region(
     let solved = dwell::solve(
         &kept,
         n,
-        &r,
+        r,
         &pick(&lower),
         &pick(&upper),
         config.regularization,

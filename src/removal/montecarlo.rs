@@ -20,6 +20,40 @@ const CANDIDATE_REACH_FACTOR: f64 = 2.0;
 /// Relative slack for rounding when a draw's reach is compared with the gathered radius.
 const ROUNDING: f64 = 1e-9;
 
+/// Tool-tip error of a cell with no record, mm per axis (0.12): 0.119 mm, the worst tool tip
+/// `calibrate verify --sim` measured on the ideal simulated cell when this was set; a cell
+/// with backlash or sag shows more, which is why its own record (tool.toml's
+/// `verified_tip_error_mm`) replaces it.
+pub const DEFAULT_TIP_ERROR_MM: f64 = 0.12;
+
+/// The tip error the Monte Carlo draws from and where it comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TipError {
+    /// Half-width per axis, mm.
+    pub mm: f64,
+    /// Its source in words (plan.json's `tip_error_source`).
+    pub source: String,
+}
+
+/// The tip error of the cell: `tool`'s `verified_tip_error_mm` (the worst tool tip
+/// `calibrate verify` measured) when recorded, else `config.tip_error_mm` with the reason.
+pub fn tip_error(tool: &ToolModel, config: &MonteCarloConfig) -> TipError {
+    match tool.verified_tip_error_mm {
+        Some(mm) => TipError {
+            mm,
+            source: "tool.toml [removal] verified_tip_error_mm (calibrate verify's worst tool tip)"
+                .into(),
+        },
+        None => TipError {
+            mm: config.tip_error_mm,
+            source: format!(
+                "[monte_carlo] tip_error_mm (the cell has no calibrate verify record; default \
+                 {DEFAULT_TIP_ERROR_MM} mm: calibrate verify --sim on the ideal simulated cell)"
+            ),
+        },
+    }
+}
+
 /// Settings of the Monte Carlo.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -34,9 +68,10 @@ pub struct MonteCarloConfig {
     /// worst case kept for a cell that was not verified); each draw puts every joint
     /// uniformly within +-half of it.
     pub backlash_deg: f64,
-    /// Tool-tip error after calibration, mm per axis: the worst tool tip `calibrate verify`
-    /// reports (0.12: 0.119 mm from `calibrate verify --sim` on the simulated cell; set the
-    /// real cell's value); each draw shifts the tip uniformly within +-this on every axis.
+    /// Tool-tip error when the cell has no record of its own, mm per axis
+    /// ([`DEFAULT_TIP_ERROR_MM`]); each draw shifts the tip uniformly within +-the tip error
+    /// on every axis. The cell's record wins: tool.toml's `[removal] verified_tip_error_mm`,
+    /// the worst tool tip `calibrate verify` measured ([`tip_error`]).
     pub tip_error_mm: f64,
     /// Share of the 95th percentile taken as the verdict (0.95).
     pub quantile: f64,
@@ -48,7 +83,7 @@ impl Default for MonteCarloConfig {
             draws: 50,
             seed: 28,
             backlash_deg: 0.0,
-            tip_error_mm: 0.12,
+            tip_error_mm: DEFAULT_TIP_ERROR_MM,
             quantile: 0.95,
         }
     }
@@ -120,6 +155,7 @@ pub fn spread(
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
     let dof = joints.first().map_or(0, |j| j.half_count.len());
     let half_backlash = 0.5 * config.backlash_deg.to_radians();
+    let tip_half = tip_error(tool, config).mm;
     // Preston's k uniform with the model's standard deviation: half-width sqrt(3) sd
     let k_half = 3f64.sqrt() * tool.preston_k_rel_sd;
     let nominal = Influence::new(tool, ball_mm);
@@ -134,7 +170,7 @@ pub fn spread(
     let draws = (0..config.draws)
         .map(|_| {
             let backlash = DVector::from_fn(dof, |_, _| rng.gen_range(-1.0..=1.0) * half_backlash);
-            let tip = Vector3::from_fn(|_, _| rng.gen_range(-1.0..=1.0) * config.tip_error_mm);
+            let tip = Vector3::from_fn(|_, _| rng.gen_range(-1.0..=1.0) * tip_half);
             let k_scale = 1.0 + k_half * rng.gen_range(-1.0..=1.0);
             let drawn = ToolModel {
                 preston_k_mm2_n: tool.preston_k_mm2_n * k_scale.max(0.0),

@@ -46,6 +46,14 @@ pub struct RemovalReport {
     pub preload_mm: f64,
     /// Tolerance, mm: over-grind is a residual below -tolerance.
     pub tolerance_mm: f64,
+    /// The Monte Carlo's tool-tip error, mm per axis (`montecarlo::tip_error`). Absent in
+    /// plans from before 2026-12-05: 0.
+    #[serde(default)]
+    pub tip_error_mm: f64,
+    /// Where that tip error comes from: the cell's `calibrate verify` record, or the default
+    /// and why. Absent in older plans: empty.
+    #[serde(default)]
+    pub tip_error_source: String,
     /// Per planned region.
     pub regions: Vec<RegionPrediction>,
     /// One row per core point (predicted.csv; not in plan.json).

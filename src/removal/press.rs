@@ -137,6 +137,7 @@ mod tests {
             position: Point3::new(x, 0.0, 0.0),
             normal: Vector3::z(),
             distance,
+            uncertainty: 0.0,
             region: -1,
         }
     }

@@ -67,6 +67,7 @@ mod tests {
                 ),
                 normal: Vector3::z(),
                 distance: 0.1,
+                uncertainty: 0.0,
                 region: 0,
             })
             .collect();

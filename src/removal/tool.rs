@@ -35,6 +35,11 @@ pub struct ToolModel {
     pub preston_k_mm2_n: f64,
     /// Relative standard uncertainty of k (0.3 = 30 %).
     pub preston_k_rel_sd: f64,
+    /// The worst tool-tip error `calibrate verify` measured on this cell, mm (it writes this
+    /// key into the tool.toml of its `--out`): the Monte Carlo's tip error
+    /// (`montecarlo::tip_error`). Absent: the cell has no such record and the Monte Carlo
+    /// takes `[monte_carlo] tip_error_mm`, saying so in plan.json.
+    pub verified_tip_error_mm: Option<f64>,
 }
 
 /// Defaults: each value's source is in `calibration/tool.toml` and docs/ALGORITHMS.md.
@@ -49,9 +54,14 @@ impl Default for ToolModel {
             tilt_deg: 20.0,
             preston_k_mm2_n: 5e-6,
             preston_k_rel_sd: 0.3,
+            verified_tip_error_mm: None,
         }
     }
 }
+
+/// Largest tool-tip error a record may hold, mm (50, as `[monte_carlo] tip_error_mm`): the
+/// DOFBOT reaches about 400 mm; a value in micrometres or a typo is caught.
+pub const MAX_TIP_ERROR_MM: f64 = 50.0;
 
 /// Accepted ranges per key (inclusive, the lower end excluded where the name says `(`): wide
 /// around physical tools, narrow enough that a typo (a rate in N/m, a speed in rad/s of 0)
@@ -126,6 +136,12 @@ impl ToolModel {
         ];
         if let Some((name, msg)) = out_of_range(&RANGES, &values) {
             return Err((format!("removal.{name}"), msg));
+        }
+        if let Some(e) = self.verified_tip_error_mm {
+            if !(0.0..=MAX_TIP_ERROR_MM).contains(&e) {
+                let msg = format!("{e} is outside 0..={MAX_TIP_ERROR_MM} mm");
+                return Err(("removal.verified_tip_error_mm".to_string(), msg));
+            }
         }
         if let Some(table) = &self.influence_table {
             check_table(table).map_err(|m| ("removal.influence_table".to_string(), m))?;
@@ -229,6 +245,10 @@ mod tests {
             assert!(e.contains(key) && e.contains("tool.toml"), "{e}");
             assert_eq!(e.lines().count(), 1, "{e}");
         }
+        let e = load_text("[removal]\nverified_tip_error_mm = -0.1\n").unwrap_err();
+        assert!(e.contains("removal.verified_tip_error_mm"), "{e}");
+        let m = load_text("[removal]\nverified_tip_error_mm = 0.3\n").unwrap();
+        assert_eq!(m.verified_tip_error_mm, Some(0.3));
         let e = load_text("[removal]\nspring_rate = 2.0\n").unwrap_err();
         assert!(e.contains("spring_rate") && e.contains("[removal]"), "{e}");
     }

@@ -16,6 +16,7 @@ pub fn verdict_text(v: Verdict) -> &'static str {
         Verdict::Repairable => "repairable",
         Verdict::Reject => "reject",
         Verdict::Incomplete => "incomplete",
+        Verdict::Undecided => "undecided: rescan at a higher resolution",
     }
 }
 
@@ -27,14 +28,24 @@ pub fn verdict_line(found: &Regions) -> String {
             ", below the {:.1} % needed for a verdict",
             100.0 * found.min_coverage
         ),
+        Verdict::Undecided => format!("; {}", found.decision.undecided_reason()),
         _ => String::new(),
+    };
+    let iso = match &found.decision {
+        d if d.rule.is_empty() => String::new(),
+        d if d.undecided_regions.is_empty() => format!("; {}", d.describe()),
+        d => format!(
+            "; {}; regions with no non-conform member (not evidence): {:?}",
+            d.describe(),
+            d.undecided_regions
+        ),
     };
     let rest = match found.shortfall.describe() {
         w if w.is_empty() => String::new(),
         w => format!(": {w}"),
     };
     format!(
-        "{} ({} regions; resolved {:.1} % of the area to inspect{rest}{why})",
+        "{} ({} regions; resolved {:.1} % of the area to inspect{rest}{why}{iso})",
         verdict_text(found.verdict),
         found.regions.len(),
         100.0 * found.coverage,

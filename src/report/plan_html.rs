@@ -115,7 +115,7 @@ pub fn write_plan_html(
     let labels: Vec<i64> = pts.iter().map(|p| p.region).collect();
     let planned: Vec<usize> = plan.passes.iter().map(|p| p.region).collect();
     let m = &plan.metrics;
-    let summary = vec![
+    let mut summary = vec![
         ("plan".to_string(), plan_file.display().to_string()),
         (
             "predicted duration".to_string(),
@@ -146,6 +146,15 @@ pub fn write_plan_html(
             ),
         ),
     ];
+    if let Some(rem) = &plan.removal {
+        summary.push((
+            "Monte Carlo tip error".to_string(),
+            format!(
+                "+-{} mm per axis, from {}",
+                rem.tip_error_mm, rem.tip_error_source
+            ),
+        ));
+    }
     let report = inspection.dir.join("report.html");
     let dir = (html.parent())
         .filter(|p| !p.as_os_str().is_empty())

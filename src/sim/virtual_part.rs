@@ -186,13 +186,13 @@ impl Ground {
 
     /// After the run on `arm`: grinds the part (placed in the robot's base frame by the cell's
     /// `robot_from_reference`, workcell.toml's) over the run's virtual time, writes the rescan
-    /// and its truth, prints one line and returns the ground surface (the truth PLY's cloud).
+    /// and its truth, prints one line and returns what it wrote ([`GroundPart`]).
     pub fn finish(
         mut self,
         arm: &SimArm,
         map: &ServoMap,
         robot_from_reference: &Matrix4<f64>,
-    ) -> anyhow::Result<PointCloud> {
+    ) -> anyhow::Result<GroundPart> {
         let g = &self.options.grinding;
         let home = map.home_raw(self.options.home_gripper_deg)?;
         let mut trace = ServoTrace::new(&self.options, home, arm.received());
@@ -225,7 +225,10 @@ impl Ground {
             g.rescan_max_translation_mm,
             g.seed,
         )?;
-        cloud::write_ply(&self.out, &scan, None, PlyPrecision::F64)?;
+        // F64 PLY: the file reads back exactly as `scan`, which the caller holds instead.
+        let scan_ply = cloud::write_ply_bytes(&scan, None, PlyPrecision::F64);
+        std::fs::write(&self.out, &scan_ply)
+            .with_context(|| format!("{}: cannot write", self.out.display()))?;
         let (ply, json) = truth_paths(&self.out);
         cloud::write_ply(&ply, &surface, None, PlyPrecision::F64)?;
         let truth = GroundTruth {
@@ -253,6 +256,21 @@ impl Ground {
             self.out.display(),
             ply.display()
         );
-        Ok(surface)
+        Ok(GroundPart {
+            surface,
+            rescan: scan,
+            rescan_ply: scan_ply,
+        })
     }
+}
+
+/// What [`Ground::finish`] wrote, held: the ground surface (the truth PLY's cloud) and the
+/// rescan (its cloud and the bytes of its PLY file).
+pub struct GroundPart {
+    /// The ground surface, reference frame, mm.
+    pub surface: PointCloud,
+    /// The rescan, scan frame, mm.
+    pub rescan: PointCloud,
+    /// The rescan's file as written.
+    pub rescan_ply: Vec<u8>,
 }

@@ -52,16 +52,22 @@ const ARTICULAR_POINTS: usize = 200_000;
 
 impl SynthCase {
     /// Writes reference.ply, scan.ply and truth.json into `dir` (created if missing).
-    pub fn write(&self, dir: &Path) -> Result<()> {
+    /// Returns the bytes of reference.ply and scan.ply as written (F64: they read back exactly
+    /// as `reference` and `scan`).
+    pub fn write(&self, dir: &Path) -> Result<[Vec<u8>; 2]> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create", dir.display()))?;
-        cloud::write_ply(
-            &dir.join("reference.ply"),
-            &self.reference,
-            None,
-            PlyPrecision::F64,
-        )?;
-        cloud::write_ply(&dir.join("scan.ply"), &self.scan, None, PlyPrecision::F64)?;
+        let written =
+            [("reference.ply", &self.reference), ("scan.ply", &self.scan)].map(|(name, c)| {
+                (
+                    dir.join(name),
+                    cloud::write_ply_bytes(c, None, PlyPrecision::F64),
+                )
+            });
+        for (path, bytes) in &written {
+            std::fs::write(path, bytes)
+                .with_context(|| format!("{}: cannot write", path.display()))?;
+        }
         if let Some((views, truth)) = &self.turntable {
             for (view, t) in views.iter().zip(&truth.views) {
                 cloud::write_ply(&dir.join(&t.file), view, None, PlyPrecision::F64)?;
@@ -72,7 +78,8 @@ impl SynthCase {
                 cloud::write_ply(&dir.join("articular.ply"), &area, None, PlyPrecision::F64)?;
             }
         }
-        self.truth.save(&dir.join("truth.json"))
+        self.truth.save(&dir.join("truth.json"))?;
+        Ok(written.map(|(_, bytes)| bytes))
     }
 }
 

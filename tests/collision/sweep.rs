@@ -203,3 +203,38 @@ fn a_ball_inside_the_part_between_two_clear_samples_is_caught_by_the_sweep() {
     }
     assert!(skipped > 0, "the sweeps carried no bound");
 }
+
+/// A wall 2.4 mm thick (two faces of reference points 0.5 mm apart, normals facing away from
+/// each other, the shape of femoral_dm's lateral rim) and the 6 mm ball at centres along its
+/// normal: 1 mm off either face the ball is 2 mm into that face (the far face, 3.4 mm behind
+/// its plane, is not the inside: the ball's centre is in front of its nearest face), and a
+/// centre in the wall's middle is 1.2 mm deep (4.2 mm with the radius).
+#[test]
+fn a_ball_beside_a_thin_wall_is_measured_from_the_near_face_not_behind_the_far_one() {
+    let (robot, wc, cfg) = bare_cell();
+    let r = robot.tool.radius_mm();
+    let (x, y, z) = (
+        nalgebra::Vector3::x(),
+        nalgebra::Vector3::y(),
+        nalgebra::Vector3::z(),
+    );
+    let thick = 2.4;
+    let face = |at: f64, n: nalgebra::Vector3<f64>| {
+        grid(Point3::new(at, 0.0, 0.0), y, z, 10.0, 10.0, 0.5)
+            .into_iter()
+            .map(move |p| point(p, n, 0.0, -1))
+    };
+    let pts: Vec<SurfacePoint> = face(0.0, -x).chain(face(thick, x)).collect();
+    let scene = Scene::new(&pts, &robot, &wc, &cfg);
+    for (cx, want) in [
+        (-1.0, 1.0 - r),
+        (thick + 1.0, 1.0 - r),
+        (thick / 2.0, -thick / 2.0 - r),
+    ] {
+        let got = scene.ball_clearance(&Point3::new(cx, 0.2, 0.1), -10.0);
+        assert!(
+            (got - want).abs() < 1e-9,
+            "centre x {cx}: {got} (want {want})"
+        );
+    }
+}

@@ -62,6 +62,7 @@ pub fn of_case(config: &SynthConfig) -> Inspection {
             position: *p,
             normal: *n,
             distance: d,
+            uncertainty: 0.0,
             region: owner.map_or(-1, |k| k as i64),
         });
     }
