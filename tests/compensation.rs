@@ -82,6 +82,37 @@ fn tip_errors(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) -> V
     out
 }
 
+/// Grinding samples of `plan` with some joint within `margin` rad of its limit (the planned,
+/// loaded joints), and the largest joint difference between a command and its sample, rad.
+fn limit_stats(plan: &Plan, robot: &Robot, margin: f64) -> (usize, [usize; 5], f64) {
+    let mut any = 0;
+    let mut per = [0; 5];
+    for seg in &plan.segments {
+        if seg.kind != SegmentKind::Grind {
+            continue;
+        }
+        for s in &plan.samples[seg.first_sample..=seg.last_sample] {
+            let near: Vec<bool> = robot
+                .joints
+                .iter()
+                .zip(&s.q)
+                .map(|(j, q)| q - j.lower < margin || j.upper - q < margin)
+                .collect();
+            any += usize::from(near.iter().any(|&b| b));
+            for (k, b) in near.iter().enumerate().take(5) {
+                per[k] += usize::from(*b);
+            }
+        }
+    }
+    let most = plan.commands.as_ref().map_or(0.0, |c| {
+        c.iter()
+            .zip(&plan.samples)
+            .flat_map(|(c, s)| c.iter().zip(&s.q).map(|(a, b)| (a - b).abs()))
+            .fold(0.0, f64::max)
+    });
+    (any, per, most)
+}
+
 /// Median, 95th percentile and largest of `x`.
 fn quantiles(mut x: Vec<f64>) -> [f64; 3] {
     assert!(!x.is_empty(), "no grinding sample");
@@ -94,15 +125,14 @@ fn quantiles(mut x: Vec<f64>) -> [f64; 3] {
 /// fitted on the documented arm; `POLISHBOT_COMPENSATION_SERVOS` plans with a servos.toml
 /// given by hand instead, to take the fit's error apart from the model's), the simulated
 /// loaded tip lands nearer the planned tip than uncompensated (the same cell without the
-/// table): the 95th percentile of the distance over every grinding sample below
-/// [`COMPENSATED_P95_MM`] and below half the uncompensated one. NOT MET YET, so run by hand
-/// (`cargo test --release --test compensation -- --ignored --nocapture`); measured
-/// 2026-12-05 with the limits kept by construction (RANGE_MARGIN 0.005 rad): median / p95 /
-/// max 1.066 / 1.876 / 3.503 mm compensated against 1.463 / 2.173 / 2.225 uncompensated,
-/// 4639 of 8154 grinding samples partial (least share 0.086: the elbow sits on its lower
-/// limit), so `[plan] compensate_compliance` stays off by default.
+/// table): median, 95th percentile and largest distance over every grinding sample all
+/// smaller, and the 95th percentile under [`COMPENSATED_P95_MM`]. Measured 2026-12-05 (the
+/// absorbed offset as the least joint change, joints kept `LIMIT_MARGIN_RAD` from their
+/// limits where a tilt allows): median / p95 / max 0.148 / 0.156 / 2.056 mm compensated
+/// against 1.463 / 2.173 / 2.225 uncompensated, 385 of 7381 grinding samples partial (the
+/// elbow on its lower limit), 359 grinding samples with the elbow within 0.02 rad of its
+/// limit (493 without the margin search). Without the compensation (no `commands`) it fails.
 #[test]
-#[ignore]
 fn compensation_puts_the_simulated_loaded_tip_nearer_the_planned_contacts() {
     let dir = common::tempdir();
     let inspection = common::synthetic::demo_like(&dir.path().join("inspection"));
@@ -132,6 +162,15 @@ fn compensation_puts_the_simulated_loaded_tip_nearer_the_planned_contacts() {
         compensated.commands.is_some(),
         "no commands: the corrected commands broke a limit, see the warning"
     );
+    for (name, plan) in [("uncompensated", &plain), ("compensated", &compensated)] {
+        for margin in [0.02, 0.05] {
+            let (any, per, most) = limit_stats(plan, &compliant, margin);
+            println!(
+                "{name}: grinding samples within {margin} rad of a limit {any} (per joint {per:?}); \
+                 largest command offset {most:.4} rad"
+            );
+        }
+    }
     let before = quantiles(tip_errors(&plain, &rigid, &wc, &arm));
     let after = quantiles(tip_errors(&compensated, &compliant, &wc, &arm));
     println!(
@@ -140,7 +179,7 @@ fn compensation_puts_the_simulated_loaded_tip_nearer_the_planned_contacts() {
         compensated.compensation
     );
     assert!(
-        after[1] < COMPENSATED_P95_MM && after[1] < 0.5 * before[1],
-        "p95 compensated {after:?} against uncompensated {before:?}"
+        after[1] < COMPENSATED_P95_MM && (0..3).all(|k| after[k] < before[k]),
+        "median / p95 / max compensated {after:?} against uncompensated {before:?}"
     );
 }

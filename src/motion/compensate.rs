@@ -12,7 +12,9 @@
 //! (four moving averages: a cubic B-spline, bounded jerk) so that the commanded trajectory
 //! keeps the joints' limits; when no smoothing keeps them the caller leaves the compensation
 //! out. Method: docs/ALGORITHMS.md, "Compliance compensation".
-use nalgebra::{Matrix4, Vector3, Vector4};
+use nalgebra::{Matrix3x4, Vector3};
+
+use super::file::MAX_COMMAND_OFFSET_RAD;
 
 use super::program::SegmentKind;
 use super::program::{PlannedPass, Segment};
@@ -87,7 +89,7 @@ pub fn commands<E>(
             (SegmentKind::Grind, Some(pass)) => {
                 let q = traj.sample(i);
                 let force = contact_force(&loads.passes[pass], robot, wc, q) * loads.force_n;
-                Some(correction(model, robot, q, &force, &absorbed))
+                correction(model, robot, q, &force, &absorbed)
             }
             _ => None,
         })
@@ -135,17 +137,18 @@ const WHOLE_SHARE: f64 = 1.0 - 1e-9;
 
 /// The servo angles minus the planned ones at loaded joints `q` under `force` (N, robot
 /// frame, on the tip): the loaded tip goes to the planned tip plus `absorbed` (where the
-/// calibrated cell's frame has the planned tip), the tool axis kept.
+/// calibrated cell's frame has the planned tip), the tool axis kept. None where [`shifted`]
+/// finds no such pose near `q` (the sample then holds its neighbours' correction).
 fn correction(
     model: &Compliance,
     robot: &Robot,
     q: &[f64],
     force: &Vector3<f64>,
     absorbed: &Vector3<f64>,
-) -> Vec<f64> {
-    let out = shifted(robot, q, absorbed);
+) -> Option<Vec<f64>> {
+    let out = shifted(robot, q, absorbed)?;
     let cmd = model.command(robot, &out, force);
-    cmd.iter().zip(q).map(|(c, a)| c - a).collect()
+    Some(cmd.iter().zip(q).map(|(c, a)| c - a).collect())
 }
 
 /// How far inside each joint's limits and servo range a corrected sample stays, rad (0.005,
@@ -153,9 +156,15 @@ fn correction(
 /// 0.01 rad, so that a contact the plan puts next to a limit keeps some of its correction).
 const RANGE_MARGIN: f64 = 0.005;
 
+/// Share of `run`'s command offset bound ([`MAX_COMMAND_OFFSET_RAD`]) a correction may use
+/// (0.99: the bound itself is checked on the smoothed, shared commands, and this keeps them
+/// off it by a hundredth).
+const OFFSET_KEPT: f64 = 0.99;
+
 /// The largest share `s` in [0, 1] of the correction `c` at joints `q` such that `q + s c`
-/// stays [`RANGE_MARGIN`] inside each joint's limits and servo range (the least over the
-/// joints; 0 for a joint already inside the margin that `c` pushes further out).
+/// stays [`RANGE_MARGIN`] inside each joint's limits and servo range and within
+/// [`OFFSET_KEPT`] of `run`'s offset bound (the least over the joints; 0 for a joint already
+/// inside the margin that `c` pushes further out).
 fn share_within_range(robot: &Robot, q: &[f64], c: &[f64]) -> f64 {
     c.iter()
         .enumerate()
@@ -173,7 +182,8 @@ fn share_within_range(robot: &Robot, q: &[f64], c: &[f64]) -> f64 {
             if v == 0.0 {
                 1.0
             } else {
-                (room / v.abs()).clamp(0.0, 1.0)
+                // and within the offset from its sample `run` accepts of a command
+                (room.min(OFFSET_KEPT * MAX_COMMAND_OFFSET_RAD) / v.abs()).clamp(0.0, 1.0)
             }
         })
         .fold(1.0, f64::min)
@@ -192,43 +202,50 @@ fn eroded(x: &[f64], reach: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Newton steps of [`shifted`] (2: the shift is millimetres on 100 mm links, so the second
-/// step leaves under a micrometre).
-const SHIFT_STEPS: usize = 2;
+/// Gauss-Newton steps of [`shifted`] (3: the shift is millimetres on 100 mm links, so the
+/// second step leaves a few micrometres and the third well under one).
+const SHIFT_STEPS: usize = 3;
+/// Largest tip miss, m, of a [`shifted`] pose that counts as solved (1e-6, against shifts of
+/// millimetres).
+const SHIFT_MISS_M: f64 = 1e-6;
 /// Step of [`shifted`]'s numeric derivative, rad.
 const SHIFT_PROBE: f64 = 1e-7;
 
-/// Joint angles near `q` whose tip lies `by` (m, robot frame) from `q`'s with the same tool
-/// tilt: the base yaw and the three pitch joints by Newton on the tip and the pitch sum (the
-/// DOFBOT's tool axis in its arm plane), the wrist roll kept; `q` itself where the chain is
-/// not the DOFBOT's or the step is singular.
-fn shifted(robot: &Robot, q: &[f64], by: &Vector3<f64>) -> Vec<f64> {
+/// Joint angles near `q` whose tip lies `by` (m, robot frame) from `q`'s: the base yaw and
+/// the three pitch joints by Gauss-Newton with the least joint change (the minimum-norm step:
+/// the frame the calibration shifted is only translated, and the ball's centre, not its axis,
+/// sets the contact; holding the axis too made the DOFBOT fold its pitch joints against each
+/// other, 0.05-0.07 rad for a 6 mm shift on the demo-like part, over what `run` accepts), the
+/// wrist roll kept; `q` itself where the chain is not the DOFBOT's; None where the step is
+/// singular, misses the shifted tip by more than [`SHIFT_MISS_M`] or turns a joint more than
+/// `run` accepts of a command ([`MAX_COMMAND_OFFSET_RAD`]).
+fn shifted(robot: &Robot, q: &[f64], by: &Vector3<f64>) -> Option<Vec<f64>> {
     if q.len() < 4 || !robot.has_closed_form() {
-        return q.to_vec();
+        return Some(q.to_vec());
     }
     let goal = robot.fk(q).position + by;
-    let tilt = q[1] + q[2] + q[3];
-    let miss = |x: &[f64]| {
-        let d = robot.fk(x).position - goal;
-        Vector4::new(d.x, d.y, d.z, x[1] + x[2] + x[3] - tilt)
-    };
+    let miss = |x: &[f64]| robot.fk(x).position - goal;
     let mut x = q.to_vec();
     for _ in 0..SHIFT_STEPS {
         let r = miss(&x);
-        let mut jac = Matrix4::zeros();
+        let mut jac = Matrix3x4::zeros();
         for k in 0..4 {
             let mut y = x.clone();
             y[k] += SHIFT_PROBE;
             jac.set_column(k, &((miss(&y) - r) / SHIFT_PROBE));
         }
-        let Some(step) = jac.lu().solve(&(-r)) else {
-            return q.to_vec();
-        };
+        let lambda = (jac * jac.transpose()).lu().solve(&(-r))?;
+        let step = jac.transpose() * lambda;
         for k in 0..4 {
             x[k] += step[k];
         }
     }
-    x
+    let turned = x
+        .iter()
+        .zip(q)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    (miss(&x).norm() <= SHIFT_MISS_M && turned <= MAX_COMMAND_OFFSET_RAD).then_some(x)
 }
 
 /// The unit contact force direction at loaded joints `q` of grinding pass `pass`: the outward

@@ -89,9 +89,11 @@ pub struct PlanConfig {
     /// Tolerance of the removal mode when the inspection names none, mm (0.05, issue 28).
     pub tolerance_mm: f64,
     /// Command the servos so that the loaded joints sit on the plan where servos.toml has a
-    /// `[compliance]` table (false: off by default, because on the demo's part the elbow sits
-    /// on its joint limit and the compensation, kept inside the limits, barely moves the
-    /// simulated tip: docs/ALGORITHMS.md, "Compliance compensation").
+    /// `[compliance]` table, and keep the grinding contacts' joints room for that correction
+    /// from their limits (true; without `[compliance]` it does nothing; measured on the
+    /// demo-like part, tests/compensation.rs: the simulated loaded tip's median / p95 / max
+    /// distance from the planned tip 1.463 / 2.173 / 2.225 mm uncompensated, 0.148 / 0.156 /
+    /// 2.056 mm compensated: docs/ALGORITHMS.md, "Compliance compensation").
     pub compensate_compliance: bool,
 }
 
@@ -126,7 +128,7 @@ impl Default for PlanConfig {
             monte_carlo: removal::montecarlo::MonteCarloConfig::default(),
             force_share: removal::force::DEFAULT_FORCE_SHARE,
             tolerance_mm: DEFAULT_TOLERANCE_MM,
-            compensate_compliance: false,
+            compensate_compliance: true,
         }
     }
 }

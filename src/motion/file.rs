@@ -262,11 +262,8 @@ impl Plan {
                     s.q.len()
                 ));
             }
-            let off = super::program::max_step(c, &s.q);
-            if off > MAX_COMMAND_OFFSET_RAD {
-                return bad(format!(
-                    "command {i} lies {off:.4} rad from its sample, more than the {MAX_COMMAND_OFFSET_RAD} rad a compliance correction makes"
-                ));
+            if let Some(why) = offset_refused(i, c, &s.q) {
+                return bad(why);
             }
             traj.push(c);
         }
@@ -276,6 +273,18 @@ impl Plan {
         }
         Ok(commands.clone())
     }
+}
+
+/// Why command `i` is refused for lying more than [`MAX_COMMAND_OFFSET_RAD`] from its sample
+/// `sample` (largest joint difference), or None: the check `run` makes on a compensated plan,
+/// and the planner on its own commands before it writes them.
+pub fn offset_refused(i: usize, command: &[f64], sample: &[f64]) -> Option<String> {
+    let off = super::program::max_step(command, sample);
+    (off > MAX_COMMAND_OFFSET_RAD).then(|| {
+        format!(
+            "command {i} lies {off:.4} rad from its sample, more than the {MAX_COMMAND_OFFSET_RAD} rad a compliance correction makes"
+        )
+    })
 }
 
 /// Largest joint difference between a command and its sample a plan may hold, rad (0.05,

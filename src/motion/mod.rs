@@ -21,6 +21,7 @@ pub mod feed;
 pub mod file;
 pub mod frames;
 mod free_motion;
+mod margin;
 pub mod order;
 mod predict;
 pub mod program;
@@ -181,21 +182,26 @@ fn compensate_plan(
         passes: &prog.passes,
         force_n,
     };
+    // what `run` checks of the commands (file::Plan::check): each within the offset bound of
+    // its sample, and the limits
     let keeps = |c: &JointTrajectory| {
+        let far = (0..c.len()).find_map(|i| file::offset_refused(i, c.sample(i), traj.sample(i)));
+        if let Some(why) = far {
+            return Err(why);
+        }
         let violations = validate(c, robot, &config.validation);
-        violations.is_empty().then_some(()).ok_or(violations)
+        match violations.first() {
+            None => Ok(()),
+            Some(v) => Err(format!("{} limit(s), first {v}", violations.len())),
+        }
     };
     let compensated = config
         .compensate_compliance
         .then(|| compensate::commands(traj, &loads, robot, workcell, &keeps))
         .flatten();
     match compensated {
-        Some(Err(violations)) => {
-            tracing::warn!(
-                "compliance compensation left out: the corrected commands break {} limit(s), first {}",
-                violations.len(),
-                violations[0]
-            );
+        Some(Err(why)) => {
+            tracing::warn!("compliance compensation left out: the corrected commands break {why}");
             (None, None)
         }
         Some(Ok(c)) => {
