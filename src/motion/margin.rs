@@ -6,9 +6,11 @@
 //! [`LIMIT_MARGIN_RAD`] inside its limits. A stroke no tilt gives that margin keeps its
 //! answer; the compensation then carries only the share of its correction that fits
 //! (`compensate::commands`). Method: docs/ALGORITHMS.md, "Compliance compensation".
-use super::program::{plane_frames, solve_tilted, Resolved, Restroke, Solved};
+use super::program::{in_plane, plane_frames, Resolved, Restroke, Solved};
 use super::PlanConfig;
+use crate::robot::IkTarget;
 use crate::robot::Robot;
+use nalgebra::Vector3;
 
 /// How far inside its limits every joint of a grinding contact is kept when the plan
 /// compensates, rad (0.05, 2.9 degrees): the largest correction the model makes on the
@@ -90,4 +92,36 @@ pub fn keep(
             ok.then_some((d, r))
         })
         .or(chosen)
+}
+
+/// The stroke `s` solved again with every solved point of its first answers tilted by `delta`
+/// rad in the arm plane (exact IK, chained from its start, every joint `margin` rad inside its
+/// limits): the answers and the last pose, or None when a point becomes unreachable or its
+/// axis leaves the cone of its requested axis or normal.
+pub(super) fn solve_tilted(s: &Restroke, delta: f64, margin: f64) -> Option<Resolved> {
+    let (robot, cfg) = (s.robot, s.cfg);
+    let exact = crate::robot::IkConfig {
+        axis_search: false,
+        limit_margin: margin,
+        ..cfg.ik.clone()
+    };
+    let max = cfg.ik.max_axis_miss_deg;
+    let mut again = s.start.to_vec();
+    let mut out = Vec::with_capacity(s.targets.len());
+    for ((t, f), n) in s.targets.iter().zip(s.first).zip(s.normals) {
+        let Ok((q0, _)) = f else {
+            out.push(f.clone());
+            continue;
+        };
+        let (plane, requested) = in_plane(robot, q0, &t.axis);
+        let axis = requested * delta.cos() + plane.cross(&requested) * delta.sin();
+        let miss = |to: &Vector3<f64>| crate::robot::angle_between(to, &axis).to_degrees();
+        if miss(&t.axis) > max || miss(&-n) > max {
+            return None;
+        }
+        let sol = robot.ik(&IkTarget { axis, ..*t }, &again, &exact).ok()?;
+        again.clone_from(&sol.q);
+        out.push(Ok((sol.q, axis)));
+    }
+    Some((out, again))
 }

@@ -311,23 +311,23 @@ fn solve_stroke(
 
 /// One stroke's first answers and what solving it again with one tilt needs.
 pub(super) struct Restroke<'a> {
-    targets: &'a [IkTarget],
-    normals: &'a [Vector3<f64>],
+    pub(super) targets: &'a [IkTarget],
+    pub(super) normals: &'a [Vector3<f64>],
     /// Each point's first answer.
     pub(super) first: &'a [Solved],
     /// The arm.
     pub(super) robot: &'a Robot,
     /// The planner's settings.
     pub(super) cfg: &'a PlanConfig,
-    start: &'a [f64],
+    pub(super) start: &'a [f64],
     /// The signed in-plane tilt reach needed (axis search), rad.
     reach: f64,
 }
 
 impl Restroke<'_> {
-    /// The stroke solved again with `delta` rad of in-plane tilt ([`solve_tilted`]).
+    /// The stroke solved again with `delta` rad of in-plane tilt ([`super::margin::solve_tilted`]).
     fn tilted(&self, delta: f64) -> Option<Resolved> {
-        solve_tilted(self, delta, self.cfg.ik.limit_margin)
+        super::margin::solve_tilted(self, delta, self.cfg.ik.limit_margin)
     }
 
     /// The stroke held at least `min` rad from every normal, leaning the preferred way first;
@@ -453,40 +453,12 @@ fn least_tilt(frames: &[(f64, f64)], min: f64, sign: f64, reach: f64, max: f64) 
     None
 }
 
-/// The stroke `s` solved again with every solved point of its first answers tilted by `delta`
-/// rad in the arm plane (exact IK, chained from its start, every joint `margin` rad inside its
-/// limits): the answers and the last pose, or None when a point becomes unreachable or its
-/// axis leaves the cone of its requested axis or normal.
-pub(super) fn solve_tilted(s: &Restroke, delta: f64, margin: f64) -> Option<Resolved> {
-    let (robot, cfg) = (s.robot, s.cfg);
-    let exact = crate::robot::IkConfig {
-        axis_search: false,
-        limit_margin: margin,
-        ..cfg.ik.clone()
-    };
-    let max = cfg.ik.max_axis_miss_deg;
-    let mut again = s.start.to_vec();
-    let mut out = Vec::with_capacity(s.targets.len());
-    for ((t, f), n) in s.targets.iter().zip(s.first).zip(s.normals) {
-        let Ok((q0, _)) = f else {
-            out.push(f.clone());
-            continue;
-        };
-        let (plane, requested) = in_plane(robot, q0, &t.axis);
-        let axis = requested * delta.cos() + plane.cross(&requested) * delta.sin();
-        let miss = |to: &Vector3<f64>| crate::robot::angle_between(to, &axis).to_degrees();
-        if miss(&t.axis) > max || miss(&-n) > max {
-            return None;
-        }
-        let sol = robot.ik(&IkTarget { axis, ..*t }, &again, &exact).ok()?;
-        again.clone_from(&sol.q);
-        out.push(Ok((sol.q, axis)));
-    }
-    Some((out, again))
-}
-
 /// The arm plane's normal at `q` (joint 2's axis) and `axis` projected into the plane (unit).
-fn in_plane(robot: &Robot, q: &[f64], axis: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+pub(super) fn in_plane(
+    robot: &Robot,
+    q: &[f64],
+    axis: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>) {
     let (_, axes) = robot.joint_frames(q);
     let n = axes[1].normalize();
     let a = axis.normalize();
