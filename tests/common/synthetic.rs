@@ -27,8 +27,11 @@ pub fn demo_like(dir: &Path) -> polishbot::repair::Inspection {
         scan_points: 1_000,
         ..SynthConfig::default()
     };
-    let reachable =
-        polishbot::cell::reachable_sites(polishbot::cell::SITE_AXIS_MARGIN_DEG).unwrap();
+    let reachable = polishbot::cell::reachable_sites(
+        &super::shipped_cell(),
+        polishbot::cell::SITE_AXIS_MARGIN_DEG,
+    )
+    .unwrap();
     let case = polishbot::synth::synth_at(&config, &reachable).expect("synth");
     inspection_of(dir, case);
     polishbot::repair::Inspection::load(dir).expect("inspection")
