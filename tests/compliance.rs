@@ -3,23 +3,11 @@
 //! src/sim/grind/slack.rs); the simulated operator touches the built-in poses through the
 //! bus; the fit must recover the stiffness within 10 % and the backlash within 0.1 degree for
 //! every joint the touches observe, on a worn arm and on the documented default arm.
-use std::path::{Path, PathBuf};
+mod common;
 
-use polishbot::bus::{Bus, BusConfig, Journal};
-use polishbot::calibrate::compliance::{self, FITTED_JOINTS};
-use polishbot::calibrate::jog::Cell;
-use polishbot::calibrate::CalibrationConfig;
-use polishbot::cli::calibrate_compliance::SimTouch;
-use polishbot::motion::frames;
-use polishbot::robot::{Compliance, Robot};
+use polishbot::calibrate::compliance::FITTED_JOINTS;
 use polishbot::sim::grind::slack;
-use polishbot::sim::{GrindConfig, SimArm, SimOptions};
-
-fn shipped(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("calibration")
-        .join(name)
-}
+use polishbot::sim::GrindConfig;
 
 /// A worn arm: 1.5 times the documented sag (a softer arm) and uneven backlash.
 fn planted() -> GrindConfig {
@@ -30,46 +18,10 @@ fn planted() -> GrindConfig {
     }
 }
 
-fn run_fit(grinding: &GrindConfig) -> (Robot, compliance::ComplianceFit) {
-    let robot = Robot::load(
-        &shipped("dofbot.urdf"),
-        &shipped("tool.toml"),
-        &shipped("servos.toml"),
-    )
-    .unwrap();
-    let map = frames::servo_map(&robot).unwrap();
-    let options = SimOptions {
-        grinding: grinding.clone(),
-        ..SimOptions::default()
-    };
-    let arm = SimArm::new(&options, &map).unwrap();
-    let bus_cfg = BusConfig {
-        servo_map: map.clone(),
-        ..BusConfig::default()
-    };
-    let mut bus = Bus::connect(arm.transport(), bus_cfg, Journal::none()).unwrap();
-    let cfg = CalibrationConfig::default();
-    let cell = Cell {
-        robot: &robot,
-        map: &map,
-        gripper_deg: 90.0,
-        cfg: &cfg,
-    };
-    let poses = compliance::default_poses(&robot);
-    let mut source = SimTouch::new(grinding, &poses);
-    let start = Compliance {
-        stiffness_nm_rad: [200.0; 5],
-        backlash_deg: [0.0; 5],
-        masses_kg: [0.1; 4],
-    };
-    let fit = compliance::compliance(&mut bus, &cell, &poses, &start, &mut source).unwrap();
-    (robot, fit)
-}
-
 /// Fits on the arm `truth` and checks every observed joint against the planted values.
 fn recovers(truth: &GrindConfig) {
     let stiffness = slack::Arm::new(truth).stiffness_nm_rad();
-    let (_, fit) = run_fit(truth);
+    let (_, fit) = common::compensation::run_fit(truth);
     let c = &fit.compliance;
     eprintln!(
         "true stiffness {stiffness:.1} N m/rad, fitted {:.1?} (sd {:.1?}); true backlash {:?}, \
@@ -140,7 +92,7 @@ fn calibrate_compliance_cli_writes_the_fitted_table_into_servos_toml() {
     let written = dir.path().join("servos.toml");
     let text = std::fs::read_to_string(&written).unwrap();
     // every line of the shipped file outside its [compliance] table is kept
-    let shipped_text = std::fs::read_to_string(shipped("servos.toml")).unwrap();
+    let shipped_text = std::fs::read_to_string(common::calib("servos.toml")).unwrap();
     let before = shipped_text.split("\n[compliance]").next().unwrap();
     for line in before.lines().filter(|l| !l.trim().is_empty()) {
         assert!(text.contains(line), "line {line:?} lost");

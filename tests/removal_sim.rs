@@ -63,30 +63,6 @@ const BANDS_MM: [f64; 3] = [0.02, 0.1, 0.2];
 /// that left narrow peaks above the tolerance after the acceptance cases' grinds (issue 29).
 const BAND_WITHIN: f64 = 0.15;
 
-/// The demo's part (cli/demo.rs `demo_config`, seed 1) at 200,000 reference samples (the
-/// planner's core points here; tests/common `case`'s density).
-fn demo_like(dir: &Path) -> Inspection {
-    let config = polishbot::synth::SynthConfig {
-        seed: 1,
-        defects: 5,
-        height_range: [0.12, 0.4],
-        width_range: [2.0, 4.0],
-        pit_share: 0.2,
-        ridge_share: 0.2,
-        reference_points: 200_000,
-        scan_points: 1_000,
-        ..polishbot::synth::SynthConfig::default()
-    };
-    let reachable = polishbot::cell::reachable_sites(
-        &common::shipped_cell(),
-        polishbot::cell::SITE_AXIS_MARGIN_DEG,
-    )
-    .unwrap();
-    let case = polishbot::synth::synth_at(&config, &reachable).expect("synth");
-    common::synthetic::inspection_of(dir, case);
-    Inspection::load(dir).expect("inspection")
-}
-
 /// The simulated cell's truth for this test: the shipped tool, k as the planner's, no k
 /// field, the exponents of `POLISHBOT_SIM_EXPONENTS` (pressure,speed; default 1,1).
 fn truth(robot: &Robot) -> GrindConfig {
@@ -219,7 +195,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
             (Inspection::load(&d.join("inspection")).unwrap(), plan)
         }
         Err(_) => {
-            let inspection = demo_like(dir.path());
+            let inspection = common::synthetic::demo_like(dir.path());
             let started = std::time::Instant::now();
             let plan = plan_part(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
             println!("planned in {:.2} s", started.elapsed().as_secs_f64());

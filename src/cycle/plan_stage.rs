@@ -215,6 +215,12 @@ fn print_summary(plan: &Plan, inspection: &Path, out: &Path) {
         m.resolution_error_mean_mm,
         m.sample_to_path_max_mm.max(m.path_to_samples_max_mm),
     );
+    if let Some(c) = &plan.compensation {
+        println!(
+            "plan: compliance compensated; {} of {} grinding samples only partly (a joint limit; least share {:.2})",
+            c.partial_samples, c.grinding_samples, c.least_share
+        );
+    }
     for r in &planned {
         println!(
             "plan: region {}: {} layer(s), {:.0}% of its area unreachable, {:.1}% of the reachable part covered, {} of {} path points left out",

@@ -23,6 +23,18 @@ pub struct Sample {
     pub q: Vec<f64>,
 }
 
+/// How much of the compliance correction a compensated plan's `commands` carry: near a joint
+/// limit a stretch keeps only a share of it (docs/ALGORITHMS.md, "Compliance compensation").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CompensationReport {
+    /// Grinding samples in the plan.
+    pub grinding_samples: usize,
+    /// Grinding samples commanded with only a share of their correction (partial).
+    pub partial_samples: usize,
+    /// The smallest share of its correction any grinding sample keeps (1: all whole).
+    pub least_share: f64,
+}
+
 /// A grinding plan: the contents of plan.json (docs/FORMATS.md).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Plan {
@@ -52,6 +64,15 @@ pub struct Plan {
     pub samples: Vec<Sample>,
     /// The servo command stream: one 0x1D frame per sample after the first (hex).
     pub frames: Vec<String>,
+    /// The joint angles the servos are commanded per sample, rad, when the plan compensates
+    /// the arm's compliance (servos.toml `[compliance]`; `samples` are then the loaded joints
+    /// the plan wants, and the frames are made from these); absent: the frames are made from
+    /// `samples`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commands: Option<Vec<Vec<f64>>>,
+    /// How much of the compliance correction `commands` carry (absent without `commands`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compensation: Option<CompensationReport>,
     /// Reach and coverage per region, every point left out and why.
     pub reachability: Reachability,
     /// Measured quality of the plan.
@@ -162,6 +183,7 @@ impl Plan {
         if !violations.is_empty() {
             return Err(PlanError::Invalid(violations));
         }
+        let qs = self.commanded(robot, config)?;
         if self.frames.len() != self.samples.len() {
             return bad(format!(
                 "{} frames for {} samples",
@@ -171,7 +193,6 @@ impl Plan {
         }
         let map = frames::servo_map(robot)?;
         let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
-        let qs: Vec<Vec<f64>> = self.samples.iter().map(|s| s.q.clone()).collect();
         let expected = frames::encode(&qs, &map, hold, self.period)?;
         let time_ms = frames::frame_time_ms(self.period)?;
         let mut raw = Vec::with_capacity(expected.len());
@@ -206,4 +227,67 @@ impl Plan {
             table: None,
         })
     }
+
+    /// The joint angles the frames must encode: `commands` when present (checked: one per
+    /// sample, finite, within [`MAX_COMMAND_OFFSET_RAD`] of its sample, within the limits, and
+    /// only for a robot whose servos.toml has `[compliance]`), else the samples.
+    fn commanded(
+        &self,
+        robot: &Robot,
+        config: &ValidationConfig,
+    ) -> Result<Vec<Vec<f64>>, PlanError> {
+        let bad = |m: String| Err(PlanError::Frames(m));
+        let Some(commands) = &self.commands else {
+            return Ok(self.samples.iter().map(|s| s.q.clone()).collect());
+        };
+        if robot.servos.compliance.is_none() {
+            return bad(
+                "the plan compensates the arm's compliance (`commands`) but servos.toml has no [compliance]"
+                    .into(),
+            );
+        }
+        if commands.len() != self.samples.len() {
+            return bad(format!(
+                "{} commands for {} samples",
+                commands.len(),
+                self.samples.len()
+            ));
+        }
+        let mut traj = JointTrajectory::starting_at(&self.samples[0].q, self.period);
+        traj.positions.clear();
+        for (i, (c, s)) in commands.iter().zip(&self.samples).enumerate() {
+            if c.len() != s.q.len() || c.iter().any(|v| !v.is_finite()) {
+                return bad(format!(
+                    "command {i}: needs {} finite joint angles",
+                    s.q.len()
+                ));
+            }
+            if let Some(why) = offset_refused(i, c, &s.q) {
+                return bad(why);
+            }
+            traj.push(c);
+        }
+        let violations = validate(&traj, robot, config);
+        if !violations.is_empty() {
+            return Err(PlanError::Invalid(violations));
+        }
+        Ok(commands.clone())
+    }
 }
+
+/// Why command `i` is refused for lying more than [`MAX_COMMAND_OFFSET_RAD`] from its sample
+/// `sample` (largest joint difference), or None: the check `run` makes on a compensated plan,
+/// and the planner on its own commands before it writes them.
+pub fn offset_refused(i: usize, command: &[f64], sample: &[f64]) -> Option<String> {
+    let off = super::program::max_step(command, sample);
+    (off > MAX_COMMAND_OFFSET_RAD).then(|| {
+        format!(
+            "command {i} lies {off:.4} rad from its sample, more than the {MAX_COMMAND_OFFSET_RAD} rad a compliance correction makes"
+        )
+    })
+}
+
+/// Largest joint difference between a command and its sample a plan may hold, rad (0.05,
+/// 2.9 degrees: three times the largest correction the DOFBOT's model makes, a 0.5 degree
+/// band plus the bending of 2 N and the arm's weight, about 0.015 rad; more is a damaged file).
+pub const MAX_COMMAND_OFFSET_RAD: f64 = 0.05;

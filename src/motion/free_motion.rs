@@ -8,6 +8,7 @@
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 
 use super::collide::{Allow, Hit, Scene};
+use super::compensate::FREE_LIMIT_SHARE;
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::feed::{path_limits, sample_stroke, JointSpline, PathLimits};
@@ -43,6 +44,24 @@ pub(super) struct Assembly<'a> {
     pub(super) limits: Limits,
 }
 
+/// The joints' limits for free motions: the whole limit, or [`FREE_LIMIT_SHARE`] of it when
+/// the plan compensates the arm's compliance (`compensate_compliance` and a `[compliance]`
+/// table: the smoothed correction adds to these moves).
+fn free_limits(robot: &Robot, cfg: &PlanConfig) -> Limits {
+    let mut limits = Limits::from_joints(&robot.joints);
+    if cfg.compensate_compliance && robot.servos.compliance.is_some() {
+        for v in limits
+            .velocity
+            .iter_mut()
+            .chain(&mut limits.acceleration)
+            .chain(&mut limits.jerk)
+        {
+            *v *= FREE_LIMIT_SHARE;
+        }
+    }
+    limits
+}
+
 impl<'a> Assembly<'a> {
     /// The cell of `robot` in `wc` with `cfg`'s settings and the part's `scene`.
     pub(super) fn new(
@@ -56,7 +75,7 @@ impl<'a> Assembly<'a> {
             wc,
             cfg,
             scene,
-            limits: Limits::from_joints(&robot.joints),
+            limits: free_limits(robot, cfg),
         }
     }
 

@@ -14,6 +14,7 @@ mod by_region;
 pub mod check;
 pub mod clearance;
 pub mod collide;
+pub mod compensate;
 mod config;
 pub mod dwell;
 pub mod error;
@@ -21,6 +22,7 @@ pub mod feed;
 pub mod file;
 pub mod frames;
 mod free_motion;
+mod margin;
 pub mod order;
 mod predict;
 pub mod program;
@@ -134,7 +136,9 @@ pub fn plan_part(
         &mut prog.trajectory,
         JointTrajectory::starting_at(&config.home, config.trajectory.period),
     );
-    let (samples, stream) = samples_and_frames(&traj, robot)?;
+    let force_n = tool.as_ref().map_or(0.0, |t| t.force_n());
+    let (commanded, compensation) = compensate_plan(&traj, &prog, force_n, robot, workcell, config);
+    let (samples, stream) = samples_and_frames(&traj, commanded.as_ref(), robot)?;
     Ok(Plan {
         format: "polishbot-plan".into(),
         version: 1,
@@ -153,11 +157,64 @@ pub fn plan_part(
         segments: prog.segments,
         samples,
         frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
+        commands: commanded.map(|c| (0..c.len()).map(|i| c.sample(i).to_vec()).collect()),
+        compensation,
         reachability,
         metrics,
         removal,
         turntable: None,
     })
+}
+
+/// The servo commands and their report when `config.compensate_compliance` and the robot has
+/// `[compliance]` (docs/ALGORITHMS.md, "Compliance compensation"); (None, None) otherwise.
+/// A correction that no smoothing keeps within the limits is left out, said on stderr: the
+/// plan then commands the loaded joints as before.
+fn compensate_plan(
+    traj: &JointTrajectory,
+    prog: &program::Program,
+    force_n: f64,
+    robot: &Robot,
+    workcell: &Workcell,
+    config: &PlanConfig,
+) -> (Option<JointTrajectory>, Option<file::CompensationReport>) {
+    let loads = compensate::Loads {
+        segments: &prog.segments,
+        passes: &prog.passes,
+        force_n,
+    };
+    // what `run` checks of the commands (file::Plan::check): each within the offset bound of
+    // its sample, and the limits
+    let keeps = |c: &JointTrajectory| {
+        let far = (0..c.len()).find_map(|i| file::offset_refused(i, c.sample(i), traj.sample(i)));
+        if let Some(why) = far {
+            return Err(why);
+        }
+        let violations = validate(c, robot, &config.validation);
+        match violations.first() {
+            None => Ok(()),
+            Some(v) => Err(format!("{} limit(s), first {v}", violations.len())),
+        }
+    };
+    let compensated = config
+        .compensate_compliance
+        .then(|| compensate::commands(traj, &loads, robot, workcell, &keeps))
+        .flatten();
+    match compensated {
+        Some(Err(why)) => {
+            tracing::warn!("compliance compensation left out: the corrected commands break {why}");
+            (None, None)
+        }
+        Some(Ok(c)) => {
+            let report = file::CompensationReport {
+                grinding_samples: c.grinding_samples,
+                partial_samples: c.partial_samples,
+                least_share: c.least_share,
+            };
+            (Some(c.traj), Some(report))
+        }
+        None => (None, None),
+    }
 }
 
 /// The whole sampled program against the limits (validation), the scene (collisions) and the
@@ -195,10 +252,12 @@ fn check_program(
     Ok(())
 }
 
-/// The trajectory's samples and the servo command stream they make (one frame per sample,
-/// through the robot's servo map, the gripper held at its `hold_deg`).
+/// The trajectory's samples and the servo command stream they make (one frame per sample of
+/// `commanded` when the plan compensates the arm's compliance, else of `traj`, through the
+/// robot's servo map, the gripper held at its `hold_deg`).
 fn samples_and_frames(
     traj: &JointTrajectory,
+    commanded: Option<&JointTrajectory>,
     robot: &Robot,
 ) -> Result<(Vec<Sample>, Vec<Vec<u8>>), PlanError> {
     let samples: Vec<Sample> = (0..traj.len())
@@ -209,7 +268,8 @@ fn samples_and_frames(
         .collect();
     let map = frames::servo_map(robot)?;
     let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
-    let qs: Vec<Vec<f64>> = samples.iter().map(|s| s.q.clone()).collect();
+    let sent = commanded.unwrap_or(traj);
+    let qs: Vec<Vec<f64>> = (0..sent.len()).map(|i| sent.sample(i).to_vec()).collect();
     let stream = frames::encode(&qs, &map, hold, traj.period)?;
     Ok((samples, stream))
 }

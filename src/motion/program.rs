@@ -244,10 +244,10 @@ fn stroke_axis(targets: &[IkTarget], spread_deg: f64) -> Option<Vector3<f64>> {
 }
 
 /// Joint angles and the tool axis used for one point, or why it is unreachable.
-type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
+pub(super) type Solved = Result<(Vec<f64>, Vector3<f64>), String>;
 
 /// A stroke solved again: every point's answer and the last pose.
-type Resolved = (Vec<Solved>, Vec<f64>);
+pub(super) type Resolved = (Vec<Solved>, Vec<f64>);
 
 /// Which way a held tilt (removal mode, [`solve_stroke`]) leans first: true tips the tool
 /// axis (shank to tip) away from the arm's base, the shank back toward it; the other way is
@@ -296,11 +296,16 @@ fn solve_stroke(
     let held = min_tilt.and_then(|min| stroke.hold(min));
     let reached = || {
         (reach.abs() >= 1e-9)
-            .then(|| stroke.tilted(reach))
+            .then(|| stroke.tilted(reach).map(|r| (reach, r)))
             .flatten()
     };
-    match held.or_else(reached) {
-        Some((out, end)) => {
+    let chosen = held.or_else(reached);
+    let chosen = match super::margin::wanted(robot, cfg) {
+        Some(m) => super::margin::keep(&stroke, chosen, min_tilt, m),
+        None => chosen,
+    };
+    match chosen {
+        Some((_, (out, end))) => {
             *prev = end;
             out
         }
@@ -309,27 +314,30 @@ fn solve_stroke(
 }
 
 /// One stroke's first answers and what solving it again with one tilt needs.
-struct Restroke<'a> {
-    targets: &'a [IkTarget],
-    normals: &'a [Vector3<f64>],
-    first: &'a [Solved],
-    robot: &'a Robot,
-    cfg: &'a PlanConfig,
-    start: &'a [f64],
+pub(super) struct Restroke<'a> {
+    pub(super) targets: &'a [IkTarget],
+    pub(super) normals: &'a [Vector3<f64>],
+    /// Each point's first answer.
+    pub(super) first: &'a [Solved],
+    /// The arm.
+    pub(super) robot: &'a Robot,
+    /// The planner's settings.
+    pub(super) cfg: &'a PlanConfig,
+    pub(super) start: &'a [f64],
     /// The signed in-plane tilt reach needed (axis search), rad.
     reach: f64,
 }
 
 impl Restroke<'_> {
-    /// The stroke solved again with `delta` rad of in-plane tilt ([`solve_tilted`]).
+    /// The stroke solved again with `delta` rad of in-plane tilt ([`super::margin::solve_tilted`]).
     fn tilted(&self, delta: f64) -> Option<Resolved> {
-        solve_tilted(self, delta)
+        super::margin::solve_tilted(self, delta, self.cfg.ik.limit_margin)
     }
 
     /// The stroke held at least `min` rad from every normal, leaning the preferred way first;
     /// where neither way reaches it, at the largest smaller hold either way reaches (bisected,
-    /// [`HOLD_BISECTIONS`]). None when no hold is reached.
-    fn hold(&self, min: f64) -> Option<Resolved> {
+    /// [`HOLD_BISECTIONS`]). None when no hold is reached; else the tilt (rad) and answers.
+    fn hold(&self, min: f64) -> Option<(f64, Resolved)> {
         let away = away_sign(self.targets, self.first, self.robot)?;
         let frames = plane_frames(self);
         let max = self.cfg.ik.max_axis_miss_deg.to_radians();
@@ -339,12 +347,13 @@ impl Restroke<'_> {
             [-away, away]
         };
         let attempt = |m: f64, sign: f64| {
-            least_tilt(&frames, m, sign, self.reach, max).and_then(|d| self.tilted(d))
+            least_tilt(&frames, m, sign, self.reach, max)
+                .and_then(|d| self.tilted(d).map(|r| (d, r)))
         };
         if let Some(found) = signs.iter().find_map(|&s| attempt(min, s)) {
             return Some(found);
         }
-        let mut best: Option<(f64, Resolved)> = None;
+        let mut best: Option<(f64, (f64, Resolved))> = None;
         for sign in signs {
             let (mut lo, mut hi, mut found) = (0.0, min, None);
             for _ in 0..HOLD_BISECTIONS {
@@ -412,7 +421,7 @@ fn away_sign(targets: &[IkTarget], first: &[Solved], robot: &Robot) -> Option<f6
 /// Per solved point, its inward normal in the arm plane's coordinates of the tilt: `(A, B)`
 /// with the tool axis tilted by delta at `A cos delta + B sin delta` (cosine of its angle from
 /// the inward normal).
-fn plane_frames(s: &Restroke) -> Vec<(f64, f64)> {
+pub(super) fn plane_frames(s: &Restroke) -> Vec<(f64, f64)> {
     let each = s.targets.iter().zip(s.normals).zip(s.first);
     each.filter_map(|((t, n), f)| {
         let (q, _) = f.as_ref().ok()?;
@@ -448,38 +457,12 @@ fn least_tilt(frames: &[(f64, f64)], min: f64, sign: f64, reach: f64, max: f64) 
     None
 }
 
-/// The stroke `s` solved again with every solved point of its first answers tilted by `delta`
-/// rad in the arm plane (exact IK, chained from its start): the answers and the last pose, or None when a
-/// point becomes unreachable or its axis leaves the cone of its requested axis or normal.
-fn solve_tilted(s: &Restroke, delta: f64) -> Option<Resolved> {
-    let (robot, cfg) = (s.robot, s.cfg);
-    let exact = crate::robot::IkConfig {
-        axis_search: false,
-        ..cfg.ik.clone()
-    };
-    let max = cfg.ik.max_axis_miss_deg;
-    let mut again = s.start.to_vec();
-    let mut out = Vec::with_capacity(s.targets.len());
-    for ((t, f), n) in s.targets.iter().zip(s.first).zip(s.normals) {
-        let Ok((q0, _)) = f else {
-            out.push(f.clone());
-            continue;
-        };
-        let (plane, requested) = in_plane(robot, q0, &t.axis);
-        let axis = requested * delta.cos() + plane.cross(&requested) * delta.sin();
-        let miss = |to: &Vector3<f64>| crate::robot::angle_between(to, &axis).to_degrees();
-        if miss(&t.axis) > max || miss(&-n) > max {
-            return None;
-        }
-        let sol = robot.ik(&IkTarget { axis, ..*t }, &again, &exact).ok()?;
-        again.clone_from(&sol.q);
-        out.push(Ok((sol.q, axis)));
-    }
-    Some((out, again))
-}
-
 /// The arm plane's normal at `q` (joint 2's axis) and `axis` projected into the plane (unit).
-fn in_plane(robot: &Robot, q: &[f64], axis: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+pub(super) fn in_plane(
+    robot: &Robot,
+    q: &[f64],
+    axis: &Vector3<f64>,
+) -> (Vector3<f64>, Vector3<f64>) {
     let (_, axes) = robot.joint_frames(q);
     let n = axes[1].normalize();
     let a = axis.normalize();

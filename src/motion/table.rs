@@ -432,6 +432,7 @@ fn sweep(
 fn concat(mut a: Plan, b: Plan) -> Plan {
     let base = a.samples.len() - 1;
     let passes = a.passes.len();
+    let b_samples = b.samples.clone();
     for s in b.samples.into_iter().skip(1) {
         a.samples.push(super::Sample {
             t: a.samples.len() as f64 * a.period,
@@ -439,6 +440,17 @@ fn concat(mut a: Plan, b: Plan) -> Plan {
         });
     }
     a.frames.extend(b.frames.into_iter().skip(1));
+    a.commands = match (a.commands.take(), b.commands) {
+        (None, None) => None,
+        (x, y) => {
+            let own = |c: Option<Vec<Vec<f64>>>, s: &[super::Sample]| {
+                c.unwrap_or_else(|| s.iter().map(|s| s.q.clone()).collect())
+            };
+            let mut x = own(x, &a.samples[..=base]);
+            x.extend(own(y, &b_samples).into_iter().skip(1));
+            Some(x)
+        }
+    };
     a.segments.extend(b.segments.into_iter().map(|mut s| {
         s.first_sample += base;
         s.last_sample += base;

@@ -148,9 +148,28 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
     let extra = std::env::var("POLISHBOT_ACCEPT_SIM")
         .unwrap_or_default()
         .replace(';', "\n");
+    // a cell whose servos.toml has `[compliance]` (issue 50's compensation): `fitted`, the
+    // table `calibrate compliance` fits on this case's simulated arm, or a file given by hand
+    let mut servos = std::env::var("POLISHBOT_ACCEPT_SERVOS").unwrap_or_default();
+    if servos == "fitted" {
+        let arm: polishbot::sim::GrindConfig =
+            toml::from_str(&format!("{}{sim}{extra}", super::SIM_TOOL)).unwrap();
+        let c = super::compensation::fitted(&arm);
+        println!("fitted [compliance]: {c:?}");
+        servos = super::compensation::servos_with(&c, &dir)
+            .display()
+            .to_string();
+    }
+    let robot = match servos.is_empty() {
+        true => String::new(),
+        false => format!("[plan.robot]\nservos = {servos:?}\n[run.robot]\nservos = {servos:?}\n"),
+    };
     std::fs::write(
         &cfg,
-        format!("[run.sim.grinding]\n{}{sim}{extra}\n", super::SIM_TOOL),
+        format!(
+            "{robot}[run.sim.grinding]\n{}{sim}{extra}\n",
+            super::SIM_TOOL
+        ),
     )
     .unwrap();
     let mut command = cycle(&dir, "cycle");

@@ -12,6 +12,31 @@ pub fn inspection(dir: &Path, config: &SynthConfig) -> Truth {
     inspection_of(dir, synth(config).expect("synth"))
 }
 
+/// The demo's part (cli/demo.rs `demo_config`, seed 1) at 200,000 reference samples (the
+/// planner's core points here; tests/common `case`'s density), its defects where the arm
+/// reaches, as a perfect inspection.
+pub fn demo_like(dir: &Path) -> polishbot::repair::Inspection {
+    let config = SynthConfig {
+        seed: 1,
+        defects: 5,
+        height_range: [0.12, 0.4],
+        width_range: [2.0, 4.0],
+        pit_share: 0.2,
+        ridge_share: 0.2,
+        reference_points: 200_000,
+        scan_points: 1_000,
+        ..SynthConfig::default()
+    };
+    let reachable = polishbot::cell::reachable_sites(
+        &super::shipped_cell(),
+        polishbot::cell::SITE_AXIS_MARGIN_DEG,
+    )
+    .unwrap();
+    let case = polishbot::synth::synth_at(&config, &reachable).expect("synth");
+    inspection_of(dir, case);
+    polishbot::repair::Inspection::load(dir).expect("inspection")
+}
+
 /// As [`inspection`], for a case already made (`synth_at`: defects where the arm reaches).
 pub fn inspection_of(dir: &Path, case: SynthCase) -> Truth {
     let tolerance = 0.05;
