@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 
 use polishbot::motion::{plan, Inspection, Plan, PlanMode};
 
-use common::femoral::{cell, parametric_case, planned_area, reasons, uniform_case};
+use common::femoral::{cell, parametric_case, planned_area, reasons, setups, uniform_case};
 
 /// Least share of the repairable area planned in removal mode in the shipped designed cell,
 /// on each seed of [`uniform_defects_in_the_designed_cell_in_removal_mode`]: issue 51's 0.90.
@@ -21,6 +21,11 @@ use common::femoral::{cell, parametric_case, planned_area, reasons, uniform_case
 /// contacts the removal planner lifts over (passing at full feed would remove more than they
 /// ask).
 const REMOVAL_FLOOR: f64 = 0.90;
+
+/// Least share of the repairable area planned over the shipped designed cell's two setups
+/// (calibration/femoral/ and its setup-2/, the part re-fixtured between them), removal mode,
+/// on each seed of [`uniform_defects_over_the_designed_cells_two_setups`]. Measured TWO_SETUP_MEASURED.
+const TWO_SETUP_FLOOR: f64 = 0.90;
 
 /// Coverage below which a region counts as left out: plan.json must say why.
 const LEFT_OUT: f64 = 0.5;
@@ -116,5 +121,42 @@ fn uniform_defects_in_the_designed_cell_in_removal_mode() {
                 assert!(a.coverage < LEFT_OUT && a.refused.is_some(), "{a:?}");
             }
         }
+    }
+}
+
+/// Issue 51's case over the designed cell's two setups (`plan` reads setup-2/ beside the
+/// workcell): the same seeds planned with setup 1 alone and with both, in removal mode. The
+/// two-setup plan plans no less than setup 1 alone and at least [`TWO_SETUP_FLOOR`]; every
+/// region names its setup, setup 2 holds exactly the regions moved to it, each setup states
+/// its placement's hash, and every region setup 2 tried and left names why.
+#[test]
+fn uniform_defects_over_the_designed_cells_two_setups() {
+    let (robot, cells, mut config) = setups("femoral/");
+    assert_eq!(cells.len(), 2, "the designed cell ships two setups");
+    config.mode = PlanMode::Removal;
+    for seed in [5100, 5101] {
+        let insp = uniform_case(seed);
+        let one = polishbot::motion::setups::plan(&insp, &robot, &cells[..1], &config).unwrap();
+        let two = polishbot::motion::setups::plan(&insp, &robot, &cells, &config).unwrap();
+        let (c1, t1) = planned_area(&one);
+        let (c2, t2) = planned_area(&two);
+        let moved = &two.setups[1].regions;
+        println!(
+            "seed {seed}: repairable {t2:.1} mm^2, planned {:.1} % with setup 1, {:.1} % with two setups; regions moved to setup 2: {moved:?}; tried there and left: {:?}",
+            100.0 * c1 / t1,
+            100.0 * c2 / t2,
+            two.setups[1].tried
+        );
+        assert!(one.setups.is_empty(), "one setup: no setups list");
+        assert!(c2 / t2 >= TWO_SETUP_FLOOR, "seed {seed}: planned {:.3}", c2 / t2);
+        assert!(c2 / t2 >= c1 / t1 - 1e-9, "seed {seed}: two setups plan less");
+        assert_ne!(two.setups[0].placement_sha256, two.setups[1].placement_sha256);
+        for r in &two.reachability.regions {
+            let s = r.setup.expect("every region names its setup");
+            assert_eq!(moved.contains(&r.id), s == 2, "region {}: setup {s}", r.id);
+        }
+        let sub = two.setups[1].plan.as_deref();
+        assert_eq!(sub.is_some(), !moved.is_empty(), "setup 2's plan iff it has regions");
+        assert!(two.setups[1].tried.iter().all(|t| t.refused.is_some()));
     }
 }

@@ -6,6 +6,7 @@ use clap::Args;
 use serde::Deserialize;
 
 use super::arm::DeviceArgs;
+use super::setup_stop;
 use super::settings::{self, ConfigFile};
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
@@ -107,37 +108,6 @@ fn check_run_settings(file: &ConfigFile, r: &RunConfig) -> anyhow::Result<()> {
         c.map_err(|m| file.refuse("run", &m))?;
     }
     Ok(())
-}
-
-/// The frame to start from: 0, or with `--resume` the journal's resume point, after checking
-/// that the journal belongs to this plan (its SHA-256) and stays within its frames.
-fn start_frame(resume: Option<&Path>, sha: &str, frames: usize) -> anyhow::Result<usize> {
-    let Some(j) = resume else {
-        return Ok(0);
-    };
-    let rp = ResumePoint::from_journal(j)?;
-    match rp.plan_sha256.as_slice() {
-        [h] if h == sha => {}
-        [] => anyhow::bail!(
-            "{}: --resume: the journal records no plan SHA-256 (not written by `run` of this \
-             version): cannot tell which plan it belongs to",
-            j.display()
-        ),
-        hashes => {
-            anyhow::bail!(
-            "{}: --resume: the journal belongs to another plan (SHA-256 {}), this plan's is {sha}",
-            j.display(),
-            hashes.iter().find(|h| *h != sha).map_or("?", |h| h.as_str())
-        )
-        }
-    }
-    let from = rp.resume_from();
-    anyhow::ensure!(
-        from < frames as u64,
-        "{}: --resume: the journal says frame {from} was sent, but the plan has {frames} frames (arm and table)",
-        j.display()
-    );
-    Ok(from as usize)
 }
 
 /// A fresh run refuses to append to a journal of another plan (`--resume` checks its own).
@@ -321,16 +291,21 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
         }
     };
     let sha = sha256_hex(text.as_bytes());
-    let table = Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
+    // a plan over several setups: the setup this run streams, on that setup's workcell
+    let whole = plan;
+    let stage = setup_stop::stage(job.resume, &sha, whole)?;
+    let plan = stage.plan;
+    let cell = setup_stop::cell_of(&cfg.robot, whole, stage.setup)?;
+    let table = Turntable::load(&cell.servos, &cell.workcell)?;
     let checked = plan
         .check_cell(&robot, table.as_ref(), &cfg.validation)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
     let steps = crate::cell::steps(&checked).len();
-    let workcell = Workcell::load(&cfg.robot.workcell)?;
+    let workcell = Workcell::load(&cell.workcell)?;
     let mut collision = cfg.collision.clone();
     collision
         .solids
-        .extend(collide::solids_beside(&cfg.robot.workcell)?);
+        .extend(collide::solids_beside(&cell.workcell)?);
     let loaded;
     let inspection = match job.inspection {
         Some(i) => i,
@@ -346,7 +321,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
     };
     plan.check_clearance_cell(inspection, &robot, &workcell, table.as_ref(), &collision)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
-    let from = start_frame(job.resume, &sha, steps)?;
+    let from = stage.from(job.resume, steps)?;
     let journal_path = (job.journal.clone())
         .or(job.resume.map(Path::to_path_buf))
         .unwrap_or_else(|| plan_path.with_file_name("journal.jsonl"));
@@ -368,7 +343,10 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
         );
         return Ok(None);
     }
-    let journal = Journal::append(&journal_path)?.for_plan(&sha);
+    let journal = Journal::append(&journal_path)?
+        .for_plan(&sha)
+        .for_setup(stage.setup as u64);
+    let next = |()| setup_stop::after_setup(whole, stage.setup, &journal_path, &sha, plan_path);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
     if let Some(ground) = ground {
@@ -379,7 +357,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
         );
         let arm = ground.arm(&map)?;
         let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
-        stream(bus, &checked, plan, from, &cfg.run, stop, &journal_path)?;
+        stream(bus, &checked, plan, from, &cfg.run, stop, &journal_path).and_then(next)?;
         return ground
             .finish(&arm, &map, &workcell.robot_from_reference)
             .map(Some);
@@ -394,6 +372,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
         stop,
         &journal_path,
     )
+    .and_then(next)
     .map(|()| None)
 }
 

@@ -59,17 +59,19 @@ pub fn plan_into(
     refuse: &dyn Fn(&str) -> anyhow::Error,
 ) -> Result<Planned> {
     let mut cfg = cfg.clone();
-    let (robot, workcell) = robot::load_with(&cfg.robot, tool.tool()?)?;
+    // the workcell is read (and checked) again with the cell's setups below
+    let (robot, _) = robot::load_with(&cfg.robot, tool.tool()?)?;
     // the tool file's [removal] checked here, so that its errors name the file's full path
     let removal_tool = ToolModel::of_text(tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
         motion::PlanError::Config(m) => refuse(&m),
         e => e.into(),
     })?;
-    let solids = motion::collide::solids_beside(&cfg.robot.workcell)?;
-    cfg.plan.collision.solids.extend(solids);
-    let table = robot::Turntable::load(&cfg.robot.servos, &cfg.robot.workcell)?;
-    let plan = motion::plan(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
+    // the cell's setups: its workcell.toml, then setup-N/ beside it (motion::setups)
+    let cells = motion::setups::load(&cfg.robot.workcell, &cfg.robot.servos)?;
+    let plan = motion::setups::plan(inspection, &robot, &cells, &cfg.plan)?;
+    // setup 1's solids, as planned with (the provenance records them)
+    cfg.plan.collision.solids.extend(cells[0].solids.iter().cloned());
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let provenance = provenance(&inspection.dir, &cfg.robot, tool, written, &cfg.plan)?;

@@ -62,6 +62,11 @@ pub struct Plan {
     /// The turntable's angles and moves (absent in a cell without a turntable).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turntable: Option<TablePlan>,
+    /// A cell with further setups (`setup-N/` beside its workcell.toml): per setup its
+    /// placement's hash, the regions planned in it and, from setup 2 on, its own plan, which
+    /// streams after the operator re-fixtures the part (absent in a cell with one setup).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub setups: Vec<super::setups::SetupPart>,
 }
 
 /// A plan that passed [`Plan::check`]: its frames as bytes and their raw poses.
