@@ -24,8 +24,12 @@ const REMOVAL_FLOOR: f64 = 0.90;
 
 /// Least share of the repairable area planned over the shipped designed cell's two setups
 /// (calibration/femoral/ and its setup-2/, the part re-fixtured between them), removal mode,
-/// on each seed of [`uniform_defects_over_the_designed_cells_two_setups`]. Measured TWO_SETUP_MEASURED.
-const TWO_SETUP_FLOOR: f64 = 0.90;
+/// on each seed of [`uniform_defects_over_the_designed_cells_two_setups`]. Measured 0.928
+/// (seed 5100; 0.921 with setup 1 alone) and 0.938 (seed 5101; 0.931): setup 2 takes one
+/// region on each (5100: region 9, 5101: region 56). What stays out: regions whose contacts
+/// lie beyond the 45 degree cone in both setups, and seed 5101's region 35, which setup 2
+/// refuses by its free move in (the ball 0.97 mm from the part on the way).
+const TWO_SETUP_FLOOR: f64 = 0.925;
 
 /// Coverage below which a region counts as left out: plan.json must say why.
 const LEFT_OUT: f64 = 0.5;
@@ -148,6 +152,7 @@ fn uniform_defects_over_the_designed_cells_two_setups() {
             two.setups[1].tried
         );
         assert!(one.setups.is_empty(), "one setup: no setups list");
+        assert!(!moved.is_empty(), "seed {seed}: setup 2 takes no region");
         assert!(c2 / t2 >= TWO_SETUP_FLOOR, "seed {seed}: planned {:.3}", c2 / t2);
         assert!(c2 / t2 >= c1 / t1 - 1e-9, "seed {seed}: two setups plan less");
         assert_ne!(two.setups[0].placement_sha256, two.setups[1].placement_sha256);
