@@ -146,10 +146,13 @@ fn setup_files(workcell_in: &Path, out: &Path, n: usize) -> Result<(PathBuf, Pat
     if let Some(dir) = file.parent() {
         std::fs::create_dir_all(dir).map_err(|e| CalibError::file(dir, e))?;
     }
-    let input = [setup_file(&out.join("workcell.toml"), n), setup_file(workcell_in, n)]
-        .into_iter()
-        .find(|p| p.is_file())
-        .unwrap_or_else(|| workcell_in.to_path_buf());
+    let input = [
+        setup_file(&out.join("workcell.toml"), n),
+        setup_file(workcell_in, n),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+    .unwrap_or_else(|| workcell_in.to_path_buf());
     Ok((input, file))
 }
 

@@ -6,8 +6,8 @@ use clap::Args;
 use serde::Deserialize;
 
 use super::arm::DeviceArgs;
-use super::setup_stop;
 use super::settings::{self, ConfigFile};
+use super::setup_stop;
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
 use crate::cloud::{Geometry, PointCloud};
@@ -346,7 +346,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
     let journal = Journal::append(&journal_path)?
         .for_plan(&sha)
         .for_setup(stage.setup as u64);
-    let next = |()| setup_stop::after_setup(whole, stage.setup, &journal_path, &sha, plan_path);
+    let then = setup_stop::next_stop(whole, stage.setup, &journal_path, plan_path);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
     if let Some(ground) = ground {
@@ -356,23 +356,26 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
             "run: --part: the virtual part's grinding does not follow the turntable; run the plan without --part"
         );
         let arm = ground.arm(&map)?;
-        let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
-        stream(bus, &checked, plan, from, &cfg.run, stop, &journal_path).and_then(next)?;
+        let mut bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
+        bus.set_stop_flag(stop);
+        let (run, at) = (&cfg.run, &journal_path);
+        stream(bus, &checked, plan, from, run, at, then.as_ref())?;
         return ground
             .finish(&arm, &map, &workcell.robot_from_reference)
             .map(Some);
     }
     let link = super::arm::open_link(job.device, &sim, &bus_cfg.servo_map, "run")?;
+    let mut bus = Bus::connect(link, bus_cfg, journal)?;
+    bus.set_stop_flag(stop);
     stream(
-        Bus::connect(link, bus_cfg, journal)?,
+        bus,
         &checked,
         plan,
         from,
         &cfg.run,
-        stop,
         &journal_path,
+        then.as_ref(),
     )
-    .and_then(next)
     .map(|()| None)
 }
 
@@ -416,10 +419,9 @@ fn stream<T: Transport>(
     plan: &Plan,
     from: usize,
     cfg: &RunConfig,
-    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     journal: &Path,
+    then: Option<&setup_stop::OperatorStop>,
 ) -> anyhow::Result<()> {
-    bus.set_stop_flag(stop);
     let port = bus.transport().describe();
     match execute(&mut bus, checked, plan.period, from, cfg) {
         Ok(r) => {
@@ -436,7 +438,9 @@ fn stream<T: Transport>(
                 r.final_raw,
                 journal.display()
             );
-            Ok(())
+            let Some(op) = then else { return Ok(()) };
+            bus.operator_stop(&op.kind, op.setup, &op.message)?;
+            Err(op.clone().into())
         }
         Err(e) => Err(anyhow::anyhow!(
             "run: {port}: stopped: {e}; journal {} (continue with --resume {})",

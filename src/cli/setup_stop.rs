@@ -5,7 +5,7 @@
 //! for. One stop for every kind (`refixture`; a tool change is the next).
 use std::path::Path;
 
-use crate::bus::{Entry, EntryKind, Journal, ResumePoint};
+use crate::bus::ResumePoint;
 use crate::motion::setups::{placement_sha256, setup_file};
 use crate::motion::Plan;
 use crate::robot::{RobotConfig, Workcell};
@@ -15,10 +15,12 @@ use crate::robot::{RobotConfig, Workcell};
 pub const OPERATOR_STOP_EXIT: u8 = 5;
 
 /// The run ended for the operator: what to do before `run --resume`.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct OperatorStop {
     /// The stop's kind (`refixture`).
     pub kind: String,
+    /// The setup the run continues with.
+    pub setup: u64,
     /// What the operator does next, one line.
     pub message: String,
 }
@@ -78,18 +80,21 @@ pub fn stage<'a>(resume: Option<&Path>, sha: &str, plan: &'a Plan) -> anyhow::Re
              version): cannot tell which plan it belongs to",
             j.display()
         ),
-        hashes => anyhow::bail!(
+        hashes => {
+            anyhow::bail!(
             "{}: --resume: the journal belongs to another plan (SHA-256 {}), this plan's is {sha}",
             j.display(),
             hashes.iter().find(|h| *h != sha).map_or("?", |h| h.as_str())
-        ),
+        )
+        }
     }
     let (setup, resume) = match &rp.operator_stop {
         Some((_, next)) => (*next as usize, None),
         None => (rp.setup as usize, Some(rp)),
     };
-    let plan = setup_plan(plan, setup)
-        .ok_or_else(|| anyhow::anyhow!("{}: --resume: the plan has no setup {setup}", j.display()))?;
+    let plan = setup_plan(plan, setup).ok_or_else(|| {
+        anyhow::anyhow!("{}: --resume: the plan has no setup {setup}", j.display())
+    })?;
     Ok(Stage {
         setup,
         plan,
@@ -125,42 +130,27 @@ pub fn cell_of(robot: &RobotConfig, plan: &Plan, setup: usize) -> anyhow::Result
     Ok(out)
 }
 
-/// After setup `done` of `plan` streamed: the operator stop before the next setup with a
-/// plan (journaled in `journal`, tied to the plan's SHA-256 `sha`), or Ok when none is left.
-pub fn after_setup(
+/// The operator stop after setup `done` of `plan` (file `plan_file`, journal `journal`): the
+/// next setup with a plan, or None when none is left. `run` journals it after the setup's
+/// last frame (`Bus::operator_stop`) and ends with it: the one path of every operator stop.
+pub fn next_stop(
     plan: &Plan,
     done: usize,
     journal: &Path,
-    sha: &str,
     plan_file: &Path,
-) -> anyhow::Result<()> {
-    let Some(next) = (done + 1..=plan.setups.len()).find(|&n| setup_plan(plan, n).is_some())
-    else {
-        return Ok(());
-    };
+) -> Option<OperatorStop> {
+    let next = (done + 1..=plan.setups.len()).find(|&n| setup_plan(plan, n).is_some())?;
     let part = &plan.setups[next - 1];
     let message = format!(
-        "setup {done} done; re-fixture the part as setup {next} (mount it as {} places it: {} region(s) left for it), run `polishbot calibrate workcell --setup {next} ...` if its placement is not measured yet, then `polishbot run --plan {} --resume {} ...`",
+        "setup {done} done; re-fixture the part as setup {next} (mounted as {} places it; {} region(s) left for it), run `polishbot calibrate workcell --setup {next} ...` if that placement is not measured yet, then `polishbot run --plan {} --resume {} ...`",
         part.workcell,
         part.regions.len(),
         plan_file.display(),
         journal.display()
     );
-    stop(journal, sha, "refixture", next as u64, &message)
-}
-
-/// Journals an operator stop of `kind` (continuing with setup `next`) and ends the run with
-/// it: the one path of every operator stop.
-pub fn stop(journal: &Path, sha: &str, kind: &str, next: u64, message: &str) -> anyhow::Result<()> {
-    let mut j = Journal::append(journal)?.for_plan(sha);
-    let mut e = Entry::new(EntryKind::OperatorStop);
-    e.code = Some(kind.to_string());
-    e.setup = Some(next);
-    e.message = Some(message.to_string());
-    j.write(e, 0.0)?;
-    Err(OperatorStop {
-        kind: kind.to_string(),
-        message: message.to_string(),
-    }
-    .into())
+    Some(OperatorStop {
+        kind: "refixture".into(),
+        setup: next as u64,
+        message,
+    })
 }

@@ -71,7 +71,10 @@ pub fn plan_into(
     let cells = motion::setups::load(&cfg.robot.workcell, &cfg.robot.servos)?;
     let plan = motion::setups::plan(inspection, &robot, &cells, &cfg.plan)?;
     // setup 1's solids, as planned with (the provenance records them)
-    cfg.plan.collision.solids.extend(cells[0].solids.iter().cloned());
+    cfg.plan
+        .collision
+        .solids
+        .extend(cells[0].solids.iter().cloned());
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let provenance = provenance(&inspection.dir, &cfg.robot, tool, written, &cfg.plan)?;

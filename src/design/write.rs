@@ -38,7 +38,10 @@ pub fn write_cell(design: &Design, source: &SourceCell, out: &Path) -> Result<()
         let dir = format!("{SETUP_DIR}{n}");
         std::fs::create_dir_all(out.join(&dir))
             .with_context(|| format!("{}: cannot create", out.join(&dir).display()))?;
-        put(&format!("{dir}/workcell.toml"), &setup_workcell_text(n, cell))?;
+        put(
+            &format!("{dir}/workcell.toml"),
+            &setup_workcell_text(n, cell),
+        )?;
         put(&format!("{dir}/solids.toml"), &solids_text(&cell.solids))?;
     }
     put("design.json", &serde_json::to_string_pretty(design)?)?;

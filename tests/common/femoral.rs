@@ -133,10 +133,15 @@ const POINTS: usize = 15_000;
 
 /// Seed `seed`'s case: `DEFECTS` defects uniform over the articular surface.
 pub fn uniform_case(seed: u64) -> Inspection {
-    of_case(&SynthConfig {
+    of_case(&uniform_config(seed))
+}
+
+/// The synth settings of [`uniform_case`] (`synthetic::inspection` writes its folder).
+pub fn uniform_config(seed: u64) -> SynthConfig {
+    SynthConfig {
         reference_points: POINTS,
         ..super::femoral_synth(seed, DEFECTS)
-    })
+    }
 }
 
 /// The same on synth's parametric femoral part (its own frame: medial-lateral along x).
