@@ -376,7 +376,7 @@ fn routine(
                 .zip(&fit.residuals_mm)
                 .map(|(f, r)| format!("{} {r:.3}", f.name))
                 .collect();
-            let (input, file) = setup_files(&ctx.workcell_in, &ctx.out, *setup as usize)?;
+            let (input, file) = setup_files(&ctx.workcell_in, ctx.out, *setup as usize)?;
             let header = format!(
                 "Written by `polishbot calibrate workcell` from {} touched fiducials of {}.\n\
                  Residual per fiducial [mm]: {}; RMS {:.3} mm.",
