@@ -12,12 +12,12 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::file::Plan;
+pub use super::file::{SetupPart, TriedSetup};
 use super::table::{coverage, first_clause, planned, GOOD_COVERAGE};
 use super::Solid;
 use crate::repair::Inspection;
@@ -44,37 +44,6 @@ pub struct SetupCell {
     pub table: Option<Turntable>,
     /// Its solids.toml's solids.
     pub solids: Vec<Solid>,
-}
-
-/// A setup in plan.json.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SetupPart {
-    /// Setup number, 1 first.
-    pub setup: usize,
-    /// The workcell file planned on.
-    pub workcell: String,
-    /// SHA-256 of the placement ([`placement_sha256`]): the setup streams only to a cell whose
-    /// workcell file gives the same.
-    pub placement_sha256: String,
-    /// Regions planned in this setup.
-    pub regions: Vec<usize>,
-    /// Regions tried in this setup and left where they were: what it covered and why not more.
-    pub tried: Vec<TriedSetup>,
-    /// This setup's plan (setup 2 on; setup 1's is the plan holding this list).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub plan: Option<Box<Plan>>,
-}
-
-/// A region tried in a setup that did not take it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TriedSetup {
-    /// The region.
-    pub region: usize,
-    /// Share of its core points the setup's plan covered (0: refused).
-    pub coverage: f64,
-    /// The first reason the setup's plan gives (the rule that refused the region's contacts,
-    /// or the planner's error); None when it covered no less than the region's setup.
-    pub refused: Option<String>,
 }
 
 /// SHA-256 (hex) of a placement's 16 numbers to 9 decimals (a further setup's workcell.toml
