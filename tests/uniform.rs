@@ -32,7 +32,7 @@ const REMOVAL_FLOOR: f64 = 0.90;
 /// (seed 5100; 0.921 with setup 1 alone) and 0.938 (seed 5101; 0.931): setup 2 takes one
 /// region on each (5100: region 9, 5101: region 56). What stays out: regions whose contacts
 /// lie beyond the 45 degree cone in both setups, and seed 5101's region 35, which setup 2
-/// refuses by its free move in (the ball 0.97 mm from the part on the way).
+/// refuses by its free move in ("no collision-free way in: tool ball and the part").
 const TWO_SETUP_FLOOR: f64 = 0.925;
 
 /// Coverage below which a region counts as left out: plan.json must say why.
