@@ -77,8 +77,11 @@ fn demo_like(dir: &Path) -> Inspection {
         scan_points: 1_000,
         ..polishbot::synth::SynthConfig::default()
     };
-    let reachable =
-        polishbot::cell::reachable_sites(polishbot::cell::SITE_AXIS_MARGIN_DEG).unwrap();
+    let reachable = polishbot::cell::reachable_sites(
+        &common::shipped_cell(),
+        polishbot::cell::SITE_AXIS_MARGIN_DEG,
+    )
+    .unwrap();
     let case = polishbot::synth::synth_at(&config, &reachable).expect("synth");
     common::synthetic::inspection_of(dir, case);
     Inspection::load(dir).expect("inspection")

@@ -532,3 +532,31 @@ fn plan_page_loads(browser: &str, out: &std::path::Path, ids: &[u64]) {
     }
     assert_local_only(&dom, &netlog);
 }
+
+#[test]
+fn the_plan_link_goes_into_the_held_page_without_reading_it_back() {
+    use polishbot::report::plan_page::add_link;
+    let dir = tempdir();
+    // no file at the path: the page held is the one edited (an inspection this process wrote)
+    let report = dir.path().join("report.html");
+    let held = "<html><body>\n<h1>t</h1>\n<p id=\"links\"></p>\n<table></table></body></html>\n";
+    assert!(add_link(&report, Some(held), "grinding plan", "../plan.html").unwrap());
+    let written = std::fs::read_to_string(&report).unwrap();
+    assert_eq!(
+        written,
+        held.replacen(
+            "<p id=\"links\">",
+            "<p id=\"links\"><a href=\"../plan.html\">grinding plan</a> ",
+            1
+        )
+    );
+    // a page without the links paragraph is left as it is (and not written)
+    let other = dir.path().join("old.html");
+    assert!(!add_link(&other, Some("<html></html>"), "grinding plan", "x").unwrap());
+    assert!(!other.exists());
+    // no page held: the page on disk is read (a report another run wrote), once linked
+    assert!(add_link(&report, None, "grinding plan", "../plan.html").unwrap());
+    assert_eq!(std::fs::read_to_string(&report).unwrap(), written);
+    let err = add_link(&other, None, "grinding plan", "x").unwrap_err();
+    assert!(format!("{err:#}").contains("old.html"), "{err:#}");
+}

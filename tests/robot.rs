@@ -561,3 +561,74 @@ fn servo_resolution_error_bounds_the_quantised_tip() {
         hi * 1e3
     );
 }
+
+#[test]
+fn a_cell_held_in_memory_is_the_cell_on_disk_and_names_its_paths() {
+    use polishbot::motion::collide::{solids_beside, solids_of};
+    use polishbot::robot::{RobotConfig, Turntable};
+    // the turntable cell: every file kind, solids.toml and a [turntable] in two files
+    let mut cfg = RobotConfig::default();
+    cfg.use_cell(&calib("turntable"));
+    let mut held = cfg.read_cell().unwrap();
+    let roles: Vec<&str> = held.by_role().iter().map(|(r, _)| *r).collect();
+    assert_eq!(
+        roles,
+        [
+            "robot description",
+            "tool",
+            "servo calibration",
+            "workcell",
+            "solids"
+        ]
+    );
+    // the texts parsed at paths where no file is: what is parsed is what was read once
+    let gone = calib("turntable").join("no-such-folder");
+    for f in [
+        &mut held.urdf,
+        &mut held.tool,
+        &mut held.servos,
+        &mut held.workcell,
+    ] {
+        f.path = gone.join(f.path.file_name().unwrap());
+    }
+    let solids = held.solids.as_mut().unwrap();
+    solids.path = gone.join("solids.toml");
+    let robot = held.robot().unwrap();
+    let on_disk = Robot::load(&cfg.urdf, &cfg.tool, &cfg.servos).unwrap();
+    assert_eq!(robot.joints, on_disk.joints);
+    assert_eq!(robot.tool, on_disk.tool);
+    assert_eq!(
+        held.workcell().unwrap(),
+        Workcell::load(&cfg.workcell).unwrap()
+    );
+    let table = held.turntable().unwrap();
+    assert!(table.is_some());
+    assert_eq!(table, Turntable::load(&cfg.servos, &cfg.workcell).unwrap());
+    assert_eq!(
+        solids_of(held.solids.as_ref()).unwrap(),
+        solids_beside(&cfg.workcell).unwrap()
+    );
+    // a bad value in a held file is named by the held path and the key or line
+    let mut bad = held.clone();
+    bad.servos.text = bad
+        .servos
+        .text
+        .replacen("velocity = 1.0", "velocity = \"fast\"", 1);
+    let err = bad.robot().unwrap_err().to_string();
+    assert!(
+        err.contains(&bad.servos.path.display().to_string()) && err.contains("velocity"),
+        "{err}"
+    );
+    let mut bad = held.clone();
+    bad.urdf.text = bad.urdf.text.replacen("<robot", "<robt", 1);
+    let err = bad.robot().unwrap_err().to_string();
+    assert!(err.contains(&bad.urdf.path.display().to_string()), "{err}");
+    let mut bad = held.clone();
+    bad.solids.as_mut().unwrap().text +=
+        "\n[[solid]]\nname = \"flat\"\nmin = [0, 0, 0]\nmax = [1, 1, 0]\n";
+    let err = solids_of(bad.solids.as_ref()).unwrap_err().to_string();
+    assert!(
+        err.contains("no-such-folder/solids.toml") && err.contains("flat"),
+        "{err}"
+    );
+}

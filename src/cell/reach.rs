@@ -2,7 +2,7 @@
 //! arm must reach (demo, tests/cycle.rs).
 use anyhow::Result;
 
-use crate::robot::{self as robot_model, IkConfig, IkTarget, RobotConfig};
+use crate::robot::{CellFiles, IkConfig, IkTarget, RobotConfig};
 use crate::synth::SiteProbe;
 
 /// Joint-limit margin of the reach test, rad: the sites keep 0.02 rad inside every limit so
@@ -18,11 +18,14 @@ pub const SITE_AXIS_MARGIN_DEG: f64 = 5.0;
 
 /// A filter of surface points: every probe (reference frame mm, outward normal) must be
 /// reachable with the tool against the surface at its own normal, the tool axis within the
-/// default cell's axis limit less `axis_margin_deg` (the default cell calibration). Synth's
-/// sites use [`SITE_AXIS_MARGIN_DEG`]; judging a point the planner could grind uses 0.
-pub fn reachable_sites(axis_margin_deg: f64) -> Result<impl Fn(&[SiteProbe]) -> bool + Sync> {
+/// default IK settings' axis limit less `axis_margin_deg`, in the cell `cell` (its files held).
+/// Synth's sites use [`SITE_AXIS_MARGIN_DEG`]; judging a point the planner could grind uses 0.
+pub fn reachable_sites(
+    cell: &CellFiles,
+    axis_margin_deg: f64,
+) -> Result<impl Fn(&[SiteProbe]) -> bool + Sync> {
     let robot_cfg = RobotConfig::default();
-    let (robot, workcell) = robot_model::load(&robot_cfg)?;
+    let (robot, workcell) = cell.load()?;
     let ik = IkConfig {
         limit_margin: SITE_LIMIT_MARGIN,
         max_axis_miss_deg: robot_cfg.ik.max_axis_miss_deg - axis_margin_deg,

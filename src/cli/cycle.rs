@@ -212,9 +212,13 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         cfg.plan.plan.mode = mode;
     }
     cfg.plan_table = configs.plan.table;
+    let settings = super::run::settings(&configs.run.file, None).map_err(blame)?;
+    // the cells of [plan] and [run] are read here, once; the loop parses them from memory
+    let cell = cfg.plan.robot.read_cell()?;
     let mut arm = LoopArm {
         device: args.device,
-        settings: super::run::settings(&configs.run.file, None).map_err(blame)?,
+        cell: settings.robot.read_cell()?,
+        settings,
         table: configs.run.table,
         ground: None,
     };
@@ -227,6 +231,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
             format: args.input.format,
         },
         out: args.out,
+        cell,
         first: None,
     };
     let ended = run_cycle(&cfg, inputs, &mut arm).map_err(|e| blame_config(e, &out, config))?;

@@ -16,6 +16,7 @@ use crate::cloud::Geometry;
 use crate::cycle::{plan_into, run_cycle, CycleConfig, First, PlanFileConfig};
 use crate::inspect::{FileInput, Findings, InspectConfig, Source};
 use crate::motion::Plan;
+use crate::robot::{CellFiles, FileText, RobotConfig};
 use crate::synth::{synth_at, DefectKind, SynthConfig, Truth};
 
 /// The demo's files: synth writes millimetres in PLY.
@@ -91,9 +92,32 @@ const DEMO_CELL: [(&str, &str); 10] = [
     ),
 ];
 
-/// Creates `out`, writes the built-in cell into `out/calibration/` and makes `out` the working
-/// directory (every default cell path is `calibration/...` under it); returns `out` made
-/// absolute, so the demo's own paths do not depend on the change.
+/// The built-in cell held in memory, at the paths the default settings name (`calibration/...`
+/// under the demo folder, where [`enter_demo_folder`] writes it as an output): the demo's
+/// stages parse it from here and never read those files back.
+fn demo_cell() -> CellFiles {
+    let held = |path: PathBuf| {
+        let name = path.strip_prefix("calibration").unwrap_or(&path);
+        let text = DEMO_CELL.iter().find(|(n, _)| Path::new(n) == name);
+        FileText {
+            text: text.map_or("", |(_, t)| t).to_string(),
+            path,
+        }
+    };
+    let cfg = RobotConfig::default();
+    CellFiles {
+        urdf: held(cfg.urdf.clone()),
+        tool: held(cfg.tool.clone()),
+        servos: held(cfg.servos.clone()),
+        workcell: held(cfg.workcell.clone()),
+        solids: Some(held(cfg.solids())),
+    }
+}
+
+/// Creates `out`, writes the built-in cell into `out/calibration/` (an output: the demo's
+/// stages take it from memory, [`demo_cell`]) and makes `out` the working directory (every
+/// default cell path, as plan.json records it, is `calibration/...` under it); returns `out`
+/// made absolute, so the demo's own paths do not depend on the change.
 fn enter_demo_folder(out: &Path) -> Result<PathBuf> {
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let out = out
@@ -121,7 +145,8 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         shown.join("calibration").display()
     );
     step("synth: parametric femoral component with defects planted where the arm reaches");
-    let reachable = crate::cell::reachable_sites(crate::cell::SITE_AXIS_MARGIN_DEG)?;
+    let cell = demo_cell();
+    let reachable = crate::cell::reachable_sites(&cell, crate::cell::SITE_AXIS_MARGIN_DEG)?;
     let case = synth_at(&demo_config(args.seed), &reachable)?;
     let [reference_ply, scan_ply] = case.write(&out)?;
     // The part is handed on as written (inspect and the loop read no file back).
@@ -150,11 +175,10 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let refuse = |m: &str| anyhow::anyhow!("plan settings: {m}");
     let ros = out.join("trajectory.yaml");
     let plan_cfg = PlanFileConfig::default();
-    let tool = crate::robot::ToolText::read(&plan_cfg.robot.tool)?;
     let planned = plan_into(
         &plan_cfg,
-        &tool,
-        &found.written,
+        &cell,
+        Some(&found),
         &inspection,
         &plan_file,
         Some(&ros),
@@ -178,7 +202,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
                 plan: &planned.plan,
             },
             inspection: Some(&inspection),
-            tool: Some(&planned.tool),
+            cell: &cell,
             device: &DeviceArgs::sim(),
             dry_run: false,
             resume: None,
@@ -204,6 +228,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         scan,
         files: DEMO_FILES,
         out: cycle_dir,
+        cell: cell.clone(),
         first: Some(First {
             found,
             inspection_dir,
@@ -215,6 +240,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         device: DeviceArgs::sim(),
         settings: run_settings,
         table: toml::Table::new(),
+        cell,
         ground: None,
     };
     let ended = run_cycle(&cfg, inputs, &mut arm)?;

@@ -53,11 +53,12 @@ pub fn run(args: PlanArgs, config: Option<&Path>) -> anyhow::Result<()> {
     }
     let inspection = Inspection::load(&args.inspection)?;
     let refuse = |m: &str| file.refuse("plan", m);
-    let tool = crate::robot::ToolText::read(&cfg.robot.tool)?;
+    // the cell's files are read here, once; the planner parses them from memory
+    let cell = cfg.robot.read_cell()?;
     plan_into(
         &cfg,
-        &tool,
-        &[],
+        &cell,
+        None,
         &inspection,
         &args.out,
         args.export_ros.as_deref(),

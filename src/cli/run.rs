@@ -14,7 +14,7 @@ use crate::cloud::{Geometry, PointCloud};
 use crate::inspect::Source;
 use crate::motion::file::CheckedPlan;
 use crate::motion::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
-use crate::robot::{Robot, RobotConfig, ToolText, Turntable, Workcell};
+use crate::robot::{CellFiles, RobotConfig};
 use crate::sim::virtual_part::{self, Ground, GroundPart, Inspected, Part};
 use crate::sim::SimOptions;
 
@@ -133,14 +133,14 @@ fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 /// Refuses a plan made from other files than `run` is given: each file plan.json's
-/// provenance records (the inspection's and the cell's, by role) must have the recorded
-/// SHA-256 now; a file the plan did not have must still be absent. A plan without a
-/// provenance block (written by hand or by an older version) is not checked.
+/// provenance records (the inspection's and the cell's, by role; the cell's as held, `cell`)
+/// must have the recorded SHA-256 now; a file the plan did not have must still be absent. A
+/// plan without a provenance block (written by hand or by an older version) is not checked.
 fn check_made_for(
     plan_path: &Path,
     text: &str,
     plan: &Plan,
-    robot: &RobotConfig,
+    (robot, cell): (&RobotConfig, &CellFiles),
 ) -> anyhow::Result<()> {
     let value: serde_json::Value = serde_json::from_str(text)?;
     let Some(recorded) = value["provenance"]["inputs"].as_array() else {
@@ -161,7 +161,13 @@ fn check_made_for(
                 path.display()
             )
         };
-        match (entry, std::fs::read(path)) {
+        let held = cell.by_role().into_iter().find(|(r, _)| r == role);
+        let now = match held {
+            Some((_, f)) => Ok(f.text.clone().into_bytes()),
+            None if role.starts_with("inspection") => std::fs::read(path),
+            None => Err(std::io::ErrorKind::NotFound.into()),
+        };
+        match (entry, now) {
             (None, Err(_)) => {}
             (None, Ok(_)) => return Err(refuse("the plan was made without this file".into())),
             (Some(e), Err(err)) => {
@@ -207,8 +213,8 @@ pub struct Job<'a> {
     pub source: PlanSource<'a>,
     /// The part to check collisions against; None: the inspection folder plan.json names.
     pub inspection: Option<&'a Inspection>,
-    /// The tool file the plan was made with, held in memory; None: the settings' tool file.
-    pub tool: Option<&'a ToolText>,
+    /// The cell's files (read once by the caller; the loop's with the plan's tool file).
+    pub cell: &'a CellFiles,
     /// The arm.
     pub device: &'a DeviceArgs,
     /// Check everything, send nothing.
@@ -241,6 +247,7 @@ pub fn settings(file: &ConfigFile, cell: Option<&Path>) -> anyhow::Result<RunFil
 /// resume point, journal) and stops before opening the link.
 pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let cfg = settings(&ConfigFile::read(config)?, args.cell.as_deref())?;
+    let cell = cfg.robot.read_cell()?;
     let part = match (&args.part, &args.ground_out) {
         (Some(file), Some(out)) => Some(Part {
             file,
@@ -257,7 +264,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
             plan_file: &args.plan,
             source: PlanSource::File,
             inspection: None,
-            tool: None,
+            cell: &cell,
             device: &args.device,
             dry_run: args.dry_run,
             resume: args.resume.as_deref(),
@@ -273,10 +280,7 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
 /// virtual part's ground surface and rescan, as written, when the simulated arm ground one
 /// (`job.part`).
 pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<GroundPart>> {
-    let robot = match job.tool {
-        Some(tool) => Robot::with_tool(&cfg.robot.urdf, tool.tool()?, &cfg.robot.servos)?,
-        None => Robot::load(&cfg.robot.urdf, &cfg.robot.tool, &cfg.robot.servos)?,
-    };
+    let robot = job.cell.robot()?;
     let plan_path = job.plan_file;
     let (text, parsed);
     let (text, plan) = match job.source {
@@ -286,7 +290,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
             text = std::fs::read_to_string(plan_path)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", plan_path.display()))?;
             parsed = Plan::parse(plan_path, &text)?;
-            check_made_for(plan_path, &text, &parsed, &cfg.robot)?;
+            check_made_for(plan_path, &text, &parsed, (&cfg.robot, job.cell))?;
             (text.as_str(), &parsed)
         }
     };
@@ -295,17 +299,25 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
     let whole = plan;
     let stage = setup_stop::stage(job.resume, &sha, whole)?;
     let plan = stage.plan;
-    let cell = setup_stop::cell_of(&cfg.robot, whole, stage.setup)?;
-    let table = Turntable::load(&cell.servos, &cell.workcell)?;
+    let (table, workcell, solids) = match stage.setup {
+        1 => (
+            job.cell.turntable()?,
+            job.cell.workcell()?,
+            collide::solids_of(job.cell.solids.as_ref())?,
+        ),
+        n => {
+            let c = setup_stop::cell_of(&cfg.robot, whole, n)?;
+            let table = crate::robot::Turntable::load(&c.servos, &c.workcell)?;
+            let wc = crate::robot::Workcell::load(&c.workcell)?;
+            (table, wc, collide::solids_beside(&c.workcell)?)
+        }
+    };
     let checked = plan
         .check_cell(&robot, table.as_ref(), &cfg.validation)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
     let steps = crate::cell::steps(&checked).len();
-    let workcell = Workcell::load(&cell.workcell)?;
     let mut collision = cfg.collision.clone();
-    collision
-        .solids
-        .extend(collide::solids_beside(&cell.workcell)?);
+    collision.solids.extend(solids);
     let loaded;
     let inspection = match job.inspection {
         Some(i) => i,
@@ -461,6 +473,9 @@ pub struct LoopArm {
     /// The same as written (cycle's `[run]` table): each iteration's run.toml is it with the
     /// plan's tool file.
     pub table: toml::Table,
+    /// The cell of the run settings' `[robot]`, read once: each grind uses it with the plan's
+    /// tool file.
+    pub cell: CellFiles,
     /// The simulated arm's part as the last grind left it, and the truth file it wrote it to:
     /// the next grind of that file takes it from here.
     pub ground: Option<(PathBuf, PointCloud)>,
@@ -491,7 +506,7 @@ impl crate::cycle::Executor for LoopArm {
                 plan: &job.planned.plan,
             },
             inspection: Some(job.inspection),
-            tool: Some(job.tool),
+            cell: &self.cell.with_tool(job.tool),
             device: &self.device,
             dry_run: false,
             resume: None,

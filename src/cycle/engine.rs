@@ -17,8 +17,7 @@ use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
-use crate::report::provenance::InputFile;
-use crate::robot::ToolText;
+use crate::robot::{CellFiles, ToolText};
 
 /// What the loop starts from.
 pub struct Inputs {
@@ -30,6 +29,9 @@ pub struct Inputs {
     pub files: FileInput,
     /// Output folder: iter-1, iter-2, ..., cycle.html and cycle.json.
     pub out: PathBuf,
+    /// The plan's cell (the files the plan settings' `[robot]` names), read once by the
+    /// caller: each plan parses it from memory, with the loop's refitted tool.
+    pub cell: CellFiles,
     /// Iteration 1's inspection and plan when the caller made them already (demo).
     pub first: Option<First>,
 }
@@ -140,7 +142,7 @@ struct Loop<'a> {
     /// file, reference frame), so that it keeps its shape between grinds.
     part: (Source, bool),
     /// The tool file of the next plan, held in memory: refitted after each grind; None until
-    /// the first refit (the plan settings' tool file, read when planning).
+    /// the first refit (the cell's tool file, `Inputs::cell`).
     tool: Option<ToolText>,
 }
 
@@ -192,7 +194,7 @@ impl Loop<'_> {
         }
         let (plan_file, planned) = match made {
             Some(made) => made,
-            None => self.plan(&inspection, &found.written, &dir)?,
+            None => self.plan(&inspection, &found, &dir)?,
         };
         let last = self.records.last_mut().expect("pushed above");
         last.planned(&inspection, &planned.plan);
@@ -248,21 +250,23 @@ impl Loop<'_> {
     fn plan(
         &self,
         inspection: &Inspection,
-        written: &[InputFile],
+        found: &inspect::Findings,
         dir: &Path,
     ) -> anyhow::Result<(PathBuf, Planned)> {
         println!("== cycle: plan");
-        let tool = match &self.tool {
-            Some(t) => t.clone(),
-            None => ToolText::read(&self.cfg.plan.robot.tool)?,
+        let cell = match &self.tool {
+            Some(t) => self.inputs.cell.with_tool(t),
+            None => self.inputs.cell.clone(),
         };
+        let tool = &cell.tool;
         let settings = dir.join("plan.toml");
         with_tool(&self.cfg.plan_table, &tool.path, &settings)?;
         let mut cfg = self.cfg.plan.clone();
         cfg.robot.tool = tool.path.clone();
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
-        let planned = plan_into(&cfg, &tool, written, inspection, &plan_file, None, &refuse)?;
+        let found = Some(found);
+        let planned = plan_into(&cfg, &cell, found, inspection, &plan_file, None, &refuse)?;
         Ok((plan_file, planned))
     }
 

@@ -13,7 +13,7 @@ use crate::removal::ToolModel;
 use crate::repair::Inspection;
 use crate::report::plan_html::write_plan_html;
 use crate::report::provenance::{InputFile, Provenance};
-use crate::robot::{self, RobotConfig, ToolText};
+use crate::robot::{CellFiles, RobotConfig, ToolText};
 
 /// `--config` TOML of `plan` and `run`: `[robot]` (RobotConfig: urdf, tool, servos, workcell,
 /// ik) and `[plan]` (PlanConfig).
@@ -42,45 +42,54 @@ pub struct Planned {
     pub tool: ToolText,
 }
 
-/// Plans from `inspection` (read from or written to `inspection.dir`) with `cfg` and the tool
-/// file `tool` (held in memory; `cfg.robot.tool` names it) and writes
+/// Plans from `inspection` (read from or written to `inspection.dir`) with `cfg` and the
+/// cell's files `cell` (held in memory; `cfg.robot` names them) and writes
 /// `out` (plan.json), its provenance, plan.html beside it, predicted.csv (removal plans) and
 /// `export_ros`; prints what was planned. A setting the planner refuses is reported through
-/// `refuse` (the caller names its settings file and line). `written`: the inspection's files
-/// as this process wrote them ([`crate::inspect::Findings::written`]), recorded in the
-/// provenance without reading them back; the others are hashed from their files.
+/// `refuse` (the caller names its settings file and line). `found`: the inspection when this
+/// process made it: the files it wrote ([`crate::inspect::Findings::written`]) are recorded in
+/// the provenance and its report.html gets the plan's link from the page held, without reading
+/// them back; without it, the inspection's files are hashed and its report edited on disk.
 pub fn plan_into(
     cfg: &PlanFileConfig,
-    tool: &ToolText,
-    written: &[InputFile],
+    cell: &CellFiles,
+    found: Option<&crate::inspect::Findings>,
     inspection: &Inspection,
     out: &Path,
     export_ros: Option<&Path>,
     refuse: &dyn Fn(&str) -> anyhow::Error,
 ) -> Result<Planned> {
     let mut cfg = cfg.clone();
-    // the workcell is read (and checked) again with the cell's setups below
-    let (robot, _) = robot::load_with(&cfg.robot, tool.tool()?)?;
+    let tool = &cell.tool;
+    let (robot, workcell) = cell.load()?;
     // the tool file's [removal] checked here, so that its errors name the file's full path
     let removal_tool = ToolModel::of_text(tool)?;
     cfg.plan.check(&robot).map_err(|e| match e {
         motion::PlanError::Config(m) => refuse(&m),
         e => e.into(),
     })?;
-    // the cell's setups: its workcell.toml, then setup-N/ beside it (motion::setups)
-    let cells = motion::setups::load(&cfg.robot.workcell, &cfg.robot.servos)?;
+    let solids = motion::collide::solids_of(cell.solids.as_ref())?;
+    // the cell's setups: setup 1 as held, then setup-N/ beside its workcell file
+    let mut cells = vec![motion::setups::SetupCell {
+        file: cfg.robot.workcell.clone(),
+        workcell,
+        table: cell.turntable()?,
+        solids: solids.clone(),
+    }];
+    cells.extend(motion::setups::load_further(
+        &cfg.robot.workcell,
+        &cfg.robot.servos,
+    )?);
     let plan = motion::setups::plan(inspection, &robot, &cells, &cfg.plan)?;
-    // setup 1's solids, as planned with (the provenance records them)
-    cfg.plan
-        .collision
-        .solids
-        .extend(cells[0].solids.iter().cloned());
+    cfg.plan.collision.solids.extend(solids);
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    let provenance = provenance(&inspection.dir, &cfg.robot, tool, written, &cfg.plan)?;
+    let written = found.map_or(&[][..], |f| &f.written[..]);
+    let provenance = provenance(&inspection.dir, &cfg.robot, cell, written, &cfg.plan)?;
     let text = provenance.stamp(&compact, out)?;
     std::fs::write(out, &text).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
-    let page = write_plan_html(out, inspection, &plan, &provenance)?;
+    let report = found.and_then(|f| f.report_html.as_deref());
+    let page = write_plan_html(out, inspection, &plan, &provenance, report)?;
     let predicted_csv = match &plan.removal {
         Some(removal) => Some(write_removal(removal, out, &cfg.plan)?),
         None => None,
@@ -111,25 +120,30 @@ pub fn plan_inputs(inspection: &Path, robot: &RobotConfig) -> Vec<(&'static str,
         ("tool", robot.tool.clone()),
         ("servo calibration", robot.servos.clone()),
         ("workcell", robot.workcell.clone()),
-        ("solids", robot.workcell.with_file_name("solids.toml")),
+        ("solids", robot.solids()),
     ]
 }
 
 /// The provenance of a plan: the inspection's files it read (those in `written` as written),
-/// the cell's files (the tool file as held, `tool`), the settings.
+/// the cell's files as held (`cell`), the settings.
 fn provenance(
     inspection: &Path,
     robot: &RobotConfig,
-    tool: &ToolText,
+    cell: &CellFiles,
     written: &[InputFile],
     plan: &PlanConfig,
 ) -> Result<Provenance> {
     use rayon::prelude::*;
     let held = |p: &Path| written.iter().find(|f| f.path == p.display().to_string());
+    let cell_files = cell.by_role();
+    let of_cell = |role: &str| cell_files.iter().find(|(r, _)| *r == role).map(|c| c.1);
     let inputs = (plan_inputs(inspection, robot).into_par_iter())
-        .filter(|(role, p)| *role == "tool" || held(p).is_some() || p.is_file())
-        .map(|(role, p)| match (role, held(&p)) {
-            ("tool", _) => Ok(InputFile::held(role, &tool.path, tool.text.as_bytes())),
+        .filter(|(role, p)| match role.strip_prefix("inspection") {
+            Some(_) => held(p).is_some() || p.is_file(),
+            None => of_cell(role).is_some(),
+        })
+        .map(|(role, p)| match (of_cell(role), held(&p)) {
+            (Some(f), _) => Ok(InputFile::held(role, &f.path, f.text.as_bytes())),
             (_, Some(f)) => Ok(InputFile {
                 role: role.to_string(),
                 ..f.clone()
@@ -138,7 +152,7 @@ fn provenance(
         })
         .collect::<Result<Vec<_>>>()?;
     // the removal model the plan used (its k is what `calibrate removal` scales from)
-    let removal_tool = ToolModel::of_text(tool).ok();
+    let removal_tool = ToolModel::of_text(&cell.tool).ok();
     let config = serde_json::json!({ "robot": robot, "plan": plan, "removal_tool": removal_tool });
     Provenance::of_inputs(
         "plan",

@@ -124,7 +124,8 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
             suggestion: words.clone(),
         }),
     };
-    found.written = write_outputs(out, written, lines, &provenance)?;
+    let (files, page) = write_outputs(out, written, lines, &provenance)?;
+    (found.written, found.report_html) = (files, Some(page));
     found.times.lap("files and report");
     print_summary(
         &found.deviations,
@@ -158,13 +159,13 @@ struct Written<'a> {
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
 /// (formatting is most of their time, and each is single-threaded); returns the records of
-/// regions.json and deviations.csv as written ([`Findings::written`]).
+/// regions.json and deviations.csv as written ([`Findings::written`]) and the report's text.
 fn write_outputs(
     out: &Path,
     written: Written,
     report_summary: Vec<(String, String)>,
     provenance: &Provenance,
-) -> Result<Vec<InputFile>> {
+) -> Result<(Vec<InputFile>, String)> {
     let Written {
         dev,
         found,
@@ -207,8 +208,8 @@ fn write_outputs(
         },
     );
     ply?;
-    report?;
-    Ok(vec![regions?, csv?])
+    let page = report?;
+    Ok((vec![regions?, csv?], page))
 }
 
 fn print_summary(dev: &compare::Deviations, found: &Regions, seconds: f64) {

@@ -55,6 +55,9 @@ pub struct Findings {
     /// regions.json and deviations.csv as [`inspect_into`] wrote them (size, SHA-256), for
     /// the plan's provenance; empty from [`run`], which writes nothing.
     pub written: Vec<crate::report::provenance::InputFile>,
+    /// report.html's text as [`inspect_into`] wrote it (the plan adds its link to it in
+    /// memory); None from [`run`].
+    pub report_html: Option<String>,
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
@@ -144,6 +147,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         suggestion,
         in_area,
         written: Vec::new(),
+        report_html: None,
     })
 }
 

@@ -17,7 +17,7 @@ use crate::robot::units::{mm, MM_PER_M, M_PER_MM};
 use crate::robot::{angle_between, Robot, Workcell};
 use crate::spatial::{Neighbour, Neighbours};
 use solids::{segment_box_distance, spacing};
-pub use solids::{solids_beside, CollisionConfig, Solid};
+pub use solids::{solids_beside, solids_of, CollisionConfig, Solid};
 use sweep::Carry;
 pub use sweep::Sweep;
 

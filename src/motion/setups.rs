@@ -69,13 +69,13 @@ pub fn setup_file(workcell: &Path, n: usize) -> PathBuf {
     dir.join(format!("{SETUP_DIR}{n}")).join("workcell.toml")
 }
 
-/// The setups of the cell whose setup 1 is `workcell` (servo calibration `servos`): setup 1,
-/// then `setup-2/workcell.toml`, `setup-3/...` beside it while they exist.
-pub fn load(workcell: &Path, servos: &Path) -> Result<Vec<SetupCell>, RobotError> {
+/// The further setups of the cell whose setup 1 is `workcell` (servo calibration `servos`):
+/// `setup-2/workcell.toml`, `setup-3/...` beside it while they exist.
+pub fn load_further(workcell: &Path, servos: &Path) -> Result<Vec<SetupCell>, RobotError> {
     let mut out = Vec::new();
-    for n in 1..=MAX_SETUPS {
+    for n in 2..=MAX_SETUPS {
         let file = setup_file(workcell, n);
-        if n > 1 && !file.is_file() {
+        if !file.is_file() {
             break;
         }
         out.push(SetupCell {
@@ -85,6 +85,19 @@ pub fn load(workcell: &Path, servos: &Path) -> Result<Vec<SetupCell>, RobotError
             file,
         });
     }
+    Ok(out)
+}
+
+/// The setups of the cell whose setup 1 is `workcell`: setup 1 read from its files, then
+/// [`load_further`].
+pub fn load(workcell: &Path, servos: &Path) -> Result<Vec<SetupCell>, RobotError> {
+    let mut out = vec![SetupCell {
+        workcell: Workcell::load(workcell)?,
+        table: Turntable::load(servos, workcell)?,
+        solids: super::collide::solids_beside(workcell)?,
+        file: workcell.to_path_buf(),
+    }];
+    out.extend(load_further(workcell, servos)?);
     Ok(out)
 }
 

@@ -33,8 +33,8 @@ pub struct Layout<'p> {
 }
 
 /// Writes the page: title, links, summary, whole figures, close-ups, viewer, tables,
-/// provenance.
-pub fn write(path: &Path, input: &ReportInput, layout: &Layout) -> Result<()> {
+/// provenance. Returns the page's text as written.
+pub fn write(path: &Path, input: &ReportInput, layout: &Layout) -> Result<String> {
     let mut s = String::new();
     let _ = write!(
         s,
@@ -116,7 +116,8 @@ img{{max-width:100%;max-height:250mm}} .closeups figure{{max-width:48%}} .closeu
         s += "</table>\n";
     }
     s += "</body></html>\n";
-    std::fs::write(path, s).with_context(|| format!("{}: cannot write", path.display()))
+    std::fs::write(path, &s).with_context(|| format!("{}: cannot write", path.display()))?;
+    Ok(s)
 }
 
 /// A plain page without scripts or figures: `title`, one table (`header`, `rows`; cells

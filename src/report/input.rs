@@ -115,6 +115,8 @@ pub struct ReportFiles {
     pub html: PathBuf,
     /// The figures: overview, histogram, then one close-up per region.
     pub figures: Vec<PathBuf>,
+    /// The page's text as written (a later link is added to it in memory, not read back).
+    pub page: String,
 }
 
 /// Symmetric colour range: the 99.5th percentile of |distance|, at least

@@ -98,14 +98,15 @@ pub fn region_mark(r: &Region) -> RegionMark {
 }
 
 /// Writes `dir/report.html` with its figures; `summary` lines come first (registration...).
-/// With an incomplete verdict `unmeasured` adds the picture of the unmeasured area.
+/// With an incomplete verdict `unmeasured` adds the picture of the unmeasured area. Returns
+/// the page's text as written.
 pub fn write_inspection_page(
     dir: &Path,
     (dev, found): (&Deviations, &Regions),
     mut summary: Vec<(String, String)>,
     provenance: &Provenance,
     unmeasured: Option<super::Unmeasured>,
-) -> Result<()> {
+) -> Result<String> {
     let distances: Vec<f64> = dev.values.iter().map(|v| v.distance).collect();
     let uncertainties: Vec<f64> = dev.values.iter().map(|v| v.uncertainty).collect();
     summary.splice(
@@ -181,6 +182,5 @@ pub fn write_inspection_page(
         provenance: Some(provenance),
         unmeasured,
     };
-    super::write_report(dir, &input, &ReportConfig::default())?;
-    Ok(())
+    Ok(super::write_report(dir, &input, &ReportConfig::default())?.page)
 }

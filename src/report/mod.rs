@@ -115,9 +115,10 @@ pub fn write_report(dir: &Path, input: &ReportInput, cfg: &ReportConfig) -> Resu
         viewer: &viewer,
         links: &[],
     };
-    html::write(&html, input, &layout)?;
+    let page = html::write(&html, input, &layout)?;
     Ok(ReportFiles {
         html,
+        page,
         figures: whole.into_iter().chain(closeups).map(|f| f.path).collect(),
     })
 }

@@ -100,12 +100,14 @@ fn tables(plan: &Plan) -> Vec<Table> {
 }
 
 /// Writes plan.html (beside `plan_file`, same stem) with its figures and links the
-/// inspection's report.html to it; returns the page.
+/// inspection's report.html to it (`report_page`: its text when this process wrote it, see
+/// [`plan_page::add_link`]); returns the page.
 pub fn write_plan_html(
     plan_file: &Path,
     inspection: &Inspection,
     plan: &Plan,
     provenance: &Provenance,
+    report_page: Option<&str>,
 ) -> Result<PathBuf> {
     let html = plan_file.with_extension("html");
     let pts = &inspection.points;
@@ -203,20 +205,6 @@ pub fn write_plan_html(
             .collect(),
     };
     plan_page::write_plan_page(&html, &page, &ReportConfig::default())?;
-    // The link from the inspection's report is a convenience: a report it cannot edit (an
-    // older one, a read-only folder) is said on stderr and left as it is.
-    if report.is_file() {
-        let linked = plan_page::relative(&inspection.dir, &html)
-            .map(|href| plan_page::add_link(&report, "grinding plan", &href));
-        match linked {
-            Some(Ok(true)) => {}
-            Some(Err(e)) => eprintln!("plan: notice: {e:#}; not linked to {}", html.display()),
-            _ => eprintln!(
-                "plan: notice: {} has no links paragraph (an older report); not linked to {}",
-                report.display(),
-                html.display()
-            ),
-        }
-    }
+    plan_page::link_report(&report, report_page, &inspection.dir, &html);
     Ok(html)
 }

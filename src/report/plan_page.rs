@@ -108,11 +108,40 @@ pub fn relative(from: &Path, to: &Path) -> Option<String> {
     Some(parts.join("/"))
 }
 
+/// Links the inspection's page `report` (in the folder `dir`; `held`: its text, see
+/// [`add_link`]) to the plan's page `html`, when there is such a report. The link is a
+/// convenience: a report it cannot edit (an older one, a read-only folder) is said on stderr
+/// and left as it is.
+pub fn link_report(report: &Path, held: Option<&str>, dir: &Path, html: &Path) {
+    if !report.is_file() {
+        return;
+    }
+    let linked = relative(dir, html).map(|href| add_link(report, held, "grinding plan", &href));
+    match linked {
+        Some(Ok(true)) => {}
+        Some(Err(e)) => eprintln!("plan: notice: {e:#}; not linked to {}", html.display()),
+        _ => eprintln!(
+            "plan: notice: {} has no links paragraph (an older report); not linked to {}",
+            report.display(),
+            html.display()
+        ),
+    }
+}
+
 /// Adds a link `text` -> `href` to the links paragraph of the page `report` (once); false
 /// when the page has no such paragraph (a report from before 2026-12-02), left as it is.
-pub fn add_link(report: &Path, text: &str, href: &str) -> Result<bool> {
-    let page = std::fs::read_to_string(report)
-        .with_context(|| format!("{}: cannot read", report.display()))?;
+/// `held`: the page's text when this process wrote it (edited in memory and written, not read
+/// back); None: the page is read from `report`.
+pub fn add_link(report: &Path, held: Option<&str>, text: &str, href: &str) -> Result<bool> {
+    let read;
+    let page = match held {
+        Some(page) => page,
+        None => {
+            read = std::fs::read_to_string(report)
+                .with_context(|| format!("{}: cannot read", report.display()))?;
+            &read
+        }
+    };
     let anchor = format!("<a href=\"{}\">", html::escape(href));
     if page.contains(&anchor) {
         return Ok(true);

@@ -6,7 +6,7 @@ use dofbot_protocol::ServoScale;
 use nalgebra::{Matrix4, Point3, Vector3};
 use serde::Deserialize;
 
-use super::error::{parse_toml, read_text, read_toml, RobotError};
+use super::error::{parse_toml, read_text, RobotError};
 
 /// `tool.toml`: the grinding tool on the wrist-roll flange.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -58,7 +58,7 @@ impl Tool {
 
     /// Loads and checks `tool.toml`.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
-        ToolText::read(file)?.tool()
+        FileText::read(file)?.tool()
     }
 
     /// Parses and checks the text of `tool.toml` (`file`, named in errors).
@@ -118,27 +118,31 @@ impl Tool {
     }
 }
 
-/// A tool file held in memory: its path (named in messages and recorded in provenance) and its
-/// text. The loop hands the tool it refitted on this way: tool.toml is written as an output and
-/// never read back.
+/// A file held in memory: its path (named in messages and recorded in provenance) and its
+/// text. The cell's files are read once where a command starts, or written once as outputs
+/// (the demo's cell, the loop's refitted tool), and handed on this way: never read back.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ToolText {
+pub struct FileText {
     /// Where the text is (or was written).
     pub path: PathBuf,
     /// The file's text.
     pub text: String,
 }
 
-impl ToolText {
+/// A tool file held in memory ([`FileText`]): the loop hands the tool it refitted on this way
+/// (tool.toml is written as an output and never read back).
+pub type ToolText = FileText;
+
+impl FileText {
     /// Reads `file`.
     pub fn read(file: &Path) -> Result<Self, RobotError> {
-        Ok(ToolText {
+        Ok(FileText {
             path: file.to_path_buf(),
             text: read_text(file)?,
         })
     }
 
-    /// The tool, parsed and checked ([`Tool::parse`]).
+    /// The text parsed and checked as a tool file ([`Tool::parse`]).
     pub fn tool(&self) -> Result<Tool, RobotError> {
         Tool::parse(&self.path, &self.text)
     }
@@ -263,7 +267,12 @@ pub struct Servos {
 impl Servos {
     /// Loads and checks `servos.toml`.
     pub fn load(file: &Path) -> Result<Self, RobotError> {
-        let s: Servos = read_toml(file)?;
+        Self::parse(file, &read_text(file)?)
+    }
+
+    /// Parses and checks the text of `servos.toml` (`file`, named in errors).
+    pub fn parse(file: &Path, text: &str) -> Result<Self, RobotError> {
+        let s: Servos = parse_toml(file, text)?;
         if let Some((key, why)) = s.compliance.as_ref().and_then(|c| c.problem()) {
             return Err(RobotError::bad(file, key, why));
         }
@@ -374,7 +383,12 @@ struct WorkcellFile {
 impl Workcell {
     /// Loads and checks `workcell.toml` (rows of the matrix, last row `[0, 0, 0, 1]`).
     pub fn load(file: &Path) -> Result<Self, RobotError> {
-        let raw: WorkcellFile = read_toml(file)?;
+        Self::parse(file, &read_text(file)?)
+    }
+
+    /// Parses and checks the text of `workcell.toml` (`file`, named in errors).
+    pub fn parse(file: &Path, text: &str) -> Result<Self, RobotError> {
+        let raw: WorkcellFile = parse_toml(file, text)?;
         let rows = raw.robot_from_reference;
         let m = Matrix4::from_fn(|r, c| rows[r][c]);
         let key = "robot_from_reference";

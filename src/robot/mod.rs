@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use serde::{Deserialize, Serialize};
 
 pub mod calibration;
+pub mod cell_files;
 pub mod compliance;
 pub mod error;
 pub mod ik;
@@ -19,7 +20,8 @@ pub mod servo_map;
 pub mod turntable;
 pub mod units;
 
-pub use calibration::{Servo, Servos, Tool, ToolText, Workcell};
+pub use calibration::{FileText, Servo, Servos, Tool, ToolText, Workcell};
+pub use cell_files::CellFiles;
 pub use compliance::Compliance;
 pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
@@ -75,15 +77,32 @@ impl RobotConfig {
         self.servos = dir.join("servos.toml");
         self.workcell = dir.join("workcell.toml");
     }
+
+    /// solids.toml beside the workcell file (the cell's fixed solids, when it exists).
+    pub fn solids(&self) -> PathBuf {
+        self.workcell.with_file_name("solids.toml")
+    }
+
+    /// Reads the cell's files this config names, once (solids.toml when it exists), to hand
+    /// on in memory.
+    pub fn read_cell(&self) -> Result<CellFiles, RobotError> {
+        let solids = self.solids();
+        Ok(CellFiles {
+            urdf: FileText::read(&self.urdf)?,
+            tool: FileText::read(&self.tool)?,
+            servos: FileText::read(&self.servos)?,
+            workcell: FileText::read(&self.workcell)?,
+            solids: solids
+                .exists()
+                .then(|| FileText::read(&solids))
+                .transpose()?,
+        })
+    }
 }
 
 /// Loads the robot model (URDF + tool + servos) and the workcell named by `config`.
 pub fn load(config: &RobotConfig) -> Result<(Robot, Workcell), RobotError> {
-    load_with(config, Tool::load(&config.tool)?)
-}
-
-/// [`load`] with the tool given (held in memory) instead of read from `config.tool`.
-pub fn load_with(config: &RobotConfig, tool: Tool) -> Result<(Robot, Workcell), RobotError> {
+    let tool = Tool::load(&config.tool)?;
     let robot = Robot::with_tool(&config.urdf, tool, &config.servos)?;
     let workcell = Workcell::load(&config.workcell)?;
     Ok((robot, workcell))

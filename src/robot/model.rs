@@ -5,7 +5,7 @@ use std::sync::Mutex;
 
 use nalgebra::{DMatrix, Isometry3, Vector3};
 
-use super::calibration::{Servos, Tool};
+use super::calibration::{FileText, Servos, Tool};
 use super::error::RobotError;
 use super::planar::Planar;
 
@@ -68,12 +68,19 @@ impl Robot {
 
     /// [`Robot::load`] with the tool given (held in memory) instead of read from a file.
     pub fn with_tool(urdf: &Path, tool_cfg: Tool, servos: &Path) -> Result<Self, RobotError> {
-        let servos_cfg = Servos::load(servos)?;
-        let description = urdf_rs::read_file(urdf).map_err(|e| RobotError::Io {
-            file: urdf.to_path_buf(),
+        let servos = FileText::read(servos)?;
+        Self::from_texts(&FileText::read(urdf)?, tool_cfg, &servos)
+    }
+
+    /// [`Robot::with_tool`] from the URDF and servos.toml held in memory (their paths named in
+    /// errors).
+    pub fn from_texts(urdf: &FileText, tool: Tool, servos: &FileText) -> Result<Self, RobotError> {
+        let servos_cfg = Servos::parse(&servos.path, &servos.text)?;
+        let description = urdf_rs::read_from_string(&urdf.text).map_err(|e| RobotError::Io {
+            file: urdf.path.clone(),
             message: e.to_string(),
         })?;
-        Self::from_parts(description, urdf, tool_cfg, servos_cfg, servos)
+        Self::from_parts(description, &urdf.path, tool, servos_cfg, &servos.path)
     }
 
     /// Builds the model from a parsed URDF; `urdf_file` and `servos_file` only name the files in

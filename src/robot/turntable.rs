@@ -7,8 +7,8 @@ use std::path::Path;
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Deserialize;
 
-use super::calibration::{less, Servo, Servos, Workcell};
-use super::error::{read_toml, RobotError};
+use super::calibration::{less, FileText, Servo, Servos, Workcell};
+use super::error::{parse_toml, RobotError};
 
 /// Lowest and highest bus id the 0x19 frame may address (DOFBOT.md: "any bus servo id
 /// 1..250"); ids 1..=6 are the arm's.
@@ -42,8 +42,17 @@ impl Turntable {
     /// The cell's turntable: `None` when neither `servos.toml` nor `workcell.toml` has a
     /// `[turntable]`; an error naming the file and key when only one has, or a value is bad.
     pub fn load(servos_file: &Path, workcell_file: &Path) -> Result<Option<Turntable>, RobotError> {
-        let servos = Servos::load(servos_file)?;
-        let table: WorkcellTable = read_toml(workcell_file)?;
+        Self::parse(
+            &FileText::read(servos_file)?,
+            &FileText::read(workcell_file)?,
+        )
+    }
+
+    /// [`Turntable::load`] from servos.toml and workcell.toml held in memory.
+    pub fn parse(servos: &FileText, workcell: &FileText) -> Result<Option<Turntable>, RobotError> {
+        let (servos_file, workcell_file) = (servos.path.as_path(), workcell.path.as_path());
+        let servos = Servos::parse(servos_file, &servos.text)?;
+        let table: WorkcellTable = parse_toml(workcell_file, &workcell.text)?;
         let (servo, axis) = match (servos.turntable, table.turntable) {
             (None, None) => return Ok(None),
             (Some(s), Some(a)) => (s, a),

@@ -177,7 +177,7 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
     };
     let mut inspections = Vec::new();
     let mut part = TruePart::default();
-    let reach = polishbot::cell::reachable_sites(0.0).unwrap();
+    let reach = polishbot::cell::reachable_sites(&super::shipped_cell(), 0.0).unwrap();
     for k in 1.. {
         let it = dir.join(format!("cycle/iter-{k}"));
         let Ok(i) = polishbot::repair::Inspection::load(&it.join("inspection")) else {

@@ -226,6 +226,13 @@ pub fn calib(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// The shipped cell's files (`calibration/`), held.
+pub fn shipped_cell() -> polishbot::robot::CellFiles {
+    let mut cfg = polishbot::robot::RobotConfig::default();
+    cfg.use_cell(&calib(""));
+    cfg.read_cell().expect("read the shipped cell")
+}
+
 /// The shipped DOFBOT cell's robot (URDF, tool, servos).
 pub fn dofbot() -> polishbot::robot::Robot {
     polishbot::robot::Robot::load(
@@ -296,7 +303,8 @@ pub const SEED_TRIES: u64 = 20;
 /// the first seed from `seed` on that places all five.
 pub fn case(seed: u64, dir: &Path) -> polishbot::synth::Truth {
     let reachable =
-        polishbot::cell::reachable_sites(polishbot::cell::SITE_AXIS_MARGIN_DEG).unwrap();
+        polishbot::cell::reachable_sites(&shipped_cell(), polishbot::cell::SITE_AXIS_MARGIN_DEG)
+            .unwrap();
     let make = |seed| polishbot::synth::SynthConfig {
         seed,
         defects: 5,

@@ -119,14 +119,25 @@ pub fn solids_beside(workcell: &std::path::Path) -> Result<Vec<Solid>, crate::ro
     if !file.exists() {
         return Ok(Vec::new());
     }
-    let parsed: SolidsFile = crate::robot::error::read_toml(&file)?;
+    solids_of(Some(&crate::robot::FileText::read(&file)?))
+}
+
+/// The `[[solid]]` entries of a solids.toml held in memory (none without one: a cell's
+/// [`crate::robot::CellFiles::solids`]).
+pub fn solids_of(
+    file: Option<&crate::robot::FileText>,
+) -> Result<Vec<Solid>, crate::robot::RobotError> {
+    let Some(file) = file else {
+        return Ok(Vec::new());
+    };
+    let parsed: SolidsFile = crate::robot::error::parse_toml(&file.path, &file.text)?;
     for (i, s) in parsed.solid.iter().enumerate() {
         let ok =
             (0..3).all(|k| s.min[k].is_finite() && s.max[k].is_finite() && s.min[k] < s.max[k]);
         if !ok {
             let msg = "min must be finite and below max on every axis";
             return Err(crate::robot::RobotError::bad(
-                &file,
+                &file.path,
                 format!("solid[{i}] ({})", s.name),
                 msg,
             ));
