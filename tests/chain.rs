@@ -57,8 +57,11 @@ fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
     assert!(stdout.contains(&format!("({frames} frames)")), "{stdout}");
     // The loop on the documented arm (issue 50): the first grind, made before any removal
     // shift is known, cuts no deeper than the tolerance where it ground (main 7eea059:
-    // -0.143 mm); its shift is measured and carried, so that the second grind lands nearer
-    // its plan than the first did in every region (measured 1.25-1.56 mm, then 0.10-0.41 mm).
+    // -0.143 mm; with compensation, the spindle's aim and the first pass's cap -0.009 mm).
+    // After it the loop either grinds again with the measured shift carried, landing nearer
+    // its plan than the first grind did in every region, or stops itself naming the region
+    // and the shift it measured (never a second grind on a model the regions disagree with;
+    // on this part with compensation: region 1 1.41 mm off against a cell-wide 0.21 mm).
     let cycle: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("cycle/cycle.json")).unwrap())
             .unwrap();
@@ -79,14 +82,22 @@ fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
             })
             .collect()
     };
-    let (first, second) = (shifts(&records[0]), shifts(&records[1]));
-    assert!(!first.is_empty() && !second.is_empty(), "{cycle}");
-    let least_first = first.iter().copied().fold(f64::INFINITY, f64::min);
-    let most_second = second.iter().copied().fold(0.0, f64::max);
-    assert!(
-        most_second < least_first,
-        "shifts after grind 1 {first:?}, after grind 2 (carried) {second:?}"
-    );
+    if cycle["outcome"] == "off_plan" {
+        let stop = stdout
+            .lines()
+            .find(|l| l.starts_with("cycle: stop: region "))
+            .unwrap_or_else(|| panic!("off plan without naming the region:\n{stdout}"));
+        assert!(stop.contains(" mm [") && stop.contains("from where the plan aimed"), "{stop}");
+    } else {
+        let (first, second) = (shifts(&records[0]), shifts(&records[1]));
+        assert!(!first.is_empty() && !second.is_empty(), "{cycle}");
+        let least_first = first.iter().copied().fold(f64::INFINITY, f64::min);
+        let most_second = second.iter().copied().fold(0.0, f64::max);
+        assert!(
+            most_second < least_first,
+            "shifts after grind 1 {first:?}, after grind 2 (carried) {second:?}"
+        );
+    }
     // Run again into the same folder, as a user repeating the README's command does: the
     // earlier run's journals and loop iterations must not stop it.
     let again = polishbot()

@@ -174,9 +174,9 @@ pub struct Dwelled {
 
 /// Turns one region's runs into one-contact pieces carrying the dwell solved at `allowance`
 /// mm (`removal::solve_region`; the Monte Carlo on the dwell the trajectory spends is the
-/// caller's, `predict::rehearse_region`); refuses a contact whose force a servo cannot hold
-/// (naming the point and the joint). The inner error says why the region is left out: no core
-/// point in the tool's reach of its contacts, or the solver failed.
+/// caller's, `predict::rehearse_region`). The inner error says why the region is left out: a
+/// contact whose force a servo cannot hold (naming the point and the joint), no core point in
+/// the tool's reach of its contacts, or the solver failed.
 pub fn set_dwell(
     runs: Vec<Run>,
     region: &RegionInfo,
@@ -202,8 +202,9 @@ pub fn set_dwell(
         allowance = highest - solve.max_pass_mm;
         (contacts, cores) = in_reach(&placed, bench, &influence, allowance);
     }
-    for (p, c) in pieces.iter().zip(&contacts) {
-        check_force(p, c, region.id, setup)?;
+    // a contact a servo cannot hold leaves the region out with the reason (the plan goes on)
+    if let Some(why) = (pieces.iter().zip(&contacts)).find_map(|(p, c)| overloaded(p, c, setup)) {
+        return Ok(Err(format!("region left out by the removal planner: {why}")));
     }
     if cores.is_empty() {
         return Ok(Err(format!(
@@ -315,27 +316,21 @@ fn in_reach(
     (contacts, cores)
 }
 
-/// Refuses contact `c` of piece `p` when a servo cannot hold the force the ball presses with
-/// there (the preload's times `c.force_ratio`: the part's excess presses harder; the static
-/// torque `J^T F` above `force_share` of its rating), naming the point and the joint.
-fn check_force(
-    p: &PlannedPass,
-    c: &Contact,
-    region: usize,
-    setup: &Setup,
-) -> Result<(), PlanError> {
+/// Why contact `c` of piece `p` cannot be ground, when a servo cannot hold the force the ball
+/// presses with there (the preload's times `c.force_ratio`: the part's excess presses harder,
+/// a spring-loaded spindle tilted from the normal harder still; the static torque `J^T F`
+/// above `force_share` of its rating), naming the point and the joint; None when it can.
+fn overloaded(p: &PlannedPass, c: &Contact, setup: &Setup) -> Option<String> {
     let (tool, config) = (setup.tool, setup.config);
     let force = tool.force_n() * c.force_ratio;
     let push = setup.workcell.direction_from_reference(&c.normal) * force;
-    let Some(o) = force::overload(setup.robot, &p.points[0].q, &push, config.force_share) else {
-        return Ok(());
-    };
+    let o = force::overload(setup.robot, &p.points[0].q, &push, config.force_share)?;
     let s = c.point;
-    Err(PlanError::Config(format!(
-        "region {region}: contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to \
-         hold {:.2} N, more than its {:.3} N m (`force_share` {})",
+    Some(format!(
+        "contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to hold {:.2} N, more \
+         than its {:.3} N m (`force_share` {})",
         s.x, s.y, s.z, o.name, o.torque_nm, force, o.limit_nm, config.force_share
-    )))
+    ))
 }
 
 /// The dwell solve's settings with the fastest feed lowered to what the joints allow along
