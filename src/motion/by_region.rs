@@ -86,6 +86,22 @@ pub(crate) fn plan_regions(
         cell: &cell,
     };
     let mut prev = config.home.clone();
+    let tilt = tool.map(|t| t.tilt_deg.to_radians());
+    // the raster's strokes walked by the IK from `prev` (the aim's trial walk and the plan's)
+    let walk = |strokes: &[raster::Stroke], prev: &mut _, unreachable: &mut _, jumps: &mut _| {
+        program::walk(
+            strokes,
+            robot,
+            workcell,
+            config,
+            reach,
+            scene,
+            prev,
+            unreachable,
+            jumps,
+            tilt,
+        )
+    };
     for &k in &visit {
         let region = planned[k];
         let members: Vec<SurfacePoint> = inspection
@@ -101,34 +117,17 @@ pub(crate) fn plan_regions(
         let strokes = match tool {
             Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
                 // a first walk finds the axis held at each point (`aim`)
-                let trial = program::walk(
-                    &strokes,
-                    robot,
-                    workcell,
-                    config,
-                    reach,
-                    scene,
-                    &mut prev.clone(),
-                    &mut Vec::new(),
-                    &mut 0,
-                    Some(t.tilt_deg.to_radians()),
-                );
+                let trial = walk(&strokes, &mut prev.clone(), &mut Vec::new(), &mut 0);
                 let back = dwell::reference_from_robot(workcell);
                 aim::aimed(&strokes, &trial, &back, &surface)
             }
             _ => strokes,
         };
-        let runs = program::walk(
+        let runs = walk(
             &strokes,
-            robot,
-            workcell,
-            config,
-            reach,
-            scene,
             &mut prev,
             &mut reachability.unreachable,
             &mut reachability.jumps,
-            tool.map(|t| t.tilt_deg.to_radians()),
         );
         let runs = match tool {
             None => runs,
