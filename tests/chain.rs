@@ -87,7 +87,10 @@ fn demo_finds_every_planted_repairable_defect_and_completes_the_run() {
             .lines()
             .find(|l| l.starts_with("cycle: stop: region "))
             .unwrap_or_else(|| panic!("off plan without naming the region:\n{stdout}"));
-        assert!(stop.contains(" mm [") && stop.contains("from where the plan aimed"), "{stop}");
+        assert!(
+            stop.contains(" mm [") && stop.contains("from where the plan aimed"),
+            "{stop}"
+        );
     } else {
         let (first, second) = (shifts(&records[0]), shifts(&records[1]));
         assert!(!first.is_empty() && !second.is_empty(), "{cycle}");

@@ -204,7 +204,9 @@ pub fn set_dwell(
     }
     // a contact a servo cannot hold leaves the region out with the reason (the plan goes on)
     if let Some(why) = (pieces.iter().zip(&contacts)).find_map(|(p, c)| overloaded(p, c, setup)) {
-        return Ok(Err(format!("region left out by the removal planner: {why}")));
+        return Ok(Err(format!(
+            "region left out by the removal planner: {why}"
+        )));
     }
     if cores.is_empty() {
         return Ok(Err(format!(
