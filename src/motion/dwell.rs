@@ -179,7 +179,7 @@ pub struct Dwelled {
 /// the tool's reach of its contacts, or the solver failed.
 pub fn set_dwell(
     runs: Vec<Run>,
-    region: &RegionInfo,
+    _region: &RegionInfo,
     inspection: &Inspection,
     setup: &Setup,
     allowance: f64,
