@@ -270,7 +270,7 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
     let Some(browser) = chromium() else { return };
     let dir = tempdir();
     let out = dir.path().join("demo");
-    common::succeed(
+    let demo = common::succeed(
         common::polishbot()
             .current_dir(env!("CARGO_MANIFEST_DIR"))
             .args(["demo", "--out"])
@@ -346,6 +346,7 @@ fn the_demo_report_works_offline_in_chromium_and_prints() {
         "planned {planned:?} of {ids:?}"
     );
     plan_page_loads(&browser, &out, &planned);
+    cycle_page_loads(&browser, &out, &String::from_utf8_lossy(&demo.stdout));
     // The viewer alone on screen: the part is drawn and its defects are coloured.
     let only_viewer = page.replacen(
         "</head>",
@@ -511,25 +512,82 @@ fn plan_page_loads(browser: &str, out: &std::path::Path, ids: &[u64]) {
     let dom = dump_dom(browser, &out.join("plan-probe.html"), &netlog);
     assert_eq!(attr(&dom, "<body", "data-errors"), "0", "{dom}");
     let figures = dom.matches("<figure").count();
+    // the coverage map, then per planned region (the demo's plan predicts every one) its tool
+    // path, and the deviation before, the predicted part after and the Monte Carlo's low
+    // quantile
     assert_eq!(
         figures,
-        ids.len(),
-        "one tool-path figure per planned region"
+        1 + 4 * ids.len(),
+        "a coverage map and four figures per planned region"
     );
     assert_eq!(attr(&dom, "<body", "data-loaded"), figures.to_string());
     for id in ids {
-        assert!(
-            dom.contains(&format!("<figure data-regions=\"{id}\">")),
-            "{id}"
+        let own = format!("<figure data-regions=\"{id}\">");
+        assert_eq!(dom.matches(&own).count(), 4, "{id}");
+        let scales: Vec<&str> = dom
+            .split(&format!("<figcaption>region {id}: "))
+            .skip(1)
+            .filter_map(|c| c.split("colour scale ±").nth(1))
+            .map(|c| &c[..c.find(' ').unwrap()])
+            .collect();
+        assert_eq!(
+            scales.len(),
+            3,
+            "region {id}: three panels on a colour scale"
         );
+        assert!(scales.iter().all(|s| *s == scales[0]), "{scales:?}");
     }
     for table in [
+        "left out by rule",
+        "left out: regions and strokes",
         "reach and time per region",
         "time per kind of motion",
         "provenance",
     ] {
         assert!(dom.contains(table), "plan.html has no {table}");
     }
+    assert_local_only(&dom, &netlog);
+}
+
+/// cycle.html of the demo's loop: the convergence plot and per grind each planned region's map
+/// with the shift the loop printed (`log`, its "cycle: region N: removal shift S mm" lines),
+/// and the removal scatter; every image loads.
+fn cycle_page_loads(browser: &str, out: &std::path::Path, log: &str) {
+    let dir = out.join("cycle");
+    let page = std::fs::read_to_string(dir.join("cycle.html")).unwrap();
+    let shifts: Vec<(&str, &str)> = log
+        .lines()
+        .filter_map(|l| l.strip_prefix("cycle: region "))
+        .filter_map(|l| {
+            let (id, rest) = l.split_once(": removal shift ")?;
+            Some((id, rest.split_once(" mm")?.0))
+        })
+        .collect();
+    assert!(
+        !shifts.is_empty(),
+        "the demo's loop printed no shift:\n{log}"
+    );
+    for (id, shift) in &shifts {
+        let caption = format!("region {id}: deviation before; measured shift {shift} mm");
+        assert!(page.contains(&caption), "cycle.html lacks {caption:?}");
+    }
+    let grinds = page.matches(": removal predicted by the plan").count();
+    assert!(grinds >= 1, "no removal scatter");
+    assert!(
+        page.contains("src=\"convergence.png\""),
+        "no convergence plot"
+    );
+    std::fs::write(dir.join("cycle-probe.html"), probe(&page)).unwrap();
+    let netlog = dir.join("cycle-netlog.json");
+    let dom = dump_dom(browser, &dir.join("cycle-probe.html"), &netlog);
+    assert_eq!(attr(&dom, "<body", "data-errors"), "0", "{dom}");
+    let images = attr(&dom, "<body", "data-images");
+    assert_eq!(
+        images,
+        (1 + grinds + shifts.len()).to_string(),
+        "convergence, a map per region shifted, a scatter per grind"
+    );
+    assert_eq!(attr(&dom, "<body", "data-loaded"), images);
     assert_local_only(&dom, &netlog);
 }
 

@@ -8,6 +8,9 @@ mod common;
 use std::collections::BTreeMap;
 
 use polishbot::motion::{plan, Inspection, Plan, PlanMode};
+use polishbot::report::escape;
+use polishbot::report::plan_html::write_plan_html;
+use polishbot::report::provenance::Provenance;
 
 use common::femoral::{cell, parametric_case, planned_area, reasons, uniform_case};
 
@@ -81,10 +84,12 @@ fn uniform_defects_in_the_shipped_cells() {
 /// it was refused (`turntable.regions[].tried`).
 #[test]
 fn uniform_defects_in_the_designed_cell_in_removal_mode() {
+    let mut rules = 0;
     for seed in [5100, 5101] {
         let insp = uniform_case(seed);
         let (c, t, plan) = measure_plan("femoral/", &insp, seed);
         assert!(c / t >= REMOVAL_FLOOR, "seed {seed}: planned {:.3}", c / t);
+        rules += plan_page_says_what_is_left_out(&insp, &plan, seed);
         let table = plan.turntable.as_ref().expect("a table part");
         for r in &plan.reachability.regions {
             if !r.repairable || r.coverage_of_all >= LEFT_OUT {
@@ -117,4 +122,98 @@ fn uniform_defects_in_the_designed_cell_in_removal_mode() {
             }
         }
     }
+    assert!(
+        rules > 0,
+        "neither seed left a contact out: the page check saw no rule"
+    );
+}
+
+/// The text of the first `<figcaption>` that starts with `start`.
+fn caption<'a>(page: &'a str, start: &str) -> &'a str {
+    let from = page
+        .find(&format!("<figcaption>{start}"))
+        .unwrap_or_else(|| panic!("no caption {start:?}"));
+    &page[from..from + page[from..].find("</figcaption>").unwrap()]
+}
+
+/// Writes `plan`'s plan.html and checks what it says of the part left out (issue 51): every
+/// rule of plan.json's unreachable list with its count, a coverage map whose planned area is
+/// plan.json's (`coverage_of_all` x area), each region left mostly unground in the left-out
+/// table with a rule plan.json gives and the table angles tried; and per predicted region the
+/// three panels on one colour scale, the predicted one spanning plan.json's prediction.
+/// Returns how many rules refused contacts.
+fn plan_page_says_what_is_left_out(insp: &Inspection, plan: &Plan, seed: u64) -> usize {
+    let dir = common::tempdir();
+    let provenance = Provenance::of_inputs("plan", "mm", Vec::new(), &"test").unwrap();
+    let html =
+        write_plan_html(&dir.path().join("plan.json"), insp, plan, &provenance, None).unwrap();
+    let page = std::fs::read_to_string(html).unwrap();
+    let rules = reasons(plan);
+    for (rule, n) in &rules {
+        let row = format!("<tr><td>{}</td><td>{n}</td>", escape(rule));
+        assert!(page.contains(&row), "seed {seed}: no row {row:?}");
+    }
+    let (c, t) = planned_area(plan);
+    let map = caption(&page, "coverage map: ");
+    let numbers: Vec<f64> = map["<figcaption>coverage map: ".len()..]
+        .split(" mm²")
+        .next()
+        .unwrap()
+        .split(" of ")
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!((numbers[1] - t).abs() < 0.01, "seed {seed}: {map} ({t:.2})");
+    assert!(
+        (numbers[0] - c).abs() <= 0.01 * t,
+        "seed {seed}: {map} ({c:.2})"
+    );
+    assert!(dir.path().join("plan_coverage.png").is_file());
+    let left = &page[page.find("<h2>left out: regions").expect("left-out table")..];
+    let left = &left[..left.find("</table>").unwrap()];
+    for r in &plan.reachability.regions {
+        if !r.repairable || r.coverage_of_all >= LEFT_OUT {
+            continue;
+        }
+        let row = left
+            .split("<tr>")
+            .find(|row| row.starts_with(&format!("<td>{}</td>", r.id)))
+            .unwrap_or_else(|| panic!("seed {seed}: region {} not in {left}", r.id));
+        let cells: Vec<&str> = row
+            .split("<td>")
+            .skip(1)
+            .map(|c| &c[..c.find("</td>").unwrap()])
+            .collect();
+        assert!(
+            rules.keys().any(|k| escape(k) == cells[4]),
+            "seed {seed}: {row}"
+        );
+        assert!(cells[5].contains("best other: table"), "seed {seed}: {row}");
+    }
+    let removal = plan.removal.as_ref().expect("removal mode");
+    for r in &removal.regions {
+        let scale = |what: &str| {
+            let c = caption(&page, &format!("region {}: {what};", r.region));
+            c.split("colour scale ±")
+                .nth(1)
+                .unwrap()
+                .split(' ')
+                .next()
+                .unwrap()
+                .to_string()
+        };
+        let scales = [
+            "deviation before",
+            "predicted after",
+            "Monte Carlo low quantile",
+        ]
+        .map(scale);
+        assert!(
+            scales.iter().all(|s| *s == scales[0]),
+            "seed {seed}: {scales:?}"
+        );
+        let after = caption(&page, &format!("region {}: predicted after;", r.region));
+        let span = format!("{:+.4} to {:+.4} mm", r.after.lowest_mm, r.after.peak_mm);
+        assert!(after.contains(&span), "seed {seed}: {after} ({span})");
+    }
+    rules.len()
 }

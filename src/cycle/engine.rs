@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 
 use super::config::CycleConfig;
+use super::figures;
 use super::plan_stage::{plan_into, Planned};
 use super::record::{
     decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
@@ -17,6 +18,7 @@ use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
 use crate::removal::fit::Evidence;
 use crate::repair::{Inspection, SurfacePoint};
+use crate::report::Figure;
 use crate::robot::{CellFiles, ToolText};
 
 /// What the loop starts from.
@@ -116,6 +118,7 @@ pub fn run_cycle(
         records: Vec::new(),
         previous: None,
         pooled: Vec::new(),
+        figures: Vec::new(),
     };
     for k in 1.. {
         if let Some(outcome) = state.iteration(k, executor)? {
@@ -144,6 +147,8 @@ struct Loop<'a> {
     /// The tool file of the next plan, held in memory: refitted after each grind; None until
     /// the first refit (the cell's tool file, `LoopInputs::cell`).
     tool: Option<ToolText>,
+    /// cycle.html's figures of the grinds so far (drawn when each grind is judged).
+    figures: Vec<Figure>,
 }
 
 impl Loop<'_> {
@@ -174,7 +179,7 @@ impl Loop<'_> {
         if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
             last.followed_by(&measured, &before.inspection, &inspection);
             let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
-            (last.k_fitted, last.agreement, off_plan) = refit(
+            let done = refit(
                 before,
                 (&inspection_dir, &inspection),
                 &ids,
@@ -182,6 +187,18 @@ impl Loop<'_> {
                 &mut self.tool,
                 &mut self.pooled,
             );
+            (last.k_fitted, last.agreement, off_plan) = (done.k, done.agreement, done.off_plan);
+            if let Some((predicted, shifts)) = done.seen {
+                let ground = self.inputs.out.join(format!("iter-{}", last.iteration));
+                self.figures.extend(figures::grind(
+                    &ground,
+                    last.iteration,
+                    (&before.inspection, &inspection),
+                    &last.planned_regions,
+                    &predicted,
+                    (&shifts, &[]),
+                ));
+            }
         }
         self.records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&self.records, self.cfg);
@@ -274,8 +291,9 @@ impl Loop<'_> {
     fn finish(self, outcome: Outcome) -> anyhow::Result<CycleOutcome> {
         let out = &self.inputs.out;
         let html = out.join("cycle.html");
-        std::fs::write(&html, table_html(&self.records, outcome))
-            .with_context(|| format!("{}: cannot write", html.display()))?;
+        let table = table_html(&self.records, outcome);
+        let page = figures::page(&table, out, &self.records, &self.figures);
+        std::fs::write(&html, page).with_context(|| format!("{}: cannot write", html.display()))?;
         let json = out.join("cycle.json");
         std::fs::write(
             &json,

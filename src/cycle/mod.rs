@@ -9,6 +9,7 @@
 //! share them with the loop.
 mod config;
 mod engine;
+mod figures;
 mod plan_stage;
 pub mod record;
 pub mod refit;

@@ -228,7 +228,7 @@ pub struct PlannedGrind {
 /// points). Returns the fitted k, or None with the reason printed (a rigid plan, too little
 /// evidence), the agreement (None for a rigid plan), and the registration's reason to stop
 /// (`removal_shift::judge`): k is fitted on the prediction moved by each region's measured
-/// shift.
+/// shift. Also hands back what cycle.html draws ([`Refitted::seen`]).
 pub fn refit(
     before: &PlannedGrind,
     after: (&Path, &Inspection),
@@ -236,7 +236,7 @@ pub fn refit(
     dir: &Path,
     tool: &mut Option<ToolText>,
     pooled: &mut Vec<Evidence>,
-) -> (Option<f64>, Option<Agreement>, Option<String>) {
+) -> Refitted {
     let inputs = RefitInputs {
         before: before.inspection.dir.clone(),
         after: after.0.to_path_buf(),
@@ -247,6 +247,7 @@ pub fn refit(
     let prediction = prediction_of(&before.plan_file, &before.planned, &before.inspection);
     let shift_cfg = ShiftConfig::default();
     let mut off_plan = None;
+    let mut seen = None;
     let prediction = prediction.map(|(p, k)| {
         let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
         shifts
@@ -254,6 +255,7 @@ pub fn refit(
             .for_each(|r| println!("{}", describe_shift(r)));
         off_plan = removal_shift::judge(&shifts, &shift_cfg);
         let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
+        seen = Some((p, shifts));
         (moved, k)
     });
     let fitted = prediction.as_ref().map_err(clone_error).and_then(|(p, k)| {
@@ -282,7 +284,25 @@ pub fn refit(
     let agreement = prediction.ok().and_then(|(p, plan_k)| {
         fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
     });
-    (k, agreement, off_plan)
+    Refitted {
+        k,
+        agreement,
+        off_plan,
+        seen,
+    }
+}
+
+/// What [`refit`] found after a grind.
+pub struct Refitted {
+    /// The fitted k, or None with the reason printed (a rigid plan, too little evidence).
+    pub k: Option<f64>,
+    /// The grind's prediction against the achieved residual (None for a rigid plan).
+    pub agreement: Option<Agreement>,
+    /// The registration's reason to stop (`removal_shift::judge`), or None.
+    pub off_plan: Option<String>,
+    /// What cycle.html draws: the plan's unshifted prediction per core point of the
+    /// inspection before the grind, and each region's measured shift (None for a rigid plan).
+    pub seen: Option<(Vec<f64>, Vec<RegionShift>)>,
 }
 
 /// One line on a region's registration for the loop's log.

@@ -71,6 +71,8 @@ pub struct Overlay {
     pub lines: Vec<(Vec<Point3<f64>>, RGBColor, u32)>,
     /// Crosses: point, colour.
     pub crosses: Vec<(Point3<f64>, RGBColor)>,
+    /// The figure's title (None: "region N: along its normal").
+    pub title: Option<String>,
 }
 
 /// Renders region `region`'s close-up into `path`; false when the region has no member point
@@ -142,7 +144,8 @@ pub fn draw_with(
             .map_err(err)?;
     }
     let title = TextStyle::from((font::FAMILY, 20).into_font()).color(&BLACK);
-    let name = format!("region {}: along its normal", region.id);
+    let name = (overlay.title.clone())
+        .unwrap_or_else(|| format!("region {}: along its normal", region.id));
     root.draw_text(&name, &title, (10, 10)).map_err(err)?;
     if let Some(p) = peak {
         let (x, y) = cam.pixel(&input.points[p]);

@@ -3,6 +3,8 @@
 //! normal; the histogram of deviations; tables). Works offline: no CDN, a shipped font.
 mod closeup;
 mod colour;
+pub mod coverage;
+pub mod cycle_page;
 pub(crate) mod font;
 mod histogram;
 mod html;
@@ -11,6 +13,7 @@ pub mod inspection;
 mod marks;
 pub mod plan_html;
 pub mod plan_page;
+pub mod plan_reach;
 pub mod provenance;
 mod raster;
 mod viewer;

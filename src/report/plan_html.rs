@@ -6,12 +6,139 @@ use std::path::{Path, PathBuf};
 use anyhow::Result;
 use nalgebra::{Point3, Vector3};
 
+use plotters::style::RGBColor;
+
+use super::coverage::Class;
 use super::inspection::region_mark;
-use super::plan_page::{self, PlanPage, ToolPath};
+use super::plan_page::{self, CoverageMap, PlanPage, PredictedRegion, ToolPath};
+use super::plan_reach::{self, Reach, PLANNED, RULE0};
 use super::provenance::Provenance;
 use super::{ReportConfig, ReportInput, Table};
 use crate::motion::{Plan, Segment, SegmentKind, StrokeKind};
 use crate::repair::Inspection;
+use crate::spatial::Neighbours;
+
+/// Colours of the coverage map: conform, pit, planned.
+const FIXED: [RGBColor; 3] = [
+    RGBColor(225, 225, 225),
+    RGBColor(110, 150, 200),
+    RGBColor(60, 170, 80),
+];
+/// Colours of the rules that left parts out, in turn (told apart from the fixed three and
+/// from each other; a ninth rule takes the first again).
+const RULE_COLOURS: [RGBColor; 8] = [
+    RGBColor(245, 130, 32),
+    RGBColor(200, 0, 200),
+    RGBColor(215, 40, 40),
+    RGBColor(120, 60, 170),
+    RGBColor(150, 90, 40),
+    RGBColor(230, 190, 0),
+    RGBColor(0, 150, 150),
+    RGBColor(60, 60, 60),
+];
+/// Largest distance between a predicted.csv row and its core point, mm (the rows are the core
+/// points themselves: anything farther is not the same point).
+const SAME_POINT_MM: f64 = 1e-6;
+
+/// The coverage map's classes with their legend lines, and the table of rules.
+fn coverage(reach: &Reach, inspection: &Inspection) -> (CoverageMap, Table) {
+    let count = |c: usize| reach.class.iter().filter(|&&k| k == c).count();
+    let mut classes = vec![
+        Class {
+            colour: FIXED[0],
+            label: format!("outside every defect region: {} core points", count(0)),
+        },
+        Class {
+            colour: FIXED[1],
+            label: format!("pit, never ground: {} core points", count(1)),
+        },
+        Class {
+            colour: FIXED[PLANNED],
+            label: format!(
+                "planned: {} core points, {:.2} mm²",
+                reach.planned.0, reach.planned.1
+            ),
+        },
+    ];
+    classes.extend(reach.rules.iter().enumerate().map(|(k, r)| Class {
+        colour: RULE_COLOURS[k % RULE_COLOURS.len()],
+        label: format!(
+            "left out, {}: {} path points refused, {} core points, {:.2} mm²",
+            r.rule, r.path_points, r.core_points, r.area_mm2
+        ),
+    }));
+    let repairable: f64 = (inspection.regions.iter())
+        .filter(|r| r.repairable)
+        .map(|r| r.area)
+        .sum();
+    let map = CoverageMap {
+        class: reach.class.clone(),
+        classes,
+        first_shown: RULE0,
+        caption: format!(
+            "coverage map: {:.2} of {repairable:.2} mm² of repairable area planned \
+             (within the footprint of a planned stroke); what is left out in the colour of \
+             the rule that refused it",
+            reach.planned.1
+        ),
+    };
+    let rows = (reach.rules.iter())
+        .map(|r| {
+            vec![
+                r.rule.clone(),
+                r.path_points.to_string(),
+                r.core_points.to_string(),
+                format!("{:.2}", r.area_mm2),
+            ]
+        })
+        .collect();
+    let header = [
+        "rule",
+        "path points refused",
+        "core points left out",
+        "area mm²",
+    ];
+    let table = Table {
+        title: "left out by rule (plan.json's unreachable list)".into(),
+        header: header.iter().map(|s| s.to_string()).collect(),
+        rows,
+    };
+    (map, table)
+}
+
+/// Per predicted region its rows (predicted.csv's, in the order of plan.json's
+/// `removal.regions`, `core_points` each) as (core point index, predicted after, low
+/// quantile: the prediction less the Monte Carlo's spread); empty when the rows do not add
+/// up to the regions' counts (a plan read back from plan.json has no rows).
+fn predicted(plan: &Plan, inspection: &Inspection) -> Vec<PredictedRegion> {
+    let Some(rem) = &plan.removal else {
+        return Vec::new();
+    };
+    let total: usize = rem.regions.iter().map(|r| r.core_points).sum();
+    if total != rem.rows.len() || total == 0 {
+        return Vec::new();
+    }
+    let positions: Vec<Point3<f64>> = inspection.points.iter().map(|p| p.position).collect();
+    let index = Neighbours::new(&positions);
+    let mut start = 0;
+    let mut out = Vec::new();
+    for r in &rem.regions {
+        let rows = &rem.rows[start..start + r.core_points];
+        start += r.core_points;
+        let matched = (rows.iter())
+            .filter_map(|row| {
+                let nb = index.nearest(&Point3::from(row.position))?;
+                (nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM).then_some((
+                    nb.index,
+                    row.residual,
+                    row.residual - row.spread_p95,
+                ))
+            })
+            .collect();
+        out.push((r.region, matched));
+    }
+    out
+}
 
 /// Seconds of the samples `first..=last` at the bus period.
 fn seconds(s: &Segment, period: f64) -> f64 {
@@ -116,6 +243,11 @@ pub fn write_plan_html(
     let distances: Vec<f64> = pts.iter().map(|p| p.distance).collect();
     let labels: Vec<i64> = pts.iter().map(|p| p.region).collect();
     let planned: Vec<usize> = plan.passes.iter().map(|p| p.region).collect();
+    let reach = plan_reach::reach(plan, inspection);
+    let (map, rules) = coverage(&reach, inspection);
+    let mut all_tables = tables(plan);
+    all_tables.insert(0, rules);
+    all_tables.insert(1, reach.table.clone());
     let m = &plan.metrics;
     let mut summary = vec![
         ("plan".to_string(), plan_file.display().to_string()),
@@ -174,7 +306,7 @@ pub fn write_plan_html(
             uncertainties: &[],
             tolerance: inspection.tolerance.unwrap_or(0.0),
             summary,
-            tables: tables(plan),
+            tables: all_tables,
             labels: &labels,
             regions: (inspection.regions.iter())
                 .filter(|r| planned.contains(&r.id))
@@ -203,6 +335,8 @@ pub fn write_plan_html(
             .iter()
             .map(|b| ("inspection report".to_string(), b.clone()))
             .collect(),
+        coverage: Some(map),
+        predicted: predicted(plan, inspection),
     };
     plan_page::write_plan_page(&html, &page, &ReportConfig::default())?;
     plan_page::link_report(&report, report_page, &inspection.dir, &html);

@@ -10,8 +10,9 @@ use plotters::style::RGBColor;
 use rayon::prelude::*;
 
 use super::closeup::{self, Overlay};
+use super::coverage::{self, Class};
 use super::html::{self, Layout, LINKS_ID};
-use super::input::{colour_range, Figure, ReportConfig, ReportInput};
+use super::input::{colour_range, Figure, RegionMark, ReportConfig, ReportInput};
 
 /// A grinding pass (in contact, at the feed): black, 2 px.
 const PASS: (RGBColor, u32) = (RGBColor(0, 0, 0), 2);
@@ -42,6 +43,88 @@ pub struct PlanPage<'a> {
     pub unreachable: Vec<(usize, Point3<f64>)>,
     /// Links to other pages: (text, relative href).
     pub links: Vec<(String, String)>,
+    /// The coverage map: per core point its class (indexing `classes`), the classes, and
+    /// the first class that must show in a view (the left-out ones); None: no map.
+    pub coverage: Option<CoverageMap>,
+    /// The predicted part per region: region id and, per core point in the tool's reach,
+    /// (index in `surface.points`, predicted deviation after, Monte Carlo low quantile), mm.
+    pub predicted: Vec<PredictedRegion>,
+}
+
+/// One region's predicted part: region id and, per core point in the tool's reach, (index in
+/// the page's points, predicted deviation after, Monte Carlo low quantile), mm.
+pub type PredictedRegion = (usize, Vec<(usize, f64, f64)>);
+
+/// The coverage map of plan.html.
+#[derive(Debug, Clone)]
+pub struct CoverageMap {
+    /// Class per core point.
+    pub class: Vec<usize>,
+    /// The classes, in legend order.
+    pub classes: Vec<Class>,
+    /// The first class each of whose points must show in a view.
+    pub first_shown: usize,
+    /// Caption of the figure.
+    pub caption: String,
+}
+
+/// The three panels of a region on one colour scale: (file suffix, title, what it shows).
+const PANELS: [(&str, &str); 3] = [
+    ("before", "deviation before"),
+    ("after", "predicted after"),
+    ("low", "Monte Carlo low quantile"),
+];
+
+/// Draws region `r`'s three panels (deviation before, predicted after, the Monte Carlo's low
+/// quantile) on the colour scale `range`, into `{stem}_region_{id}_{suffix}.png`.
+fn prediction_panels(
+    (dir, stem): (&Path, &str),
+    input: &ReportInput,
+    r: &RegionMark,
+    rows: &[(usize, f64, f64)],
+    range: f64,
+) -> Result<Vec<Figure>> {
+    let mut figures = Vec::new();
+    for (k, (suffix, what)) in PANELS.iter().enumerate() {
+        let mut distances = input.distances.to_vec();
+        for &(i, after, low) in rows {
+            distances[i] = [distances[i], after, low][k];
+        }
+        let shown = ReportInput {
+            distances: &distances,
+            ..input.clone()
+        };
+        // the regions.json peak belongs to the part before; after, the largest |value| shows
+        let mark = RegionMark {
+            peak: if k == 0 { r.peak } else { f64::NAN },
+            ..r.clone()
+        };
+        let overlay = Overlay {
+            title: Some(format!("region {}: {what}", r.id)),
+            ..Overlay::default()
+        };
+        let path = dir.join(format!("{stem}_region_{}_{suffix}.png", r.id));
+        if closeup::draw_with(&path, &shown, &mark, range, &overlay)? {
+            let values = rows
+                .iter()
+                .map(|row| [input.distances[row.0], row.1, row.2][k]);
+            let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v), hi.max(v))
+            });
+            figures.push(Figure {
+                caption: format!(
+                    "region {}: {what}; {lo:+.4} to {hi:+.4} mm over the {} core points in \
+                     the tool's reach; colour scale ±{range:.4} mm, tolerance ±{} mm",
+                    r.id,
+                    rows.len(),
+                    input.tolerance
+                ),
+                path,
+                regions: vec![r.id],
+            });
+        }
+    }
+    Ok(figures)
 }
 
 /// Writes the page `html` and a figure per region beside it; returns the figures.
@@ -65,31 +148,51 @@ pub fn write_plan_page(html: &Path, page: &PlanPage, cfg: &ReportConfig) -> Resu
             overlay.crosses = lost.map(|u| (u.1, UNREACHABLE)).collect();
             let path = dir.join(format!("{stem}_region_{}.png", r.id));
             let drawn = closeup::draw_with(&path, input, r, range, &overlay)?;
-            Ok(drawn.then(|| Figure {
-                caption: format!(
-                    "region {}: {}; {passes} passes, {links} stepovers, {} unreachable points",
-                    r.id,
-                    r.caption,
-                    overlay.crosses.len()
-                ),
-                path,
-                regions: vec![r.id],
-            }))
+            let mut figures: Vec<Figure> = drawn
+                .then(|| Figure {
+                    caption: format!(
+                        "region {}: {}; {passes} passes, {links} stepovers, {} unreachable \
+                         points",
+                        r.id,
+                        r.caption,
+                        overlay.crosses.len()
+                    ),
+                    path,
+                    regions: vec![r.id],
+                })
+                .into_iter()
+                .collect();
+            if let Some((_, rows)) = page.predicted.iter().find(|p| p.0 == r.id) {
+                figures.extend(prediction_panels((dir, stem), input, r, rows, range)?);
+            }
+            Ok(figures)
         })
         .collect::<Result<Vec<_>>>()?
         .into_iter()
         .flatten()
         .collect();
+    let mut whole = Vec::new();
+    if let Some(map) = &page.coverage {
+        let path = dir.join(format!("{stem}_coverage.png"));
+        let views = coverage::draw(&path, input, &map.class, &map.classes, map.first_shown, cfg)?;
+        whole.push(Figure {
+            path,
+            caption: format!("{}; views: {}", map.caption, views.join(", ")),
+            regions: Vec::new(),
+        });
+    }
     let layout = Layout {
-        whole: &[],
-        closeup_title: "tool path per region (black: grinding passes; grey: stepovers in \
-                        contact; magenta ×: unreachable, left out)",
+        whole: &whole,
+        closeup_title: "per region: the tool path (black: grinding passes; grey: stepovers in \
+                        contact; magenta ×: unreachable, left out), then the deviation before, \
+                        the predicted part after and the Monte Carlo's low quantile on the same \
+                        colour scale",
         closeups: &figures,
         viewer: "",
         links: &page.links,
     };
     html::write(html, input, &layout)?;
-    Ok(figures.into_iter().map(|f| f.path).collect())
+    Ok(whole.into_iter().chain(figures).map(|f| f.path).collect())
 }
 
 /// `to` relative to the folder `from` (both made absolute), with `/` separators; None when

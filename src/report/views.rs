@@ -14,9 +14,9 @@ use super::input::{RegionMark, ReportConfig, ReportInput};
 use super::marks::{self, BAR_W};
 use super::raster::{self, Camera, Raster};
 
-const TITLE_H: u32 = 40;
+pub(super) const TITLE_H: u32 = 40;
 /// Panels per row of the overview.
-const PER_ROW: usize = 3;
+pub(super) const PER_ROW: usize = 3;
 /// Least pixels of a region that count as showing it in a view (a 4 × 4 px patch: anything
 /// smaller is a speck the reader cannot find).
 pub const MIN_REGION_PX: usize = 16;
@@ -25,13 +25,13 @@ const MARGIN_PX: f64 = 24.0;
 /// Largest point splat of the overview, px.
 const MAX_SPLAT: i64 = 8;
 /// The three classic views, always shown.
-const CLASSIC: usize = 3;
+pub(super) const CLASSIC: usize = 3;
 
 /// A standard view: name, towards the viewer, screen up.
-type View = (&'static str, [f64; 3], [f64; 3]);
+pub(super) type View = (&'static str, [f64; 3], [f64; 3]);
 
 /// The six standard views, the classic three first.
-const VIEWS: [View; 6] = [
+pub(super) const VIEWS: [View; 6] = [
     ("anterior (+y)", [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
     ("lateral (+x)", [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
     ("distal (-z)", [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]),
@@ -48,7 +48,7 @@ pub struct Overview {
 }
 
 /// One camera per standard view, one scale for all so sizes compare.
-fn cameras(input: &ReportInput, panel: usize) -> Vec<Camera> {
+pub(super) fn cameras(input: &ReportInput, panel: usize) -> Vec<Camera> {
     let mut cams: Vec<Camera> = VIEWS
         .iter()
         .map(|(_, t, u)| Camera::looking(Vector3::from(*t), Vector3::from(*u), (panel, panel)))
