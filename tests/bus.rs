@@ -433,6 +433,39 @@ fn a_resume_starts_at_the_frame_whose_write_failed() {
     assert_eq!(rp.resume_from(), 4, "a stop sends nothing");
 }
 
+/// A plan over two setups (issue 51): the run of setup 1 ends at an operator stop naming
+/// setup 2, so a resume starts setup 2 at its first frame (not at setup 1's frame 41); a run
+/// of setup 2 cut short resumes where it stood, its frames counted apart from setup 1's.
+#[test]
+fn an_operator_stop_hands_the_resume_to_the_next_setup_from_its_first_frame() {
+    let line = |seq: u64, kind: &str, extra: &str| {
+        format!(r#"{{"seq":{seq},"t":0.0,"unix_ms":0,"kind":"{kind}"{extra}}}"#)
+    };
+    let mut lines = vec![
+        line(0, "open", r#","plan_sha256":"ab""#),
+        line(1, "tx", r#","motion":0"#),
+        line(2, "tx", r#","motion":41"#),
+        line(3, "operator_stop", r#","code":"refixture","setup":2"#),
+    ];
+    let parse = |lines: &[String]| {
+        let text = lines.join("\n") + "\n";
+        ResumePoint::parse(Path::new("j.jsonl"), text.as_bytes()).unwrap()
+    };
+    let rp = parse(&lines);
+    assert_eq!(rp.operator_stop, Some(("refixture".to_string(), 2)));
+    assert_eq!((rp.setup, rp.last_sent), (1, Some(41)));
+    lines.extend([
+        line(4, "open", r#","plan_sha256":"ab","setup":2"#),
+        line(5, "tx", r#","motion":0"#),
+        line(6, "tx", r#","motion":7"#),
+        line(7, "error", r#","motion":8"#),
+    ]);
+    let rp = parse(&lines);
+    assert_eq!(rp.operator_stop, None, "setup 2 has started");
+    assert_eq!((rp.setup, rp.last_sent, rp.resume_from()), (2, Some(7), 8));
+    assert_eq!(rp.plan_sha256, vec!["ab".to_string()]);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
 

@@ -101,6 +101,16 @@ impl<T: Transport> Bus<T> {
         self.stop.load(Ordering::SeqCst)
     }
 
+    /// Journals an operator stop: the run did its part of the plan and stops for the operator
+    /// (`code`: `refixture`; `setup`: the setup `run --resume` continues with).
+    pub fn operator_stop(&mut self, code: &str, setup: u64, message: &str) -> Result<(), BusError> {
+        let mut e = Entry::new(EntryKind::OperatorStop);
+        e.code = Some(code.to_string());
+        e.setup = Some(setup);
+        e.message = Some(message.to_string());
+        self.log(e)
+    }
+
     pub(super) fn log(&mut self, entry: Entry) -> Result<(), BusError> {
         let t = self.link.now().as_secs_f64();
         self.journal.write(entry, t)

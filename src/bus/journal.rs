@@ -26,6 +26,9 @@ pub enum EntryKind {
     Verified,
     /// Motion stopped (operator, fault); nothing more was sent.
     Stop,
+    /// The plan stops for the operator (code: `refixture`, later `tool_change`): the part of
+    /// the plan before it is done, the run continues with `run --resume` at `setup`.
+    OperatorStop,
 }
 
 /// One line of the journal.
@@ -60,6 +63,10 @@ pub struct Entry {
     /// SHA-256 (lowercase hex) of the plan file this run streams (open lines of `run`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plan_sha256: Option<String>,
+    /// The plan's setup streamed (open lines of setup 2 on) or to continue with (operator
+    /// stops); absent: setup 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setup: Option<u64>,
 }
 
 impl Entry {
@@ -78,6 +85,7 @@ impl Entry {
             message: None,
             raw: None,
             plan_sha256: None,
+            setup: None,
         }
     }
 }
@@ -92,6 +100,7 @@ pub struct Journal {
     file: Option<(File, PathBuf)>,
     seq: u64,
     plan_sha256: Option<String>,
+    setup: Option<u64>,
 }
 
 impl Journal {
@@ -101,6 +110,7 @@ impl Journal {
             file: None,
             seq: 0,
             plan_sha256: None,
+            setup: None,
         }
     }
 
@@ -115,6 +125,7 @@ impl Journal {
             file: Some((file, path.to_path_buf())),
             seq: 0,
             plan_sha256: None,
+            setup: None,
         })
     }
 
@@ -122,6 +133,13 @@ impl Journal {
     /// file's SHA-256, lowercase hex), which `run --resume` compares with the plan it is given.
     pub fn for_plan(mut self, sha256: &str) -> Journal {
         self.plan_sha256 = Some(sha256.to_string());
+        self
+    }
+
+    /// Marks the run as streaming the plan's setup `setup` (2 on): every open line records it,
+    /// and `run --resume` counts the frames of each setup apart.
+    pub fn for_setup(mut self, setup: u64) -> Journal {
+        self.setup = (setup > 1).then_some(setup);
         self
     }
 
@@ -134,6 +152,7 @@ impl Journal {
         entry.t = t;
         if entry.kind == EntryKind::Open {
             entry.plan_sha256.clone_from(&self.plan_sha256);
+            entry.setup = self.setup;
         }
         entry.unix_ms = SystemTime::now()
             .duration_since(UNIX_EPOCH)
@@ -172,6 +191,12 @@ pub struct ResumePoint {
     pub lines: usize,
     /// The plan SHA-256 of every open line that has one, in file order, repeats removed.
     pub plan_sha256: Vec<String>,
+    /// The setup the last open line streamed (1 when none says): the motion indices above
+    /// count within it (an open line of another setup starts them afresh).
+    pub setup: u64,
+    /// The last operator stop not yet followed by a run of the setup it names: its code
+    /// (`refixture`) and that setup.
+    pub operator_stop: Option<(String, u64)>,
 }
 
 impl ResumePoint {
@@ -195,7 +220,10 @@ impl ResumePoint {
     pub fn parse(path: &Path, bytes: &[u8]) -> Result<ResumePoint, BusError> {
         let complete = bytes.ends_with(b"\n");
         let lines: Vec<&[u8]> = bytes.split(|&b| b == b'\n').collect();
-        let mut rp = ResumePoint::default();
+        let mut rp = ResumePoint {
+            setup: 1,
+            ..ResumePoint::default()
+        };
         for (i, line) in lines.iter().enumerate() {
             let last = i + 1 == lines.len();
             let at = |e: &dyn std::fmt::Display| journal_err(path, format!("line {}: {e}", i + 1));
@@ -232,7 +260,25 @@ impl ResumePoint {
                     entry.message.unwrap_or_default(),
                 ))
             }
+            EntryKind::OperatorStop => {
+                self.operator_stop = Some((
+                    entry.code.unwrap_or_default(),
+                    entry.setup.unwrap_or(self.setup),
+                ))
+            }
             EntryKind::Open => {
+                let setup = entry.setup.unwrap_or(1);
+                if setup != self.setup {
+                    // a run of another setup: its frames count from 0
+                    self.setup = setup;
+                    self.last_sent = None;
+                    self.last_failed_write = None;
+                    self.last_verified = None;
+                    self.last_error = None;
+                }
+                if self.operator_stop.as_ref().is_some_and(|s| s.1 == setup) {
+                    self.operator_stop = None;
+                }
                 if let Some(h) = entry.plan_sha256 {
                     if !self.plan_sha256.contains(&h) {
                         self.plan_sha256.push(h);

@@ -71,6 +71,10 @@ pub enum Routine {
         /// Joint targets, one per fiducial in the fixture's order, instead of jogging.
         #[arg(long, value_name = "FILE")]
         targets: Option<PathBuf>,
+        /// The part's setup measured (a re-fixturing of a designed cell): 2 on writes
+        /// `setup-N/workcell.toml` beside workcell.toml (its `[turntable]` kept).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=9))]
+        setup: u64,
     },
     /// Turntable: touch one fiducial on the table at >= 5 table angles -> workcell.toml's
     /// [turntable] axis and centre.
@@ -133,6 +137,25 @@ pub struct CalibrateFileConfig {
 }
 
 /// `DIR/name` when it exists, else `fallback`.
+/// The workcell file setup `n` is calibrated from and the one written (setup 1: `workcell_in`
+/// and `out`/workcell.toml; further setups their `setup-N/workcell.toml`, read from
+/// `workcell_in`'s when it has none yet: the same `[turntable]`).
+fn setup_files(workcell_in: &Path, out: &Path, n: usize) -> Result<(PathBuf, PathBuf), CalibError> {
+    use crate::motion::setups::setup_file;
+    let file = setup_file(&out.join("workcell.toml"), n);
+    if let Some(dir) = file.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| CalibError::file(dir, e))?;
+    }
+    let input = [
+        setup_file(&out.join("workcell.toml"), n),
+        setup_file(workcell_in, n),
+    ]
+    .into_iter()
+    .find(|p| p.is_file())
+    .unwrap_or_else(|| workcell_in.to_path_buf());
+    Ok((input, file))
+}
+
 fn input(out: &Path, name: &str, fallback: &Path) -> PathBuf {
     let p = out.join(name);
     if p.exists() {
@@ -339,7 +362,11 @@ fn routine(
             let out = ctx.out.join("servos.toml");
             super::calibrate_compliance::run(bus, cell, ctx.sim, ctx.servos_in, &out)
         }
-        Routine::Workcell { fixture: path, .. } => {
+        Routine::Workcell {
+            fixture: path,
+            setup,
+            ..
+        } => {
             let fixture = fixture.expect("loaded in run");
             let mut src = source(targets, cell.cfg);
             let fit = calibrate::workcell(bus, cell, &fixture, src.as_mut())?;
@@ -349,7 +376,7 @@ fn routine(
                 .zip(&fit.residuals_mm)
                 .map(|(f, r)| format!("{} {r:.3}", f.name))
                 .collect();
-            let file = ctx.out.join("workcell.toml");
+            let (input, file) = setup_files(&ctx.workcell_in, ctx.out, *setup as usize)?;
             let header = format!(
                 "Written by `polishbot calibrate workcell` from {} touched fiducials of {}.\n\
                  Residual per fiducial [mm]: {}; RMS {:.3} mm.",
@@ -358,7 +385,7 @@ fn routine(
                 per.join(", "),
                 fit.rms_mm
             );
-            files::update_workcell(&ctx.workcell_in, &file, &fit.robot_from_reference, &header)?;
+            files::update_workcell(&input, &file, &fit.robot_from_reference, &header)?;
             say(&format!(
                 "calibrate workcell: residual per fiducial [mm]: {}; RMS {:.3} mm; wrote {}",
                 per.join(", "),

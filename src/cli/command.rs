@@ -83,6 +83,10 @@ pub fn main() -> ExitCode {
             eprintln!("polishbot: {err}");
             ExitCode::from(crate::inspect::INCOMPLETE_EXIT)
         }
+        Err(err) if err.is::<super::setup_stop::OperatorStop>() => {
+            eprintln!("polishbot: {err}");
+            ExitCode::from(super::setup_stop::OPERATOR_STOP_EXIT)
+        }
         Err(err) if err.is::<cycle::NotFinished>() => {
             eprintln!("polishbot: {err}");
             ExitCode::from(cycle::NOT_FINISHED_EXIT)

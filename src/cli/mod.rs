@@ -18,6 +18,7 @@ mod plan;
 mod register;
 mod run;
 pub mod settings;
+mod setup_stop;
 mod synth;
 mod table;
 

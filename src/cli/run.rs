@@ -7,6 +7,7 @@ use serde::Deserialize;
 
 use super::arm::DeviceArgs;
 use super::settings::{self, ConfigFile};
+use super::setup_stop;
 use crate::bus::{self, Bus, BusConfig, Journal, ResumePoint, Transport};
 use crate::cell::{execute, RunConfig};
 use crate::cloud::{Geometry, PointCloud};
@@ -107,37 +108,6 @@ fn check_run_settings(file: &ConfigFile, r: &RunConfig) -> anyhow::Result<()> {
         c.map_err(|m| file.refuse("run", &m))?;
     }
     Ok(())
-}
-
-/// The frame to start from: 0, or with `--resume` the journal's resume point, after checking
-/// that the journal belongs to this plan (its SHA-256) and stays within its frames.
-fn start_frame(resume: Option<&Path>, sha: &str, frames: usize) -> anyhow::Result<usize> {
-    let Some(j) = resume else {
-        return Ok(0);
-    };
-    let rp = ResumePoint::from_journal(j)?;
-    match rp.plan_sha256.as_slice() {
-        [h] if h == sha => {}
-        [] => anyhow::bail!(
-            "{}: --resume: the journal records no plan SHA-256 (not written by `run` of this \
-             version): cannot tell which plan it belongs to",
-            j.display()
-        ),
-        hashes => {
-            anyhow::bail!(
-            "{}: --resume: the journal belongs to another plan (SHA-256 {}), this plan's is {sha}",
-            j.display(),
-            hashes.iter().find(|h| *h != sha).map_or("?", |h| h.as_str())
-        )
-        }
-    }
-    let from = rp.resume_from();
-    anyhow::ensure!(
-        from < frames as u64,
-        "{}: --resume: the journal says frame {from} was sent, but the plan has {frames} frames (arm and table)",
-        j.display()
-    );
-    Ok(from as usize)
 }
 
 /// A fresh run refuses to append to a journal of another plan (`--resume` checks its own).
@@ -325,16 +295,29 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
         }
     };
     let sha = sha256_hex(text.as_bytes());
-    let table = job.cell.turntable()?;
+    // a plan over several setups: the setup this run streams, on that setup's workcell
+    let whole = plan;
+    let stage = setup_stop::stage(job.resume, &sha, whole)?;
+    let plan = stage.plan;
+    let (table, workcell, solids) = match stage.setup {
+        1 => (
+            job.cell.turntable()?,
+            job.cell.workcell()?,
+            collide::solids_of(job.cell.solids.as_ref())?,
+        ),
+        n => {
+            let c = setup_stop::cell_of(&cfg.robot, whole, n)?;
+            let table = crate::robot::Turntable::load(&c.servos, &c.workcell)?;
+            let wc = crate::robot::Workcell::load(&c.workcell)?;
+            (table, wc, collide::solids_beside(&c.workcell)?)
+        }
+    };
     let checked = plan
         .check_cell(&robot, table.as_ref(), &cfg.validation)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
     let steps = crate::cell::steps(&checked).len();
-    let workcell = job.cell.workcell()?;
     let mut collision = cfg.collision.clone();
-    collision
-        .solids
-        .extend(collide::solids_of(job.cell.solids.as_ref())?);
+    collision.solids.extend(solids);
     let loaded;
     let inspection = match job.inspection {
         Some(i) => i,
@@ -350,7 +333,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
     };
     plan.check_clearance_cell(inspection, &robot, &workcell, table.as_ref(), &collision)
         .map_err(|e| anyhow::anyhow!("{}: refused: {e}", plan_path.display()))?;
-    let from = start_frame(job.resume, &sha, steps)?;
+    let from = stage.from(job.resume, steps)?;
     let journal_path = (job.journal.clone())
         .or(job.resume.map(Path::to_path_buf))
         .unwrap_or_else(|| plan_path.with_file_name("journal.jsonl"));
@@ -372,7 +355,10 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
         );
         return Ok(None);
     }
-    let journal = Journal::append(&journal_path)?.for_plan(&sha);
+    let journal = Journal::append(&journal_path)?
+        .for_plan(&sha)
+        .for_setup(stage.setup as u64);
+    let then = setup_stop::next_stop(whole, stage.setup, &journal_path, plan_path);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
     if let Some(ground) = ground {
@@ -382,21 +368,25 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
             "run: --part: the virtual part's grinding does not follow the turntable; run the plan without --part"
         );
         let arm = ground.arm(&map)?;
-        let bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
-        stream(bus, &checked, plan, from, &cfg.run, stop, &journal_path)?;
+        let mut bus = Bus::connect(arm.transport(), bus_cfg, journal)?;
+        bus.set_stop_flag(stop);
+        let (run, at) = (&cfg.run, &journal_path);
+        stream(bus, &checked, plan, from, run, at, then.as_ref())?;
         return ground
             .finish(&arm, &map, &workcell.robot_from_reference)
             .map(Some);
     }
     let link = super::arm::open_link(job.device, &sim, &bus_cfg.servo_map, "run")?;
+    let mut bus = Bus::connect(link, bus_cfg, journal)?;
+    bus.set_stop_flag(stop);
     stream(
-        Bus::connect(link, bus_cfg, journal)?,
+        bus,
         &checked,
         plan,
         from,
         &cfg.run,
-        stop,
         &journal_path,
+        then.as_ref(),
     )
     .map(|()| None)
 }
@@ -441,10 +431,9 @@ fn stream<T: Transport>(
     plan: &Plan,
     from: usize,
     cfg: &RunConfig,
-    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
     journal: &Path,
+    then: Option<&setup_stop::OperatorStop>,
 ) -> anyhow::Result<()> {
-    bus.set_stop_flag(stop);
     let port = bus.transport().describe();
     match execute(&mut bus, checked, plan.period, from, cfg) {
         Ok(r) => {
@@ -461,7 +450,9 @@ fn stream<T: Transport>(
                 r.final_raw,
                 journal.display()
             );
-            Ok(())
+            let Some(op) = then else { return Ok(()) };
+            bus.operator_stop(&op.kind, op.setup, &op.message)?;
+            Err(op.clone().into())
         }
         Err(e) => Err(anyhow::anyhow!(
             "run: {port}: stopped: {e}; journal {} (continue with --resume {})",

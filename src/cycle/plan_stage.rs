@@ -69,9 +69,19 @@ pub fn plan_into(
         e => e.into(),
     })?;
     let solids = motion::collide::solids_of(cell.solids.as_ref())?;
+    // the cell's setups: setup 1 as held, then setup-N/ beside its workcell file
+    let mut cells = vec![motion::setups::SetupCell {
+        file: cfg.robot.workcell.clone(),
+        workcell,
+        table: cell.turntable()?,
+        solids: solids.clone(),
+    }];
+    cells.extend(motion::setups::load_further(
+        &cfg.robot.workcell,
+        &cfg.robot.servos,
+    )?);
+    let plan = motion::setups::plan(inspection, &robot, &cells, &cfg.plan)?;
     cfg.plan.collision.solids.extend(solids);
-    let table = cell.turntable()?;
-    let plan = motion::plan(inspection, &robot, &workcell, table.as_ref(), &cfg.plan)?;
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;
     let written = found.map_or(&[][..], |f| &f.written[..]);

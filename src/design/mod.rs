@@ -100,6 +100,24 @@ pub struct Design {
     /// The fixturings of the part: the candidate's mounting first, then the further ones
     /// (`setups::setups`), each with its own coverage and the coverage of all up to it.
     pub setups: Vec<setups::Fixturing>,
+    /// The cell of each further setup (setup 2 on), written to the cell folder's `setup-N/`
+    /// (not in design.json: `setups` there names their mountings).
+    #[serde(skip)]
+    pub setup_cells: Vec<FurtherSetup>,
+}
+
+/// A further setup's placement and solids, as written to `setup-N/workcell.toml` and
+/// `setup-N/solids.toml`.
+#[derive(Debug, Clone)]
+pub struct FurtherSetup {
+    /// The candidate with this setup's mounting.
+    pub candidate: Candidate,
+    /// robot_from_reference at table angle 0 (metres, as workcell.toml).
+    pub robot_from_reference: [[f64; 4]; 4],
+    /// The fixed solids with this mounting's spindle.
+    pub solids: Vec<(String, [f64; 3], [f64; 3])>,
+    /// Share of the articular surface this setup reaches alone.
+    pub coverage: f64,
 }
 
 /// Searches the cell for `part` from `source`'s arm, servos and tool.
@@ -177,16 +195,43 @@ fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Resul
     }
     let reached: Vec<bool> = fin.verdicts.iter().map(|v| v.angle_deg.is_some()).collect();
     let setups = setups::setups(ctx, best, &reached, cfg.setups, cfg.step_deg);
-    let m: Matrix4<f64> = wc.robot_from_reference;
+    let setup_cells = setups
+        .iter()
+        .skip(1)
+        .map(|s| {
+            let candidate = Candidate {
+                mount: s.mount,
+                ..best.clone()
+            };
+            FurtherSetup {
+                robot_from_reference: rows(&eval::placement(&candidate, &part.centroid)),
+                solids: boxes(eval::solids(&candidate, part).unwrap_or_default()),
+                coverage: s.coverage,
+                candidate,
+            }
+        })
+        .collect();
     Ok(Design {
         candidate: best.clone(),
-        robot_from_reference: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
-        solids: solids.into_iter().map(|s| (s.name, s.min, s.max)).collect(),
+        robot_from_reference: rows(&wc),
+        solids: boxes(solids),
         coverage: fin.coverage,
         refused,
         samples: fin.verdicts,
         candidates_scored: 1,
         alternatives: Vec::new(),
         setups,
+        setup_cells,
     })
+}
+
+/// A workcell's robot_from_reference as rows.
+fn rows(wc: &crate::robot::Workcell) -> [[f64; 4]; 4] {
+    let m: Matrix4<f64> = wc.robot_from_reference;
+    std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)]))
+}
+
+/// Solids as (name, min, max).
+fn boxes(solids: Vec<Solid>) -> Vec<(String, [f64; 3], [f64; 3])> {
+    solids.into_iter().map(|s| (s.name, s.min, s.max)).collect()
 }

@@ -1,13 +1,15 @@
 //! The designed cell's folder: workcell.toml (placement and `[turntable]`), solids.toml,
 //! tool.toml (the source's with the designed shank), the source's dofbot.urdf and servos.toml,
-//! design.json (every sample's verdict) and coverage.png.
+//! design.json (every sample's verdict) and coverage.png; each further setup's workcell.toml and
+//! solids.toml in `setup-N/` (N = 2, 3, ...).
 use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
 
-use super::{Design, SourceCell};
+use super::{Candidate, Design, FurtherSetup, SourceCell};
+pub use crate::motion::setups::SETUP_DIR;
 use crate::report::font;
 
 /// Side of one panel of the coverage picture, pixels.
@@ -23,13 +25,24 @@ pub fn write_cell(design: &Design, source: &SourceCell, out: &Path) -> Result<()
         std::fs::write(&p, text).with_context(|| format!("{}: cannot write", p.display()))
     };
     put("workcell.toml", &workcell_text(design))?;
-    put("solids.toml", &solids_text(design))?;
+    put("solids.toml", &solids_text(&design.solids))?;
     let tool = std::fs::read_to_string(source.dir.join("tool.toml"))
         .with_context(|| format!("{}: cannot read", source.dir.join("tool.toml").display()))?;
     put("tool.toml", &tool_text(&tool, design.candidate.shank_m))?;
     for name in ["dofbot.urdf", "servos.toml"] {
         std::fs::copy(source.dir.join(name), out.join(name))
             .with_context(|| format!("{}: cannot copy", source.dir.join(name).display()))?;
+    }
+    for (k, cell) in design.setup_cells.iter().enumerate() {
+        let n = k + 2;
+        let dir = format!("{SETUP_DIR}{n}");
+        std::fs::create_dir_all(out.join(&dir))
+            .with_context(|| format!("{}: cannot create", out.join(&dir).display()))?;
+        put(
+            &format!("{dir}/workcell.toml"),
+            &setup_workcell_text(n, cell),
+        )?;
+        put(&format!("{dir}/solids.toml"), &solids_text(&cell.solids))?;
     }
     put("design.json", &serde_json::to_string_pretty(design)?)?;
     picture(design, &out.join("coverage.png"))
@@ -41,9 +54,7 @@ fn vec3(v: &[f64; 3]) -> String {
 
 fn workcell_text(d: &Design) -> String {
     let c = &d.candidate;
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
+    let header = format!(
         "# Designed by `polishbot cell design` (docs/ALGORITHMS.md, \"Cell design\"): the part's\n\
          # direction {} (reference frame) lies along the table axis, its centroid on the axis at\n\
          # the centre below; a sample of the articular surface counts as reached when some table\n\
@@ -53,12 +64,41 @@ fn workcell_text(d: &Design) -> String {
         vec3(&c.mount),
         100.0 * d.coverage
     );
+    placement_text(&header, c, &d.robot_from_reference, 6)
+}
+
+/// Setup `n`'s workcell.toml (`setup-N/`): the part re-fixtured with another direction along
+/// the same table axis.
+fn setup_workcell_text(n: usize, s: &FurtherSetup) -> String {
+    let header = format!(
+        "# Setup {n} of the designed cell (`polishbot cell design`, docs/ALGORITHMS.md, \"Cell\n\
+         # design\"): the part re-fixtured on the same table with its direction {} (reference\n\
+         # frame) along the table axis; this setup alone reaches {:.1} % of the articular\n\
+         # surface. `plan` plans here the regions setup 1 leaves short; `run` stops for the\n\
+         # re-fixture. This placement is the design's: after re-fixturing, measure it with\n\
+         # `polishbot calibrate workcell --setup {n}` (docs/CALIBRATION.md), which rewrites this file.",
+        vec3(&s.candidate.mount),
+        100.0 * s.coverage
+    );
+    // 9 decimals: the rotation of a mounting off the axes is orthonormal to 1e-9 there (at
+    // 6 its error, 1e-6, is what Workcell::load refuses)
+    placement_text(&header, &s.candidate, &s.robot_from_reference, 9)
+}
+
+/// A workcell.toml: `header`, the placement (`decimals` places) and the `[turntable]` of `c`.
+fn placement_text(header: &str, c: &Candidate, m: &[[f64; 4]; 4], decimals: usize) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "{header}");
     s.push_str("robot_from_reference = [\n");
-    for row in &d.robot_from_reference {
+    for row in m {
         let _ = writeln!(
             s,
-            "  [{:.6}, {:.6}, {:.6}, {:.6}],",
-            row[0], row[1], row[2], row[3]
+            "  [{:.p$}, {:.p$}, {:.p$}, {:.p$}],",
+            row[0],
+            row[1],
+            row[2],
+            row[3],
+            p = decimals
         );
     }
     s.push_str(
@@ -68,13 +108,13 @@ fn workcell_text(d: &Design) -> String {
     s
 }
 
-fn solids_text(d: &Design) -> String {
+fn solids_text(solids: &[(String, [f64; 3], [f64; 3])]) -> String {
     let mut s = String::from(
         "# Fixed solids of the designed cell (robot frame, metres, axis-aligned boxes): the base\n\
          # plane, and the table's spindle (a chain of cubes along the axis), housing and post as\n\
          # the design assumed them. Measure the real fixture and write it here.\n",
     );
-    for (name, min, max) in &d.solids {
+    for (name, min, max) in solids {
         let _ = writeln!(
             s,
             "\n[[solid]]\nname = {name:?}\nmin = {}\nmax = {}",

@@ -170,5 +170,6 @@ pub fn region_report(
             covered_reachable as f64 / reachable as f64
         },
         coverage_of_all: covered as f64 / n,
+        setup: None,
     }
 }

@@ -62,6 +62,42 @@ pub struct Plan {
     /// The turntable's angles and moves (absent in a cell without a turntable).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub turntable: Option<TablePlan>,
+    /// A cell with further setups (`setup-N/` beside its workcell.toml): per setup its
+    /// placement's hash, the regions planned in it and, from setup 2 on, its own plan, which
+    /// streams after the operator re-fixtures the part (absent in a cell with one setup).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub setups: Vec<SetupPart>,
+}
+
+/// A setup in plan.json.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SetupPart {
+    /// Setup number, 1 first.
+    pub setup: usize,
+    /// The workcell file planned on.
+    pub workcell: String,
+    /// SHA-256 of the placement (`setups::placement_sha256`): the setup streams only to a cell whose
+    /// workcell file gives the same.
+    pub placement_sha256: String,
+    /// Regions planned in this setup.
+    pub regions: Vec<usize>,
+    /// Regions tried in this setup and left where they were: what it covered and why not more.
+    pub tried: Vec<TriedSetup>,
+    /// This setup's plan (setup 2 on; setup 1's is the plan holding this list).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<Box<Plan>>,
+}
+
+/// A region tried in a setup that did not take it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TriedSetup {
+    /// The region.
+    pub region: usize,
+    /// Share of its core points the setup's plan covered (0: refused).
+    pub coverage: f64,
+    /// The first reason the setup's plan gives (the rule that refused the region's contacts,
+    /// or the planner's error); None when it covered no less than the region's setup.
+    pub refused: Option<String>,
 }
 
 /// A plan that passed [`Plan::check`]: its frames as bytes and their raw poses.

@@ -26,6 +26,7 @@ pub mod program;
 pub mod raster;
 pub mod report;
 pub mod ros;
+pub mod setups;
 mod stroke;
 pub mod surface;
 pub mod table;
@@ -156,6 +157,7 @@ pub fn plan_part(
         metrics,
         removal,
         turntable: None,
+        setups: Vec::new(),
     })
 }
 

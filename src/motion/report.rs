@@ -72,6 +72,10 @@ pub struct RegionReport {
     pub coverage_of_reachable: f64,
     /// Share of all core points within the tool footprint of a planned stroke.
     pub coverage_of_all: f64,
+    /// The setup (fixturing, 1 first) the region is planned in; absent in a cell with one
+    /// setup.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub setup: Option<usize>,
 }
 
 /// The reachability report of plan.json.

@@ -37,7 +37,7 @@ const FALLBACK_SPREAD_DEG: f64 = 20.0;
 /// Share of a region's core points a plan should cover: a region its group leaves below this
 /// is tried alone at its next candidate angles (the reach estimate samples single points; the
 /// strokes can still split or be refused at the chosen angle).
-const GOOD_COVERAGE: f64 = 0.95;
+pub(super) const GOOD_COVERAGE: f64 = 0.95;
 
 /// Plans `inspection` in a cell with `table` (`None`: exactly [`super::plan_part`]).
 pub fn plan(
@@ -267,13 +267,13 @@ impl GroupedPlan<'_> {
 const REASON_CHARS: usize = 240;
 
 /// The first clause of a planner error (up to the first `;`), at most [`REASON_CHARS`].
-fn first_clause(e: &str) -> String {
+pub(super) fn first_clause(e: &str) -> String {
     let first = e.split(';').next().unwrap_or(e).trim();
     first.chars().take(REASON_CHARS).collect()
 }
 
 /// Share of region `id`'s core points a plan covers (0 without a plan).
-fn coverage(plan: Option<&Plan>, id: usize) -> f64 {
+pub(super) fn coverage(plan: Option<&Plan>, id: usize) -> f64 {
     plan.and_then(|p| p.reachability.regions.iter().find(|r| r.id == id))
         .map_or(0.0, |r| r.coverage_of_all)
 }
@@ -284,7 +284,7 @@ fn tidy_deg(angle: f64) -> f64 {
 }
 
 /// Whether `region` gets strokes (the filter of [`super::plan_part`]).
-fn planned(region: &RegionInfo, config: &PlanConfig, robot: &Robot) -> bool {
+pub(super) fn planned(region: &RegionInfo, config: &PlanConfig, robot: &Robot) -> bool {
     let geometry = config.geometry(robot.tool.radius_mm());
     region.repairable && !raster::layer_offsets(region.peak, &geometry).is_empty()
 }

@@ -11,7 +11,7 @@ use plotters::style::RGBColor;
 use super::coverage::Class;
 use super::inspection::region_mark;
 use super::plan_page::{self, CoverageMap, PlanPage, PredictedRegion, ToolPath};
-use super::plan_reach::{self, Reach, PLANNED, RULE0};
+use super::plan_reach::{self, PlanCoverage, PLANNED, RULE0};
 use super::provenance::Provenance;
 use super::{ReportConfig, ReportInput, Table};
 use crate::motion::{Plan, Segment, SegmentKind, StrokeKind};
@@ -41,7 +41,7 @@ const RULE_COLOURS: [RGBColor; 8] = [
 const SAME_POINT_MM: f64 = 1e-6;
 
 /// The coverage map's classes with their legend lines, and the table of rules.
-fn coverage(reach: &Reach, inspection: &Inspection) -> (CoverageMap, Table) {
+fn coverage(reach: &PlanCoverage, inspection: &Inspection) -> (CoverageMap, Table) {
     let count = |c: usize| reach.class.iter().filter(|&&k| k == c).count();
     let mut classes = vec![
         Class {

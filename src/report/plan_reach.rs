@@ -20,7 +20,7 @@ pub const CONFORM: usize = 0;
 pub const PIT: usize = 1;
 /// Class of a core point within the footprint of a planned stroke.
 pub const PLANNED: usize = 2;
-/// First class of a rule: class `RULE0 + k` is left out by `Reach::rules[k]`.
+/// First class of a rule: class `RULE0 + k` is left out by `PlanCoverage::rules[k]`.
 pub const RULE0: usize = 3;
 /// The rule of a repairable region's point that no planned stroke covers and for which
 /// plan.json lists no refused contact of its region (a rim the removal planner lifts over, a
@@ -45,7 +45,7 @@ pub struct RuleCount {
 
 /// The coverage of the part by the plan.
 #[derive(Debug, Clone)]
-pub struct Reach {
+pub struct PlanCoverage {
     /// Class per core point ([`CONFORM`], [`PIT`], [`PLANNED`], `RULE0 + k`).
     pub class: Vec<usize>,
     /// The rules, most path points first ([`UNSTATED`] last when present).
@@ -82,7 +82,7 @@ fn dense_strokes(plan: &Plan, id: usize) -> Vec<Point3<f64>> {
 }
 
 /// Classes the inspection's core points by `plan` and tabulates what is left out.
-pub fn reach(plan: &Plan, inspection: &Inspection) -> Reach {
+pub fn reach(plan: &Plan, inspection: &Inspection) -> PlanCoverage {
     let mut names: Vec<String> = Vec::new();
     let mut path_points: BTreeMap<String, usize> = BTreeMap::new();
     for u in &plan.reachability.unreachable {
@@ -170,7 +170,7 @@ pub fn reach(plan: &Plan, inspection: &Inspection) -> Reach {
         .filter(|c| **c >= RULE0)
         .for_each(|c| *c = RULE0 + new_of[*c - RULE0]);
     rules = order.iter().map(|&k| rules[k].clone()).collect();
-    Reach {
+    PlanCoverage {
         class,
         rules,
         planned,

@@ -9,7 +9,7 @@
 use polishbot::motion::{plan, PlanMode};
 
 use super::heldout::{accept, turned_tally};
-use crate::common::femoral::{cell, planned_area, reasons, uniform_case};
+use crate::common::femoral::{cell, planned_area, reasons, setups, uniform_case};
 
 /// Least share of the repairable area planned: issue 51's 0.9. The designed cell reaches
 /// 86 % of the articular surface (the design's own score: the notch walls and the condyles'
@@ -53,4 +53,28 @@ fn uniform_defects_in_removal_mode_keep_the_ball_within_its_preload() {
         &plan,
         &tally,
     );
+}
+
+/// The two-setup plan of seed 5101 (a region there no table angle of setup 1 brings into the
+/// cone goes to setup 2), removal mode: each setup's plan through the same check, its part
+/// placed as that setup's workcell.toml places it and turned by this test at each sample's
+/// table angle.
+#[test]
+fn a_two_setup_plan_keeps_the_ball_within_its_preload_in_each_setup() {
+    let insp = uniform_case(5101);
+    let (robot, cells, mut config) = setups("femoral/");
+    config.mode = PlanMode::Removal;
+    let plan = polishbot::motion::setups::plan(&insp, &robot, &cells, &config).expect("plan");
+    let mut checked = 0;
+    for (part, dir) in plan.setups.iter().zip(["femoral/", "femoral/setup-2/"]) {
+        let k = part.setup - 1;
+        let p = part.plan.as_deref().unwrap_or(&plan);
+        if p.passes.is_empty() {
+            continue;
+        }
+        let tally = turned_tally(p, &robot, &insp, &cells[k].workcell, dir);
+        accept(&format!("uniform defects, setup {}", part.setup), p, &tally);
+        checked += 1;
+    }
+    assert_eq!(checked, 2, "both setups grind");
 }

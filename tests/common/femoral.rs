@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::Vector3;
+use polishbot::motion::setups::SetupCell;
 use polishbot::motion::{Inspection, Plan, PlanConfig, SurfacePoint};
 use polishbot::regions::Region;
 use polishbot::robot::{Robot, Turntable, Workcell};
@@ -24,6 +25,16 @@ pub fn cell(dir: &str) -> (Robot, Workcell, Option<Turntable>, PlanConfig) {
     let solids = polishbot::motion::collide::solids_beside(&f("workcell.toml")).unwrap();
     config.collision.solids.extend(solids);
     (robot, wc, table, config)
+}
+
+/// The setups of `calibration/DIR` (its workcell.toml, then `setup-N/` beside it, as `plan`
+/// reads them), its robot and the planner's settings without the solids (each setup brings
+/// its own).
+pub fn setups(dir: &str) -> (Robot, Vec<SetupCell>, PlanConfig) {
+    let f = |name: &str| super::calib(&format!("{dir}{name}"));
+    let robot = Robot::load(&f("dofbot.urdf"), &f("tool.toml"), &f("servos.toml")).unwrap();
+    let cells = polishbot::motion::setups::load(&f("workcell.toml"), &f("servos.toml")).unwrap();
+    (robot, cells, PlanConfig::rigid())
 }
 
 /// An inspection of a `synth` case of the real femoral component with `defects` random
@@ -122,10 +133,15 @@ const POINTS: usize = 15_000;
 
 /// Seed `seed`'s case: `DEFECTS` defects uniform over the articular surface.
 pub fn uniform_case(seed: u64) -> Inspection {
-    of_case(&SynthConfig {
+    of_case(&uniform_config(seed))
+}
+
+/// The synth settings of [`uniform_case`] (`synthetic::inspection` writes its folder).
+pub fn uniform_config(seed: u64) -> SynthConfig {
+    SynthConfig {
         reference_points: POINTS,
         ..super::femoral_synth(seed, DEFECTS)
-    })
+    }
 }
 
 /// The same on synth's parametric femoral part (its own frame: medial-lateral along x).
