@@ -70,13 +70,7 @@ fn rms(d: &[f64]) -> Option<f64> {
 /// Ids of the regions `plan` grinds: depth layers planned (rigid mode), or a removal
 /// prediction (removal mode).
 pub fn planned_regions(plan: &Plan) -> Vec<usize> {
-    let mut ids: Vec<usize> = plan
-        .reachability
-        .regions
-        .iter()
-        .filter(|r| r.layers > 0)
-        .map(|r| r.id)
-        .collect();
+    let mut ids = plan.reachability.planned_ids();
     if let Some(rem) = &plan.removal {
         ids.extend(rem.regions.iter().map(|r| r.region));
     }

@@ -89,6 +89,16 @@ pub struct Reachability {
     pub jumps: usize,
 }
 
+impl Reachability {
+    /// Ids of the regions the plan grinds (at least one layer planned), in report order.
+    pub fn planned_ids(&self) -> Vec<usize> {
+        (self.regions.iter())
+            .filter(|r| r.layers > 0)
+            .map(|r| r.id)
+            .collect()
+    }
+}
+
 /// Quality of the plan, measured on the sampled trajectory through the robot model.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {

@@ -189,13 +189,7 @@ pub fn plan(
     } else {
         plan_in(first, &only(inspection, |id| !moved.contains(&id)))?
     };
-    parts[0].regions = top
-        .reachability
-        .regions
-        .iter()
-        .filter(|r| r.layers > 0)
-        .map(|r| r.id)
-        .collect();
+    parts[0].regions = top.reachability.planned_ids();
     merge_reports(&mut top, &mut parts, inspection);
     top.setups = parts;
     Ok(top)

@@ -6,13 +6,12 @@ use std::path::Path;
 
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
-use rayon::prelude::*;
 
 use super::colour::shade;
 use super::font;
 use super::input::{ReportConfig, ReportInput};
-use super::raster::{self, Raster, NONE};
-use super::views::{cameras, CLASSIC, MIN_REGION_PX, PER_ROW, TITLE_H, VIEWS};
+use super::raster::NONE;
+use super::views::{view_rasters, CLASSIC, MIN_REGION_PX, PER_ROW, TITLE_H, VIEWS};
 
 /// Height of one legend line, px.
 const LEGEND_LINE_PX: u32 = 24;
@@ -62,13 +61,7 @@ pub fn draw(
         class.len(),
         input.points.len()
     );
-    font::register();
-    let panel = cfg.panel_px.max(100) as usize;
-    let cams = cameras(input, panel);
-    let rasters: Vec<Raster> = cams
-        .par_iter()
-        .map(|cam| raster::raster(input, cam, |_| true))
-        .collect();
+    let (panel, cams, rasters) = view_rasters(input, cfg);
     let pixels: Vec<Vec<usize>> = (rasters.iter())
         .map(|r| {
             let mut n = vec![0; classes.len()];

@@ -47,6 +47,22 @@ pub struct Overview {
     pub panels: Vec<(String, Vec<usize>)>,
 }
 
+/// The standard views at `cfg`'s panel size: the panel side in pixels, one camera per view
+/// ([`cameras`]) and each camera's raster of every point (the font registered for the titles).
+pub(super) fn view_rasters(
+    input: &ReportInput,
+    cfg: &ReportConfig,
+) -> (usize, Vec<Camera>, Vec<Raster>) {
+    font::register();
+    let panel = cfg.panel_px.max(100) as usize;
+    let cams = cameras(input, panel);
+    let rasters = cams
+        .par_iter()
+        .map(|cam| raster::raster(input, cam, |_| true))
+        .collect();
+    (panel, cams, rasters)
+}
+
 /// One camera per standard view, one scale for all so sizes compare.
 pub(super) fn cameras(input: &ReportInput, panel: usize) -> Vec<Camera> {
     let mut cams: Vec<Camera> = VIEWS
@@ -183,13 +199,7 @@ pub fn draw_unmeasured(
     };
     let inside = |i: usize| un.in_area.is_none_or(|a| a[i]);
     let missing = |i: usize| inside(i) && !input.distances[i].is_finite();
-    font::register();
-    let panel = cfg.panel_px.max(100) as usize;
-    let cams = cameras(input, panel);
-    let rasters: Vec<Raster> = cams
-        .par_iter()
-        .map(|cam| raster::raster(input, cam, |_| true))
-        .collect();
+    let (panel, cams, rasters) = view_rasters(input, cfg);
     let count = |r: &Raster| {
         r.idx
             .iter()
