@@ -338,9 +338,12 @@ fn calibrate_verify_turns_the_table_and_reports_its_read_back_error() {
         let config = dir.path().join(name);
         let text = format!("[sim.mechanics]\nread_noise_counts = 1\nnoise_seed = 7\n{extra}");
         std::fs::write(&config, text).unwrap();
+        // --out: verify writes its measured tip error into a tool.toml; never the shipped cell's
         on_the_table_cell("verify")
             .arg("--config")
             .arg(&config)
+            .arg("--out")
+            .arg(dir.path())
             .output()
             .unwrap()
     };

@@ -14,7 +14,7 @@ use crate::cloud::{Geometry, PointCloud};
 use crate::inspect::Source;
 use crate::motion::file::CheckedPlan;
 use crate::motion::{collide, frames, CollisionConfig, Inspection, Plan, ValidationConfig};
-use crate::robot::{CellFiles, RobotConfig};
+use crate::robot::{sha256_hex, CellFiles, RobotConfig};
 use crate::sim::virtual_part::{self, Ground, GroundPart, Inspected, PartToGrind};
 use crate::sim::SimOptions;
 
@@ -123,13 +123,6 @@ fn check_fresh_journal(path: &Path, sha: &str) -> anyhow::Result<()> {
         path.display()
     );
     Ok(())
-}
-
-/// SHA-256 of a file's bytes, lowercase hex.
-fn sha256_hex(bytes: &[u8]) -> String {
-    use sha2::Digest;
-    let digest = sha2::Sha256::digest(bytes);
-    digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
 /// Refuses a plan made from other files than `run` is given: each file plan.json's

@@ -12,8 +12,6 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use sha2::{Digest, Sha256};
-
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::file::Plan;
@@ -54,10 +52,7 @@ pub fn placement_sha256(wc: &Workcell) -> String {
         .flat_map(|r| (0..4).map(move |c| (r, c)))
         .map(|(r, c)| format!("{:.9}\n", m[(r, c)] + 0.0))
         .collect();
-    Sha256::digest(text.as_bytes())
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
+    crate::robot::sha256_hex(text.as_bytes())
 }
 
 /// The workcell file of setup `n` (1: `workcell` itself).

@@ -65,3 +65,11 @@ impl CellFiles {
         files
     }
 }
+
+/// SHA-256 of `bytes`, lowercase hex: how plan.json names the cell's files and a setup's
+/// placement, so that `run` can tell the cell a plan was made for.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    let digest = sha2::Sha256::digest(bytes);
+    digest.iter().map(|b| format!("{b:02x}")).collect()
+}

@@ -21,7 +21,7 @@ pub mod turntable;
 pub mod units;
 
 pub use calibration::{FileText, Servo, Servos, Tool, ToolText, Workcell};
-pub use cell_files::CellFiles;
+pub use cell_files::{sha256_hex, CellFiles};
 pub use compliance::Compliance;
 pub use error::RobotError;
 pub use ik::{angle_between, IkConfig, IkSolution, IkTarget, Unreachable};
