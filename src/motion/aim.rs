@@ -29,7 +29,6 @@ use std::collections::HashMap;
 use nalgebra::{Matrix3, Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use super::program::Run;
 use super::raster::Stroke;
 use super::surface::Surface;
 
@@ -146,21 +145,19 @@ fn key(p: [f64; 3]) -> [u64; 3] {
 
 /// `strokes` with every pressed point (negative offset) moved along the surface by
 /// `-offset x a_t / cos`, a the unit spindle axis (shank to tip, reference frame) the `trial`
-/// walk of the same strokes held there, `a_t` its part along the surface and cos its angle
+/// walk of the same strokes held there (each walked point's `surface_mm` and robot-frame axis), `a_t` its part along the surface and cos its angle
 /// with the inward normal; the moved point is projected onto `surface` with its normal there.
 /// `back` turns robot-frame directions into the reference frame. Points the trial left out
 /// stay where they were.
 pub(crate) fn aimed(
     strokes: &[Stroke],
-    trial: &[Run],
+    trial: impl IntoIterator<Item = ([f64; 3], [f64; 3])>,
     back: &Matrix3<f64>,
     surface: &Surface,
 ) -> Vec<Stroke> {
     let held: HashMap<[u64; 3], Vector3<f64>> = trial
-        .iter()
-        .flatten()
-        .flat_map(|pass| &pass.points)
-        .map(|p| (key(p.surface_mm), back * Vector3::from(p.axis)))
+        .into_iter()
+        .map(|(at, axis)| (key(at), back * Vector3::from(axis)))
         .collect();
     let mut out = strokes.to_vec();
     for point in out.iter_mut().flat_map(|s| s.points.iter_mut()) {

@@ -119,7 +119,9 @@ pub(crate) fn plan_regions(
                 // a first walk finds the axis held at each point (`aim`)
                 let trial = walk(&strokes, &mut prev.clone(), &mut Vec::new(), &mut 0);
                 let back = dwell::reference_from_robot(workcell);
-                aim::aimed(&strokes, &trial, &back, &surface)
+                let held = trial.iter().flatten().flat_map(|pass| &pass.points);
+                let held = held.map(|p| (p.surface_mm, p.axis));
+                aim::aimed(&strokes, held, &back, &surface)
             }
             _ => strokes,
         };

@@ -22,7 +22,6 @@ pub mod feed;
 pub mod file;
 pub mod frames;
 mod free_motion;
-mod margin;
 pub mod order;
 mod predict;
 pub mod program;
@@ -35,6 +34,7 @@ pub mod surface;
 pub mod table;
 pub mod table_check;
 pub mod table_file;
+mod tilt;
 pub mod trajectory;
 pub mod validate;
 
