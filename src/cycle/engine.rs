@@ -220,7 +220,7 @@ impl Loop<'_> {
         }
         let (plan_file, planned) = match made {
             Some(made) => made,
-            None => self.plan(&inspection, &found, &dir)?,
+            None => self.plan(&inspection, &found, (&dir, k))?,
         };
         let last = self.records.last_mut().expect("pushed above");
         last.planned(&inspection, &planned.plan);
@@ -271,13 +271,15 @@ impl Loop<'_> {
         inspect::inspect_into(&self.cfg.inspect, &inputs, into)
     }
 
-    /// Plans from `inspection` into DIR/plan.json with the loop's plan settings and its tool
-    /// file (written as DIR/plan.toml, an output: the `[plan]` settings with `robot.tool` set).
+    /// Plans grind `grind` from `inspection` into DIR/plan.json with the loop's plan settings
+    /// and its tool file (written as DIR/plan.toml, an output: the `[plan]` settings with
+    /// `robot.tool`, the carried `aim` and `finish.grind` set: grind 2 on is planned as a
+    /// finish, `motion::finish`).
     fn plan(
         &self,
         inspection: &Inspection,
         found: &inspect::Findings,
-        dir: &Path,
+        (dir, grind): (&Path, usize),
     ) -> anyhow::Result<(PathBuf, Planned)> {
         println!("== cycle: plan");
         let cell = match &self.tool {
@@ -286,20 +288,26 @@ impl Loop<'_> {
         };
         let tool = &cell.tool;
         let settings = dir.join("plan.toml");
-        let mut table = self.cfg.plan_table.clone();
-        if !self.aim.is_empty() {
-            // the carried shift, so that `plan --config plan.toml` makes this plan again
-            let plan = table
-                .entry("plan")
-                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
-            if let (Some(p), Ok(aim)) = (plan.as_table_mut(), toml::Value::try_from(&self.aim)) {
-                p.insert("aim".into(), aim);
-            }
-        }
-        with_tool(&table, &tool.path, &settings)?;
         let mut cfg = self.cfg.plan.clone();
         cfg.robot.tool = tool.path.clone();
         cfg.plan.aim = self.aim.clone();
+        cfg.plan.finish.grind = grind;
+        // the carried shift and the grind, so that `plan --config plan.toml` makes this plan
+        // again
+        let mut table = self.cfg.plan_table.clone();
+        let plan = table
+            .entry("plan")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if let Some(p) = plan.as_table_mut() {
+            let aim = (!self.aim.is_empty()).then(|| toml::Value::try_from(&self.aim));
+            if let Some(Ok(aim)) = aim {
+                p.insert("aim".into(), aim);
+            }
+            if let Ok(finish) = toml::Value::try_from(&cfg.plan.finish) {
+                p.insert("finish".into(), finish);
+            }
+        }
+        with_tool(&table, &tool.path, &settings)?;
         let refuse = |m: &str| anyhow::anyhow!("{}: [plan] {m}", settings.display());
         let plan_file = dir.join("plan.json");
         let found = Some(found);

@@ -9,7 +9,7 @@ use super::error::PlanError;
 use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{aim, collide, dwell, order, predict, program, raster, surface};
+use super::{aim, collide, dwell, finish, order, predict, program, raster, surface};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::units::mm;
@@ -113,7 +113,12 @@ pub(crate) fn plan_regions(
             None => raster::layer_offsets(region.peak, &geometry),
             Some(t) => vec![-t.preload_mm],
         };
-        let strokes = raster::raster_at(region, &members, &surface, &geometry, &offsets);
+        // one raster, or a finish's cross-hatch (`finish`)
+        let turns = match tool {
+            None => vec![0.0],
+            Some(_) => config.finish.turns(),
+        };
+        let strokes = finish::strokes((region, &members), &surface, &geometry, &offsets, &turns);
         let strokes = match tool {
             Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
                 // a first walk finds the axis held at each point (`aim`)

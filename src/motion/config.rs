@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 use super::aim::Aim;
 use super::collide::CollisionConfig;
 use super::error::PlanError;
+use super::finish::FinishConfig;
 use super::raster::RasterGeometry;
 use super::trajectory::TrajectoryConfig;
 use super::validate::ValidationConfig;
@@ -100,6 +101,10 @@ pub struct PlanConfig {
     /// distance from the planned tip 1.463 / 2.173 / 2.225 mm uncompensated, 0.148 / 0.156 /
     /// 2.056 mm compensated: docs/ALGORITHMS.md, "Compliance compensation").
     pub compensate_compliance: bool,
+    /// The loop's later grinds as finishing strokes (`motion::finish`: a smaller influence,
+    /// a cross-hatch, the removal capped); the loop sets `finish.grind`.
+    #[serde(skip_serializing_if = "FinishConfig::is_default")]
+    pub finish: FinishConfig,
 }
 
 impl Default for PlanConfig {
@@ -135,6 +140,7 @@ impl Default for PlanConfig {
             tolerance_mm: DEFAULT_TOLERANCE_MM,
             aim: Aim::default(),
             compensate_compliance: true,
+            finish: FinishConfig::default(),
         }
     }
 }
@@ -212,6 +218,7 @@ impl PlanConfig {
         self.removal.check().map_err(PlanError::Config)?;
         self.monte_carlo.check().map_err(PlanError::Config)?;
         self.aim.check().map_err(PlanError::Config)?;
+        self.finish.check().map_err(PlanError::Config)?;
         for (name, v) in [
             ("force_share", self.force_share),
             ("tolerance_mm", self.tolerance_mm),

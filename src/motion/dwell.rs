@@ -221,7 +221,10 @@ pub fn set_dwell(
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let aim = removal::targets(&cores, allowance, tolerance);
     // no removal shift measured yet: the whole region, at most the first pass's depth
-    let aim: Vec<f64> = aim.iter().map(|t| config.aim.cap(*t, tolerance)).collect();
+    // a finish asks for a share of what is left (`finish`)
+    let aim: Vec<f64> = (aim.iter())
+        .map(|t| config.finish.cap(config.aim.cap(*t, tolerance)))
+        .collect();
     let plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),

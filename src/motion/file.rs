@@ -77,6 +77,10 @@ pub struct Plan {
     pub reachability: Reachability,
     /// Measured quality of the plan.
     pub metrics: Metrics,
+    /// Removal mode: the strokes the plan used (a raster, or finishing strokes with their
+    /// preload and turns: `motion::finish`); absent in rigid mode and in older plans.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub strokes: Option<super::finish::StrokeRecord>,
     /// Removal mode: the dwell map and the predicted part per region (absent in rigid mode).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub removal: Option<crate::removal::prediction::RemovalReport>,

@@ -20,6 +20,7 @@ pub mod dwell;
 pub mod error;
 pub mod feed;
 pub mod file;
+pub mod finish;
 pub mod frames;
 mod free_motion;
 pub mod order;
@@ -67,7 +68,12 @@ pub fn plan_part(
     config.check(robot)?;
     let tool = match config.mode {
         PlanMode::Rigid => None,
-        PlanMode::Removal => Some(removal::ToolModel::of_robot(robot).map_err(PlanError::Config)?),
+        // a finish presses with a share of the preload (`finish`): every model below follows
+        PlanMode::Removal => Some(
+            config
+                .finish
+                .tool(removal::ToolModel::of_robot(robot).map_err(PlanError::Config)?),
+        ),
     };
     // the compliant ball is commanded `preload` inside the surface: the grinding rule of the
     // collision model (grinding, pressing in and out) accepts that much more penetration
@@ -162,6 +168,7 @@ pub fn plan_part(
         compensation,
         reachability,
         metrics,
+        strokes: tool.as_ref().map(|t| config.finish.record(t)),
         removal,
         turntable: None,
         setups: Vec::new(),

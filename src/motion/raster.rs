@@ -89,7 +89,21 @@ pub fn raster_at(
     g: &RasterGeometry,
     offsets: &[f64],
 ) -> Vec<Stroke> {
-    let lines = raster_lines(region, members, g);
+    raster_turned(region, members, surface, g, offsets, 0.0)
+}
+
+/// Strokes over `region` as [`raster_at`] lays them, with the lines turned by `turn` rad
+/// (about the region's normal) from the members' principal direction: the finishing
+/// planner's cross-hatch (`motion::finish`).
+pub fn raster_turned(
+    region: &RegionInfo,
+    members: &[SurfacePoint],
+    surface: &Surface,
+    g: &RasterGeometry,
+    offsets: &[f64],
+    turn: f64,
+) -> Vec<Stroke> {
+    let lines = raster_lines(region, members, g, turn);
     let mut out = Vec::new();
     let project = |uv: &[Point3<f64>], offset: f64| -> Vec<PathPoint> {
         uv.iter()
@@ -136,7 +150,7 @@ pub fn raster_at(
 }
 
 /// Points from `a` to `b` (both included) no farther apart than `spacing`.
-fn resample(a: &Point3<f64>, b: &Point3<f64>, spacing: f64) -> Vec<Point3<f64>> {
+pub(crate) fn resample(a: &Point3<f64>, b: &Point3<f64>, spacing: f64) -> Vec<Point3<f64>> {
     let n = ((b - a).norm() / spacing).ceil().max(1.0) as usize;
     (0..=n)
         .map(|k| a + (b - a) * (k as f64 / n as f64))
@@ -144,12 +158,13 @@ fn resample(a: &Point3<f64>, b: &Point3<f64>, spacing: f64) -> Vec<Point3<f64>> 
 }
 
 /// The raster lines in the region's tangent plane (points off the surface, to be projected):
-/// lines along the principal direction of the members, `stepover` apart, centred on their
-/// spread; each line spans the members nearest to it.
+/// lines along the principal direction of the members turned by `turn` rad, `stepover` apart,
+/// centred on their spread; each line spans the members nearest to it.
 fn raster_lines(
     region: &RegionInfo,
     members: &[SurfacePoint],
     g: &RasterGeometry,
+    turn: f64,
 ) -> Vec<Vec<Point3<f64>>> {
     let c = Point3::from(region.centroid);
     let n = Vector3::from(region.normal).normalize();
@@ -169,6 +184,8 @@ fn raster_lines(
         1
     };
     let d: Vector2<f64> = eig.eigenvectors.column(k).into_owned();
+    let (sin, cos) = turn.sin_cos();
+    let d = Vector2::new(d.x * cos - d.y * sin, d.x * sin + d.y * cos);
     let e1 = (a * d.x + b * d.y).normalize();
     let e2 = n.cross(&e1);
     let coords: Vec<(f64, f64)> = members
