@@ -190,9 +190,12 @@ fn spread(cfg: &FinishConfig, seed: u64) -> Spread {
     }
 }
 
+/// The settings of the loop's grind `n` with the finish on from grind 2 (it is off by default:
+/// `motion::finish::FINISH_FROM_GRIND`).
 fn grind(n: usize) -> FinishConfig {
     FinishConfig {
         grind: n,
+        from_grind: 2,
         ..FinishConfig::default()
     }
 }

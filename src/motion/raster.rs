@@ -105,18 +105,7 @@ pub fn raster_turned(
 ) -> Vec<Stroke> {
     let lines = raster_lines(region, members, g, turn);
     let mut out = Vec::new();
-    let project = |uv: &[Point3<f64>], offset: f64| -> Vec<PathPoint> {
-        uv.iter()
-            .map(|q| {
-                let (surface_pt, normal) = surface.project(q);
-                PathPoint {
-                    surface: surface_pt,
-                    normal,
-                    offset,
-                }
-            })
-            .collect()
-    };
+    let project = |uv: &[Point3<f64>], offset: f64| project(uv, surface, offset);
     let mut order: Vec<usize> = (0..lines.len()).collect();
     let mut forward = true;
     for (layer, &offset) in offsets.iter().enumerate() {
@@ -147,6 +136,21 @@ pub fn raster_turned(
         order.reverse();
     }
     out
+}
+
+/// The points `uv` (off the surface) projected onto `surface`, each a contact at `offset` mm
+/// above it.
+pub(crate) fn project(uv: &[Point3<f64>], surface: &Surface, offset: f64) -> Vec<PathPoint> {
+    uv.iter()
+        .map(|q| {
+            let (surface_pt, normal) = surface.project(q);
+            PathPoint {
+                surface: surface_pt,
+                normal,
+                offset,
+            }
+        })
+        .collect()
 }
 
 /// Points from `a` to `b` (both included) no farther apart than `spacing`.
