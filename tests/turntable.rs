@@ -43,7 +43,10 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
             "case {seed}: repairable {t:.1} mm^2, covered {:.1} % with the table ({} moves, angles {:?} deg), {:.1} % without",
             100.0 * c / t.max(1e-9),
             tp.moves.len(),
-            tp.regions.iter().map(|r| r.angle_deg).collect::<Vec<_>>(),
+            tp.regions
+                .iter()
+                .map(|r| r.angles_deg().collect::<Vec<_>>())
+                .collect::<Vec<_>>(),
             100.0 * c0 / t0.max(1e-9)
         );
         table_file::check(tp, &table, turned.samples.len(), turned.period).expect("table moves");

@@ -17,6 +17,9 @@ use super::table_file::{table_move, RegionTable, TablePlan, TriedAngle};
 use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
+#[path = "table_split.rs"]
+mod split;
+
 /// Spacing of the candidate table angles, degrees: the IK accepts the tool axis within a cone
 /// around the normal (45 degrees), so 5-degree steps lose at most 2.5 degrees of it; over a
 /// 270-degree table that is 55 candidates.
@@ -73,6 +76,7 @@ pub fn plan(
     for (angle, regions) in groups {
         cell.plan_group(angle, regions, &ranked)?;
     }
+    cell.split_short()?;
     let GroupedPlan {
         merged, table_plan, ..
     } = cell;
@@ -360,6 +364,7 @@ fn rank_angles(
                     reachable_share: order[0].1,
                     reachable_share_at_zero: at_zero,
                     tried: Vec::new(),
+                    pieces: Vec::new(),
                 },
                 candidates: spread(&order),
             }
