@@ -100,6 +100,10 @@ pub struct PlanConfig {
     /// distance from the planned tip 1.463 / 2.173 / 2.225 mm uncompensated, 0.148 / 0.156 /
     /// 2.056 mm compensated: docs/ALGORITHMS.md, "Compliance compensation").
     pub compensate_compliance: bool,
+    /// In a cell with a turntable, the most further pieces a region short of 95 % covered
+    /// may be split into, each planned at another table angle (2; 0: no split; docs/
+    /// ALGORITHMS.md, "Turntable", step 5).
+    pub table_pieces: usize,
 }
 
 impl Default for PlanConfig {
@@ -135,9 +139,15 @@ impl Default for PlanConfig {
             tolerance_mm: DEFAULT_TOLERANCE_MM,
             aim: Aim::default(),
             compensate_compliance: true,
+            table_pieces: TABLE_PIECES,
         }
     }
 }
+
+/// Most further pieces per region split by table angle: each costs a table move and an
+/// approach from home; on the uniform femoral cases in the turntable cell the pieces after
+/// the second added nothing (tests/uniform.rs, `uniform_defects_split_by_table_angle`).
+pub const TABLE_PIECES: usize = 2;
 
 /// Tolerance of removal mode when the inspection names none, mm: the acceptance
 /// tolerance.
