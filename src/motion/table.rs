@@ -234,7 +234,7 @@ impl GroupedPlan<'_> {
         let entry = &self.table_plan.regions[k];
         let used: Vec<f64> = entry.angles_deg().map(f64::to_radians).collect();
         let ranked = split::rank(&cell, &left, &candidates(self.table), &used, used[0]);
-        let part = split::piece_of(self.inspection, &region, &left);
+        let part = split::piece_of(self.inspection, &region, &left, merged.removal.as_ref());
         let mut best: Option<(f64, Plan, usize)> = None;
         for angle in spread(&ranked).into_iter().take(split::PIECE_ANGLES) {
             let wc = self.table.workcell_at(self.workcell, angle);
@@ -259,8 +259,11 @@ impl GroupedPlan<'_> {
         self.append(angle, sub)?;
         let mut angles = used;
         angles.push(angle);
-        let merged = self.merged.as_mut().expect("appended");
-        let coverage = split::fold(&cell, merged, &region, &angles).unwrap_or(0.0);
+        let coverage = self
+            .merged
+            .as_mut()
+            .and_then(|merged| split::fold(&cell, merged, &region, &angles))
+            .unwrap_or(0.0);
         self.table_plan.regions[k].pieces.push(TablePiece {
             angle_deg: tidy_deg(angle),
             points: left.len(),

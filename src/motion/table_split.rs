@@ -10,9 +10,12 @@
 //!
 //! Front: `table::plan` calls these for each short region after the groups (its
 //! `GroupedPlan::split_short`): [`uncovered`], [`rank`], [`piece_of`], [`gained`], [`fold`].
+use std::collections::HashMap;
+
 use super::check::{tool_reaches, Cover};
 use super::config::PlanConfig;
 use super::file::Plan;
+use crate::removal::prediction::RemovalReport;
 use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
@@ -162,8 +165,16 @@ pub(super) fn fold(
 }
 
 /// The inspection with region `region` cut down to its core points `left` (the others no
-/// longer in a region: they are ground, or neighbours, for the piece's plan).
-pub(super) fn piece_of(inspection: &Inspection, region: &RegionInfo, left: &[usize]) -> Inspection {
+/// longer in a region: they are ground, or neighbours, for the piece's plan), and the part as
+/// the plan so far leaves it: a core point with a predicted residual in `earlier` (removal
+/// mode) takes the lowest one, so that the piece's dwell and its over-grind check start from
+/// what the earlier strokes remove (at the seam between pieces, and the neighbours).
+pub(super) fn piece_of(
+    inspection: &Inspection,
+    region: &RegionInfo,
+    left: &[usize],
+    earlier: Option<&RemovalReport>,
+) -> Inspection {
     let mut part = inspection.clone();
     for p in part
         .points
@@ -174,6 +185,17 @@ pub(super) fn piece_of(inspection: &Inspection, region: &RegionInfo, left: &[usi
     }
     for &i in left {
         part.points[i].region = region.id as i64;
+    }
+    let key = |p: [f64; 3]| p.map(f64::to_bits);
+    let mut after: HashMap<[u64; 3], f64> = HashMap::new();
+    for row in earlier.map_or(&[][..], |r| &r.rows[..]) {
+        let at = after.entry(key(row.position)).or_insert(row.residual);
+        *at = at.min(row.residual);
+    }
+    for p in part.points.iter_mut() {
+        if let Some(&r) = after.get(&key([p.position.x, p.position.y, p.position.z])) {
+            p.distance = p.distance.min(r);
+        }
     }
     let mut piece = region.clone();
     piece.area = region.area * left.len() as f64 / region.points.max(1) as f64;
