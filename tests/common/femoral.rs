@@ -184,8 +184,8 @@ pub fn ground_at(plan: &Plan, id: usize) -> Vec<f64> {
         let at = tp
             .moves
             .iter()
-            .filter(|m| m.at_sample <= s.first_sample)
-            .last()
+            .rev()
+            .find(|m| m.at_sample <= s.first_sample)
             .map_or(tp.start, |m| *m.samples.last().expect("a move"));
         let deg = (at.to_degrees() * 1e6).round() / 1e6;
         if !out.contains(&deg) {
