@@ -148,6 +148,9 @@ impl Default for PlanConfig {
 /// approach from home; on the uniform femoral cases in the turntable cell the pieces after
 /// the second added nothing (tests/uniform.rs, `uniform_defects_split_by_table_angle`).
 pub const TABLE_PIECES: usize = 2;
+/// Most accepted `table_pieces`: each piece plans the region again at up to 3 table angles,
+/// so the setting bounds the planning time.
+const MAX_TABLE_PIECES: usize = 10;
 
 /// Tolerance of removal mode when the inspection names none, mm: the acceptance
 /// tolerance.
@@ -231,6 +234,12 @@ impl PlanConfig {
                     "`{name}` = {v:?} is outside 0 (excluded)..=10"
                 )));
             }
+        }
+        if self.table_pieces > MAX_TABLE_PIECES {
+            return Err(PlanError::Config(format!(
+                "`table_pieces` = {} is outside 0..={MAX_TABLE_PIECES}",
+                self.table_pieces
+            )));
         }
         if !(self.joint_margin > 0.0 && self.joint_margin <= 1.0) {
             let m = self.joint_margin;
