@@ -157,8 +157,8 @@ pub fn parametric_case(seed: u64) -> Inspection {
 
 /// Seed of the uniform case whose removal-mode plan in the turntable cell
 /// (calibration/turntable/) splits regions by table angle: at each region's one angle it
-/// planned 63.3 % of the repairable area, split 66.9 % (tests/uniform.rs,
-/// `uniform_defects_split_by_table_angle`).
+/// planned 63.3 % of the repairable area, split 67.6 % (region 17's last 8 core points at
+/// -5 degrees; tests/uniform.rs, `uniform_defects_split_by_table_angle`).
 pub const SPLIT_SEED: u64 = 5100;
 
 /// The uniform case [`SPLIT_SEED`] and its removal-mode plan in the turntable cell, as `plan`
