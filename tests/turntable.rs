@@ -4,7 +4,7 @@
 mod board;
 mod common;
 
-use common::femoral::{cell, inspection};
+use common::femoral::{cell, ground_at, inspection, split_plan};
 use nalgebra::Point3;
 use polishbot::bus::{Bus, BusConfig, Journal, ResumePoint};
 use polishbot::cell::{execute, steps, RunConfig, Step};
@@ -43,7 +43,10 @@ fn the_turntable_reaches_nine_tenths_of_the_repairable_area() {
             "case {seed}: repairable {t:.1} mm^2, covered {:.1} % with the table ({} moves, angles {:?} deg), {:.1} % without",
             100.0 * c / t.max(1e-9),
             tp.moves.len(),
-            tp.regions.iter().map(|r| r.angle_deg).collect::<Vec<_>>(),
+            tp.regions
+                .iter()
+                .map(|r| r.angles_deg().collect::<Vec<_>>())
+                .collect::<Vec<_>>(),
             100.0 * c0 / t0.max(1e-9)
         );
         table_file::check(tp, &table, turned.samples.len(), turned.period).expect("table moves");
@@ -336,6 +339,62 @@ fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
     assert_eq!(
         report.final_table_raw.map(|r| r.abs_diff(want) <= 1),
         Some(true)
+    );
+}
+
+/// Issue 51, the table as a sixth axis at stroke granularity: a plan that splits regions by
+/// table angle (`common::femoral::split_plan`) passes `run`'s checks (the table's frames,
+/// each region ground at one of its angles, the collision re-check at each stretch's angle),
+/// and the simulated cell, serving the table as bus servo 7, follows it: every table frame
+/// received once, the arm's read-backs within `run`'s tolerance, and the table read back at
+/// the plan's last angle.
+#[test]
+fn a_plan_with_regions_split_by_table_angle_runs_on_the_simulated_cell() {
+    let (robot, wc, table, config, insp, plan) = split_plan();
+    let tp = plan.turntable.clone().expect("a table part");
+    let split = tp.regions.iter().find(|r| !r.pieces.is_empty());
+    let split = split.expect("a region split by table angle");
+    assert!(ground_at(&plan, split.region).len() >= 2);
+    let checked = plan
+        .check_cell(&robot, Some(&table), &Default::default())
+        .expect("run's check");
+    plan.check_clearance_cell(&insp, &robot, &wc, Some(&table), &config.collision)
+        .expect("run's clearance check");
+    let cfg = bus_config(&robot);
+    let options = SimOptions {
+        extra_servos: vec![ExtraServo {
+            id: 7,
+            start_raw: table.raw(0.0).unwrap(),
+        }],
+        ..SimOptions::default()
+    };
+    let arm = SimArm::new(&options, &cfg.servo_map).unwrap();
+    let mut bus = Bus::connect(arm.transport(), cfg, Journal::none()).unwrap();
+    let run = RunConfig::default();
+    let report = execute(&mut bus, &checked, plan.period, 0, &run).unwrap();
+    let frames: usize = checked
+        .table
+        .as_ref()
+        .unwrap()
+        .moves
+        .iter()
+        .map(|m| m.raw.len())
+        .sum();
+    let sent = arm.received().iter().filter(|f| f.func == 0x19).count();
+    assert_eq!(sent, frames, "every table frame once");
+    assert!(report.readbacks > 0);
+    assert!(report.worst_readback_counts <= run.readback_tolerance_counts);
+    let want = table.raw(tp.end()).unwrap();
+    assert_eq!(arm.extra_position(7), Some(want));
+    assert!(report
+        .final_table_raw
+        .is_some_and(|r| r.abs_diff(want) <= 1));
+    println!(
+        "{} table moves, {frames} table frames; region {} ground at {:?} deg; worst arm read-back {} counts",
+        tp.moves.len(),
+        split.region,
+        ground_at(&plan, split.region),
+        report.worst_readback_counts
     );
 }
 

@@ -90,6 +90,42 @@ fn uniform_defects_in_the_shipped_cells() {
     }
 }
 
+/// Regions split by table angle (issue 51, "the table as a sixth axis", at stroke
+/// granularity): femoral_dm's uniform cases in the turntable and the designed cell, removal
+/// mode, planned with each region at one angle (`table_pieces` 0) and split into up to 2
+/// and 3 further pieces (numbers only: `--ignored --nocapture`).
+#[test]
+#[ignore]
+fn uniform_defects_split_by_table_angle() {
+    for seed in [5100, 5101] {
+        let insp = uniform_case(seed);
+        for dir in ["turntable/", "femoral/"] {
+            let (robot, wc, table, mut config) = cell(dir);
+            config.mode = PlanMode::Removal;
+            for pieces in [0, 2, 3] {
+                config.table_pieces = pieces;
+                let plan = match plan(&insp, &robot, &wc, table.as_ref(), &config) {
+                    Ok(p) => p,
+                    Err(e) => {
+                        println!("seed {seed}, cell {dir:?}, pieces {pieces}: refused: {e}");
+                        continue;
+                    }
+                };
+                let (c, t) = planned_area(&plan);
+                let tp = plan.turntable.as_ref().expect("a table part");
+                let split = tp.regions.iter().filter(|r| !r.pieces.is_empty()).count();
+                let added: usize = tp.regions.iter().map(|r| r.pieces.len()).sum();
+                println!(
+                    "seed {seed}, cell {dir:?}, pieces {pieces}: planned {:.1} % of {t:.1} mm^2, {split} regions split, {added} pieces, {} table moves, {:.1} s",
+                    100.0 * c / t,
+                    tp.moves.len(),
+                    plan.predicted_duration_s
+                );
+            }
+        }
+    }
+}
+
 /// Issue 51's acceptance case in removal mode (`plan`'s default) in the shipped designed cell,
 /// seeds 5100 and 5101: the planned share on each (at least [`REMOVAL_FLOOR`]), and every
 /// region left mostly unground names the rules that refused its contacts (plan.json's

@@ -111,6 +111,39 @@ pub fn tool_reaches(
     robot.ik(&target, &cfg.home, &cfg.ik).is_ok()
 }
 
+/// Where a region's planned strokes grind: the passes' surface points (reference frame)
+/// densified along each pass to 1/20 of the footprint.
+pub struct Cover {
+    index: Neighbours,
+    footprint: f64,
+}
+
+impl Cover {
+    /// The strokes of region `region` among `passes`, with footprint radius `footprint` mm.
+    pub fn new(passes: &[PlannedPass], region: usize, footprint: f64) -> Cover {
+        let mut dense = Vec::new();
+        for pass in passes.iter().filter(|p| p.region == region) {
+            let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.surface_mm.into()).collect();
+            dense.extend(pts.first().copied());
+            for w in pts.windows(2) {
+                let n = ((w[1] - w[0]).norm() / (footprint * 0.05)).ceil().max(1.0) as usize;
+                dense.extend((1..=n).map(|k| w[0] + (w[1] - w[0]) * (k as f64 / n as f64)));
+            }
+        }
+        Cover {
+            index: Neighbours::new(&dense),
+            footprint,
+        }
+    }
+
+    /// Whether `p` (reference frame, mm) lies within the footprint of a stroke.
+    pub fn covers(&self, p: &Point3<f64>) -> bool {
+        self.index
+            .nearest(p)
+            .is_some_and(|n| n.dist2.sqrt() <= self.footprint)
+    }
+}
+
 /// Reach and coverage of `region`: a core point is reachable when the tool can sit on its
 /// normal at the last layer's height; covered when it lies within `footprint` mm of a planned
 /// pass of the region (the polylines through the passes' surface points).
@@ -129,23 +162,12 @@ pub fn region_report(
     footprint: f64,
 ) -> RegionReport {
     let members = inspection.region_points(region.id);
-    let mut dense = Vec::new();
-    for pass in passes.iter().filter(|p| p.region == region.id) {
-        let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.surface_mm.into()).collect();
-        dense.push(pts[0]);
-        for w in pts.windows(2) {
-            let n = ((w[1] - w[0]).norm() / (footprint * 0.05)).ceil().max(1.0) as usize;
-            dense.extend((1..=n).map(|k| w[0] + (w[1] - w[0]) * (k as f64 / n as f64)));
-        }
-    }
-    let index = Neighbours::new(&dense);
+    let cover = Cover::new(passes, region.id, footprint);
     let (mut reachable, mut covered_reachable, mut covered) = (0usize, 0usize, 0usize);
     for &i in &members {
         let sp = &inspection.points[i];
         let ok = tool_reaches(sp, robot, wc, cfg, reach);
-        let near = index
-            .nearest(&sp.position)
-            .is_some_and(|n| n.dist2.sqrt() <= footprint);
+        let near = cover.covers(&sp.position);
         reachable += usize::from(ok);
         covered += usize::from(near);
         covered_reachable += usize::from(ok && near);

@@ -35,6 +35,7 @@ pub mod surface;
 pub mod table;
 pub mod table_check;
 pub mod table_file;
+mod table_split;
 mod tilt;
 pub mod trajectory;
 pub mod validate;

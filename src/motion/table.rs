@@ -13,7 +13,8 @@ use super::error::PlanError;
 use super::file::Plan;
 use super::raster;
 use super::report::Metrics;
-use super::table_file::{table_move, RegionTable, TablePlan, TriedAngle};
+use super::table_file::{table_move, RegionTable, TablePiece, TablePlan, TriedAngle};
+use super::table_split::{self as split, PieceCell, MIN_PIECE_GAIN, MIN_PIECE_POINTS};
 use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
@@ -73,6 +74,7 @@ pub fn plan(
     for (angle, regions) in groups {
         cell.plan_group(angle, regions, &ranked)?;
     }
+    cell.split_short()?;
     let GroupedPlan {
         merged, table_plan, ..
     } = cell;
@@ -189,6 +191,85 @@ impl GroupedPlan<'_> {
             self.append(angle, sub)?;
         }
         self.append_alone(moved)
+    }
+
+    /// Splits every region with strokes that the plan so far leaves short of
+    /// [`GOOD_COVERAGE`] by table angle: up to `config.table_pieces` further pieces
+    /// (docs/ALGORITHMS.md, "Turntable", step 5; `table_split.rs`).
+    fn split_short(&mut self) -> Result<(), PlanError> {
+        for k in 0..self.inspection.regions.len() {
+            if !planned(&self.inspection.regions[k], self.config, self.robot) {
+                continue;
+            }
+            for _ in 0..self.config.table_pieces {
+                if !self.add_piece(k)? {
+                    break;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Plans the core points of region `k` (regions.json order) no stroke covers yet as a
+    /// piece at the best of its candidate angles and appends it; false when the region is
+    /// covered enough or no angle adds enough.
+    fn add_piece(&mut self, k: usize) -> Result<bool, PlanError> {
+        let region = self.inspection.regions[k].clone();
+        let cell = PieceCell {
+            inspection: self.inspection,
+            robot: self.robot,
+            workcell: self.workcell,
+            table: self.table,
+            config: self.config,
+        };
+        let Some(merged) = self.merged.as_ref() else {
+            return Ok(false);
+        };
+        let (left, n) = split::uncovered(&cell, merged, region.id);
+        if 1.0 - left.len() as f64 / n.max(1) as f64 >= GOOD_COVERAGE
+            || left.len() < MIN_PIECE_POINTS
+        {
+            return Ok(false);
+        }
+        let entry = &self.table_plan.regions[k];
+        let used: Vec<f64> = entry.angles_deg().map(f64::to_radians).collect();
+        let ranked = split::rank(&cell, &left, &candidates(self.table), &used, used[0]);
+        let part = split::piece_of(self.inspection, &region, &left, merged.removal.as_ref());
+        let mut best: Option<(f64, Plan, usize)> = None;
+        for angle in spread(&ranked).into_iter().take(split::PIECE_ANGLES) {
+            let wc = self.table.workcell_at(self.workcell, angle);
+            // refused at this angle (a free move, a collision): no piece there
+            let Ok(sub) = super::plan_part(&part, self.robot, &wc, self.config) else {
+                continue;
+            };
+            let got = split::gained(&cell, &sub, region.id, &left);
+            if best.as_ref().is_none_or(|b| got > b.2) {
+                best = Some((angle, sub, got));
+            }
+            if got as f64 >= GOOD_COVERAGE * left.len() as f64 {
+                break;
+            }
+        }
+        let Some((angle, sub, got)) = best else {
+            return Ok(false);
+        };
+        if got < MIN_PIECE_POINTS || (got as f64) < MIN_PIECE_GAIN * left.len() as f64 {
+            return Ok(false);
+        }
+        self.append(angle, sub)?;
+        let mut angles = used;
+        angles.push(angle);
+        let coverage = self
+            .merged
+            .as_mut()
+            .and_then(|merged| split::fold(&cell, merged, &region, &angles))
+            .unwrap_or(0.0);
+        self.table_plan.regions[k].pieces.push(TablePiece {
+            angle_deg: tidy_deg(angle),
+            points: left.len(),
+            coverage,
+        });
+        Ok(true)
     }
 
     /// Appends regions planned alone, sorted by angle from where the table stands.
@@ -314,11 +395,7 @@ fn rank_angles(
     config: &PlanConfig,
 ) -> Vec<Ranked> {
     let reach = robot.tool.radius_mm() + config.contact_offset_mm;
-    let [lo, hi] = table.range();
-    let step = CANDIDATE_STEP_DEG.to_radians();
-    let candidates: Vec<f64> = ((lo / step).ceil() as i64..=(hi / step).floor() as i64)
-        .map(|k| k as f64 * step)
-        .collect();
+    let candidates = candidates(table);
     let cells: Vec<Workcell> = candidates
         .iter()
         .map(|&a| table.workcell_at(workcell, a))
@@ -360,10 +437,20 @@ fn rank_angles(
                     reachable_share: order[0].1,
                     reachable_share_at_zero: at_zero,
                     tried: Vec::new(),
+                    pieces: Vec::new(),
                 },
                 candidates: spread(&order),
             }
         })
+        .collect()
+}
+
+/// The candidate table angles, radians: every [`CANDIDATE_STEP_DEG`] over the table's range.
+fn candidates(table: &Turntable) -> Vec<f64> {
+    let [lo, hi] = table.range();
+    let step = CANDIDATE_STEP_DEG.to_radians();
+    ((lo / step).ceil() as i64..=(hi / step).floor() as i64)
+        .map(|k| k as f64 * step)
         .collect()
 }
 

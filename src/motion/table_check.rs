@@ -73,11 +73,15 @@ impl Plan {
                 .iter()
                 .find(|(lo, hi, _)| s.first_sample >= *lo && s.first_sample < (*hi).max(*lo + 1))
                 .map_or(part.start, |r| r.2);
-            if (at.to_degrees() - want.angle_deg).abs() > ANGLE_TOLERANCE_DEG {
+            if want
+                .angles_deg()
+                .all(|a| (at.to_degrees() - a).abs() > ANGLE_TOLERANCE_DEG)
+            {
+                let planned: Vec<String> = want.angles_deg().map(|a| format!("{a:.4}")).collect();
                 return Err(PlanError::Frames(format!(
-                    "turntable: region {region} is planned at {:.4} deg but the table is at {:.4} deg \
+                    "turntable: region {region} is planned at {} deg but the table is at {:.4} deg \
                      when it is ground (sample {}): are table moves missing?",
-                    want.angle_deg,
+                    planned.join(" / "),
                     at.to_degrees(),
                     s.first_sample
                 )));

@@ -30,6 +30,29 @@ pub struct RegionTable {
     /// plans from before 2026-12-05 and where none was needed: empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tried: Vec<TriedAngle>,
+    /// The region split by table angle: the further pieces, each the core points the strokes
+    /// so far left uncovered, planned at another angle (`angle_deg` grinds the first piece).
+    /// Absent in plans from before 2026-12-05 and where no piece was needed: empty.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pieces: Vec<TablePiece>,
+}
+
+/// One further piece of a region split by table angle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TablePiece {
+    /// Table angle the piece is ground at, degrees.
+    pub angle_deg: f64,
+    /// Core points of the region the piece was planned on (those left uncovered before it).
+    pub points: usize,
+    /// Share of the region's core points covered once the piece is added.
+    pub coverage: f64,
+}
+
+impl RegionTable {
+    /// Every table angle the region is ground at, degrees: its own, then its pieces'.
+    pub fn angles_deg(&self) -> impl Iterator<Item = f64> + '_ {
+        std::iter::once(self.angle_deg).chain(self.pieces.iter().map(|p| p.angle_deg))
+    }
 }
 
 /// One table angle a region was planned at alone.

@@ -9,7 +9,9 @@
 use polishbot::motion::{plan, PlanMode};
 
 use super::heldout::{accept, turned_tally};
-use crate::common::femoral::{cell, planned_area, reasons, setups, uniform_case};
+use crate::common::femoral::{
+    cell, ground_at, planned_area, reasons, setups, split_plan, uniform_case,
+};
 
 /// Least share of the repairable area planned: issue 51's 0.9. The designed cell reaches
 /// 86 % of the articular surface (the design's own score: the notch walls and the condyles'
@@ -77,4 +79,39 @@ fn a_two_setup_plan_keeps_the_ball_within_its_preload_in_each_setup() {
         checked += 1;
     }
     assert_eq!(checked, 2, "both setups grind");
+}
+
+/// Issue 51, the table as a sixth axis at stroke granularity: the uniform case whose plan in
+/// the turntable cell splits regions by table angle (`common::femoral::SPLIT_SEED`). Each
+/// split region is ground at two or more table angles, its pieces add coverage, the split
+/// plans more than the same plan without splitting (`table_pieces` 0), and every sample
+/// passes this suite's clearance check with the part turned by this test at its table angle.
+#[test]
+fn a_region_split_by_table_angle_is_ground_at_each_angle_collision_free() {
+    let (robot, wc, table, mut config, insp, plan) = split_plan();
+    let tp = plan.turntable.as_ref().expect("a table part");
+    let split: Vec<_> = tp.regions.iter().filter(|r| !r.pieces.is_empty()).collect();
+    assert!(!split.is_empty(), "no region split");
+    for r in &split {
+        let at = ground_at(&plan, r.region);
+        println!(
+            "region {}: ground at {at:?} deg; pieces {:?}",
+            r.region, r.pieces
+        );
+        assert!(at.len() >= 2, "region {} ground at {at:?} only", r.region);
+        let covered = r.pieces.iter().map(|p| p.coverage);
+        assert!(covered.clone().all(|c| c > 0.0 && c <= 1.0));
+        assert!(covered.clone().zip(covered.skip(1)).all(|(a, b)| b > a));
+    }
+    config.table_pieces = 0;
+    let unsplit = polishbot::motion::plan(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+    let ((c, t), (c0, _)) = (planned_area(&plan), planned_area(&unsplit));
+    println!(
+        "split: {:.1} % planned, one angle per region: {:.1} %",
+        100.0 * c / t,
+        100.0 * c0 / t
+    );
+    assert!(c > c0, "the split plans no more");
+    let tally = turned_tally(&plan, &robot, &insp, &wc, "turntable/");
+    accept("regions split by table angle", &plan, &tally);
 }

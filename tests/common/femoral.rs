@@ -155,6 +155,47 @@ pub fn parametric_case(seed: u64) -> Inspection {
     })
 }
 
+/// Seed of the uniform case whose removal-mode plan in the turntable cell
+/// (calibration/turntable/) splits regions by table angle: at each region's one angle it
+/// planned 63.3 % of the repairable area, split 67.6 % (region 17's last 8 core points at
+/// -5 degrees; tests/uniform.rs, `uniform_defects_split_by_table_angle`).
+pub const SPLIT_SEED: u64 = 5100;
+
+/// The uniform case [`SPLIT_SEED`] and its removal-mode plan in the turntable cell, as `plan`
+/// makes it: its robot, placement, table and settings too.
+pub fn split_plan() -> (Robot, Workcell, Turntable, PlanConfig, Inspection, Plan) {
+    let insp = uniform_case(SPLIT_SEED);
+    let (robot, wc, table, mut config) = cell("turntable/");
+    config.mode = polishbot::motion::PlanMode::Removal;
+    let table = table.expect("the turntable cell has a turntable");
+    let plan = polishbot::motion::plan(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+    (robot, wc, table, config, insp, plan)
+}
+
+/// The table angles (degrees, sorted, distinct) at which `plan` grinds region `id`: the
+/// angle the table's moves leave it at when each of the region's grinding segments starts.
+pub fn ground_at(plan: &Plan, id: usize) -> Vec<f64> {
+    let tp = plan.turntable.as_ref().expect("a table part");
+    let mut out: Vec<f64> = Vec::new();
+    for s in &plan.segments {
+        if s.region != Some(id) || s.kind != polishbot::motion::SegmentKind::Grind {
+            continue;
+        }
+        let at = tp
+            .moves
+            .iter()
+            .rev()
+            .find(|m| m.at_sample <= s.first_sample)
+            .map_or(tp.start, |m| *m.samples.last().expect("a move"));
+        let deg = (at.to_degrees() * 1e6).round() / 1e6;
+        if !out.contains(&deg) {
+            out.push(deg);
+        }
+    }
+    out.sort_by(f64::total_cmp);
+    out
+}
+
 /// Planned and total repairable area of a plan, mm^2: per repairable region its area times
 /// the share of its points within the footprint of a planned stroke (plan.json's
 /// `coverage_of_all`).
