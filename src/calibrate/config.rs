@@ -4,6 +4,12 @@ use serde::{Deserialize, Serialize};
 use crate::bus::BusError;
 use crate::robot::RobotError;
 
+/// Default of `max_compliance_check_rms_mm`, mm: 0.3, three times the scatter the documented
+/// arm's own table leaves on `verify`'s loaded touch-offs (whole servo counts and one count of
+/// read noise, about 0.1 mm), and a fifth of what a table learned on the documented arm leaves
+/// on an ideal one (about 1.5 mm).
+pub const MAX_COMPLIANCE_CHECK_RMS_MM: f64 = 0.3;
+
 /// Settings of the calibration routines.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -54,6 +60,10 @@ pub struct CalibrationConfig {
     pub max_verify_table_error_counts: u16,
     /// Initial jog step, degrees. Default 1.
     pub jog_step_deg: f64,
+    /// Largest RMS scatter of `verify`'s loaded touch-offs under servos.toml's `[compliance]`
+    /// (calibrate/compliance_check.rs), mm; more refuses the table as not this arm's. Default
+    /// [`MAX_COMPLIANCE_CHECK_RMS_MM`].
+    pub max_compliance_check_rms_mm: f64,
 }
 
 impl Default for CalibrationConfig {
@@ -75,6 +85,7 @@ impl Default for CalibrationConfig {
             max_table_rms_mm: 1.0,
             verify_table_angles_deg: vec![-90.0, -30.0, 30.0, 90.0, 0.0],
             max_verify_table_error_counts: 2,
+            max_compliance_check_rms_mm: MAX_COMPLIANCE_CHECK_RMS_MM,
         }
     }
 }
