@@ -171,7 +171,11 @@ fn calibrate_verify_refuses_a_compliance_table_the_arm_contradicts() {
     let out = calibrate_sim("verify", "", dir.path());
     let stdout = String::from_utf8_lossy(&out.stdout);
     eprintln!("{stdout}");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let (with, without) = verdict(&stdout);
     eprintln!("documented arm, shipped table: {with} mm with, {without} mm without");
     assert!(with < 0.3 && with < without, "{with} / {without}");
@@ -181,10 +185,18 @@ fn calibrate_verify_refuses_a_compliance_table_the_arm_contradicts() {
     let fit = calibrate_sim("compliance", ideal, dir.path());
     let stdout = String::from_utf8_lossy(&fit.stdout);
     eprintln!("{stdout}");
-    assert!(fit.status.success(), "{}", String::from_utf8_lossy(&fit.stderr));
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
     let out = calibrate_sim("verify", ideal, dir.path());
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let (with, without) = verdict(&stdout);
     eprintln!("ideal arm, its own table: {with} mm with, {without} mm without");
     assert!(with < 0.3, "{with} / {without}");

@@ -385,7 +385,11 @@ fn solve_pinned(
         b[3 * rows.len() + j] = MASS_PRIOR_M_PER_KG * START_MASS;
     }
     for (i, &j) in pinned.iter().enumerate() {
-        let floor = if j < FITTED_JOINTS { MIN_COMPLIANCE } else { 0.0 };
+        let floor = if j < FITTED_JOINTS {
+            MIN_COMPLIANCE
+        } else {
+            0.0
+        };
         a[(3 * rows.len() + prior + i, j)] = PIN_WEIGHT;
         b[3 * rows.len() + prior + i] = PIN_WEIGHT * floor;
     }

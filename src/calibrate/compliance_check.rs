@@ -21,7 +21,8 @@ use crate::robot::{Compliance, Robot};
 /// Base poses of the check's two points (joint angles, rad): two of `calibrate compliance`'s
 /// points, one straight ahead and high, one to the right and far, so every pitch joint and the
 /// base yaw carry load torques of both signs across the eight loads.
-const CHECK_POINTS: [[f64; JOINT_COUNT]; 2] = [[0.0, 0.35, 0.7, 0.5, 0.0], [0.45, -0.1, 0.9, 0.8, 0.0]];
+const CHECK_POINTS: [[f64; JOINT_COUNT]; 2] =
+    [[0.0, 0.35, 0.7, 0.5, 0.0], [0.45, -0.1, 0.9, 0.8, 0.0]];
 /// The check touches each point from the base pose's tilt only (the tilts add nothing the loads
 /// do not already show, and an operator makes 16 touches, not 80).
 const CHECK_TILTS_DEG: [f64; 1] = [0.0];
@@ -91,9 +92,8 @@ pub fn judge(
     table: &Compliance,
     limit_mm: f64,
 ) -> ComplianceCheck {
-    let loaded = |t: &Touch, p: &LoadedPose| {
-        table.loaded_tip(robot, &t.joints, &Vector3::from(p.force_n))
-    };
+    let loaded =
+        |t: &Touch, p: &LoadedPose| table.loaded_tip(robot, &t.joints, &Vector3::from(p.force_n));
     ComplianceCheck {
         rms_table_mm: scatter(poses, touches, loaded),
         rms_rigid_mm: scatter(poses, touches, |t, _| t.tip()),
