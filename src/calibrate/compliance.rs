@@ -280,13 +280,11 @@ enum Unknown {
     Masses,
 }
 
-/// One linearised least-squares solve over the touches marked in `used` (and trusted); with
-/// `pin`, the compliances and half bands are kept physical: a solve that puts one below its
-/// floor ([`MIN_COMPLIANCE`], no band) is made again with it pinned there, until none is (on a
-/// stiff arm the free solve fits the read-back's whole counts with small negative compliances
-/// and bands that the others and the points then balance; clamped afterwards, the balance was
-/// lost: the ideal arm's fit left 0.7 mm residuals and a 0.11 degree band). The new estimate
-/// and the standard deviations of its first 2 x [`FITTED_JOINTS`] parameters.
+/// One linearised least-squares solve over the touches marked in `used` (and trusted): the
+/// new estimate and the standard deviations of its first 2 x [`FITTED_JOINTS`] parameters.
+/// With `pin`, a solve that puts a compliance or half band below its floor ([`MIN_COMPLIANCE`],
+/// no band) is made again with it pinned there, until none is (clamped afterwards instead, the
+/// ideal arm's fit kept 0.7 mm residuals and a 0.11 degree band the others had balanced).
 fn solve(
     robot: &Robot,
     samples: &[Sample],
