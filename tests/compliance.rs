@@ -116,3 +116,88 @@ fn calibrate_compliance_cli_writes_the_fitted_table_into_servos_toml() {
         );
     }
 }
+
+/// `polishbot calibrate ROUTINE --sim` on the shipped cell with `[sim.grinding]` lines
+/// `grinding` (the simulated arm), reading and writing the cell's files in `out`.
+fn calibrate_sim(routine: &str, grinding: &str, out: &std::path::Path) -> std::process::Output {
+    let cfg = out.join(format!("{routine}-sim.toml"));
+    std::fs::write(&cfg, format!("[sim.grinding]\n{grinding}\n")).unwrap();
+    common::polishbot()
+        .args(["calibrate", routine, "--sim", "--cell"])
+        .arg(common::calib(""))
+        .arg("--out")
+        .arg(out)
+        .arg("--config")
+        .arg(&cfg)
+        .output()
+        .unwrap()
+}
+
+/// The scatter with and without the table on `calibrate verify`'s verdict line.
+fn verdict(stdout: &str) -> (f64, f64) {
+    let line = stdout
+        .lines()
+        .find(|l| l.contains("[compliance]: loaded touch-offs scatter"))
+        .unwrap_or_else(|| panic!("no verdict: {stdout}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let at = |w: &str, by: isize| -> f64 {
+        let i = words.iter().position(|x| x.starts_with(w)).unwrap();
+        words[(i as isize + by) as usize].parse().unwrap()
+    };
+    (at("scatter", 1), at("without", -2))
+}
+
+/// The guard (issue 50: the compliance table must be the cell's own): `calibrate verify` on the
+/// simulated ideal arm (no backlash, no sag) with the shipped cell's table, which was learned
+/// on the documented arm, refuses it in one line naming servos.toml, `[compliance]` and the
+/// bound; on the documented arm the same table passes, and so does the table `calibrate
+/// compliance` measures on the ideal arm itself. The verdict comes from the read-back joints
+/// and the applied loads only.
+#[test]
+fn calibrate_verify_refuses_a_compliance_table_the_arm_contradicts() {
+    let ideal = "ideal_arm = true";
+    let dir = common::tempdir();
+    let out = calibrate_sim("verify", ideal, dir.path());
+    let line = common::one_line_failure(&out);
+    eprintln!("ideal arm, shipped table: {line}");
+    for want in ["servos.toml", "[compliance]", "max_compliance_check_rms_mm"] {
+        assert!(line.contains(want), "{want}: {line}");
+    }
+    let (with, without) = verdict(&String::from_utf8_lossy(&out.stdout));
+    assert!(with > 0.3 && without < with, "{with} / {without}");
+
+    // the documented arm (the simulator's default) with the same table
+    let dir = common::tempdir();
+    let out = calibrate_sim("verify", "", dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    eprintln!("{stdout}");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (with, without) = verdict(&stdout);
+    eprintln!("documented arm, shipped table: {with} mm with, {without} mm without");
+    assert!(with < 0.3 && with < without, "{with} / {without}");
+
+    // the ideal arm with the table measured on it
+    let dir = common::tempdir();
+    let fit = calibrate_sim("compliance", ideal, dir.path());
+    let stdout = String::from_utf8_lossy(&fit.stdout);
+    eprintln!("{stdout}");
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+    let out = calibrate_sim("verify", ideal, dir.path());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (with, without) = verdict(&stdout);
+    eprintln!("ideal arm, its own table: {with} mm with, {without} mm without");
+    assert!(with < 0.3, "{with} / {without}");
+}

@@ -200,17 +200,41 @@ fn the_loop_grinds_the_reachable_defects_down_over_iterations_and_leaves_the_pit
     // (20 N/mm, the simulator's former default mount) whose true k is 1.3 x 1e-4 mm^2/N, a
     // 10 MPa abrasive at 5000 rpm (the simulator's former default tool), on an ideal arm (a
     // 20 N/mm mount turns the documented arm's 1 mm tip errors into 20 N); the removal loop
-    // (now the default mode) is the two-case test below. The ideal arm is the planner's arm
-    // too: the shipped compliance table (learned on the documented arm) is not compensated
-    // for (with it this loop cut to -0.393 mm: the planner bent the commands against a sag
-    // this arm does not have), and the burr gives along the normal as the former mount did.
+    // (now the default mode) is the two-case test below. The cell's compliance table is this
+    // arm's own, as on a real cell: `calibrate compliance` measured on the simulated ideal arm
+    // (the shipped table was learned on the documented arm; planning this arm with it bent the
+    // commands against a sag the arm does not have and cut to -0.393 mm, and `calibrate
+    // verify` refuses it on this arm: tests/compliance.rs); the compensation stays on, as by
+    // default. The burr gives along the normal as the former mount did.
+    let own = dir.join("own-cell");
+    std::fs::create_dir_all(&own).unwrap();
+    let arm = dir.join("ideal-arm.toml");
+    std::fs::write(&arm, "[sim.grinding]\nideal_arm = true\n").unwrap();
+    let fit = common::polishbot()
+        .args(["calibrate", "compliance", "--sim", "--cell"])
+        .arg(common::calib(""))
+        .arg("--out")
+        .arg(&own)
+        .arg("--config")
+        .arg(&arm)
+        .output()
+        .unwrap();
+    println!("{}", String::from_utf8_lossy(&fit.stdout));
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+    let servos = own.join("servos.toml");
     let cfg = dir.join("cycle.toml");
     std::fs::write(
         &cfg,
-        "[plan.plan]\ncompensate_compliance = false\n\
-         [run.sim.grinding]\npreston_k = 1e-4\nk_factor = 1.3\nspring_rate_n_mm = 20.0\n\
-         modulus_mpa = 10.0\nspindle_rpm = 5000.0\nideal_arm = true\n\
-         compliance_direction = \"surface_normal\"\n",
+        format!(
+            "[plan.robot]\nservos = {servos:?}\n[run.robot]\nservos = {servos:?}\n\
+             [run.sim.grinding]\npreston_k = 1e-4\nk_factor = 1.3\nspring_rate_n_mm = 20.0\n\
+             modulus_mpa = 10.0\nspindle_rpm = 5000.0\nideal_arm = true\n\
+             compliance_direction = \"surface_normal\"\n"
+        ),
     )
     .unwrap();
     let out = cycle(&dir, "cycle")

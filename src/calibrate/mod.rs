@@ -16,11 +16,14 @@
 //!
 //! 6. [`compliance::compliance`]: the tool tip touches fixed points from several tilts under
 //!    loads of both signs; a least-squares fit gives each joint's stiffness and backlash and
-//!    the arm's lumped masses (servos.toml's `[compliance]`).
+//!    the arm's lumped masses (servos.toml's `[compliance]`); `verify` checks a cell's table
+//!    against loaded touch-offs of its own ([`compliance_check`]) and refuses a table they
+//!    contradict.
 //!
 //! Touches come from a [`TouchSource`]: the interactive jog terminal ([`jog::JogTerminal`])
 //! or a list of joint targets ([`jog::Scripted`]). All settings: [`CalibrationConfig`].
 pub mod compliance;
+pub mod compliance_check;
 pub mod config;
 pub mod files;
 pub mod jog;

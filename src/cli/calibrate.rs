@@ -324,7 +324,10 @@ fn routine(
             targets.is_none()
         }
         Routine::Compliance => ctx.sim.is_none(),
-        Routine::Verify { .. } | Routine::Removal { .. } => false,
+        Routine::Verify { targets, .. } => {
+            targets.is_none() && ctx.sim.is_none() && cell.robot.servos.compliance.is_some()
+        }
+        Routine::Removal { .. } => false,
     };
     let _raw = interactive.then(RawTerminal::enable).flatten();
     match which {
@@ -398,12 +401,23 @@ fn routine(
             "the removal fit needs no arm and runs before connecting".into(),
         )),
         Routine::Turntable { angles, .. } => turntable(bus, cell, angles, targets, ctx),
-        Routine::Verify { .. } => {
+        Routine::Verify {
+            targets: scripted, ..
+        } => {
             let poses = targets.expect("set in run");
             let table = ctx.table.as_ref();
             let w = &ctx.workcell_in;
             let worst =
                 super::calibrate_verify::run(bus, cell, table, &poses, fixture.as_ref(), w)?;
+            match scripted {
+                None => super::calibrate_verify::check_table(bus, cell, ctx.sim, ctx.servos_in)?,
+                Some(_) if cell.robot.servos.compliance.is_some() => say(&format!(
+                    "calibrate verify: [compliance] of {} not checked (scripted --targets make \
+                     no loaded touch-offs; run verify without --targets to check it)",
+                    ctx.servos_in.display()
+                )),
+                Some(_) => {}
+            }
             let file = ctx.out.join("tool.toml");
             files::write_verified_tip(ctx.tool_in, &file, worst)?;
             say(&format!(

@@ -3,15 +3,20 @@
 //! arm at its home pose during each turn), read back over 0x37 and its error reported per
 //! angle in counts and degrees, then turned back to 0 (the placement workcell.toml gives).
 //! Then the arm moves through the check poses (calibrate/verify.rs). Fails with one line
-//! naming every check over its tolerance.
+//! naming every check over its tolerance. Last, on a cell whose servos.toml has a
+//! `[compliance]` table, the operator (with `--sim` the simulated one) makes the loaded
+//! touch-offs of calibrate/compliance_check.rs, and a table they contradict is refused with
+//! one line naming servos.toml and `[compliance]` ([`check_table`]).
 use std::path::Path;
 
 use super::common::say;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
+use crate::calibrate::compliance_check::{check_compliance, check_poses};
 use crate::calibrate::jog::Cell;
 use crate::calibrate::verify::{verify_table, TableCheck};
-use crate::calibrate::{self, CalibError, CalibrationConfig, Fixture};
+use crate::calibrate::{self, CalibError, CalibrationConfig, Fixture, JogTerminal, TouchSource};
 use crate::robot::{Turntable, Workcell};
+use crate::sim::GrindConfig;
 
 /// The config key of the table's check angles, named in its errors.
 const ANGLES_KEY: &str = "[calibrate] verify_table_angles_deg";
@@ -138,4 +143,61 @@ fn judge_table(checks: &[TableCheck], tolerance: u16) -> Option<String> {
             worst.angle_deg
         )
     })
+}
+
+/// The config key of the compliance check's bound, named in its refusal.
+const CHECK_KEY: &str = "[calibrate] max_compliance_check_rms_mm";
+
+/// The guard on servos.toml's `[compliance]` (calibrate/compliance_check.rs): nothing on a cell
+/// without the table; else the loaded touch-offs (from the simulated operator of `sim`, else
+/// the jog terminal) and the verdict printed, and a table they contradict refused naming
+/// `servos` and the key.
+pub fn check_table<T: Transport>(
+    bus: &mut Bus<T>,
+    cell: &Cell,
+    sim: Option<&GrindConfig>,
+    servos: &Path,
+) -> Result<(), CalibError> {
+    let Some(table) = cell.robot.servos.compliance.as_ref() else {
+        return Ok(());
+    };
+    let mut source: Box<dyn TouchSource<T>> = match sim {
+        Some(g) => Box::new(super::calibrate_compliance::SimTouch::new(
+            g,
+            &check_poses(cell.robot),
+        )),
+        None => {
+            say(&format!(
+                "calibrate verify: {} carries a [compliance] table; check it with {} loaded \
+                 touch-offs: for each, jog the tool tip onto the point (the first touch of a \
+                 point fixes it) while a spring scale pulls the tip with the listed load (N, \
+                 robot frame), then record the touch",
+                servos.display(),
+                check_poses(cell.robot).len()
+            ));
+            Box::new(JogTerminal::new(
+                std::io::stdin(),
+                std::io::stdout(),
+                cell.cfg.jog_step_deg,
+            ))
+        }
+    };
+    let c = check_compliance(bus, cell, table, source.as_mut())?;
+    let verdict = format!(
+        "{}: [compliance]: loaded touch-offs scatter {:.3} mm with the table, {:.3} mm without \
+         ({} touches; {CHECK_KEY} {})",
+        servos.display(),
+        c.rms_table_mm,
+        c.rms_rigid_mm,
+        c.touches,
+        c.limit_mm
+    );
+    say(&format!("calibrate verify: {verdict}"));
+    match c.agrees() {
+        true => Ok(()),
+        false => Err(CalibError::Refused(format!(
+            "{verdict}: this arm contradicts the table (it was learned on another arm); run \
+             calibrate compliance on this one, or remove the table"
+        ))),
+    }
 }
