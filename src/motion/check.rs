@@ -113,7 +113,8 @@ pub fn tool_reaches(
 
 /// Reach and coverage of `region`: a core point is reachable when the tool can sit on its
 /// normal at the last layer's height; covered when it lies within `footprint` mm of a planned
-/// pass of the region (the polylines through the passes' surface points).
+/// pass of the region (the polylines through where the passes' patches land,
+/// `PlannedPoint::landing`).
 #[allow(clippy::too_many_arguments)]
 pub fn region_report(
     region: &RegionInfo,
@@ -131,7 +132,7 @@ pub fn region_report(
     let members = inspection.region_points(region.id);
     let mut dense = Vec::new();
     for pass in passes.iter().filter(|p| p.region == region.id) {
-        let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.surface_mm.into()).collect();
+        let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.landing().into()).collect();
         dense.push(pts[0]);
         for w in pts.windows(2) {
             let n = ((w[1] - w[0]).norm() / (footprint * 0.05)).ceil().max(1.0) as usize;
