@@ -129,6 +129,7 @@ fn predict(tool: &ToolModel, deg: f64) -> Vec<f64> {
         length: 0.0,
         force_ratio: 1.0,
         offset: Vector3::zeros(),
+        depth_mm: tool.preload_mm,
     }];
     press(&mut contacts, tool, &influence, (&cores, &index), 0.0);
     let geometry: Vec<(Point3<f64>, Vector3<f64>)> =

@@ -85,6 +85,7 @@ fn raster(spacing: f64, stepover: f64, spin: Vector3<f64>) -> Vec<Contact> {
                 length: spacing,
                 force_ratio: 1.0,
                 offset: Vector3::zeros(),
+                depth_mm: 2.0,
             });
         }
     }
@@ -261,6 +262,7 @@ fn a_contacts_spindle_axis_is_the_arms_at_its_joint_angles() {
         tip_m: [0.0; 3],
         axis: [0.0; 3],
         q: q.to_vec(),
+        landed_mm: None,
     };
     let (qa, qb) = ([0.1, 0.5, -0.7, -0.9, 0.3], [0.14, 0.47, -0.66, -0.95, 0.3]);
     let piece = PlannedPass {

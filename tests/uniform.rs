@@ -7,10 +7,12 @@ mod common;
 
 use std::collections::BTreeMap;
 
+use nalgebra::Vector3;
 use polishbot::motion::{plan, Inspection, Plan, PlanMode};
 use polishbot::report::escape;
 use polishbot::report::plan_html::write_plan_html;
 use polishbot::report::provenance::Provenance;
+use polishbot::robot::{angle_between, Turntable, Workcell};
 
 use common::femoral::{
     cell, parametric_case, planned_area, reasons, setups, uniform_case, uniform_config,
@@ -55,11 +57,52 @@ fn measure_plan(dir: &str, insp: &Inspection, seed: u64) -> (f64, f64, Plan) {
     let plan = plan(insp, &robot, &wc, table.as_ref(), &config).expect("plan");
     let (c, t) = planned_area(&plan);
     println!(
-        "cell {dir:?} seed {seed}: repairable {t:.1} mm^2, planned {:.1} %, left out {:?}",
+        "cell {dir:?} seed {seed}: repairable {t:.1} mm^2, planned {:.1} %, left out {:?}; {}",
         100.0 * c / t.max(1e-9),
-        reasons(&plan)
+        reasons(&plan),
+        press_depths(&plan, &wc, table.as_ref())
     );
     (c, t, plan)
+}
+
+/// The pressed contacts of `plan` (placed by `wc`, turned to each region's table angle by
+/// `table`) by the depth they are commanded below the surface: how many, how many shallower
+/// than the deepest (the force a servo holds limits them: `motion::press_depth`), the
+/// shallowest, and the range of the spindle's tilt from the normal at each kind.
+fn press_depths(plan: &Plan, wc: &Workcell, table: Option<&Turntable>) -> String {
+    let angle = |region: usize| {
+        let t = plan.turntable.as_ref()?;
+        let e = t.regions.iter().find(|e| e.region == region)?;
+        Some(e.angle_deg.to_radians())
+    };
+    let points = plan.passes.iter().flat_map(|p| {
+        let at = match (table, angle(p.region)) {
+            (Some(t), Some(a)) => t.workcell_at(wc, a),
+            _ => wc.clone(),
+        };
+        p.points.iter().filter(|q| q.offset_mm < 0.0).map(move |q| {
+            let inward = -at.direction_from_reference(&Vector3::from(q.normal));
+            let tilt = angle_between(&Vector3::from(q.axis), &inward).to_degrees();
+            (-q.offset_mm, tilt)
+        })
+    });
+    let all: Vec<(f64, f64)> = points.collect();
+    let deepest = all.iter().map(|p| p.0).fold(0.0, f64::max);
+    let range = |v: &[(f64, f64)]| {
+        let lo = v.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+        let hi = v.iter().map(|p| p.1).fold(0.0, f64::max);
+        format!("{lo:.1}-{hi:.1} deg")
+    };
+    let (shallow, full): (Vec<_>, Vec<_>) = all.iter().partition(|p| p.0 < deepest - 1e-9);
+    format!(
+        "{} pressed points, {} of them {deepest:.2} mm deep (tilt {}), {} shallower (least {:.2} mm, tilt {})",
+        all.len(),
+        full.len(),
+        range(&full),
+        shallow.len(),
+        shallow.iter().map(|p| p.0).fold(deepest, f64::min),
+        range(&shallow)
+    )
 }
 
 /// The baseline of issue 51 on two uniform cases in the default and the turntable cell

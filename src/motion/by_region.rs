@@ -9,7 +9,7 @@ use super::error::PlanError;
 use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{aim, collide, dwell, finish, order, predict, program, raster, surface};
+use super::{aim, collide, dwell, finish, order, predict, press_depth, program, raster, surface};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::units::mm;
@@ -121,8 +121,10 @@ pub(crate) fn plan_regions(
         let strokes = finish::strokes((region, &members), &surface, &geometry, &offsets, &turns);
         let strokes = match tool {
             Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
-                // a first walk finds the axis held at each point (`aim`)
+                // a first walk finds the axis held at each point (`aim`) and the joint
+                // angles the force is held at (`press_depth`)
                 let trial = walk(&strokes, &mut prev.clone(), &mut Vec::new(), &mut 0);
+                let strokes = press_depth::limited(&strokes, &trial, inspection, ctx);
                 let back = dwell::reference_from_robot(workcell);
                 let held = trial.iter().flatten().flat_map(|pass| &pass.points);
                 let held = held.map(|p| (p.surface_mm, p.axis));

@@ -111,8 +111,8 @@ pub fn tool_reaches(
     robot.ik(&target, &cfg.home, &cfg.ik).is_ok()
 }
 
-/// Where a region's planned strokes grind: the passes' surface points (reference frame)
-/// densified along each pass to 1/20 of the footprint.
+/// Where a region's planned strokes grind: where the passes' patches land
+/// (`PlannedPoint::landing`, reference frame) densified along each pass to 1/20 of the footprint.
 pub struct Cover {
     index: Neighbours,
     footprint: f64,
@@ -123,7 +123,7 @@ impl Cover {
     pub fn new(passes: &[PlannedPass], region: usize, footprint: f64) -> Cover {
         let mut dense = Vec::new();
         for pass in passes.iter().filter(|p| p.region == region) {
-            let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.surface_mm.into()).collect();
+            let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.landing().into()).collect();
             dense.extend(pts.first().copied());
             for w in pts.windows(2) {
                 let n = ((w[1] - w[0]).norm() / (footprint * 0.05)).ceil().max(1.0) as usize;
@@ -146,7 +146,8 @@ impl Cover {
 
 /// Reach and coverage of `region`: a core point is reachable when the tool can sit on its
 /// normal at the last layer's height; covered when it lies within `footprint` mm of a planned
-/// pass of the region (the polylines through the passes' surface points).
+/// pass of the region (the polylines through where the passes' patches land,
+/// `PlannedPoint::landing`).
 #[allow(clippy::too_many_arguments)]
 pub fn region_report(
     region: &RegionInfo,

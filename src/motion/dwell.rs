@@ -29,9 +29,10 @@ pub fn reference_from_robot(wc: &Workcell) -> Matrix3<f64> {
     r.transpose()
 }
 
-/// The contact of a two-point piece: its middle, mean normal, direction, length, and the
+/// The contact of a two-point piece: its middle, mean normal, direction, length, the
 /// spindle axis the arm holds over it (`robot`'s FK at the piece's first and last poses,
-/// averaged, in the reference frame by `back`, `reference_from_robot`).
+/// averaged, in the reference frame by `back`, `reference_from_robot`) and the depth its
+/// points command the ball below the surface (their mean pressed offset).
 pub fn contact(piece: &PlannedPass, robot: &Robot, back: &Matrix3<f64>) -> Contact {
     let (a, b) = (&piece.points[0], &piece.points[piece.points.len() - 1]);
     let (pa, pb) = (Point3::from(a.surface_mm), Point3::from(b.surface_mm));
@@ -49,6 +50,7 @@ pub fn contact(piece: &PlannedPass, robot: &Robot, back: &Matrix3<f64>) -> Conta
         length: d.norm(),
         force_ratio: 1.0,
         offset: Vector3::zeros(),
+        depth_mm: (-0.5 * (a.offset_mm + b.offset_mm)).max(0.0),
     }
 }
 
@@ -332,9 +334,9 @@ fn overloaded(p: &PlannedPass, c: &Contact, setup: &Setup) -> Option<String> {
     let o = force::overload(setup.robot, &p.points[0].q, &push, config.force_share)?;
     let s = c.point;
     Some(format!(
-        "contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to hold {:.2} N, more \
-         than its {:.3} N m (`force_share` {})",
-        s.x, s.y, s.z, o.name, o.torque_nm, force, o.limit_nm, config.force_share
+        "contact at ({:.2}, {:.2}, {:.2}) mm: joint {} needs {:.3} N m to hold {:.2} N (the \
+         ball pressed {:.2} mm deep), more than its {:.3} N m (`force_share` {})",
+        s.x, s.y, s.z, o.name, o.torque_nm, force, c.depth_mm, o.limit_nm, config.force_share
     ))
 }
 

@@ -25,6 +25,7 @@ pub mod frames;
 mod free_motion;
 pub mod order;
 mod predict;
+mod press_depth;
 pub mod program;
 pub mod raster;
 pub mod report;
@@ -114,6 +115,12 @@ pub fn plan_part(
         &scene,
         &mut reachability.unreachable,
     )?;
+    if tool
+        .as_ref()
+        .is_some_and(|t| t.compliance_direction == removal::ComplianceDirection::SpindleAxis)
+    {
+        press_depth::land(&mut prog.passes, workcell);
+    }
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability

@@ -72,7 +72,9 @@ fn points_of(pieces: &[&PlannedPass]) -> Vec<[f64; 3]> {
 /// touching the surface and the preload, and Preston's removal summed over the contact patch
 /// is `k F v` (linear in the force, F = rate x depth), so each bus period of a press counts
 /// as `period x depth / preload` of dwell (trapezoid over its samples) at the contact it
-/// presses into (the next grinding piece) or out of (the previous one).
+/// presses into (the next grinding piece) or out of (the previous one); the depth runs up to
+/// the contact's own commanded depth (its pressed offset: the preload, or less where the
+/// force was limited, `press_depth`).
 fn press_dwell(prog: &Program, robot: &Robot, wc: &Workcell, preload: f64) -> Vec<f64> {
     let mut out = vec![0.0; prog.passes.len()];
     let segs = &prog.segments;
@@ -92,9 +94,10 @@ fn press_dwell(prog: &Program, robot: &Robot, wc: &Workcell, preload: f64) -> Ve
         };
         let normal = wc.direction_from_reference(&Vector3::from(point.normal));
         let contact = Vector3::from(point.tip_m);
+        let deepest = (-point.offset_mm).clamp(0.0, preload);
         let depth = |k: usize| {
             let tip = robot.fk(prog.trajectory.sample(k)).position;
-            (preload - mm((tip - contact).dot(&normal))).clamp(0.0, preload) / preload
+            (deepest - mm((tip - contact).dot(&normal))).clamp(0.0, deepest) / preload
         };
         let shares: Vec<f64> = (seg.first_sample..=seg.last_sample).map(depth).collect();
         let sum: f64 = shares.windows(2).map(|w| 0.5 * (w[0] + w[1])).sum();

@@ -31,6 +31,20 @@ pub struct PlannedPoint {
     pub axis: [f64; 3],
     /// Joint angles, rad.
     pub q: Vec<f64>,
+    /// Where the ball's contact patch lands on the nominal surface, reference frame, mm, when
+    /// not under `surface_mm`: a spring-loaded spindle pressed `-offset_mm` deep slides it
+    /// `depth x tan(tilt)` back toward the shank (`press_depth::land`); what plan.json's
+    /// coverage counts as ground. Absent: under `surface_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landed_mm: Option<[f64; 3]>,
+}
+
+impl PlannedPoint {
+    /// Where the ball's patch lands on the nominal surface, reference frame, mm: `landed_mm`,
+    /// else under `surface_mm`.
+    pub fn landing(&self) -> [f64; 3] {
+        self.landed_mm.unwrap_or(self.surface_mm)
+    }
 }
 
 /// A reachable piece of a stroke, ground at constant feed from rest to rest.
@@ -202,6 +216,7 @@ pub(crate) fn walk(
                 tip_m: arr(&target.position),
                 axis: arr(&axis),
                 q,
+                landed_mm: None,
             });
         }
         close(&mut piece, &mut run, &mut runs, false);

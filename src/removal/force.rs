@@ -30,29 +30,40 @@ pub fn joint_torques(robot: &Robot, q: &[f64], force: &Vector3<f64>) -> Vec<f64>
         .collect()
 }
 
+/// The torque joint `joint` (URDF order) may give the contact force, N m: `share` of its
+/// servo's rated torque (0 when servos.toml gives no rating: no force goes unchecked).
+fn allowed(robot: &Robot, joint: usize, share: f64) -> f64 {
+    let id = robot.joints[joint].servo_id;
+    let rated = robot.servos.servos.iter().find(|s| s.id == id);
+    share * rated.and_then(|s| s.rated_torque_nm).unwrap_or(0.0)
+}
+
+/// The largest force along the unit direction `direction` (robot frame, acting on the tool
+/// tip) that every servo holds within `share` of its rated torque at joint angles `q`, N: the
+/// torques are linear in the force, so joint i allows `share x rated / |(J_p^T u)_i|`
+/// ([`joint_torques`] of the unit force u); 0 when a servo that feels the direction has no
+/// rating (as [`overload`] counts it), infinite when no joint feels it.
+pub fn largest_force(robot: &Robot, q: &[f64], direction: &Vector3<f64>, share: f64) -> f64 {
+    let per_newton = joint_torques(robot, q, direction);
+    per_newton
+        .iter()
+        .enumerate()
+        .filter(|(_, tau)| tau.abs() > 1e-12)
+        .map(|(i, tau)| allowed(robot, i, share) / tau.abs())
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// The first joint whose torque exceeds `share` of its servo's rated torque (a servo without
 /// a rating counts as overloaded: no force goes unchecked).
 pub fn overload(robot: &Robot, q: &[f64], force: &Vector3<f64>, share: f64) -> Option<Overload> {
     let torques = joint_torques(robot, q, force);
-    robot
-        .joints
-        .iter()
-        .zip(torques)
-        .enumerate()
-        .find_map(|(i, (joint, tau))| {
-            let rated = robot
-                .servos
-                .servos
-                .iter()
-                .find(|s| s.id == joint.servo_id)
-                .and_then(|s| s.rated_torque_nm)
-                .unwrap_or(0.0);
-            let limit = share * rated;
-            (tau.abs() > limit).then(|| Overload {
-                joint: i,
-                name: joint.name.clone(),
-                torque_nm: tau.abs(),
-                limit_nm: limit,
-            })
+    torques.iter().enumerate().find_map(|(i, tau)| {
+        let limit = allowed(robot, i, share);
+        (tau.abs() > limit).then(|| Overload {
+            joint: i,
+            name: robot.joints[i].name.clone(),
+            torque_nm: tau.abs(),
+            limit_nm: limit,
         })
+    })
 }

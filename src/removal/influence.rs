@@ -200,6 +200,10 @@ pub struct Contact {
     /// surface; where the part is sloped the ball touches it up-slope of its nominal contact,
     /// at the foot of its centre on the measured surface ([`super::press`]).
     pub offset: Vector3<f64>,
+    /// How far the arm commands the ball centre below touching the nominal surface here, mm:
+    /// the tool's preload, or less where the force it would press with is more than a servo
+    /// holds (`motion::press_depth`); [`super::press`] presses the contact from it.
+    pub depth_mm: f64,
 }
 
 impl Contact {

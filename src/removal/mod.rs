@@ -370,6 +370,7 @@ mod tests {
                 length: 1.0,
                 force_ratio: 1.0,
                 offset: Vector3::zeros(),
+                depth_mm: 2.0,
             })
             .collect()
     }

@@ -96,8 +96,14 @@ pub fn measured_at(
 /// plan removes down to `allowance` mm: the penetration `preload + deviation - share x target`
 /// ([`MID_PASS_SHARE`]) over the preload.
 pub fn force_ratio(tool: &ToolModel, deviation: f64, allowance: f64) -> f64 {
+    force_ratio_at(tool, tool.preload_mm, deviation, allowance)
+}
+
+/// [`force_ratio`] of a contact commanded `depth` mm below touching the nominal surface
+/// (`Contact::depth_mm`) instead of the preload: its penetration over the preload.
+fn force_ratio_at(tool: &ToolModel, depth: f64, deviation: f64, allowance: f64) -> f64 {
     let removed = MID_PASS_SHARE * target(deviation, allowance);
-    tool.force_ratio(tool.preload_mm + deviation - removed)
+    tool.force_ratio(depth + deviation - removed)
 }
 
 /// Smallest cosine of the spindle's tilt from the measured normal at which a spindle-axis
@@ -125,7 +131,7 @@ pub fn press(
             along_axis(c, tool, influence.ball_mm(), &part, allowance);
             continue;
         }
-        c.force_ratio = force_ratio(tool, part.deviation, allowance);
+        c.force_ratio = force_ratio_at(tool, c.depth_mm, part.deviation, allowance);
         let nominal = c.normal;
         c.normal = part.normal(&nominal);
         // the ball centre is this far from the measured surface (its radius less the
@@ -139,8 +145,9 @@ pub fn press(
 }
 
 /// Contact `c` pressed by a spring-loaded spindle (docs/ALGORITHMS.md, "The mount's
-/// direction"): the arm commands the ball centre `preload` below the nominal surface along
-/// the nominal normal n, the point `(ball - preload) n` from `c.point`; the measured surface
+/// direction"): the arm commands the ball centre `depth` (`c.depth_mm`: the preload, or less
+/// where a servo could not hold its force) below the nominal surface along the nominal normal
+/// n, the point `(ball - depth) n` from `c.point`; the measured surface
 /// is the plane through `c.point + h n` (h the deviation less the mid-pass removal) with
 /// normal m. The rigid ball retreats along the spindle axis a by the compression s that
 /// leaves it touching: `s = (ball - m . (free - h n)) / cos`, `cos = -m . a`; the contact force
@@ -159,7 +166,7 @@ pub fn along_axis(
     let a = c.spin.normalize();
     let cos = (-m.dot(&a)).max(MIN_AXIS_COS);
     let h = part.deviation - MID_PASS_SHARE * target(part.deviation, allowance);
-    let free = nominal * (ball_mm - tool.preload_mm);
+    let free = nominal * (ball_mm - c.depth_mm);
     let s = ((ball_mm - m.dot(&(free - nominal * h))) / cos).max(0.0);
     c.force_ratio = tool.force_ratio(s / cos);
     c.normal = m;
@@ -277,6 +284,7 @@ mod tests {
             length: 0.0,
             force_ratio: 1.0,
             offset: Vector3::zeros(),
+            depth_mm: tool.preload_mm,
         }];
         press(&mut contacts, &tool, &influence, (&cores, &index), 1.0);
         let c = &contacts[0];

@@ -81,6 +81,7 @@ mod tests {
             length: 0.0,
             force_ratio: 1.0,
             offset: Vector3::zeros(),
+            depth_mm: tool.preload_mm,
         };
         let centre = 20 * 41 + 20;
         let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();

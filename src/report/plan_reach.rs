@@ -66,12 +66,13 @@ pub fn rule_of(reason: &str) -> String {
         .to_string()
 }
 
-/// The planned strokes of region `id` as points at most `DENSIFY_SHARE` footprints apart.
+/// The planned strokes of region `id` (where their patches land, `PlannedPoint::landing`)
+/// as points at most `DENSIFY_SHARE` footprints apart.
 fn dense_strokes(plan: &Plan, id: usize) -> Vec<Point3<f64>> {
     let step = (plan.footprint_mm * DENSIFY_SHARE).max(1e-3);
     let mut dense = Vec::new();
     for pass in plan.passes.iter().filter(|p| p.region == id) {
-        let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.surface_mm.into()).collect();
+        let pts: Vec<Point3<f64>> = pass.points.iter().map(|p| p.landing().into()).collect();
         dense.extend(pts.first());
         for w in pts.windows(2) {
             let n = ((w[1] - w[0]).norm() / step).ceil().max(1.0) as usize;
