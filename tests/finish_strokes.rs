@@ -107,6 +107,7 @@ fn contacts(strokes: &[Stroke], preload: f64, rng: Option<&mut StdRng>) -> Vec<C
                 // the tip e.z above its command presses e.z less deep
                 force_ratio: (1.0 - e.z / preload).max(0.0),
                 offset: Vector3::zeros(),
+                depth_mm: preload,
             });
         }
     }
