@@ -85,3 +85,54 @@ pub fn resolve(tool_file: &Path, name_or_file: &Path) -> PathBuf {
         name_or_file.to_path_buf()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A cell folder with the shipped tool.toml and `tools/` holding `names`.
+    fn cell(names: &[&str]) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/calibration/tool.toml");
+        let text = std::fs::read_to_string(shipped).unwrap();
+        let tool = dir.path().join("tool.toml");
+        std::fs::write(&tool, &text).unwrap();
+        std::fs::create_dir_all(dir.path().join(TOOLS_DIR)).unwrap();
+        for n in names {
+            std::fs::write(tools_dir(&tool).join(format!("{n}.toml")), &text).unwrap();
+        }
+        (dir, tool)
+    }
+
+    #[test]
+    fn the_library_is_tool_toml_and_the_tools_folder_by_name() {
+        let (_dir, tool) = cell(&["small", "fine"]);
+        let names: Vec<String> = read_further(&tool).unwrap().iter().map(tool_name).collect();
+        assert_eq!(names, ["fine", "small"]);
+        let small = tools_dir(&tool).join("small.toml");
+        assert_eq!(resolve(&tool, Path::new("small")), small);
+        assert_eq!(resolve(&tool, Path::new(DEFAULT_TOOL)), tool);
+        // not a library name: the path as given
+        assert_eq!(resolve(&tool, Path::new("other")), Path::new("other"));
+        assert_eq!(resolve(&tool, Path::new("a/b.toml")), Path::new("a/b.toml"));
+    }
+
+    #[test]
+    fn a_cell_without_a_tools_folder_is_the_library_of_one_tool() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(read_further(&dir.path().join("tool.toml"))
+            .unwrap()
+            .is_empty());
+    }
+
+    #[test]
+    fn a_library_file_named_tool_or_not_a_tool_file_is_refused_with_its_path() {
+        let (_dir, tool) = cell(&[DEFAULT_TOOL]);
+        let e = read_further(&tool).unwrap_err().to_string();
+        assert!(e.contains("tools/tool.toml") && e.contains("rename"), "{e}");
+        let (_dir, tool) = cell(&[]);
+        std::fs::write(tools_dir(&tool).join("bad.toml"), "radius = \"x\"\n").unwrap();
+        let e = read_further(&tool).unwrap_err().to_string();
+        assert!(e.contains("tools/bad.toml"), "{e}");
+    }
+}
