@@ -61,7 +61,7 @@ pub fn assign(
         .filter(|r| eligible(r))
         .map(|r| (r.id, (0, coverage(Some(&whole), r.id))))
         .collect();
-    for k in 1..count {
+    for (k, took) in taken.iter_mut().enumerate().skip(1) {
         let short: Vec<usize> = best
             .iter()
             .filter(|(_, &(s, c))| s == 0 && c < GOOD_COVERAGE)
@@ -71,7 +71,7 @@ pub fn assign(
             break;
         }
         let trial = plan_with(k, &only(inspection, |id| short.contains(&id)));
-        let moved = judge(&trial, &short, &mut best, k, &mut taken[k].tried);
+        let moved = judge(&trial, &short, &mut best, k, &mut took.tried);
         if moved.is_empty() {
             continue;
         }
@@ -79,8 +79,8 @@ pub fn assign(
             (Ok(p), true) => p,
             _ => plan_with(k, &only(inspection, |id| moved.contains(&id)))?,
         };
-        taken[k].regions = moved;
-        taken[k].plan = Some(Box::new(sub));
+        took.regions = moved;
+        took.plan = Some(Box::new(sub));
     }
     let moved: Vec<usize> = best
         .iter()
