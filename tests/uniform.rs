@@ -15,7 +15,7 @@ use polishbot::report::provenance::Provenance;
 use polishbot::robot::{angle_between, Turntable, Workcell};
 
 use common::femoral::{
-    cell, parametric_case, planned_area, reasons, setups, uniform_case, uniform_config,
+    cell, library, parametric_case, planned_area, reasons, setups, uniform_case, uniform_config,
 };
 use common::{calib, polishbot, read_journal, succeed, tempdir};
 use polishbot::bus::EntryKind;
@@ -317,13 +317,14 @@ fn plan_page_says_what_is_left_out(insp: &Inspection, plan: &Plan, seed: u64) ->
 /// its placement's hash, and every region setup 2 tried and left names why.
 #[test]
 fn uniform_defects_over_the_designed_cells_two_setups() {
-    let (robot, cells, mut config) = setups("femoral/");
+    let (_, cells, mut config) = setups("femoral/");
+    let alone = library("femoral/", true);
     assert_eq!(cells.len(), 2, "the designed cell ships two setups");
     config.mode = PlanMode::Removal;
     for seed in [5100, 5101] {
         let insp = uniform_case(seed);
-        let one = polishbot::motion::setups::plan(&insp, &robot, &cells[..1], &config).unwrap();
-        let two = polishbot::motion::setups::plan(&insp, &robot, &cells, &config).unwrap();
+        let one = polishbot::motion::setups::plan(&insp, &alone, &cells[..1], &config).unwrap();
+        let two = polishbot::motion::setups::plan(&insp, &alone, &cells, &config).unwrap();
         let (c1, t1) = planned_area(&one);
         let (c2, t2) = planned_area(&two);
         let moved = &two.setups[1].regions;

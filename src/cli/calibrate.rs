@@ -113,9 +113,10 @@ pub enum Routine {
         /// The plan that was ground (made with --mode removal; predicted.csv beside it).
         #[arg(long, value_name = "FILE")]
         plan: PathBuf,
-        /// The tool file the plan was made with, read and updated in place [default: the
+        /// The tool the plan was made with, read and updated in place: a file, or the name
+        /// of a tool of the cell's library (`small`: its `tools/small.toml`) [default: the
         /// cell's tool.toml, written into --out].
-        #[arg(long, value_name = "FILE")]
+        #[arg(long, value_name = "FILE|NAME")]
         tool: Option<PathBuf>,
     },
 }
@@ -186,6 +187,9 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
         tool,
     } = &args.routine
     {
+        let tool = tool
+            .as_ref()
+            .map(|t| crate::robot::tool_library::resolve(&tool_in, t));
         let inputs = super::calibrate_removal::RefitInputs {
             before: before.clone(),
             after: after.clone(),

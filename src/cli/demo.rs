@@ -112,6 +112,7 @@ fn demo_cell() -> CellFiles {
         servos: held(cfg.servos.clone()),
         workcell: held(cfg.workcell.clone()),
         solids: Some(held(cfg.solids())),
+        tools: Vec::new(),
     }
 }
 

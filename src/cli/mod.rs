@@ -21,6 +21,7 @@ pub mod settings;
 mod setup_stop;
 mod synth;
 mod table;
+mod tool_stop;
 
 pub use command::{main, Cli, Command};
 pub use common::{load_config, one_line, GeometryInput};

@@ -251,21 +251,24 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
         }),
         _ => None,
     };
-    stream_plan(
-        &cfg,
-        &Job {
+    let run_from = |resume: Option<&Path>| {
+        let job = Job {
             plan_file: &args.plan,
             source: PlanSource::File,
             inspection: None,
             cell: &cell,
             device: &args.device,
             dry_run: args.dry_run,
-            resume: args.resume.as_deref(),
+            resume,
             journal: args.journal.clone(),
             part,
-        },
-    )
-    .map(drop)
+        };
+        stream_plan(&cfg, &job).map(drop)
+    };
+    match args.device.sim && part.is_none() {
+        true => setup_stop::simulated_operator(run_from, args.resume.as_deref()),
+        false => run_from(args.resume.as_deref()),
+    }
 }
 
 /// Streams `job`'s plan with the settings `cfg`: checks the plan against the cell (joint and
@@ -273,7 +276,6 @@ pub fn run(args: RunArgs, config: Option<&Path>) -> anyhow::Result<()> {
 /// virtual part's ground surface and rescan, as written, when the simulated arm ground one
 /// (`job.part`).
 pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<GroundPart>> {
-    let robot = job.cell.robot()?;
     let plan_path = job.plan_file;
     let (text, parsed);
     let (text, plan) = match job.source {
@@ -292,6 +294,7 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
     let whole = plan;
     let stage = setup_stop::stage(job.resume, &sha, whole)?;
     let plan = stage.plan;
+    let robot = super::tool_stop::robot_for(job.cell, stage.tool)?;
     let (table, workcell, solids) = match stage.setup {
         1 => (
             job.cell.turntable()?,
@@ -350,8 +353,8 @@ pub fn stream_plan(cfg: &RunFileConfig, job: &Job) -> anyhow::Result<Option<Grou
     }
     let journal = Journal::append(&journal_path)?
         .for_plan(&sha)
-        .for_setup(stage.setup as u64);
-    let then = setup_stop::next_stop(whole, stage.setup, &journal_path, plan_path);
+        .for_setup(stage.number as u64);
+    let then = setup_stop::next_stop(whole, stage.number, &journal_path, plan_path);
     let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
     let _ = bus::install_ctrlc(stop.clone());
     if let Some(ground) = ground {

@@ -2,10 +2,17 @@
 //! ends with an operator stop (journaled, exit [`OPERATOR_STOP_EXIT`]) asking to re-fixture
 //! the part and measure the new placement; `run --resume` continues with the next setup's
 //! plan only on the cell's workcell file of that setup with the placement the plan was made
-//! for. One stop for every kind (`refixture`; a tool change is the next).
-use std::path::Path;
+//! for. One stop for every kind: `refixture`, and `tool_change` (`super::tool_stop`) between
+//! the tools of a cell's tool library within a setup.
+//!
+//! A run streams the plan in stages: per setup (1 first) its plan, and in a plan with a tool
+//! library (`tools[]`) per setup one stage per tool in the plan's tool sequence. The journal
+//! numbers the stages (its `setup` field); in a plan without a tool library a stage is a setup
+//! and its number the setup's.
+use std::path::{Path, PathBuf};
 
 use crate::bus::ResumePoint;
+use crate::motion::file::ToolPart;
 use crate::motion::setups::{placement_sha256, setup_file};
 use crate::motion::Plan;
 use crate::robot::{RobotConfig, Workcell};
@@ -17,12 +24,15 @@ pub const OPERATOR_STOP_EXIT: u8 = 5;
 /// The run ended for the operator: what to do before `run --resume`.
 #[derive(Debug, Clone)]
 pub struct OperatorStop {
-    /// The stop's kind (`refixture`).
+    /// The stop's kind (`refixture`, `tool_change`).
     pub kind: String,
-    /// The setup the run continues with.
+    /// The stage the run continues with (journal `setup`; a setup's number when the plan has
+    /// no tool library).
     pub setup: u64,
     /// What the operator does next, one line.
     pub message: String,
+    /// The journal the stop is written to (`run --resume` reads it).
+    pub journal: PathBuf,
 }
 
 impl std::fmt::Display for OperatorStop {
@@ -33,11 +43,51 @@ impl std::fmt::Display for OperatorStop {
 
 impl std::error::Error for OperatorStop {}
 
-/// Which part of the plan a run streams: its setup, that setup's plan and the first frame.
-pub struct Stage<'a> {
+/// One stage of a plan as listed (its plan None when the setup or tool grinds nothing).
+#[derive(Clone, Copy)]
+pub struct StagePart<'a> {
     /// The setup (1 first).
     pub setup: usize,
-    /// Its plan (setup 1: the plan itself).
+    /// The library tool (None: the plan has no tool library).
+    pub tool: Option<&'a ToolPart>,
+    /// Its plan.
+    pub plan: Option<&'a Plan>,
+}
+
+/// The stages of `plan` in the order a run streams them (the stage number is the index + 1).
+pub fn stages(plan: &Plan) -> Vec<StagePart<'_>> {
+    let setups = (1..=plan.setups.len().max(1)).map(|n| (n, setup_plan(plan, n)));
+    let mut out = Vec::new();
+    for (setup, p) in setups {
+        let tools = p.map_or(&[][..], |p| &p.tools[..]);
+        if tools.is_empty() {
+            out.push(StagePart {
+                setup,
+                tool: None,
+                plan: p,
+            });
+        }
+        for (k, t) in tools.iter().enumerate() {
+            let plan = if k == 0 { p } else { t.plan.as_deref() };
+            out.push(StagePart {
+                setup,
+                tool: Some(t),
+                plan,
+            });
+        }
+    }
+    out
+}
+
+/// Which part of the plan a run streams: its stage, that stage's plan and the first frame.
+pub struct Stage<'a> {
+    /// The stage's number (1 first; the journal's `setup`).
+    pub number: usize,
+    /// The setup (1 first).
+    pub setup: usize,
+    /// The library tool it grinds with (None: the plan has no tool library).
+    pub tool: Option<&'a ToolPart>,
+    /// Its plan (stage 1: the plan itself).
     pub plan: &'a Plan,
     /// The first frame to send; None: checked against the frames by the caller ([`from`]).
     resume: Option<ResumePoint>,
@@ -53,21 +103,25 @@ impl Stage<'_> {
         let from = rp.resume_from();
         anyhow::ensure!(
             from < frames as u64,
-            "{}: --resume: the journal says frame {from} of setup {} was sent, but its plan has {frames} frames (arm and table)",
+            "{}: --resume: the journal says frame {from} of stage {} (setup {}) was sent, but its plan has {frames} frames (arm and table)",
             j.display(),
+            self.number,
             self.setup
         );
         Ok(from as usize)
     }
 }
 
-/// The stage a run of `plan` (file SHA-256 `sha`) streams: setup 1 from frame 0, or with
+/// The stage a run of `plan` (file SHA-256 `sha`) streams: stage 1 from frame 0, or with
 /// `--resume` the journal's (which must belong to this plan): after an operator stop the
-/// setup it names from frame 0, else the setup it was streaming from where it stood.
+/// stage it names from frame 0, else the stage it was streaming from where it stood.
 pub fn stage<'a>(resume: Option<&Path>, sha: &str, plan: &'a Plan) -> anyhow::Result<Stage<'a>> {
+    let all = stages(plan);
     let Some(j) = resume else {
         return Ok(Stage {
+            number: 1,
             setup: 1,
+            tool: all.first().and_then(|s| s.tool),
             plan,
             resume: None,
         });
@@ -88,15 +142,23 @@ pub fn stage<'a>(resume: Option<&Path>, sha: &str, plan: &'a Plan) -> anyhow::Re
         )
         }
     }
-    let (setup, resume) = match &rp.operator_stop {
+    let (number, resume) = match &rp.operator_stop {
         Some((_, next)) => (*next as usize, None),
         None => (rp.setup as usize, Some(rp)),
     };
-    let plan = setup_plan(plan, setup).ok_or_else(|| {
-        anyhow::anyhow!("{}: --resume: the plan has no setup {setup}", j.display())
-    })?;
-    Ok(Stage {
+    let part = number.checked_sub(1).and_then(|k| all.get(k));
+    let Some(&StagePart {
         setup,
+        tool,
+        plan: Some(plan),
+    }) = part
+    else {
+        anyhow::bail!("{}: --resume: the plan has no stage {number}", j.display())
+    };
+    Ok(Stage {
+        number,
+        setup,
+        tool,
         plan,
         resume,
     })
@@ -130,27 +192,82 @@ pub fn cell_of(robot: &RobotConfig, plan: &Plan, setup: usize) -> anyhow::Result
     Ok(out)
 }
 
-/// The operator stop after setup `done` of `plan` (file `plan_file`, journal `journal`): the
-/// next setup with a plan, or None when none is left. `run` journals it after the setup's
-/// last frame (`Bus::operator_stop`) and ends with it: the one path of every operator stop.
+/// The operator stop after stage `done` of `plan` (file `plan_file`, journal `journal`): the
+/// next stage with a plan, or None when none is left: a tool change within the setup
+/// ([`super::tool_stop::message`]), else a re-fixture (naming the tool to mount when it
+/// changes too). `run` journals it after the stage's last frame (`Bus::operator_stop`) and
+/// ends with it: the one path of every operator stop.
 pub fn next_stop(
     plan: &Plan,
     done: usize,
     journal: &Path,
     plan_file: &Path,
 ) -> Option<OperatorStop> {
-    let next = (done + 1..=plan.setups.len()).find(|&n| setup_plan(plan, n).is_some())?;
-    let part = &plan.setups[next - 1];
-    let message = format!(
-        "setup {done} done; re-fixture the part as setup {next} (mounted as {} places it; {} region(s) left for it), run `polishbot calibrate workcell --setup {next} ...` if that placement is not measured yet, then `polishbot run --plan {} --resume {} ...`",
-        part.workcell,
-        part.regions.len(),
+    let all = stages(plan);
+    let was = all.get(done.checked_sub(1)?)?;
+    let (k, now) = (all.iter().enumerate().skip(done)).find(|(_, s)| s.plan.is_some())?;
+    let next = k + 1;
+    let resume = format!(
+        "`polishbot run --plan {} --resume {} ...`",
         plan_file.display(),
         journal.display()
     );
+    let (kind, message) = if now.setup == was.setup {
+        let mount = super::tool_stop::message(now.tool, was.tool);
+        (
+            super::tool_stop::TOOL_CHANGE,
+            format!("setup {}: {mount}, then {resume}", now.setup),
+        )
+    } else {
+        let part = &plan.setups[now.setup - 1];
+        let tool = match (now.tool, was.tool) {
+            (Some(t), Some(w)) if t.tool != w.tool => {
+                format!("; {}", super::tool_stop::message(now.tool, was.tool))
+            }
+            _ => String::new(),
+        };
+        let message = format!(
+            "setup {} done; re-fixture the part as setup {} (mounted as {} places it; {} region(s) left for it){tool}, run `polishbot calibrate workcell --setup {} ...` if that placement is not measured yet, then {resume}",
+            was.setup,
+            now.setup,
+            part.workcell,
+            part.regions.len(),
+            now.setup,
+        );
+        ("refixture", message)
+    };
     Some(OperatorStop {
-        kind: "refixture".into(),
+        kind: kind.into(),
         setup: next as u64,
         message,
+        journal: journal.to_path_buf(),
     })
+}
+
+/// Most tool changes the simulated operator makes in one `run --sim` (a plan changes tools
+/// at most once per tool and setup; a library holds at most 16 tools and a cell 9 setups).
+const MAX_SIMULATED_CHANGES: usize = 16 * 9;
+
+/// `run --sim`'s operator: runs `stream` (a run from the start, then with the journal to
+/// resume from) and, while it ends at a tool change, mounts the tool asked for (prints it)
+/// and resumes; any other stop or error ends it.
+pub fn simulated_operator(
+    mut stream: impl FnMut(Option<&Path>) -> anyhow::Result<()>,
+    resume: Option<&Path>,
+) -> anyhow::Result<()> {
+    let mut from = resume.map(Path::to_path_buf);
+    for _ in 0..=MAX_SIMULATED_CHANGES {
+        match stream(from.as_deref()) {
+            Err(e) => match e.downcast::<OperatorStop>() {
+                Ok(stop) if stop.kind == super::tool_stop::TOOL_CHANGE => {
+                    println!("run: simulated operator: {}", stop.message);
+                    from = Some(stop.journal);
+                }
+                Ok(stop) => return Err(stop.into()),
+                Err(e) => return Err(e),
+            },
+            done => return done,
+        }
+    }
+    anyhow::bail!("run: the simulated operator made more than {MAX_SIMULATED_CHANGES} tool changes")
 }

@@ -80,7 +80,8 @@ pub fn plan_into(
         &cfg.robot.workcell,
         &cfg.robot.servos,
     )?);
-    let plan = motion::setups::plan(inspection, &robot, &cells, &cfg.plan)?;
+    let tools = motion::tools::ToolRobot::of_cell(cell)?;
+    let plan = motion::setups::plan(inspection, &tools, &cells, &cfg.plan)?;
     cfg.plan.collision.solids.extend(solids);
     let compact =
         serde_json::to_string(&plan).map_err(|e| anyhow::anyhow!("{}: {e}", out.display()))?;

@@ -194,5 +194,6 @@ pub fn region_report(
         },
         coverage_of_all: covered as f64 / n,
         setup: None,
+        tool: None,
     }
 }

@@ -92,6 +92,35 @@ pub struct Plan {
     /// streams after the operator re-fixtures the part (absent in a cell with one setup).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub setups: Vec<SetupPart>,
+    /// A cell with a tool library (`tools/` beside tool.toml): the tool sequence of this plan
+    /// (largest ball first), per tool its file's hash, the regions it grinds and, from the
+    /// second tool on, its own plan, which streams after the operator mounts that tool
+    /// (absent with one tool; docs/FORMATS.md).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tools: Vec<ToolPart>,
+}
+
+/// A tool of the library in plan.json, in the order the run mounts them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ToolPart {
+    /// The tool's library name (tool.toml: `tool`; `tools/NAME.toml`: NAME).
+    pub tool: String,
+    /// Its file as planned with.
+    pub file: String,
+    /// SHA-256 of that file: the tool's stage streams only when the cell's file of that name
+    /// gives the same.
+    pub tool_sha256: String,
+    /// Ball radius, mm.
+    pub ball_radius_mm: f64,
+    /// Shank length from the ball centre, mm.
+    pub shank_length_mm: f64,
+    /// Regions ground with this tool.
+    pub regions: Vec<usize>,
+    /// Regions tried with this tool and left where they were: what it covered and why not more.
+    pub tried: Vec<TriedSetup>,
+    /// This tool's plan (second tool on; the first tool's is the plan holding this list).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<Box<Plan>>,
 }
 
 /// A setup in plan.json.

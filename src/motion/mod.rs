@@ -9,6 +9,7 @@
 //! result: [`Plan`] (plan.json). [`plan_part`] plans the part where it sits, the step `plan`
 //! makes once per table angle.
 pub mod aim;
+pub mod alternatives;
 mod assemble;
 mod by_region;
 pub mod check;
@@ -38,6 +39,7 @@ pub mod table_check;
 pub mod table_file;
 mod table_split;
 mod tilt;
+pub mod tools;
 pub mod trajectory;
 pub mod validate;
 
@@ -180,6 +182,7 @@ pub fn plan_part(
         removal,
         turntable: None,
         setups: Vec::new(),
+        tools: Vec::new(),
     })
 }
 

@@ -76,6 +76,10 @@ pub struct RegionReport {
     /// setup.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub setup: Option<usize>,
+    /// The library tool (plan.json `tools[].tool`) the region is ground with; absent in a
+    /// cell with one tool.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tool: Option<String>,
 }
 
 /// The reachability report of plan.json.

@@ -191,7 +191,7 @@ fn left_table(plan: &Plan, left: &BTreeMap<(usize, String), (usize, f64, usize)>
                 points.to_string(),
                 strokes.to_string(),
                 rule.clone(),
-                best_tried(plan, *region),
+                best_tried(tool_plan(plan, *region), *region) + &tools_tried(plan, *region),
             ]
         })
         .collect();
@@ -207,6 +207,46 @@ fn left_table(plan: &Plan, left: &BTreeMap<(usize, String), (usize, f64, usize)>
         title: "left out: regions and strokes the plan does not grind".into(),
         header: header.iter().map(|s| s.to_string()).collect(),
         rows,
+    }
+}
+
+/// The plan of the library tool `region` is ground with (the plan itself without a library
+/// or for its first tool): the one holding the region's table angles.
+fn tool_plan(plan: &Plan, region: usize) -> &Plan {
+    let holds = |p: &&Plan| p.reachability.regions.iter().any(|r| r.id == region);
+    (plan.tools.iter().skip(1))
+        .filter(|t| t.regions.contains(&region))
+        .find_map(|t| t.plan.as_deref().filter(holds))
+        .unwrap_or(plan)
+}
+
+/// The tools of the library tried on `region` besides its own, each with what it covered
+/// and why not more (empty in a plan without a tool library).
+fn tools_tried(plan: &Plan, region: usize) -> String {
+    let own = plan.tools.iter().find(|t| t.regions.contains(&region));
+    let tried: Vec<String> = (plan.tools.iter())
+        .filter_map(|t| {
+            let x = t.tried.iter().find(|x| x.region == region)?;
+            let why = x
+                .refused
+                .as_deref()
+                .map_or(String::new(), |w| format!(", refused: {w}"));
+            Some(format!(
+                "tool `{}` (ball {:.1} mm): {:.0} % covered{why}",
+                t.tool,
+                t.ball_radius_mm,
+                100.0 * x.coverage
+            ))
+        })
+        .collect();
+    match (own, tried.is_empty()) {
+        (None, true) => String::new(),
+        (Some(t), true) => format!("; ground with tool `{}`, no other tool tried", t.tool),
+        (own, false) => format!(
+            "; ground with {}; other tools: {}",
+            own.map_or("no tool".to_string(), |t| format!("tool `{}`", t.tool)),
+            tried.join("; ")
+        ),
     }
 }
 

@@ -21,6 +21,9 @@ pub struct CellFiles {
     pub workcell: FileText,
     /// solids.toml beside the workcell file, when the cell has one.
     pub solids: Option<FileText>,
+    /// The tool library's further tools (`tools/NAME.toml` beside tool.toml, by name; empty:
+    /// tool.toml is the library, [`super::tool_library`]).
+    pub tools: Vec<ToolText>,
 }
 
 impl CellFiles {
@@ -30,6 +33,21 @@ impl CellFiles {
             tool: tool.clone(),
             ..self.clone()
         }
+    }
+
+    /// The tool library: tool.toml, then the further tools (each with its library name).
+    pub fn library(&self) -> Vec<(String, &ToolText)> {
+        let mut all = vec![(super::tool_library::DEFAULT_TOOL.to_string(), &self.tool)];
+        all.extend((self.tools.iter()).map(|t| (super::tool_library::tool_name(t), t)));
+        all
+    }
+
+    /// The library's tool `name` (tool.toml: [`super::tool_library::DEFAULT_TOOL`]).
+    pub fn library_tool(&self, name: &str) -> Option<&ToolText> {
+        self.library()
+            .into_iter()
+            .find(|(n, _)| n == name)
+            .map(|t| t.1)
     }
 
     /// The arm: the URDF chain with the tool and the servos ([`Robot::from_texts`]).

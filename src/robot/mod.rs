@@ -17,6 +17,7 @@ pub mod model;
 mod planar;
 pub mod resolution;
 pub mod servo_map;
+pub mod tool_library;
 pub mod turntable;
 pub mod units;
 
@@ -96,6 +97,7 @@ impl RobotConfig {
                 .exists()
                 .then(|| FileText::read(&solids))
                 .transpose()?,
+            tools: tool_library::read_further(&self.tool)?,
         })
     }
 }

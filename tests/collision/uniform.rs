@@ -10,7 +10,7 @@ use polishbot::motion::{plan, PlanMode};
 
 use super::heldout::{accept, turned_tally};
 use crate::common::femoral::{
-    cell, ground_at, planned_area, reasons, setups, split_plan, uniform_case,
+    cell, ground_at, library, planned_area, reasons, setups, split_plan, uniform_case,
 };
 
 /// Least share of the repairable area planned: issue 51's 0.9. The designed cell reaches
@@ -66,7 +66,8 @@ fn a_two_setup_plan_keeps_the_ball_within_its_preload_in_each_setup() {
     let insp = uniform_case(5101);
     let (robot, cells, mut config) = setups("femoral/");
     config.mode = PlanMode::Removal;
-    let plan = polishbot::motion::setups::plan(&insp, &robot, &cells, &config).expect("plan");
+    let plan = polishbot::motion::setups::plan(&insp, &library("femoral/", true), &cells, &config)
+        .expect("plan");
     let mut checked = 0;
     for (part, dir) in plan.setups.iter().zip(["femoral/", "femoral/setup-2/"]) {
         let k = part.setup - 1;

@@ -37,6 +37,18 @@ pub fn setups(dir: &str) -> (Robot, Vec<SetupCell>, PlanConfig) {
     (robot, cells, PlanConfig::rigid())
 }
 
+/// The tool library of `calibration/DIR` as `plan` reads it (tool.toml and `tools/*.toml`,
+/// largest ball first); with `alone`, the cell's tool.toml only (as before the library).
+pub fn library(dir: &str, alone: bool) -> Vec<polishbot::motion::tools::ToolRobot> {
+    let mut cfg = polishbot::robot::RobotConfig::default();
+    cfg.use_cell(&super::calib(dir));
+    let mut cell = cfg.read_cell().expect("read the cell");
+    if alone {
+        cell.tools.clear();
+    }
+    polishbot::motion::tools::ToolRobot::of_cell(&cell).expect("the tool library")
+}
+
 /// An inspection of a `synth` case of the real femoral component with `defects` random
 /// defects on its articular surface (femoral_dm_contact.stl; placed by the seed, not for the
 /// arm's reach): core points are the reference samples, distances the true deviations, a

@@ -1,0 +1,170 @@
+//! Regions over alternatives (issue 51): the rule shared by the setups of a cell
+//! (`setups`) and the tools of its library (`tools`). Every region is planned with the first
+//! alternative; a region it leaves short of the table planner's good coverage (or refuses)
+//! goes to the next alternative that covers more of it, and the first is planned again
+//! without the regions that left. Each alternative past the first keeps its own plan; each
+//! records the regions it tried and did not take, with its coverage and the reason.
+//!
+//! Front function: [`assign`].
+use std::collections::BTreeMap;
+
+use super::error::PlanError;
+use super::file::{Plan, TriedSetup};
+use super::report::RegionReport;
+use super::table::{coverage, first_clause, GOOD_COVERAGE};
+use crate::repair::{Inspection, RegionInfo};
+
+/// A coverage gain below this counts as none (a region moves to a later alternative only when
+/// that covers more of it).
+const GAIN_EPS: f64 = 1e-9;
+
+/// What one alternative took.
+#[derive(Debug, Clone, Default)]
+pub struct Taken {
+    /// Regions planned with it.
+    pub regions: Vec<usize>,
+    /// Regions tried with it and left where they were.
+    pub tried: Vec<TriedSetup>,
+    /// Its plan (from the second alternative on; the first's is the plan [`assign`] returns).
+    pub plan: Option<Box<Plan>>,
+}
+
+/// A planner of `inspection`'s regions with alternative `k` (0 first).
+pub type PlanWith<'a> = dyn Fn(usize, &Inspection) -> Result<Plan, PlanError> + 'a;
+
+/// `inspection` with the regions `keep` accepts.
+fn only(inspection: &Inspection, keep: impl Fn(usize) -> bool) -> Inspection {
+    let mut part = inspection.clone();
+    part.regions.retain(|r| keep(r.id));
+    part
+}
+
+/// Plans `inspection` over `count` alternatives (`plan_with`; one: exactly its plan with
+/// alternative 0) for the regions `eligible` accepts; returns the first alternative's plan and
+/// what each took. Reports are not merged ([`merge_reports`]).
+pub fn assign(
+    inspection: &Inspection,
+    count: usize,
+    eligible: &dyn Fn(&RegionInfo) -> bool,
+    plan_with: &PlanWith,
+) -> Result<(Plan, Vec<Taken>), PlanError> {
+    let whole = plan_with(0, inspection)?;
+    let mut taken = vec![Taken::default(); count.max(1)];
+    if count <= 1 {
+        taken[0].regions = whole.reachability.planned_ids();
+        return Ok((whole, taken));
+    }
+    // best coverage so far per planned region, and the alternative holding it
+    let mut best: BTreeMap<usize, (usize, f64)> = inspection
+        .regions
+        .iter()
+        .filter(|r| eligible(r))
+        .map(|r| (r.id, (0, coverage(Some(&whole), r.id))))
+        .collect();
+    for (k, took) in taken.iter_mut().enumerate().skip(1) {
+        let short: Vec<usize> = best
+            .iter()
+            .filter(|(_, &(s, c))| s == 0 && c < GOOD_COVERAGE)
+            .map(|(&id, _)| id)
+            .collect();
+        if short.is_empty() {
+            break;
+        }
+        let trial = plan_with(k, &only(inspection, |id| short.contains(&id)));
+        let moved = judge(&trial, &short, &mut best, k, &mut took.tried);
+        if moved.is_empty() {
+            continue;
+        }
+        let sub = match (trial, moved.len() == short.len()) {
+            (Ok(p), true) => p,
+            _ => plan_with(k, &only(inspection, |id| moved.contains(&id)))?,
+        };
+        took.regions = moved;
+        took.plan = Some(Box::new(sub));
+    }
+    let moved: Vec<usize> = best
+        .iter()
+        .filter(|(_, &(s, _))| s > 0)
+        .map(|(&id, _)| id)
+        .collect();
+    let top = if moved.is_empty() {
+        whole
+    } else {
+        plan_with(0, &only(inspection, |id| !moved.contains(&id)))?
+    };
+    taken[0].regions = top.reachability.planned_ids();
+    Ok((top, taken))
+}
+
+/// Which of the `short` regions alternative `k`'s `trial` plan covers better than `best`
+/// (updated to it); the others go into `tried` with the trial's coverage and reason.
+fn judge(
+    trial: &Result<Plan, PlanError>,
+    short: &[usize],
+    best: &mut BTreeMap<usize, (usize, f64)>,
+    k: usize,
+    tried: &mut Vec<TriedSetup>,
+) -> Vec<usize> {
+    let mut moved = Vec::new();
+    for &id in short {
+        let had = best.get(&id).map_or(0.0, |b| b.1);
+        let (c, why) = match trial {
+            Err(e) => (0.0, Some(first_clause(&e.to_string()))),
+            Ok(p) => {
+                let c = coverage(Some(p), id);
+                let why = p
+                    .reachability
+                    .unreachable
+                    .iter()
+                    .find(|u| u.region == id)
+                    .map(|u| first_clause(&u.reason));
+                (c, why)
+            }
+        };
+        if c > had + GAIN_EPS {
+            best.insert(id, (k, c));
+            moved.push(id);
+        } else {
+            let refused = why.or_else(|| {
+                Some(format!(
+                    "covers {:.1} % of it, no more than before",
+                    100.0 * c
+                ))
+            });
+            tried.push(TriedSetup {
+                region: id,
+                coverage: c,
+                refused,
+            });
+        }
+    }
+    moved
+}
+
+/// The first alternative's plan `top` reports every region: each region planned with
+/// alternative `k` is marked by `mark(report, k)`, and the reports (and points left out) of
+/// the regions that moved come from their alternative's plan, in regions.json order.
+pub fn merge_reports(
+    top: &mut Plan,
+    taken: &[Taken],
+    inspection: &Inspection,
+    mark: &dyn Fn(&mut RegionReport, usize),
+) {
+    for r in &mut top.reachability.regions {
+        mark(r, 0);
+    }
+    for (k, part) in taken.iter().enumerate().skip(1) {
+        let Some(sub) = &part.plan else { continue };
+        let of = |id: usize| part.regions.contains(&id);
+        for r in sub.reachability.regions.iter().filter(|r| of(r.id)) {
+            let mut r = r.clone();
+            mark(&mut r, k);
+            top.reachability.regions.retain(|x| x.id != r.id);
+            top.reachability.regions.push(r);
+        }
+        let left = sub.reachability.unreachable.iter().filter(|u| of(u.region));
+        top.reachability.unreachable.extend(left.cloned());
+    }
+    let order = |id: usize| inspection.regions.iter().position(|r| r.id == id);
+    top.reachability.regions.sort_by_key(|r| order(r.id));
+}
