@@ -227,10 +227,16 @@ pub fn set_dwell(
     let aim: Vec<f64> = (aim.iter())
         .map(|t| config.finish.cap(config.aim.cap(*t, tolerance)))
         .collect();
-    let plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
+    let mut plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
     };
+    // the cap holds on the removal the solved dwell makes, not only on the targets
+    if let Some(share) = config.aim.first_pass_share {
+        let limit = vec![share * tolerance; cores.len()];
+        let model = (setup.tool, &influence, &solve);
+        removal::cap::hold_in_order((&placed, &contacts), (&cores, &limit), model, &mut plan);
+    }
     let planned = runs.iter_mut().flatten().zip(&plan.dwell).zip(&contacts);
     for ((piece, t), c) in planned {
         piece.dwell_s = Some(*t);

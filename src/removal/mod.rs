@@ -8,6 +8,7 @@
 //!
 //! Front function: [`solve_region`] with a [`RemovalConfig`]; result: [`RegionRemoval`]. The k
 //! fit: [`fit::fit`] with a [`fit::FitConfig`].
+pub mod cap;
 pub mod dwell;
 pub mod fit;
 pub mod force;

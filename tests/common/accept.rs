@@ -100,8 +100,8 @@ pub struct Inspected {
 
 /// One acceptance case's numbers (issue 29): per inspection the repairable volume above the
 /// tolerance and peak, and the lowest core points; the first fitted k against the true k (the
-/// scale that maps iteration 1's predicted removal onto the simulator's true removal,
-/// `after_truth.ply`).
+/// scale that maps iteration 1's predicted removal, moved to where the tool really ground,
+/// onto the simulator's true removal, `after_truth.ply`: `super::true_k`).
 #[derive(Debug)]
 pub struct Acceptance {
     /// Every inspection, in order.
