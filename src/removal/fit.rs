@@ -277,8 +277,7 @@ pub fn fit(
 }
 
 /// Fits one k to the points of all `grinds` pooled: m = k u with u = predicted / the grind's
-/// plan k, k = sum(m u) / sum(u^2) over every point (over more than one grind: the median of
-/// the regions' own k, [`region_median`], where there are enough regions), its standard error
+/// plan k, k = sum(m u) / sum(u^2) over every point, its standard error
 /// sqrt(sum(r^2) / (n - 1) / sum(u^2)). A grind too thin to fit alone still adds its points.
 /// Refuses with a one-line reason when the pool as a whole has fewer than `min_points`
 /// points, a relative standard error above `max_relative_error`, or nothing removed. The
@@ -300,17 +299,7 @@ pub fn pool(grinds: &[Evidence], cfg: &FitConfig) -> Result<RemovalFit, String> 
             cfg.min_predicted_mm,
         ));
     };
-    let mut k = through_origin(&pairs);
-    if used > 1 {
-        // pooled over grinds: the regions' median, so that one region whose removal collapsed
-        // (or doubled) does not drag the next plan's k for every region
-        if let Some(median) = region_median(grinds, cfg.min_region_points) {
-            let xx: f64 = pairs.iter().map(|(u, _)| u * u).sum();
-            k.residual_ss = pairs.iter().map(|(u, m)| (m - median * u).powi(2)).sum();
-            k.std_error = (k.residual_ss / (pairs.len() as f64 - 1.0) / xx).sqrt();
-            k.value = median;
-        }
-    }
+    let k = through_origin(&pairs);
     let (s, se) = (k.value / last.plan_k_mm2_n, k.std_error / last.plan_k_mm2_n);
     if !(s > 0.0 && se / s <= cfg.max_relative_error) {
         return Err(format!(
@@ -374,36 +363,6 @@ fn region_fits(g: &Evidence, least: usize) -> Vec<RegionFit> {
             k_mm2_n: through_origin(&pairs).value,
         })
         .collect()
-}
-
-/// Fewest region fits [`region_median`] takes a median of (3: with two, one collapsed region
-/// is half the answer).
-const MEDIAN_REGIONS: usize = 3;
-
-/// The median of the k fitted to each region of every one of `grinds` alone (regions with at
-/// least `least` points), when there are at least [`MEDIAN_REGIONS`]: the loop's k pooled over
-/// grinds (issue 50, acceptance seed 29: grind 2 removed 29 % of its plan in one region, the
-/// tall bump the arm gives way on, while the others removed about their plan; the pooled fit,
-/// weighted by that region's large predicted removal, fell to 0.36 x, and grind 3 removed
-/// 1.73-1.88 x its plan and cut to -0.061 mm). A region whose removal departs from the
-/// model's for a reason k does not hold (the arm, the contact) is one vote, not most of the
-/// weight. None with fewer regions (the pooled fit stands).
-fn region_median(grinds: &[Evidence], least: usize) -> Option<f64> {
-    let mut ks: Vec<f64> = grinds
-        .iter()
-        .flat_map(|g| by_region(g, least))
-        .map(|(_, pairs)| through_origin(&pairs).value)
-        .filter(|k| k.is_finite() && *k > 0.0)
-        .collect();
-    if ks.len() < MEDIAN_REGIONS {
-        return None;
-    }
-    ks.sort_by(f64::total_cmp);
-    let n = ks.len();
-    Some(match n % 2 {
-        1 => ks[n / 2],
-        _ => 0.5 * (ks[n / 2 - 1] + ks[n / 2]),
-    })
 }
 
 /// Spread of k between regions relative to `k`: the regions of every grind with at least
@@ -506,43 +465,5 @@ mod tests {
         let one = pool(&[grind(region(0, 1.1).collect())], &cfg).unwrap();
         assert_eq!(one.k_region_rel_sd, 0.0);
         assert_eq!(one.k_rel_sd(), MIN_K_REL_SD);
-    }
-
-    /// Acceptance seed 29's shape: grind 1 removes its plan in three regions; grind 2 removes
-    /// 29 % of its plan in region 0, whose predicted removal is five times the others' (a tall
-    /// bump), and its plan elsewhere. Pooled by least squares k falls to about half; the
-    /// regions' median keeps the k the other five regions agree on.
-    #[test]
-    fn one_region_that_collapsed_does_not_drag_the_pooled_k() {
-        let plan_k = 5e-6;
-        let region = |id: i64, scale: f64, size: f64| {
-            (0..40).map(move |i| {
-                let p = size * (0.01 + 0.002 * i as f64);
-                EvidencePoint {
-                    region: id,
-                    predicted_mm: p,
-                    measured_mm: scale * p,
-                }
-            })
-        };
-        let grind = |points: Vec<EvidencePoint>| Evidence {
-            plan_k_mm2_n: plan_k,
-            points,
-            unmatched: 0,
-        };
-        let first: Vec<_> = (0..3).flat_map(|id| region(id, 1.0, 1.0)).collect();
-        let second: Vec<_> = region(0, 0.29, 5.0)
-            .chain(region(1, 1.02, 1.0))
-            .chain(region(2, 0.98, 1.0))
-            .collect();
-        let (first, second) = (grind(first), grind(second));
-        let cfg = FitConfig::default();
-        let all: Vec<(f64, f64)> = [&first, &second].iter().flat_map(|g| g.pairs()).collect();
-        let least_squares = through_origin(&all).value / plan_k;
-        assert!(least_squares < 0.5, "the case must drag: {least_squares}");
-        let fit = pool(&[first, second], &cfg).unwrap();
-        assert!((fit.k_mm2_n / plan_k - 1.0).abs() < 0.021, "{fit:?}");
-        // the collapsed region still shows in the spread the next Monte Carlo draws
-        assert!(fit.k_region_rel_sd > 0.2, "{fit:?}");
     }
 }
