@@ -6,8 +6,9 @@
 //! [`Compliance::command`] gives the servo angles that bend and push the joints (stiffness and
 //! gear flank) onto the planned pose; from that the offset the workcell calibration already
 //! absorbed is taken away: the calibration touched the fixture with no contact force, so the
-//! arm's gravity-only deflection at the pose nearest the part's origin is in the calibrated
-//! part pose (docs/CALIBRATION.md). The correction is held through the press, approach,
+//! arm's gravity-only deflection at the poses near the part's origin (a weighted mean over
+//! them: the calibration touched there more than once) is in the calibrated part pose
+//! (docs/CALIBRATION.md). The correction is held through the press, approach,
 //! retract and re-orientation around each contact, faded out over the transits, and smoothed
 //! (four moving averages: a cubic B-spline, bounded jerk) so that the commanded trajectory
 //! keeps the joints' limits; when no smoothing keeps them the caller leaves the compensation
@@ -262,8 +263,20 @@ fn contact_force(pass: &PlannedPass, robot: &Robot, wc: &Workcell, q: &[f64]) ->
     })
 }
 
+/// Spread of the workcell calibration's touch-offs around the part's origin, m (5 mm): the
+/// calibration touches the fixture near the origin more than once, a few millimetres apart, so
+/// the offset it absorbed is the mean over those touches, not the offset at one pose; the
+/// plan's poses nearest the origin (several nearly tied, their gravity offsets up to 0.7 mm
+/// apart on the documented arm) are weighted by `exp(-((d - d_min) / spread)^2)`, which does
+/// not jump from one pose to the other on a small change of the trajectory or kinematics.
+const TOUCH_SPREAD_M: f64 = 0.005;
+/// Weight under which a pose is left out of the absorbed offset's mean (1e-3: beyond 2.6
+/// spreads of the nearest pose, a share of the mean far under the model's error).
+const TOUCH_MIN_WEIGHT: f64 = 1e-3;
+
 /// The tip offset the workcell calibration absorbed, m (robot frame): the model's
-/// gravity-only deflection of the tip at the sample of `traj` nearest the part's origin.
+/// gravity-only deflection of the tip, a weighted mean over the samples of `traj` whose tip
+/// lies near the part's origin ([`TOUCH_SPREAD_M`]).
 fn absorbed_offset(
     model: &Compliance,
     traj: &JointTrajectory,
@@ -272,13 +285,25 @@ fn absorbed_offset(
 ) -> Vector3<f64> {
     let m = &wc.robot_from_reference;
     let origin = Vector3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-    let nearest = (0..traj.len()).map(|i| traj.sample(i)).min_by(|a, b| {
-        let d = |q: &[f64]| (robot.fk(q).position - origin).norm();
-        d(a).total_cmp(&d(b))
-    });
-    nearest.map_or(Vector3::zeros(), |q| {
-        model.loaded_tip(robot, q, &Vector3::zeros()) - robot.fk(q).position
-    })
+    let dist: Vec<f64> = (0..traj.len())
+        .map(|i| (robot.fk(traj.sample(i)).position - origin).norm())
+        .collect();
+    let nearest = dist.iter().copied().fold(f64::INFINITY, f64::min);
+    let (mut sum, mut weight) = (Vector3::zeros(), 0.0);
+    for (i, d) in dist.iter().enumerate() {
+        let w = (-((d - nearest) / TOUCH_SPREAD_M).powi(2)).exp();
+        if w < TOUCH_MIN_WEIGHT {
+            continue;
+        }
+        let q = traj.sample(i);
+        sum += (model.loaded_tip(robot, q, &Vector3::zeros()) - robot.fk(q).position) * w;
+        weight += w;
+    }
+    if weight > 0.0 {
+        sum / weight
+    } else {
+        Vector3::zeros()
+    }
 }
 
 /// Per sample, the kind of the segment it belongs to (the later one at a joint of two) and

@@ -106,10 +106,20 @@ pub fn grind(
 /// Step between the poses [`absorbed_offset`] looks at, s: one bus period (20 ms).
 const ABSORB_STEP_S: f64 = 0.02;
 
+/// Spread of the cell's calibration touch-offs around the part's origin, m (5 mm): the
+/// calibration touched the fixture near the origin more than once, a few millimetres apart,
+/// so what it absorbed is the mean offset over those touches; the run's poses are weighted by
+/// `exp(-((d - d_min) / spread)^2)` with `d` the tip's distance from the origin, so that two
+/// nearly tied poses with different offsets do not make the absorbed offset jump.
+const TOUCH_SPREAD_M: f64 = 0.005;
+/// Weight under which a pose is left out of that mean (1e-3: beyond 2.6 spreads).
+const TOUCH_MIN_WEIGHT: f64 = 1e-3;
+
 /// What the workcell calibration absorbed of the arm's sag and backlash, m (robot frame): the
 /// cell was calibrated by touching the fixture with the arm loaded by its weight, so the
 /// ball's offset there (gravity on each loaded joint's flank, no contact force) went into the
-/// calibrated part pose. Taken at the pose of the run nearest the part's origin `origin`.
+/// calibrated part pose. A weighted mean over the run's poses whose tip lies near the part's
+/// origin `origin` ([`TOUCH_SPREAD_M`]).
 fn absorbed_offset(
     arm: &slack::Arm,
     trace: &mut ServoTrace,
@@ -119,13 +129,24 @@ fn absorbed_offset(
 ) -> Vector3<f64> {
     let tip_m = arm.tip_m();
     let n = (t_end / ABSORB_STEP_S).ceil().max(0.0) as usize;
-    let nearest = (0..=n)
-        .map(|s| joints_at(trace, s as f64 * ABSORB_STEP_S))
-        .min_by(|a, b| {
-            let d = |q: &[f64; 5]| (fk::tool(q, &tip_m).0 - origin).norm();
-            d(a).total_cmp(&d(b))
-        });
-    nearest.map_or(Vector3::zeros(), |q| {
-        arm.held(q, Vector3::zeros()).0 - fk::tool(&q, &tip_m).0
-    })
+    let poses: Vec<([f64; 5], f64)> = (0..=n)
+        .map(|s| {
+            let q = joints_at(trace, s as f64 * ABSORB_STEP_S);
+            (q, (fk::tool(&q, &tip_m).0 - origin).norm())
+        })
+        .collect();
+    let nearest = poses.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+    let (mut sum, mut weight) = (Vector3::zeros(), 0.0);
+    for (q, d) in &poses {
+        let w = (-((d - nearest) / TOUCH_SPREAD_M).powi(2)).exp();
+        if w >= TOUCH_MIN_WEIGHT {
+            sum += (arm.held(*q, Vector3::zeros()).0 - fk::tool(q, &tip_m).0) * w;
+            weight += w;
+        }
+    }
+    if weight > 0.0 {
+        sum / weight
+    } else {
+        Vector3::zeros()
+    }
 }
