@@ -366,21 +366,45 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
     // tests/cycle.rs's case: 5 defects (0.08-0.5 mm) where the arm reaches, one a pit
     common::case(3, &dir);
     common::inspect_in(&dir, "scan.ply", "before");
+    // the simulator's true k 1.3 x the planner's (issue 29's "30 % off"), on an ideal arm
+    // whose compliance table is its own (`calibrate compliance --sim` on it, as tests/cycle.rs's
+    // rigid loop): this checks the fit where the removal follows the planned force. On the
+    // documented arm the arm gives way under the contact and the fit reads 0.6 x the cell's
+    // Preston k (issue 50's closing note), which is the arm's problem, not the fit's.
+    let arm = dir.join("ideal-arm.toml");
+    std::fs::write(&arm, "[sim.grinding]\nideal_arm = true\n").unwrap();
+    let own = dir.join("own-cell");
+    std::fs::create_dir_all(&own).unwrap();
+    common::succeed(
+        polishbot()
+            .args(["calibrate", "compliance", "--sim", "--cell"])
+            .arg(common::calib(""))
+            .arg("--out")
+            .arg(&own)
+            .arg("--config")
+            .arg(&arm),
+    );
+    let servos = own.join("servos.toml");
+    std::fs::write(
+        dir.join("plan.toml"),
+        format!("[robot]\nservos = {servos:?}\n"),
+    )
+    .unwrap();
     let plan = |mode: &str, out: &str| {
         common::succeed(
             polishbot()
-                .args(["plan", "--mode", mode, "--inspection", &d("before"), "-o"])
+                .args(["plan", "--mode", mode, "--inspection", &d("before")])
+                .args(["--config", &d("plan.toml"), "-o"])
                 .arg(d(out)),
         )
     };
     plan("removal", "plan.json");
-    // the simulator's true k 1.3 x the planner's (issue 29's "30 % off"), on the cell's
-    // default (documented) arm, the arm the shipped servos.toml's `[compliance]` table was
-    // learned on and the plan compensates: on the ideal arm that table bent the commands
-    // against a sag it does not have and the removal landed 0.7-1.4 mm off (issue 50)
     std::fs::write(
         dir.join("run.toml"),
-        format!("[sim.grinding]\n{}", common::SIM_TOOL),
+        format!(
+            "[robot]\nservos = {servos:?}\n[sim.grinding]\n{}ideal_arm = true\n",
+            common::SIM_TOOL
+        ),
     )
     .unwrap();
     common::succeed(polishbot().args(["run", "--config", &d("run.toml")]).args([
@@ -436,8 +460,11 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
         PLAN_K,
     );
     println!(
-        "fitted k {k:.4e}, true k {k_true:.4e}, ratio {:.4}",
-        k / k_true
+        "fitted k {k:.4e}, true k {k_true:.4e}, ratio {:.4}; the simulator's Preston k {:.4e}, \
+         ratio {:.4}",
+        k / k_true,
+        PLAN_K * 1.3,
+        k / (PLAN_K * 1.3)
     );
     assert!((k / k_true - 1.0).abs() < K_WITHIN, "{k} vs {k_true}");
     assert!(stdout.contains("fit residual RMS"), "{stdout}");

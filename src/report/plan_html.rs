@@ -106,6 +106,17 @@ fn coverage(reach: &PlanCoverage, inspection: &Inspection) -> (CoverageMap, Tabl
     (map, table)
 }
 
+/// Merges a later piece's `more` rows into `rows`: per core point the lower prediction.
+fn lowest_of(rows: &mut Vec<(usize, f64, f64)>, more: Vec<(usize, f64, f64)>) {
+    for m in more {
+        match rows.iter_mut().find(|r| r.0 == m.0) {
+            Some(r) if m.1 < r.1 => *r = m,
+            Some(_) => {}
+            None => rows.push(m),
+        }
+    }
+}
+
 /// Per predicted region its rows (predicted.csv's, in the order of plan.json's
 /// `removal.regions`, `core_points` each) as (core point index, predicted after, low
 /// quantile: the prediction less the Monte Carlo's spread); empty when the rows do not add
@@ -135,7 +146,12 @@ fn predicted(plan: &Plan, inspection: &Inspection) -> Vec<PredictedRegion> {
                 ))
             })
             .collect();
-        out.push((r.region, matched));
+        // a region split by table angle has an entry per piece, each piece planned on the
+        // part as the earlier ones leave it: a point's prediction is its lowest
+        match out.iter_mut().find(|(id, _)| *id == r.region) {
+            Some((_, rows)) => lowest_of(rows, matched),
+            None => out.push((r.region, matched)),
+        }
     }
     out
 }

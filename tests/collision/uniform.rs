@@ -83,7 +83,7 @@ fn a_two_setup_plan_keeps_the_ball_within_its_preload_in_each_setup() {
 }
 
 /// Issue 51, the table as a sixth axis at stroke granularity: the uniform case whose plan in
-/// the turntable cell splits regions by table angle (`common::femoral::SPLIT_SEED`). Each
+/// the designed femoral cell splits regions by table angle (`common::femoral::SPLIT_SEED`). Each
 /// split region is ground at two or more table angles, its pieces add coverage, the split
 /// plans more than the same plan without splitting (`table_pieces` 0), and every sample
 /// passes this suite's clearance check with the part turned by this test at its table angle.
@@ -113,6 +113,6 @@ fn a_region_split_by_table_angle_is_ground_at_each_angle_collision_free() {
         100.0 * c0 / t
     );
     assert!(c > c0, "the split plans no more");
-    let tally = turned_tally(&plan, &robot, &insp, &wc, "turntable/");
+    let tally = turned_tally(&plan, &robot, &insp, &wc, "femoral/");
     accept("regions split by table angle", &plan, &tally);
 }
