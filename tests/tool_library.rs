@@ -174,19 +174,7 @@ fn a_tool_change_stops_the_run_and_resumes_with_the_planned_tool() {
         .as_deref()
         .expect("the 6 mm ball has regions");
     let journal = tmp.path().join("journal.jsonl");
-    let run = |extra: &[&str]| {
-        let mut cmd = polishbot();
-        cmd.args([
-            "run",
-            "--plan",
-            &path(&plan_file),
-            "--sim",
-            "--cell",
-            &path(&cell_dir),
-        ])
-        .args(extra);
-        cmd.output().unwrap()
-    };
+    let run = |extra: &[&str]| common::run_sim(&plan_file, &cell_dir, extra);
     // the 6 mm tool re-made (its file changed) after the plan: refused at the change
     let tool = cell_dir.join("tools/mid.toml");
     let planned = std::fs::read_to_string(&tool).unwrap();
@@ -206,9 +194,7 @@ fn a_tool_change_stops_the_run_and_resumes_with_the_planned_tool() {
     let last = entries.last().unwrap();
     assert_eq!((last.kind, last.setup), (EntryKind::OperatorStop, Some(2)));
     assert_eq!(last.code.as_deref(), Some("tool_change"));
-    let sent1 = (entries.iter())
-        .filter(|e| e.kind == EntryKind::Tx && e.motion.is_some())
-        .count();
+    let sent1 = common::motion_frames_sent(&entries);
     assert!(
         sent1 >= plan.frames.len(),
         "stage 1 streamed: {sent1} motion frames"

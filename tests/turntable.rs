@@ -317,14 +317,7 @@ fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
     let Step::Table { frame, .. } = all[from] else {
         unreachable!()
     };
-    let total: usize = checked
-        .table
-        .as_ref()
-        .unwrap()
-        .moves
-        .iter()
-        .map(|m| m.raw.len())
-        .sum();
+    let total: usize = table_frames(&checked);
     assert_eq!(
         sent.len(),
         total - frame,
@@ -372,14 +365,7 @@ fn a_plan_with_regions_split_by_table_angle_runs_on_the_simulated_cell() {
     let mut bus = Bus::connect(arm.transport(), cfg, Journal::none()).unwrap();
     let run = RunConfig::default();
     let report = execute(&mut bus, &checked, plan.period, 0, &run).unwrap();
-    let frames: usize = checked
-        .table
-        .as_ref()
-        .unwrap()
-        .moves
-        .iter()
-        .map(|m| m.raw.len())
-        .sum();
+    let frames: usize = table_frames(&checked);
     let sent = arm.received().iter().filter(|f| f.func == 0x19).count();
     assert_eq!(sent, frames, "every table frame once");
     assert!(report.readbacks > 0);
@@ -447,4 +433,10 @@ fn arm_move_table_turns_the_table_and_refuses_bad_requests() {
         .output()
         .unwrap();
     assert!(common::one_line_failure(&none).contains("[turntable]"));
+}
+
+/// Table frames a checked plan streams (every table move's raw positions).
+fn table_frames(checked: &polishbot::motion::file::CheckedPlan) -> usize {
+    let table = checked.table.as_ref().expect("a table part");
+    table.moves.iter().map(|m| m.raw.len()).sum()
 }

@@ -446,19 +446,7 @@ fn a_two_setup_plan_stops_for_the_refixture_and_resumes_with_setup_two() {
         serde_json::from_str(&std::fs::read_to_string(&plan_file).unwrap()).unwrap();
     let setup2 = plan.setups[1].plan.as_deref().expect("setup 2 has regions");
     let journal = tmp.path().join("journal.jsonl");
-    let run = |extra: &[&str]| {
-        let mut cmd = polishbot();
-        cmd.args([
-            "run",
-            "--plan",
-            &path(&plan_file),
-            "--sim",
-            "--cell",
-            &path(&cell_dir),
-        ])
-        .args(extra);
-        cmd.output().unwrap()
-    };
+    let run = |extra: &[&str]| common::run_sim(&plan_file, &cell_dir, extra);
     let first = run(&[]);
     let err = String::from_utf8_lossy(&first.stderr);
     assert_eq!(first.status.code(), Some(5), "{err}");
@@ -466,10 +454,7 @@ fn a_two_setup_plan_stops_for_the_refixture_and_resumes_with_setup_two() {
     let entries = read_journal(&journal);
     let last = entries.last().unwrap();
     assert_eq!((last.kind, last.setup), (EntryKind::OperatorStop, Some(2)));
-    let sent1 = entries
-        .iter()
-        .filter(|e| e.kind == EntryKind::Tx && e.motion.is_some())
-        .count();
+    let sent1 = common::motion_frames_sent(&entries);
     assert!(
         sent1 >= plan.frames.len(),
         "setup 1 streamed: {sent1} motion frames"

@@ -66,6 +66,21 @@ pub fn polishbot() -> Command {
     Command::new(env!("CARGO_BIN_EXE_polishbot"))
 }
 
+/// `polishbot run --plan PLAN --sim --cell CELL` with `extra` flags, run to its end.
+pub fn run_sim(plan: &Path, cell: &Path, extra: &[&str]) -> std::process::Output {
+    let mut cmd = polishbot();
+    cmd.args(["run", "--plan"]).arg(plan);
+    cmd.args(["--sim", "--cell"]).arg(cell).args(extra);
+    cmd.output().unwrap()
+}
+
+/// Motion frames a run's journal `entries` record as sent.
+pub fn motion_frames_sent(entries: &[polishbot::bus::Entry]) -> usize {
+    (entries.iter())
+        .filter(|e| e.kind == polishbot::bus::EntryKind::Tx && e.motion.is_some())
+        .count()
+}
+
 /// `polishbot inspect --reference REFERENCE --scan SCAN [--pose POSE] -o OUT`; the caller adds
 /// further flags and runs it.
 pub fn inspect_cmd(reference: &Path, scan: &Path, pose: Option<&Path>, out: &Path) -> Command {
