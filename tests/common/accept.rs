@@ -8,6 +8,8 @@ use polishbot::spatial::Neighbours;
 use polishbot::synth::{DefectKind, Truth};
 
 use super::polishbot;
+use super::true_part::TruePart;
+pub use super::true_part::TrueState;
 
 /// The planted defect's footprint radius on the surface, mm (as demo's summary matches).
 pub fn footprint(width: f64, length: f64) -> f64 {
@@ -120,6 +122,13 @@ pub struct Acceptance {
     /// predicted at the plan's k, at the fitted k, achieved, and achieved minus predicted at
     /// the fitted k point by point, mm.
     pub agreement: Option<[f64; 4]>,
+    /// The true part before the first grind and after each grind (noise-free, `TruePart`).
+    pub truth: Vec<TrueState>,
+    /// First fitted k / the cell's Preston k (`[sim.grinding]` preston_k x k_factor, read from
+    /// the settings the cell ran; None: not fitted).
+    pub k_cell: Option<f64>,
+    /// How the loop ended (cycle.json's `outcome`, e.g. "max_iterations", "off_plan").
+    pub outcome: String,
 }
 
 /// A core point is in the ground area when a point some grind removed from lies this near,
@@ -139,7 +148,15 @@ pub const IDEAL_ARM: &str = "ideal_arm = true\n";
 
 /// [`acceptance`] with more `[sim.grinding]` lines `sim` (e.g. [`IDEAL_ARM`]).
 pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
-    let dir = super::scratch(&format!("accept-{seed}"));
+    let servos = std::env::var("POLISHBOT_ACCEPT_SERVOS").unwrap_or_default();
+    acceptance_in(seed, sim, &format!("accept-{seed}"), &servos)
+}
+
+/// [`acceptance_with`] in the scratch folder `name` (runs side by side each need their own),
+/// the cell's servos.toml `servos`: "" the shipped one, "fitted" the table `calibrate
+/// compliance` fits on this case's simulated arm, else a file's path.
+pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptance {
+    let dir = super::scratch(name);
     let truth = super::case(seed, &dir);
     let cfg = dir.join("cycle.toml");
     // more of the simulated cell's truth, to take it apart by hand: `;`-separated
@@ -150,10 +167,10 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
         .replace(';', "\n");
     // a cell whose servos.toml has `[compliance]` (issue 50's compensation): `fitted`, the
     // table `calibrate compliance` fits on this case's simulated arm, or a file given by hand
-    let mut servos = std::env::var("POLISHBOT_ACCEPT_SERVOS").unwrap_or_default();
+    let mut servos = servos.to_string();
+    let arm: polishbot::sim::GrindConfig =
+        toml::from_str(&format!("{}{sim}{extra}", super::SIM_TOOL)).unwrap();
     if servos == "fitted" {
-        let arm: polishbot::sim::GrindConfig =
-            toml::from_str(&format!("{}{sim}{extra}", super::SIM_TOOL)).unwrap();
         let c = super::compensation::fitted(&arm);
         println!("fitted [compliance]: {c:?}");
         servos = super::compensation::servos_with(&c, &dir)
@@ -196,7 +213,9 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
     };
     let mut inspections = Vec::new();
     let mut part = TruePart::default();
+    let mut states = Vec::new();
     let reach = polishbot::cell::reachable_sites(&super::shipped_cell(), 0.0).unwrap();
+    let in_area = |p: &Point3<f64>, n: &Vector3<f64>| !near_pit(p) && reach(&[(*p, *n)]);
     for k in 1.. {
         let it = dir.join(format!("cycle/iter-{k}"));
         let Ok(i) = polishbot::repair::Inspection::load(&it.join("inspection")) else {
@@ -248,10 +267,17 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
             open,
         });
         if it.join("after_truth.ply").is_file() {
-            part.grind(&dir, &truth, k);
+            part.grind(&dir, &truth, k, &in_area);
+            if k == 1 {
+                states.push(part.state(false));
+            }
+            states.push(part.state(true));
         }
     }
     let (k_ratio, k_ratios, agreement) = k_numbers(&dir);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("cycle/cycle.json")).unwrap())
+            .unwrap();
     let a = Acceptance {
         inspections,
         true_low: part.lowest_ground(&|p| !near_pit(p)),
@@ -264,6 +290,9 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
         k_ratio,
         k_ratios,
         agreement,
+        truth: states,
+        k_cell: first_fitted_k(&dir).map(|k| k / (arm.preston_k * arm.k_factor)),
+        outcome: json["outcome"].as_str().unwrap_or("?").to_string(),
     };
     println!("acceptance seed {seed}: {a:.4?}");
     a
@@ -272,12 +301,7 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
 /// The loop's k in `dir` against the true k: the first refit's ratio (None: not refitted),
 /// every grind's (cycle.json's `k_fitted`), and iteration 1's agreement (see [`Acceptance`]).
 fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
-    let refit = dir.join("cycle/iter-2/tool.toml");
-    let fitted = refit.is_file().then(|| {
-        polishbot::removal::ToolModel::load(&refit)
-            .unwrap()
-            .preston_k_mm2_n
-    });
+    let fitted = first_fitted_k(dir);
     let plan_k = polishbot::removal::ToolModel::load(&super::calib("tool.toml"))
         .unwrap()
         .preston_k_mm2_n;
@@ -311,114 +335,14 @@ fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
     (k_ratio, k_ratios, agreement)
 }
 
-/// The true part through the grinds without the scan's noise: the deviation synth planted at
-/// each point of the simulated part (its truth files keep their points in order from grind to
-/// grind) less the removal the simulator summed there over the grinds so far. The truth
-/// files' own points carry the first scan's 0.015 mm noise (the first grind's part is that
-/// scan), which on single points reads as -0.06..-0.08 mm where the ground surface averages
-/// -0.01..-0.05 within 0.5 mm.
-/// Farthest a point's place before a grind, found from its place after it (moved back along
-/// its normal by its removal), lies from where the previous truth file has it, mm (0.1: the
-/// normal turns by up to 10 degrees over a grind's 0.25 mm, 0.04 mm off; the points lie
-/// 0.3 mm apart).
-const MATCH_MM: f64 = 0.1;
-/// More of that distance per mm removed at the point (0.35, sin 20 degrees): a cut far below
-/// the planned depth (issue 50: 0.4-0.6 mm with 1 degree of backlash) turns the normal by up to
-/// 20 degrees, so its point lies farther off than 0.1 mm and the walk ran off the end.
-const MATCH_PER_MM_REMOVED: f64 = 0.35;
-
-#[derive(Default)]
-struct TruePart {
-    points: Vec<Point3<f64>>,
-    planted: Vec<f64>,
-    removed: Vec<f64>,
-}
-
-impl TruePart {
-    /// Adds grind `k`'s removal (its truth file).
-    fn grind(&mut self, dir: &Path, truth: &Truth, k: usize) {
-        let file = dir.join(format!("cycle/iter-{k}/after_truth.ply"));
-        let after = polishbot::cloud::load_cloud(&file, None, None).unwrap();
-        let removal = after.field("removal").unwrap();
-        if self.planted.is_empty() {
-            let reference =
-                polishbot::cloud::load_cloud(&dir.join("reference.ply"), None, None).unwrap();
-            let (index, normals) = (
-                Neighbours::new(&reference.points),
-                reference.normals.unwrap(),
-            );
-            self.planted = after
-                .points
-                .iter()
-                .map(|p| truth.deviation_at(p, &normals[index.nearest(p).unwrap().index]))
-                .collect();
-            self.removed = vec![0.0; after.len()];
-        } else {
-            self.follow(&after.points, after.normals.as_ref().unwrap(), removal, k);
-        }
-        for (total, r) in self.removed.iter_mut().zip(removal) {
-            *total += r;
-        }
-        self.points = after.points;
-    }
-
-    /// The points some grind removed from, where they are now (reference frame).
-    fn ground(&self) -> Vec<Point3<f64>> {
-        (0..self.points.len())
-            .filter(|&i| self.removed[i] > 0.0)
-            .map(|i| self.points[i])
-            .collect()
-    }
-
-    /// The most removed so far at a point `inside` accepts, mm (0 where none).
-    fn most_removed(&self, inside: &dyn Fn(&Point3<f64>) -> bool) -> f64 {
-        (0..self.points.len())
-            .filter(|&i| inside(&self.points[i]))
-            .map(|i| self.removed[i])
-            .fold(0.0, f64::max)
-    }
-
-    /// Keeps, in order, the points of the last grind that grind `k`'s part kept (`points`, the
-    /// truth file's, each moved `removal` along its `normals` from where it was: the simulator
-    /// drops the points off the inspected surface before each grind and never reorders them).
-    fn follow(
-        &mut self,
-        points: &[Point3<f64>],
-        normals: &[Vector3<f64>],
-        removal: &[f64],
-        k: usize,
-    ) {
-        let mut at = 0;
-        let mut kept = Vec::with_capacity(points.len());
-        for ((p, n), r) in points.iter().zip(normals).zip(removal) {
-            let before = p + n * *r;
-            loop {
-                let earlier = self.points.get(at);
-                let earlier =
-                    earlier.unwrap_or_else(|| panic!("grind {k}: a point of no earlier grind"));
-                if (earlier - before).norm() <= MATCH_MM + MATCH_PER_MM_REMOVED * r.abs() {
-                    break;
-                }
-                at += 1;
-            }
-            kept.push(at);
-            at += 1;
-        }
-        self.planted = kept.iter().map(|&i| self.planted[i]).collect();
-        self.removed = kept.iter().map(|&i| self.removed[i]).collect();
-    }
-
-    /// The lowest true deviation at a point ground so far, and how many ground points lie
-    /// below the tolerance of how many, over the points `keep` accepts, mm.
-    fn lowest_ground(&self, keep: &dyn Fn(&Point3<f64>) -> bool) -> (f64, usize, usize) {
-        let ground: Vec<f64> = (0..self.removed.len())
-            .filter(|&i| self.removed[i] > 0.0 && keep(&self.points[i]))
-            .map(|i| self.planted[i] - self.removed[i])
-            .collect();
-        let below = ground.iter().filter(|d| **d < -TOLERANCE_MM).count();
-        let lowest = ground.iter().copied().fold(f64::INFINITY, f64::min);
-        (lowest, below, ground.len())
-    }
+/// The k the loop fitted after its first grind (iter-2/tool.toml; None: not refitted), mm^2/N.
+fn first_fitted_k(dir: &Path) -> Option<f64> {
+    let refit = dir.join("cycle/iter-2/tool.toml");
+    refit.is_file().then(|| {
+        polishbot::removal::ToolModel::load(&refit)
+            .unwrap()
+            .preston_k_mm2_n
+    })
 }
 
 /// Tolerance of the cases, mm (inspect's default).

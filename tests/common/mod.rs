@@ -11,7 +11,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 pub mod removal;
+pub mod survey;
 pub mod synthetic;
+pub mod true_part;
 
 /// A file under the planners' read-only data folder (`../shared/data`).
 pub fn shared_data(rel: &str) -> PathBuf {
