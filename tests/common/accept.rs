@@ -129,6 +129,9 @@ pub struct Acceptance {
     pub k_cell: Option<f64>,
     /// How the loop ended (cycle.json's `outcome`, e.g. "max_iterations", "off_plan").
     pub outcome: String,
+    /// Each grind's plan (plan.json `removal.regions[]`): the highest region peak before it
+    /// and the highest the plan predicts after it, mm.
+    pub planned_peaks: Vec<(f64, f64)>,
 }
 
 /// A core point is in the ground area when a point some grind removed from lies this near,
@@ -293,6 +296,7 @@ pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptan
         truth: states,
         k_cell: first_fitted_k(&dir).map(|k| k / (arm.preston_k * arm.k_factor)),
         outcome: json["outcome"].as_str().unwrap_or("?").to_string(),
+        planned_peaks: planned_peaks(&dir),
     };
     println!("acceptance seed {seed}: {a:.4?}");
     a
@@ -333,6 +337,25 @@ fn k_numbers(dir: &Path) -> (Option<f64>, Vec<Option<f64>>, Option<[f64; 4]>) {
         .map(|r| r["k_fitted"].as_f64().map(|k| k / k_true))
         .collect();
     (k_ratio, k_ratios, agreement)
+}
+
+/// Each grind's plan's highest region peak before and predicted after it (plan.json), mm.
+fn planned_peaks(dir: &Path) -> Vec<(f64, f64)> {
+    (1..)
+        .map(|k| dir.join(format!("cycle/iter-{k}/plan.json")))
+        .take_while(|p| p.is_file())
+        .map(|p| {
+            let plan: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+            let regions = plan["removal"]["regions"].as_array().cloned();
+            let peak = |when: &str| {
+                regions.iter().flatten().fold(0.0, |m: f64, r| {
+                    m.max(r[when]["peak_mm"].as_f64().unwrap_or(f64::NAN))
+                })
+            };
+            (peak("before"), peak("after"))
+        })
+        .collect()
 }
 
 /// The k the loop fitted after its first grind (iter-2/tool.toml; None: not refitted), mm^2/N.

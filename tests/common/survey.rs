@@ -110,7 +110,7 @@ impl Run {
             let why = self.result.as_ref().err().unwrap();
             let why: String = why.lines().next().unwrap_or("").chars().take(120).collect();
             return format!(
-                "| {} | {} | no | - | - | - | - | - | panic: {} | other |",
+                "| {} | {} | no | - | - | - | - | - | - | - | panic: {} | other |",
                 self.case,
                 self.cell,
                 why.replace('|', "/")
@@ -124,9 +124,14 @@ impl Run {
             .map(|i| format!("{:.2}", i.volume))
             .collect();
         let k = a.k_cell.map_or("-".into(), |k| format!("{k:.2}"));
+        let plans: Vec<String> = a
+            .planned_peaks
+            .iter()
+            .map(|(b, p)| format!("{b:.2}>{p:.2}"))
+            .collect();
         format!(
             "| {} | {} | {} | {:.1} % ({} above, {} never ground, {} below of {}) | {} | {} | \
-             {:.3} mm ({} of {}) | {:.3} | {} | {} | {} |",
+             {:.3} mm ({} of {}) | {:.3} | {} | {} | {} | {} |",
             self.case,
             self.cell,
             if self.within() { "yes" } else { "no" },
@@ -142,6 +147,7 @@ impl Run {
             a.true_low.2,
             a.on_pits,
             k,
+            plans.join(", "),
             a.outcome,
             self.class()
         )
@@ -152,8 +158,9 @@ impl Run {
 pub const HEADER: &str = "| case | cell seed | accepted | true area within +-tol after the \
     loop | true volume above tol per grind (mm^3) | measured volume per inspection (mm^3) | \
     lowest true ground point (points below -tol of ground) | pits ground: most removed (mm) | \
-    k after grind 1 / cell's Preston k | outcome | class |\n\
-    |---|---|---|---|---|---|---|---|---|---|---|";
+    k after grind 1 / cell's Preston k | each plan's peak before > predicted after (mm) | outcome \
+    | class |\n\
+    |---|---|---|---|---|---|---|---|---|---|---|---|";
 
 /// Share of the reachable repairable area within +-tolerance after the last grind (0 when no
 /// grind was made).

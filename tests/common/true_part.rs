@@ -70,6 +70,8 @@ pub struct TruePart {
     points: Vec<Point3<f64>>,
     planted: Vec<f64>,
     removed: Vec<f64>,
+    /// Each grind's removal at the point, in order, mm.
+    by_grind: Vec<Vec<f64>>,
     /// Whether the point is in the reachable repairable area (see [`TrueState`]).
     area: Vec<bool>,
     /// The point's share of the surface, mm^2 (0 where the planted deviation is within the
@@ -103,6 +105,7 @@ impl TruePart {
                 .map(|p| truth.deviation_at(p, &normal(p)))
                 .collect();
             self.removed = vec![0.0; after.len()];
+            self.by_grind = vec![Vec::new(); after.len()];
             let own = Neighbours::new(&after.points);
             let excess = |i: usize| self.planted[i] > TOLERANCE_MM;
             self.area = (0..after.len())
@@ -121,6 +124,9 @@ impl TruePart {
         }
         for (total, r) in self.removed.iter_mut().zip(removal) {
             *total += r;
+        }
+        for (each, r) in self.by_grind.iter_mut().zip(removal) {
+            each.push(*r);
         }
         self.points = after.points;
     }
@@ -169,6 +175,7 @@ impl TruePart {
         }
         self.planted = kept.iter().map(|&i| self.planted[i]).collect();
         self.removed = kept.iter().map(|&i| self.removed[i]).collect();
+        self.by_grind = kept.iter().map(|&i| self.by_grind[i].clone()).collect();
         self.area = kept.iter().map(|&i| self.area[i]).collect();
         self.patch = kept.iter().map(|&i| self.patch[i]).collect();
     }
@@ -198,6 +205,21 @@ impl TruePart {
             .map(|i| self.patch[i] * (dev(i) - TOLERANCE_MM).max(0.0))
             .sum();
         s
+    }
+
+    /// The ground points `keep` accepts whose true deviation lies below `limit`: where they
+    /// are, the deviation synth planted there and each grind's removal, mm (to take a gouge
+    /// apart by hand).
+    pub fn below(
+        &self,
+        keep: &dyn Fn(&Point3<f64>) -> bool,
+        limit: f64,
+    ) -> Vec<(Point3<f64>, f64, Vec<f64>)> {
+        (0..self.points.len())
+            .filter(|&i| self.removed[i] > 0.0 && keep(&self.points[i]))
+            .filter(|&i| self.planted[i] - self.removed[i] < limit)
+            .map(|i| (self.points[i], self.planted[i], self.by_grind[i].clone()))
+            .collect()
     }
 
     /// The lowest true deviation at a point ground so far, and how many ground points lie
