@@ -7,13 +7,17 @@ use polishbot::cell::{execute, steps, RunConfig, Step};
 use polishbot::motion::{plan, PlanMode};
 use polishbot::sim::{ExtraServo, SimArm, SimOptions};
 
-/// Survey: femoral_dm's uniform cases in the designed cell, rigid mode, with and without
-/// strokes ground while the table turns (numbers only: `--ignored --nocapture`).
+/// Tool-axis cones of the survey, degrees from the arm's plane: the IK's default (45), and
+/// the stricter 10 of [`common::femoral::synced_plan`].
+const SURVEY_CONES: [f64; 2] = [45.0, 10.0];
+
+/// Survey: femoral_dm's uniform cases 5100 and 5101 and synth case 2000 in the designed and
+/// the turntable cell, rigid mode, each tool-axis cone of [`SURVEY_CONES`], planned without
+/// and with strokes ground while the table turns (numbers only: `--ignored --nocapture`).
 #[test]
 #[ignore]
 fn uniform_defects_with_the_table_in_sync() {
-    let seeds = std::env::var("SYNC_SEEDS").unwrap_or("5100,5101".into());
-    for seed in seeds.split(',').map(|s| s.parse::<u64>().unwrap()) {
+    for seed in [5100, 5101, 2000] {
         let insp = if seed >= 5000 {
             uniform_case(seed)
         } else {
@@ -22,36 +26,27 @@ fn uniform_defects_with_the_table_in_sync() {
         for dir in ["femoral/", "turntable/"] {
             let (robot, wc, table, mut config) = cell(dir);
             config.mode = PlanMode::Rigid;
-            if let Ok(c) = std::env::var("SYNC_CONE") {
-                config.ik.max_axis_miss_deg = c.parse().unwrap();
-            }
-            for (pieces, sync) in [(2, 0), (2, 8)] {
-                config.table_sync = sync;
-                config.table_pieces = pieces;
-                let p = match plan(&insp, &robot, &wc, table.as_ref(), &config) {
-                    Ok(p) => p,
-                    Err(e) => {
-                        println!("seed {seed} {dir} pieces {pieces} sync {sync}: refused: {e}");
-                        continue;
-                    }
-                };
-                let (c, t) = planned_area(&p);
-                let tp = p.turntable.as_ref().unwrap();
-                let strokes: usize = tp.regions.iter().map(|r| r.synced_strokes).sum();
-                let short: Vec<(usize, usize, String)> = p
-                    .reachability
-                    .regions
-                    .iter()
-                    .filter(|r| r.repairable && r.coverage_of_all < 0.95)
-                    .map(|r| (r.id, r.layers, format!("{:.2}", r.coverage_of_all)))
-                    .collect();
-                println!(
-                    "seed {seed} {dir} pieces {pieces} sync {sync}: planned {:.1} % of {t:.1} mm^2, {} synced stretches ({strokes} strokes), {} moves, {:.1} s; short {short:?}",
-                    100.0 * c / t,
-                    tp.synced.len(),
-                    tp.moves.len(),
-                    p.predicted_duration_s,
-                );
+            for cone in SURVEY_CONES {
+                config.ik.max_axis_miss_deg = cone;
+                for sync in [0, polishbot::motion::PlanConfig::default().table_sync] {
+                    config.table_sync = sync;
+                    let p = match plan(&insp, &robot, &wc, table.as_ref(), &config) {
+                        Ok(p) => p,
+                        Err(e) => {
+                            println!("seed {seed} {dir} cone {cone} sync {sync}: refused: {e}");
+                            continue;
+                        }
+                    };
+                    let (c, t) = planned_area(&p);
+                    let tp = p.turntable.as_ref().unwrap();
+                    println!(
+                        "seed {seed} {dir} cone {cone} sync {sync}: planned {:.1} % of {t:.1} mm^2, {} synced strokes, {} table moves, {:.1} s",
+                        100.0 * c / t,
+                        tp.synced.len(),
+                        tp.moves.len(),
+                        p.predicted_duration_s,
+                    );
+                }
             }
         }
     }
@@ -146,4 +141,48 @@ fn a_plan_without_in_stroke_table_motion_is_unchanged() {
         "a `synced` key in a plan without synced strokes"
     );
     assert_eq!(a, b, "plan.json changed");
+}
+
+/// `run`'s check refuses a plan whose strokes ground with the table turning were tampered
+/// with, naming the stretch or the region: its table angles deleted, one sample's angle moved
+/// beyond the table's velocity limit, a frame that is not its sample's; and the plan streamed
+/// to a cell without that table. The plan as made passes.
+#[test]
+fn a_tampered_synced_stretch_or_a_cell_without_the_table_is_refused() {
+    let (robot, _, table, _, _, plan) = common::femoral::synced_plan();
+    let check = |p: &polishbot::motion::Plan| {
+        p.check_cell(&robot, Some(&table), &Default::default())
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    check(&plan).expect("the plan as made");
+    let mut cut = plan.clone();
+    cut.turntable.as_mut().unwrap().synced.clear();
+    let err = check(&cut).unwrap_err();
+    assert!(err.contains("turntable"), "{err}");
+    let mut fast = plan.clone();
+    let st = &mut fast.turntable.as_mut().unwrap().synced[0];
+    let k = st.angles.len() / 2;
+    st.angles[k] += 0.2;
+    let err = check(&fast).unwrap_err();
+    assert!(err.contains("synced stretch 0 sample"), "{err}");
+    let mut frame = plan.clone();
+    let st = &mut frame.turntable.as_mut().unwrap().synced[0];
+    // the middle sample's frame sent first (its neighbours at rest share one raw count)
+    let k = st.frames.len() / 2;
+    st.frames.swap(0, k);
+    let err = check(&frame).unwrap_err();
+    assert!(err.contains("synced stretch 0 frame 0"), "{err}");
+    let err = plan
+        .check_cell(&robot, None, &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no [turntable]"), "{err}");
+    let mut only_synced = plan.clone();
+    only_synced.turntable.as_mut().unwrap().moves.clear();
+    let err = only_synced
+        .check(&robot, &Default::default())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("turntable"), "{err}");
 }
