@@ -225,6 +225,9 @@ fn send_synced<T: Transport>(
     let id = BusId::new(t.servo_id).map_err(|e| BusError::Refused(e.to_string()))?;
     let want = s.raw[frame];
     let target = AnyTarget::new(id, want).map_err(|e| BusError::Refused(e.to_string()))?;
+    // the table is bus servo 7: Arm_Lib's `Arm_serial_servo_write(id, angle, time)` addresses
+    // only ids 1..6 (FUNC 0x10 + id), so its frame is `Arm_serial_servo_write_any(id, angle,
+    // time)`'s 0x19 (DOFBOT.md, "Commands"), sent right after the 0x1D of the same sample
     bus.send_any(k as u64, target, plan.time_ms)?;
     let Some(tolerance) = read else {
         return Ok(None);
