@@ -6,6 +6,8 @@ mod common;
 mod heldout;
 #[path = "collision/sweep.rs"]
 mod sweep;
+#[path = "collision/synced.rs"]
+mod synced;
 #[path = "collision/uniform.rs"]
 mod uniform;
 

@@ -57,6 +57,16 @@ pub struct RunReport {
 pub enum Step {
     /// Arm frame (0x1D) of sample k.
     Arm(usize),
+    /// Arm frame (0x1D) of sample `arm` and, in the same bus period, table frame `frame` of
+    /// synced stretch `stretch` (the table turning with the arm).
+    Synced {
+        /// Arm sample.
+        arm: usize,
+        /// Synced stretch index.
+        stretch: usize,
+        /// Frame index within the stretch.
+        frame: usize,
+    },
     /// A table frame (0x19).
     Table {
         /// Move index.
@@ -70,9 +80,21 @@ pub enum Step {
 /// this list (equal to the frame index when the plan turns no table).
 pub fn steps(plan: &CheckedPlan) -> Vec<Step> {
     let moves = plan.table.as_ref().map_or(&[][..], |t| &t.moves[..]);
+    let synced = plan.table.as_ref().map_or(&[][..], |t| &t.synced[..]);
     let mut out = Vec::with_capacity(plan.frames.len());
     for k in 0..plan.frames.len() {
-        out.push(Step::Arm(k));
+        let with = synced
+            .iter()
+            .enumerate()
+            .find(|(_, s)| k > s.first_sample && k <= s.first_sample + s.raw.len());
+        out.push(match with {
+            Some((stretch, s)) => Step::Synced {
+                arm: k,
+                stretch,
+                frame: k - s.first_sample - 1,
+            },
+            None => Step::Arm(k),
+        });
         for (mv, m) in moves.iter().enumerate().filter(|(_, m)| m.at_sample == k) {
             out.extend((0..m.frames.len()).map(|frame| Step::Table { mv, frame }));
         }
@@ -88,6 +110,14 @@ fn state_after(plan: &CheckedPlan, steps: &[Step], i: usize) -> (usize, Option<u
     for s in &steps[..=i] {
         match *s {
             Step::Arm(k) => arm = k,
+            Step::Synced {
+                arm: k,
+                stretch,
+                frame,
+            } => {
+                arm = k;
+                raw = table.map(|t| t.synced[stretch].raw[frame]);
+            }
             Step::Table { mv, frame } => raw = table.map(|t| t.moves[mv].raw[frame]),
         }
     }
@@ -135,7 +165,7 @@ fn check_start<T: Transport>(
     };
     bus.verify(from as u64, plan.raw[arm]).map_err(moved)?;
     let lag = match (steps[from], from.checked_sub(1)) {
-        (Step::Table { .. }, Some(prev)) => {
+        (Step::Table { .. } | Step::Synced { .. }, Some(prev)) => {
             let before = state_after(plan, steps, prev).1;
             table.zip(before).map_or(0, |(a, b)| a.abs_diff(b))
         }
@@ -177,6 +207,38 @@ fn send_table_step<T: Transport>(
     Ok(sent_at)
 }
 
+/// Sends the table frame `frame` of synced stretch `stretch` at step `k` (right after its arm
+/// frame, in the same period) and, with `read` (the read-back tolerance, counts), reads the
+/// table back against it within that tolerance plus its step between the last two frames (the servo may lag one
+/// frame). Returns the read-back's difference, counts, when it read.
+fn send_synced<T: Transport>(
+    bus: &mut Bus<T>,
+    plan: &CheckedPlan,
+    k: usize,
+    (stretch, frame): (usize, usize),
+    read: Option<u16>,
+) -> Result<Option<u16>, BusError> {
+    let Some(t) = plan.table.as_ref() else {
+        return Err(BusError::Refused(format!("step {k} is no table frame")));
+    };
+    let s = &t.synced[stretch];
+    let id = BusId::new(t.servo_id).map_err(|e| BusError::Refused(e.to_string()))?;
+    let want = s.raw[frame];
+    let target = AnyTarget::new(id, want).map_err(|e| BusError::Refused(e.to_string()))?;
+    // the table is bus servo 7: Arm_Lib's `Arm_serial_servo_write(id, angle, time)` addresses
+    // only ids 1..6 (FUNC 0x10 + id), so its frame is `Arm_serial_servo_write_any(id, angle,
+    // time)`'s 0x19 (DOFBOT.md, "Commands"), sent right after the 0x1D of the same sample
+    bus.send_any(k as u64, target, plan.time_ms)?;
+    let Some(tolerance) = read else {
+        return Ok(None);
+    };
+    // the stretch starts at rest: its first frame has no lag
+    let before = if frame > 0 { s.raw[frame - 1] } else { want };
+    let tol = tolerance + want.abs_diff(before);
+    let got = bus.verify_any(k as u64, id, t.raw_range, want, tol)?;
+    Ok(Some(got.abs_diff(want)))
+}
+
 /// Streams steps `from..` of `plan` ([`steps`]) over `bus`, `period` seconds apart. Refuses to
 /// start unless the arm (and the table) read back at step `from`'s pose. Before each table
 /// move the arm's pose is read back (it rests at its start pose); after it, once settled, the
@@ -216,7 +278,16 @@ pub fn execute<T: Transport>(
             bus.sleep(due - now);
         }
         let index = k as u64;
-        let Step::Arm(a) = steps[k] else {
+        let (a, with) = match steps[k] {
+            Step::Arm(a) => (a, None),
+            Step::Synced {
+                arm,
+                stretch,
+                frame,
+            } => (arm, Some((stretch, frame))),
+            Step::Table { .. } => (usize::MAX, None),
+        };
+        if a == usize::MAX {
             let sent_at = send_table_step(bus, plan, &steps, k, settle)?;
             report.sent += 1;
             // a read-back around a table move kept this frame back or took longer than a
@@ -225,11 +296,25 @@ pub fn execute<T: Transport>(
             let settled = bus.transport().now().saturating_sub(due + step);
             start += behind.max(settled);
             continue;
-        };
+        }
         let pose = Pose::new(plan.raw[a]).map_err(|e| BusError::Refused(e.to_string()))?;
         bus.send_motion(index, pose, plan.time_ms)?;
         report.sent += 1;
-        if (k - from + 1).is_multiple_of(every) && a + 1 < plan.frames.len() {
+        let due_read = (k - from + 1).is_multiple_of(every) && a + 1 < plan.frames.len();
+        if let Some((stretch, frame)) = with {
+            // the table's frame of the same sample, and every other read-back the table's
+            let read =
+                (due_read && next_servo % 2 == 1).then_some(config.readback_tolerance_counts);
+            let got = send_synced(bus, plan, k, (stretch, frame), read)?;
+            report.sent += 1;
+            if let Some(diff) = got {
+                next_servo += 1;
+                report.readbacks += 1;
+                report.worst_readback_counts = report.worst_readback_counts.max(diff);
+                continue;
+            }
+        }
+        if due_read {
             let i = next_servo % SERVO_COUNT;
             next_servo += 1;
             let lag = if a > 0 {

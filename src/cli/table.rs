@@ -71,6 +71,7 @@ pub fn turn<T: Transport>(
         start: from,
         regions: Vec::new(),
         moves: vec![mv],
+        synced: Vec::new(),
     };
     let checked = table_file::check(&plan, table, 1, period)?;
     let targets = &checked.moves[0].raw;

@@ -13,7 +13,7 @@ use crate::robot::{Robot, Workcell};
 /// What each of `n` samples may touch, and the segment it belongs to (the later one at a
 /// joint): the loosest rule of its segments (where a transit meets an approach the sample is
 /// the approach's start and may be near the part).
-fn allowances(segments: &[Segment], n: usize) -> Vec<(Allow, Option<usize>)> {
+pub(super) fn allowances(segments: &[Segment], n: usize) -> Vec<(Allow, Option<usize>)> {
     let mut out = vec![(Allow::Free, None); n];
     for (k, s) in segments.iter().enumerate() {
         let last = s.last_sample.min(n.saturating_sub(1));

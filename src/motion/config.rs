@@ -109,7 +109,21 @@ pub struct PlanConfig {
     /// may be split into, each planned at another table angle (2; 0: no split; docs/
     /// ALGORITHMS.md, "Turntable", step 5).
     pub table_pieces: usize,
+    /// In a cell with a turntable, rigid mode: the most strokes per region still short after
+    /// its pieces that are ground with the table turning during the stroke (the table as a
+    /// sixth axis, `motion::table_sync`; 0: none).
+    #[serde(skip_serializing_if = "is_default_sync")]
+    pub table_sync: usize,
 }
+
+/// Whether `n` is [`TABLE_SYNC`] (left out of a written plan.toml, as before the setting).
+fn is_default_sync(n: &usize) -> bool {
+    *n == TABLE_SYNC
+}
+
+/// Most strokes per short region ground with the table turning during the stroke: each one is
+/// a trip from home with a table move before it, so a handful bounds the plan's time.
+pub const TABLE_SYNC: usize = 8;
 
 impl Default for PlanConfig {
     fn default() -> Self {
@@ -146,6 +160,7 @@ impl Default for PlanConfig {
             compensate_compliance: true,
             finish: FinishConfig::default(),
             table_pieces: TABLE_PIECES,
+            table_sync: TABLE_SYNC,
         }
     }
 }

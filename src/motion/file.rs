@@ -212,7 +212,7 @@ impl Plan {
         config: &ValidationConfig,
     ) -> Result<CheckedPlan, PlanError> {
         let bad = |m: String| Err(PlanError::Frames(m));
-        if self.turntable.as_ref().is_some_and(|t| !t.moves.is_empty()) {
+        if (self.turntable.as_ref()).is_some_and(|t| !t.moves.is_empty() || !t.synced.is_empty()) {
             return bad(
                 "the plan turns the part turntable: it needs the cell's turntable to be checked (run --cell DIR)".into(),
             );

@@ -38,6 +38,7 @@ pub mod table;
 pub mod table_check;
 pub mod table_file;
 mod table_split;
+mod table_sync;
 mod tilt;
 pub mod tools;
 pub mod trajectory;
@@ -275,7 +276,7 @@ fn check_program(
 /// The trajectory's samples and the servo command stream they make (one frame per sample of
 /// `commanded` when the plan compensates the arm's compliance, else of `traj`, through the
 /// robot's servo map, the gripper held at its `hold_deg`).
-fn samples_and_frames(
+pub(super) fn samples_and_frames(
     traj: &JointTrajectory,
     commanded: Option<&JointTrajectory>,
     robot: &Robot,

@@ -113,7 +113,13 @@ pub(crate) fn max_step(a: &[f64], b: &[f64]) -> f64 {
 /// Tool tip (m) and axis in the robot frame for a contact point, `lift` mm above the contact
 /// along the normal; the ball centre sits `reach` mm (radius + contact offset) off it, moved
 /// back by the removal shift `aim` measured there (`motion::aim`).
-fn tool_target(p: &PathPoint, reach: f64, lift: f64, wc: &Workcell, aim: &Aim) -> IkTarget {
+pub(super) fn tool_target(
+    p: &PathPoint,
+    reach: f64,
+    lift: f64,
+    wc: &Workcell,
+    aim: &Aim,
+) -> IkTarget {
     let tip_mm =
         p.surface + p.normal * (p.offset + reach + lift) - aim.shift_at(&p.surface, &p.normal);
     IkTarget {
@@ -231,7 +237,7 @@ pub(crate) fn walk(
 /// touch a second face of the part or enter it beyond the contact tolerance. A pressed ball
 /// (removal mode, negative offset) is placed touching: it stops at the surface and its spring
 /// takes the preload. The ball is where it is commanded: moved back by the shift `aim`.
-fn misfit(p: &PathPoint, reach: f64, scene: &Scene, aim: &Aim) -> Option<String> {
+pub(super) fn misfit(p: &PathPoint, reach: f64, scene: &Scene, aim: &Aim) -> Option<String> {
     let centre =
         p.surface + p.normal * (p.offset.max(0.0) + reach) - aim.shift_at(&p.surface, &p.normal);
     if let Some(hit) = scene.second_face(&centre, Some(&p.normal)) {

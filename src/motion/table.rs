@@ -9,15 +9,21 @@
 //! arguments); result: [`Plan`] with its `turntable` part ([`TablePlan`]).
 use super::check::tool_reaches;
 use super::config::PlanConfig;
+use super::config::PlanMode;
 use super::error::PlanError;
 use super::file::Plan;
 use super::raster;
-use super::report::Metrics;
+use super::table_file::{frame, SyncedStretch};
 use super::table_file::{table_move, RegionTable, TablePiece, TablePlan, TriedAngle};
-use super::table_split::{self as split, PieceCell, MIN_PIECE_GAIN, MIN_PIECE_POINTS};
+use super::table_split::{self as split, concat, PieceCell, MIN_PIECE_GAIN, MIN_PIECE_POINTS};
+use super::table_sync;
 use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
 
+/// Every how many samples of a synced stroke its table angle joins the region's angles at
+/// which its reachable points are counted (a stroke turns the table by at most a few degrees
+/// over ten samples; counting every sample would cost an IK call per core point each).
+const SYNC_REACH_STRIDE: usize = 10;
 /// Spacing of the candidate table angles, degrees: the IK accepts the tool axis within a cone
 /// around the normal (45 degrees), so 5-degree steps lose at most 2.5 degrees of it; over a
 /// 270-degree table that is 55 candidates.
@@ -66,6 +72,7 @@ pub fn plan(
             start: 0.0,
             regions: choices,
             moves: Vec::new(),
+            synced: Vec::new(),
         },
     };
     let groups = sweep(&cell.table_plan.regions, inspection, |r| {
@@ -206,6 +213,9 @@ impl GroupedPlan<'_> {
                     break;
                 }
             }
+            if self.config.table_sync > 0 && self.config.mode == PlanMode::Rigid {
+                self.add_synced(k)?;
+            }
         }
         Ok(())
     }
@@ -269,6 +279,65 @@ impl GroupedPlan<'_> {
             points: left.len(),
             coverage,
         });
+        Ok(true)
+    }
+
+    /// Grinds the core points of region `k` no stroke covers yet with strokes during which
+    /// the table turns (`table_sync.rs`), when they add enough; false when not.
+    fn add_synced(&mut self, k: usize) -> Result<bool, PlanError> {
+        let region = self.inspection.regions[k].clone();
+        let cell = PieceCell {
+            inspection: self.inspection,
+            robot: self.robot,
+            workcell: self.workcell,
+            table: self.table,
+            config: self.config,
+        };
+        let Some(merged) = self.merged.as_ref() else {
+            return Ok(false);
+        };
+        let (left, n) = split::uncovered(&cell, merged, region.id);
+        if 1.0 - left.len() as f64 / n.max(1) as f64 >= GOOD_COVERAGE
+            || left.len() < MIN_PIECE_POINTS
+        {
+            return Ok(false);
+        }
+        let part = split::piece_of(self.inspection, &region, &left, merged.removal.as_ref());
+        let parts = table_sync::synced(&cell, &part, &region, self.table_plan.end());
+        if table_sync::gained(&cell, &parts, region.id, &left) < MIN_PIECE_POINTS {
+            return Ok(false);
+        }
+        let time_ms = super::frames::frame_time_ms(self.config.trajectory.period)?;
+        let mut angles: Vec<f64> = self.table_plan.regions[k]
+            .angles_deg()
+            .map(f64::to_radians)
+            .collect();
+        let strokes = parts.len();
+        let mut coverage = 0.0;
+        for part in parts {
+            let base = self.merged.as_ref().map_or(0, |m| m.samples.len() - 1);
+            self.append(part.start, part.plan)?;
+            let first_sample = base + part.first_sample;
+            let frames = part.angles[1..]
+                .iter()
+                .map(|&a| frame(self.table, a, time_ms).map(|f| super::frames::to_hex(&f)))
+                .collect::<Result<_, _>>()?;
+            angles.extend(part.angles.iter().step_by(SYNC_REACH_STRIDE).copied());
+            self.table_plan.synced.push(SyncedStretch {
+                first_sample,
+                angles: part.angles,
+                frames,
+            });
+            // one report per region: each stroke's folded in as it is appended
+            coverage = self
+                .merged
+                .as_mut()
+                .and_then(|merged| split::fold(&cell, merged, &region, &angles))
+                .unwrap_or(0.0);
+        }
+        let entry = &mut self.table_plan.regions[k];
+        entry.synced_strokes = strokes;
+        entry.synced_coverage = Some(coverage);
         Ok(true)
     }
 
@@ -438,6 +507,8 @@ fn rank_angles(
                     reachable_share_at_zero: at_zero,
                     tried: Vec::new(),
                     pieces: Vec::new(),
+                    synced_strokes: 0,
+                    synced_coverage: None,
                 },
                 candidates: spread(&order),
             }
@@ -511,82 +582,4 @@ fn sweep(
     let idle = pairs.iter().filter(|(r, _)| !is_planned(r));
     groups[0].1.extend(idle.map(|(r, _)| (*r).clone()));
     groups
-}
-
-/// `a` followed by `b` (which starts at the home pose `a` ends at): samples and frames after
-/// `b`'s first, segments and passes re-indexed, reports, metrics and removal predictions
-/// combined.
-fn concat(mut a: Plan, b: Plan) -> Plan {
-    let base = a.samples.len() - 1;
-    let passes = a.passes.len();
-    let b_samples = b.samples.clone();
-    for s in b.samples.into_iter().skip(1) {
-        a.samples.push(super::Sample {
-            t: a.samples.len() as f64 * a.period,
-            q: s.q,
-        });
-    }
-    a.frames.extend(b.frames.into_iter().skip(1));
-    a.commands = match (a.commands.take(), b.commands) {
-        (None, None) => None,
-        (x, y) => {
-            let own = |c: Option<Vec<Vec<f64>>>, s: &[super::Sample]| {
-                c.unwrap_or_else(|| s.iter().map(|s| s.q.clone()).collect())
-            };
-            let mut x = own(x, &a.samples[..=base]);
-            x.extend(own(y, &b_samples).into_iter().skip(1));
-            Some(x)
-        }
-    };
-    a.segments.extend(b.segments.into_iter().map(|mut s| {
-        s.first_sample += base;
-        s.last_sample += base;
-        s.pass = s.pass.map(|p| p + passes);
-        s
-    }));
-    a.passes.extend(b.passes);
-    a.predicted_duration_s += b.predicted_duration_s;
-    a.reachability.regions.extend(b.reachability.regions);
-    a.reachability
-        .unreachable
-        .extend(b.reachability.unreachable);
-    a.reachability.jumps += b.reachability.jumps;
-    a.metrics = combine(&a.metrics, &b.metrics);
-    // removal mode: each group predicted its own regions (same tool, preload and tolerance)
-    a.removal = match (a.removal.take(), b.removal) {
-        (Some(mut x), Some(y)) => {
-            x.regions.extend(y.regions);
-            x.rows.extend(y.rows);
-            Some(x)
-        }
-        (x, y) => x.or(y),
-    };
-    a
-}
-
-/// Metrics of two plans run one after the other: sums, extremes, and sample-weighted means
-/// (the cruise share weighted by samples too: an estimate).
-fn combine(a: &Metrics, b: &Metrics) -> Metrics {
-    let (wa, wb) = (a.samples as f64, b.samples.saturating_sub(1) as f64);
-    let mean = |x: f64, y: f64| (x * wa + y * wb) / (wa + wb).max(1.0);
-    let grinds = |m: &Metrics| m.path_points > 0;
-    let cruise_min = match (grinds(a), grinds(b)) {
-        (true, true) => a.cruise_feed_min_mm_s.min(b.cruise_feed_min_mm_s),
-        (false, true) => b.cruise_feed_min_mm_s,
-        _ => a.cruise_feed_min_mm_s,
-    };
-    Metrics {
-        predicted_duration_s: a.predicted_duration_s + b.predicted_duration_s,
-        path_points: a.path_points + b.path_points,
-        samples: a.samples + b.samples.saturating_sub(1),
-        resolution_error_max_mm: a.resolution_error_max_mm.max(b.resolution_error_max_mm),
-        resolution_error_mean_mm: mean(a.resolution_error_mean_mm, b.resolution_error_mean_mm),
-        sample_to_path_max_mm: a.sample_to_path_max_mm.max(b.sample_to_path_max_mm),
-        path_to_samples_max_mm: a.path_to_samples_max_mm.max(b.path_to_samples_max_mm),
-        feed_mm_s: a.feed_mm_s,
-        cruise_feed_min_mm_s: cruise_min,
-        cruise_feed_max_mm_s: a.cruise_feed_max_mm_s.max(b.cruise_feed_max_mm_s),
-        slowed_strokes: a.slowed_strokes + b.slowed_strokes,
-        cruise_share: mean(a.cruise_share, b.cruise_share),
-    }
 }

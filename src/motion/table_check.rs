@@ -2,7 +2,8 @@
 //! part against the cell's turntable with the arm at rest during every table move
 //! ([`Plan::check_cell`]), and the collision re-check of each stretch of samples against the
 //! part turned to its table angle ([`Plan::check_clearance_cell`]).
-use super::collide::CollisionConfig;
+use super::clearance::{allowances, Collision};
+use super::collide::{CollisionConfig, Scene};
 use super::error::PlanError;
 use super::file::{CheckedPlan, Plan};
 use super::program::SegmentKind;
@@ -69,6 +70,21 @@ impl Plan {
                     "turntable: region {region} is ground but has no table angle in `turntable.regions`"
                 )));
             };
+            // ground with the table turning: its angle per sample is the stretch's (checked
+            // against the table's limits and frames by `check`)
+            let synced = part
+                .synced
+                .iter()
+                .any(|st| s.first_sample >= st.first_sample && s.first_sample < st.last_sample());
+            if synced && want.synced_strokes == 0 {
+                return Err(PlanError::Frames(format!(
+                    "turntable: region {region} is ground while the table turns (sample {}) but has no synced strokes",
+                    s.first_sample
+                )));
+            }
+            if synced {
+                continue;
+            }
             let at = ranges
                 .iter()
                 .find(|(lo, hi, _)| s.first_sample >= *lo && s.first_sample < (*hi).max(*lo + 1))
@@ -97,14 +113,26 @@ impl Plan {
 const ANGLE_TOLERANCE_DEG: f64 = 1e-3;
 
 /// The arm samples at one table angle: `first..=last` (a move's resting sample belongs to
-/// the ranges on both sides: the arm rests there while the table turns).
+/// the ranges on both sides: the arm rests there while the table turns; a synced stretch's
+/// first sample ends one range and its last starts the next, and the samples between them
+/// belong to none: each has its own angle).
 fn angle_ranges(plan: &TablePlan, samples: usize) -> Vec<(usize, usize, f64)> {
-    let mut out = Vec::with_capacity(plan.moves.len() + 1);
+    let mut events: Vec<(usize, usize, f64)> = (plan.moves.iter())
+        .map(|m| (m.at_sample, m.at_sample, *m.samples.last().unwrap_or(&0.0)))
+        .chain((plan.synced.iter()).map(|s| {
+            (
+                s.first_sample,
+                s.last_sample(),
+                *s.angles.last().unwrap_or(&0.0),
+            )
+        }))
+        .collect();
+    events.sort_by_key(|e| (e.0, e.1));
+    let mut out = Vec::with_capacity(events.len() + 1);
     let (mut first, mut angle) = (0usize, plan.start);
-    for m in &plan.moves {
-        out.push((first, m.at_sample, angle));
-        first = m.at_sample;
-        angle = *m.samples.last().unwrap_or(&angle);
+    for (at, next, to) in events {
+        out.push((first, at, angle));
+        (first, angle) = (next, to);
     }
     out.push((first, samples.saturating_sub(1), angle));
     out
@@ -158,10 +186,53 @@ impl Plan {
                 Err(e) => return Err(e),
             }
         }
+        found.extend(self.synced_collisions(inspection, robot, wc, part, table, cfg)?);
         if found.is_empty() {
             Ok(())
         } else {
             Err(PlanError::Collides(found))
         }
+    }
+
+    /// The samples inside the synced stretches of `part`, each against the part turned to its
+    /// own table angle (one scene, placed per sample), with what its segment allows.
+    fn synced_collisions(
+        &self,
+        inspection: &Inspection,
+        robot: &Robot,
+        wc: &Workcell,
+        part: &TablePlan,
+        table: &Turntable,
+        cfg: &CollisionConfig,
+    ) -> Result<Vec<Collision>, PlanError> {
+        cfg.check(robot.dof()).map_err(PlanError::Config)?;
+        let mut cfg = cfg.clone();
+        cfg.press_mm = self.removal.as_ref().map_or(0.0, |r| r.preload_mm);
+        let mut found = Vec::new();
+        if part.synced.is_empty() {
+            return Ok(found);
+        }
+        let rules = allowances(&self.segments, self.samples.len());
+        let mut scene = Scene::new(&inspection.points, robot, wc, &cfg);
+        for st in &part.synced {
+            let inner = st.first_sample + 1..st.last_sample();
+            for (i, angle) in inner.zip(&st.angles[1..]) {
+                let Some((sample, &(allow, owner))) = self.samples.get(i).zip(rules.get(i)) else {
+                    continue;
+                };
+                scene.place(&table.workcell_at(wc, *angle), &cfg.solids);
+                if let Some(hit) = scene.check(robot, &sample.q, allow) {
+                    let seg = owner.map(|k| &self.segments[k]);
+                    found.push(Collision {
+                        sample: i,
+                        segment: owner,
+                        kind: seg.map(|s| s.kind),
+                        region: seg.and_then(|s| s.region),
+                        hit,
+                    });
+                }
+            }
+        }
+        Ok(found)
     }
 }

@@ -35,6 +35,19 @@ pub struct RegionTable {
     /// Absent in plans from before 2026-12-05 and where no piece was needed: empty.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub pieces: Vec<TablePiece>,
+    /// Strokes of the region ground with the table turning during the stroke (the table as a
+    /// sixth axis: `synced` of the table part), after its pieces; absent where none: 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub synced_strokes: usize,
+    /// Share of the region's core points covered once those strokes are added (absent
+    /// without them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub synced_coverage: Option<f64>,
+}
+
+/// Whether `n` is 0 (a count left out of plan.json when nothing was counted).
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// One further piece of a region split by table angle.
@@ -81,6 +94,39 @@ pub struct TableMove {
     pub frames: Vec<String>,
 }
 
+/// A stretch of arm samples in which the table turns with the arm (a stroke ground with the
+/// table as a sixth axis, `table_sync.rs`): the table angle at every arm sample of the
+/// stretch, and one 0x19 frame per sample after the first, sent in the same bus period as
+/// that sample's arm frame (0x1D).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SyncedStretch {
+    /// Arm sample index of the stretch's first sample (where the table stands at `angles[0]`).
+    pub first_sample: usize,
+    /// Table angle per arm sample from `first_sample` on, radians.
+    pub angles: Vec<f64>,
+    /// One 0x19 frame per angle after the first (hex), time = the period.
+    pub frames: Vec<String>,
+}
+
+impl SyncedStretch {
+    /// Arm sample index of the stretch's last sample.
+    pub fn last_sample(&self) -> usize {
+        self.first_sample + self.angles.len().saturating_sub(1)
+    }
+}
+
+/// A synced stretch `run` may send: the raw target of each table frame and its bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedSynced {
+    /// Arm sample index of the stretch's first sample; frame `i` goes with arm sample
+    /// `first_sample + 1 + i`.
+    pub first_sample: usize,
+    /// Raw count each frame sends the table servo to.
+    pub raw: Vec<u16>,
+    /// The frames' bytes.
+    pub frames: Vec<Vec<u8>>,
+}
+
 /// A table move `run` may send: where it happens and each frame's raw target.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CheckedMove {
@@ -103,6 +149,8 @@ pub struct CheckedTable {
     pub start_raw: u16,
     /// The moves in order.
     pub moves: Vec<CheckedMove>,
+    /// The synced stretches in order.
+    pub synced: Vec<CheckedSynced>,
 }
 
 /// The `turntable` object of plan.json.
@@ -116,6 +164,10 @@ pub struct TablePlan {
     pub regions: Vec<RegionTable>,
     /// The table moves in order.
     pub moves: Vec<TableMove>,
+    /// The stretches in which the table turns with the arm (strokes ground with the table as
+    /// a sixth axis), in order; absent in plans without in-stroke table motion.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub synced: Vec<SyncedStretch>,
 }
 
 impl TablePlan {
@@ -130,12 +182,23 @@ impl TablePlan {
         total + 0.0
     }
 
-    /// The table angle after the last move, radians.
+    /// The table angle after the last move or synced stretch, radians (a move at a
+    /// stretch's last sample comes after it).
     pub fn end(&self) -> f64 {
-        self.moves
+        let mv = self
+            .moves
             .last()
-            .and_then(|m| m.samples.last().copied())
-            .unwrap_or(self.start)
+            .and_then(|m| Some((m.at_sample, *m.samples.last()?)));
+        let st = self
+            .synced
+            .last()
+            .and_then(|s| Some((s.last_sample(), *s.angles.last()?)));
+        match (mv, st) {
+            (Some(m), Some(s)) if s.0 > m.0 => s.1,
+            (Some(m), _) => m.1,
+            (None, Some(s)) => s.1,
+            (None, None) => self.start,
+        }
     }
 }
 
@@ -190,10 +253,97 @@ fn frame_raw(frame: &[u8]) -> u16 {
     u16::from_be_bytes([frame[5], frame[6]])
 }
 
+/// The limits one table sample path is checked against.
+struct SampleRule<'a> {
+    table: &'a Turntable,
+    time_ms: u16,
+    range: [f64; 2],
+    /// Largest step per period, rad.
+    most: f64,
+    /// Largest change of step per period, rad.
+    most_change: f64,
+}
+
+impl SampleRule<'_> {
+    /// Checks `samples` (`what`: "move 3", "synced stretch 1") starting at `angle` where the
+    /// table stands: inside the range, every step within the velocity limit and every change
+    /// of step within the acceleration limit, from rest to rest, and every frame equal byte
+    /// for byte to the 0x19 frame its sample makes. Returns the frames' bytes.
+    fn check(
+        &self,
+        what: &str,
+        samples: &[f64],
+        frames: &[String],
+        angle: f64,
+    ) -> Result<Vec<Vec<u8>>, PlanError> {
+        let bad = |m: String| Err(PlanError::Frames(format!("turntable: {what}{m}")));
+        let [lo, hi] = self.range;
+        if samples.len() < 2 || frames.len() + 1 != samples.len() {
+            return bad(format!(
+                ": {} frames for {} samples",
+                frames.len(),
+                samples.len()
+            ));
+        }
+        if (samples[0] - angle).abs() > 1e-9 {
+            return bad(format!(
+                ": starts at {} rad, the table is at {angle} rad",
+                samples[0]
+            ));
+        }
+        let mut bytes = Vec::with_capacity(frames.len());
+        for (i, q) in samples.iter().enumerate() {
+            if !(q.is_finite() && *q >= lo - 1e-12 && *q <= hi + 1e-12) {
+                return bad(format!(" sample {i}: {q} rad outside {lo}..={hi} rad"));
+            }
+            if i == 0 {
+                continue;
+            }
+            let step = (q - samples[i - 1]).abs();
+            if step > self.most {
+                return bad(format!(
+                    " sample {i}: steps {step:.5} rad in one period, the velocity limit allows {:.5}",
+                    self.most
+                ));
+            }
+            let change = if i >= 2 {
+                q - 2.0 * samples[i - 1] + samples[i - 2]
+            } else {
+                q - samples[0]
+            };
+            if change.abs() > self.most_change {
+                return bad(format!(
+                    " sample {i}: its step changes by {:.6} rad, the acceleration limit allows {:.6}",
+                    change.abs(),
+                    self.most_change
+                ));
+            }
+            let want = frame(self.table, *q, self.time_ms)?;
+            if to_hex(&want) != frames[i - 1] {
+                return bad(format!(
+                    " frame {}: is not the frame sample {i} makes ({})",
+                    i - 1,
+                    to_hex(&want)
+                ));
+            }
+            bytes.push(want);
+        }
+        let last = samples.len() - 1;
+        if (samples[last] - samples[last - 1]).abs() > self.most_change {
+            return bad(format!(
+                ": does not end at rest (last step {:.6} rad)",
+                (samples[last] - samples[last - 1]).abs()
+            ));
+        }
+        Ok(bytes)
+    }
+}
+
 /// Checks the plan's table part against the cell's `table`: the servo id, each move's place
-/// (in order, within the arm's samples), continuity from the start angle, every sample inside
-/// the table's range (so every raw target inside its raw and degree ranges), every step within
-/// its velocity limit and every change of step within its acceleration limit, and every frame
+/// (in order, within the arm's samples) and each synced stretch's (in order, within the arm's
+/// samples, no move inside it), continuity from the start angle, every sample inside the
+/// table's range (so every raw target inside its raw and degree ranges), every step within its
+/// velocity limit and every change of step within its acceleration limit, and every frame
 /// equal byte for byte to the 0x19 frame its sample makes. Returns what `run` sends.
 pub fn check(
     plan: &TablePlan,
@@ -208,92 +358,76 @@ pub fn check(
             plan.servo_id, table.servo.id
         ));
     }
-    let time_ms = frame_time_ms(period)?;
-    let [lo, hi] = table.range();
     let [v, a, _] = table.limits();
-    let most = v * period * (1.0 + STEP_TOLERANCE);
-    let most_change = a * period * period * (1.0 + STEP_TOLERANCE);
-    let (mut at, mut angle) = (0usize, plan.start);
+    let rule = SampleRule {
+        table,
+        time_ms: frame_time_ms(period)?,
+        range: table.range(),
+        most: v * period * (1.0 + STEP_TOLERANCE),
+        most_change: a * period * period * (1.0 + STEP_TOLERANCE),
+    };
     let start_raw = table
         .raw(plan.start)
         .map_err(|m| PlanError::Frames(format!("turntable: start: {m}")))?;
-    let mut out = Vec::with_capacity(plan.moves.len());
-    for (k, m) in plan.moves.iter().enumerate() {
-        if m.at_sample < at || m.at_sample >= arm_samples.max(1) {
+    // the moves and stretches in time order: a move at sample k comes after a stretch ending
+    // there and before one starting there
+    let mut events: Vec<(usize, bool, usize)> = (plan.moves.iter().enumerate())
+        .map(|(k, m)| (m.at_sample, true, k))
+        .chain(
+            plan.synced
+                .iter()
+                .enumerate()
+                .map(|(k, s)| (s.first_sample, false, k)),
+        )
+        .collect();
+    events.sort_by_key(|e| (e.0, !e.1));
+    let (mut at, mut angle, mut busy_to) = (0usize, plan.start, 0usize);
+    let (mut moves, mut synced) = (Vec::new(), Vec::new());
+    let (mut next_move, mut next_sync) = (0usize, 0usize);
+    for (sample, is_move, k) in events {
+        let (what, expected) = if is_move {
+            (format!("move {k}"), &mut next_move)
+        } else {
+            (format!("synced stretch {k}"), &mut next_sync)
+        };
+        let last = if is_move {
+            sample
+        } else {
+            plan.synced[k].last_sample()
+        };
+        if k != *expected || sample < at.max(busy_to) || last >= arm_samples.max(1) {
             return bad(format!(
-                "move {k}: at arm sample {} (out of order or past the last)",
-                m.at_sample
+                "{what}: at arm sample {sample} (out of order, inside a synced stretch or past the last)"
             ));
         }
-        if m.samples.len() < 2 || m.frames.len() + 1 != m.samples.len() {
-            return bad(format!(
-                "move {k}: {} frames for {} samples",
-                m.frames.len(),
-                m.samples.len()
-            ));
+        *expected += 1;
+        if is_move {
+            let m = &plan.moves[k];
+            let bytes = rule.check(&what, &m.samples, &m.frames, angle)?;
+            moves.push(CheckedMove {
+                at_sample: m.at_sample,
+                raw: bytes.iter().map(|f| frame_raw(f)).collect(),
+                frames: bytes,
+            });
+            angle = *m.samples.last().unwrap_or(&angle);
+            at = sample;
+        } else {
+            let s = &plan.synced[k];
+            let bytes = rule.check(&what, &s.angles, &s.frames, angle)?;
+            synced.push(CheckedSynced {
+                first_sample: s.first_sample,
+                raw: bytes.iter().map(|f| frame_raw(f)).collect(),
+                frames: bytes,
+            });
+            angle = *s.angles.last().unwrap_or(&angle);
+            (at, busy_to) = (last, last);
         }
-        if (m.samples[0] - angle).abs() > 1e-9 {
-            return bad(format!(
-                "move {k}: starts at {} rad, the table is at {angle} rad",
-                m.samples[0]
-            ));
-        }
-        let mut bytes = Vec::with_capacity(m.frames.len());
-        for (i, q) in m.samples.iter().enumerate() {
-            if !(q.is_finite() && *q >= lo - 1e-12 && *q <= hi + 1e-12) {
-                return bad(format!(
-                    "move {k} sample {i}: {q} rad outside {lo}..={hi} rad"
-                ));
-            }
-            if i == 0 {
-                continue;
-            }
-            if (q - m.samples[i - 1]).abs() > most {
-                return bad(format!(
-                    "move {k} sample {i}: steps {:.5} rad in one period, the velocity limit allows {most:.5}",
-                    (q - m.samples[i - 1]).abs()
-                ));
-            }
-            let change = if i >= 2 {
-                q - 2.0 * m.samples[i - 1] + m.samples[i - 2]
-            } else {
-                q - m.samples[0]
-            };
-            if change.abs() > most_change {
-                return bad(format!(
-                    "move {k} sample {i}: its step changes by {:.6} rad, the acceleration limit allows {most_change:.6}",
-                    change.abs()
-                ));
-            }
-            let want = frame(table, *q, time_ms)?;
-            if to_hex(&want) != m.frames[i - 1] {
-                return bad(format!(
-                    "move {k} frame {}: is not the frame sample {i} makes ({})",
-                    i - 1,
-                    to_hex(&want)
-                ));
-            }
-            bytes.push(want);
-        }
-        let last = m.samples.len() - 1;
-        if (m.samples[last] - m.samples[last - 1]).abs() > most_change {
-            return bad(format!(
-                "move {k}: does not end at rest (last step {:.6} rad)",
-                (m.samples[last] - m.samples[last - 1]).abs()
-            ));
-        }
-        out.push(CheckedMove {
-            at_sample: m.at_sample,
-            raw: bytes.iter().map(|f| frame_raw(f)).collect(),
-            frames: bytes,
-        });
-        at = m.at_sample;
-        angle = *m.samples.last().unwrap_or(&angle);
     }
     Ok(CheckedTable {
         servo_id: table.servo.id,
         raw_range: table.servo.raw_range,
         start_raw,
-        moves: out,
+        moves,
+        synced,
     })
 }

@@ -15,6 +15,7 @@ use std::collections::HashMap;
 use super::check::{tool_reaches, Cover};
 use super::config::PlanConfig;
 use super::file::Plan;
+use super::report::Metrics;
 use crate::removal::prediction::RemovalReport;
 use crate::repair::{Inspection, RegionInfo};
 use crate::robot::{Robot, Turntable, Workcell};
@@ -202,4 +203,82 @@ pub(super) fn piece_of(
     piece.points = left.len();
     part.regions = vec![piece];
     part
+}
+
+/// `a` followed by `b` (which starts at the home pose `a` ends at): samples and frames after
+/// `b`'s first, segments and passes re-indexed, reports, metrics and removal predictions
+/// combined.
+pub(super) fn concat(mut a: Plan, b: Plan) -> Plan {
+    let base = a.samples.len() - 1;
+    let passes = a.passes.len();
+    let b_samples = b.samples.clone();
+    for s in b.samples.into_iter().skip(1) {
+        a.samples.push(super::file::Sample {
+            t: a.samples.len() as f64 * a.period,
+            q: s.q,
+        });
+    }
+    a.frames.extend(b.frames.into_iter().skip(1));
+    a.commands = match (a.commands.take(), b.commands) {
+        (None, None) => None,
+        (x, y) => {
+            let own = |c: Option<Vec<Vec<f64>>>, s: &[super::file::Sample]| {
+                c.unwrap_or_else(|| s.iter().map(|s| s.q.clone()).collect())
+            };
+            let mut x = own(x, &a.samples[..=base]);
+            x.extend(own(y, &b_samples).into_iter().skip(1));
+            Some(x)
+        }
+    };
+    a.segments.extend(b.segments.into_iter().map(|mut s| {
+        s.first_sample += base;
+        s.last_sample += base;
+        s.pass = s.pass.map(|p| p + passes);
+        s
+    }));
+    a.passes.extend(b.passes);
+    a.predicted_duration_s += b.predicted_duration_s;
+    a.reachability.regions.extend(b.reachability.regions);
+    a.reachability
+        .unreachable
+        .extend(b.reachability.unreachable);
+    a.reachability.jumps += b.reachability.jumps;
+    a.metrics = combine(&a.metrics, &b.metrics);
+    // removal mode: each group predicted its own regions (same tool, preload and tolerance)
+    a.removal = match (a.removal.take(), b.removal) {
+        (Some(mut x), Some(y)) => {
+            x.regions.extend(y.regions);
+            x.rows.extend(y.rows);
+            Some(x)
+        }
+        (x, y) => x.or(y),
+    };
+    a
+}
+
+/// Metrics of two plans run one after the other: sums, extremes, and sample-weighted means
+/// (the cruise share weighted by samples too: an estimate).
+fn combine(a: &Metrics, b: &Metrics) -> Metrics {
+    let (wa, wb) = (a.samples as f64, b.samples.saturating_sub(1) as f64);
+    let mean = |x: f64, y: f64| (x * wa + y * wb) / (wa + wb).max(1.0);
+    let grinds = |m: &Metrics| m.path_points > 0;
+    let cruise_min = match (grinds(a), grinds(b)) {
+        (true, true) => a.cruise_feed_min_mm_s.min(b.cruise_feed_min_mm_s),
+        (false, true) => b.cruise_feed_min_mm_s,
+        _ => a.cruise_feed_min_mm_s,
+    };
+    Metrics {
+        predicted_duration_s: a.predicted_duration_s + b.predicted_duration_s,
+        path_points: a.path_points + b.path_points,
+        samples: a.samples + b.samples.saturating_sub(1),
+        resolution_error_max_mm: a.resolution_error_max_mm.max(b.resolution_error_max_mm),
+        resolution_error_mean_mm: mean(a.resolution_error_mean_mm, b.resolution_error_mean_mm),
+        sample_to_path_max_mm: a.sample_to_path_max_mm.max(b.sample_to_path_max_mm),
+        path_to_samples_max_mm: a.path_to_samples_max_mm.max(b.path_to_samples_max_mm),
+        feed_mm_s: a.feed_mm_s,
+        cruise_feed_min_mm_s: cruise_min,
+        cruise_feed_max_mm_s: a.cruise_feed_max_mm_s.max(b.cruise_feed_max_mm_s),
+        slowed_strokes: a.slowed_strokes + b.slowed_strokes,
+        cruise_share: mean(a.cruise_share, b.cruise_share),
+    }
 }

@@ -132,16 +132,10 @@ fn turntable_cell(insp: &Inspection) -> (Plan, Tally) {
     (plan, t)
 }
 
-/// The check of a plan made in the turntable cell `calibration/DIR`, the part turned by this
-/// test from DIR/workcell.toml's `[turntable]` at each sample's table angle.
-pub(super) fn turned_tally(
-    plan: &Plan,
-    robot: &Robot,
-    insp: &Inspection,
-    wc: &Workcell,
-    dir: &str,
-) -> Tally {
-    // the table's axis and centre as workcell.toml states them
+/// The part's placement `wc` turned by table angle `angle` (rad) about the table's axis and
+/// centre as `calibration/DIR`/workcell.toml states them (read by this test, not the planner's
+/// loader).
+pub(super) fn turner(wc: &Workcell, dir: &str) -> impl Fn(f64) -> Workcell {
     let text = std::fs::read_to_string(calib(&format!("{dir}workcell.toml"))).expect("workcell");
     let doc: toml::Value = toml::from_str(&text).expect("toml");
     let vec3 = |key: &str| {
@@ -149,24 +143,51 @@ pub(super) fn turned_tally(
         Vector3::from_fn(|k, _| v[k].as_float().expect(key))
     };
     let (axis, centre) = (Unit::new_normalize(vec3("axis")), vec3("centre"));
-    let turned = |angle: f64| {
+    let base = wc.robot_from_reference;
+    move |angle: f64| {
         let about = Translation3::from(centre).to_homogeneous()
             * Rotation3::from_axis_angle(&axis, angle).to_homogeneous()
             * Translation3::from(-centre).to_homogeneous();
         Workcell {
-            robot_from_reference: about * wc.robot_from_reference,
+            robot_from_reference: about * base,
         }
-    };
+    }
+}
+
+/// The check of a plan made in the turntable cell `calibration/DIR`, the part turned by this
+/// test from DIR/workcell.toml's `[turntable]` at each sample's table angle (inside a synced
+/// stretch, the stretch's angle at that sample).
+pub(super) fn turned_tally(
+    plan: &Plan,
+    robot: &Robot,
+    insp: &Inspection,
+    wc: &Workcell,
+    dir: &str,
+) -> Tally {
+    let turned = turner(wc, dir);
     let tp = plan.turntable.clone().expect("a table part");
     let angles = |i: usize| -> Vec<f64> {
-        let mut at = tp.start;
+        // the table's angle after the latest move or synced stretch before sample i
+        let (mut at, mut since) = (tp.start, 0usize);
         let mut out = Vec::new();
         for m in &tp.moves {
             if m.at_sample < i {
                 at = *m.samples.last().expect("move");
+                since = m.at_sample + 1;
             } else if m.at_sample == i {
                 // the arm rests here while the table turns through every sampled angle
                 out.extend(&m.samples);
+            }
+        }
+        // a stroke ground with the table turning: the table at its own angle at each sample
+        for st in &tp.synced {
+            let last = st.first_sample + st.angles.len() - 1;
+            if i > st.first_sample && i < last {
+                return vec![st.angles[i - st.first_sample]];
+            }
+            if last <= i && last >= since {
+                at = *st.angles.last().expect("stretch");
+                since = last;
             }
         }
         if out.is_empty() {
@@ -175,7 +196,7 @@ pub(super) fn turned_tally(
         out
     };
     tally(plan, robot, insp, |i| {
-        angles(i).into_iter().map(turned).collect()
+        angles(i).into_iter().map(&turned).collect()
     })
 }
 

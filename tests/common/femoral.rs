@@ -239,3 +239,24 @@ pub fn reasons(plan: &Plan) -> BTreeMap<String, usize> {
     }
     out
 }
+
+/// The synth case (seed [`SYNC_SEED`], 4 defects) of the real femoral component planned in
+/// rigid mode in the designed femoral cell with the tool held within [`SYNC_CONE_DEG`] of the
+/// arm's plane (a stricter tool-axis rule than the IK's default 45 degrees): at that cone no
+/// single table angle reaches most of region 0's contacts, and the planner grinds some of its
+/// strokes with the table turning (`motion::table_sync`). Its robot, placement, table,
+/// settings, the inspection and the plan.
+pub fn synced_plan() -> (Robot, Workcell, Turntable, PlanConfig, Inspection, Plan) {
+    let insp = inspection(SYNC_SEED, 4);
+    let (robot, wc, table, mut config) = cell("femoral/");
+    config.ik.max_axis_miss_deg = SYNC_CONE_DEG;
+    let table = table.expect("the designed cell has a turntable");
+    let plan = polishbot::motion::plan(&insp, &robot, &wc, Some(&table), &config).expect("plan");
+    (robot, wc, table, config, insp, plan)
+}
+
+/// Seed of [`synced_plan`]'s case.
+pub const SYNC_SEED: u64 = 2000;
+
+/// Tool-axis cone of [`synced_plan`], degrees from the arm's plane.
+pub const SYNC_CONE_DEG: f64 = 10.0;
