@@ -113,8 +113,8 @@ fn written(dir: &Path, name: &str, mesh: &Mesh, surface: &Mesh, seed: u64) -> Sy
     }
 }
 
-/// The synth settings of `v`'s uniform case, seed `seed`, its meshes written to `dir`.
-pub fn variant_config(dir: &Path, v: &Variant, seed: u64) -> SynthConfig {
+/// femoral_dm and its articular surface (mm) as variant `v`.
+pub fn variant_meshes(v: &Variant) -> (Mesh, Mesh) {
     let load = |f: &str| {
         polishbot::design::load_mesh(&super::shared_data(f), Some(Units::M)).expect("mesh")
     };
@@ -126,8 +126,15 @@ pub fn variant_config(dir: &Path, v: &Variant, seed: u64) -> SynthConfig {
         }
         p0 + d
     };
-    let mesh = mapped(&load("femoral_dm.stl"), f, v.mirror);
-    let surface = mapped(&load("femoral_dm_contact.stl"), f, v.mirror);
+    (
+        mapped(&load("femoral_dm.stl"), f, v.mirror),
+        mapped(&load("femoral_dm_contact.stl"), f, v.mirror),
+    )
+}
+
+/// The synth settings of `v`'s uniform case, seed `seed`, its meshes written to `dir`.
+pub fn variant_config(dir: &Path, v: &Variant, seed: u64) -> SynthConfig {
+    let (mesh, surface) = variant_meshes(v);
     let name = v.name.replace([' ', '.'], "_");
     written(dir, &name, &mesh, &surface, seed)
 }
@@ -146,10 +153,10 @@ fn surface_centroid(mesh: &Mesh) -> Point3<f64> {
     Point3::from(sum / area)
 }
 
-/// The synth settings of the uniform case on synth's parametric femoral part (default shape),
-/// turned into femoral_dm's anatomical frame (its x medio-lateral, y anterior, z proximal onto
-/// femoral_dm's z, x, y) with its centroid on the fixture point; meshes written to `dir`.
-pub fn parametric_config(dir: &Path, seed: u64) -> SynthConfig {
+/// Synth's parametric femoral part (default shape) and its articular surface, turned into
+/// femoral_dm's anatomical frame (its x medio-lateral, y anterior, z proximal onto
+/// femoral_dm's z, x, y) with its centroid on the fixture point, mm.
+pub fn parametric_meshes() -> (Mesh, Mesh) {
     let part = build_femoral(&FemoralShape::default());
     let surface = Mesh {
         vertices: part.mesh.vertices.clone(),
@@ -163,14 +170,25 @@ pub fn parametric_config(dir: &Path, seed: u64) -> SynthConfig {
         let d = p - c;
         p0 + Vector3::new(d.y, d.z, d.x)
     };
-    let mesh = mapped(&part.mesh, f, false);
-    let surface = mapped(&surface, f, false);
+    (mapped(&part.mesh, f, false), mapped(&surface, f, false))
+}
+
+/// The synth settings of the uniform case on [`parametric_meshes`], written to `dir`.
+pub fn parametric_config(dir: &Path, seed: u64) -> SynthConfig {
+    let (mesh, surface) = parametric_meshes();
     written(dir, "parametric", &mesh, &surface, seed)
 }
 
 /// The uniform case of `config` (see [`super::femoral::of_case`]).
 pub fn case(config: &SynthConfig) -> Inspection {
     super::femoral::of_case(config)
+}
+
+/// `mount` (a part direction, reference frame) mirrored along [`MEDIO_LATERAL`].
+pub fn mirrored(mount: [f64; 3]) -> [f64; 3] {
+    let mut m = mount;
+    m[MEDIO_LATERAL] = -m[MEDIO_LATERAL];
+    m
 }
 
 /// `cells` with a left knee's fixture: each setup's mounting mirrored along
@@ -184,8 +202,8 @@ pub fn mirrored_fixture(cells: &[SetupCell], p0: &Point3<f64>) -> Vec<SetupCell>
             let table = c.table.as_ref().expect("a table");
             let m = c.workcell.robot_from_reference;
             let r: Matrix3<f64> = m.fixed_slice::<3, 3>(0, 0).into();
-            let mut mount = r.transpose() * table.axis.into_inner();
-            mount[MEDIO_LATERAL] = -mount[MEDIO_LATERAL];
+            let first = r.transpose() * table.axis.into_inner();
+            let mount = Vector3::from(mirrored(first.into()));
             let q = UnitQuaternion::rotation_between(&mount, &table.axis).expect("not opposite");
             let t = table.centre.coords - q * (p0.coords * 1e-3);
             let mut out = c.clone();
