@@ -92,7 +92,7 @@ fn survey_of_unseen_designs_in_the_shipped_cell() {
             .filter(|(a, b)| a.angle_deg.is_some() || b.angle_deg.is_some())
             .count() as f64;
         let mut why: Vec<_> = one.refused.iter().collect();
-        why.sort_by(|a, b| b.1.cmp(a.1));
+        why.sort_by_key(|w| std::cmp::Reverse(*w.1));
         println!(
             "| {name} | {:.1} % | {:.1} % | {:.1} % | {:?} |",
             100.0 * one.coverage,

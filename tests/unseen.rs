@@ -28,7 +28,7 @@ fn shares(insp: &Inspection, cells: &[SetupCell]) -> (f64, f64, String) {
     let (c1, t1) = planned_area(&one);
     let (c2, t2) = planned_area(&two);
     let mut why: Vec<(String, usize)> = reasons(&two).into_iter().collect();
-    why.sort_by(|a, b| b.1.cmp(&a.1));
+    why.sort_by_key(|w| std::cmp::Reverse(w.1));
     let top: Vec<String> = why
         .iter()
         .take(3)
