@@ -11,8 +11,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::eval::{score, Candidate, Context};
+use super::part::Part;
 use super::setups::Fixturing;
-use super::Part;
 
 /// The family's members scored besides the part: its sizes at the ends of an implant family
 /// (0.85 and 1.15 x; the planners check held-out designs of about that range) and its mirror
@@ -21,7 +21,7 @@ pub const MEMBERS: [(f64, bool); 3] = [(0.85, false), (1.15, false), (1.0, true)
 
 /// One member of the family and what the designed cell reaches of it.
 #[derive(Debug, Clone, Serialize)]
-pub struct Member {
+pub struct FamilyMember {
     /// Scale about the centroid.
     pub scale: f64,
     /// Mirrored through the centroid.
@@ -63,7 +63,7 @@ pub fn family(
     fixturings: &[Fixturing],
     n: usize,
     step_deg: f64,
-) -> Vec<Member> {
+) -> Vec<FamilyMember> {
     MEMBERS
         .par_iter()
         .map(|&(scale, mirrored)| {
@@ -98,7 +98,7 @@ pub fn family(
                 });
                 hit.count() as f64 / total as f64
             };
-            Member {
+            FamilyMember {
                 scale,
                 mirrored,
                 coverage: share(1.min(reached.len())),

@@ -109,7 +109,7 @@ pub struct Design {
     /// an implant family and its mirror image), each member held as the part is; scored by
     /// [`design`], not by [`assess`].
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub family: Vec<family::Member>,
+    pub family: Vec<family::FamilyMember>,
 }
 
 /// A further setup's placement and solids, as written to `setup-N/workcell.toml` and
