@@ -94,6 +94,15 @@ pub fn run(args: CellArgs, _config: Option<&std::path::Path>) -> anyhow::Result<
             100.0 * s.union_coverage
         );
     }
+    for m in &d.family {
+        println!(
+            "cell design: the part's family: {:.2} x{}: {:.1} % in setup 1, {:.1} % over the setups",
+            m.scale,
+            if m.mirrored { ", mirrored (the other knee)" } else { "" },
+            100.0 * m.coverage,
+            100.0 * m.union_coverage
+        );
+    }
     println!(
         "cell design: articular surface reached {:.1} % in setup 1, {:.1} % over {} setup(s) ({} samples); cell written to {}",
         100.0 * d.coverage,

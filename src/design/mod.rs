@@ -10,6 +10,7 @@
 //! design".
 mod config;
 mod eval;
+pub mod family;
 mod part;
 mod search;
 pub mod setups;
@@ -104,6 +105,11 @@ pub struct Design {
     /// (not in design.json: `setups` there names their mountings).
     #[serde(skip)]
     pub setup_cells: Vec<FurtherSetup>,
+    /// The cell's coverage of the part's family (`family::MEMBERS`: its sizes at the ends of
+    /// an implant family and its mirror image), each member held as the part is; scored by
+    /// [`design`], not by [`assess`].
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub family: Vec<family::FamilyMember>,
 }
 
 /// A further setup's placement and solids, as written to `setup-N/workcell.toml` and
@@ -133,6 +139,13 @@ pub fn design(part: &Part, source: &SourceCell, cfg: &DesignConfig) -> Result<De
     let mut d = assess_in(&ctx, &found.best, cfg)?;
     d.candidates_scored = found.scored;
     d.alternatives = found.alternatives;
+    d.family = family::family(
+        &ctx,
+        &d.candidate,
+        &d.setups,
+        cfg.final_samples,
+        cfg.step_deg,
+    );
     Ok(d)
 }
 
@@ -222,6 +235,7 @@ fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Resul
         alternatives: Vec::new(),
         setups,
         setup_cells,
+        family: Vec::new(),
     })
 }
 

@@ -4,6 +4,7 @@ pub mod accept;
 pub mod compensation;
 pub mod femoral;
 pub mod hostile;
+pub mod variants;
 
 use nalgebra::{Point3, Vector3};
 use std::io::{BufRead, BufReader};
