@@ -1,11 +1,11 @@
 //! The table as a sixth axis within a stroke (issue 51, item 3; `motion::table_sync`).
 mod common;
 
-use common::femoral::{cell, inspection, planned_area, uniform_case};
-use polishbot::bus::{Bus, BusConfig, EntryKind, Journal};
+use common::femoral::{cell, inspection, planned_area, table_bus, uniform_case};
+use polishbot::bus::{Bus, EntryKind, Journal};
 use polishbot::cell::{execute, steps, RunConfig, Step};
 use polishbot::motion::{plan, PlanMode};
-use polishbot::sim::{ExtraServo, SimArm, SimOptions};
+use polishbot::sim::SimArm;
 
 /// Tool-axis cones of the survey, degrees from the arm's plane: the IK's default (45), and
 /// the stricter 10 of [`common::femoral::synced_plan`].
@@ -65,17 +65,7 @@ fn the_simulated_cell_follows_the_table_turning_within_a_stroke() {
     let checked = plan
         .check_cell(&robot, Some(&table), &Default::default())
         .expect("run's check");
-    let cfg = BusConfig {
-        servo_map: polishbot::motion::frames::servo_map(&robot).unwrap(),
-        ..BusConfig::default()
-    };
-    let options = SimOptions {
-        extra_servos: vec![ExtraServo {
-            id: 7,
-            start_raw: table.raw(0.0).unwrap(),
-        }],
-        ..SimOptions::default()
-    };
+    let (cfg, options) = table_bus(&robot, &table);
     let arm = SimArm::new(&options, &cfg.servo_map).unwrap();
     let dir = common::tempdir();
     let journal = dir.path().join("journal.jsonl");

@@ -4,7 +4,7 @@
 mod board;
 mod common;
 
-use common::femoral::{cell, ground_at, inspection, split_plan};
+use common::femoral::{cell, ground_at, inspection, split_plan, table_bus};
 use nalgebra::Point3;
 use polishbot::bus::{Bus, BusConfig, Journal, ResumePoint};
 use polishbot::cell::{execute, steps, RunConfig, Step};
@@ -12,7 +12,7 @@ use polishbot::motion::file::CheckedPlan;
 use polishbot::motion::{plan, table_file, Plan, PlanConfig};
 use polishbot::repair::Inspection;
 use polishbot::robot::{Robot, Turntable, Workcell};
-use polishbot::sim::{ExtraServo, SimArm, SimOptions};
+use polishbot::sim::SimArm;
 
 /// Ten synth parts with random defects on the articular surface: the turntable cell covers at
 /// least 90 % of their repairable area; today's figure (the same cell without turning) is
@@ -264,12 +264,7 @@ fn an_independent_board_serving_servo_7_ends_at_the_plans_last_table_angle() {
 #[test]
 fn a_resume_after_a_stop_mid_table_move_ends_at_the_right_angle() {
     let (robot, table, checked, period, end) = table_plan();
-    let cfg = bus_config(&robot);
-    let start_raw = table.raw(0.0).unwrap();
-    let options = SimOptions {
-        extra_servos: vec![ExtraServo { id: 7, start_raw }],
-        ..SimOptions::default()
-    };
+    let (cfg, options) = table_bus(&robot, &table);
     // a clean run tells which received frame is the middle of the first table move
     let clean = SimArm::new(&options, &cfg.servo_map).unwrap();
     let mut bus = Bus::connect(clean.transport(), cfg.clone(), Journal::none()).unwrap();
@@ -353,14 +348,7 @@ fn a_plan_with_regions_split_by_table_angle_runs_on_the_simulated_cell() {
         .expect("run's check");
     plan.check_clearance_cell(&insp, &robot, &wc, Some(&table), &config.collision)
         .expect("run's clearance check");
-    let cfg = bus_config(&robot);
-    let options = SimOptions {
-        extra_servos: vec![ExtraServo {
-            id: 7,
-            start_raw: table.raw(0.0).unwrap(),
-        }],
-        ..SimOptions::default()
-    };
+    let (cfg, options) = table_bus(&robot, &table);
     let arm = SimArm::new(&options, &cfg.servo_map).unwrap();
     let mut bus = Bus::connect(arm.transport(), cfg, Journal::none()).unwrap();
     let run = RunConfig::default();

@@ -124,6 +124,91 @@ pub fn plan_part(
     {
         press_depth::land(&mut prog.passes, workcell);
     }
+    let cell = (robot, workcell, config);
+    region_reports(
+        inspection,
+        &counts,
+        &prog,
+        cell,
+        &mut reachability,
+        reach,
+        geometry.footprint,
+    );
+    if config.require_full_reach && !reachability.unreachable.is_empty() {
+        return Err(PlanError::Unreachable(reachability.unreachable));
+    }
+    let metrics = check::measure(&prog, robot, config);
+    check_program(&prog, &metrics, robot, &scene, config)?;
+    let traj = std::mem::replace(
+        &mut prog.trajectory,
+        JointTrajectory::starting_at(&config.home, config.trajectory.period),
+    );
+    let force_n = tool.as_ref().map_or(0.0, |t| t.force_n());
+    let (commanded, compensation) = compensate_plan(&traj, &prog, force_n, robot, workcell, config);
+    let sampled = samples_and_frames(&traj, commanded.as_ref(), robot)?;
+    let mut plan = plan_record(inspection, &traj, robot, &geometry, prog, sampled);
+    plan.commands = commanded.map(|c| (0..c.len()).map(|i| c.sample(i).to_vec()).collect());
+    plan.compensation = compensation;
+    plan.reachability = reachability;
+    plan.metrics = metrics;
+    plan.strokes = tool.as_ref().map(|t| config.finish.record(t));
+    plan.removal = removal;
+    Ok(plan)
+}
+
+/// The plan of one placement of the part as every planner writes it: format, the part's
+/// folder (absolute, so that `run` finds the part for its collision re-check from any
+/// folder), the trajectory's period and duration, the arm's joints, the tool's and raster's
+/// sizes, the program with its `samples` and frames; no commands, compensation, report,
+/// strokes, removal, table, setups or tools (the caller sets those it has).
+pub(super) fn plan_record(
+    inspection: &Inspection,
+    traj: &JointTrajectory,
+    robot: &Robot,
+    geometry: &RasterGeometry,
+    prog: program::Program,
+    (samples, stream): (Vec<Sample>, Vec<Vec<u8>>),
+) -> Plan {
+    Plan {
+        format: "polishbot-plan".into(),
+        version: 1,
+        inspection: std::fs::canonicalize(&inspection.dir)
+            .unwrap_or_else(|_| inspection.dir.clone())
+            .display()
+            .to_string(),
+        period: traj.period,
+        joint_names: robot.joints.iter().map(|j| j.name.clone()).collect(),
+        tool_radius_mm: robot.tool.radius_mm(),
+        stepover_mm: geometry.stepover,
+        footprint_mm: geometry.footprint,
+        predicted_duration_s: traj.duration(),
+        passes: prog.passes,
+        segments: prog.segments,
+        samples,
+        frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
+        commands: None,
+        compensation: None,
+        reachability: Reachability::default(),
+        metrics: Metrics::default(),
+        strokes: None,
+        removal: None,
+        turntable: None,
+        setups: Vec::new(),
+        tools: Vec::new(),
+    }
+}
+
+/// Each region's coverage report (`check::region_report`) into `reachability.regions`: its
+/// layers and path points from `counts`, the points left out from `reachability.unreachable`.
+fn region_reports(
+    inspection: &Inspection,
+    counts: &std::collections::HashMap<usize, (usize, usize)>,
+    prog: &program::Program,
+    (robot, workcell, config): (&Robot, &Workcell, &PlanConfig),
+    reachability: &mut Reachability,
+    reach: f64,
+    footprint: f64,
+) {
     for region in &inspection.regions {
         let (layers, total) = counts.get(&region.id).copied().unwrap_or((0, 0));
         let left_out = reachability
@@ -142,49 +227,9 @@ pub fn plan_part(
             workcell,
             config,
             reach,
-            geometry.footprint,
+            footprint,
         ));
     }
-    if config.require_full_reach && !reachability.unreachable.is_empty() {
-        return Err(PlanError::Unreachable(reachability.unreachable));
-    }
-    let metrics = check::measure(&prog, robot, config);
-    check_program(&prog, &metrics, robot, &scene, config)?;
-    let traj = std::mem::replace(
-        &mut prog.trajectory,
-        JointTrajectory::starting_at(&config.home, config.trajectory.period),
-    );
-    let force_n = tool.as_ref().map_or(0.0, |t| t.force_n());
-    let (commanded, compensation) = compensate_plan(&traj, &prog, force_n, robot, workcell, config);
-    let (samples, stream) = samples_and_frames(&traj, commanded.as_ref(), robot)?;
-    Ok(Plan {
-        format: "polishbot-plan".into(),
-        version: 1,
-        // absolute, so that `run` finds the part for its collision re-check from any folder
-        inspection: std::fs::canonicalize(&inspection.dir)
-            .unwrap_or_else(|_| inspection.dir.clone())
-            .display()
-            .to_string(),
-        period: traj.period,
-        joint_names: robot.joints.iter().map(|j| j.name.clone()).collect(),
-        tool_radius_mm: radius_mm,
-        stepover_mm: geometry.stepover,
-        footprint_mm: geometry.footprint,
-        predicted_duration_s: traj.duration(),
-        passes: prog.passes,
-        segments: prog.segments,
-        samples,
-        frames: stream.iter().map(|f| frames::to_hex(f)).collect(),
-        commands: commanded.map(|c| (0..c.len()).map(|i| c.sample(i).to_vec()).collect()),
-        compensation,
-        reachability,
-        metrics,
-        strokes: tool.as_ref().map(|t| config.finish.record(t)),
-        removal,
-        turntable: None,
-        setups: Vec::new(),
-        tools: Vec::new(),
-    })
 }
 
 /// The servo commands and their report when `config.compensate_compliance` and the robot has

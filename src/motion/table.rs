@@ -112,7 +112,7 @@ struct GroupedPlan<'a> {
     table_plan: TablePlan,
 }
 
-impl GroupedPlan<'_> {
+impl<'a> GroupedPlan<'a> {
     /// `regions` planned as today with the part turned to `angle`.
     fn plan_at(&self, angle: f64, regions: Vec<RegionInfo>) -> Result<Plan, PlanError> {
         let mut part = self.inspection.clone();
@@ -220,27 +220,36 @@ impl GroupedPlan<'_> {
         Ok(())
     }
 
-    /// Plans the core points of region `k` (regions.json order) no stroke covers yet as a
-    /// piece at the best of its candidate angles and appends it; false when the region is
-    /// covered enough or no angle adds enough.
-    fn add_piece(&mut self, k: usize) -> Result<bool, PlanError> {
-        let region = self.inspection.regions[k].clone();
-        let cell = PieceCell {
+    /// The cell a piece of a region is planned in.
+    fn piece_cell(&self) -> PieceCell<'a> {
+        PieceCell {
             inspection: self.inspection,
             robot: self.robot,
             workcell: self.workcell,
             table: self.table,
             config: self.config,
-        };
-        let Some(merged) = self.merged.as_ref() else {
-            return Ok(false);
-        };
-        let (left, n) = split::uncovered(&cell, merged, region.id);
-        if 1.0 - left.len() as f64 / n.max(1) as f64 >= GOOD_COVERAGE
-            || left.len() < MIN_PIECE_POINTS
-        {
-            return Ok(false);
         }
+    }
+
+    /// The plan so far and the core points of region `id` no stroke of it covers yet, when
+    /// the region is covered less than [`GOOD_COVERAGE`] and at least [`MIN_PIECE_POINTS`]
+    /// are left; None otherwise.
+    fn still_uncovered(&self, cell: &PieceCell, id: usize) -> Option<(&Plan, Vec<usize>)> {
+        let merged = self.merged.as_ref()?;
+        let (left, n) = split::uncovered(cell, merged, id);
+        let covered = 1.0 - left.len() as f64 / n.max(1) as f64;
+        (covered < GOOD_COVERAGE && left.len() >= MIN_PIECE_POINTS).then_some((merged, left))
+    }
+
+    /// Plans the core points of region `k` (regions.json order) no stroke covers yet as a
+    /// piece at the best of its candidate angles and appends it; false when the region is
+    /// covered enough or no angle adds enough.
+    fn add_piece(&mut self, k: usize) -> Result<bool, PlanError> {
+        let region = self.inspection.regions[k].clone();
+        let cell = self.piece_cell();
+        let Some((merged, left)) = self.still_uncovered(&cell, region.id) else {
+            return Ok(false);
+        };
         let entry = &self.table_plan.regions[k];
         let used: Vec<f64> = entry.angles_deg().map(f64::to_radians).collect();
         let ranked = split::rank(&cell, &left, &candidates(self.table), &used, used[0]);
@@ -286,22 +295,10 @@ impl GroupedPlan<'_> {
     /// the table turns (`table_sync.rs`), when they add enough; false when not.
     fn add_synced(&mut self, k: usize) -> Result<bool, PlanError> {
         let region = self.inspection.regions[k].clone();
-        let cell = PieceCell {
-            inspection: self.inspection,
-            robot: self.robot,
-            workcell: self.workcell,
-            table: self.table,
-            config: self.config,
-        };
-        let Some(merged) = self.merged.as_ref() else {
+        let cell = self.piece_cell();
+        let Some((merged, left)) = self.still_uncovered(&cell, region.id) else {
             return Ok(false);
         };
-        let (left, n) = split::uncovered(&cell, merged, region.id);
-        if 1.0 - left.len() as f64 / n.max(1) as f64 >= GOOD_COVERAGE
-            || left.len() < MIN_PIECE_POINTS
-        {
-            return Ok(false);
-        }
         let part = split::piece_of(self.inspection, &region, &left, merged.removal.as_ref());
         let parts = table_sync::synced(&cell, &part, &region, self.table_plan.end());
         if table_sync::gained(&cell, &parts, region.id, &left) < MIN_PIECE_POINTS {

@@ -449,34 +449,11 @@ fn to_plan(
         &mut prog.trajectory,
         JointTrajectory::starting_at(&config.home, config.trajectory.period),
     );
-    let (samples, stream) = super::samples_and_frames(&traj, None, robot).ok()?;
-    Some(Plan {
-        format: "polishbot-plan".into(),
-        version: 1,
-        inspection: std::fs::canonicalize(&part.dir)
-            .unwrap_or_else(|_| part.dir.clone())
-            .display()
-            .to_string(),
-        period: traj.period,
-        joint_names: robot.joints.iter().map(|j| j.name.clone()).collect(),
-        tool_radius_mm: radius_mm,
-        stepover_mm: geometry.stepover,
-        footprint_mm: geometry.footprint,
-        predicted_duration_s: traj.duration(),
-        passes: prog.passes,
-        segments: prog.segments,
-        samples,
-        frames: stream.iter().map(|f| super::frames::to_hex(f)).collect(),
-        commands: None,
-        compensation: None,
-        reachability,
-        metrics,
-        strokes: None,
-        removal: None,
-        turntable: None,
-        setups: Vec::new(),
-        tools: Vec::new(),
-    })
+    let sampled = super::samples_and_frames(&traj, None, robot).ok()?;
+    let mut plan = super::plan_record(part, &traj, robot, &geometry, prog, sampled);
+    plan.reachability = reachability;
+    plan.metrics = metrics;
+    Some(plan)
 }
 
 /// How many of the core points `left` of region `id` the strokes of `parts` cover together.

@@ -260,3 +260,23 @@ pub const SYNC_SEED: u64 = 2000;
 
 /// Tool-axis cone of [`synced_plan`], degrees from the arm's plane.
 pub const SYNC_CONE_DEG: f64 = 10.0;
+
+/// The bus settings of `robot` (its servo map, the defaults otherwise) and the simulated
+/// board's options with the turntable `table` on bus servo 7 at angle 0.
+pub fn table_bus(
+    robot: &Robot,
+    table: &Turntable,
+) -> (polishbot::bus::BusConfig, polishbot::sim::SimOptions) {
+    let cfg = polishbot::bus::BusConfig {
+        servo_map: polishbot::motion::frames::servo_map(robot).unwrap(),
+        ..polishbot::bus::BusConfig::default()
+    };
+    let options = polishbot::sim::SimOptions {
+        extra_servos: vec![polishbot::sim::ExtraServo {
+            id: 7,
+            start_raw: table.raw(0.0).unwrap(),
+        }],
+        ..polishbot::sim::SimOptions::default()
+    };
+    (cfg, options)
+}
