@@ -174,6 +174,10 @@ fn dwell_region(
             return Ok(Vec::new());
         }
     };
+    for (piece, why) in &dwelled.refused {
+        let reason = format!("contact lifted over by the removal planner: {why}");
+        super::assemble::leave_out(piece, &reason, unreachable);
+    }
     let mut settled = Settled {
         id: region.id,
         allowance: dwelled.allowance,

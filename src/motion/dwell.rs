@@ -172,6 +172,9 @@ pub struct Dwelled {
     /// The highest deviation over the core points in reach, mm: above it the allowance asks
     /// for no removal (every dwell at its shortest).
     pub highest: f64,
+    /// The pieces lifted over because a servo cannot hold their contact's force, each with
+    /// the reason (joint, torque, force, depth).
+    pub refused: Vec<(PlannedPass, String)>,
 }
 
 /// Turns one region's runs into one-contact pieces carrying the dwell solved at `allowance`
@@ -187,6 +190,7 @@ pub fn set_dwell(
     allowance: f64,
 ) -> Result<Result<Dwelled, String>, PlanError> {
     let (tool, robot, config) = (setup.tool, setup.robot, setup.config);
+    let asked = allowance;
     let solve = solve_config(&runs, robot, config)?;
     let mut runs = split(runs);
     let pieces: Vec<&PlannedPass> = runs.iter().flatten().collect();
@@ -204,11 +208,28 @@ pub fn set_dwell(
         allowance = highest - solve.max_pass_mm;
         (contacts, cores) = in_reach(&placed, bench, &influence, allowance);
     }
-    // a contact a servo cannot hold leaves the region out with the reason (the plan goes on)
-    if let Some(why) = (pieces.iter().zip(&contacts)).find_map(|(p, c)| overloaded(p, c, setup)) {
-        return Ok(Err(format!(
-            "region left out by the removal planner: {why}"
-        )));
+    // a contact a servo cannot hold is lifted over and the rest solved again (each round
+    // lifts at least one piece, so it ends); the region is left out with the reason only when
+    // every contact is over
+    let over: Vec<Option<String>> = (pieces.iter().zip(&contacts))
+        .map(|(p, c)| overloaded(p, c, setup))
+        .collect();
+    if let Some(why) = over.iter().flatten().next() {
+        if over.iter().all(Option::is_some) {
+            return Ok(Err(format!(
+                "region left out by the removal planner: {why}"
+            )));
+        }
+        let refused: Vec<(PlannedPass, String)> = (pieces.iter().zip(&over))
+            .filter_map(|(p, why)| why.clone().map(|w| ((*p).clone(), w)))
+            .collect();
+        let lifted: Vec<bool> = over.iter().map(Option::is_some).collect();
+        let kept = lift_over(runs, &lifted);
+        let mut again = set_dwell(kept, _region, inspection, setup, asked)?;
+        if let Ok(d) = again.as_mut() {
+            d.refused.extend(refused);
+        }
+        return Ok(again);
     }
     if cores.is_empty() {
         return Ok(Err(format!(
@@ -254,6 +275,7 @@ pub fn set_dwell(
         runs,
         allowance,
         highest,
+        refused: Vec::new(),
     }))
 }
 
