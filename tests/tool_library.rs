@@ -10,7 +10,7 @@ use polishbot::bus::EntryKind;
 use polishbot::motion::{Plan, PlanMode};
 
 use common::femoral::{planned_area, setups, uniform_case, uniform_config};
-use common::{calib, polishbot, read_journal, succeed, tempdir};
+use common::{calib, read_journal, tempdir};
 use polishbot::motion::tools::ToolRobot;
 use polishbot::robot::FileText;
 
@@ -156,17 +156,8 @@ fn a_tool_change_stops_the_run_and_resumes_with_the_planned_tool() {
     copy_cell(&cell_dir);
     common::synthetic::inspection(&insp, &uniform_config(SEED));
     let plan_file = tmp.path().join("plan.json");
+    let plan: Plan = common::plan_in_cell(&insp, &cell_dir, &plan_file);
     let path = |p: &std::path::Path| p.display().to_string();
-    succeed(polishbot().args([
-        "plan",
-        "--inspection",
-        &path(&insp),
-        "--cell",
-        &path(&cell_dir),
-        "-o",
-        &path(&plan_file),
-    ]));
-    let plan: Plan = serde_json::from_str(&std::fs::read_to_string(&plan_file).unwrap()).unwrap();
     let names: Vec<&str> = plan.tools.iter().map(|t| t.tool.as_str()).collect();
     assert_eq!(names, ["tool", "mid"], "the plan lists the library");
     let mid = plan.tools[1]

@@ -17,7 +17,7 @@ use polishbot::robot::{angle_between, Turntable, Workcell};
 use common::femoral::{
     cell, library, parametric_case, planned_area, reasons, setups, uniform_case, uniform_config,
 };
-use common::{calib, polishbot, read_journal, succeed, tempdir};
+use common::{calib, read_journal, tempdir};
 use polishbot::bus::EntryKind;
 
 /// Issue 51's 0.90 is the share planned in the shipped cell, and the shipped designed cell is
@@ -432,18 +432,8 @@ fn a_two_setup_plan_stops_for_the_refixture_and_resumes_with_setup_two() {
     copy_cell(&cell_dir);
     common::synthetic::inspection(&insp, &uniform_config(5101));
     let plan_file = tmp.path().join("plan.json");
+    let plan = common::plan_in_cell(&insp, &cell_dir, &plan_file);
     let path = |p: &std::path::Path| p.display().to_string();
-    succeed(polishbot().args([
-        "plan",
-        "--inspection",
-        &path(&insp),
-        "--cell",
-        &path(&cell_dir),
-        "-o",
-        &path(&plan_file),
-    ]));
-    let plan: polishbot::motion::Plan =
-        serde_json::from_str(&std::fs::read_to_string(&plan_file).unwrap()).unwrap();
     let setup2 = plan.setups[1].plan.as_deref().expect("setup 2 has regions");
     let journal = tmp.path().join("journal.jsonl");
     let run = |extra: &[&str]| common::run_sim(&plan_file, &cell_dir, extra);

@@ -77,6 +77,16 @@ pub fn run_sim(plan: &Path, cell: &Path, extra: &[&str]) -> std::process::Output
     cmd.output().unwrap()
 }
 
+/// `polishbot plan --inspection INSPECTION --cell CELL -o OUT`, which must succeed, and the
+/// plan it wrote.
+pub fn plan_in_cell(inspection: &Path, cell: &Path, out: &Path) -> polishbot::motion::Plan {
+    let mut cmd = polishbot();
+    cmd.args(["plan", "--inspection"]).arg(inspection);
+    cmd.arg("--cell").arg(cell).arg("-o").arg(out);
+    succeed(&mut cmd);
+    serde_json::from_str(&std::fs::read_to_string(out).unwrap()).unwrap()
+}
+
 /// Motion frames a run's journal `entries` record as sent.
 pub fn motion_frames_sent(entries: &[polishbot::bus::Entry]) -> usize {
     (entries.iter())
