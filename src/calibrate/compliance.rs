@@ -18,43 +18,14 @@ use nalgebra::{DMatrix, DVector, Matrix3xX, Vector3};
 
 use super::config::{CalibError, CalibrationConfig};
 use super::jog::{Cell, Touch, TouchSource};
-use crate::bus::{Bus, Transport, JOINT_COUNT};
+pub use super::touch_plan::{default_poses, touch_plan, LoadedPose, TOUCH_LOAD_N};
+use crate::bus::{Bus, Transport};
 use crate::robot::compliance::{FLANK_TORQUE_NM, LUMPED_MASSES};
-use crate::robot::{Compliance, IkConfig, IkTarget, Robot};
+use crate::robot::{Compliance, Robot};
 
 /// Joints whose stiffness and backlash the touches observe: base yaw, shoulder, elbow and
 /// wrist pitch (the tip lies on the wrist roll's axis).
 pub const FITTED_JOINTS: usize = 4;
-/// Load of a touch, N: 4, enough to turn the shoulder's and the wrist's gravity torques
-/// (0.2-0.6 N m at the DOFBOT's reach) round so that every pitch joint crosses its band, and
-/// under half the 15 kg.cm servos' rating at 0.3 m.
-pub const TOUCH_LOAD_N: f64 = 4.0;
-/// Tool tilts (rad, in the arm plane, from the base pose's) each point is touched from.
-const TILTS_DEG: [f64; 5] = [-12.0, -6.0, 0.0, 6.0, 12.0];
-/// Directions of a touch's load in the arm plane (degrees from the outward radial towards
-/// up): out, up, in, down.
-const IN_PLANE_DEG: [f64; 4] = [0.0, 90.0, 180.0, 270.0];
-/// The push across the arm plane added to each in-plane load, relative to it: both ways, at
-/// two sizes (the base yaw's torque then takes two sizes of each sign, which separates its
-/// stiffness from its backlash; 0.35 and 1: torques of 0.1-0.3 and 0.3-0.6 N m at the
-/// DOFBOT's reach).
-const ACROSS: [f64; 4] = [1.0, -1.0, 0.35, -0.35];
-/// How far inside its limits every joint of a touch pose stays, rad (0.15: the loads and the
-/// jogging move the joints by a few hundredths).
-const POSE_MARGIN: f64 = 0.15;
-/// Base poses of the touched points (joint angles, rad): spread over the working volume
-/// (left, middle and right; near and far; high and low). Six azimuths: the base yaw's whole
-/// count (0.08 deg, 0.3 mm across the arm at its reach) leaves the same miss on every touch
-/// of a point under one across push, so its stiffness and backlash average over the points
-/// (with three, the documented arm's base yaw came out 8 % and 0.06 deg off).
-const POINT_POSES: [[f64; JOINT_COUNT]; 6] = [
-    [-0.5, 0.1, 0.8, 0.7, 0.0],
-    [0.0, 0.35, 0.7, 0.5, 0.0],
-    [0.45, -0.1, 0.9, 0.8, 0.0],
-    [-0.25, 0.2, 0.75, 0.6, 0.0],
-    [0.2, 0.0, 0.85, 0.75, 0.0],
-    [0.7, 0.25, 0.65, 0.55, 0.0],
-];
 /// Rounds of the alternating fit (it settles to 1e-3 deg and 0.1 N m/rad within 6 on the
 /// simulated cell).
 const FIT_ROUNDS: usize = 12;
@@ -79,17 +50,6 @@ const MASS_PRIOR_M_PER_KG: f64 = 1e-4;
 /// Largest lumped mass, kg (a DOFBOT link with its servo weighs under 0.2 kg).
 const MAX_MASS_KG: f64 = 2.0;
 
-/// One touch to make: which point, the joint angles near it, and the load on the tip.
-#[derive(Debug, Clone, PartialEq)]
-pub struct LoadedPose {
-    /// Index of the fixed point touched.
-    pub point: usize,
-    /// Joint angles (rad) that put the unloaded, rigid arm's tip on the point.
-    pub q: [f64; JOINT_COUNT],
-    /// Load on the tool tip while touching, N, robot frame.
-    pub force_n: [f64; 3],
-}
-
 /// The result of the compliance calibration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ComplianceFit {
@@ -108,60 +68,6 @@ pub struct ComplianceFit {
     /// Touches left out: a joint's load torque under [`TRUST_TORQUE_NM`], or a residual over
     /// [`OUTLIER_FACTOR`] times the median (and over [`OUTLIER_FLOOR_MM`]) after a first fit.
     pub set_aside: usize,
-}
-
-/// The built-in touch plan: each point of [`POINT_POSES`] from each tilt of [`TILTS_DEG`]
-/// under loads of [`TOUCH_LOAD_N`] in each direction of [`IN_PLANE_DEG`] with each push
-/// [`ACROSS`]; tilts the IK cannot reach [`POSE_MARGIN`] inside the limits are left out.
-pub fn default_poses(robot: &Robot) -> Vec<LoadedPose> {
-    touch_plan(robot, &POINT_POSES, &TILTS_DEG, &ACROSS)
-}
-
-/// Touches of the points the rigid arm's tip reaches at the base poses `points`, each from
-/// every tilt of `tilts_deg` (in the arm plane) under loads of [`TOUCH_LOAD_N`] in each
-/// direction of [`IN_PLANE_DEG`] with each push of `across`; tilts the IK cannot reach
-/// [`POSE_MARGIN`] inside the limits are left out.
-pub fn touch_plan(
-    robot: &Robot,
-    points: &[[f64; JOINT_COUNT]],
-    tilts_deg: &[f64],
-    across: &[f64],
-) -> Vec<LoadedPose> {
-    let mut out = Vec::new();
-    let exact = IkConfig {
-        axis_search: false,
-        limit_margin: POSE_MARGIN,
-        ..IkConfig::default()
-    };
-    for (point, base) in points.iter().enumerate() {
-        let pose = robot.fk(base);
-        let radial = Vector3::new(pose.position.x, pose.position.y, 0.0).normalize();
-        let side_axis = Vector3::z().cross(&radial);
-        for tilt in tilts_deg {
-            let rot = nalgebra::Rotation3::new(side_axis * tilt.to_radians());
-            let target = IkTarget {
-                position: pose.position,
-                axis: rot * pose.axis,
-                roll: Some(0.0),
-            };
-            let Ok(sol) = robot.ik(&target, base, &exact) else {
-                continue;
-            };
-            let q: [f64; JOINT_COUNT] = std::array::from_fn(|k| sol.q[k]);
-            for a in IN_PLANE_DEG.map(f64::to_radians) {
-                for side in across {
-                    let dir = Vector3::z() * a.sin() + radial * a.cos() + side_axis * *side;
-                    let f = dir.normalize() * TOUCH_LOAD_N;
-                    out.push(LoadedPose {
-                        point,
-                        q,
-                        force_n: [f.x, f.y, f.z],
-                    });
-                }
-            }
-        }
-    }
-    out
 }
 
 /// The model a cell without a `[compliance]` table starts from: every stiffness

@@ -30,6 +30,7 @@ pub mod jog;
 pub mod pivot;
 pub mod read;
 pub mod servos;
+pub mod touch_plan;
 pub mod turntable;
 pub mod verify;
 pub mod workcell;
