@@ -87,13 +87,54 @@ pub fn assign(
         .filter(|(_, &(s, _))| s > 0)
         .map(|(&id, _)| id)
         .collect();
-    let top = if moved.is_empty() {
-        whole
-    } else {
-        plan_with(0, &only(inspection, |id| !moved.contains(&id)))?
-    };
+    if moved.is_empty() {
+        taken[0].regions = whole.reachability.planned_ids();
+        return Ok((whole, taken));
+    }
+    let top = plan_with(0, &only(inspection, |id| !moved.contains(&id)))?;
+    // regions planned again apart can come out covered less than together (the removal
+    // planner's lift-overs, the table angles a group shares): the alternatives are kept only
+    // when they plan more of the repairable area than the first alternative alone
+    if planned_area(&top, &taken) + AREA_EPS_MM2 < planned_area(&whole, &[]) {
+        for t in taken.iter_mut().skip(1) {
+            let gave_back = t.regions.iter().map(|&id| TriedSetup {
+                region: id,
+                coverage: coverage(t.plan.as_deref(), id),
+                refused: Some(
+                    "the plan over the alternatives planned less of the area than the first alone"
+                        .into(),
+                ),
+            });
+            let gave_back: Vec<TriedSetup> = gave_back.collect();
+            t.tried.extend(gave_back);
+            t.regions.clear();
+            t.plan = None;
+        }
+        taken[0].regions = whole.reachability.planned_ids();
+        return Ok((whole, taken));
+    }
     taken[0].regions = top.reachability.planned_ids();
     Ok((top, taken))
+}
+
+/// Planned area below which two plans count as planning the same, mm^2 (a hundredth of a
+/// square millimetre: sums of the same reports in another order).
+const AREA_EPS_MM2: f64 = 1e-2;
+
+/// The repairable area `top` (the first alternative's plan) and the plans of `taken` (from
+/// the second on, each for the regions it took) plan, mm^2: per region its area times its
+/// coverage (`coverage_of_all`).
+fn planned_area(top: &Plan, taken: &[Taken]) -> f64 {
+    let sum = |p: &Plan, keep: &dyn Fn(usize) -> bool| -> f64 {
+        (p.reachability.regions.iter())
+            .filter(|r| r.repairable && keep(r.id))
+            .map(|r| r.coverage_of_all * r.area_mm2)
+            .sum()
+    };
+    let further: f64 = (taken.iter().skip(1))
+        .filter_map(|t| t.plan.as_deref().map(|p| sum(p, &|id| t.regions.contains(&id))))
+        .sum();
+    sum(top, &|_| true) + further
 }
 
 /// Which of the `short` regions alternative `k`'s `trial` plan covers better than `best`
