@@ -238,4 +238,3 @@ fn the_designs_family_members_are_the_part_scaled_about_its_fixture_point() {
         assert!(worst < 1e-3, "{}: {worst}", v.name);
     }
 }
-

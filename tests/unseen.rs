@@ -26,7 +26,11 @@ const SEEDS: [u64; 4] = [5100, 5101, 5102, 5103];
 fn seeds() -> Vec<u64> {
     std::env::var("UNSEEN_SEEDS").map_or(SEEDS.to_vec(), |s| {
         s.split(',')
-            .map(|x| x.trim().parse().expect("UNSEEN_SEEDS: numbers, comma-separated"))
+            .map(|x| {
+                x.trim()
+                    .parse()
+                    .expect("UNSEEN_SEEDS: numbers, comma-separated")
+            })
             .collect()
     })
 }
@@ -86,7 +90,12 @@ fn short_regions(one: &polishbot::motion::Plan, two: &polishbot::motion::Plan, t
             continue;
         }
         let mut why = std::collections::BTreeMap::new();
-        for u in two.reachability.unreachable.iter().filter(|u| u.region == r.id) {
+        for u in two
+            .reachability
+            .unreachable
+            .iter()
+            .filter(|u| u.region == r.id)
+        {
             let rule: String = u.reason.chars().take(60).collect();
             *why.entry(rule).or_insert(0) += 1;
         }

@@ -153,9 +153,9 @@ fn over_setups(ctx: &Context, cfg: &DesignConfig, all: Vec<Candidate>) -> Option
         let reached: Vec<bool> = s.verdicts.iter().map(|v| v.angle_deg.is_some()).collect();
         let fixturings = setups(ctx, &c, &reached, cfg, cfg.step_deg);
         let union = fixturings.last().map_or(s.coverage, |f| f.union_coverage);
-        let better = best.as_ref().is_none_or(|b| {
-            union > b.1 + tie || (union > b.1 - tie && s.coverage > b.2 + tie)
-        });
+        let better = best
+            .as_ref()
+            .is_none_or(|b| union > b.1 + tie || (union > b.1 - tie && s.coverage > b.2 + tie));
         if better {
             best = Some((c, union, s.coverage));
         }

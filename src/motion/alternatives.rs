@@ -132,7 +132,11 @@ fn planned_area(top: &Plan, taken: &[Taken]) -> f64 {
             .sum()
     };
     let further: f64 = (taken.iter().skip(1))
-        .filter_map(|t| t.plan.as_deref().map(|p| sum(p, &|id| t.regions.contains(&id))))
+        .filter_map(|t| {
+            t.plan
+                .as_deref()
+                .map(|p| sum(p, &|id| t.regions.contains(&id)))
+        })
         .sum();
     sum(top, &|_| true) + further
 }
