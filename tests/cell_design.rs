@@ -161,7 +161,12 @@ fn survey_of_hand_picked_cells() {
 #[test]
 fn the_shipped_femoral_cell_reaches_what_its_design_says() {
     let (candidate, doc) = shipped_candidate();
-    let cfg = DesignConfig::default();
+    // design.json was written with table angles every 10 degrees in the final score and the
+    // setups (`cell design` now scores them every 5, the planner's step)
+    let cfg = DesignConfig {
+        final_step_deg: 10.0,
+        ..DesignConfig::default()
+    };
     let part = femoral_part(&cfg);
     let source = SourceCell::load(&calib("turntable")).unwrap();
     let d = design::assess(&part, &source, &cfg, &candidate).unwrap();

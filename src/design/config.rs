@@ -29,8 +29,12 @@ pub struct DesignConfig {
     pub part_points: usize,
     /// Table angle step of the coarse grid, degrees (30).
     pub coarse_step_deg: f64,
-    /// Table angle step of the later stages, degrees (10).
+    /// Table angle step of the ranking and refinement stages, degrees (10).
     pub step_deg: f64,
+    /// Table angle step of the final score, the further setups and the family, degrees (5:
+    /// the planner's candidate table angles are 5 degrees apart, `motion::table`, so a
+    /// sample reached only between two 10-degree steps is reached by the planner too).
+    pub final_step_deg: f64,
     /// Shank lengths tried (ball centre to flange), metres (19.3 mm, the shipped tool; 35 and
     /// 50 mm, stock long-shank burrs).
     pub shanks_m: Vec<f64>,
@@ -42,6 +46,11 @@ pub struct DesignConfig {
     pub keep: usize,
     /// Rounds of local refinement around the best candidate (3).
     pub rounds: usize,
+    /// Candidates of the ranking stage (best first) whose setups are scored at the end of the
+    /// search beside the refined winner, on the ranking's samples (8): the cell is the one
+    /// whose setups reach most together, since the part is re-fixtured anyway (0: the refined
+    /// winner of setup 1 alone, as before).
+    pub finalists: usize,
     /// Seed of the surface samples (1).
     pub seed: u64,
     /// Table axes of the grid, robot frame (default: vertical; horizontal across and along
@@ -51,6 +60,13 @@ pub struct DesignConfig {
     /// re-fixturing brings the faces along the table axis into reach; 1: the part is mounted
     /// once). Scored after the search, which designs the cell for the first.
     pub setups: usize,
+    /// Angles between a further setup's mounting and the first one's, degrees (60, 75, 90:
+    /// at 90 the faces along the first axis turn fully into the plane the table rotates the
+    /// part in; 60 and 75 keep more of what the first setup reached in reach as well).
+    pub setup_tilts_deg: Vec<f64>,
+    /// Step of the further mountings' direction about the first mounting, degrees (30: 12
+    /// per tilt, each scored on the final samples).
+    pub setup_azimuth_step_deg: f64,
 }
 
 impl Default for DesignConfig {
@@ -62,14 +78,18 @@ impl Default for DesignConfig {
             part_points: 6000,
             coarse_step_deg: 30.0,
             step_deg: 10.0,
+            final_step_deg: 5.0,
             shanks_m: vec![0.0193, 0.035, 0.05],
             distances_m: vec![0.14, 0.19, 0.24],
             heights_m: vec![0.06, 0.11, 0.16, 0.21],
             keep: 16,
             rounds: 3,
+            finalists: 8,
             seed: 1,
             axes: AXES.to_vec(),
             setups: 2,
+            setup_tilts_deg: vec![60.0, 75.0, 90.0],
+            setup_azimuth_step_deg: 30.0,
         }
     }
 }

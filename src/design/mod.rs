@@ -144,7 +144,7 @@ pub fn design(part: &Part, source: &SourceCell, cfg: &DesignConfig) -> Result<De
         &d.candidate,
         &d.setups,
         cfg.final_samples,
-        cfg.step_deg,
+        cfg.final_step_deg,
     );
     Ok(d)
 }
@@ -196,7 +196,7 @@ fn context<'a>(
 
 fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Result<Design> {
     let part = ctx.part;
-    let fin = eval::score(ctx, best, cfg.final_samples, cfg.step_deg, true)
+    let fin = eval::score(ctx, best, cfg.final_samples, cfg.final_step_deg, true)
         .context("the cell is not buildable: its fixture or the part meets the base plane, or the arm's home pose meets the part")?;
     let wc = eval::placement(best, &part.centroid);
     let solids: Vec<Solid> = eval::solids(best, part).unwrap_or_default();
@@ -207,7 +207,7 @@ fn assess_in(ctx: &eval::Context, best: &Candidate, cfg: &DesignConfig) -> Resul
         }
     }
     let reached: Vec<bool> = fin.verdicts.iter().map(|v| v.angle_deg.is_some()).collect();
-    let setups = setups::setups(ctx, best, &reached, cfg.setups, cfg.step_deg);
+    let setups = setups::setups(ctx, best, &reached, cfg, cfg.final_step_deg);
     let setup_cells = setups
         .iter()
         .skip(1)

@@ -6,6 +6,7 @@ use rayon::prelude::*;
 
 use super::config::DesignConfig;
 use super::eval::{score, Candidate, Context};
+use super::setups::setups;
 
 /// What the search found.
 pub struct Found {
@@ -139,6 +140,29 @@ fn neighbours(ctx: &Context, c: &Candidate, place: f64, turn: f64) -> Vec<Candid
     out
 }
 
+/// Of `all` (the refined winner first; None when none is buildable), the candidate whose setups (`setups::setups`, on the
+/// ranking's samples and table angle step) reach most together; ties (within one sample) go
+/// to the larger share of the first setup, then to the earlier candidate.
+fn over_setups(ctx: &Context, cfg: &DesignConfig, all: Vec<Candidate>) -> Option<Candidate> {
+    let tie = 0.5 / cfg.samples.max(1) as f64;
+    let mut best: Option<(Candidate, f64, f64)> = None;
+    for c in all {
+        let Some(s) = score(ctx, &c, cfg.samples, cfg.step_deg, true) else {
+            continue;
+        };
+        let reached: Vec<bool> = s.verdicts.iter().map(|v| v.angle_deg.is_some()).collect();
+        let fixturings = setups(ctx, &c, &reached, cfg, cfg.step_deg);
+        let union = fixturings.last().map_or(s.coverage, |f| f.union_coverage);
+        let better = best
+            .as_ref()
+            .is_none_or(|b| union > b.1 + tie || (union > b.1 - tie && s.coverage > b.2 + tie));
+        if better {
+            best = Some((c, union, s.coverage));
+        }
+    }
+    best.map(|b| b.0)
+}
+
 /// Runs the search.
 pub fn run(ctx: &Context, cfg: &DesignConfig) -> Found {
     let all = grid(ctx, cfg);
@@ -169,6 +193,11 @@ pub fn run(ctx: &Context, cfg: &DesignConfig) -> Found {
             alternatives.push((fam.to_string(), *s, c.clone()));
         }
     }
+    let finalists: Vec<Candidate> = ranked
+        .iter()
+        .take(cfg.finalists)
+        .map(|r| r.0.clone())
+        .collect();
     let Some((mut best, mut best_score)) = ranked.into_iter().next() else {
         let c = coarse.into_iter().next().map(|c| c.0);
         return Found {
@@ -192,6 +221,14 @@ pub fn run(ctx: &Context, cfg: &DesignConfig) -> Found {
         }
         place /= 2.0;
         turn /= 2.0;
+    }
+    if cfg.setups > 1 && cfg.finalists > 0 {
+        let mut all = vec![best.clone()];
+        all.extend(finalists.into_iter().filter(|c| *c != best));
+        scored += all.len();
+        if let Some(c) = over_setups(ctx, cfg, all) {
+            best = c;
+        }
     }
     Found {
         best,

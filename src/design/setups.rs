@@ -10,16 +10,8 @@ use nalgebra::Vector3;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::config::DesignConfig;
 use super::eval::{score, Candidate, Context};
-
-/// Angles between a further setup's mounting and the first one's, degrees: at 90 the faces
-/// along the first axis turn fully into the plane the table rotates the part in; 60 and 75
-/// keep more of what the first setup reached in reach as well (the shipped femoral cell's
-/// best second setup lies at 90: 95.0 % together, 94.1-95.0 % over the twelve directions).
-const TILTS_DEG: [f64; 3] = [60.0, 75.0, 90.0];
-/// Step of the further mountings' direction about the first mounting, degrees (12 per tilt:
-/// 36 candidates, each scored on the final samples).
-const AZIMUTH_STEP_DEG: f64 = 30.0;
 
 /// One fixturing of the part and what it reaches.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -32,9 +24,9 @@ pub struct Fixturing {
     pub union_coverage: f64,
 }
 
-/// Mountings tried for a further setup: directions at each of [`TILTS_DEG`] from `first`,
-/// every [`AZIMUTH_STEP_DEG`] about it.
-fn mountings(first: &[f64; 3]) -> Vec<[f64; 3]> {
+/// Mountings tried for a further setup: directions at each of `tilts_deg` from `first`,
+/// every `azimuth_step_deg` about it.
+fn mountings(first: &[f64; 3], tilts_deg: &[f64], azimuth_step_deg: f64) -> Vec<[f64; 3]> {
     let m = Vector3::from(*first).normalize();
     let side = if m.x.abs() < 0.9 {
         Vector3::x()
@@ -43,12 +35,12 @@ fn mountings(first: &[f64; 3]) -> Vec<[f64; 3]> {
     };
     let p1 = m.cross(&side).normalize();
     let p2 = m.cross(&p1);
-    let steps = (360.0 / AZIMUTH_STEP_DEG).round() as usize;
+    let steps = (360.0 / azimuth_step_deg).round().max(1.0) as usize;
     let mut out = Vec::new();
-    for tilt in TILTS_DEG {
+    for &tilt in tilts_deg {
         let t = tilt.to_radians();
         for k in 0..steps {
-            let a = (k as f64 * AZIMUTH_STEP_DEG).to_radians();
+            let a = (k as f64 * azimuth_step_deg).to_radians();
             let v = m * t.cos() + (p1 * a.cos() + p2 * a.sin()) * t.sin();
             out.push([v.x, v.y, v.z]);
         }
@@ -57,16 +49,17 @@ fn mountings(first: &[f64; 3]) -> Vec<[f64; 3]> {
 }
 
 /// The setups of `first` (whose samples reached are `reached`, on the first `n` samples with
-/// table angles every `step_deg`): the first itself, then up to `count - 1` further
-/// mountings, each the one reaching most of what the setups before it leave (none added once
-/// one adds nothing).
+/// table angles every `step_deg`): the first itself, then up to `cfg.setups - 1` further
+/// mountings (`cfg.setup_tilts_deg`, `cfg.setup_azimuth_step_deg`), each the one reaching
+/// most of what the setups before it leave (none added once one adds nothing).
 pub fn setups(
     ctx: &Context,
     first: &Candidate,
     reached: &[bool],
-    count: usize,
+    cfg: &DesignConfig,
     step_deg: f64,
 ) -> Vec<Fixturing> {
+    let count = cfg.setups;
     let n = reached.len().max(1) as f64;
     let share = |r: &[bool]| r.iter().filter(|&&x| x).count() as f64 / n;
     let mut union = reached.to_vec();
@@ -75,7 +68,11 @@ pub fn setups(
         coverage: share(reached),
         union_coverage: share(reached),
     }];
-    let tried = mountings(&first.mount);
+    let tried = mountings(
+        &first.mount,
+        &cfg.setup_tilts_deg,
+        cfg.setup_azimuth_step_deg,
+    );
     while out.len() < count {
         let scored: Vec<([f64; 3], Vec<bool>)> = tried
             .par_iter()

@@ -87,13 +87,58 @@ pub fn assign(
         .filter(|(_, &(s, _))| s > 0)
         .map(|(&id, _)| id)
         .collect();
-    let top = if moved.is_empty() {
-        whole
-    } else {
-        plan_with(0, &only(inspection, |id| !moved.contains(&id)))?
-    };
+    if moved.is_empty() {
+        taken[0].regions = whole.reachability.planned_ids();
+        return Ok((whole, taken));
+    }
+    let top = plan_with(0, &only(inspection, |id| !moved.contains(&id)))?;
+    // regions planned again apart can come out covered less than together (the removal
+    // planner's lift-overs, the table angles a group shares): the alternatives are kept only
+    // when they plan more of the repairable area than the first alternative alone
+    if planned_area(&top, &taken) + AREA_EPS_MM2 < planned_area(&whole, &[]) {
+        for t in taken.iter_mut().skip(1) {
+            let gave_back = t.regions.iter().map(|&id| TriedSetup {
+                region: id,
+                coverage: coverage(t.plan.as_deref(), id),
+                refused: Some(
+                    "the plan over the alternatives planned less of the area than the first alone"
+                        .into(),
+                ),
+            });
+            let gave_back: Vec<TriedSetup> = gave_back.collect();
+            t.tried.extend(gave_back);
+            t.regions.clear();
+            t.plan = None;
+        }
+        taken[0].regions = whole.reachability.planned_ids();
+        return Ok((whole, taken));
+    }
     taken[0].regions = top.reachability.planned_ids();
     Ok((top, taken))
+}
+
+/// Planned area below which two plans count as planning the same, mm^2 (a hundredth of a
+/// square millimetre: sums of the same reports in another order).
+const AREA_EPS_MM2: f64 = 1e-2;
+
+/// The repairable area `top` (the first alternative's plan) and the plans of `taken` (from
+/// the second on, each for the regions it took) plan, mm^2: per region its area times its
+/// coverage (`coverage_of_all`).
+fn planned_area(top: &Plan, taken: &[Taken]) -> f64 {
+    let sum = |p: &Plan, keep: &dyn Fn(usize) -> bool| -> f64 {
+        (p.reachability.regions.iter())
+            .filter(|r| r.repairable && keep(r.id))
+            .map(|r| r.coverage_of_all * r.area_mm2)
+            .sum()
+    };
+    let further: f64 = (taken.iter().skip(1))
+        .filter_map(|t| {
+            t.plan
+                .as_deref()
+                .map(|p| sum(p, &|id| t.regions.contains(&id)))
+        })
+        .sum();
+    sum(top, &|_| true) + further
 }
 
 /// Which of the `short` regions alternative `k`'s `trial` plan covers better than `best`
@@ -167,4 +212,117 @@ pub fn merge_reports(
     }
     let order = |id: usize| inspection.regions.iter().position(|r| r.id == id);
     top.reachability.regions.sort_by_key(|r| order(r.id));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::report::{Metrics, Reachability};
+
+    /// A region of `area` mm^2 (repairable).
+    fn region(id: usize, area: f64) -> RegionInfo {
+        RegionInfo {
+            id,
+            centroid: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+            area,
+            peak: 0.2,
+            peak_lower_bound: false,
+            mean: 0.1,
+            volume: 1.0,
+            points: 10,
+            repairable: true,
+            measured_share: 1.0,
+            touches_unmeasured: false,
+        }
+    }
+
+    /// A plan reporting each of `inspection`'s regions covered as `cover` says.
+    fn plan(inspection: &Inspection, cover: impl Fn(usize) -> f64) -> Plan {
+        let report = |r: &RegionInfo| RegionReport {
+            id: r.id,
+            repairable: true,
+            peak_mm: r.peak,
+            peak_lower_bound: false,
+            touches_unmeasured: false,
+            area_mm2: r.area,
+            layers: 1,
+            path_points: 10,
+            unreachable_path_points: 0,
+            points: 10,
+            reachable_points: 10,
+            unreachable_share: 0.0,
+            coverage_of_reachable: cover(r.id),
+            coverage_of_all: cover(r.id),
+            setup: None,
+            tool: None,
+        };
+        Plan {
+            format: "polishbot-plan".into(),
+            version: 1,
+            inspection: String::new(),
+            period: 0.02,
+            joint_names: Vec::new(),
+            tool_radius_mm: 3.0,
+            stepover_mm: 0.3,
+            footprint_mm: 0.6,
+            predicted_duration_s: 0.0,
+            passes: Vec::new(),
+            segments: Vec::new(),
+            samples: Vec::new(),
+            frames: Vec::new(),
+            commands: None,
+            compensation: None,
+            reachability: Reachability {
+                regions: inspection.regions.iter().map(report).collect(),
+                ..Reachability::default()
+            },
+            metrics: Metrics::default(),
+            strokes: None,
+            removal: None,
+            turntable: None,
+            setups: Vec::new(),
+            tools: Vec::new(),
+        }
+    }
+
+    /// Two regions short in the first alternative: the second covers region 1 better when
+    /// tried with both, but planned again for it alone covers less of it, and the first
+    /// planned again without region 1 covers region 0 less: over the alternatives the plan
+    /// would plan less of the area than the first alone, which it keeps. Where the plans
+    /// apart cover as much as together, region 1 moves.
+    #[test]
+    fn alternatives_are_kept_only_when_they_plan_more_area() {
+        let inspection = Inspection {
+            dir: ".".into(),
+            tolerance: Some(0.05),
+            regions: vec![region(0, 100.0), region(1, 20.0)],
+            points: Vec::new(),
+        };
+        for (alone_gain, moves) in [(false, false), (true, true)] {
+            let plan_with = |k: usize, part: &Inspection| -> Result<Plan, PlanError> {
+                let both = part.regions.len() == 2;
+                Ok(plan(part, |id| match (k, id, both) {
+                    (0, 0, true) => 0.9,
+                    (0, 0, false) if alone_gain => 0.9,
+                    (0, 0, false) => 0.7,
+                    (0, 1, _) => 0.5,
+                    (_, 1, true) => 0.8,
+                    (_, 1, false) if alone_gain => 0.8,
+                    (_, 1, false) => 0.1,
+                    _ => 0.0,
+                }))
+            };
+            let (top, taken) = assign(&inspection, 2, &|_| true, &plan_with).unwrap();
+            let ids: Vec<usize> = top.reachability.regions.iter().map(|r| r.id).collect();
+            if moves {
+                assert_eq!(taken[1].regions, vec![1]);
+                assert_eq!(ids, vec![0]);
+            } else {
+                assert!(taken[1].regions.is_empty() && taken[1].plan.is_none());
+                assert_eq!(ids, vec![0, 1]);
+                assert!(taken[1].tried.iter().any(|t| t.region == 1));
+            }
+        }
+    }
 }
