@@ -87,35 +87,34 @@ pub fn assign(
         .filter(|(_, &(s, _))| s > 0)
         .map(|(&id, _)| id)
         .collect();
-    if moved.is_empty() {
-        taken[0].regions = whole.reachability.planned_ids();
-        return Ok((whole, taken));
-    }
-    let top = plan_with(0, &only(inspection, |id| !moved.contains(&id)))?;
+    let top = match moved.is_empty() {
+        true => None,
+        false => Some(plan_with(0, &only(inspection, |id| !moved.contains(&id)))?),
+    };
     // regions planned again apart can come out covered less than together (the removal
     // planner's lift-overs, the table angles a group shares): the alternatives are kept only
     // when they plan more of the repairable area than the first alternative alone
-    if planned_area(&top, &taken) + AREA_EPS_MM2 < planned_area(&whole, &[]) {
-        for t in taken.iter_mut().skip(1) {
-            let gave_back = t.regions.iter().map(|&id| TriedSetup {
-                region: id,
-                coverage: coverage(t.plan.as_deref(), id),
-                refused: Some(
-                    "the plan over the alternatives planned less of the area than the first alone"
-                        .into(),
-                ),
-            });
-            let gave_back: Vec<TriedSetup> = gave_back.collect();
-            t.tried.extend(gave_back);
-            t.regions.clear();
-            t.plan = None;
-        }
-        taken[0].regions = whole.reachability.planned_ids();
-        return Ok((whole, taken));
+    let kept = top.filter(|t| planned_area(t, &taken) + AREA_EPS_MM2 >= planned_area(&whole, &[]));
+    if let Some(top) = kept {
+        taken[0].regions = top.reachability.planned_ids();
+        return Ok((top, taken));
     }
-    taken[0].regions = top.reachability.planned_ids();
-    Ok((top, taken))
+    for t in taken.iter_mut().skip(1) {
+        let plan = t.plan.take();
+        t.tried.extend(t.regions.drain(..).map(|id| TriedSetup {
+            region: id,
+            coverage: coverage(plan.as_deref(), id),
+            refused: Some(GAVE_BACK.into()),
+        }));
+    }
+    taken[0].regions = whole.reachability.planned_ids();
+    Ok((whole, taken))
 }
+
+/// Why a region an alternative took went back to the first (its plan over the alternatives
+/// planned less of the repairable area than the first alternative's alone).
+const GAVE_BACK: &str =
+    "the plan over the alternatives planned less of the area than the first alone";
 
 /// Planned area below which two plans count as planning the same, mm^2 (a hundredth of a
 /// square millimetre: sums of the same reports in another order).
