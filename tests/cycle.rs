@@ -181,6 +181,70 @@ fn an_unknown_table_in_the_cycle_settings_is_refused_naming_file_and_line() {
     );
 }
 
+/// An arm that grinds nothing (the rescan is the scan it was given) and, before its rescan
+/// comes back, makes the next iteration's plan.json a folder: grind 2's plan then fails to
+/// be written, a failure of the plan stage as a failed path check is.
+struct Blocked;
+
+impl polishbot::cycle::Executor for Blocked {
+    fn grind(
+        &mut self,
+        job: &polishbot::cycle::GrindJob,
+    ) -> anyhow::Result<polishbot::cycle::Rescan> {
+        let next = job.dir.parent().unwrap().join("iter-2/plan.json");
+        std::fs::create_dir_all(next)?;
+        Ok(polishbot::cycle::Rescan {
+            scan: job.part.clone(),
+            more_scans: Vec::new(),
+            part: None,
+        })
+    }
+}
+
+#[test]
+fn a_later_plan_that_fails_ends_the_loop_recorded_with_its_reason() {
+    let dir = common::scratch("plan-failed");
+    common::case(3, &dir);
+    let mut plan = polishbot::cycle::PlanFileConfig::default();
+    plan.robot.use_cell(&common::calib(""));
+    let cfg = CycleConfig {
+        // the arm grinds nothing: no progress must not end the loop before grind 2's plan
+        min_progress: 0.0,
+        plan,
+        ..CycleConfig::default()
+    };
+    let out = dir.join("cycle");
+    let inputs = polishbot::cycle::LoopInputs {
+        reference: polishbot::inspect::Source::file(dir.join("reference.ply")),
+        scan: polishbot::inspect::Source::file(dir.join("scan.ply")),
+        files: polishbot::inspect::FileInput::default(),
+        out: out.clone(),
+        cell: common::shipped_cell(),
+        first: None,
+    };
+    let ended = polishbot::cycle::run_cycle(&cfg, inputs, &mut Blocked)
+        .expect("a later plan's failure is an outcome, not an error");
+    assert_eq!(ended.outcome, Outcome::PlanFailed);
+    assert_eq!(ended.records.len(), 2, "{:?}", ended.records);
+    let why = ended.records[1]
+        .stopped
+        .as_deref()
+        .expect("the reason recorded");
+    assert!(why.starts_with("grind 2's plan failed: "), "{why}");
+    assert!(why.contains("plan.json"), "{why}");
+    // cycle.json and cycle.html are written, with the verdict of the part as last measured
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("cycle.json")).unwrap()).unwrap();
+    assert_eq!(json["outcome"], "plan_failed");
+    assert_eq!(json["records"][1]["stopped"].as_str(), Some(why));
+    assert_eq!(
+        json["records"][1]["measured"]["verdict"],
+        serde_json::to_value(ended.records[1].measured.verdict).unwrap()
+    );
+    let html = std::fs::read_to_string(&ended.html).unwrap();
+    assert!(html.contains("Stopped because grind 2"), "{html}");
+}
+
 /// Least drop of a planted bump's true peak (p90) in the first grind, mm: the rigid layers
 /// at k 1.3 x nominal take 0.04-0.1 mm off (42 % of the demo's excess volume in its first
 /// pass), so 0.01 mm (two thirds of the scan noise) tells a ground defect from a missed one.

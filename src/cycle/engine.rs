@@ -12,7 +12,7 @@ use super::plan_stage::{plan_into, Planned};
 use super::record::{
     decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
 };
-use super::refit::{refit, PlannedGrind};
+use super::refit::{one_line, refit, PlannedGrind};
 use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
@@ -211,15 +211,26 @@ impl Loop<'_> {
         }
         self.records.push(IterationRecord::new(k, measured));
         let mut outcome = decide(&self.records, self.cfg);
-        if let (Outcome::Continue, Some(reason)) = (outcome, &off_plan) {
+        if let (Outcome::Continue, Some(reason)) = (outcome, off_plan) {
             println!("cycle: stop: {reason}");
-            outcome = Outcome::OffPlan;
+            outcome = self.stop(Outcome::OffPlan, reason);
         }
         if outcome != Outcome::Continue {
             return Ok(Some(outcome));
         }
         let (plan_file, planned) = match made {
             Some(made) => made,
+            // a later grind's plan that fails (its own path check, an unreachable aim) ends
+            // the loop on the part as measured, recorded; the first plan's failure is the
+            // settings' or the part's and is the caller's error, as `plan`'s
+            None if k > 1 => match self.plan(&inspection, &found, (&dir, k)) {
+                Ok(made) => made,
+                Err(e) => {
+                    let why = format!("grind {k}'s plan failed: {}", one_line(&e));
+                    println!("cycle: stop: {why}");
+                    return Ok(Some(self.stop(Outcome::PlanFailed, why)));
+                }
+            },
             None => self.plan(&inspection, &found, (&dir, k))?,
         };
         let last = self.records.last_mut().expect("pushed above");
@@ -253,6 +264,15 @@ impl Loop<'_> {
         });
         print!("{}", table_text(&self.records));
         Ok(None)
+    }
+
+    /// Ends the loop with `outcome` for the reason `why` (one line), recorded on the last
+    /// inspection's record (cycle.json's `stopped`, cycle.html's outcome).
+    fn stop(&mut self, outcome: Outcome, why: String) -> Outcome {
+        if let Some(last) = self.records.last_mut() {
+            last.stopped = Some(why);
+        }
+        outcome
     }
 
     /// Inspects the scan into `into` with the loop's inspection settings; an incomplete

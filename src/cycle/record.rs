@@ -124,6 +124,10 @@ pub struct IterationRecord {
     /// registered or the loop stopped on it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub shifts: Vec<CarriedShift>,
+    /// Why the loop stopped at this inspection when the stop rule did not say it alone: the
+    /// registration's line (`Outcome::OffPlan`) or the failed plan's (`Outcome::PlanFailed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stopped: Option<String>,
 }
 
 impl IterationRecord {
@@ -140,6 +144,7 @@ impl IterationRecord {
             k_fitted: None,
             agreement: None,
             shifts: Vec::new(),
+            stopped: None,
         }
     }
 
@@ -206,9 +211,13 @@ pub enum Outcome {
     NoProgress,
     /// `max_iterations` grinds were made and the part is not within tolerance.
     MaxIterations,
-    /// The last grind's removal landed off its plan (`removal_shift::judge`; the loop printed
-    /// the region and its shift): no grind on a wrong model.
+    /// The last grind's removal landed off its plan (`removal_shift::carry`; the loop printed
+    /// the region and its shift, the last record's `stopped` holds it): no grind on a wrong
+    /// model.
     OffPlan,
+    /// The next grind's plan failed (its own checks refused it; the last record's `stopped`
+    /// names the failure): the part stays as last measured.
+    PlanFailed,
 }
 
 impl Outcome {
@@ -229,6 +238,10 @@ impl Outcome {
             Outcome::MaxIterations => "not finished: --max-iterations reached",
             Outcome::OffPlan => {
                 "stopped: the last grind's removal landed off its plan (region and shift above)"
+            }
+            Outcome::PlanFailed => {
+                "stopped: the next grind's plan failed (the failure above); the part is as last \
+                 measured"
             }
         }
     }
@@ -374,8 +387,11 @@ pub fn table_json(records: &[IterationRecord], outcome: Outcome) -> serde_json::
 /// `cycle.html`: the table and the outcome, plain HTML without scripts.
 pub fn table_html(records: &[IterationRecord], outcome: Outcome) -> String {
     let rows: Vec<Vec<String>> = records.iter().map(|r| table_row(r).to_vec()).collect();
+    let why = (records.last().and_then(|r| r.stopped.as_deref())).map_or(String::new(), |w| {
+        format!(" Stopped because {}.", escape(w))
+    });
     let paragraphs = [
-        format!("Outcome: {}.", escape(outcome.describe())),
+        format!("Outcome: {}.{why}", escape(outcome.describe())),
         "Each row is the inspection that began iteration k (folder iter-k); removed % and the \
          achieved residual come from the next inspection. The defect points' column re-predicts \
          the grind with the k fitted after it (the plan's removal x fitted k / plan's k) and \
