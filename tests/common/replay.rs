@@ -89,8 +89,9 @@ pub fn planned_contacts(
         let (SegmentKind::Grind, Some(pass)) = (seg.kind, seg.pass) else {
             continue;
         };
-        for i in seg.first_sample..=seg.last_sample {
-            let planned = fk::tool(&sim_joints(robot, &plan.samples[i].q), tip).0;
+        let range = seg.first_sample..=seg.last_sample;
+        for (o, s) in out[range.clone()].iter_mut().zip(&plan.samples[range]) {
+            let planned = fk::tool(&sim_joints(robot, &s.q), tip).0;
             let p = plan.passes[pass]
                 .points
                 .iter()
@@ -102,7 +103,7 @@ pub fn planned_contacts(
             let nrm = wc
                 .direction_from_reference(&Vector3::from(p.normal))
                 .normalize();
-            out[i] = Some((planned, nrm * force));
+            *o = Some((planned, nrm * force));
         }
     }
     out
