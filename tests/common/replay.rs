@@ -174,6 +174,8 @@ pub struct Replayed {
     pub errors: Vec<f64>,
     /// Per grinding sample, that error's part along the surface (across the normal), mm.
     pub lateral: Vec<f64>,
+    /// The mean of the error vectors over the grinding samples (robot frame), mm.
+    pub mean: Vector3<f64>,
     /// Per joint and grinding sample, how far the tip moves by that joint's gear sitting where
     /// its history put it instead of where a pose held still puts it, mm.
     pub per_joint: [Vec<f64>; 5],
@@ -261,6 +263,7 @@ pub fn replayed(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) ->
     let mut gear = slack::Backlash::new(&band);
     let mut out = Replayed {
         errors: Vec::new(),
+        mean: Vector3::zeros(),
         lateral: Vec::new(),
         per_joint: Default::default(),
         torque: Default::default(),
@@ -292,6 +295,7 @@ pub fn replayed(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) ->
         let err = loaded - planned;
         let normal = force.normalize();
         out.errors.push(err.norm() * 1e3);
+        out.mean += err * 1e3;
         out.lateral
             .push((err - normal * err.dot(&normal)).norm() * 1e3);
         for (k, t) in out.torque.iter_mut().enumerate() {
@@ -302,6 +306,7 @@ pub fn replayed(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) ->
         }
     }
     out.off_flank_share = off_flank / in_contact;
+    out.mean /= out.errors.len().max(1) as f64;
     out.press_start = press_starts(plan, &sent, &contacts, &offsets, &band, &tip);
     out
 }
@@ -354,6 +359,7 @@ pub fn print_replayed(
     println!(
         "share of grinding samples a gear's history moves by over {HISTORY_MOVE_MM} mm: {moved:.4}"
     );
+    println!("mean error vector (robot frame): {:.3?} mm", r.mean);
     let total = quantiles(r.errors);
     let lateral = quantiles(r.lateral);
     println!(
