@@ -11,23 +11,14 @@
 //! force, and the sag); compensated it must be much nearer.
 mod common;
 
-use nalgebra::{Point3, Vector3};
+use common::replay::{quantiles, tip_errors};
 use polishbot::motion::{plan_part, Plan, PlanConfig, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
-use polishbot::sim::grind::{fk, slack};
 use polishbot::sim::GrindConfig;
 
 /// The compensated tip error's 95th percentile must stay under this, mm (0.5: the plan's
 /// Monte Carlo assumed 0.12 mm of tip error; uncompensated the documented arm is 2.2 mm off).
 const COMPENSATED_P95_MM: f64 = 0.5;
-
-/// Spread of the calibration's touch-offs around the part's origin, m (5 mm, the simulator's
-/// and the planner's rule: the absorbed offset is the mean gravity-only offset over the poses
-/// near the origin, weighted `exp(-((d - d_min) / spread)^2)`, not the offset at the single
-/// nearest pose, which jumps between nearly tied poses 0.7 mm apart).
-const TOUCH_SPREAD_M: f64 = 0.005;
-/// Weight under which a pose is left out of that mean (1e-3, as the simulator's).
-const TOUCH_MIN_WEIGHT: f64 = 1e-3;
 
 /// A grinding sample with a joint nearer its limit than this, rad, gets only part of its
 /// correction (0.02: the largest correction the model makes on the documented arm is about
@@ -37,77 +28,6 @@ const NEAR_LIMIT_RAD: f64 = 0.02;
 /// How far inside its limits the compensating planner tries to keep every joint of a grinding
 /// stroke by re-tilting it, rad (motion/tilt.rs `LIMIT_MARGIN_RAD`).
 const PLANNER_MARGIN_RAD: f64 = 0.05;
-
-/// The planner's joint angles as the simulator's (through the servo degrees of servos.toml
-/// and DOFBOT.md's convention).
-fn sim_joints(robot: &Robot, q: &[f64]) -> [f64; 5] {
-    std::array::from_fn(|k| {
-        let servo = robot.servos.for_joint(&robot.joints[k].name).unwrap();
-        fk::joint_of_servo_deg(servo.servo_deg(q[k]))
-    })
-}
-
-/// The simulated loaded tip's distance from the planned tip at every grinding sample of
-/// `plan` (robot frame, mm).
-fn tip_errors(plan: &Plan, robot: &Robot, wc: &Workcell, arm: &GrindConfig) -> Vec<f64> {
-    let sim = slack::Arm::new(arm);
-    let tip = sim.tip_m();
-    let sent: Vec<[f64; 5]> = match &plan.commands {
-        Some(c) => c.iter().map(|q| sim_joints(robot, q)).collect(),
-        None => plan
-            .samples
-            .iter()
-            .map(|s| sim_joints(robot, &s.q))
-            .collect(),
-    };
-    let m = &wc.robot_from_reference;
-    let origin = Point3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-    let dist: Vec<f64> = sent
-        .iter()
-        .map(|q| (fk::tool(q, &tip).0 - origin).norm())
-        .collect();
-    let nearest = dist.iter().copied().fold(f64::INFINITY, f64::min);
-    let (mut sum, mut weight) = (Vector3::zeros(), 0.0);
-    for (q, d) in sent.iter().zip(&dist) {
-        let w = (-((d - nearest) / TOUCH_SPREAD_M).powi(2)).exp();
-        if w >= TOUCH_MIN_WEIGHT {
-            sum += (sim.held(*q, Vector3::zeros()).0 - fk::tool(q, &tip).0) * w;
-            weight += w;
-        }
-    }
-    let absorbed = sum / weight;
-    println!(
-        "absorbed offset (test's rule, over the sent commands): {:.3?} mm",
-        absorbed * 1e3
-    );
-    let force = polishbot::removal::ToolModel::of_robot(robot)
-        .unwrap()
-        .force_n();
-    let mut out = Vec::new();
-    for seg in &plan.segments {
-        let (SegmentKind::Grind, Some(pass)) = (seg.kind, seg.pass) else {
-            continue;
-        };
-        let range = seg.first_sample..=seg.last_sample;
-        for (s, q) in plan.samples[range.clone()].iter().zip(&sent[range]) {
-            let planned = fk::tool(&sim_joints(robot, &s.q), &tip).0;
-            let p = plan.passes[pass]
-                .points
-                .iter()
-                .min_by(|a, b| {
-                    let d = |t: &[f64; 3]| (Vector3::from(*t) - planned.coords).norm();
-                    d(&a.tip_m).total_cmp(&d(&b.tip_m))
-                })
-                .unwrap();
-            let nrm = wc
-                .direction_from_reference(&Vector3::from(p.normal))
-                .normalize();
-            let loaded = sim.held(*q, nrm * force).0 - absorbed;
-            out.push((loaded - planned).norm() * 1e3);
-        }
-    }
-    out
-}
 
 /// Grinding samples of `plan` with some joint within `margin` rad of its limit (the planned,
 /// loaded joints), and the largest joint difference between a command and its sample, rad.
@@ -162,14 +82,6 @@ fn per_region(plan: &Plan, robot: &Robot) -> std::collections::BTreeMap<usize, [
         }
     }
     out
-}
-
-/// Median, 95th percentile and largest of `x`.
-fn quantiles(mut x: Vec<f64>) -> [f64; 3] {
-    assert!(!x.is_empty(), "no grinding sample");
-    x.sort_by(f64::total_cmp);
-    let at = |q: f64| x[((x.len() - 1) as f64 * q).round() as usize];
-    [at(0.5), at(0.95), x[x.len() - 1]]
 }
 
 /// Compensated with the shipped cell's `[compliance]` (the table `calibrate compliance --sim`

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
 pub mod removal;
+pub mod replay;
 pub mod survey;
 pub mod synthetic;
 pub mod true_part;
