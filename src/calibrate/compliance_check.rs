@@ -15,6 +15,7 @@ use nalgebra::Vector3;
 use super::compliance::{touch_all, touch_plan, LoadedPose};
 use super::config::CalibError;
 use super::jog::{Cell, Touch, TouchSource};
+use super::touch_plan::IN_PLANE_DEG;
 use crate::bus::{Bus, Transport, JOINT_COUNT};
 use crate::robot::{Compliance, Robot};
 
@@ -54,7 +55,13 @@ impl ComplianceCheck {
 /// The check's touches: each point of [`CHECK_POINTS`] under the loads of `calibrate
 /// compliance` (4 N out, up, in and down, each pushed across the arm either way).
 pub fn check_poses(robot: &Robot) -> Vec<LoadedPose> {
-    touch_plan(robot, &CHECK_POINTS, &CHECK_TILTS_DEG, &CHECK_ACROSS)
+    touch_plan(
+        robot,
+        &CHECK_POINTS,
+        &CHECK_TILTS_DEG,
+        &IN_PLANE_DEG,
+        &CHECK_ACROSS,
+    )
 }
 
 /// RMS over the touches of the distance of `tip(touch, pose)` from the mean of its point's

@@ -18,8 +18,28 @@ use crate::sim::grind::{fk, slack};
 use crate::sim::model::{deg_at_raw, raw_at_deg, round_raw};
 use crate::sim::GrindConfig;
 
-/// Newton iterations of the simulated operator's jogging (converges in 3-5).
-const JOG_ITERATIONS: usize = 30;
+/// Iterations of the simulated operator's jogging (converges in 3-5 where the tilt is
+/// reachable; the damped steps towards a relaxed tilt take a few tens more).
+const JOG_ITERATIONS: usize = 100;
+/// Weight of the jog's tilt miss against its tip miss, m per rad: 0.01 (a degree of tilt off
+/// counts as 0.17 mm of tip miss). Where the tilt is reachable both misses go to zero and the
+/// weight does not matter; where the loaded arm cannot put its tip on the point at the listed
+/// tilt (the pose's pitch sum: the loaded tool leans by the pitch joints' deflections, up to
+/// 4 degrees with 10 mm of sag, which moves the wrist 13 mm from the rigid pose's, beyond a
+/// stretched elbow's reach) the tip stays on the point within a few hundredths of a
+/// millimetre and the tilt gives.
+const JOG_TILT_WEIGHT_M_PER_RAD: f64 = 0.01;
+/// Start damping of the jog's Levenberg-Marquardt steps (relative to the normal matrix's
+/// diagonal): 1e-3, a Newton step where the jog converges.
+const JOG_START_DAMPING: f64 = 1e-3;
+/// Factor the damping falls by after a step that lowers the miss and rises by after one
+/// that does not.
+const JOG_DAMPING_FACTOR: f64 = 10.0;
+/// Smallest damping (1e-12: the step is Newton's to double precision).
+const JOG_MIN_DAMPING: f64 = 1e-12;
+/// Damping over which the jog stops (1e6: the steps are then under a millionth of the
+/// gradient's).
+const JOG_MAX_DAMPING: f64 = 1e6;
 /// Largest joint step of one jogging iteration, rad (keeps Newton on its elbow branch).
 const JOG_MAX_STEP: f64 = 0.05;
 /// Step of the numeric derivative of the jogging, rad.
@@ -65,32 +85,53 @@ impl SimTouch {
     }
 
     /// The simulator's joint angles (rad) that hold the loaded tip on `point` with the pitch
-    /// sum (the tool's tilt in the arm plane) and roll of `q`.
+    /// sum (the tool's tilt in the arm plane) and roll of `q`, or, where the loaded arm cannot
+    /// reach the point at that tilt, at the tilt nearest it that does (a damped least-squares
+    /// jog that weighs the tilt by [`JOG_TILT_WEIGHT_M_PER_RAD`]: an operator tilts the tool a
+    /// little rather than record a touch beside the mark).
     fn jog(&self, q: &[f64; 5], force: Vector3<f64>, point: &Point3<f64>) -> [f64; 5] {
         let tilt = q[1] + q[2] + q[3];
         let miss = |x: &[f64; 5]| {
             let tip = self.arm.held(*x, force).0;
             let d = tip - point;
-            Vector4::new(d.x, d.y, d.z, x[1] + x[2] + x[3] - tilt)
+            Vector4::new(
+                d.x,
+                d.y,
+                d.z,
+                JOG_TILT_WEIGHT_M_PER_RAD * (x[1] + x[2] + x[3] - tilt),
+            )
         };
         let mut x = *q;
+        let mut r = miss(&x);
+        let mut damping = JOG_START_DAMPING;
         for _ in 0..JOG_ITERATIONS {
-            let r = miss(&x);
             let mut jac = Matrix4::zeros();
             for k in 0..4 {
                 let mut y = x;
                 y[k] += JOG_STEP;
                 jac.set_column(k, &((miss(&y) - r) / JOG_STEP));
             }
-            let Some(step) = jac.lu().solve(&(-r)) else {
+            let jtj = jac.transpose() * jac;
+            let lhs = jtj + Matrix4::from_diagonal(&jtj.diagonal()) * damping;
+            let Some(step) = lhs.lu().solve(&(-(jac.transpose() * r))) else {
                 break;
             };
             let scale = (JOG_MAX_STEP / step.norm()).min(1.0);
+            let mut y = x;
             for k in 0..4 {
-                x[k] += step[k] * scale;
+                y[k] += step[k] * scale;
             }
-            if step.norm() < 1e-12 {
+            let ry = miss(&y);
+            if ry.norm() < r.norm() {
+                (x, r) = (y, ry);
+                damping = (damping / JOG_DAMPING_FACTOR).max(JOG_MIN_DAMPING);
+                if step.norm() < 1e-12 {
+                    break;
+                }
+            } else if damping > JOG_MAX_DAMPING {
                 break;
+            } else {
+                damping *= JOG_DAMPING_FACTOR;
             }
         }
         x
