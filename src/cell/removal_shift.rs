@@ -1,13 +1,18 @@
 //! Where the tool really ground (issue 50): after a grind, each repairable region's measured
 //! removal map (the deviation before minus the deviation after, at the same core points) is
-//! registered against the plan's predicted removal: the shift s along the surface and the
-//! depth scale a that best explain m(x) = a p(x - s) in least squares, over a grid of shifts
-//! in the region's tangent plane. The removal planned at y landed at y + s; k is fitted on the
-//! prediction moved by s ([`shifted_prediction`]), so that a removal beside the plan is not read
-//! as a slower tool; the shift is carried into the next plan (the tool aimed back by it,
-//! `motion::aim`), and a grind whose regions disagree on the shift, whose shift is beyond what
-//! the plan can aim back by, or that removed where no shift of the plan explains it, stops the
-//! loop ([`carry`]).
+//! registered against the plan's predicted removal by their first moments: the shift s along
+//! the surface is where the measured removal's centroid lies from the predicted removal's, the
+//! measured centroid taken over a window that follows it (the plan's footprint moved by s and
+//! widened by [`ShiftConfig::window_mm`]); the depth scale a is then the least-squares scale of
+//! m(x) = a p(x - s). A least-squares search over shifts was used before: the predicted map
+//! ripples with the ~1 mm stroke spacing and the removal's shape is not the plan's (the
+//! simulator presses one flank of a bump harder), so its residual had basins a stroke apart
+//! and a 0.28 mm centroid difference read as 1.50 mm on the demo. The removal planned at y
+//! landed at y + s; k is fitted on the prediction moved by s ([`shifted_prediction`]), so that
+//! a removal beside the plan is not read as a slower tool; the shift is carried into the next
+//! plan (the tool aimed back by it, `motion::aim`), and a grind whose regions disagree on the
+//! shift, whose shift is beyond what the plan can aim back by, or that removed where no shift
+//! of the plan explains it, stops the loop ([`carry`]).
 //! Method: docs/ALGORITHMS.md, "Where the tool really ground".
 //!
 //! Front function: [`register`] with a [`ShiftConfig`]; result: one [`RegionShift`] per region.
@@ -19,15 +24,39 @@ use crate::removal::matching::{partners, repairable_ids};
 use crate::repair::Inspection;
 use crate::spatial::{tangent_basis, Neighbours, SparseGrid};
 
+/// Most steps of the moving window's centroid iteration (30: each step moves the window to the
+/// centroid it found; a removal 2 mm off a footprint 3 mm across is followed in 5-10 steps, and
+/// the iteration stops earlier once a step moves it less than [`CONVERGED_MM`]).
+const MOMENT_ITERATIONS: usize = 30;
+
+/// A step of the centroid iteration under which it has converged, mm (0.005: a twentieth of
+/// the 0.1 mm the registration is asked to resolve).
+const CONVERGED_MM: f64 = 0.005;
+
 /// Settings of the registration and of the stop rule.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ShiftConfig {
-    /// Largest shift searched along the surface, mm (2.5: on the documented arm the demo's
-    /// first grind landed 1.36-1.89 mm off, the ten acceptance cases' 0.8-1.2 mm; a shift at
-    /// the edge of the search may be larger than it saw, so the search reaches past the
-    /// largest shift carried, `carry_mm`).
+    /// Largest shift the registration measures along the surface, mm (2.5: on the documented
+    /// arm the demo's first grind landed 0.13-0.28 mm off (its true removal's centroids), the
+    /// ten acceptance cases' up to 1.2 mm; a shift beyond it stops the loop, as one larger
+    /// than the shift carried, `carry_mm`).
     pub search_mm: f64,
-    /// Step of the search grid, mm (0.1: under a tenth of the patch).
+    /// How far beyond the plan's footprint (moved by the shift) the measured removal's
+    /// centroid is taken, mm (0.3: half the shipped tool's 0.6 mm patch radius, so removal
+    /// spread by the patch beyond the footprint's edge counts, while the inspection's noise at
+    /// the points farther out, 0.013-0.021 mm each, does not pull the centroid: measured on a
+    /// synthetic raster, 0.6 mm gave a 0.06 mm median error where 0.3 mm gave 0.04-0.06).
+    pub window_mm: f64,
+    /// Share of the predicted removal around a region (within `search_mm + window_mm` of its
+    /// points) that lies on points other regions hold, over which the centroid is not trusted
+    /// and the shift is the least-squares fit of the predicted map instead (0.2: the removal
+    /// on another region's points is not the region's to weigh, and the centroid of a removal
+    /// a fifth of which is cut off moves toward what is left by up to a fifth of the
+    /// footprint's width, 0.5 mm on a 2.5 mm footprint; the fit of the whole map is not cut by
+    /// the regions' borders, but has basins a stroke apart where the removal's shape is not
+    /// the plan's, so it is used only there).
+    pub hidden_share: f64,
+    /// Step of the least-squares grid, mm (0.1: under a tenth of the patch).
     pub step_mm: f64,
     /// Largest shift (carried and measured together) the next plan aims back by, mm (2.4):
     /// the tool is commanded back along the contact's tangent plane, which on a surface of
@@ -39,9 +68,9 @@ pub struct ShiftConfig {
     /// (1.2, the shipped tool's contact patch diameter: a region whose removal landed a whole
     /// patch away from where the cell-wide error puts it does not overlap it at all, a
     /// different error rather than the same arm's error changing over the part. Measured on
-    /// the documented arm: the demo's regions 0.24-0.46 mm from their mean, acceptance cases
-    /// 1 and 21 up to 0.73 and 0.70 mm; 0.6 mm, the patch radius, stopped both cases after
-    /// grind 1).
+    /// the documented arm with the least-squares registration: the demo's regions 0.24-0.46 mm
+    /// from their mean, acceptance cases 1 and 21 up to 0.73 and 0.70 mm; 0.6 mm, the patch
+    /// radius, stopped both cases after grind 1).
     pub agree_mm: f64,
     /// Least predicted removal over a region for its shift to be measured, mm (0.04: twice
     /// the 0.02 mm scatter of the difference of two inspections; the shift is fitted over the
@@ -51,27 +80,20 @@ pub struct ShiftConfig {
     /// scatter of the difference of two inspections, each 0.013-0.021 mm on ground surface).
     pub removed_mm: f64,
     /// Least prediction at the registered shift under which a removal is "where nothing was
-    /// planned", mm (0.005: the removal fit's least predicted removal).
+    /// planned", mm (0.005: the removal fit's least predicted removal); also the edge of the
+    /// plan's footprint the centroid's window follows.
     pub planned_mm: f64,
     /// Most unplanned removed points tolerated per region (10: a few stray points of the
     /// inspection's noise tail; a misplaced patch covers 30+ core points).
     pub unplanned_points: usize,
-    /// Share above a region's least residual sum of squares within which two shifts fit it
-    /// equally well; the registration takes among them the shift nearest the regions' median
-    /// best shift (0.05). The measured removal is
-    /// the difference of two noisy inspections, and the removal landing on the arm's real
-    /// errors is not the predicted shape moved: a region's residual over the shifts can have
-    /// two basins a patch apart. Measured on the demo (documented arm, issue 50): region 1's
-    /// best fit landed 1.41 mm off and shifts 1.62 mm from it fitted within 5 % of it, where
-    /// the noise-free true removal (`after_truth.ply`) registers at 0.41 mm and a noise-free
-    /// rescan at 0.36 mm; every other region's near-best shifts lay within 0.14 mm of its best.
-    pub near_best: f64,
 }
 
 impl Default for ShiftConfig {
     fn default() -> Self {
         ShiftConfig {
             search_mm: 2.5,
+            window_mm: 0.3,
+            hidden_share: 0.2,
             step_mm: 0.1,
             carry_mm: 2.4,
             agree_mm: 1.2,
@@ -79,7 +101,6 @@ impl Default for ShiftConfig {
             removed_mm: 0.06,
             planned_mm: 0.005,
             unplanned_points: 10,
-            near_best: 0.05,
         }
     }
 }
@@ -110,6 +131,14 @@ pub struct RegionShift {
     pub reach_mm: f64,
     /// Largest predicted removal over the points used, mm.
     pub peak_predicted_mm: f64,
+    /// Share of the predicted removal around the region on other regions' points: over
+    /// [`ShiftConfig::hidden_share`] the shift is the least-squares fit, else first moments.
+    pub hidden_share: f64,
+}
+
+/// Whether core point `p` may carry region `id`'s removal: its own, or no region's.
+fn open_to(p: &crate::repair::SurfacePoint, id: i64) -> bool {
+    p.region == id || p.region < 0
 }
 
 /// The matched points near region `id` that no other repairable region holds: (index in
@@ -126,7 +155,7 @@ fn neighbourhood(
         .points
         .iter()
         .enumerate()
-        .filter(|(_, p)| p.region == id || p.region < 0)
+        .filter(|(_, p)| open_to(p, id))
         .filter_map(|(i, p)| {
             Some((i, measured[i]?)).filter(|_| grid.any_within(&p.position, reach))
         })
@@ -164,10 +193,110 @@ fn scaled(pairs: impl Iterator<Item = (f64, f64)>) -> (f64, f64) {
     (a, mm - 2.0 * a * pm + a * a * pp)
 }
 
+/// What the first moments compare: the core points (`positions`, their index `index`), the
+/// measured removal per point (None: unmatched), and the region (`id`) with its mean normal.
+struct Moments<'a> {
+    before: &'a Inspection,
+    positions: &'a [Point3<f64>],
+    index: &'a Neighbours,
+    measured: &'a [Option<f64>],
+    id: i64,
+    normal: Vector3<f64>,
+}
+
+impl Moments<'_> {
+    /// The removal's shift from the plan by first moments: the measured removal's centroid
+    /// over the plan's footprint (`footprint`, the points the plan removes from) moved by the
+    /// shift and widened by `cfg.window_mm`, from the centroid `planned` of the prediction,
+    /// iterated until the window stops moving; in the region's tangent plane. None when the
+    /// window holds no net removal.
+    fn shift(
+        &self,
+        footprint: &[Point3<f64>],
+        planned: &Point3<f64>,
+        cfg: &ShiftConfig,
+    ) -> Option<Vector3<f64>> {
+        let mut s = Vector3::zeros();
+        let mut inside = vec![false; self.positions.len()];
+        for _ in 0..MOMENT_ITERATIONS {
+            inside.iter_mut().for_each(|b| *b = false);
+            let (mut sum, mut moment) = (0.0, Vector3::zeros());
+            for f in footprint {
+                for nb in self.index.within_unsorted(&(f + s), cfg.window_mm) {
+                    let i = nb.index;
+                    if inside[i] || !open_to(&self.before.points[i], self.id) {
+                        continue;
+                    }
+                    inside[i] = true;
+                    if let Some(m) = self.measured[i] {
+                        sum += m;
+                        moment += self.positions[i].coords * m;
+                    }
+                }
+            }
+            if sum <= 0.0 {
+                return None;
+            }
+            let d = moment / sum - planned.coords;
+            let next = d - self.normal * self.normal.dot(&d);
+            let step = (next - s).norm();
+            s = next;
+            if step < CONVERGED_MM || s.norm() > cfg.search_mm + cfg.window_mm {
+                break;
+            }
+        }
+        Some(s)
+    }
+
+    /// Share of the predicted removal within `reach` of the region's own points that lies on
+    /// points other regions hold (`predicted` per core point).
+    fn hidden(&self, predicted: &[f64], reach: f64) -> f64 {
+        let own = (self.before.points.iter()).filter(|p| p.region == self.id);
+        let grid = SparseGrid::new(reach, own.map(|p| p.position));
+        let (mut open, mut held) = (0.0, 0.0);
+        for (p, q) in self.before.points.iter().zip(predicted) {
+            if *q > 0.0 && grid.any_within(&p.position, reach) {
+                match open_to(p, self.id) {
+                    true => open += q,
+                    false => held += q,
+                }
+            }
+        }
+        held / (open + held).max(f64::MIN_POSITIVE)
+    }
+
+    /// The shift by least squares: the s on a grid of `cfg.step_mm` within `cfg.search_mm`
+    /// in the tangent plane whose scaled prediction p(x - s) leaves the least residual over
+    /// `near` (`at` gives the scale and the residual sum of squares at s).
+    fn least_squares(
+        &self,
+        at: &dyn Fn(&Vector3<f64>) -> (f64, f64, Vec<f64>),
+        cfg: &ShiftConfig,
+    ) -> Vector3<f64> {
+        let (ta, tb) = tangent_basis(&self.normal);
+        let n = (cfg.search_mm / cfg.step_mm).round() as i64;
+        let mut best = (Vector3::zeros(), at(&Vector3::zeros()).1);
+        for u in -n..=n {
+            for v in -n..=n {
+                let s = (ta * u as f64 + tb * v as f64) * cfg.step_mm;
+                if s.norm() > cfg.search_mm + 1e-9 {
+                    continue;
+                }
+                let ss = at(&s).1;
+                if ss < best.1 {
+                    best = (s, ss);
+                }
+            }
+        }
+        best.0
+    }
+}
+
 /// Registers each repairable region of `before` that the plan removes from (`predicted`, per
-/// core point of `before`) against its measured removal in `after`. Where several shifts fit
-/// a region within [`ShiftConfig::near_best`] of its best, it takes the one nearest the
-/// regions' median best shift (the noise of two inspections cannot choose between them).
+/// core point of `before`) against its measured removal in `after`: the shift by first
+/// moments ([`Moments::shift`]; by least squares, [`Moments::least_squares`], where other
+/// regions hide over [`ShiftConfig::hidden_share`] of the window), the depth scale by least
+/// squares at that shift.
 pub fn register(
     before: &Inspection,
     after: &Inspection,
@@ -183,14 +312,14 @@ pub fn register(
         .collect();
     let positions: Vec<Point3<f64>> = before.points.iter().map(|p| p.position).collect();
     let index = Neighbours::new(&positions);
-    let n = (cfg.search_mm / cfg.step_mm).round() as i64;
-    // first the best fit of every region, then each region's fit among those the noise
-    // cannot tell from its best that lies nearest the regions' median shift
-    let mut firsts = Vec::new();
+    let mut out = Vec::new();
     for id in repairable_ids(before) {
-        let near = neighbourhood(before, &measured, id, cfg.search_mm + cfg.step_mm);
-        let planned = near.iter().any(|(i, _)| predicted[*i] >= cfg.planned_mm);
-        if !planned {
+        let near = neighbourhood(before, &measured, id, cfg.search_mm + cfg.window_mm);
+        let footprint: Vec<Point3<f64>> = (near.iter())
+            .filter(|(i, _)| predicted[*i] >= cfg.planned_mm)
+            .map(|(i, _)| positions[*i])
+            .collect();
+        if footprint.is_empty() {
             continue;
         }
         let normal = near
@@ -198,7 +327,21 @@ pub fn register(
             .map(|(i, _)| before.points[*i].normal)
             .sum::<Vector3<f64>>()
             .normalize();
-        let (ta, tb) = tangent_basis(&normal);
+        let weight: f64 = near.iter().map(|(i, _)| predicted[*i].max(0.0)).sum();
+        let planned = Point3::from(
+            (near.iter())
+                .map(|(i, _)| positions[*i].coords * predicted[*i].max(0.0))
+                .sum::<Vector3<f64>>()
+                / weight,
+        );
+        let moments = Moments {
+            before,
+            positions: &positions,
+            index: &index,
+            measured: &measured,
+            id,
+            normal,
+        };
         let at = |s: &Vector3<f64>| {
             let p: Vec<f64> = near
                 .iter()
@@ -207,52 +350,19 @@ pub fn register(
             let (a, ss) = scaled(p.iter().zip(&near).map(|(p, (_, m))| (*p, *m)));
             (a, ss, p)
         };
-        let zero = at(&Vector3::zeros());
-        let mut grid = vec![(Vector3::zeros(), zero.0, zero.1)];
-        for u in -n..=n {
-            for v in -n..=n {
-                let s = (ta * u as f64 + tb * v as f64) * cfg.step_mm;
-                if s.norm() > cfg.search_mm + 1e-9 {
-                    continue;
-                }
-                let (a, ss, _) = at(&s);
-                grid.push((s, a, ss));
-            }
-        }
-        let least = grid.iter().map(|g| g.2).fold(f64::INFINITY, f64::min);
-        let near_best: Vec<_> = grid
-            .into_iter()
-            .filter(|g| g.2 <= least * (1.0 + cfg.near_best))
-            .collect();
-        firsts.push((id, near, normal, zero, near_best));
-    }
-    let bests: Vec<Vector3<f64>> = (firsts.iter())
-        .filter_map(|f| f.4.iter().min_by(|a, b| a.2.total_cmp(&b.2)).map(|g| g.0))
-        .collect();
-    let median = |k: usize| {
-        let mut c: Vec<f64> = bests.iter().map(|b| b[k]).collect();
-        c.sort_by(f64::total_cmp);
-        c.get(c.len() / 2).copied().unwrap_or(0.0)
-    };
-    let consensus = Vector3::new(median(0), median(1), median(2));
-    let mut out = Vec::new();
-    for (id, near, normal, zero, near_best) in firsts {
-        let at = |s: &Vector3<f64>| {
-            near.iter()
-                .map(|(i, _)| predicted_at(&index, predicted, &(positions[*i] - s)))
-                .collect::<Vec<f64>>()
+        // first moments where the window sees the removal whole; where other regions hold
+        // part of it, the template's least squares (the moments would be cut there)
+        let hidden = moments.hidden(predicted, cfg.search_mm + cfg.window_mm);
+        let shift = match hidden > cfg.hidden_share {
+            true => Some(moments.least_squares(&at, cfg)),
+            false => moments.shift(&footprint, &planned, cfg),
         };
-        let best = (near_best.into_iter())
-            .min_by(|a, b| {
-                (a.0 - consensus)
-                    .norm()
-                    .total_cmp(&(b.0 - consensus).norm())
-            })
-            .unwrap_or((Vector3::zeros(), zero.0, zero.1));
-        let p = at(&best.0);
-        let unplanned = p
-            .iter()
-            .zip(&near)
+        let zero = at(&Vector3::zeros());
+        let s = shift.unwrap_or_else(Vector3::zeros);
+        let best = at(&s);
+        // no net removal under the footprint: nothing registered, the scale 0 (not measured)
+        let scale = if shift.is_some() { best.0 } else { 0.0 };
+        let unplanned = (best.2.iter().zip(&near))
             .filter(|(p, (_, m))| **p < cfg.planned_mm && *m > cfg.removed_mm)
             .count();
         let rms = |ss: f64| (ss / near.len().max(1) as f64).sqrt();
@@ -266,16 +376,17 @@ pub fn register(
         let extent = own.iter().map(|p| (p - centre).norm()).fold(0.0, f64::max);
         out.push(RegionShift {
             region: id,
-            shift_mm: best.0,
-            scale: best.1,
+            shift_mm: s,
+            scale,
             scale_unshifted: zero.0,
-            rms_mm: [rms(zero.1), rms(best.2)],
+            rms_mm: [rms(zero.1), rms(best.1)],
             points: near.len(),
             unplanned,
             centre,
             normal,
             reach_mm: extent + cfg.search_mm,
             peak_predicted_mm: near.iter().map(|(i, _)| predicted[*i]).fold(0.0, f64::max),
+            hidden_share: hidden,
         });
     }
     out
@@ -294,7 +405,7 @@ pub fn shifted_prediction(
     let everywhere = vec![Some(0.0); positions.len()];
     let mut out = predicted.to_vec();
     for r in shifts {
-        for (i, _) in neighbourhood(before, &everywhere, r.region, cfg.search_mm + cfg.step_mm) {
+        for (i, _) in neighbourhood(before, &everywhere, r.region, cfg.search_mm + cfg.window_mm) {
             out[i] = predicted_at(&index, predicted, &(positions[i] - r.shift_mm));
         }
     }
@@ -351,13 +462,12 @@ pub fn carry(shifts: &[RegionShift], aim: &Aim, cfg: &ShiftConfig) -> Result<Car
         return Err(stop(r, why));
     }
     let measured = |r: &&RegionShift| r.peak_predicted_mm >= cfg.measurable_mm && r.scale > 0.0;
-    let edge = cfg.search_mm - 0.5 * cfg.step_mm;
     if let Some(r) = shifts
         .iter()
         .filter(measured)
-        .find(|r| r.shift_mm.norm() > edge)
+        .find(|r| r.shift_mm.norm() > cfg.search_mm)
     {
-        let why = format!("at the edge of the {} mm search", cfg.search_mm);
+        let why = format!("beyond the {} mm the registration measures", cfg.search_mm);
         return Err(stop(r, why));
     }
     let total = |r: &RegionShift| aim.shift_at(&r.centre, &r.normal) + r.shift_mm;

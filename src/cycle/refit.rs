@@ -337,7 +337,7 @@ fn describe_shift(r: &RegionShift) -> String {
     format!(
         "cycle: region {}: removal shift {:.2} mm [{:.2}, {:.2}, {:.2}], depth scale {:.3} \
          (unshifted {:.3}), residual RMS {:.4} -> {:.4} mm over {} points, {} removed where \
-         nothing was planned",
+         nothing was planned; {}",
         r.region,
         s.norm(),
         s.x,
@@ -348,7 +348,14 @@ fn describe_shift(r: &RegionShift) -> String {
         r.rms_mm[0],
         r.rms_mm[1],
         r.points,
-        r.unplanned
+        r.unplanned,
+        match r.hidden_share > ShiftConfig::default().hidden_share {
+            true => format!(
+                "least squares ({:.0} % of the prediction on other regions)",
+                100.0 * r.hidden_share
+            ),
+            false => "first moments".to_string(),
+        }
     )
 }
 
