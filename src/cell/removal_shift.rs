@@ -193,6 +193,10 @@ fn scaled(pairs: impl Iterator<Item = (f64, f64)>) -> (f64, f64) {
     (a, mm - 2.0 * a * pm + a * a * pp)
 }
 
+/// The fit of the prediction moved by a shift: depth scale, residual sum of squares, and the
+/// moved prediction at each point of the neighbourhood.
+type Fitted = (f64, f64, Vec<f64>);
+
 /// What the first moments compare: the core points (`positions`, their index `index`), the
 /// measured removal per point (None: unmatched), and the region (`id`) with its mean normal.
 struct Moments<'a> {
@@ -270,7 +274,7 @@ impl Moments<'_> {
     /// `near` (`at` gives the scale and the residual sum of squares at s).
     fn least_squares(
         &self,
-        at: &dyn Fn(&Vector3<f64>) -> (f64, f64, Vec<f64>),
+        at: &dyn Fn(&Vector3<f64>) -> Fitted,
         cfg: &ShiftConfig,
     ) -> Vector3<f64> {
         let (ta, tb) = tangent_basis(&self.normal);
