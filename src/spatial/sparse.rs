@@ -1,15 +1,64 @@
 //! Hashed cells over a set of points of any extent, for "is any point within r of this one?"
 //! (synth's defect placement asks it of sharp-edge samples and of the articular surface).
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 use nalgebra::Point3;
 
 use super::ifloor;
 
+/// Multiplier of [`CellHasher`] (FxHash's, rustc's hasher: an odd constant with its bits
+/// spread, so a product mixes every bit of a word into the high bits).
+const CELL_HASH_MUL: u64 = 0x51_7c_c1_b7_27_22_0a_95;
+
+/// Rotation of [`CellHasher`]'s state before it is handed out, bits (26, as rustc-hash 2:
+/// the product's well-mixed high bits moved down to where the table takes its bucket index).
+const CELL_HASH_ROTATE: u32 = 26;
+
+/// The hash of a cell's integer key: multiply and rotate (FxHash), not the standard library's
+/// SipHash. The keys are the grid's own cell coordinates, never an adversary's, and SipHash
+/// was most of [`SparseGrid::any_within`]'s time (27 lookups per query: the demo's synth and
+/// the loop's removal registration ask it of every core point). The answers do not depend on
+/// the hash: the map is only looked up, never iterated.
+#[derive(Default, Clone, Copy)]
+struct CellHasher(u64);
+
+impl CellHasher {
+    fn add(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(CELL_HASH_MUL);
+    }
+}
+
+impl Hasher for CellHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.add(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, i: u64) {
+        self.add(i);
+    }
+
+    fn write_i64(&mut self, i: i64) {
+        self.add(i as u64);
+    }
+
+    fn write_usize(&mut self, i: usize) {
+        self.add(i as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0.rotate_left(CELL_HASH_ROTATE)
+    }
+}
+
 /// Points bucketed into cubic cells of edge `cell`, only the occupied cells stored.
 pub struct SparseGrid {
     cell: f64,
-    cells: HashMap<[i64; 3], Vec<Point3<f64>>>,
+    cells: HashMap<[i64; 3], Vec<Point3<f64>>, BuildHasherDefault<CellHasher>>,
 }
 
 impl SparseGrid {
@@ -17,7 +66,7 @@ impl SparseGrid {
     pub fn new(cell: f64, points: impl IntoIterator<Item = Point3<f64>>) -> SparseGrid {
         let mut g = SparseGrid {
             cell,
-            cells: HashMap::new(),
+            cells: HashMap::default(),
         };
         for p in points {
             g.cells.entry(g.key(&p)).or_default().push(p);
