@@ -17,6 +17,7 @@
 //!
 //! Front function: [`register`] with a [`ShiftConfig`]; result: one [`RegionShift`] per region.
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::motion::aim::{Aim, AimRegion};
@@ -151,9 +152,8 @@ fn neighbourhood(
 ) -> Vec<(usize, f64)> {
     let own = before.points.iter().filter(|p| p.region == id);
     let grid = SparseGrid::new(reach, own.map(|p| p.position));
-    before
-        .points
-        .iter()
+    // each point's test is its own: in parallel, the order and the answer kept
+    (before.points.par_iter())
         .enumerate()
         .filter(|(_, p)| open_to(p, id))
         .filter_map(|(i, p)| {
@@ -347,8 +347,7 @@ pub fn register(
             normal,
         };
         let at = |s: &Vector3<f64>| {
-            let p: Vec<f64> = near
-                .iter()
+            let p: Vec<f64> = (near.par_iter())
                 .map(|(i, _)| predicted_at(&index, predicted, &(positions[*i] - s)))
                 .collect();
             let (a, ss) = scaled(p.iter().zip(&near).map(|(p, (_, m))| (*p, *m)));
@@ -408,9 +407,20 @@ pub fn shifted_prediction(
     let index = Neighbours::new(&positions);
     let everywhere = vec![Some(0.0); positions.len()];
     let mut out = predicted.to_vec();
+    // regions in order (a point near two takes the later one's), each region's points in
+    // parallel
     for r in shifts {
-        for (i, _) in neighbourhood(before, &everywhere, r.region, cfg.search_mm + cfg.window_mm) {
-            out[i] = predicted_at(&index, predicted, &(positions[i] - r.shift_mm));
+        let near = neighbourhood(before, &everywhere, r.region, cfg.search_mm + cfg.window_mm);
+        let moved: Vec<(usize, f64)> = (near.par_iter())
+            .map(|(i, _)| {
+                (
+                    *i,
+                    predicted_at(&index, predicted, &(positions[*i] - r.shift_mm)),
+                )
+            })
+            .collect();
+        for (i, p) in moved {
+            out[i] = p;
         }
     }
     out
