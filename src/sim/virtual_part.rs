@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use nalgebra::{Matrix4, Point3, Vector3};
+use rayon::prelude::*;
 use serde::Serialize;
 
 use super::grind::{grind, GrindReport, ServoTrace, VirtualPart};
@@ -116,7 +117,9 @@ impl Ground {
         let index = Neighbours::new(&inspection.positions);
         // the part's surface: points within OFF_SURFACE_MM of where the inspection measured
         // the surface (the core point's plane moved by its deviation); outliers lie farther
+        // (each point's test is its own: a parallel filter keeps the order and the answer)
         let on_surface: Vec<usize> = (0..cloud.len())
+            .into_par_iter()
             .filter(|&i| {
                 let p = cloud.points[i];
                 index.nearest(&p).is_some_and(|nb| {
@@ -163,14 +166,16 @@ impl Ground {
             ..NormalConfig::default()
         };
         let mut normals = estimate_normals(&cloud, &cfg)?.normals;
-        for (p, n) in cloud.points.iter().zip(&mut normals) {
-            let outward = index
-                .nearest(p)
-                .map_or(Vector3::z(), |nb| inspection.normals[nb.index]);
-            if n.dot(&outward) < 0.0 {
-                *n = -*n;
-            }
-        }
+        (cloud.points.par_iter())
+            .zip(normals.par_iter_mut())
+            .for_each(|(p, n)| {
+                let outward = index
+                    .nearest(p)
+                    .map_or(Vector3::z(), |nb| inspection.normals[nb.index]);
+                if n.dot(&outward) < 0.0 {
+                    *n = -*n;
+                }
+            });
         Ok(Ground {
             part: VirtualPart::new(cloud.points, normals, &options.grinding),
             options: options.clone(),

@@ -1,6 +1,7 @@
 //! The virtual part: surface points with outward normals that move inward as the true law
 //! removes material under the simulated tool.
 use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
 
 use super::law::{preston_rate, HertzContact, KField};
 use super::{GrindConfig, MountGive};
@@ -10,6 +11,12 @@ use crate::spatial::Neighbours;
 /// Extra distance beyond the ball radius at which the nearest surface point is still looked
 /// at, mm: the ball is out of contact farther than that, and the query stays cheap.
 const CONTACT_SEARCH_MARGIN_MM: f64 = 0.5;
+
+/// Margin by which a ball's lower bound on its distance to the part must exceed the contact
+/// reach for a step to skip the nearest-point query, mm (1e-6: the distances are sums of
+/// squares of coordinates around 100 mm, rounded at 1e-14 mm; the margin keeps the skipped
+/// steps exactly those the query would have found out of reach).
+const CLEARANCE_ROUNDING_MM: f64 = 1e-6;
 
 /// Surface points whose heights under the ball give the penetration (their median): one
 /// stray point (an outlier that lies near the surface, a normal across an edge) among them
@@ -47,6 +54,20 @@ pub struct VirtualPart {
     stale: Vec<usize>,
     k: Vec<f64>,
     index: Neighbours,
+    /// The points near the ball centre of the last step (`index` never moves, so they are
+    /// the same whenever the same centre is asked again; their heights are not kept).
+    last_near: Option<LastNear>,
+    /// The last ball centre whose nearest point was looked up, and that point's distance,
+    /// mm: the nearest distance changes by at most what the centre moved, so a ball that was
+    /// far from the part and moved little is still out of reach without a query.
+    clearance: Option<(Point3<f64>, f64)>,
+}
+
+/// [`VirtualPart::penetration`]'s neighbours of one ball centre.
+struct LastNear {
+    centre: Point3<f64>,
+    ball_mm: f64,
+    near: Option<Vec<usize>>,
 }
 
 /// The state of the tool at one step, reference frame.
@@ -66,7 +87,7 @@ impl VirtualPart {
     pub fn new(points: Vec<Point3<f64>>, normals: Vec<Vector3<f64>>, cfg: &GrindConfig) -> Self {
         assert_eq!(points.len(), normals.len(), "one normal per point");
         let field = KField::new(cfg);
-        let k = points.iter().map(|p| field.at(p)).collect();
+        let k = points.par_iter().map(|p| field.at(p)).collect();
         let index = Neighbours::new(&points);
         VirtualPart {
             removal: vec![0.0; points.len()],
@@ -76,6 +97,8 @@ impl VirtualPart {
             normals,
             k,
             index,
+            last_near: None,
+            clearance: None,
         }
     }
 
@@ -111,23 +134,71 @@ impl VirtualPart {
     /// no point is near. Returns the index of the median point too (its normal is the
     /// contact's).
     pub fn penetration(&self, centre: &Point3<f64>, ball_mm: f64) -> Option<(usize, f64)> {
-        let near = self.index.nearest(centre)?;
-        let reach = ball_mm + CONTACT_SEARCH_MARGIN_MM;
-        if near.dist2 > reach * reach {
-            return None;
-        }
-        let mut heights: Vec<(f64, usize)> = self
-            .index
-            .knn(centre, PENETRATION_NEIGHBOURS)
+        let near = match &self.last_near {
+            Some(last) if last.centre == *centre && last.ball_mm == ball_mm => last.near.clone(),
+            _ => self.near(centre, ball_mm),
+        }?;
+        let mut heights: Vec<(f64, usize)> = near
             .into_iter()
-            .map(|nb| {
-                let i = nb.index;
-                (self.normals[i].dot(&(centre - self.current(i))), i)
-            })
+            .map(|i| (self.normals[i].dot(&(centre - self.current(i))), i))
             .collect();
         heights.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (height, i) = heights[heights.len() / 2];
         Some((i, ball_mm - height))
+    }
+
+    /// [`VirtualPart::near`] of the ball centre where the arm holds it at this step: None
+    /// without a query while the last nearest distance, less what the centre moved since,
+    /// stays beyond the reach (by [`CLEARANCE_ROUNDING_MM`]); the nearest point first while
+    /// the ball was out of contact (one cheap query answers most steps), the neighbours at
+    /// once while it was in contact (one query instead of two). The same answer each way.
+    fn near_tool(&mut self, centre: &Point3<f64>, ball_mm: f64) -> Option<Vec<usize>> {
+        let reach = ball_mm + CONTACT_SEARCH_MARGIN_MM;
+        if let Some((at, distance)) = self.clearance {
+            if distance - (centre - at).norm() > reach + CLEARANCE_ROUNDING_MM {
+                return None;
+            }
+        }
+        let in_contact = (self.last_near.as_ref()).is_some_and(|last| last.near.is_some());
+        if in_contact {
+            self.clearance = None;
+            return self.near(centre, ball_mm);
+        }
+        let nearest = self.index.nearest(centre)?;
+        self.clearance = Some((*centre, nearest.dist2.sqrt()));
+        if nearest.dist2 > reach * reach {
+            return None;
+        }
+        Some(
+            (self.index.knn(centre, PENETRATION_NEIGHBOURS).into_iter())
+                .map(|nb| nb.index)
+                .collect(),
+        )
+    }
+
+    /// The [`PENETRATION_NEIGHBOURS`] points nearest `centre` (nearest first, as
+    /// `Neighbours::knn`), None when the nearest lies farther than the ball radius and
+    /// [`CONTACT_SEARCH_MARGIN_MM`]. One query where all of them lie within that reach (a
+    /// ball in contact): the k nearest within a radius are the k nearest when there are k.
+    fn near(&self, centre: &Point3<f64>, ball_mm: f64) -> Option<Vec<usize>> {
+        let reach = ball_mm + CONTACT_SEARCH_MARGIN_MM;
+        let r2 = reach * reach;
+        let want = PENETRATION_NEIGHBOURS.min(self.index.len());
+        let within = match r2.is_finite() && r2 >= 0.0 {
+            true => self.index.knn_within(centre, PENETRATION_NEIGHBOURS, reach),
+            false => Vec::new(),
+        };
+        if within.len() < want || within.is_empty() {
+            let nearest = self.index.nearest(centre)?;
+            if nearest.dist2 > r2 {
+                return None;
+            }
+        }
+        let near = match within.len() >= want && !within.is_empty() {
+            true => within,
+            false => self.index.knn(centre, PENETRATION_NEIGHBOURS),
+        };
+        Some(near.into_iter().map(|nb| nb.index).collect())
     }
 
     /// Where the ball sits with the arm holding its mount at `tool`, and how hard it presses:
@@ -162,6 +233,14 @@ impl VirtualPart {
         dt: f64,
         cfg: &GrindConfig,
     ) -> Option<HertzContact> {
+        // the points under the ball where the arm holds it: asked once a step, by the seat
+        // and by the caller's contact normal after the step (`penetration`)
+        let near = self.near_tool(&tool.centre, cfg.ball_radius_mm);
+        self.last_near = Some(LastNear {
+            centre: tool.centre,
+            ball_mm: cfg.ball_radius_mm,
+            near,
+        });
         let (i, ball, depth) = self.seat(tool, cfg)?;
         let contact = HertzContact::hertz(
             depth,
