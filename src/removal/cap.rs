@@ -309,4 +309,101 @@ mod tests {
         assert_eq!(lifted, vec![false, true, true]);
         assert!(apply(&a, &dwell, 3)[2] == 0.0);
     }
+
+    /// A flat part: a bump 0.1 mm high for x < 0.5 mm, conform surface beyond it, and one
+    /// conform point at (1.5, 0) already ground to -0.04 mm (LoD95 0.005 mm, tolerance
+    /// 0.05 mm: it may lose 0.005 mm). Three contacts over the bump at x = -1, -0.5, 0 with
+    /// 5 s each: where the removal lands as predicted their patches (0.6 mm radius, plus a
+    /// quarter millimetre of piece) do not reach the point; landed 1 mm toward +x, the last
+    /// one grinds it below the tolerance. Held against a 1 mm landing margin, no landing
+    /// takes it below its budget, and the bump is still ground where it is predicted.
+    #[test]
+    fn a_conform_point_beside_the_contacts_keeps_its_budget_wherever_they_land() {
+        let tolerance = 0.05;
+        let grid = 41;
+        let cores: Vec<SurfacePoint> = (0..grid * grid)
+            .map(|i| {
+                let (x, y) = (0.1 * (i % grid) as f64 - 2.0, 0.1 * (i / grid) as f64 - 2.0);
+                let distance = match ((x - 1.5).abs() < 1e-9 && y.abs() < 1e-9, x < 0.5) {
+                    (true, _) => -0.04,
+                    (false, true) => 0.1,
+                    (false, false) => 0.0,
+                };
+                SurfacePoint {
+                    position: nalgebra::Point3::new(x, y, 0.0),
+                    normal: Vector3::z(),
+                    distance,
+                    uncertainty: 0.005,
+                    region: if x < 0.5 { 0 } else { -1 },
+                }
+            })
+            .collect();
+        let rim = cores
+            .iter()
+            .position(|c| c.distance == -0.04)
+            .expect("the grid holds (1.5, 0)");
+        let tool = ToolModel::default();
+        let influence = Influence::new(&tool, 3.0);
+        let tilt = 20f64.to_radians();
+        let contacts: Vec<Contact> = [-1.0, -0.5, 0.0]
+            .iter()
+            .map(|&x| Contact {
+                point: nalgebra::Point3::new(x, 0.0, 0.0),
+                normal: Vector3::z(),
+                along: Vector3::y(),
+                spin: -Vector3::new(tilt.sin(), 0.0, tilt.cos()),
+                length: 0.25,
+                force_ratio: 1.0,
+                offset: Vector3::zeros(),
+                depth_mm: tool.preload_mm,
+            })
+            .collect();
+        let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
+        let reach = Reach::new(&geometry);
+        let landed = |c: &Contact, dx: f64| Contact {
+            offset: Vector3::new(dx, 0.0, 0.0),
+            ..*c
+        };
+        let removal_at = |dwell: &[f64], dx: f64| {
+            let moved: Vec<Contact> = contacts.iter().map(|c| landed(c, dx)).collect();
+            apply(&reach.matrix(&influence, &moved), dwell, cores.len())
+        };
+        let mut plan = RegionRemoval {
+            dwell: vec![5.0; 3],
+            lifted: vec![false; 3],
+            removal: Vec::new(),
+            before: cores.iter().map(|c| c.distance).collect(),
+        };
+        let budget = -0.04 + tolerance - 0.005;
+        let (predicted, shifted) = (removal_at(&plan.dwell, 0.0), removal_at(&plan.dwell, 1.0));
+        assert!(predicted[rim] == 0.0, "{}", predicted[rim]);
+        assert!(
+            -0.04 - shifted[rim] < -tolerance,
+            "the case must gouge when landed 1 mm off: {}",
+            shifted[rim]
+        );
+        let limit: Vec<f64> = (cores.iter())
+            .map(|c| (c.distance + tolerance - c.uncertainty).max(0.0))
+            .collect();
+        let solve = RemovalConfig::default();
+        let model = (&tool, &influence, &solve);
+        hold_landed(
+            (&contacts, &contacts),
+            (&cores, &limit),
+            model,
+            &[1.0; 3],
+            &mut plan,
+        );
+        for dx in [0.0, 0.25, 0.5, 0.75, 1.0] {
+            let r = removal_at(&plan.dwell, dx)[rim];
+            assert!(r <= budget * (1.0 + 2.0 * SLACK), "landed {dx} mm off: {r}");
+        }
+        // the contacts away from the point still grind the bump
+        let kept = removal_at(&plan.dwell, 0.0);
+        let bump = cores
+            .iter()
+            .position(|c| (c.position.x + 1.0).abs() < 1e-9 && c.position.y.abs() < 1e-9)
+            .unwrap();
+        assert!(kept[bump] > 0.02, "{:?} {}", plan.dwell, kept[bump]);
+    }
 }
