@@ -338,7 +338,13 @@ pub fn set_dwell(
         let model = (setup.tool, &influence, &solve);
         removal::cap::hold_in_order((&placed, &contacts), (&cores, &limit), model, &mut plan);
     }
-    guard_rim((&placed, &contacts), bench, (&influence, &solve), tolerance, &mut plan);
+    guard_rim(
+        (&placed, &contacts),
+        bench,
+        (&influence, &solve),
+        tolerance,
+        &mut plan,
+    );
     let planned = runs.iter_mut().flatten().zip(&plan.dwell).zip(&contacts);
     for ((piece, t), c) in planned {
         piece.dwell_s = Some(*t);
