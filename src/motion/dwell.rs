@@ -517,3 +517,44 @@ pub fn leave_out(
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    fn point(distance: f64, region: i64) -> SurfacePoint {
+        SurfacePoint {
+            position: Point3::origin(),
+            normal: Vector3::z(),
+            distance,
+            uncertainty: 0.01,
+            region,
+        }
+    }
+
+    /// Case 101's gouged rim point read -0.012 mm after grind 1 (true -0.039 mm): its budget
+    /// counts the loss at 1/0.3, so the next grind may take nothing there, where the measured
+    /// budget (-0.012 + 0.05 - 0.01 = 0.028 mm) let it take 0.029 mm to -0.068 mm true. A
+    /// region's point reads its broad removal as it is; a proven excess keeps its whole
+    /// budget; a pit takes nothing.
+    #[test]
+    fn a_rim_point_read_below_nominal_counts_its_loss_as_the_rescan_underreads_it() {
+        let tol = 0.05;
+        let budget = rim_budget(
+            &[
+                point(-0.012, -1),
+                point(0.004, -1),
+                point(-0.012, 2),
+                point(0.2, 2),
+                point(-0.2, 3),
+                point(f64::NAN, -1),
+            ],
+            tol,
+        );
+        let want = [0.0, 0.044, 0.028, 0.24, 0.0, 0.04];
+        for (got, want) in budget.iter().zip(want) {
+            assert!((got - want).abs() < 1e-12, "{budget:?}");
+        }
+    }
+}
