@@ -136,7 +136,8 @@ const RINGS_PER_PATCH: f64 = 1.0;
 
 /// Fewest directions of a ring of landing shifts (8: every 45 degrees); a wider ring takes
 /// one direction per patch radius of its circumference, so that neighbouring shifts' patches
-/// overlap.
+/// overlap. Between two directions the removal at a guarded point can exceed what either
+/// predicts: in the test below by 16 % (0.0058 mm against a 0.005 mm budget).
 const MIN_DIRECTIONS: usize = 8;
 
 /// The landing shifts a region's removal is held against (issue 50, "no grind takes conform
@@ -237,6 +238,12 @@ pub fn hold_landed(
 mod tests {
     use super::*;
     use crate::removal::influence::apply;
+
+    /// How far over its budget a guarded point may go when the removal lands between two
+    /// directions of a ring (1.25): [`landings`] spaces them a patch radius apart on the
+    /// circumference, so a landing between them puts the patch's edge up to about a quarter
+    /// of its radius nearer the point; the test below measured 0.0058 mm against 0.005 mm.
+    const BETWEEN_LANDINGS: f64 = 1.25;
 
     /// Three contacts in a row over three points, each reaching its own point fully and its
     /// neighbours by half (a patch wider than the piece): the middle point takes 0.5 + 1 + 0.5
@@ -394,9 +401,31 @@ mod tests {
             &[1.0; 3],
             &mut plan,
         );
-        for dx in [0.0, 0.25, 0.5, 0.75, 1.0] {
-            let r = removal_at(&plan.dwell, dx)[rim];
-            assert!(r <= budget * (1.0 + 2.0 * SLACK), "landed {dx} mm off: {r}");
+        // held on every landing of the scenarios...
+        let margin = [1.0; 3];
+        for shifts in landings(&contacts, &margin, influence.patch_radius()) {
+            let moved: Vec<Contact> = (contacts.iter().zip(&shifts))
+                .map(|(c, s)| Contact { offset: *s, ..*c })
+                .collect();
+            let r = apply(&reach.matrix(&influence, &moved), &plan.dwell, cores.len())[rim];
+            assert!(
+                r <= budget * (1.0 + 2.0 * SLACK),
+                "landed {:?}: {r}",
+                shifts[0]
+            );
+        }
+        // ...and between them within [`BETWEEN_LANDINGS`] of the budget (a sweep every 5
+        // degrees and 0.1 mm; +x itself lies between two directions of the outer ring)
+        for step in 0..72 {
+            let angle = (5.0 * step as f64).to_radians();
+            for r in 1..=10 {
+                let d = 0.1 * r as f64 * Vector3::new(angle.cos(), angle.sin(), 0.0);
+                let moved: Vec<Contact> = (contacts.iter())
+                    .map(|c| Contact { offset: d, ..*c })
+                    .collect();
+                let got = apply(&reach.matrix(&influence, &moved), &plan.dwell, cores.len());
+                assert!(got[rim] <= BETWEEN_LANDINGS * budget, "{d:?}: {}", got[rim]);
+            }
         }
         // the contacts away from the point still grind the bump
         let kept = removal_at(&plan.dwell, 0.0);
