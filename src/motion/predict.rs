@@ -11,7 +11,8 @@ use std::collections::HashMap;
 use nalgebra::{Point3, Vector3};
 
 use super::dwell::{
-    cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot, Setup,
+    cores_landed, cores_near, joint_error, landing_margin, placed_contacts, pressed_contacts,
+    reference_from_robot, Setup,
 };
 use super::error::PlanError;
 use super::free_motion::{pressed, Assembly};
@@ -197,7 +198,7 @@ fn region_verdict(
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let placed = placed_contacts(pieces, setup);
     let contacts = pressed_contacts(&placed, inspection, setup, allowance_mm);
-    let idx = cores_near(inspection, setup.index, &contacts, &influence);
+    let (idx, nominal) = verdict_points(inspection, setup, &contacts, &influence);
     let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
         .iter()
         .map(|&i| {
@@ -244,13 +245,21 @@ fn region_verdict(
             .collect()
     };
     let (low, median) = (&in_order(&quantiles.low), &in_order(&quantiles.median));
-    let lowest = low.iter().copied().fold(f64::INFINITY, f64::min);
     if let Some(why) = over_grind(low, &before, tolerance, mc.quantile) {
         return (Err(why), quantiles);
     }
-    let rows = idx
+    // the report and predicted.csv keep the core points in reach as predicted
+    let pick = |v: &[f64]| -> Vec<f64> {
+        (v.iter().zip(&nominal))
+            .filter(|p| *p.1)
+            .map(|p| *p.0)
+            .collect()
+    };
+    let lowest = pick(low).into_iter().fold(f64::INFINITY, f64::min);
+    let rows: Vec<PredictedRow> = idx
         .iter()
         .enumerate()
+        .filter(|(k, _)| nominal[*k])
         .map(|(k, &i)| {
             let p = inspection.points[i].position;
             PredictedRow {
@@ -279,12 +288,31 @@ fn region_verdict(
                 feed_mm_s: p.feed_mm_s,
             })
             .collect(),
-        core_points: idx.len(),
-        before: Stats::of(&before, tolerance, area),
-        after: Stats::of(&after, tolerance, area),
+        core_points: rows.len(),
+        before: Stats::of(&pick(&before), tolerance, area),
+        after: Stats::of(&pick(&after), tolerance, area),
         after_low_p95_mm: if lowest.is_finite() { lowest } else { 0.0 },
     };
     (Ok((prediction, rows)), quantiles)
+}
+
+/// The core points a region's verdict checks (inspection indices, in index order) and which
+/// of them are in the nominal reach of `contacts` (`cores_near`, the report's): those in reach
+/// of a contact landed anywhere within its landing margin (`dwell::cores_landed`), so that the
+/// Monte Carlo's draws are checked at the conform rim the dwell solve guards too.
+fn verdict_points(
+    inspection: &Inspection,
+    setup: &Setup,
+    contacts: &[removal::Contact],
+    influence: &Influence,
+) -> (Vec<usize>, Vec<bool>) {
+    let near = cores_near(inspection, setup.index, contacts, influence);
+    let margin: Vec<f64> = (contacts.iter())
+        .map(|c| landing_margin(c, setup))
+        .collect();
+    let wide = cores_landed(inspection, setup.index, contacts, influence, &margin);
+    let nominal = wide.iter().map(|i| near.binary_search(i).is_ok()).collect();
+    (wide, nominal)
 }
 
 /// Share of the tolerance a core point already below `-tolerance` before grinding (a pit, or
