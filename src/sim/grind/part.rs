@@ -183,22 +183,19 @@ impl VirtualPart {
     fn near(&self, centre: &Point3<f64>, ball_mm: f64) -> Option<Vec<usize>> {
         let reach = ball_mm + CONTACT_SEARCH_MARGIN_MM;
         let r2 = reach * reach;
-        let want = PENETRATION_NEIGHBOURS.min(self.index.len());
-        let within = match r2.is_finite() && r2 >= 0.0 {
-            true => self.index.knn_within(centre, PENETRATION_NEIGHBOURS, reach),
-            false => Vec::new(),
-        };
-        if within.len() < want || within.is_empty() {
-            let nearest = self.index.nearest(centre)?;
-            if nearest.dist2 > r2 {
-                return None;
+        let want = PENETRATION_NEIGHBOURS.min(self.index.len()).max(1);
+        let indices = |v: Vec<_>| v.into_iter().map(|nb: crate::spatial::Neighbour| nb.index);
+        if r2.is_finite() {
+            let within = self.index.knn_within(centre, PENETRATION_NEIGHBOURS, reach);
+            if within.len() >= want {
+                return Some(indices(within).collect());
             }
         }
-        let near = match within.len() >= want && !within.is_empty() {
-            true => within,
-            false => self.index.knn(centre, PENETRATION_NEIGHBOURS),
-        };
-        Some(near.into_iter().map(|nb| nb.index).collect())
+        let nearest = self.index.nearest(centre)?;
+        if nearest.dist2 > r2 {
+            return None;
+        }
+        Some(indices(self.index.knn(centre, PENETRATION_NEIGHBOURS)).collect())
     }
 
     /// Where the ball sits with the arm holding its mount at `tool`, and how hard it presses:
