@@ -11,8 +11,7 @@
 //! force, and the sag); compensated it must be much nearer.
 mod common;
 
-use common::replay::{quantiles, tip_errors};
-use polishbot::motion::file::CompensationReport;
+use common::replay::{fully_compensated_p95, quantiles, tip_errors};
 use polishbot::motion::{plan_part, Plan, PlanConfig, SegmentKind};
 use polishbot::robot::{Robot, Workcell};
 use polishbot::sim::GrindConfig;
@@ -59,21 +58,6 @@ fn limit_stats(plan: &Plan, robot: &Robot, margin: f64) -> (usize, [usize; 5], f
             .fold(0.0, f64::max)
     });
     (any, per, most)
-}
-
-/// The 95th percentile of the tip error over the grinding samples the plan compensated in
-/// full, mm: the plan reports how many it corrected only in part (a joint at its limit:
-/// region 1's elbow), and those are the largest errors, so the fully compensated samples' p95
-/// is the `0.95 x (1 - partial share)` quantile of all of them. Under the rim guard the plan
-/// grinds 1,110 samples where it ground 3,668, the partial ones (72) are 6.5 % of them and the
-/// p95 of all (0.762 mm) is one of them (2026-12-06).
-fn fully_compensated_p95(errors: &[f64], report: Option<&CompensationReport>) -> f64 {
-    let share = report.map_or(0.0, |r| {
-        r.partial_samples as f64 / r.grinding_samples as f64
-    });
-    let mut x = errors.to_vec();
-    x.sort_by(f64::total_cmp);
-    x[((x.len() - 1) as f64 * 0.95 * (1.0 - share)).round() as usize]
 }
 
 /// Grinding samples of `plan`.
