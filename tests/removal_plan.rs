@@ -52,7 +52,8 @@ fn removal_contacts_are_pressed_in_and_out_only_under_the_grinding_rule() {
     // defect is a pit); a contact left out is one of a region the removal planner left out
     // (it over-grinds at the Monte Carlo's quantile), or one the collision check refused: the
     // demo's region 3 has 4 of its 103 path points next to a face 67 degrees away, where the
-    // ball pressed by the preload does not fit on the retract ("tool does not fit")
+    // ball pressed by the preload does not fit on the retract ("tool does not fit"); under the
+    // rim guard 2 of them, refused on the way in to a stroke ("no collision-free way in")
     assert!(
         removal.regions.len() >= 4,
         "{} regions",
@@ -62,7 +63,8 @@ fn removal_contacts_are_pressed_in_and_out_only_under_the_grinding_rule() {
     let mut refused = 0;
     for u in &plan.reachability.unreachable {
         if planned.contains(&u.region) {
-            assert!(u.reason.contains("tool does not fit"), "{u:?}");
+            let collision = ["tool does not fit", "no collision-free way in"];
+            assert!(collision.iter().any(|c| u.reason.contains(c)), "{u:?}");
             refused += 1;
         } else {
             assert!(u.reason.contains("over-grinds"), "{}", u.reason);
@@ -236,19 +238,26 @@ fn tall_bump_plan(name: &str, max_pass: f64) -> (Plan, PlanConfig) {
 }
 
 /// The planner's real path to a region's allowance (`motion/by_region.rs`: set_dwell, the
-/// rehearsal's Monte Carlo, the re-solve): a bump that over-grinds at the Monte Carlo's quantile
-/// with the default allowance is planned, not left out, with its allowance raised by whole
-/// steps of `ALLOWANCE_STEP_SHARE` x tolerance until the quantile stays within the tolerance.
+/// rehearsal's Monte Carlo, the re-solve): a tall bump is planned, not left out, at an
+/// allowance where its Monte Carlo quantile stays within the tolerance. Before the rim guard
+/// (issue 50) the bump over-ground at the quantile with the default allowance and was raised
+/// by whole steps of `ALLOWANCE_STEP_SHARE` x tolerance; under it every core point within a
+/// contact's reach plus the landing margin keeps its removal within its budget under the
+/// landing shifts, and the bump plans at the default allowance (measured 0 mm, 2026-12-06).
+/// A raise, where one is taken, is a whole step or a step halved or bisected back
+/// (`ALLOWANCE_STEP_HALVINGS` and `ALLOWANCE_BISECTIONS`, 2 each: sixteenths of a step at the
+/// finest), never below the default.
 #[test]
-fn a_tall_bump_is_planned_with_its_allowance_raised_in_steps() {
-    // no cap on one pass's removal here (the next test has it): the steps start at 0
+fn a_tall_bump_is_planned_at_an_allowance_its_monte_carlo_passes() {
+    // no cap on one pass's removal here (the next test has it)
     let (p, config) = tall_bump_plan("tall_bump", 1.0);
     let removal = p.removal.as_ref().expect("a removal report");
     let allowance = removal.regions[0].allowance_mm;
-    let steps = (allowance - config.allowance_mm) / (ALLOWANCE_STEP_SHARE * TOLERANCE_MM);
-    println!("allowance {allowance:.3} mm ({steps:.3} steps)");
+    let sixteenths =
+        16.0 * (allowance - config.allowance_mm) / (ALLOWANCE_STEP_SHARE * TOLERANCE_MM);
+    println!("allowance {allowance:.4} mm ({sixteenths:.3} sixteenths of a step)");
     assert!(
-        steps > 0.5 && (steps - steps.round()).abs() < 1e-9,
+        sixteenths > -1e-9 && (sixteenths - sixteenths.round()).abs() < 1e-6,
         "allowance {allowance} mm from {} mm",
         config.allowance_mm
     );
