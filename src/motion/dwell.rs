@@ -164,8 +164,13 @@ pub const UNMEASURED_LANDING_MM: f64 = 1.8;
 /// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
 /// the aim moves the raster by it, but the part's excess and the axis the arm really holds
 /// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
-/// the carried removal shift's magnitude, at least [`UNMEASURED_LANDING_MM`] (its own error
-/// is of its size: the registration reads the stroke spacing's ripple).
+/// the carried removal shift's magnitude (its own error is of its size: the registration
+/// reads the stroke spacing's ripple). Before any grind's reach was measured the shift's term
+/// is at least [`UNMEASURED_LANDING_MM`]; once the loop measured how far beyond its plans'
+/// footprints the removal really reached (`motion::aim::Aim::reach_mm`, read from the
+/// rescans by `cell::removal_reach`), the margin is the larger of the three terms and that
+/// reach: the measured reach holds the landing error and the footprint's widening the fixed
+/// floor stood for, on this arm and tool.
 pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
     let (tool, config) = (setup.tool, setup.config);
     let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
@@ -178,7 +183,10 @@ pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
         removal::ComplianceDirection::SurfaceNormal => 0.0,
     };
     let carried = config.aim.shift_at(&c.point, &c.normal).norm();
-    tip + slide + carried.max(UNMEASURED_LANDING_MM)
+    match config.aim.reach_mm {
+        Some(reach) => (tip + slide + carried).max(reach),
+        None => tip + slide + carried.max(UNMEASURED_LANDING_MM),
+    }
 }
 
 /// Share of a conform point's loss the rescan reads (0.3): outside every region the removal
