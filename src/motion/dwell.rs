@@ -149,8 +149,10 @@ pub(crate) fn cores_near(
     (0..keep.len()).filter(|&i| keep[i]).collect()
 }
 
-/// Landing error of a grind whose removal shift was not measured yet (a loop's first plan), or
-/// least registration error of a measured one, mm (1.8): the documented arm's first grinds
+/// Landing error and reach beyond the model's patch of a grind before the loop measured how far
+/// its removal reaches (a loop's first plan, a plan outside a loop: the prior of
+/// [`landing_margin`]; from grind 2 on the reach read from the rescans replaces it,
+/// `cell::removal_reach`), mm (1.8): the documented arm's first grinds
 /// landed about 0.9 mm from their plan (0.6-0.7 mm of it on the ideal arm too: the planner's
 /// removal sits 0.2-0.45 mm from the simulator's), the shift registration misreads by as much
 /// (the demo's region 1: 1.50 mm read where 0.28 mm was true), and the removal reaches
