@@ -67,7 +67,7 @@ impl Default for ReachConfig {
 
 /// What one grind's reach reading found.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Reach {
+pub struct RemovalReach {
     /// How far beyond the predicted footprint the measured removal reached, mm (0: no bin
     /// stands above the far field).
     pub reach_mm: f64,
@@ -82,7 +82,7 @@ pub struct Reach {
 /// field whose mean stands above the far field's mean by `cfg.z` standard errors (the far
 /// field's scatter, at least `cfg.noise_floor_mm`, over the bin's points) and by
 /// `cfg.least_mm`. None when the far field holds fewer than `cfg.least_points`.
-pub fn reach_of(points: &[(f64, f64)], cfg: &ReachConfig) -> Option<Reach> {
+pub fn reach_of(points: &[(f64, f64)], cfg: &ReachConfig) -> Option<RemovalReach> {
     let far: Vec<f64> = (points.iter())
         .filter(|(d, _)| (cfg.far_mm[0]..cfg.far_mm[1]).contains(d))
         .map(|(_, m)| *m)
@@ -114,7 +114,7 @@ pub fn reach_of(points: &[(f64, f64)], cfg: &ReachConfig) -> Option<Reach> {
             reach_mm = outer;
         }
     }
-    Some(Reach {
+    Some(RemovalReach {
         reach_mm,
         far_mm: [mean, sd],
         bins,
@@ -131,7 +131,7 @@ pub fn measure(
     after: &Inspection,
     predicted: &[f64],
     cfg: &ReachConfig,
-) -> Option<Reach> {
+) -> Option<RemovalReach> {
     let inside = |i: usize| predicted.get(i).is_some_and(|p| *p >= cfg.planned_mm);
     let footprint: Vec<Point3<f64>> = (before.points.iter().enumerate())
         .filter(|(i, _)| inside(*i))
