@@ -3,8 +3,10 @@
 //! call it. Method: docs/ALGORITHMS.md, "Cell: streaming a plan".
 //!
 //! Front function: [`execute`] with a [`RunConfig`] (result: [`RunReport`]); the measured
-//! shift of a grind's removal, [`removal_shift::register`].
+//! shift of a grind's removal, [`removal_shift::register`]; how far beyond its plan's
+//! footprint it reached, [`removal_reach::measure`].
 mod reach;
+pub mod removal_reach;
 pub mod removal_shift;
 mod stream;
 

@@ -540,6 +540,7 @@ pub fn carry(shifts: &[RegionShift], aim: &Aim, cfg: &ShiftConfig) -> Result<Car
         0 if aim.regions.is_empty() => aim.clone(),
         _ => Aim {
             first_pass_share: None,
+            reach_mm: aim.reach_mm,
             common_mm: arr(common),
             regions: (shifts.iter().zip(&regions))
                 .map(|(r, c)| AimRegion {

@@ -69,6 +69,11 @@ pub struct Aim {
     pub common_mm: [f64; 3],
     /// Each measured region's own shift.
     pub regions: Vec<AimRegion>,
+    /// How far beyond its plan's predicted footprint the removal of the loop's grinds reached,
+    /// the largest over them, mm (`cell::removal_reach`; None: not measured yet, and the
+    /// landing margin keeps its floor, `motion::dwell::UNMEASURED_LANDING_MM`). The landing
+    /// margin is at least it (`motion::dwell::landing_margin`).
+    pub reach_mm: Option<f64>,
 }
 
 impl Aim {
@@ -115,6 +120,11 @@ impl Aim {
         {
             return Err(format!(
                 "`aim.first_pass_share` = {s} is outside 0.01..=100 (x tolerance)"
+            ));
+        }
+        if let Some(r) = self.reach_mm.filter(|r| !(r.is_finite() && *r >= 0.0)) {
+            return Err(format!(
+                "`aim.reach_mm` = {r} is not a finite distance >= 0 (mm)"
             ));
         }
         let finite = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
@@ -196,6 +206,7 @@ mod tests {
                 reach_mm: 3.0,
                 shift_mm: [0.0, 2.0, 0.5],
             }],
+            reach_mm: None,
         };
         let z = Vector3::z();
         let own = aim.shift_at(&Point3::new(11.0, 1.0, 0.0), &z);
@@ -217,5 +228,10 @@ mod tests {
             ..Aim::default()
         };
         assert!(bad.check().unwrap_err().contains("aim.common_mm"));
+        let bad = Aim {
+            reach_mm: Some(-1.0),
+            ..Aim::default()
+        };
+        assert!(bad.check().unwrap_err().contains("aim.reach_mm"));
     }
 }

@@ -149,8 +149,10 @@ pub(crate) fn cores_near(
     (0..keep.len()).filter(|&i| keep[i]).collect()
 }
 
-/// Landing error of a grind whose removal shift was not measured yet (a loop's first plan), or
-/// least registration error of a measured one, mm (1.8): the documented arm's first grinds
+/// Landing error and reach beyond the model's patch of a grind before the loop measured how far
+/// its removal reaches (a loop's first plan, a plan outside a loop: the prior of
+/// [`landing_margin`]; from grind 2 on the reach read from the rescans replaces it,
+/// `cell::removal_reach`), mm (1.8): the documented arm's first grinds
 /// landed about 0.9 mm from their plan (0.6-0.7 mm of it on the ideal arm too: the planner's
 /// removal sits 0.2-0.45 mm from the simulator's), the shift registration misreads by as much
 /// (the demo's region 1: 1.50 mm read where 0.28 mm was true), and the removal reaches
@@ -164,8 +166,13 @@ pub const UNMEASURED_LANDING_MM: f64 = 1.8;
 /// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
 /// the aim moves the raster by it, but the part's excess and the axis the arm really holds
 /// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
-/// the carried removal shift's magnitude, at least [`UNMEASURED_LANDING_MM`] (its own error
-/// is of its size: the registration reads the stroke spacing's ripple).
+/// the carried removal shift's magnitude (its own error is of its size: the registration
+/// reads the stroke spacing's ripple). Before any grind's reach was measured the shift's term
+/// is at least [`UNMEASURED_LANDING_MM`]; once the loop measured how far beyond its plans'
+/// footprints the removal really reached (`motion::aim::Aim::reach_mm`, read from the
+/// rescans by `cell::removal_reach`), the margin is the larger of the three terms and that
+/// reach: the measured reach holds the landing error and the footprint's widening the fixed
+/// floor stood for, on this arm and tool.
 pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
     let (tool, config) = (setup.tool, setup.config);
     let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
@@ -178,7 +185,10 @@ pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
         removal::ComplianceDirection::SurfaceNormal => 0.0,
     };
     let carried = config.aim.shift_at(&c.point, &c.normal).norm();
-    tip + slide + carried.max(UNMEASURED_LANDING_MM)
+    match config.aim.reach_mm {
+        Some(reach) => (tip + slide + carried).max(reach),
+        None => tip + slide + carried.max(UNMEASURED_LANDING_MM),
+    }
 }
 
 /// Share of a conform point's loss the rescan reads (0.3): outside every region the removal
