@@ -9,7 +9,9 @@ use super::error::PlanError;
 use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{aim, collide, dwell, finish, order, predict, press_depth, program, raster, surface};
+use super::{
+    aim, collide, dwell, finish, order, predict, press_depth, program, raster, soften, surface,
+};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::units::mm;
@@ -119,19 +121,29 @@ pub(crate) fn plan_regions(
             Some(_) => config.finish.turns(),
         };
         let strokes = finish::strokes((region, &members), &surface, &geometry, &offsets, &turns);
+        // the strokes before the aim and the axes the trial walk held (a spindle-axis mount)
+        let mut unaimed = None;
+        let back = dwell::reference_from_robot(workcell);
         let strokes = match tool {
             Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
                 // a first walk finds the axis held at each point (`aim`) and the joint
                 // angles the force is held at (`press_depth`)
                 let trial = walk(&strokes, &mut prev.clone(), &mut Vec::new(), &mut 0);
                 let strokes = press_depth::limited(&strokes, &trial, inspection, ctx);
-                let back = dwell::reference_from_robot(workcell);
                 let held = trial.iter().flatten().flat_map(|pass| &pass.points);
-                let held = held.map(|p| (p.surface_mm, p.axis));
-                aim::aimed(&strokes, held, &back, &surface)
+                let held: Vec<_> = held.map(|p| (p.surface_mm, p.axis)).collect();
+                let aimed = aim::aimed(&strokes, held.iter().copied(), &back, &surface);
+                unaimed = Some((strokes, held));
+                aimed
             }
             _ => strokes,
         };
+        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
+        let start = (
+            prev.clone(),
+            reachability.unreachable.len(),
+            reachability.jumps,
+        );
         let runs = walk(
             &strokes,
             &mut prev,
@@ -142,35 +154,137 @@ pub(crate) fn plan_regions(
             None => runs,
             // nothing reachable: every point is already recorded with the reason
             Some(_) if runs.is_empty() => runs,
-            Some(_) => {
+            Some(t) => {
+                let allowance = ctx.config.allowance_mm;
+                let first = dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?;
+                let mut walked = Walked {
+                    runs,
+                    strokes,
+                    dwelled: first,
+                };
+                if let Some((limited, held)) = &unaimed {
+                    let again = |soft: &[raster::Stroke]| {
+                        let aimed = aim::aimed(soft, held.iter().copied(), &back, &surface);
+                        let mut at = start.0.clone();
+                        let (mut lost, mut jumps) = (Vec::new(), 0);
+                        let runs = walk(&aimed, &mut at, &mut lost, &mut jumps);
+                        (aimed, runs, at, lost, jumps)
+                    };
+                    let depth = soften::SOFT_DEPTH_SHARE * t.preload_mm;
+                    if let Some(w) =
+                        soften_region(&walked, limited, depth, again, (region, inspection, ctx))?
+                    {
+                        let (kept, lost, jumps, at) = w;
+                        prev = at;
+                        reachability.unreachable.truncate(start.1);
+                        reachability.unreachable.extend(lost);
+                        reachability.jumps = start.2 + jumps;
+                        walked = kept;
+                    }
+                }
                 let unreachable = &mut reachability.unreachable;
-                dwell_region(runs, &strokes, region, &bench, &mut out, unreachable)?
+                dwell_region(walked, region, &bench, &mut out, unreachable)?
             }
         };
         out.runs.extend(runs);
-        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
         out.counts.insert(region.id, (offsets.len(), total));
     }
     Ok(out)
 }
 
-/// Removal mode: sets the dwell of one region's walked `runs` at the configured allowance
-/// and settles it (`settle`); returns the runs to assemble (none when it is left out, its
-/// points recorded with the reason) and records it in `out.settled`.
-fn dwell_region(
+/// A region's strokes as walked, its walked runs and their dwell set at the configured
+/// allowance (`dwell::set_dwell`).
+struct Walked {
     runs: Vec<program::Run>,
-    strokes: &[raster::Stroke],
+    strokes: Vec<raster::Stroke>,
+    dwelled: Result<dwell::Dwelled, String>,
+}
+
+/// The pieces of `w` the removal's limits lifted (`dwell::Dwelled::lifted`; every walked
+/// piece when they lifted them all, `dwell::NOTHING_TO_GRIND`) and how many one-contact
+/// pieces are ground.
+fn lifted_and_ground(w: &Walked) -> (Vec<program::PlannedPass>, usize) {
+    match &w.dwelled {
+        Ok(d) => (d.lifted.clone(), d.runs.iter().map(Vec::len).sum()),
+        Err(why) if why.starts_with(dwell::NOTHING_TO_GRIND) => {
+            (w.runs.iter().flatten().cloned().collect(), 0)
+        }
+        Err(_) => (Vec::new(), 0),
+    }
+}
+
+/// A region walked again with the contacts the removal's limits lifted commanded `depth` mm
+/// deep (`soften::softened` of the region's strokes before the aim, `limited`), when that
+/// grinds more of its contacts: the region walked so (`again` aims and walks strokes from the
+/// region's start: the aimed strokes, the runs, the pose it ends at, the points it left out
+/// and its jumps), with those points, jumps and the end pose; None when nothing was lifted or
+/// the softer contacts grind no more.
+#[allow(clippy::type_complexity)]
+fn soften_region(
+    w: &Walked,
+    limited: &[raster::Stroke],
+    depth: f64,
+    again: impl Fn(
+        &[raster::Stroke],
+    ) -> (
+        Vec<raster::Stroke>,
+        Vec<program::Run>,
+        Vec<f64>,
+        Vec<UnreachablePoint>,
+        usize,
+    ),
+    (region, inspection, ctx): (&RegionInfo, &Inspection, &dwell::Setup),
+) -> Result<Option<(Walked, Vec<UnreachablePoint>, usize, Vec<f64>)>, PlanError> {
+    let (lifted, ground) = lifted_and_ground(w);
+    let Some(soft) = soften::softened(limited, &w.strokes, &lifted, depth) else {
+        return Ok(None);
+    };
+    let (strokes, runs, at, lost, jumps) = again(&soft);
+    if runs.is_empty() {
+        return Ok(None);
+    }
+    let allowance = ctx.config.allowance_mm;
+    let dwelled = dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?;
+    let kept = Walked {
+        runs,
+        strokes,
+        dwelled,
+    };
+    let (still, now) = lifted_and_ground(&kept);
+    let report = format!(
+        "region {}: {} contacts lifted over by the removal's limits, commanded {depth:.2} mm \
+         deep instead: {} still lifted, one-contact pieces ground {ground} -> {now}",
+        region.id,
+        lifted.len(),
+        still.len()
+    );
+    tracing::info!("{report}");
+    if std::env::var_os("POLISHBOT_DEBUG_REACH").is_some() {
+        eprintln!("DBG soften {report}");
+    }
+    Ok((now > ground).then_some((kept, lost, jumps, at)))
+}
+
+/// Removal mode: settles one region from its walked runs with the dwell set at the
+/// configured allowance (`settle`); returns the runs to assemble (none when it is left out,
+/// its points recorded with the reason) and records it in `out.settled`.
+fn dwell_region(
+    walked: Walked,
     region: &RegionInfo,
     bench: &Bench,
     out: &mut Planned,
     unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Vec<program::Run>, PlanError> {
-    let (inspection, ctx) = (bench.inspection, bench.ctx);
-    let allowance = ctx.config.allowance_mm;
-    let dwelled = match dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)? {
+    let ctx = bench.ctx;
+    let Walked {
+        runs,
+        strokes,
+        dwelled,
+    } = walked;
+    let dwelled = match dwelled {
         Ok(dwelled) => dwelled,
         Err(reason) => {
-            dwell::leave_out(strokes, &reason, ctx.workcell, unreachable);
+            dwell::leave_out(&strokes, &reason, ctx.workcell, unreachable);
             return Ok(Vec::new());
         }
     };

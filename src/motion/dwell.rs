@@ -161,7 +161,9 @@ pub const UNMEASURED_LANDING_MM: f64 = 1.8;
 
 /// How far from where a contact's removal is predicted it may land, mm: the tool-tip error
 /// the Monte Carlo draws (`removal::montecarlo::tip_error`), the spring-loaded spindle's
-/// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
+/// slide `depth x tan(tilt)` (the depth the contact is commanded, `Contact::depth_mm`: the
+/// spring's compression and so the slide scale with it; its patch lands that far from under
+/// the commanded centre;
 /// the aim moves the raster by it, but the part's excess and the axis the arm really holds
 /// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
 /// the carried removal shift's magnitude, at least [`UNMEASURED_LANDING_MM`] (its own error
@@ -173,7 +175,7 @@ pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
         removal::ComplianceDirection::SpindleAxis => {
             let (tilt, _) = c.tilt();
             let cos = tilt.cos.max(removal::press::MIN_AXIS_COS);
-            tool.preload_mm * tilt.sin / cos
+            c.depth_mm * tilt.sin / cos
         }
         removal::ComplianceDirection::SurfaceNormal => 0.0,
     };
@@ -248,6 +250,12 @@ fn guard_rim(
     removal::cap::hold_landed((placed, contacts), (&guarded, &limit), model, &margin, plan);
 }
 
+/// How [`set_dwell`]'s reason begins when the removal's limits lifted every contact of a
+/// region (`removal::cap`): every one of them, even at its shortest dwell, removes more than
+/// a point in its reach may lose.
+pub(crate) const NOTHING_TO_GRIND: &str =
+    "region left out by the removal planner: nothing to grind";
+
 /// What the removal planner needs besides the runs.
 pub struct Setup<'a> {
     /// The compliant tool.
@@ -274,6 +282,9 @@ pub struct Dwelled {
     /// The pieces lifted over because a servo cannot hold their contact's force, each with
     /// the reason (joint, torque, force, depth).
     pub refused: Vec<(PlannedPass, String)>,
+    /// The pieces the removal's limits lifted over (`removal::cap`: at their shortest dwell
+    /// they still remove more than a point's cap or rim budget), as walked.
+    pub lifted: Vec<PlannedPass>,
 }
 
 /// Turns one region's runs into one-contact pieces carrying the dwell solved at `allowance`
@@ -369,11 +380,14 @@ pub fn set_dwell(
         piece.dwell_s = Some(*t);
         piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
     }
+    let lifted: Vec<PlannedPass> = (runs.iter().flatten().zip(&plan.lifted))
+        .filter(|(_, l)| **l)
+        .map(|(p, _)| p.clone())
+        .collect();
     let runs = lift_over(runs, &plan.lifted);
     if runs.is_empty() {
         return Ok(Err(format!(
-            "region left out by the removal planner: nothing to grind at an allowance of \
-             {allowance:.3} mm (the highest deviation in reach is {highest:.3} mm; every contact \
+            "{NOTHING_TO_GRIND} at an allowance of {allowance:.3} mm (the highest deviation in reach is {highest:.3} mm; every contact \
              would remove less than passing at full feed)"
         )));
     }
@@ -382,6 +396,7 @@ pub fn set_dwell(
         allowance,
         highest,
         refused: Vec::new(),
+        lifted,
     }))
 }
 
