@@ -161,9 +161,7 @@ pub const UNMEASURED_LANDING_MM: f64 = 1.8;
 
 /// How far from where a contact's removal is predicted it may land, mm: the tool-tip error
 /// the Monte Carlo draws (`removal::montecarlo::tip_error`), the spring-loaded spindle's
-/// slide `depth x tan(tilt)` (the depth the contact is commanded, `Contact::depth_mm`: the
-/// spring's compression and so the slide scale with it; its patch lands that far from under
-/// the commanded centre;
+/// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
 /// the aim moves the raster by it, but the part's excess and the axis the arm really holds
 /// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
 /// the carried removal shift's magnitude, at least [`UNMEASURED_LANDING_MM`] (its own error
@@ -175,7 +173,7 @@ pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
         removal::ComplianceDirection::SpindleAxis => {
             let (tilt, _) = c.tilt();
             let cos = tilt.cos.max(removal::press::MIN_AXIS_COS);
-            c.depth_mm * tilt.sin / cos
+            tool.preload_mm * tilt.sin / cos
         }
         removal::ComplianceDirection::SurfaceNormal => 0.0,
     };
