@@ -121,29 +121,12 @@ pub(crate) fn plan_regions(
             Some(_) => config.finish.turns(),
         };
         let strokes = finish::strokes((region, &members), &surface, &geometry, &offsets, &turns);
-        // the strokes before the aim and the axes the trial walk held (a spindle-axis mount)
-        let mut unaimed = None;
         let back = dwell::reference_from_robot(workcell);
-        let strokes = match tool {
-            Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
-                // a first walk finds the axis held at each point (`aim`) and the joint
-                // angles the force is held at (`press_depth`)
-                let trial = walk(&strokes, &mut prev.clone(), &mut Vec::new(), &mut 0);
-                let strokes = press_depth::limited(&strokes, &trial, inspection, ctx);
-                let held = trial.iter().flatten().flat_map(|pass| &pass.points);
-                let held: Vec<_> = held.map(|p| (p.surface_mm, p.axis)).collect();
-                let aimed = aim::aimed(&strokes, held.iter().copied(), &back, &surface);
-                unaimed = Some((strokes, held));
-                aimed
-            }
-            _ => strokes,
-        };
+        let bench_in = (inspection, ctx, &surface, &back);
+        let (strokes, unaimed) = aim_strokes(strokes, tool, &walk, &prev, bench_in);
         let total: usize = strokes.iter().map(|s| s.points.len()).sum();
-        let start = (
-            prev.clone(),
-            reachability.unreachable.len(),
-            reachability.jumps,
-        );
+        let start = (prev.clone(), reachability.unreachable.len());
+        let start = (start, reachability.jumps);
         let runs = walk(
             &strokes,
             &mut prev,
@@ -157,31 +140,22 @@ pub(crate) fn plan_regions(
             Some(t) => {
                 let allowance = ctx.config.allowance_mm;
                 let first = dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?;
-                let mut walked = Walked {
+                let walked = soften::Walked {
                     runs,
                     strokes,
                     dwelled: first,
                 };
-                if let Some((limited, held)) = &unaimed {
-                    let again = |soft: &[raster::Stroke]| {
-                        let aimed = aim::aimed(soft, held.iter().copied(), &back, &surface);
-                        let mut at = start.0.clone();
-                        let (mut lost, mut jumps) = (Vec::new(), 0);
-                        let runs = walk(&aimed, &mut at, &mut lost, &mut jumps);
-                        (aimed, runs, at, lost, jumps)
-                    };
-                    let depth = soften::SOFT_DEPTH_SHARE * t.preload_mm;
-                    if let Some(w) =
-                        soften_region(&walked, limited, depth, again, (region, inspection, ctx))?
-                    {
-                        let (kept, lost, jumps, at) = w;
-                        prev = at;
-                        reachability.unreachable.truncate(start.1);
-                        reachability.unreachable.extend(lost);
-                        reachability.jumps = start.2 + jumps;
-                        walked = kept;
-                    }
-                }
+                let held = unaimed.as_ref().map_or(&[][..], |u| &u.1[..]);
+                let again = |soft: &[raster::Stroke]| {
+                    let aimed = aim::aimed(soft, held.iter().copied(), &back, &surface);
+                    let mut at = start.0 .0.clone();
+                    let (mut lost, mut jumps) = (Vec::new(), 0);
+                    let runs = walk(&aimed, &mut at, &mut lost, &mut jumps);
+                    (aimed, runs, at, lost, jumps)
+                };
+                let soft = (unaimed.as_ref().map(|u| &u.0[..]), t.preload_mm, again);
+                let at = (&mut prev, &mut *reachability, (start.0 .1, start.1));
+                let walked = soften::soften_region(walked, soft, (region, inspection, ctx), at)?;
                 let unreachable = &mut reachability.unreachable;
                 dwell_region(walked, region, &bench, &mut out, unreachable)?
             }
@@ -192,91 +166,56 @@ pub(crate) fn plan_regions(
     Ok(out)
 }
 
-/// A region's strokes as walked, its walked runs and their dwell set at the configured
-/// allowance (`dwell::set_dwell`).
-struct Walked {
-    runs: Vec<program::Run>,
+/// Where a spindle-axis mount's trial walk (`walk` from `prev`) held the axis: each walked
+/// point's raster position and robot-frame axis.
+type Held = Vec<([f64; 3], [f64; 3])>;
+
+/// A region's `strokes` as the plan walks them: for a spring-loaded spindle (`tool`), a first
+/// walk finds the axis held at each point (`aim`) and the joint angles the force is held at
+/// (`press_depth`), and the strokes come back aimed, with the strokes before the aim
+/// (`press_depth::limited`) and the axes held; otherwise as they are.
+fn aim_strokes(
     strokes: Vec<raster::Stroke>,
-    dwelled: Result<dwell::Dwelled, String>,
-}
-
-/// The pieces of `w` the removal's limits lifted (`dwell::Dwelled::lifted`; every walked
-/// piece when they lifted them all, `dwell::NOTHING_TO_GRIND`) and how many one-contact
-/// pieces are ground.
-fn lifted_and_ground(w: &Walked) -> (Vec<program::PlannedPass>, usize) {
-    match &w.dwelled {
-        Ok(d) => (d.lifted.clone(), d.runs.iter().map(Vec::len).sum()),
-        Err(why) if why.starts_with(dwell::NOTHING_TO_GRIND) => {
-            (w.runs.iter().flatten().cloned().collect(), 0)
-        }
-        Err(_) => (Vec::new(), 0),
-    }
-}
-
-/// A region walked again with the contacts the removal's limits lifted commanded `depth` mm
-/// deep (`soften::softened` of the region's strokes before the aim, `limited`), when that
-/// grinds more of its contacts: the region walked so (`again` aims and walks strokes from the
-/// region's start: the aimed strokes, the runs, the pose it ends at, the points it left out
-/// and its jumps), with those points, jumps and the end pose; None when nothing was lifted or
-/// the softer contacts grind no more.
-#[allow(clippy::type_complexity)]
-fn soften_region(
-    w: &Walked,
-    limited: &[raster::Stroke],
-    depth: f64,
-    again: impl Fn(
+    tool: Option<&removal::ToolModel>,
+    walk: &impl Fn(
         &[raster::Stroke],
-    ) -> (
-        Vec<raster::Stroke>,
-        Vec<program::Run>,
-        Vec<f64>,
-        Vec<UnreachablePoint>,
-        usize,
+        &mut Vec<f64>,
+        &mut Vec<UnreachablePoint>,
+        &mut usize,
+    ) -> Vec<program::Run>,
+    prev: &[f64],
+    (inspection, ctx, surface, back): (
+        &Inspection,
+        &dwell::Setup,
+        &surface::Surface,
+        &nalgebra::Matrix3<f64>,
     ),
-    (region, inspection, ctx): (&RegionInfo, &Inspection, &dwell::Setup),
-) -> Result<Option<(Walked, Vec<UnreachablePoint>, usize, Vec<f64>)>, PlanError> {
-    let (lifted, ground) = lifted_and_ground(w);
-    let Some(soft) = soften::softened(limited, &w.strokes, &lifted, depth) else {
-        return Ok(None);
-    };
-    let (strokes, runs, at, lost, jumps) = again(&soft);
-    if runs.is_empty() {
-        return Ok(None);
+) -> (Vec<raster::Stroke>, Option<(Vec<raster::Stroke>, Held)>) {
+    match tool {
+        Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
+            let trial = walk(&strokes, &mut prev.to_vec(), &mut Vec::new(), &mut 0);
+            let strokes = press_depth::limited(&strokes, &trial, inspection, ctx);
+            let held = trial.iter().flatten().flat_map(|pass| &pass.points);
+            let held: Held = held.map(|p| (p.surface_mm, p.axis)).collect();
+            let aimed = aim::aimed(&strokes, held.iter().copied(), back, surface);
+            (aimed, Some((strokes, held)))
+        }
+        _ => (strokes, None),
     }
-    let allowance = ctx.config.allowance_mm;
-    let dwelled = dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?;
-    let kept = Walked {
-        runs,
-        strokes,
-        dwelled,
-    };
-    let (still, now) = lifted_and_ground(&kept);
-    let report = format!(
-        "region {}: {} contacts lifted over by the removal's limits, commanded {depth:.2} mm \
-         deep instead: {} still lifted, one-contact pieces ground {ground} -> {now}",
-        region.id,
-        lifted.len(),
-        still.len()
-    );
-    tracing::info!("{report}");
-    if std::env::var_os("POLISHBOT_DEBUG_REACH").is_some() {
-        eprintln!("DBG soften {report}");
-    }
-    Ok((now > ground).then_some((kept, lost, jumps, at)))
 }
 
 /// Removal mode: settles one region from its walked runs with the dwell set at the
 /// configured allowance (`settle`); returns the runs to assemble (none when it is left out,
 /// its points recorded with the reason) and records it in `out.settled`.
 fn dwell_region(
-    walked: Walked,
+    walked: soften::Walked,
     region: &RegionInfo,
     bench: &Bench,
     out: &mut Planned,
     unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Vec<program::Run>, PlanError> {
     let ctx = bench.ctx;
-    let Walked {
+    let soften::Walked {
         runs,
         strokes,
         dwelled,

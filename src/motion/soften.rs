@@ -14,9 +14,13 @@
 //! lifted.
 use std::collections::HashMap;
 
+use super::dwell;
+use super::error::PlanError;
 use super::press_depth::{ramp_stroke, MIN_DEPTH_SHARE};
-use super::program::PlannedPass;
+use super::program::{PlannedPass, Run};
 use super::raster::Stroke;
+use super::report::{Reachability, UnreachablePoint};
+use crate::repair::{Inspection, RegionInfo};
 
 /// Share of the preload a contact the removal's limits lifted is commanded at instead
 /// ([`MIN_DEPTH_SHARE`], 0.5: the gentlest setting the planner commands: the spring still
@@ -62,6 +66,90 @@ pub(crate) fn softened(
     }
     out.iter_mut().for_each(ramp_stroke);
     Some(out)
+}
+
+/// A region's strokes as walked, its walked runs and their dwell set at the configured
+/// allowance (`dwell::set_dwell`).
+pub(crate) struct Walked {
+    pub(crate) runs: Vec<Run>,
+    pub(crate) strokes: Vec<Stroke>,
+    pub(crate) dwelled: Result<dwell::Dwelled, String>,
+}
+
+/// The pieces of `w` the removal's limits lifted (`dwell::Dwelled::lifted`; every walked
+/// piece when they lifted them all, `dwell::NOTHING_TO_GRIND`) and how many one-contact
+/// pieces are ground.
+fn lifted_and_ground(w: &Walked) -> (Vec<PlannedPass>, usize) {
+    match &w.dwelled {
+        Ok(d) => (d.lifted.clone(), d.runs.iter().map(Vec::len).sum()),
+        Err(why) if why.starts_with(dwell::NOTHING_TO_GRIND) => {
+            (w.runs.iter().flatten().cloned().collect(), 0)
+        }
+        Err(_) => (Vec::new(), 0),
+    }
+}
+
+/// What aiming and walking a region's strokes again from its start gives: the aimed strokes,
+/// the runs, the pose it ends at, the points it left out and its jumps.
+pub(crate) type Rewalk = (
+    Vec<Stroke>,
+    Vec<Run>,
+    Vec<f64>,
+    Vec<UnreachablePoint>,
+    usize,
+);
+
+/// Region `w` walked again with the contacts the removal's limits lifted commanded at
+/// [`SOFT_DEPTH_SHARE`] of the `preload` ([`softened`] of the region's strokes
+/// before the aim, `limited`; `again` aims and walks strokes from the region's start), kept
+/// when that grinds more of its one-contact pieces: then the end pose `prev`, the points left
+/// out and the jumps of `reachability` (recorded from `mark`, their counts at the region's
+/// start) follow the new walk. The contacts softened and still lifted are counted in
+/// `reachability`. Without `limited` (a mount along the normal), or when nothing was lifted,
+/// `w` comes back as it was.
+pub(crate) fn soften_region(
+    w: Walked,
+    (limited, preload, again): (Option<&[Stroke]>, f64, impl Fn(&[Stroke]) -> Rewalk),
+    (region, inspection, ctx): (&RegionInfo, &Inspection, &dwell::Setup),
+    (prev, reachability, mark): (&mut Vec<f64>, &mut Reachability, (usize, usize)),
+) -> Result<Walked, PlanError> {
+    let (lifted, ground) = lifted_and_ground(&w);
+    let depth = SOFT_DEPTH_SHARE * preload;
+    let soft = limited.and_then(|l| softened(l, &w.strokes, &lifted, depth));
+    let Some(soft) = soft else {
+        reachability.lifted += lifted.len();
+        return Ok(w);
+    };
+    let (strokes, runs, at, lost, jumps) = again(&soft);
+    let allowance = ctx.config.allowance_mm;
+    let dwelled = match runs.is_empty() {
+        true => Err(String::new()),
+        false => dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?,
+    };
+    let kept = Walked {
+        runs,
+        strokes,
+        dwelled,
+    };
+    let (still, now) = lifted_and_ground(&kept);
+    tracing::info!(
+        "region {}: {} contacts lifted over by the removal's limits, commanded {depth:.2} mm \
+         deep instead: {} still lifted, one-contact pieces ground {ground} -> {now}",
+        region.id,
+        lifted.len(),
+        still.len()
+    );
+    if now <= ground {
+        reachability.lifted += lifted.len();
+        return Ok(w);
+    }
+    reachability.softened += lifted.len().saturating_sub(still.len());
+    reachability.lifted += still.len();
+    *prev = at;
+    reachability.unreachable.truncate(mark.0);
+    reachability.unreachable.extend(lost);
+    reachability.jumps = mark.1 + jumps;
+    Ok(kept)
 }
 
 #[cfg(test)]
