@@ -9,9 +9,8 @@ use super::error::PlanError;
 use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{
-    aim, collide, dwell, finish, order, predict, press_depth, program, raster, soften, surface,
-};
+use super::{aim, collide, dwell, finish, order, predict, press_depth, program};
+use super::{raster, soften, surface};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::units::mm;
