@@ -9,7 +9,8 @@ use super::error::PlanError;
 use super::free_motion::Assembly;
 use super::raster::RasterGeometry;
 use super::report::{Reachability, UnreachablePoint};
-use super::{aim, collide, dwell, finish, order, predict, press_depth, program, raster, surface};
+use super::{aim, collide, dwell, finish, order, predict, press_depth, program};
+use super::{raster, soften, surface};
 use crate::removal;
 use crate::repair::{Inspection, RegionInfo, SurfacePoint};
 use crate::robot::units::mm;
@@ -119,19 +120,12 @@ pub(crate) fn plan_regions(
             Some(_) => config.finish.turns(),
         };
         let strokes = finish::strokes((region, &members), &surface, &geometry, &offsets, &turns);
-        let strokes = match tool {
-            Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
-                // a first walk finds the axis held at each point (`aim`) and the joint
-                // angles the force is held at (`press_depth`)
-                let trial = walk(&strokes, &mut prev.clone(), &mut Vec::new(), &mut 0);
-                let strokes = press_depth::limited(&strokes, &trial, inspection, ctx);
-                let back = dwell::reference_from_robot(workcell);
-                let held = trial.iter().flatten().flat_map(|pass| &pass.points);
-                let held = held.map(|p| (p.surface_mm, p.axis));
-                aim::aimed(&strokes, held, &back, &surface)
-            }
-            _ => strokes,
-        };
+        let back = dwell::reference_from_robot(workcell);
+        let bench_in = (inspection, ctx, &surface, &back);
+        let (strokes, unaimed) = aim_strokes(strokes, tool, &walk, &prev, bench_in);
+        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
+        let start = (prev.clone(), reachability.unreachable.len());
+        let start = (start, reachability.jumps);
         let runs = walk(
             &strokes,
             &mut prev,
@@ -142,35 +136,93 @@ pub(crate) fn plan_regions(
             None => runs,
             // nothing reachable: every point is already recorded with the reason
             Some(_) if runs.is_empty() => runs,
-            Some(_) => {
+            Some(t) => {
+                let allowance = ctx.config.allowance_mm;
+                let first = dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?;
+                let walked = soften::Walked {
+                    runs,
+                    strokes,
+                    dwelled: first,
+                };
+                let held = unaimed.as_ref().map_or(&[][..], |u| &u.1[..]);
+                let again = |soft: &[raster::Stroke]| {
+                    let aimed = aim::aimed(soft, held.iter().copied(), &back, &surface);
+                    let mut at = start.0 .0.clone();
+                    let (mut lost, mut jumps) = (Vec::new(), 0);
+                    let runs = walk(&aimed, &mut at, &mut lost, &mut jumps);
+                    (aimed, runs, at, lost, jumps)
+                };
+                let soft = (unaimed.as_ref().map(|u| &u.0[..]), t.preload_mm, again);
+                let at = (&mut prev, &mut *reachability, (start.0 .1, start.1));
+                let walked = soften::soften_region(walked, soft, (region, inspection, ctx), at)?;
                 let unreachable = &mut reachability.unreachable;
-                dwell_region(runs, &strokes, region, &bench, &mut out, unreachable)?
+                dwell_region(walked, region, &bench, &mut out, unreachable)?
             }
         };
         out.runs.extend(runs);
-        let total: usize = strokes.iter().map(|s| s.points.len()).sum();
         out.counts.insert(region.id, (offsets.len(), total));
     }
     Ok(out)
 }
 
-/// Removal mode: sets the dwell of one region's walked `runs` at the configured allowance
-/// and settles it (`settle`); returns the runs to assemble (none when it is left out, its
-/// points recorded with the reason) and records it in `out.settled`.
+/// Where a spindle-axis mount's trial walk (`walk` from `prev`) held the axis: each walked
+/// point's raster position and robot-frame axis.
+type Held = Vec<([f64; 3], [f64; 3])>;
+
+/// A region's `strokes` as the plan walks them: for a spring-loaded spindle (`tool`), a first
+/// walk finds the axis held at each point (`aim`) and the joint angles the force is held at
+/// (`press_depth`), and the strokes come back aimed, with the strokes before the aim
+/// (`press_depth::limited`) and the axes held; otherwise as they are.
+fn aim_strokes(
+    strokes: Vec<raster::Stroke>,
+    tool: Option<&removal::ToolModel>,
+    walk: &impl Fn(
+        &[raster::Stroke],
+        &mut Vec<f64>,
+        &mut Vec<UnreachablePoint>,
+        &mut usize,
+    ) -> Vec<program::Run>,
+    prev: &[f64],
+    (inspection, ctx, surface, back): (
+        &Inspection,
+        &dwell::Setup,
+        &surface::Surface,
+        &nalgebra::Matrix3<f64>,
+    ),
+) -> (Vec<raster::Stroke>, Option<(Vec<raster::Stroke>, Held)>) {
+    match tool {
+        Some(t) if t.compliance_direction == removal::ComplianceDirection::SpindleAxis => {
+            let trial = walk(&strokes, &mut prev.to_vec(), &mut Vec::new(), &mut 0);
+            let strokes = press_depth::limited(&strokes, &trial, inspection, ctx);
+            let held = trial.iter().flatten().flat_map(|pass| &pass.points);
+            let held: Held = held.map(|p| (p.surface_mm, p.axis)).collect();
+            let aimed = aim::aimed(&strokes, held.iter().copied(), back, surface);
+            (aimed, Some((strokes, held)))
+        }
+        _ => (strokes, None),
+    }
+}
+
+/// Removal mode: settles one region from its walked runs with the dwell set at the
+/// configured allowance (`settle`); returns the runs to assemble (none when it is left out,
+/// its points recorded with the reason) and records it in `out.settled`.
 fn dwell_region(
-    runs: Vec<program::Run>,
-    strokes: &[raster::Stroke],
+    walked: soften::Walked,
     region: &RegionInfo,
     bench: &Bench,
     out: &mut Planned,
     unreachable: &mut Vec<UnreachablePoint>,
 ) -> Result<Vec<program::Run>, PlanError> {
-    let (inspection, ctx) = (bench.inspection, bench.ctx);
-    let allowance = ctx.config.allowance_mm;
-    let dwelled = match dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)? {
+    let ctx = bench.ctx;
+    let soften::Walked {
+        runs,
+        strokes,
+        dwelled,
+    } = walked;
+    let dwelled = match dwelled {
         Ok(dwelled) => dwelled,
         Err(reason) => {
-            dwell::leave_out(strokes, &reason, ctx.workcell, unreachable);
+            dwell::leave_out(&strokes, &reason, ctx.workcell, unreachable);
             return Ok(Vec::new());
         }
     };

@@ -258,6 +258,12 @@ fn guard_rim(
     removal::cap::hold_landed((placed, contacts), (&guarded, &limit), model, &margin, plan);
 }
 
+/// How [`set_dwell`]'s reason begins when the removal's limits lifted every contact of a
+/// region (`removal::cap`): every one of them, even at its shortest dwell, removes more than
+/// a point in its reach may lose.
+pub(crate) const NOTHING_TO_GRIND: &str =
+    "region left out by the removal planner: nothing to grind";
+
 /// What the removal planner needs besides the runs.
 pub struct Setup<'a> {
     /// The compliant tool.
@@ -284,6 +290,9 @@ pub struct Dwelled {
     /// The pieces lifted over because a servo cannot hold their contact's force, each with
     /// the reason (joint, torque, force, depth).
     pub refused: Vec<(PlannedPass, String)>,
+    /// The pieces the removal's limits lifted over (`removal::cap`: at their shortest dwell
+    /// they still remove more than a point's cap or rim budget), as walked.
+    pub lifted: Vec<PlannedPass>,
 }
 
 /// Turns one region's runs into one-contact pieces carrying the dwell solved at `allowance`
@@ -379,11 +388,14 @@ pub fn set_dwell(
         piece.dwell_s = Some(*t);
         piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
     }
+    let lifted: Vec<PlannedPass> = (runs.iter().flatten().zip(&plan.lifted))
+        .filter(|(_, l)| **l)
+        .map(|(p, _)| p.clone())
+        .collect();
     let runs = lift_over(runs, &plan.lifted);
     if runs.is_empty() {
         return Ok(Err(format!(
-            "region left out by the removal planner: nothing to grind at an allowance of \
-             {allowance:.3} mm (the highest deviation in reach is {highest:.3} mm; every contact \
+            "{NOTHING_TO_GRIND} at an allowance of {allowance:.3} mm (the highest deviation in reach is {highest:.3} mm; every contact \
              would remove less than passing at full feed)"
         )));
     }
@@ -392,6 +404,7 @@ pub fn set_dwell(
         allowance,
         highest,
         refused: Vec::new(),
+        lifted,
     }))
 }
 

@@ -32,6 +32,7 @@ pub mod raster;
 pub mod report;
 pub mod ros;
 pub mod setups;
+mod soften;
 mod stroke;
 pub mod surface;
 pub mod table;

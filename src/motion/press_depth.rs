@@ -76,19 +76,31 @@ pub(crate) fn limited(
                 *d = d.min(depth_for(walked, &back, inspection, setup));
             }
         }
-        let along: Vec<f64> = stroke
-            .points
-            .windows(2)
-            .map(|w| (w[1].surface - w[0].surface).norm())
-            .collect();
-        ramped(&mut depths, &along);
         for (point, d) in stroke.points.iter_mut().zip(depths) {
             if point.offset < 0.0 {
                 point.offset = -d;
             }
         }
+        ramp_stroke(stroke);
     }
     out
+}
+
+/// Lowers the depths of `stroke`'s pressed points (negative offsets) so that they change by
+/// at most [`DEPTH_SLOPE`] per mm along it ([`ramped`]); the other points keep theirs.
+pub(crate) fn ramp_stroke(stroke: &mut Stroke) {
+    let mut depths: Vec<f64> = stroke.points.iter().map(|p| -p.offset).collect();
+    let along: Vec<f64> = stroke
+        .points
+        .windows(2)
+        .map(|w| (w[1].surface - w[0].surface).norm())
+        .collect();
+    ramped(&mut depths, &along);
+    for (point, d) in stroke.points.iter_mut().zip(depths) {
+        if point.offset < 0.0 {
+            point.offset = -d;
+        }
+    }
 }
 
 /// Sets where each pressed point of `passes` (placed by `wc`) lands its patch

@@ -91,6 +91,20 @@ pub struct Reachability {
     pub unreachable: Vec<UnreachablePoint>,
     /// Places where a stroke was split because consecutive IK solutions jumped.
     pub jumps: usize,
+    /// Removal mode: contacts the removal's limits (`removal::cap`) lifted over at the
+    /// preload's depth that are ground commanded shallower instead (`soften`), counted on
+    /// each region's first dwell solve. Absent: none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub softened: usize,
+    /// Removal mode: contacts the removal's limits lift over even commanded shallower, on the
+    /// same solves. Absent: none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub lifted: usize,
+}
+
+/// Whether a count is zero (serde's `skip_serializing_if`).
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl Reachability {

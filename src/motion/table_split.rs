@@ -243,6 +243,8 @@ pub(super) fn concat(mut a: Plan, b: Plan) -> Plan {
         .unreachable
         .extend(b.reachability.unreachable);
     a.reachability.jumps += b.reachability.jumps;
+    a.reachability.softened += b.reachability.softened;
+    a.reachability.lifted += b.reachability.lifted;
     a.metrics = combine(&a.metrics, &b.metrics);
     // removal mode: each group predicted its own regions (same tool, preload and tolerance)
     a.removal = match (a.removal.take(), b.removal) {

@@ -85,6 +85,10 @@ fn two_setups_checked(what: &str, insp: &Inspection) -> (Plan, usize) {
             continue;
         }
         let tally = turned_tally(p, &robot, insp, &cells[k].workcell, dir);
+        println!(
+            "{what}, setup {}: contacts the removal's limits lifted: {} ground softer, {} lifted",
+            part.setup, p.reachability.softened, p.reachability.lifted
+        );
         accept(&format!("{what}, setup {}", part.setup), p, &tally);
         checked += 1;
     }
