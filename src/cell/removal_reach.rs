@@ -96,11 +96,14 @@ pub fn reach_of(points: &[(f64, f64)], cfg: &ReachConfig) -> Option<RemovalReach
     let sd = sd.max(cfg.noise_floor_mm);
     let count = (cfg.far_mm[0] / cfg.bin_mm).ceil() as usize;
     let mut sums = vec![(0usize, 0.0); count];
-    for (d, m) in points {
-        let b = (d / cfg.bin_mm).floor();
-        if b >= 0.0 && (b as usize) < count && *d < cfg.far_mm[0] {
-            sums[b as usize].0 += 1;
-            sums[b as usize].1 += m;
+    let before_far = points
+        .iter()
+        .filter(|(d, _)| (0.0..cfg.far_mm[0]).contains(d));
+    for (d, m) in before_far {
+        // the bins reach the far field: only a division rounded up onto its edge has none
+        if let Some(sum) = sums.get_mut((d / cfg.bin_mm) as usize) {
+            sum.0 += 1;
+            sum.1 += m;
         }
     }
     let mut reach_mm = 0.0;
