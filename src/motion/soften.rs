@@ -6,12 +6,14 @@
 //! spindle pressed less deep presses with less force, so its Hertz patch is smaller (less
 //! reach) and its pressure lower (less removal per second); its landing margin stays the
 //! preload's (`dwell::landing_margin`). [`softened`] commands the contacts the limits lifted at
-//! [`SOFT_DEPTH_SHARE`] of the preload (ramped into their strokes as
-//! `press_depth::DEPTH_SLOPE` asks); the caller walks the strokes again (the arm's joint
-//! angles carry the shallower ball to the bus and the simulator) and solves the region again,
-//! where the dwell solve, the limits and the Monte Carlo all read the commanded depth
-//! (`Contact::depth_mm` -> `force_ratio`). A contact the limits still lift at that depth is
-//! lifted.
+//! [`MIN_DEPTH_SHARE`] of the preload (0.5, the gentlest setting the planner commands: the
+//! spring still holds the ball on the part through the servos' quantisation; the force
+//! halves, the patch's radius and peak pressure fall by `0.5^(1/3)`, 21 %, and the spring's
+//! slide halves), ramped into their strokes as `press_depth::DEPTH_SLOPE` asks; the caller
+//! walks the strokes again (the arm's joint angles carry the shallower ball to the bus and the
+//! simulator) and solves the region again, where the dwell solve, the limits and the Monte
+//! Carlo all read the commanded depth (`Contact::depth_mm` -> `force_ratio`). A contact the
+//! limits still lift at that depth is lifted.
 use std::collections::HashMap;
 
 use super::dwell;
@@ -21,13 +23,6 @@ use super::program::{PlannedPass, Run};
 use super::raster::Stroke;
 use super::report::{Reachability, UnreachablePoint};
 use crate::repair::{Inspection, RegionInfo};
-
-/// Share of the preload a contact the removal's limits lifted is commanded at instead
-/// ([`MIN_DEPTH_SHARE`], 0.5: the gentlest setting the planner commands: the spring still
-/// holds the ball on the part through the servos' quantisation; the force halves, the
-/// patch's radius and peak pressure fall by `0.5^(1/3)`, 21 %, and the spring's slide
-/// halves).
-pub(crate) const SOFT_DEPTH_SHARE: f64 = MIN_DEPTH_SHARE;
 
 /// `limited`, the strokes of a region before the aim (`aim::aimed` moved them to `aimed`,
 /// point for point, which the walk copied into the pieces' `surface_mm`), with every pressed
@@ -100,7 +95,7 @@ pub(crate) type Rewalk = (
 );
 
 /// Region `w` walked again with the contacts the removal's limits lifted commanded at
-/// [`SOFT_DEPTH_SHARE`] of the `preload` ([`softened`] of the region's strokes
+/// [`MIN_DEPTH_SHARE`] of the `preload` ([`softened`] of the region's strokes
 /// before the aim, `limited`; `again` aims and walks strokes from the region's start), kept
 /// when that grinds more of its one-contact pieces: then the end pose `prev`, the points left
 /// out and the jumps of `reachability` (recorded from `mark`, their counts at the region's
@@ -114,7 +109,7 @@ pub(crate) fn soften_region(
     (prev, reachability, mark): (&mut Vec<f64>, &mut Reachability, (usize, usize)),
 ) -> Result<Walked, PlanError> {
     let (lifted, ground) = lifted_and_ground(&w);
-    let depth = SOFT_DEPTH_SHARE * preload;
+    let depth = MIN_DEPTH_SHARE * preload;
     let soft = limited.and_then(|l| softened(l, &w.strokes, &lifted, depth));
     let Some(soft) = soft else {
         reachability.lifted += lifted.len();
