@@ -222,7 +222,7 @@ fn dwell_region(
     let dwelled = match dwelled {
         Ok(dwelled) => dwelled,
         Err(reason) => {
-            dwell::leave_out(&strokes, &reason, ctx.workcell, unreachable);
+            dwell::leave_out(&strokes, &reason.to_string(), ctx.workcell, unreachable);
             return Ok(Vec::new());
         }
     };
@@ -426,7 +426,7 @@ fn resolve(
                     }
                 }
             }
-            first_why.unwrap_or_default()
+            first_why.map(|why| why.to_string()).unwrap_or_default()
         }
     };
     for piece in s.walked.iter().flatten() {

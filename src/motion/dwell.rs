@@ -7,7 +7,7 @@
 use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 
 use super::config::PlanConfig;
-use super::error::PlanError;
+use super::error::{DwellError, PlanError};
 use super::feed::JointSpline;
 use super::program::{PlannedPass, Run};
 use super::stroke::{chain_knots, chain_limits};
@@ -258,12 +258,6 @@ fn guard_rim(
     removal::cap::hold_landed((placed, contacts), (&guarded, &limit), model, &margin, plan);
 }
 
-/// How [`set_dwell`]'s reason begins when the removal's limits lifted every contact of a
-/// region (`removal::cap`): every one of them, even at its shortest dwell, removes more than
-/// a point in its reach may lose.
-pub(crate) const NOTHING_TO_GRIND: &str =
-    "region left out by the removal planner: nothing to grind";
-
 /// What the removal planner needs besides the runs.
 pub struct Setup<'a> {
     /// The compliant tool.
@@ -299,14 +293,15 @@ pub struct Dwelled {
 /// mm (`removal::solve_region`; the Monte Carlo on the dwell the trajectory spends is the
 /// caller's, `predict::rehearse_region`). The inner error says why the region is left out: a
 /// contact whose force a servo cannot hold (naming the point and the joint), no core point in
-/// the tool's reach of its contacts, or the solver failed.
+/// the tool's reach of its contacts, the solver failed, or the removal's limits lifted every
+/// contact ([`DwellError`]).
 pub fn set_dwell(
     runs: Vec<Run>,
     _region: &RegionInfo,
     inspection: &Inspection,
     setup: &Setup,
     allowance: f64,
-) -> Result<Result<Dwelled, String>, PlanError> {
+) -> Result<Result<Dwelled, DwellError>, PlanError> {
     let (tool, robot, config) = (setup.tool, setup.robot, setup.config);
     let asked = allowance;
     let solve = solve_config(&runs, robot, config)?;
@@ -334,9 +329,7 @@ pub fn set_dwell(
         .collect();
     if let Some(why) = over.iter().flatten().next() {
         if over.iter().all(Option::is_some) {
-            return Ok(Err(format!(
-                "region left out by the removal planner: {why}"
-            )));
+            return Ok(Err(DwellError::Overloaded(why.clone())));
         }
         let refused: Vec<(PlannedPass, String)> = (pieces.iter().zip(&over))
             .filter_map(|(p, why)| why.clone().map(|w| ((*p).clone(), w)))
@@ -350,13 +343,10 @@ pub fn set_dwell(
         return Ok(again);
     }
     if cores.is_empty() {
-        return Ok(Err(format!(
-            "region left out by the removal planner: no core point within the tool's reach \
-             ({:.3} mm patch radius) of its {} contacts, so no removal can be planned or \
-             predicted",
-            influence.patch_radius(),
-            contacts.len()
-        )));
+        return Ok(Err(DwellError::NoCoreInReach {
+            patch_radius_mm: influence.patch_radius(),
+            contacts: contacts.len(),
+        }));
     }
     let bounds = (&influence, &solve);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
@@ -368,7 +358,7 @@ pub fn set_dwell(
         .collect();
     let mut plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
         Ok(p) => p,
-        Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
+        Err(m) => return Ok(Err(DwellError::Unsolved(m))),
     };
     // the cap holds on the removal the solved dwell makes, not only on the targets
     if let Some(share) = config.aim.first_pass_share {
@@ -394,10 +384,10 @@ pub fn set_dwell(
         .collect();
     let runs = lift_over(runs, &plan.lifted);
     if runs.is_empty() {
-        return Ok(Err(format!(
-            "{NOTHING_TO_GRIND} at an allowance of {allowance:.3} mm (the highest deviation in reach is {highest:.3} mm; every contact \
-             would remove less than passing at full feed)"
-        )));
+        return Ok(Err(DwellError::NothingToGrind {
+            allowance_mm: allowance,
+            highest_mm: highest,
+        }));
     }
     Ok(Ok(Dwelled {
         runs,

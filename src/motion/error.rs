@@ -45,6 +45,47 @@ pub enum PlanError {
     Config(String),
 }
 
+/// Why the removal planner leaves a region out (`dwell::set_dwell`); each message is the one
+/// the plan's report gives its contacts.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DwellError {
+    /// Every contact presses with more force than a servo can hold (the first one's reason:
+    /// the point, the joint, the torque).
+    #[error("region left out by the removal planner: {0}")]
+    Overloaded(String),
+    /// No core point lies within the tool's reach of the region's contacts.
+    #[error(
+        "region left out by the removal planner: no core point within the tool's reach \
+         ({patch_radius_mm:.3} mm patch radius) of its {contacts} contacts, so no removal can \
+         be planned or predicted"
+    )]
+    NoCoreInReach {
+        /// The tool's patch radius, mm.
+        patch_radius_mm: f64,
+        /// The region's contacts.
+        contacts: usize,
+    },
+    /// The dwell solve failed (its reason).
+    #[error("region left out by the removal planner: {0}")]
+    Unsolved(String),
+    /// The removal's limits (`removal::cap`) lifted every contact: each, even at its shortest
+    /// dwell, removes more than a point in its reach may lose.
+    #[error(
+        "region left out by the removal planner: nothing to grind at an allowance of \
+         {allowance_mm:.3} mm (the highest deviation in reach is {highest_mm:.3} mm; every \
+         contact would remove less than passing at full feed)"
+    )]
+    NothingToGrind {
+        /// The allowance solved at, mm.
+        allowance_mm: f64,
+        /// The highest deviation over the core points in reach, mm.
+        highest_mm: f64,
+    },
+    /// No contact of the region was reached on its walk, so nothing was solved.
+    #[error("region left out by the removal planner: no contact of it was reached")]
+    NothingWalked,
+}
+
 impl PlanError {
     /// A bad value at `place` of `file`.
     pub fn input(file: &Path, place: impl Into<String>, message: impl Into<String>) -> Self {

@@ -17,7 +17,7 @@
 use std::collections::HashMap;
 
 use super::dwell;
-use super::error::PlanError;
+use super::error::{DwellError, PlanError};
 use super::press_depth::{ramp_stroke, MIN_DEPTH_SHARE};
 use super::program::{PlannedPass, Run};
 use super::raster::Stroke;
@@ -68,18 +68,16 @@ pub(crate) fn softened(
 pub(crate) struct Walked {
     pub(crate) runs: Vec<Run>,
     pub(crate) strokes: Vec<Stroke>,
-    pub(crate) dwelled: Result<dwell::Dwelled, String>,
+    pub(crate) dwelled: Result<dwell::Dwelled, DwellError>,
 }
 
 /// The pieces of `w` the removal's limits lifted (`dwell::Dwelled::lifted`; every walked
-/// piece when they lifted them all, `dwell::NOTHING_TO_GRIND`) and how many one-contact
+/// piece when they lifted them all, [`DwellError::NothingToGrind`]) and how many one-contact
 /// pieces are ground.
 fn lifted_and_ground(w: &Walked) -> (Vec<PlannedPass>, usize) {
     match &w.dwelled {
         Ok(d) => (d.lifted.clone(), d.runs.iter().map(Vec::len).sum()),
-        Err(why) if why.starts_with(dwell::NOTHING_TO_GRIND) => {
-            (w.runs.iter().flatten().cloned().collect(), 0)
-        }
+        Err(DwellError::NothingToGrind { .. }) => (w.runs.iter().flatten().cloned().collect(), 0),
         Err(_) => (Vec::new(), 0),
     }
 }
@@ -118,7 +116,7 @@ pub(crate) fn soften_region(
     let (strokes, runs, at, lost, jumps) = again(&soft);
     let allowance = ctx.config.allowance_mm;
     let dwelled = match runs.is_empty() {
-        true => Err(String::new()),
+        true => Err(DwellError::NothingWalked),
         false => dwell::set_dwell(runs.clone(), region, inspection, ctx, allowance)?,
     };
     let kept = Walked {
