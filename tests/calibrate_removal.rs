@@ -9,6 +9,7 @@ use nalgebra::{Point3, Vector3};
 use polishbot::motion::{Inspection, RegionInfo, SurfacePoint};
 use polishbot::removal::fit::{
     agreement, evidence, fit, parse_predicted, pool, predicted_removal, Evidence, FitConfig,
+    GrindPair,
 };
 use polishbot::removal::prediction::PredictedRow;
 use rand::{Rng, SeedableRng};
@@ -90,7 +91,7 @@ fn a_known_scale_of_a_known_removal_field_gives_k_exactly() {
     let mut a = after(&b, &removed);
     // unmeasured points are left out; the pit's points too, whatever the field says there
     a.points[0].distance = f64::NAN;
-    let f = fit(&b, &a, &p, PLAN_K, &FitConfig::default()).unwrap();
+    let f = fit(&GrindPair::new(&b, &a), &p, PLAN_K, &FitConfig::default()).unwrap();
     let used = expected_used(&b, &p)
         .into_iter()
         .filter(|&i| i != 0)
@@ -139,7 +140,7 @@ fn a_pass_re_predicted_with_the_fitted_k_scales_the_predicted_removal_at_each_po
     let mut a = after(&b, &removed);
     // a point the second inspection did not measure is left out
     a.points[1].distance = f64::NAN;
-    let got = agreement(&b, &a, &p, Some(1.3), &[0, 1]).unwrap();
+    let got = agreement(&GrindPair::new(&b, &a), &p, Some(1.3), &[0, 1]).unwrap();
     // written out here: the defect points of regions 0 and 1, deviation d = p + 0.05 before
     let idx: Vec<usize> = (0..p.len())
         .filter(|&i| b.points[i].region < 2 && i != 1)
@@ -163,14 +164,17 @@ fn a_pass_re_predicted_with_the_fitted_k_scales_the_predicted_removal_at_each_po
         .fold(f64::INFINITY, f64::min);
     close(got.lowest_ground_mm, lowest);
     // k not fitted: compared with the plan's k
-    let plain = agreement(&b, &a, &p, None, &[0, 1]).unwrap();
+    let plain = agreement(&GrindPair::new(&b, &a), &p, None, &[0, 1]).unwrap();
     assert_eq!(plain.predicted_fitted_k_mm, None);
     close(
         plain.difference_mm,
         rms_over(&idx, |i| 0.3 * p[i] + ripple(i)),
     );
     // no planned region: nothing to compare
-    assert_eq!(agreement(&b, &a, &p, Some(1.3), &[7]), None);
+    assert_eq!(
+        agreement(&GrindPair::new(&b, &a), &p, Some(1.3), &[7]),
+        None
+    );
 }
 
 #[test]
@@ -214,7 +218,13 @@ fn noise_on_the_measured_removal_gives_the_textbook_spread() {
     let (mut ks, mut ses, mut rms) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..trials {
         let removed: Vec<f64> = p.iter().map(|v| s * v + sigma * normal(&mut rng)).collect();
-        let f = fit(&b, &after(&b, &removed), &p, PLAN_K, &FitConfig::default()).unwrap();
+        let f = fit(
+            &GrindPair::new(&b, &after(&b, &removed)),
+            &p,
+            PLAN_K,
+            &FitConfig::default(),
+        )
+        .unwrap();
         ks.push(f.k_mm2_n / PLAN_K);
         ses.push(f.k_std_error_mm2_n / PLAN_K);
         rms.push(f.residual_rms_mm);
@@ -243,20 +253,32 @@ fn thin_evidence_and_unmatched_core_points_are_refused_in_one_line() {
         min_points: 100_000,
         ..FitConfig::default()
     };
-    let e = fit(&b, &a, &p, PLAN_K, &strict).unwrap_err();
+    let e = fit(&GrindPair::new(&b, &a), &p, PLAN_K, &strict).unwrap_err();
     assert!(e.contains("too little evidence"), "{e}");
     // a rescan against another reference (core points 0.01 mm away)
     let mut moved = a.clone();
     moved.points.iter_mut().for_each(|q| q.position.x += 0.01);
-    let e = fit(&b, &moved, &p, PLAN_K, &FitConfig::default()).unwrap_err();
+    let e = fit(
+        &GrindPair::new(&b, &moved),
+        &p,
+        PLAN_K,
+        &FitConfig::default(),
+    )
+    .unwrap_err();
     assert!(e.contains("not made against the same reference"), "{e}");
     // nothing removed
-    let e = fit(&b, &b, &p, PLAN_K, &FitConfig::default()).unwrap_err();
+    let e = fit(&GrindPair::new(&b, &b), &p, PLAN_K, &FitConfig::default()).unwrap_err();
     assert!(e.contains("nothing was removed"), "{e}");
     // noise ten times the removal: k is not determined
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let noisy: Vec<f64> = p.iter().map(|v| v + 2.0 * normal(&mut rng)).collect();
-    let e = fit(&b, &after(&b, &noisy), &p, PLAN_K, &FitConfig::default()).unwrap_err();
+    let e = fit(
+        &GrindPair::new(&b, &after(&b, &noisy)),
+        &p,
+        PLAN_K,
+        &FitConfig::default(),
+    )
+    .unwrap_err();
     assert!(e.contains("relative error"), "{e}");
     assert!(!e.contains('\n'));
     // predicted.csv: bad cells name the line and column; rows off the core points the row
@@ -293,7 +315,13 @@ fn grind(
         .iter()
         .map(|v| bias * TRUE_K / plan_k * v + NOISE_MM * normal(rng))
         .collect();
-    let g = evidence(b, &after(b, &removed), p, plan_k, &FitConfig::default()).unwrap();
+    let g = evidence(
+        &GrindPair::new(b, &after(b, &removed)),
+        p,
+        plan_k,
+        &FitConfig::default(),
+    )
+    .unwrap();
     let pairs = expected_used(b, p)
         .into_iter()
         .map(|i| (p[i] / plan_k, removed[i]))
@@ -524,7 +552,7 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
     let cfg = ShiftConfig::default();
     // 0.3 mm along x, -0.2 along y, the tool 1.3 x faster than planned, the rescan's noise
     let a = after(&b, &landed(&b, 1.3, [0.3, -0.2], 0.015, 5));
-    let shifts = register(&b, &a, &p, &cfg);
+    let shifts = register(&GrindPair::new(&b, &a), &p, &cfg);
     assert_eq!(shifts.len(), 2, "{shifts:?}");
     for r in &shifts {
         let e = (r.shift_mm - Vector3::new(0.3, -0.2, 0.0)).norm();
@@ -555,7 +583,8 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
     );
     // k on the prediction as planned reads the misplaced removal as a slower tool; moved by
     // the measured shift it finds the tool's 1.3 x
-    let fit_k = |pred: &[f64]| fit(&b, &a, pred, PLAN_K, &FitConfig::default()).unwrap();
+    let fit_k =
+        |pred: &[f64]| fit(&GrindPair::new(&b, &a), pred, PLAN_K, &FitConfig::default()).unwrap();
     let plain = fit_k(&p).k_mm2_n / PLAN_K;
     let moved = fit_k(&shifted_prediction(&b, &p, &shifts, &cfg)).k_mm2_n / PLAN_K;
     assert!(
@@ -565,7 +594,7 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
     assert!(plain < moved - 0.02, "moved {moved} plain {plain}");
     // 0.8 mm off in both regions: carried (the next plan aims back by it) ...
     let far = after(&b, &landed(&b, 1.0, [0.8, 0.0], 0.015, 6));
-    let far = register(&b, &far, &p, &cfg);
+    let far = register(&GrindPair::new(&b, &far), &p, &cfg);
     let next = carry(&far, &Aim::default(), &cfg).expect("one arm error, carried");
     let common = Vector3::from(next.aim.common_mm);
     assert!(
@@ -588,7 +617,7 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
         &b,
         &landed_each(&b, 1.0, [[0.0, -1.4], [0.0, 1.4]], 0.015, 7),
     );
-    let apart = register(&b, &apart, &p, &cfg);
+    let apart = register(&GrindPair::new(&b, &apart), &p, &cfg);
     let why = carry(&apart, &Aim::default(), &cfg).expect_err("a stop");
     assert!(
         why.starts_with("region ") && why.contains("regions may disagree"),
@@ -597,7 +626,7 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
     // regions ground too little to measure (0.03 mm at most) keep the shift carried to them
     let small: Vec<f64> = p.iter().map(|v| 0.15 * v).collect();
     let faint = after(&b, &landed(&b, 0.15, [0.8, 0.0], 0.015, 8));
-    let faint = register(&b, &faint, &small, &cfg);
+    let faint = register(&GrindPair::new(&b, &faint), &small, &cfg);
     let carried = Aim {
         common_mm: [0.5, 0.0, 0.0],
         ..Aim::default()

@@ -8,6 +8,7 @@
 use nalgebra::{Point3, Vector3};
 use polishbot::cell::removal_shift::{register, ShiftConfig};
 use polishbot::motion::{Inspection, RegionInfo, SurfacePoint};
+use polishbot::removal::fit::GrindPair;
 use rand::{Rng, SeedableRng};
 
 /// Spacing of the synthetic core points, mm (the demo's regions: 0.27 mm, 128 points over
@@ -112,7 +113,11 @@ fn a_raster_removal_moved_0_3_mm_registers_at_0_3_mm_not_a_stroke_away() {
             let sd = rng.gen_range(0.013..0.021);
             p.distance -= landed + sd * normal(&mut rng);
         }
-        let shifts = register(&before, &after, &predicted, &ShiftConfig::default());
+        let shifts = register(
+            &GrindPair::new(&before, &after),
+            &predicted,
+            &ShiftConfig::default(),
+        );
         assert_eq!(shifts.len(), 1, "{shifts:?}");
         let s = shifts[0].shift_mm;
         let error = (s - Vector3::new(SHIFT_MM, 0.0, 0.0)).norm();

@@ -19,8 +19,7 @@
 //! Method: docs/ALGORITHMS.md, "How far the tool really grinds".
 use nalgebra::Point3;
 
-use crate::removal::matching::partners;
-use crate::repair::Inspection;
+use crate::removal::matching::GrindPair;
 use crate::spatial::Neighbours;
 
 /// Settings of the reach's reading.
@@ -125,16 +124,13 @@ pub fn reach_of(points: &[(f64, f64)], cfg: &ReachConfig) -> Option<RemovalReach
 }
 
 /// How far beyond the predicted footprint of a grind's plan (`predicted`, removal per core
-/// point of `before`, mm) its measured removal (`before` minus `after` at the same core
-/// points) reached: [`reach_of`] over the points of `before` outside every region, outside
-/// the footprint and measured in both, each at its distance to the nearest footprint point.
+/// point of `pair.before`, mm) its measured removal (`pair.before` minus `pair.after` at the
+/// same core points) reached: [`reach_of`] over the points of `pair.before` outside every
+/// region, outside the footprint and measured in both, each at its distance to the nearest
+/// footprint point.
 /// None when the plan predicted no removal or the far field is too thin to read.
-pub fn measure(
-    before: &Inspection,
-    after: &Inspection,
-    predicted: &[f64],
-    cfg: &ReachConfig,
-) -> Option<RemovalReach> {
+pub fn measure(pair: &GrindPair, predicted: &[f64], cfg: &ReachConfig) -> Option<RemovalReach> {
+    let before = pair.before;
     let inside = |i: usize| predicted.get(i).is_some_and(|p| *p >= cfg.planned_mm);
     let footprint: Vec<Point3<f64>> = (before.points.iter().enumerate())
         .filter(|(i, _)| inside(*i))
@@ -144,11 +140,10 @@ pub fn measure(
         return None;
     }
     let index = Neighbours::new(&footprint);
-    let partner = partners(before, after);
     let points: Vec<(f64, f64)> = (before.points.iter().enumerate())
         .filter(|(i, p)| p.region < 0 && !inside(*i))
         .filter_map(|(i, p)| {
-            let m = p.distance - after.points[partner[i]?].distance;
+            let m = pair.removal(i)?;
             let d = index.nearest(&p.position)?.dist2.sqrt();
             m.is_finite().then_some((d, m))
         })
@@ -159,7 +154,7 @@ pub fn measure(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::repair::SurfacePoint;
+    use crate::repair::{Inspection, SurfacePoint};
     use nalgebra::Vector3;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
@@ -214,7 +209,8 @@ mod tests {
             predicted.push(planned);
         }
         let cfg = ReachConfig::default();
-        measure(&inspection(before), &inspection(after), &predicted, &cfg)
+        let (before, after) = (inspection(before), inspection(after));
+        measure(&GrindPair::new(&before, &after), &predicted, &cfg)
             .expect("far field read")
             .reach_mm
     }

@@ -21,7 +21,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::motion::aim::{Aim, AimRegion};
-use crate::removal::matching::{partners, repairable_ids};
+use crate::removal::matching::{repairable_ids, GrindPair};
 use crate::repair::Inspection;
 use crate::spatial::{tangent_basis, Neighbours, SparseGrid};
 
@@ -296,23 +296,15 @@ impl Moments<'_> {
     }
 }
 
-/// Registers each repairable region of `before` that the plan removes from (`predicted`, per
-/// core point of `before`) against its measured removal in `after`: the shift by first
+/// Registers each repairable region of `pair.before` that the plan removes from (`predicted`,
+/// per core point of `pair.before`) against its measured removal in `pair.after`: the shift by first
 /// moments ([`Moments::shift`]; by least squares, [`Moments::least_squares`], where other
 /// regions hide over [`ShiftConfig::hidden_share`] of the window), the depth scale by least
 /// squares at that shift.
-pub fn register(
-    before: &Inspection,
-    after: &Inspection,
-    predicted: &[f64],
-    cfg: &ShiftConfig,
-) -> Vec<RegionShift> {
-    let partner = partners(before, after);
-    let measured: Vec<Option<f64>> = partner
-        .iter()
-        .zip(&before.points)
-        .map(|(j, p)| j.map(|j| p.distance - after.points[j].distance))
-        .map(|m| m.filter(|m| m.is_finite()))
+pub fn register(pair: &GrindPair, predicted: &[f64], cfg: &ShiftConfig) -> Vec<RegionShift> {
+    let before = pair.before;
+    let measured: Vec<Option<f64>> = (0..before.points.len())
+        .map(|i| pair.removal(i).filter(|m| m.is_finite()))
         .collect();
     let positions: Vec<Point3<f64>> = before.points.iter().map(|p| p.position).collect();
     let index = Neighbours::new(&positions);

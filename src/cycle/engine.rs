@@ -17,7 +17,7 @@ use crate::cloud::transform::isometry_to_rows;
 use crate::inspect::suggest::RescanSetup;
 use crate::inspect::{self, FileInput, PoseSource, Source};
 use crate::motion::aim::Aim;
-use crate::removal::fit::Evidence;
+use crate::removal::fit::{Evidence, GrindPair};
 use crate::repair::{Inspection, SurfacePoint};
 use crate::report::Figure;
 use crate::robot::{CellFiles, ToolText};
@@ -182,11 +182,13 @@ impl Loop<'_> {
         let measured = Measured::of(found.regions.verdict, &inspection);
         let mut off_plan = None;
         if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
-            last.followed_by(&measured, &before.inspection, &inspection);
+            // the grind's two inspections matched once, for the record, the refit and figures
+            let pair = GrindPair::new(&before.inspection, &inspection);
+            last.followed_by(&measured, &pair);
             let ids: Vec<i64> = last.planned_regions.iter().map(|&i| i as i64).collect();
             let done = refit(
                 before,
-                (&inspection_dir, &inspection),
+                (&inspection_dir, &pair),
                 &ids,
                 &dir,
                 (&mut self.tool, &mut self.aim),
@@ -201,7 +203,7 @@ impl Loop<'_> {
                 self.figures.extend(figures::grind(
                     &ground,
                     last.iteration,
-                    (&before.inspection, &inspection),
+                    &pair,
                     &last.planned_regions,
                     &predicted,
                     (&shifts, &carried),

@@ -9,8 +9,7 @@ use nalgebra::{Point3, Vector3};
 
 use super::record::IterationRecord;
 use crate::cell::removal_shift::RegionShift;
-use crate::removal::matching::partners;
-use crate::repair::Inspection;
+use crate::removal::matching::GrindPair;
 use crate::report::cycle_page::{self, Convergence, GrindView, RegionGrind};
 use crate::report::inspection::region_mark;
 use crate::report::{Figure, ReportInput};
@@ -21,29 +20,28 @@ use crate::report::{Figure, ReportInput};
 const LEAST_PREDICTED_MM: f64 = 0.005;
 
 /// The figures of the grind of iteration `iteration` (its folder `dir`): the regions
-/// `planned` of `before`, the plan's `predicted` removal per core point of `before`, the
-/// measured `shifts` and, per region, the correction `carried` into the next plan (region id,
-/// mm; empty: none carried), the removal achieved by `after`. A figure that cannot be drawn is
+/// `planned` of `pair.before`, the plan's `predicted` removal per core point of `pair.before`,
+/// the measured `shifts` and, per region, the correction `carried` into the next plan (region
+/// id, mm; empty: none carried), the removal achieved by `pair.after`. A figure that cannot be drawn is
 /// said on stderr and left out (the figures are a view; the loop goes on).
 pub fn grind(
     dir: &Path,
     iteration: usize,
-    (before, after): (&Inspection, &Inspection),
+    pair: &GrindPair,
     planned: &[usize],
     predicted: &[f64],
     (shifts, carried): (&[RegionShift], &[(usize, [f64; 3])]),
 ) -> Vec<Figure> {
+    let before = pair.before;
     let pts = &before.points;
     let points: Vec<Point3<f64>> = pts.iter().map(|p| p.position).collect();
     let normals: Vec<Vector3<f64>> = pts.iter().map(|p| p.normal).collect();
     let distances: Vec<f64> = pts.iter().map(|p| p.distance).collect();
     let labels: Vec<i64> = pts.iter().map(|p| p.region).collect();
-    let partner = partners(before, after);
     let removal = (0..pts.len())
         .filter(|&i| predicted.get(i).is_some_and(|p| *p >= LEAST_PREDICTED_MM))
         .filter_map(|i| {
-            let j = partner[i]?;
-            let achieved = pts[i].distance - after.points[j].distance;
+            let achieved = pair.removal(i)?;
             let region = usize::try_from(pts[i].region).ok()?;
             achieved
                 .is_finite()

@@ -8,9 +8,8 @@ use super::config::CycleConfig;
 use crate::cell::removal_shift::CarriedShift;
 use crate::motion::{Inspection, Plan};
 use crate::regions::{Counts, Region, Verdict};
-use crate::removal::fit::{Agreement, SAME_POINT_MM};
+use crate::removal::fit::{Agreement, GrindPair};
 use crate::report::{escape, table_page};
-use crate::spatial::Neighbours;
 
 /// What one inspection of the loop measured (over the repairable regions: pits are never
 /// ground and are only counted).
@@ -163,28 +162,24 @@ impl IterationRecord {
     }
 
     /// Records what the next inspection found: the progress share of the planned excess
-    /// volume and the achieved residual over the planned regions' core points.
-    pub fn followed_by(&mut self, next: &Measured, before: &Inspection, after: &Inspection) {
+    /// volume and the achieved residual over the planned regions' core points (`pair`: this
+    /// inspection's and the next one's, matched).
+    pub fn followed_by(&mut self, next: &Measured, pair: &GrindPair) {
         if let Some(planned) = self.planned_volume_mm3.filter(|v| *v > 0.0) {
             self.progress = Some((self.measured.volume_mm3 - next.volume_mm3) / planned);
         }
         let ids: Vec<i64> = self.planned_regions.iter().map(|&i| i as i64).collect();
-        self.achieved_residual_mm = achieved_residual(before, after, &ids);
+        self.achieved_residual_mm = achieved_residual(pair, &ids);
     }
 }
 
-/// RMS of `after`'s distance over `before`'s core points of the regions `ids`, matched by
-/// position ([`SAME_POINT_MM`]); None when no point matched.
-pub fn achieved_residual(before: &Inspection, after: &Inspection, ids: &[i64]) -> Option<f64> {
-    let pos: Vec<_> = after.points.iter().map(|p| p.position).collect();
-    let index = Neighbours::new(&pos);
-    let d: Vec<f64> = before
-        .points
-        .iter()
-        .filter(|p| ids.contains(&p.region))
-        .filter_map(|p| index.nearest(&p.position))
-        .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
-        .map(|nb| after.points[nb.index].distance)
+/// RMS of `pair.after`'s distance over `pair.before`'s core points of the regions `ids` that
+/// have a partner there; None when no point matched.
+pub fn achieved_residual(pair: &GrindPair, ids: &[i64]) -> Option<f64> {
+    let d: Vec<f64> = (pair.before.points.iter().enumerate())
+        .filter(|(_, p)| ids.contains(&p.region))
+        .filter_map(|(i, _)| pair.partner(i))
+        .map(|j| pair.after.points[j].distance)
         .filter(|d| d.is_finite())
         .collect();
     rms(&d)

@@ -12,7 +12,7 @@ use crate::cell::removal_reach::{self, ReachConfig};
 use crate::cell::removal_shift::{self, CarriedShift, RegionShift, ShiftConfig};
 use crate::motion::aim::Aim;
 use crate::motion::Plan;
-use crate::removal::fit::{self, Agreement, Evidence, FitConfig, RemovalFit};
+use crate::removal::fit::{self, Agreement, Evidence, FitConfig, GrindPair, RemovalFit};
 use crate::removal::ToolModel;
 use crate::repair::Inspection;
 use crate::robot::ToolText;
@@ -37,11 +37,12 @@ pub fn fit_files(inputs: &RefitInputs, cfg: &FitConfig) -> anyhow::Result<Remova
     let before = Inspection::load(&inputs.before)?;
     let (predicted, plan_k) = prediction(&inputs.plan, &inputs.tool, &before)?;
     let after = Inspection::load(&inputs.after)?;
+    let pair = GrindPair::new(&before, &after);
     // k after the shift of where the tool really ground (issue 50)
     let shift_cfg = ShiftConfig::default();
-    let shifts = removal_shift::register(&before, &after, &predicted, &shift_cfg);
+    let shifts = removal_shift::register(&pair, &predicted, &shift_cfg);
     let predicted = removal_shift::shifted_prediction(&before, &predicted, &shifts, &shift_cfg);
-    fit::fit(&before, &after, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+    fit::fit(&pair, &predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
 /// The plan's predicted removal per core point of `before` (predicted.csv beside the removal
@@ -119,16 +120,15 @@ fn predicted_at_k(
 }
 
 /// One grind's evidence (`removal::fit::evidence`) from inspections already read from
-/// `inputs`' folders; the refusal names both folders.
+/// `inputs`' folders and matched (`pair`); the refusal names both folders.
 pub fn evidence_loaded(
     inputs: &RefitInputs,
-    before: &Inspection,
-    after: &Inspection,
+    pair: &GrindPair,
     predicted: &[f64],
     plan_k: f64,
     cfg: &FitConfig,
 ) -> anyhow::Result<Evidence> {
-    fit::evidence(before, after, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
+    fit::evidence(pair, predicted, plan_k, cfg).map_err(|m| in_folders(inputs, m))
 }
 
 /// `removal::fit`'s refusal `m` prefixed with the two inspection folders of `inputs`.
@@ -241,22 +241,23 @@ pub struct Refitted {
 /// Refits k after the last grind from the points of every grind so far (`pooled`, which this
 /// grind's points join; `removal::fit::pool`) and, when the fit holds, writes DIR/tool.toml
 /// with it and makes it (held in memory) the `tool` of the next plan; re-predicts the grind with the fitted k
-/// over the defect points of the regions `ids` against the `after` inspection (folder and
-/// points). k is fitted on the prediction moved by each region's measured shift; the shift is
+/// over the defect points of the regions `ids` against the `after` inspection (its folder, and
+/// its core points matched once to those of `before.inspection`, `pair.before`). k is fitted on the prediction moved by each region's measured shift; the shift is
 /// carried into `aim`, the next plan's, unless the registration stops the loop
 /// (`removal_shift::carry`, the grind's plan aimed by `aim`). Also hands back what cycle.html
 /// draws ([`Refitted::seen`]).
 pub fn refit(
     before: &PlannedGrind,
-    after: (&Path, &Inspection),
+    (after, pair): (&Path, &GrindPair),
     ids: &[i64],
     dir: &Path,
     (tool, aim): (&mut Option<ToolText>, &mut Aim),
     pooled: &mut Vec<Evidence>,
 ) -> Refitted {
+    debug_assert!(std::ptr::eq(pair.before, &before.inspection));
     let inputs = RefitInputs {
         before: before.inspection.dir.clone(),
-        after: after.0.to_path_buf(),
+        after: after.to_path_buf(),
         plan: before.plan_file.clone(),
         tool: before.planned.tool.path.clone(),
     };
@@ -266,7 +267,7 @@ pub fn refit(
     let (mut off_plan, mut carried) = (None, Vec::new());
     let mut seen = None;
     let prediction = prediction.map(|(p, k)| {
-        let shifts = removal_shift::register(&before.inspection, after.1, &p, &shift_cfg);
+        let shifts = removal_shift::register(pair, &p, &shift_cfg);
         shifts
             .iter()
             .for_each(|r| println!("{}", describe_shift(r)));
@@ -274,7 +275,7 @@ pub fn refit(
             Ok(next) => {
                 print_carried(&next);
                 (*aim, carried) = (next.aim, next.regions);
-                carry_reach(&before.inspection, after.1, &p, aim);
+                carry_reach(pair, &p, aim);
             }
             Err(why) => off_plan = Some(why),
         }
@@ -284,7 +285,7 @@ pub fn refit(
     });
     let fitted = prediction.as_ref().map_err(clone_error).and_then(|(p, k)| {
         let cfg = FitConfig::default();
-        let grind = evidence_loaded(&inputs, &before.inspection, after.1, p, *k, &cfg)?;
+        let grind = evidence_loaded(&inputs, pair, p, *k, &cfg)?;
         pooled.push(grind);
         let fit = fit_pooled(pooled, &cfg)?;
         let text = write_fit(&before.planned.tool, &written, &fit)?;
@@ -305,9 +306,9 @@ pub fn refit(
             None
         }
     };
-    let agreement = prediction.ok().and_then(|(p, plan_k)| {
-        fit::agreement(&before.inspection, after.1, &p, k.map(|k| k / plan_k), ids)
-    });
+    let agreement = prediction
+        .ok()
+        .and_then(|(p, plan_k)| fit::agreement(pair, &p, k.map(|k| k / plan_k), ids));
     Refitted {
         k,
         agreement,
@@ -318,13 +319,13 @@ pub fn refit(
 }
 
 /// Reads how far beyond the grind's predicted footprint (`predicted`, per core point of
-/// `before`) its removal reached (`removal_reach::measure`) and carries into `aim` the largest
+/// `pair.before`) its removal reached (`removal_reach::measure`) and carries into `aim` the largest
 /// reach of the loop's grinds so far: a later grind removes less and may read a shorter reach
 /// than its removal had (0 mm in 4 of 16 grinds 2-3 of the int13 survey where the truth
 /// reached 0.75-1.75 mm), while the first grind's reading never fell short of the truth.
 /// Nothing read (too thin a far field): the aim keeps what it carried.
-fn carry_reach(before: &Inspection, after: &Inspection, predicted: &[f64], aim: &mut Aim) {
-    let Some(r) = removal_reach::measure(before, after, predicted, &ReachConfig::default()) else {
+fn carry_reach(pair: &GrindPair, predicted: &[f64], aim: &mut Aim) {
+    let Some(r) = removal_reach::measure(pair, predicted, &ReachConfig::default()) else {
         println!("cycle: the removal's reach beyond the plan's footprint not read (far field)");
         return;
     };

@@ -18,11 +18,9 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::matching::partners;
-use crate::repair::Inspection;
-
 pub use super::matching::{
-    agreement, parse_predicted, predicted_removal, repairable_ids, Agreement, SAME_POINT_MM,
+    agreement, parse_predicted, predicted_removal, repairable_ids, Agreement, GrindPair,
+    SAME_POINT_MM,
 };
 
 /// Least uncertainty of a fitted k (0.05): the evidence is one part and a handful of regions;
@@ -210,27 +208,27 @@ fn through_origin(pairs: &[(f64, f64)]) -> Slope {
     }
 }
 
-/// Collects the evidence of one grind from the inspections `before` and `after` (the same
-/// reference, the same core points) and `predicted` (per core point of `before`, at the
+/// Collects the evidence of one grind from its inspections before and after (`pair`: the same
+/// reference, the same core points) and `predicted` (per core point of `pair.before`, at the
 /// plan's k `plan_k`); refuses with a one-line reason when the points do not match or
-/// `before` has no repairable region. Thin evidence is not refused here: [`pool`] judges it.
+/// `pair.before` has no repairable region. Thin evidence is not refused here: [`pool`] judges it.
 pub fn evidence(
-    before: &Inspection,
-    after: &Inspection,
+    pair: &GrindPair,
     predicted: &[f64],
     plan_k: f64,
     cfg: &FitConfig,
 ) -> Result<Evidence, String> {
+    let before = pair.before;
     let repairable = repairable_ids(before);
-    let partner = partners(before, after);
-    let matched = partner.iter().flatten().count() as f64 / partner.len().max(1) as f64;
+    let cores = before.points.len();
+    let matched = pair.matched() as f64 / cores.max(1) as f64;
     if matched < cfg.min_matched_share {
         return Err(format!(
             "only {:.1} % of the first inspection's {} core points have a core point within \
              {SAME_POINT_MM} mm in the second (need {:.0} %): the two inspections were not made \
              against the same reference with the same core points",
             100.0 * matched,
-            partner.len(),
+            cores,
             100.0 * cfg.min_matched_share
         ));
     }
@@ -241,11 +239,10 @@ pub fn evidence(
             continue;
         }
         defect += 1;
-        let Some(j) = partner[i] else {
+        let Some(m) = pair.removal(i) else {
             unmatched += 1;
             continue;
         };
-        let m = p.distance - after.points[j].distance;
         if m.is_finite() && predicted[i] >= cfg.min_predicted_mm {
             points.push(EvidencePoint {
                 region: p.region,
@@ -267,13 +264,12 @@ pub fn evidence(
 /// Fits k from one grind ([`evidence`], then [`pool`] over it alone); refuses with a one-line
 /// reason when the points do not match or the evidence is too thin.
 pub fn fit(
-    before: &Inspection,
-    after: &Inspection,
+    pair: &GrindPair,
     predicted: &[f64],
     plan_k: f64,
     cfg: &FitConfig,
 ) -> Result<RemovalFit, String> {
-    pool(&[evidence(before, after, predicted, plan_k, cfg)?], cfg)
+    pool(&[evidence(pair, predicted, plan_k, cfg)?], cfg)
 }
 
 /// Fits one k to the points of all `grinds` pooled: m = k u with u = predicted / the grind's

@@ -1,7 +1,7 @@
 //! What a grind's plan predicted against what the inspections measured, core point by core
 //! point: predicted.csv read and matched to the core points, the same core point found in two
-//! inspections, and the pass re-predicted with a fitted k ([`agreement`]). Used by the removal
-//! fit (`fit`) and `cycle`.
+//! inspections ([`partners`], once per grind: [`GrindPair`]), and the pass re-predicted with a
+//! fitted k ([`agreement`]). Used by the removal fit (`fit`), `cell` and `cycle`.
 use nalgebra::Point3;
 use serde::{Deserialize, Serialize};
 
@@ -64,6 +64,46 @@ pub fn partners(before: &Inspection, after: &Inspection) -> Vec<Option<usize>> {
         .collect()
 }
 
+/// The two inspections of a grind, before and after it, with their same core points matched
+/// once ([`partners`]): what the k fit, the agreement, the removal's shift and reach
+/// (`cell::removal_shift`, `cell::removal_reach`) and cycle.html's figures read.
+pub struct GrindPair<'a> {
+    /// The inspection before the grind (the one its plan was made from).
+    pub before: &'a Inspection,
+    /// The inspection of the rescan after it.
+    pub after: &'a Inspection,
+    /// Per core point of `before`, the index of the same core point in `after`.
+    partner: Vec<Option<usize>>,
+}
+
+impl<'a> GrindPair<'a> {
+    /// Matches the core points of `before` to those of `after` ([`partners`]).
+    pub fn new(before: &'a Inspection, after: &'a Inspection) -> Self {
+        GrindPair {
+            before,
+            after,
+            partner: partners(before, after),
+        }
+    }
+
+    /// The index in `after` of core point `i` of `before`, None when `after` has not it.
+    pub fn partner(&self, i: usize) -> Option<usize> {
+        self.partner[i]
+    }
+
+    /// How many core points of `before` have a partner in `after`.
+    pub fn matched(&self) -> usize {
+        self.partner.iter().flatten().count()
+    }
+
+    /// The measured removal at core point `i` of `before`: its distance before minus its
+    /// partner's after, mm (not finite where either was not measured); None without a partner.
+    pub fn removal(&self, i: usize) -> Option<f64> {
+        let j = self.partner[i]?;
+        Some(self.before.points[i].distance - self.after.points[j].distance)
+    }
+}
+
 /// The residual a pass left against the one its plan predicted, over the same defect points:
 /// the plan's prediction re-made with the fitted k (issue 29: "the achieved residual agrees
 /// with the plan's prediction, made with the fitted k, within 0.01 mm RMS").
@@ -87,24 +127,24 @@ pub struct Agreement {
 }
 
 /// Re-predicts a ground pass with `scale` = fitted k / the plan's k and compares it with what
-/// the next inspection measured, over the core points of `before` in the regions `ids` that
-/// both inspections measured. `predicted` is the plan's removal per core point of `before`
-/// at the plan's k ([`predicted_removal`]; 0 where the tool does not reach); the planner's
-/// removal is k x (its influence matrix x the dwell the trajectory spends), linear in k at a
-/// fixed trajectory, so the removal at k_fit is `predicted` x `scale`. None: no such point.
+/// the next inspection (`pair.after`) measured, over the core points of `pair.before` in the
+/// regions `ids` that both inspections measured. `predicted` is the plan's removal per core
+/// point of `pair.before` at the plan's k ([`predicted_removal`]; 0 where the tool does not
+/// reach); the planner's removal is k x (its influence matrix x the dwell the trajectory
+/// spends), linear in k at a fixed trajectory, so the removal at k_fit is `predicted` x
+/// `scale`. None: no such point.
 pub fn agreement(
-    before: &Inspection,
-    after: &Inspection,
+    pair: &GrindPair,
     predicted: &[f64],
     scale: Option<f64>,
     ids: &[i64],
 ) -> Option<Agreement> {
-    let partner = partners(before, after);
+    let (before, after) = (pair.before, pair.after);
     // (defect point, deviation before, after, predicted removal) of every matched point
     let all: Vec<(bool, f64, f64, f64)> = before
         .points
         .iter()
-        .zip(&partner)
+        .zip(&pair.partner)
         .zip(predicted)
         .filter_map(|((p, j), r)| {
             let a = after.points[(*j)?].distance;
