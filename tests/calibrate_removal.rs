@@ -218,13 +218,8 @@ fn noise_on_the_measured_removal_gives_the_textbook_spread() {
     let (mut ks, mut ses, mut rms) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..trials {
         let removed: Vec<f64> = p.iter().map(|v| s * v + sigma * normal(&mut rng)).collect();
-        let f = fit(
-            &GrindPair::new(&b, &after(&b, &removed)),
-            &p,
-            PLAN_K,
-            &FitConfig::default(),
-        )
-        .unwrap();
+        let a = after(&b, &removed);
+        let f = fit(&GrindPair::new(&b, &a), &p, PLAN_K, &FitConfig::default()).unwrap();
         ks.push(f.k_mm2_n / PLAN_K);
         ses.push(f.k_std_error_mm2_n / PLAN_K);
         rms.push(f.residual_rms_mm);
@@ -258,13 +253,8 @@ fn thin_evidence_and_unmatched_core_points_are_refused_in_one_line() {
     // a rescan against another reference (core points 0.01 mm away)
     let mut moved = a.clone();
     moved.points.iter_mut().for_each(|q| q.position.x += 0.01);
-    let e = fit(
-        &GrindPair::new(&b, &moved),
-        &p,
-        PLAN_K,
-        &FitConfig::default(),
-    )
-    .unwrap_err();
+    let pair = GrindPair::new(&b, &moved);
+    let e = fit(&pair, &p, PLAN_K, &FitConfig::default()).unwrap_err();
     assert!(e.contains("not made against the same reference"), "{e}");
     // nothing removed
     let e = fit(&GrindPair::new(&b, &b), &p, PLAN_K, &FitConfig::default()).unwrap_err();
@@ -272,13 +262,9 @@ fn thin_evidence_and_unmatched_core_points_are_refused_in_one_line() {
     // noise ten times the removal: k is not determined
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let noisy: Vec<f64> = p.iter().map(|v| v + 2.0 * normal(&mut rng)).collect();
-    let e = fit(
-        &GrindPair::new(&b, &after(&b, &noisy)),
-        &p,
-        PLAN_K,
-        &FitConfig::default(),
-    )
-    .unwrap_err();
+    let noisy = after(&b, &noisy);
+    let pair = GrindPair::new(&b, &noisy);
+    let e = fit(&pair, &p, PLAN_K, &FitConfig::default()).unwrap_err();
     assert!(e.contains("relative error"), "{e}");
     assert!(!e.contains('\n'));
     // predicted.csv: bad cells name the line and column; rows off the core points the row
@@ -315,13 +301,8 @@ fn grind(
         .iter()
         .map(|v| bias * TRUE_K / plan_k * v + NOISE_MM * normal(rng))
         .collect();
-    let g = evidence(
-        &GrindPair::new(b, &after(b, &removed)),
-        p,
-        plan_k,
-        &FitConfig::default(),
-    )
-    .unwrap();
+    let a = after(b, &removed);
+    let g = evidence(&GrindPair::new(b, &a), p, plan_k, &FitConfig::default()).unwrap();
     let pairs = expected_used(b, p)
         .into_iter()
         .map(|i| (p[i] / plan_k, removed[i]))

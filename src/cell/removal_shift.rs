@@ -297,10 +297,10 @@ impl Moments<'_> {
 }
 
 /// Registers each repairable region of `pair.before` that the plan removes from (`predicted`,
-/// per core point of `pair.before`) against its measured removal in `pair.after`: the shift by first
-/// moments ([`Moments::shift`]; by least squares, [`Moments::least_squares`], where other
-/// regions hide over [`ShiftConfig::hidden_share`] of the window), the depth scale by least
-/// squares at that shift.
+/// per core point of `pair.before`) against its measured removal in `pair.after`: the shift
+/// by first moments ([`Moments::shift`]; by least squares, [`Moments::least_squares`], where
+/// other regions hide over [`ShiftConfig::hidden_share`] of the window), the depth scale by
+/// least squares at that shift.
 pub fn register(pair: &GrindPair, predicted: &[f64], cfg: &ShiftConfig) -> Vec<RegionShift> {
     let before = pair.before;
     let measured: Vec<Option<f64>> = (0..before.points.len())

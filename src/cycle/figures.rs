@@ -22,8 +22,8 @@ const LEAST_PREDICTED_MM: f64 = 0.005;
 /// The figures of the grind of iteration `iteration` (its folder `dir`): the regions
 /// `planned` of `pair.before`, the plan's `predicted` removal per core point of `pair.before`,
 /// the measured `shifts` and, per region, the correction `carried` into the next plan (region
-/// id, mm; empty: none carried), the removal achieved by `pair.after`. A figure that cannot be drawn is
-/// said on stderr and left out (the figures are a view; the loop goes on).
+/// id, mm; empty: none carried), the removal achieved by `pair.after`. A figure that cannot be
+/// drawn is said on stderr and left out (the figures are a view; the loop goes on).
 pub fn grind(
     dir: &Path,
     iteration: usize,

@@ -240,10 +240,11 @@ pub struct Refitted {
 
 /// Refits k after the last grind from the points of every grind so far (`pooled`, which this
 /// grind's points join; `removal::fit::pool`) and, when the fit holds, writes DIR/tool.toml
-/// with it and makes it (held in memory) the `tool` of the next plan; re-predicts the grind with the fitted k
-/// over the defect points of the regions `ids` against the `after` inspection (its folder, and
-/// its core points matched once to those of `before.inspection`, `pair.before`). k is fitted on the prediction moved by each region's measured shift; the shift is
-/// carried into `aim`, the next plan's, unless the registration stops the loop
+/// with it and makes it (held in memory) the `tool` of the next plan; re-predicts the grind
+/// with the fitted k over the defect points of the regions `ids` against the `after`
+/// inspection (its folder, and its core points matched once to those of `before.inspection`,
+/// `pair.before`). k is fitted on the prediction moved by each region's measured shift; the
+/// shift is carried into `aim`, the next plan's, unless the registration stops the loop
 /// (`removal_shift::carry`, the grind's plan aimed by `aim`). Also hands back what cycle.html
 /// draws ([`Refitted::seen`]).
 pub fn refit(
