@@ -101,3 +101,40 @@ fn list<T: std::fmt::Display>(items: &[T]) -> String {
     }
     s.join("; ")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::DwellError;
+
+    /// Each reason reads as the message `dwell::set_dwell` wrote before it was typed (the
+    /// format strings of ef28d62, their lines wrapped here).
+    #[test]
+    fn a_dwell_error_reads_as_the_message_it_replaced() {
+        let lead = "region left out by the removal planner";
+        let (allowance, highest, radius, contacts) = (0.0304, 0.2178, 0.6082, 17);
+        let nothing = DwellError::NothingToGrind {
+            allowance_mm: allowance,
+            highest_mm: highest,
+        };
+        let was = format!(
+            "{lead}: nothing to grind at an allowance of {allowance:.3} mm (the highest \
+             deviation in reach is {highest:.3} mm; every contact would remove less than \
+             passing at full feed)"
+        );
+        assert_eq!(nothing.to_string(), was);
+        let none_in_reach = DwellError::NoCoreInReach {
+            patch_radius_mm: radius,
+            contacts,
+        };
+        let was = format!(
+            "region left out by the removal planner: no core point within the tool's reach \
+             ({radius:.3} mm patch radius) of its {contacts} contacts, so no removal can be \
+             planned or predicted"
+        );
+        assert_eq!(none_in_reach.to_string(), was);
+        let why = "joint 2 holds 0.31 N m of 0.25";
+        let was = format!("region left out by the removal planner: {why}");
+        assert_eq!(DwellError::Overloaded(why.into()).to_string(), was);
+        assert_eq!(DwellError::Unsolved(why.into()).to_string(), was);
+    }
+}
