@@ -247,6 +247,32 @@ fn rim_guard(
     (guarded, guard)
 }
 
+/// The rim guard's final check (`removal::cap::hold_landed`): the solve held the budgets of
+/// `guard` over the `guarded` points on the linear model (`cuts`: how), this holds them on the
+/// pass ground in order too, and says when it had to act (it lowers or lifts dwell the
+/// solve meant to keep).
+fn hold_rim(
+    (placed, contacts): (&[Contact], &[Contact]),
+    (guarded, guard, cuts): (
+        &[SurfacePoint],
+        &removal::guard::Guard,
+        removal::guard::Cuts,
+    ),
+    model: (&ToolModel, &Influence, &removal::RemovalConfig),
+    plan: &mut removal::RegionRemoval,
+) {
+    let solved: f64 = plan.dwell.iter().sum();
+    let held = removal::cap::hold_landed((placed, contacts), (guarded, guard), model, plan);
+    if held.rounds > 0 {
+        let kept: f64 = plan.dwell.iter().sum();
+        eprintln!(
+            "motion: notice: the rim guard's final hold acted after the guarded solve ({} rows \
+             in {} solves): {} rounds, {} contacts lifted, dwell {solved:.2} -> {kept:.2} s",
+            cuts.rows, cuts.solves, held.rounds, held.newly_lifted
+        );
+    }
+}
+
 /// What the removal planner needs besides the runs.
 pub struct Setup<'a> {
     /// The compliant tool.
@@ -362,19 +388,12 @@ pub fn set_dwell(
         let limit = vec![share * tolerance; cores.len()];
         removal::cap::hold_in_order((&placed, &contacts), (&cores, &limit), model, &mut plan);
     }
-    // the solve held the rim's budgets on the linear model; this holds them on the pass
-    // ground in order too
-    let solved: f64 = plan.dwell.iter().sum();
-    let held =
-        removal::cap::hold_landed((&placed, &contacts), (&guarded, &guard), model, &mut plan);
-    if held.rounds > 0 {
-        let kept: f64 = plan.dwell.iter().sum();
-        eprintln!(
-            "motion: notice: the rim guard's final hold acted after the guarded solve ({} rows \
-             in {} solves): {} rounds, {} contacts lifted, dwell {solved:.2} -> {kept:.2} s",
-            cuts.rows, cuts.solves, held.rounds, held.newly_lifted
-        );
-    }
+    hold_rim(
+        (&placed, &contacts),
+        (&guarded, &guard, cuts),
+        model,
+        &mut plan,
+    );
     let planned = runs.iter_mut().flatten().zip(&plan.dwell).zip(&contacts);
     for ((piece, t), c) in planned {
         piece.dwell_s = Some(*t);

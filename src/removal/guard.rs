@@ -11,6 +11,8 @@ use super::dwell;
 use super::influence::{Contact, Influence, InfluenceColumns, Reach};
 use crate::repair::SurfacePoint;
 use nalgebra::Vector3;
+use std::cell::RefCell;
+use std::collections::BTreeSet;
 
 /// Rings of landing shifts between no shift and a contact's whole landing margin
 /// ([`landings`]) per patch radius of margin (1): a shift between two rings a patch radius
@@ -81,6 +83,10 @@ pub struct Guard {
     rows: Vec<Vec<Row>>,
     /// Per guarded point, the removal it may take, mm.
     limit: Vec<f64>,
+    /// The (point, scenario) rows [`solve`] found binding so far: the next solve over the
+    /// same region (the in-order rounds, the bounded solve after the tool-free one) starts
+    /// from them, which spares most of its cutting rounds.
+    bound: RefCell<BTreeSet<(usize, usize)>>,
 }
 
 impl Guard {
@@ -118,6 +124,7 @@ impl Guard {
         Guard {
             rows,
             limit: limit.to_vec(),
+            bound: RefCell::default(),
         }
     }
 
@@ -225,8 +232,14 @@ pub fn solve(
     for (k, &j) in keep.iter().enumerate() {
         position[j] = Some(k);
     }
-    let mut cuts: Vec<(Row, f64)> = Vec::new();
-    let mut taken = std::collections::BTreeSet::new();
+    let row = |(i, s): (usize, usize)| -> (Row, f64) {
+        let g = (guard.rows[i][s].iter())
+            .filter_map(|&(j, v)| position[j].map(|k| (k, v)))
+            .collect();
+        (g, guard.limit[i])
+    };
+    let mut taken = guard.bound.borrow().clone();
+    let mut cuts: Vec<(Row, f64)> = taken.iter().map(|&key| row(key)).collect();
     let mut count = Cuts::default();
     loop {
         let t = dwell::solve_within(a, n, target, (lower, upper), lambda_rel, &cuts)?;
@@ -238,14 +251,12 @@ pub fn solve(
             .filter(|key| !taken.contains(key))
             .collect();
         if fresh.is_empty() || count.solves > MAX_CUT_ROUNDS {
+            guard.bound.borrow_mut().extend(taken);
             return Ok((t, count));
         }
-        for (i, s) in fresh {
-            taken.insert((i, s));
-            let row: Row = (guard.rows[i][s].iter())
-                .filter_map(|&(j, v)| position[j].map(|k| (k, v)))
-                .collect();
-            cuts.push((row, guard.limit[i]));
+        for key in fresh {
+            taken.insert(key);
+            cuts.push(row(key));
             count.rows += 1;
         }
     }
@@ -267,6 +278,7 @@ mod tests {
         let guard = Guard {
             rows: vec![vec![vec![(5, 1.0)], [skirts, vec![(5, 1.0)]].concat()]],
             limit: vec![0.5],
+            ..Guard::default()
         };
         (a, guard)
     }
@@ -315,10 +327,7 @@ mod tests {
                 .map(|r| (r - 1.0).powi(2))
                 .sum::<f64>()
         };
-        assert!(
-            error(&held) < 0.3 * error(&blunt),
-            "{held:?} {blunt:?}"
-        );
+        assert!(error(&held) < 0.3 * error(&blunt), "{held:?} {blunt:?}");
     }
 
     /// Six contacts reach a guarded point by 0.3 mm at their shortest dwell (1 s), which may
@@ -330,6 +339,7 @@ mod tests {
         let guard = Guard {
             rows: vec![vec![row]],
             limit: vec![1.0],
+            ..Guard::default()
         };
         let relaxed = [2.0, 0.2, 3.0, 0.5, 0.1, 4.0];
         let mut lift = vec![false; 6];
@@ -338,6 +348,7 @@ mod tests {
         let none = Guard {
             rows: vec![vec![vec![(1, 0.01), (4, 0.2)]]],
             limit: vec![0.0],
+            ..Guard::default()
         };
         let mut lift = vec![false; 6];
         lift_to_hold(&none, &mut lift, &[1.0; 6], &relaxed);
