@@ -241,21 +241,46 @@ pub(crate) fn cores_landed(
 
 /// Guards the rim of a region (issue 50: the gouges were conform points 1-3 mm outside every
 /// region, ground a little in each grind): every core point within the reach of a contact
-/// landed anywhere within its [`landing_margin`] keeps its [`rim_budget`], on the removal of
-/// every landing (`removal::cap::hold_landed`).
-fn guard_rim(
-    (placed, contacts): (&[Contact], &[Contact]),
+/// landed anywhere within its [`landing_margin`] keeps its [`rim_budget`] on the removal of
+/// every landing (`removal::guard::Guard::landed`): the guarded points and their budgets.
+fn rim_guard(
+    contacts: &[Contact],
     (inspection, setup): (&Inspection, &Setup),
-    (influence, solve): (&Influence, &removal::RemovalConfig),
+    influence: &Influence,
     tolerance: f64,
-    plan: &mut removal::RegionRemoval,
-) {
+) -> (Vec<SurfacePoint>, removal::guard::Guard) {
     let margin: Vec<f64> = contacts.iter().map(|c| landing_margin(c, setup)).collect();
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let limit = rim_budget(&guarded, tolerance);
-    let model = (setup.tool, influence, solve);
-    removal::cap::hold_landed((placed, contacts), (&guarded, &limit), model, &margin, plan);
+    let guard = removal::guard::Guard::landed(contacts, (&guarded, &limit), influence, &margin);
+    (guarded, guard)
+}
+
+/// The rim guard's final check (`removal::cap::hold_landed`): the solve held the budgets of
+/// `guard` over the `guarded` points on the linear model (`cuts`: how), this holds them on the
+/// pass ground in order too, and says when it had to act (it lowers or lifts dwell the
+/// solve meant to keep).
+fn hold_rim(
+    (placed, contacts): (&[Contact], &[Contact]),
+    (guarded, guard, cuts): (
+        &[SurfacePoint],
+        &removal::guard::Guard,
+        removal::guard::Cuts,
+    ),
+    model: (&ToolModel, &Influence, &removal::RemovalConfig),
+    plan: &mut removal::RegionRemoval,
+) {
+    let solved: f64 = plan.dwell.iter().sum();
+    let held = removal::cap::hold_landed((placed, contacts), (guarded, guard), model, plan);
+    if held.rounds > 0 {
+        let kept: f64 = plan.dwell.iter().sum();
+        eprintln!(
+            "motion: notice: the rim guard's final hold acted after the guarded solve ({} rows \
+             in {} solves): {} rounds, {} contacts lifted, dwell {solved:.2} -> {kept:.2} s",
+            cuts.rows, cuts.solves, held.rounds, held.newly_lifted
+        );
+    }
 }
 
 /// How [`set_dwell`]'s reason begins when the removal's limits lifted every contact of a
@@ -358,7 +383,6 @@ pub fn set_dwell(
             contacts.len()
         )));
     }
-    let bounds = (&influence, &solve);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let aim = removal::targets(&cores, allowance, tolerance);
     // no removal shift measured yet: the whole region, at most the first pass's depth
@@ -366,21 +390,27 @@ pub fn set_dwell(
     let aim: Vec<f64> = (aim.iter())
         .map(|t| config.finish.cap(config.aim.cap(*t, tolerance)))
         .collect();
-    let mut plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
+    let (guarded, guard) = rim_guard(&contacts, bench, &influence, tolerance);
+    let (mut plan, cuts) = match solve_in_order(
+        &placed,
+        setup.tool,
+        (&influence, &solve, &guard),
+        (&contacts, &cores),
+        &aim,
+    ) {
         Ok(p) => p,
         Err(m) => return Ok(Err(format!("region left out by the removal planner: {m}"))),
     };
     // the cap holds on the removal the solved dwell makes, not only on the targets
+    let model = (setup.tool, &influence, &solve);
     if let Some(share) = config.aim.first_pass_share {
         let limit = vec![share * tolerance; cores.len()];
-        let model = (setup.tool, &influence, &solve);
         removal::cap::hold_in_order((&placed, &contacts), (&cores, &limit), model, &mut plan);
     }
-    guard_rim(
+    hold_rim(
         (&placed, &contacts),
-        bench,
-        (&influence, &solve),
-        tolerance,
+        (&guarded, &guard, cuts),
+        model,
         &mut plan,
     );
     let planned = runs.iter_mut().flatten().zip(&plan.dwell).zip(&contacts);
@@ -422,26 +452,27 @@ const IN_ORDER_ROUNDS: usize = 2;
 /// not proven out of tolerance), then [`IN_ORDER_ROUNDS`] times again with each core point's
 /// target raised by what the linear model removes there beyond the contacts ground in order
 /// (r' = max(r + A t - S(t), 0), S `removal::sequence::in_order` of the `placed` contacts),
-/// so that the pass ground in order removes the target.
+/// so that the pass ground in order removes the target; every solve holds `guard`'s budgets
+/// (`removal::solve_guarded`). Also returns how the last solve cut them in.
 fn solve_in_order(
     placed: &[Contact],
     tool: &ToolModel,
-    (influence, solve): (&Influence, &removal::RemovalConfig),
+    (influence, solve, guard): (&Influence, &removal::RemovalConfig, &removal::guard::Guard),
     (contacts, cores): (&[Contact], &[SurfacePoint]),
     aim: &[f64],
-) -> Result<removal::RegionRemoval, String> {
-    let mut plan = removal::solve_region(influence, contacts, cores, aim, solve)?;
+) -> Result<(removal::RegionRemoval, removal::guard::Cuts), String> {
+    let mut plan = removal::solve_guarded(influence, contacts, cores, aim, solve, guard)?;
     let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
     let reach = removal::influence::Reach::new(&geometry);
     for _ in 0..IN_ORDER_ROUNDS {
         let ground = (cores, &reach);
-        let order = removal::sequence::in_order(placed, &plan.dwell, tool, influence, ground);
+        let order = removal::sequence::in_order(placed, &plan.0.dwell, tool, influence, ground);
         let aimed: Vec<f64> = aim
             .iter()
-            .zip(plan.removal.iter().zip(&order))
+            .zip(plan.0.removal.iter().zip(&order))
             .map(|(r, (linear, ground))| (r + linear - ground).max(0.0))
             .collect();
-        plan = removal::solve_region(influence, contacts, cores, &aimed, solve)?;
+        plan = removal::solve_guarded(influence, contacts, cores, &aimed, solve, guard)?;
     }
     Ok(plan)
 }
