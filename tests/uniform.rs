@@ -353,13 +353,17 @@ fn plan_page_says_what_is_left_out(insp: &Inspection, plan: &Plan, seed: u64) ->
 /// workcell): the same seeds planned with setup 1 alone and with both, in removal mode. The
 /// two-setup plan plans no less than setup 1 alone and at least [`TWO_SETUP_FLOOR`]; every
 /// region names its setup, setup 2 holds exactly the regions moved to it, each setup states
-/// its placement's hash, and every region setup 2 tried and left names why.
+/// its placement's hash, and every region setup 2 tried and left names why. Setup 2 takes a
+/// region of at least one seed: since the removal planner grinds a contact softer before it
+/// lifts it (motion/soften.rs), seed 5100's regions 17 and 22 plan in setup 1 (98.6 % with
+/// setup 1 alone, 2026-12-06) and only seed 5101 moves a region.
 #[test]
 fn uniform_defects_over_the_designed_cells_two_setups() {
     let (_, cells, mut config) = setups("femoral/");
     let alone = library("femoral/", true);
     assert_eq!(cells.len(), 2, "the designed cell ships two setups");
     config.mode = PlanMode::Removal;
+    let mut moved_any = false;
     for seed in [5100, 5101] {
         let insp = uniform_case(seed);
         let one = polishbot::motion::setups::plan(&insp, &alone, &cells[..1], &config).unwrap();
@@ -374,7 +378,7 @@ fn uniform_defects_over_the_designed_cells_two_setups() {
             two.setups[1].tried
         );
         assert!(one.setups.is_empty(), "one setup: no setups list");
-        assert!(!moved.is_empty(), "seed {seed}: setup 2 takes no region");
+        moved_any |= !moved.is_empty();
         assert!(
             c2 / t2 >= REMOVAL_FLOOR,
             "seed {seed}: the shipped cell planned {c2}/{t2}"
@@ -404,6 +408,7 @@ fn uniform_defects_over_the_designed_cells_two_setups() {
         );
         assert!(two.setups[1].tried.iter().all(|t| t.refused.is_some()));
     }
+    assert!(moved_any, "setup 2 takes no region of either seed");
 }
 
 /// A copy of the shipped femoral cell (with its setup-2/) in `dir`.
