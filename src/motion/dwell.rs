@@ -9,6 +9,7 @@ use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 use super::config::PlanConfig;
 use super::error::PlanError;
 use super::feed::JointSpline;
+use super::landing::landing_margin;
 use super::program::{PlannedPass, Run};
 use super::stroke::{chain_knots, chain_limits};
 use crate::removal::montecarlo::JointError;
@@ -149,48 +150,6 @@ pub(crate) fn cores_near(
     (0..keep.len()).filter(|&i| keep[i]).collect()
 }
 
-/// Landing error and reach beyond the model's patch of a grind before the loop measured how far
-/// its removal reaches (a loop's first plan, a plan outside a loop: the prior of
-/// [`landing_margin`]; from grind 2 on the reach read from the rescans replaces it,
-/// `cell::removal_reach`), mm (1.8): the documented arm's first grinds
-/// landed about 0.9 mm from their plan (0.6-0.7 mm of it on the ideal arm too: the planner's
-/// removal sits 0.2-0.45 mm from the simulator's), the shift registration misreads by as much
-/// (the demo's region 1: 1.50 mm read where 0.28 mm was true), and the removal reaches
-/// farther than the model's patch: survey case 61 (documented arm) lost 0.033/0.024/0.013 mm
-/// in grinds 1/2/3 at a rim point 1.8-2.3 mm from the nearest commanded contact, 1.2-1.7 mm
-/// beyond the model's patch edge, which a 0.9 mm margin let it take to -0.067 mm.
-pub const UNMEASURED_LANDING_MM: f64 = 1.8;
-
-/// How far from where a contact's removal is predicted it may land, mm: the tool-tip error
-/// the Monte Carlo draws (`removal::montecarlo::tip_error`), the spring-loaded spindle's
-/// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
-/// the aim moves the raster by it, but the part's excess and the axis the arm really holds
-/// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
-/// the carried removal shift's magnitude (its own error is of its size: the registration
-/// reads the stroke spacing's ripple). Before any grind's reach was measured the shift's term
-/// is at least [`UNMEASURED_LANDING_MM`]; once the loop measured how far beyond its plans'
-/// footprints the removal really reached (`motion::aim::Aim::reach_mm`, read from the
-/// rescans by `cell::removal_reach`), the margin is the larger of the three terms and that
-/// reach: the measured reach holds the landing error and the footprint's widening the fixed
-/// floor stood for, on this arm and tool.
-pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
-    let (tool, config) = (setup.tool, setup.config);
-    let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
-    let slide = match tool.compliance_direction {
-        removal::ComplianceDirection::SpindleAxis => {
-            let (tilt, _) = c.tilt();
-            let cos = tilt.cos.max(removal::press::MIN_AXIS_COS);
-            tool.preload_mm * tilt.sin / cos
-        }
-        removal::ComplianceDirection::SurfaceNormal => 0.0,
-    };
-    let carried = config.aim.shift_at(&c.point, &c.normal).norm();
-    match config.aim.reach_mm {
-        Some(reach) => (tip + slide + carried).max(reach),
-        None => tip + slide + carried.max(UNMEASURED_LANDING_MM),
-    }
-}
-
 /// Share of a conform point's loss the rescan reads (0.3): outside every region the removal
 /// of a grind is the narrow skirt of a landed patch, and the comparison averages over about
 /// 1.85 mm, wider than it; measured on survey cases 101/81/61 (documented arm, cell seed 29)
@@ -249,7 +208,10 @@ fn rim_guard(
     influence: &Influence,
     tolerance: f64,
 ) -> (Vec<SurfacePoint>, removal::guard::Guard) {
-    let margin: Vec<f64> = contacts.iter().map(|c| landing_margin(c, setup)).collect();
+    let margin: Vec<f64> = contacts
+        .iter()
+        .map(|c| landing_margin(c, setup.tool, setup.config))
+        .collect();
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let limit = rim_budget(&guarded, tolerance);

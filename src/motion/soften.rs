@@ -5,7 +5,7 @@
 //! point in its reach may lose. Before it is lifted it is commanded shallower: a spring-loaded
 //! spindle pressed less deep presses with less force, so its Hertz patch is smaller (less
 //! reach) and its pressure lower (less removal per second); its landing margin stays the
-//! preload's (`dwell::landing_margin`). [`softened`] commands the contacts the limits lifted at
+//! preload's (`landing::landing_margin`). [`softened`] commands the contacts the limits lifted at
 //! [`SOFT_DEPTH_SHARE`] of the preload (ramped into their strokes as
 //! `press_depth::DEPTH_SLOPE` asks); the caller walks the strokes again (the arm's joint
 //! angles carry the shallower ball to the bus and the simulator) and solves the region again,
@@ -115,7 +115,10 @@ pub(crate) fn soften_region(
 ) -> Result<Walked, PlanError> {
     let (lifted, ground) = lifted_and_ground(&w);
     let depth = SOFT_DEPTH_SHARE * preload;
-    let soft = limited.and_then(|l| softened(l, &w.strokes, &lifted, depth));
+    let off = std::env::var("QP2_NOSOFT").is_ok_and(|v| v == "1");
+    let soft = limited
+        .filter(|_| !off)
+        .and_then(|l| softened(l, &w.strokes, &lifted, depth));
     let Some(soft) = soft else {
         reachability.lifted += lifted.len();
         return Ok(w);

@@ -299,6 +299,15 @@ pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptan
         planned_peaks: planned_peaks(&dir),
     };
     println!("acceptance seed {seed}: {a:.4?}");
+    if std::env::var("QP2_GOUGED").is_ok() {
+        let rows: String = (part.below(&|p| !near_pit(p), -TOLERANCE_MM).iter())
+            .map(|(p, planted, by)| {
+                let by: Vec<String> = by.iter().map(|r| format!("{r:.5}")).collect();
+                format!("{},{},{},{planted:.5},{}\n", p.x, p.y, p.z, by.join(";"))
+            })
+            .collect();
+        std::fs::write(dir.join("gouged.csv"), rows).unwrap();
+    }
     a
 }
 
