@@ -115,10 +115,7 @@ pub(crate) fn soften_region(
 ) -> Result<Walked, PlanError> {
     let (lifted, ground) = lifted_and_ground(&w);
     let depth = SOFT_DEPTH_SHARE * preload;
-    let off = std::env::var("QP2_NOSOFT").is_ok_and(|v| v == "1");
-    let soft = limited
-        .filter(|_| !off)
-        .and_then(|l| softened(l, &w.strokes, &lifted, depth));
+    let soft = limited.and_then(|l| softened(l, &w.strokes, &lifted, depth));
     let Some(soft) = soft else {
         reachability.lifted += lifted.len();
         return Ok(w);
