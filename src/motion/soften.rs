@@ -4,8 +4,8 @@
 //! contact that, even at its shortest dwell (`piece / fastest feed`), removes more than a
 //! point in its reach may lose. Before it is lifted it is commanded shallower: a spring-loaded
 //! spindle pressed less deep presses with less force, so its Hertz patch is smaller (less
-//! reach) and its pressure lower (less removal per second); its landing margin stays the
-//! preload's (`landing::landing_margin`). [`softened`] commands the contacts the limits lifted at
+//! reach) and its pressure lower (less removal per second); but its removal lands farther from
+//! its prediction, so its landing margin is at least `landing::SHALLOW_LANDING_MM`. [`softened`] commands the contacts the limits lifted at
 //! [`SOFT_DEPTH_SHARE`] of the preload (ramped into their strokes as
 //! `press_depth::DEPTH_SLOPE` asks); the caller walks the strokes again (the arm's joint
 //! angles carry the shallower ball to the bus and the simulator) and solves the region again,
