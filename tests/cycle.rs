@@ -508,7 +508,8 @@ fn ten_acceptance_cases_with_the_removal_planner() {
 /// = `documented`, `ideal` or both (default `documented,ideal`); `POLISHBOT_SURVEY_JOBS` runs
 /// at a time (default 2); `POLISHBOT_SURVEY_CELLS` and `POLISHBOT_ACCEPT_SEEDS` other cell
 /// seeds and cases; `POLISHBOT_SURVEY_KEEP=1` keeps each run's folder
-/// (target/tmp/survey-ARM-CASE-CELL). Fails unless the acceptance holds on the
+/// (target/tmp/survey-ARM-CASE-CELL), `POLISHBOT_ACCEPT_GOUGED=1` writes its gouged true
+/// points there (`gouged.csv`). Fails unless the acceptance holds on the
 /// documented arm: at least 27 of 30 runs with 99 % of the area within tolerance, and in every
 /// run no true ground point below -tolerance, no pit ground and k within 10 %.
 #[test]

@@ -70,9 +70,9 @@ pub struct Aim {
     /// Each measured region's own shift.
     pub regions: Vec<AimRegion>,
     /// How far beyond its plan's predicted footprint the removal of the loop's grinds reached,
-    /// the largest over them, mm (`cell::removal_reach`; None: not measured yet, and the
-    /// landing margin keeps its floor, `motion::dwell::UNMEASURED_LANDING_MM`). The landing
-    /// margin is at least it (`motion::dwell::landing_margin`).
+    /// the largest over them, mm (`cell::removal_reach`; None: not measured yet). The landing
+    /// margin is at least it and at least its floor either way
+    /// (`motion::landing::landing_margin`, `motion::landing::UNMEASURED_LANDING_MM`).
     pub reach_mm: Option<f64>,
 }
 

@@ -9,6 +9,7 @@ use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 use super::config::PlanConfig;
 use super::error::{DwellError, PlanError};
 use super::feed::JointSpline;
+use super::landing::landing_margin;
 use super::program::{PlannedPass, Run};
 use super::stroke::{chain_knots, chain_limits};
 use crate::removal::montecarlo::JointError;
@@ -149,48 +150,6 @@ pub(crate) fn cores_near(
     (0..keep.len()).filter(|&i| keep[i]).collect()
 }
 
-/// Landing error and reach beyond the model's patch of a grind before the loop measured how far
-/// its removal reaches (a loop's first plan, a plan outside a loop: the prior of
-/// [`landing_margin`]; from grind 2 on the reach read from the rescans replaces it,
-/// `cell::removal_reach`), mm (1.8): the documented arm's first grinds
-/// landed about 0.9 mm from their plan (0.6-0.7 mm of it on the ideal arm too: the planner's
-/// removal sits 0.2-0.45 mm from the simulator's), the shift registration misreads by as much
-/// (the demo's region 1: 1.50 mm read where 0.28 mm was true), and the removal reaches
-/// farther than the model's patch: survey case 61 (documented arm) lost 0.033/0.024/0.013 mm
-/// in grinds 1/2/3 at a rim point 1.8-2.3 mm from the nearest commanded contact, 1.2-1.7 mm
-/// beyond the model's patch edge, which a 0.9 mm margin let it take to -0.067 mm.
-pub const UNMEASURED_LANDING_MM: f64 = 1.8;
-
-/// How far from where a contact's removal is predicted it may land, mm: the tool-tip error
-/// the Monte Carlo draws (`removal::montecarlo::tip_error`), the spring-loaded spindle's
-/// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
-/// the aim moves the raster by it, but the part's excess and the axis the arm really holds
-/// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
-/// the carried removal shift's magnitude (its own error is of its size: the registration
-/// reads the stroke spacing's ripple). Before any grind's reach was measured the shift's term
-/// is at least [`UNMEASURED_LANDING_MM`]; once the loop measured how far beyond its plans'
-/// footprints the removal really reached (`motion::aim::Aim::reach_mm`, read from the
-/// rescans by `cell::removal_reach`), the margin is the larger of the three terms and that
-/// reach: the measured reach holds the landing error and the footprint's widening the fixed
-/// floor stood for, on this arm and tool.
-pub(crate) fn landing_margin(c: &Contact, setup: &Setup) -> f64 {
-    let (tool, config) = (setup.tool, setup.config);
-    let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
-    let slide = match tool.compliance_direction {
-        removal::ComplianceDirection::SpindleAxis => {
-            let (tilt, _) = c.tilt();
-            let cos = tilt.cos.max(removal::press::MIN_AXIS_COS);
-            tool.preload_mm * tilt.sin / cos
-        }
-        removal::ComplianceDirection::SurfaceNormal => 0.0,
-    };
-    let carried = config.aim.shift_at(&c.point, &c.normal).norm();
-    match config.aim.reach_mm {
-        Some(reach) => (tip + slide + carried).max(reach),
-        None => tip + slide + carried.max(UNMEASURED_LANDING_MM),
-    }
-}
-
 /// Share of a conform point's loss the rescan reads (0.3): outside every region the removal
 /// of a grind is the narrow skirt of a landed patch, and the comparison averages over about
 /// 1.85 mm, wider than it; measured on survey cases 101/81/61 (documented arm, cell seed 29)
@@ -241,21 +200,49 @@ pub(crate) fn cores_landed(
 
 /// Guards the rim of a region (issue 50: the gouges were conform points 1-3 mm outside every
 /// region, ground a little in each grind): every core point within the reach of a contact
-/// landed anywhere within its [`landing_margin`] keeps its [`rim_budget`], on the removal of
-/// every landing (`removal::cap::hold_landed`).
-fn guard_rim(
-    (placed, contacts): (&[Contact], &[Contact]),
+/// landed anywhere within its [`landing_margin`] keeps its [`rim_budget`] on the removal of
+/// every landing (`removal::guard::Guard::landed`): the guarded points and their budgets.
+fn rim_guard(
+    contacts: &[Contact],
     (inspection, setup): (&Inspection, &Setup),
-    (influence, solve): (&Influence, &removal::RemovalConfig),
+    influence: &Influence,
     tolerance: f64,
-    plan: &mut removal::RegionRemoval,
-) {
-    let margin: Vec<f64> = contacts.iter().map(|c| landing_margin(c, setup)).collect();
+) -> (Vec<SurfacePoint>, removal::guard::Guard) {
+    let margin: Vec<f64> = contacts
+        .iter()
+        .map(|c| landing_margin(c, setup.tool, setup.config))
+        .collect();
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let limit = rim_budget(&guarded, tolerance);
-    let model = (setup.tool, influence, solve);
-    removal::cap::hold_landed((placed, contacts), (&guarded, &limit), model, &margin, plan);
+    let guard = removal::guard::Guard::landed(contacts, (&guarded, &limit), influence, &margin);
+    (guarded, guard)
+}
+
+/// The rim guard's final check (`removal::cap::hold_landed`): the solve held the budgets of
+/// `guard` over the `guarded` points on the linear model (`cuts`: how), this holds them on the
+/// pass ground in order too, and says when it had to act (it lowers or lifts dwell the
+/// solve meant to keep).
+fn hold_rim(
+    (placed, contacts): (&[Contact], &[Contact]),
+    (guarded, guard, cuts): (
+        &[SurfacePoint],
+        &removal::guard::Guard,
+        removal::guard::Cuts,
+    ),
+    model: (&ToolModel, &Influence, &removal::RemovalConfig),
+    plan: &mut removal::RegionRemoval,
+) {
+    let solved: f64 = plan.dwell.iter().sum();
+    let held = removal::cap::hold_landed((placed, contacts), (guarded, guard), model, plan);
+    if held.rounds > 0 {
+        let kept: f64 = plan.dwell.iter().sum();
+        eprintln!(
+            "motion: notice: the rim guard's final hold acted after the guarded solve ({} rows \
+             in {} solves): {} rounds, {} contacts lifted, dwell {solved:.2} -> {kept:.2} s",
+            cuts.rows, cuts.solves, held.rounds, held.newly_lifted
+        );
+    }
 }
 
 /// What the removal planner needs besides the runs.
@@ -348,7 +335,6 @@ pub fn set_dwell(
             contacts: contacts.len(),
         }));
     }
-    let bounds = (&influence, &solve);
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let aim = removal::targets(&cores, allowance, tolerance);
     // no removal shift measured yet: the whole region, at most the first pass's depth
@@ -356,21 +342,27 @@ pub fn set_dwell(
     let aim: Vec<f64> = (aim.iter())
         .map(|t| config.finish.cap(config.aim.cap(*t, tolerance)))
         .collect();
-    let mut plan = match solve_in_order(&placed, setup.tool, bounds, (&contacts, &cores), &aim) {
+    let (guarded, guard) = rim_guard(&contacts, bench, &influence, tolerance);
+    let (mut plan, cuts) = match solve_in_order(
+        &placed,
+        setup.tool,
+        (&influence, &solve, &guard),
+        (&contacts, &cores),
+        &aim,
+    ) {
         Ok(p) => p,
         Err(m) => return Ok(Err(DwellError::Unsolved(m))),
     };
     // the cap holds on the removal the solved dwell makes, not only on the targets
+    let model = (setup.tool, &influence, &solve);
     if let Some(share) = config.aim.first_pass_share {
         let limit = vec![share * tolerance; cores.len()];
-        let model = (setup.tool, &influence, &solve);
         removal::cap::hold_in_order((&placed, &contacts), (&cores, &limit), model, &mut plan);
     }
-    guard_rim(
+    hold_rim(
         (&placed, &contacts),
-        bench,
-        (&influence, &solve),
-        tolerance,
+        (&guarded, &guard, cuts),
+        model,
         &mut plan,
     );
     let planned = runs.iter_mut().flatten().zip(&plan.dwell).zip(&contacts);
@@ -412,26 +404,27 @@ const IN_ORDER_ROUNDS: usize = 2;
 /// not proven out of tolerance), then [`IN_ORDER_ROUNDS`] times again with each core point's
 /// target raised by what the linear model removes there beyond the contacts ground in order
 /// (r' = max(r + A t - S(t), 0), S `removal::sequence::in_order` of the `placed` contacts),
-/// so that the pass ground in order removes the target.
+/// so that the pass ground in order removes the target; every solve holds `guard`'s budgets
+/// (`removal::solve_guarded`). Also returns how the last solve cut them in.
 fn solve_in_order(
     placed: &[Contact],
     tool: &ToolModel,
-    (influence, solve): (&Influence, &removal::RemovalConfig),
+    (influence, solve, guard): (&Influence, &removal::RemovalConfig, &removal::guard::Guard),
     (contacts, cores): (&[Contact], &[SurfacePoint]),
     aim: &[f64],
-) -> Result<removal::RegionRemoval, String> {
-    let mut plan = removal::solve_region(influence, contacts, cores, aim, solve)?;
+) -> Result<(removal::RegionRemoval, removal::guard::Cuts), String> {
+    let mut plan = removal::solve_guarded(influence, contacts, cores, aim, solve, guard)?;
     let geometry: Vec<_> = cores.iter().map(|c| (c.position, c.normal)).collect();
     let reach = removal::influence::Reach::new(&geometry);
     for _ in 0..IN_ORDER_ROUNDS {
         let ground = (cores, &reach);
-        let order = removal::sequence::in_order(placed, &plan.dwell, tool, influence, ground);
+        let order = removal::sequence::in_order(placed, &plan.0.dwell, tool, influence, ground);
         let aimed: Vec<f64> = aim
             .iter()
-            .zip(plan.removal.iter().zip(&order))
+            .zip(plan.0.removal.iter().zip(&order))
             .map(|(r, (linear, ground))| (r + linear - ground).max(0.0))
             .collect();
-        plan = removal::solve_region(influence, contacts, cores, &aimed, solve)?;
+        plan = removal::solve_guarded(influence, contacts, cores, &aimed, solve, guard)?;
     }
     Ok(plan)
 }

@@ -24,6 +24,7 @@ pub mod file;
 pub mod finish;
 pub mod frames;
 mod free_motion;
+mod landing;
 pub mod order;
 mod predict;
 mod press_depth;

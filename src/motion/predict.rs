@@ -11,11 +11,12 @@ use std::collections::HashMap;
 use nalgebra::{Point3, Vector3};
 
 use super::dwell::{
-    cores_landed, cores_near, joint_error, landing_margin, placed_contacts, pressed_contacts,
-    reference_from_robot, Setup,
+    cores_landed, cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot,
+    Setup,
 };
 use super::error::PlanError;
 use super::free_motion::{pressed, Assembly};
+use super::landing::landing_margin;
 use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
 use super::trajectory::{JointTrajectory, Move};
 use crate::removal::montecarlo::{spread, JointError};
@@ -308,7 +309,7 @@ fn verdict_points(
 ) -> (Vec<usize>, Vec<bool>) {
     let near = cores_near(inspection, setup.index, contacts, influence);
     let margin: Vec<f64> = (contacts.iter())
-        .map(|c| landing_margin(c, setup))
+        .map(|c| landing_margin(c, setup.tool, setup.config))
         .collect();
     let wide = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let nominal = wide.iter().map(|i| near.binary_search(i).is_ok()).collect();

@@ -4,16 +4,17 @@
 //! contact that, even at its shortest dwell (`piece / fastest feed`), removes more than a
 //! point in its reach may lose. Before it is lifted it is commanded shallower: a spring-loaded
 //! spindle pressed less deep presses with less force, so its Hertz patch is smaller (less
-//! reach) and its pressure lower (less removal per second); its landing margin stays the
-//! preload's (`dwell::landing_margin`). [`softened`] commands the contacts the limits lifted at
-//! [`MIN_DEPTH_SHARE`] of the preload (0.5, the gentlest setting the planner commands: the
-//! spring still holds the ball on the part through the servos' quantisation; the force
-//! halves, the patch's radius and peak pressure fall by `0.5^(1/3)`, 21 %, and the spring's
-//! slide halves), ramped into their strokes as `press_depth::DEPTH_SLOPE` asks; the caller
-//! walks the strokes again (the arm's joint angles carry the shallower ball to the bus and the
-//! simulator) and solves the region again, where the dwell solve, the limits and the Monte
-//! Carlo all read the commanded depth (`Contact::depth_mm` -> `force_ratio`). A contact the
-//! limits still lift at that depth is lifted.
+//! reach) and its pressure lower (less removal per second); but its removal lands farther from
+//! its prediction, so its landing margin is at least `landing::SHALLOW_LANDING_MM`.
+//! [`softened`] commands the contacts the limits lifted at [`MIN_DEPTH_SHARE`] of the preload
+//! (0.5, the gentlest setting the planner commands: the spring still holds the ball on the part
+//! through the servos' quantisation; the force halves, the patch's radius and peak pressure
+//! fall by `0.5^(1/3)`, 21 %, and the spring's slide halves), ramped into their strokes as
+//! `press_depth::DEPTH_SLOPE` asks; the caller walks the strokes again (the arm's joint angles
+//! carry the shallower ball to the bus and the simulator) and solves the region again, where
+//! the dwell solve, the limits and the Monte Carlo all read the commanded depth
+//! (`Contact::depth_mm` -> `force_ratio`). A contact the limits still lift at that depth is
+//! lifted.
 use std::collections::HashMap;
 
 use super::dwell;

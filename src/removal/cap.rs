@@ -8,11 +8,11 @@
 //! 0.035 mm cap). [`hold`] lowers the dwell of each contact reaching a point over its limit
 //! by that point's excess ratio, lifts the tool over a contact already at its shortest dwell,
 //! and repeats until no point is over its limit.
+use super::guard::Guard;
 use super::influence::{self, Contact, Influence, InfluenceColumns, Reach};
 use super::tool::ToolModel;
 use super::{sequence, RegionRemoval, RemovalConfig};
 use crate::repair::SurfacePoint;
-use nalgebra::Vector3;
 
 /// Rounds of [`hold`] at most (30): each round scales every contact reaching an over-limit
 /// point by the worst ratio it reaches (one round settles a linear removal; the in-order
@@ -128,108 +128,40 @@ pub fn hold_in_order(
     held
 }
 
-/// Rings of landing shifts between no shift and a contact's whole landing margin
-/// ([`landings`]) per patch radius of margin (1): a shift between two rings a patch radius
-/// apart still puts the patch over every point the two rings' patches leave between them,
-/// so the worst removal at a guarded point is not missed between them.
-const RINGS_PER_PATCH: f64 = 1.0;
-
-/// Fewest directions of a ring of landing shifts (8: every 45 degrees); a wider ring takes
-/// one direction per patch radius of its circumference, so that neighbouring shifts' patches
-/// overlap. Between two directions the removal at a guarded point can exceed what either
-/// predicts: in the test below by 16 % (0.0058 mm against a 0.005 mm budget).
-const MIN_DIRECTIONS: usize = 8;
-
-/// The landing shifts a region's removal is held against (issue 50, "no grind takes conform
-/// surface below -tol"): per scenario, one shift per contact of `contacts`, mm. Scenario 0
-/// is no shift; the others move every contact the same way (a landing error is systematic
-/// within a grind: the removal shift the loop measures is one vector per region) by a share
-/// of its own `margin` (mm) in one direction of the tangent plane of the contacts' mean
-/// normal (projected into each contact's own tangent plane), on rings every
-/// [`RINGS_PER_PATCH`] patch radius `patch` (mm) of the largest margin.
-pub fn landings(contacts: &[Contact], margin: &[f64], patch: f64) -> Vec<Vec<Vector3<f64>>> {
-    let mut out = vec![vec![Vector3::zeros(); contacts.len()]];
-    let widest = margin.iter().copied().fold(0.0, f64::max);
-    let mean: Vector3<f64> = contacts.iter().map(|c| c.normal).sum();
-    let Some(normal) = mean.try_normalize(1e-12) else {
-        return out;
-    };
-    if widest <= 0.0 || patch <= 0.0 {
-        return out;
-    }
-    let (tx, ty) = crate::spatial::tangent_basis(&normal);
-    let rings = (widest / (patch / RINGS_PER_PATCH)).ceil().max(1.0) as usize;
-    for ring in 1..=rings {
-        let share = ring as f64 / rings as f64;
-        let around = std::f64::consts::TAU * share * widest / patch;
-        let directions = (around.ceil() as usize).max(MIN_DIRECTIONS);
-        for k in 0..directions {
-            let angle = std::f64::consts::TAU * k as f64 / directions as f64;
-            let d = tx * angle.cos() + ty * angle.sin();
-            let shifts = contacts
-                .iter()
-                .zip(margin)
-                .map(|(c, m)| (d - c.normal * c.normal.dot(&d)) * (share * m))
-                .collect();
-            out.push(shifts);
-        }
-    }
-    out
-}
-
 /// Holds `plan` (a region's solved dwell over the pressed `contacts`, `placed` as the raster
-/// placed them) so that no `guarded` point loses more than its `limit` mm wherever the
-/// removal lands within each contact's landing margin (`margin`, mm, [`landings`]): the
-/// removal at a guarded point is the largest over the landing scenarios of the linear
-/// model's (every contact's patch moved by the scenario's shift), and of the pass ground in
-/// order where it lands as planned; [`hold`] lowers the dwell or lifts the contacts reaching
-/// a point over its limit in any scenario. `plan.removal` is left as it was (the caller's
-/// core points differ from the guarded ones).
+/// placed them) so that no `guarded` point loses more than its budget (`guard`, built over
+/// them: `guard::Guard::landed`) wherever the removal lands within each contact's landing
+/// margin: the removal at a guarded point is the largest over the landing scenarios of the
+/// linear model's (every contact's patch moved by the scenario's shift), and of the pass
+/// ground in order where it lands as planned; [`hold`] lowers the dwell or lifts the contacts
+/// reaching a point over its limit in any scenario. `plan.removal` is left as it was (the
+/// caller's core points differ from the guarded ones).
 pub fn hold_landed(
     (placed, contacts): (&[Contact], &[Contact]),
-    (guarded, limit): (&[SurfacePoint], &[f64]),
+    (guarded, guard): (&[SurfacePoint], &Guard),
     (tool, influence, solve): (&ToolModel, &Influence, &RemovalConfig),
-    margin: &[f64],
     plan: &mut RegionRemoval,
 ) -> Held {
     let geometry: Vec<_> = guarded.iter().map(|c| (c.position, c.normal)).collect();
     let reach = Reach::new(&geometry);
-    let scenarios: Vec<InfluenceColumns> = landings(contacts, margin, influence.patch_radius())
-        .iter()
-        .map(|shifts| {
-            let moved: Vec<Contact> = (contacts.iter().zip(shifts))
-                .map(|(c, s)| Contact {
-                    offset: c.offset + s,
-                    ..*c
-                })
-                .collect();
-            reach.matrix(influence, &moved)
-        })
-        .collect();
-    // a contact reaches a guarded point when it does in any scenario
-    let mut a: InfluenceColumns = vec![Vec::new(); contacts.len()];
-    for columns in &scenarios {
-        for (j, col) in columns.iter().enumerate() {
-            a[j].extend(col.iter().copied());
-        }
-    }
+    let a = guard.columns(contacts.len());
     let lower: Vec<f64> = (contacts.iter())
         .map(|c| c.length / solve.feed_max_mm_s)
         .collect();
-    let n = guarded.len();
     let removal_of = |t: &[f64]| {
         let mut worst = sequence::in_order(placed, t, tool, influence, (guarded, &reach));
-        for columns in &scenarios {
-            let r = influence::apply(columns, t, n);
-            worst.iter_mut().zip(r).for_each(|(w, r)| *w = w.max(r));
-        }
+        let landed = guard.removal(t);
+        worst
+            .iter_mut()
+            .zip(landed)
+            .for_each(|(w, r)| *w = w.max(r));
         worst
     };
     hold(
         &a,
         (&mut plan.dwell, &mut plan.lifted),
         &lower,
-        limit,
+        guard.limit(),
         removal_of,
     )
 }
@@ -237,10 +169,12 @@ pub fn hold_landed(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::removal::guard::landings;
     use crate::removal::influence::apply;
+    use nalgebra::Vector3;
 
     /// How far over its budget a guarded point may go when the removal lands between two
-    /// directions of a ring (1.25): [`landings`] spaces them a patch radius apart on the
+    /// directions of a ring (1.25): `guard::landings` spaces them a patch radius apart on the
     /// circumference, so a landing between them puts the patch's edge up to about a quarter
     /// of its radius nearer the point; the test below measured 0.0058 mm against 0.005 mm.
     const BETWEEN_LANDINGS: f64 = 1.25;
@@ -394,13 +328,8 @@ mod tests {
             .collect();
         let solve = RemovalConfig::default();
         let model = (&tool, &influence, &solve);
-        hold_landed(
-            (&contacts, &contacts),
-            (&cores, &limit),
-            model,
-            &[1.0; 3],
-            &mut plan,
-        );
+        let guard = Guard::landed(&contacts, (&cores, &limit), &influence, &[1.0; 3]);
+        hold_landed((&contacts, &contacts), (&cores, &guard), model, &mut plan);
         // held on every landing of the scenarios...
         let margin = [1.0; 3];
         for shifts in landings(&contacts, &margin, influence.patch_radius()) {

@@ -1,6 +1,7 @@
 //! The dwell solve: `min |A t - r|^2 + lambda |t|^2` subject to `t_min <= t <= t_max`, a
 //! bounded least-squares problem handed to Clarabel (an interior-point QP/conic solver) as
-//! `min 1/2 t^T (A^T A + lambda I) t - (A^T r)^T t` with the bounds as a nonnegative cone.
+//! `min 1/2 t^T (A^T A + lambda I) t - (A^T r)^T t` with the bounds as a nonnegative cone, and
+//! optionally linear inequalities `g^T t <= h` (removal budgets, `guard`) as more rows of it.
 use std::collections::BTreeMap;
 
 use clarabel::algebra::CscMatrix;
@@ -24,6 +25,19 @@ pub fn solve(
     lower: &[f64],
     upper: &[f64],
     lambda_rel: f64,
+) -> Result<Vec<f64>, String> {
+    solve_within(a, n, target, (lower, upper), lambda_rel, &[])
+}
+
+/// [`solve`] with every one of `cuts` held too: `sum g_k t_k <= h` for each `(g, h)`, `g` the
+/// (column, coefficient) pairs, at most one per column.
+pub fn solve_within(
+    a: &InfluenceColumns,
+    n: usize,
+    target: &[f64],
+    (lower, upper): (&[f64], &[f64]),
+    lambda_rel: f64,
+    cuts: &[(Vec<(usize, f64)>, f64)],
 ) -> Result<Vec<f64>, String> {
     let m = a.len();
     if m == 0 {
@@ -58,19 +72,25 @@ pub fn solve(
         *col.entry(i).or_insert(0.0) += lambda;
     }
     let p = csc(m, upper_tri.into_iter().map(|c| c.into_iter().collect()));
-    // t <= upper: I t + s = upper; t >= lower: -I t + s = -lower; s >= 0
-    let bounds = csc(2 * m, (0..m).map(|i| vec![(i, 1.0), (m + i, -1.0)]));
-    let b: Vec<f64> = upper
-        .iter()
-        .copied()
+    // t <= upper: I t + s = upper; t >= lower: -I t + s = -lower; g^T t + s = h; s >= 0
+    let mut columns: Vec<Vec<(usize, f64)>> =
+        (0..m).map(|i| vec![(i, 1.0), (m + i, -1.0)]).collect();
+    for (k, (g, _)) in cuts.iter().enumerate() {
+        for &(i, v) in g {
+            columns[i].push((2 * m + k, v));
+        }
+    }
+    let bounds = csc(2 * m + cuts.len(), columns.into_iter());
+    let b: Vec<f64> = (upper.iter().copied())
         .chain(lower.iter().map(|l| -l))
+        .chain(cuts.iter().map(|(_, h)| *h))
         .collect();
     let settings = DefaultSettings {
         verbose: false,
         max_iter: MAX_ITER,
         ..DefaultSettings::default()
     };
-    let cones = [NonnegativeConeT(2 * m)];
+    let cones = [NonnegativeConeT(2 * m + cuts.len())];
     let mut solver = DefaultSolver::new(&p, &q, &bounds, &b, &cones, settings)
         .map_err(|e| format!("dwell problem refused by the solver: {e}"))?;
     solver.solve();

@@ -12,6 +12,7 @@ pub mod cap;
 pub mod dwell;
 pub mod fit;
 pub mod force;
+pub mod guard;
 pub mod influence;
 pub mod matching;
 pub mod montecarlo;
@@ -216,6 +217,22 @@ pub fn solve_region(
     r: &[f64],
     config: &RemovalConfig,
 ) -> Result<RegionRemoval, String> {
+    let unguarded = guard::Guard::default();
+    solve_guarded(influence, contacts, cores, r, config, &unguarded).map(|(plan, _)| plan)
+}
+
+/// [`solve_region`] with `guard`'s removal budgets held in the solve (`guard::solve`): the
+/// tool-free solve that decides which contacts to lift holds them too, and the contacts whose
+/// shortest dwell alone breaks one are lifted (`guard::lift_to_hold`) before the bounded solve.
+/// Also returns how often the budgets were cut in.
+pub fn solve_guarded(
+    influence: &Influence,
+    contacts: &[Contact],
+    cores: &[SurfacePoint],
+    r: &[f64],
+    config: &RemovalConfig,
+    guard: &guard::Guard,
+) -> Result<(RegionRemoval, guard::Cuts), String> {
     if r.len() != cores.len() {
         return Err(format!(
             "{} targets for {} core points",
@@ -229,22 +246,20 @@ pub fn solve_region(
     let bounds = |feed: f64| -> Vec<f64> { contacts.iter().map(|c| c.length / feed).collect() };
     let (lower, upper) = (bounds(config.feed_max_mm_s), bounds(config.feed_min_mm_s));
     let n = cores.len();
-    let mut lift = lifted(&a, n, r, (&lower, &upper), config)?;
+    let (mut lift, relaxed) = lifted(&a, n, r, (&lower, &upper), (config, guard))?;
     bridge(
         &mut lift,
         contacts,
         LIFT_SPAN_PATCHES * influence.patch_radius(),
     );
+    guard::lift_to_hold(guard, &mut lift, &lower, &relaxed);
     let keep: Vec<usize> = (0..contacts.len()).filter(|&i| !lift[i]).collect();
     let pick = |v: &[f64]| -> Vec<f64> { keep.iter().map(|&i| v[i]).collect() };
     let kept: influence::InfluenceColumns = keep.iter().map(|&i| a[i].clone()).collect();
-    let solved = dwell::solve(
-        &kept,
-        n,
-        r,
-        &pick(&lower),
-        &pick(&upper),
-        config.regularization,
+    let (solved, cuts) = guard::solve(
+        (&kept, n, r),
+        (&pick(&lower), &pick(&upper), config.regularization),
+        (guard, &keep, contacts.len()),
     )?;
     let mut dwell = vec![0.0; contacts.len()];
     for (&i, t) in keep.iter().zip(solved) {
@@ -252,12 +267,13 @@ pub fn solve_region(
     }
     let removal = influence::apply(&a, &dwell, n);
     let before = cores.iter().map(|c| known(c.distance)).collect();
-    Ok(RegionRemoval {
+    let plan = RegionRemoval {
         dwell,
         lifted: lift,
         removal,
         before,
-    })
+    };
+    Ok((plan, cuts))
 }
 
 /// Shortest stretch of a stroke, in patch radii, the tool lifts over between two ground
@@ -308,24 +324,29 @@ const JOIN_MM: f64 = 1e-6;
 /// (`0 <= t <= t_max`), is under `lift_share` of their shortest pass `t_min` (the removal
 /// wanted there is less than passing at full feed would make). A contact is ground at no less
 /// than its shortest pass or not at all; this decides which, and the kept ones are solved again
-/// within their bounds. None lifted when `lift_share` is 0.
+/// within their bounds. None lifted when `lift_share` is 0. The tool-free solve holds
+/// `guard`'s budgets; its dwell is returned too (`lower` when there is none).
 fn lifted(
     a: &influence::InfluenceColumns,
     n: usize,
     r: &[f64],
     (lower, upper): (&[f64], &[f64]),
-    config: &RemovalConfig,
-) -> Result<Vec<bool>, String> {
+    (config, guard): (&RemovalConfig, &guard::Guard),
+) -> Result<(Vec<bool>, Vec<f64>), String> {
     if config.lift_share <= 0.0 {
-        return Ok(vec![false; a.len()]);
+        return Ok((vec![false; a.len()], lower.to_vec()));
     }
     let free = vec![0.0; a.len()];
-    let relaxed = dwell::solve(a, n, r, &free, upper, config.regularization)?;
-    Ok(relaxed
-        .iter()
-        .zip(lower)
+    let all: Vec<usize> = (0..a.len()).collect();
+    let (relaxed, _) = guard::solve(
+        (a, n, r),
+        (&free, upper, config.regularization),
+        (guard, &all, a.len()),
+    )?;
+    let lift = (relaxed.iter().zip(lower))
         .map(|(t, t_min)| *t < config.lift_share * t_min)
-        .collect())
+        .collect();
+    Ok((lift, relaxed))
 }
 
 /// Allowance added per re-solve when the Monte Carlo predicts over-grind, as a share of the

@@ -299,6 +299,18 @@ pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptan
         planned_peaks: planned_peaks(&dir),
     };
     println!("acceptance seed {seed}: {a:.4?}");
+    // `POLISHBOT_ACCEPT_GOUGED=1`: the true points ground below -tolerance, one line each
+    // (reference frame x, y, z; planted deviation; each grind's removal, mm), to `gouged.csv`
+    // of the run's folder, to take a gouge apart by hand (with `POLISHBOT_SURVEY_KEEP=1`)
+    if std::env::var_os("POLISHBOT_ACCEPT_GOUGED").is_some() {
+        let rows: String = (part.below(&|p| !near_pit(p), -TOLERANCE_MM).iter())
+            .map(|(p, planted, by)| {
+                let by: Vec<String> = by.iter().map(|r| format!("{r:.5}")).collect();
+                format!("{},{},{},{planted:.5},{}\n", p.x, p.y, p.z, by.join(";"))
+            })
+            .collect();
+        std::fs::write(dir.join("gouged.csv"), rows).unwrap();
+    }
     a
 }
 
