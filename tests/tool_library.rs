@@ -14,8 +14,13 @@ use common::{calib, read_journal, tempdir};
 use polishbot::motion::tools::ToolRobot;
 use polishbot::robot::FileText;
 
-/// The uniform case the tests plan (seed of tests/uniform.rs's cases).
-const SEED: u64 = 5101;
+/// The uniform case the tests plan (one of tests/uniform.rs's two seeds). 5100: with the rim
+/// budgets held in the dwell solve (`removal::guard`) the 12 mm ball covers every region of
+/// seed 5101 well enough (96.5 % alone; it takes 31 regions and the 6 mm ball none), so 5101 no
+/// longer has a region only a smaller ball reaches; on 5100 the 6 mm ball takes regions 9 and
+/// 17 from it (95.7 % with the 12 mm ball alone, 100 % with the library; 2026-12-06). Seeds
+/// 5100-5112 searched: 5106, 5110 and 5111 leave the 6 mm ball nothing either.
+const SEED: u64 = 5100;
 
 /// Radius of the large ball the tests add above the shipped library, m: a 12 mm abrasive
 /// point (mounted rubber-bonded points come from 3 to 25 mm).
@@ -143,7 +148,7 @@ fn copy_cell(dir: &std::path::Path) {
     std::fs::write(dir.join("tool.toml"), large_tool()).unwrap();
 }
 
-/// The operator's steps on a plan with a tool change (seed 5101 in a copy of the femoral cell
+/// The operator's steps on a plan with a tool change (seed [`SEED`] in a copy of the femoral cell
 /// with a 12 mm ball as tool.toml and the 6 mm one as `mid`, the simulated arm): `run --sim`
 /// streams the 12 mm ball's stage, journals the `tool_change` stop naming `mid`, and its
 /// simulated operator resumes; a `mid` whose file changed since the plan is refused there
