@@ -10,7 +10,7 @@
 //! under a noise of about as much per point, and only an average over tens of points sees it.
 //! Measured against the plan's own prediction (the removal moved by the carried aim), the
 //! reach holds the grind's landing error beside the footprint's widening; the next plan's
-//! landing margin is at least it (`motion::landing::landing_margin`, through `motion::aim::Aim`).
+//! landing margin is at least it (`motion::landing::landing_margins`, through `motion::aim::Aim`).
 //! Checked against the simulator's truth on the int13 survey's kept runs (documented arm, ten
 //! cases, cell seed 29): after grind 1 the reach read 0.75-2.75 mm where the true removal's
 //! 95th percentile per bin stayed above 0.005 mm out to 0.75-2.75 mm, never less than the

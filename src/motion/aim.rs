@@ -72,7 +72,7 @@ pub struct Aim {
     /// How far beyond its plan's predicted footprint the removal of the loop's grinds reached,
     /// the largest over them, mm (`cell::removal_reach`; None: not measured yet). The landing
     /// margin is at least it and at least its floor either way
-    /// (`motion::landing::landing_margin`, `motion::landing::UNMEASURED_LANDING_MM`).
+    /// (`motion::landing::landing_margins`, `motion::landing::UNMEASURED_LANDING_MM`).
     pub reach_mm: Option<f64>,
 }
 

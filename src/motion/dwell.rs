@@ -9,7 +9,7 @@ use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 use super::config::PlanConfig;
 use super::error::{DwellError, PlanError};
 use super::feed::JointSpline;
-use super::landing::landing_margin;
+use super::landing::landing_margins;
 use super::program::{PlannedPass, Run};
 use super::stroke::{chain_knots, chain_limits};
 use crate::removal::montecarlo::JointError;
@@ -200,7 +200,7 @@ pub(crate) fn cores_landed(
 
 /// Guards the rim of a region (issue 50: the gouges were conform points 1-3 mm outside every
 /// region, ground a little in each grind): every core point within the reach of a contact
-/// landed anywhere within its [`landing_margin`] keeps its [`rim_budget`] on the removal of
+/// landed anywhere within its [`landing_margins`] keeps its [`rim_budget`] on the removal of
 /// every landing (`removal::guard::Guard::landed`): the guarded points and their budgets.
 fn rim_guard(
     contacts: &[Contact],
@@ -208,10 +208,7 @@ fn rim_guard(
     influence: &Influence,
     tolerance: f64,
 ) -> (Vec<SurfacePoint>, removal::guard::Guard) {
-    let margin: Vec<f64> = contacts
-        .iter()
-        .map(|c| landing_margin(c, setup.tool, setup.config))
-        .collect();
+    let margin = landing_margins(contacts, setup.tool, setup.config);
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let limit = rim_budget(&guarded, tolerance);

@@ -48,7 +48,7 @@ fn margin_of(tip: f64, slide: f64, carried: f64, reach: Option<f64>, shallow: bo
     }
 }
 
-/// How far from where a contact's removal is predicted it may land, mm: the tool-tip error
+/// How far from where each contact's removal is predicted it may land, mm: the tool-tip error
 /// the Monte Carlo draws (`removal::montecarlo::tip_error`), the spring-loaded spindle's
 /// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
 /// the aim moves the raster by it, but the part's excess and the axis the arm really holds
@@ -59,8 +59,15 @@ fn margin_of(tip: f64, slide: f64, carried: f64, reach: Option<f64>, shallow: bo
 /// really reached (`motion::aim::Aim::reach_mm`, read from the rescans by
 /// `cell::removal_reach`) the margin is at least that reach; a contact commanded shallow
 /// lands within [`SHALLOW_LANDING_MM`] ([`margin_of`]).
-pub(crate) fn landing_margin(c: &Contact, tool: &ToolModel, config: &PlanConfig) -> f64 {
+pub(crate) fn landing_margins(cs: &[Contact], tool: &ToolModel, config: &PlanConfig) -> Vec<f64> {
     let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
+    cs.iter()
+        .map(|c| landing_margin(c, tip, tool, config))
+        .collect()
+}
+
+/// [`landing_margins`] of one contact `c` with the tool-tip error `tip`, mm.
+fn landing_margin(c: &Contact, tip: f64, tool: &ToolModel, config: &PlanConfig) -> f64 {
     let slide = match tool.compliance_direction {
         removal::ComplianceDirection::SpindleAxis => {
             let (tilt, _) = c.tilt();
@@ -79,8 +86,9 @@ mod tests {
     use super::*;
 
     /// A measured reach short of the floor (grinds 2 and 3 read 0 mm on 4 of 16 grinds where
-    /// the truth reached 0.75-1.75 mm) leaves the margin at its floor: tip 0.12 + slide 0.2 + 1.8 mm; a longer reach widens it;
-    /// a shallow contact lands within 3 mm whatever the reach read, a full one does not.
+    /// the truth reached 0.75-1.75 mm) leaves the margin at its floor: tip 0.12 + slide 0.2 +
+    /// 1.8 mm; a longer reach widens it; a shallow contact lands within 3 mm whatever the reach
+    /// read, a full one does not.
     #[test]
     fn the_margin_keeps_its_floor_on_a_short_reach_and_widens_for_a_shallow_contact() {
         let floor = 0.12 + 0.2 + UNMEASURED_LANDING_MM;

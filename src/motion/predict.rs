@@ -16,7 +16,7 @@ use super::dwell::{
 };
 use super::error::PlanError;
 use super::free_motion::{pressed, Assembly};
-use super::landing::landing_margin;
+use super::landing::landing_margins;
 use super::program::{PlannedPass, PlannedPoint, Program, Run, Segment, SegmentKind};
 use super::trajectory::{JointTrajectory, Move};
 use crate::removal::montecarlo::{spread, JointError};
@@ -308,9 +308,7 @@ fn verdict_points(
     influence: &Influence,
 ) -> (Vec<usize>, Vec<bool>) {
     let near = cores_near(inspection, setup.index, contacts, influence);
-    let margin: Vec<f64> = (contacts.iter())
-        .map(|c| landing_margin(c, setup.tool, setup.config))
-        .collect();
+    let margin = landing_margins(contacts, setup.tool, setup.config);
     let wide = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let nominal = wide.iter().map(|i| near.binary_search(i).is_ok()).collect();
     (wide, nominal)
