@@ -158,17 +158,6 @@ pub(crate) fn cores_near(
 /// Taking the whole measured budget there took them to -0.058..-0.078 mm over the next grinds.
 pub const RIM_READ_SHARE: f64 = 0.3;
 
-/// How much faster than the k the plan uses the tool may grind (1.3): issue 50's acceptance
-/// runs the cell's k 30 % off tool.toml's, and a k fitted from a rescan carries the
-/// registration's error; the rim guard ([`rim_guard`]) holds every budget at this k. Survey of
-/// 30 runs (documented arm, cell seeds 29-31, ten cases) with the budgets held at the plan's
-/// k: 2 runs gouged (case 21, -0.052/-0.063 mm); on the softened-flank branch the gouged
-/// conform points lost 0.050-0.054 mm in one grind, the ~0.04 mm budget times 1.3 (case 81,
-/// the same point in grind 1 on all three cells): the solve drives the dwell up to the budget
-/// and the faster tool crosses it. Held at 1.3 x: no run of the 30 gouges (lowest true ground
-/// point -0.042 mm), median share within tolerance 31.2 -> 26.1 %.
-pub const K_SPREAD: f64 = 1.3;
-
 /// What removal each of `points` may take and stay conform (issue 50): its deviation plus the
 /// tolerance less its uncertainty (LoD95; unknown: none), at least 0, the deviation of a
 /// point outside every region that reads below nominal taken as [`RIM_READ_SHARE`] of its
@@ -212,8 +201,13 @@ pub(crate) fn cores_landed(
 /// Guards the rim of a region (issue 50: the gouges were conform points 1-3 mm outside every
 /// region, ground a little in each grind): every core point within the reach of a contact
 /// landed anywhere within its [`landing_margins`] keeps its [`rim_budget`] on the removal of
-/// every landing (`removal::guard::Guard::landed`) at [`K_SPREAD`] times the plan's k: the
-/// guarded points and their budgets.
+/// every landing (`removal::guard::Guard::landed`) at the plan's k times 1 + its relative
+/// uncertainty (tool.toml `preston_k_rel_sd`: 0.3 before any fit, issue 50's "k 30 % off";
+/// the fit's after one): the guarded points and their budgets. The solve drives the dwell up
+/// to a binding budget, and a tool faster than the plan's k crosses it: on a 30-run survey
+/// (documented arm, cell seeds 29-31) the gouged conform points lost 0.050-0.054 mm in one
+/// grind, a ~0.04 mm budget times 1.3. Held this way no run of the 30 gouges (lowest true
+/// ground point -0.050 mm; at the plan's k 2 runs gouge), median share 31.2 -> 30.7 %.
 fn rim_guard(
     contacts: &[Contact],
     (inspection, setup): (&Inspection, &Setup),
@@ -224,7 +218,7 @@ fn rim_guard(
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let limit: Vec<f64> = (rim_budget(&guarded, tolerance).iter())
-        .map(|b| b / K_SPREAD)
+        .map(|b| b / (1.0 + setup.tool.preston_k_rel_sd))
         .collect();
     let guard = removal::guard::Guard::landed(contacts, (&guarded, &limit), influence, &margin);
     (guarded, guard)
