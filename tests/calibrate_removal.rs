@@ -619,3 +619,37 @@ fn a_removal_landed_beside_its_plan_is_registered_and_k_is_fitted_after_the_shif
         assert!((Vector3::from(r.carried_mm) - Vector3::new(0.5, 0.0, 0.0)).norm() < 1e-9);
     }
 }
+
+#[test]
+fn a_densified_point_reads_the_removal_measured_around_it() {
+    let (mut b, mut p) = before();
+    let bump = |x: f64, y: f64| 0.2 * (-((x + 2.5).powi(2) + y * y) / 4.0).exp();
+    // two points only the first inspection has (its densification around a defect): one
+    // between the grid's points near the bump's top, one facing the other way (a thin wall's
+    // far side), which reads nothing around it
+    let (x, y) = (-2.5 + STEP / 2.0, STEP / 2.0);
+    let added = b.points.len();
+    for normal in [Vector3::z(), -Vector3::z()] {
+        b.points.push(SurfacePoint {
+            position: Point3::new(x, y, 0.0),
+            normal,
+            distance: bump(x, y) + 0.05,
+            uncertainty: 0.0,
+            region: 0,
+        });
+        p.push(bump(x, y));
+    }
+    let grid: Vec<f64> = p[..added].iter().map(|v| 1.3 * v).collect();
+    let mut a = after(&b, &grid);
+    a.points.truncate(added);
+    let pair = GrindPair::new(&b, &a);
+    assert_eq!(pair.removal(added), None);
+    let read = pair.removal_near(added).expect("read around it");
+    // the inverse-distance mean of a smooth field over points 0.18 mm away
+    assert!((read - 1.3 * bump(x, y)).abs() < 2e-3, "{read}");
+    assert_eq!(pair.removal_near(added + 1), None);
+    // the fit takes the one read around it and counts the other unmatched
+    let f = fit(&pair, &p, PLAN_K, &FitConfig::default()).unwrap();
+    assert_eq!(f.unmatched, 1);
+    assert_eq!(f.points, expected_used(&b, &p).len() - 1);
+}

@@ -101,7 +101,8 @@ pub struct RemovalFit {
     /// Grinds whose points were pooled (1 for `calibrate removal`'s single grind).
     pub grinds: usize,
     /// Defect points of the first inspection with no partner in the second (densified
-    /// around a defect by one inspection only), summed over the grinds pooled.
+    /// around a defect by one inspection only) and nothing the second measured around them
+    /// (`GrindPair::removal_near`), summed over the grinds pooled.
     pub unmatched: usize,
     /// Mean measured removal over the points used, mm.
     pub measured_mean_mm: f64,
@@ -130,7 +131,8 @@ pub struct Evidence {
     pub plan_k_mm2_n: f64,
     /// The points usable for the fit.
     pub points: Vec<EvidencePoint>,
-    /// Defect points of the inspection before with no partner in the one after.
+    /// Defect points of the inspection before with no partner in the one after and nothing
+    /// it measured around them.
     pub unmatched: usize,
 }
 
@@ -239,7 +241,7 @@ pub fn evidence(
             continue;
         }
         defect += 1;
-        let Some(m) = pair.removal(i) else {
+        let Some(m) = pair.removal_near(i) else {
             unmatched += 1;
             continue;
         };

@@ -14,6 +14,22 @@ use crate::spatial::Neighbours;
 /// points agree to the last bit; densified points of one inspection have no partner.
 pub const SAME_POINT_MM: f64 = 1e-6;
 
+/// Largest distance from a core point of the first inspection with no partner to the second
+/// inspection's core points its measured removal is read from, mm (0.6: about twice the
+/// reference sample's core spacing, 0.28 mm median; a densified point of the first inspection
+/// lies 0.22 mm (median) to 0.60 mm (most, calibrate_removal's case) from the second's
+/// nearest core point).
+pub const NEAR_POINT_MM: f64 = 0.6;
+
+/// Core points of the second inspection a point with no partner reads its value from (4:
+/// the points around it on both sides at the core spacing; inverse-distance weighted).
+const NEAR_POINTS: usize = 4;
+
+/// Least cosine between the normals of a point with no partner and a core point it reads
+/// from (0.9, 26 degrees): a point across a thin wall or an edge faces another way and
+/// measures another surface.
+const NEAR_NORMAL_COS: f64 = 0.9;
+
 /// Largest distance between a predicted.csv row and its core point, mm: the file prints
 /// positions with 6 decimals (rounding moves a coordinate by at most 5e-7 mm).
 const CSV_POINT_MM: f64 = 1e-5;
@@ -50,8 +66,17 @@ pub fn predicted_removal(before: &Inspection, rows: &[PredictedRow]) -> Result<V
 /// Per core point of `before`, the index of the same core point in `after` (within
 /// [`SAME_POINT_MM`]), None for a point `after` has not.
 pub fn partners(before: &Inspection, after: &Inspection) -> Vec<Option<usize>> {
-    let pos: Vec<Point3<f64>> = after.points.iter().map(|p| p.position).collect();
-    let index = Neighbours::new(&pos);
+    partners_in(before, &index_of(after))
+}
+
+/// The index of the core points of `inspection`.
+fn index_of(inspection: &Inspection) -> Neighbours {
+    let pos: Vec<Point3<f64>> = inspection.points.iter().map(|p| p.position).collect();
+    Neighbours::new(&pos)
+}
+
+/// [`partners`] with the index of `after`'s core points built.
+fn partners_in(before: &Inspection, index: &Neighbours) -> Vec<Option<usize>> {
     before
         .points
         .iter()
@@ -60,6 +85,39 @@ pub fn partners(before: &Inspection, after: &Inspection) -> Vec<Option<usize>> {
                 .nearest(&p.position)
                 .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
                 .map(|nb| nb.index)
+        })
+        .collect()
+}
+
+/// Per core point of `before` with no partner, the distance `after` measured around it: the
+/// inverse-distance mean of its [`NEAR_POINTS`] nearest core points of `after` within
+/// [`NEAR_POINT_MM`] that face its way and were measured; None for a point with a partner or
+/// with no such neighbour.
+fn read_near(
+    before: &Inspection,
+    after: &Inspection,
+    index: &Neighbours,
+    partner: &[Option<usize>],
+) -> Vec<Option<f64>> {
+    before
+        .points
+        .iter()
+        .zip(partner)
+        .map(|(p, j)| {
+            if j.is_some() {
+                return None;
+            }
+            let (mut sum, mut weight) = (0.0, 0.0);
+            for nb in index.knn_within(&p.position, NEAR_POINTS, NEAR_POINT_MM) {
+                let a = &after.points[nb.index];
+                if a.distance.is_finite() && a.normal.dot(&p.normal) >= NEAR_NORMAL_COS {
+                    // a point at distance 0 is a partner, not read here
+                    let w = 1.0 / nb.dist2.sqrt();
+                    sum += w * a.distance;
+                    weight += w;
+                }
+            }
+            (weight > 0.0).then(|| sum / weight)
         })
         .collect()
 }
@@ -74,15 +132,21 @@ pub struct GrindPair<'a> {
     pub after: &'a Inspection,
     /// Per core point of `before`, the index of the same core point in `after`.
     partner: Vec<Option<usize>>,
+    /// Per core point of `before` with no partner, `after`'s distance read around it.
+    near: Vec<Option<f64>>,
 }
 
 impl<'a> GrindPair<'a> {
     /// Matches the core points of `before` to those of `after` ([`partners`]).
     pub fn new(before: &'a Inspection, after: &'a Inspection) -> Self {
+        let index = index_of(after);
+        let partner = partners_in(before, &index);
+        let near = read_near(before, after, &index, &partner);
         GrindPair {
             before,
             after,
-            partner: partners(before, after),
+            partner,
+            near,
         }
     }
 
@@ -101,6 +165,15 @@ impl<'a> GrindPair<'a> {
     pub fn removal(&self, i: usize) -> Option<f64> {
         let j = self.partner[i]?;
         Some(self.before.points[i].distance - self.after.points[j].distance)
+    }
+
+    /// [`Self::removal`], or at a point with no partner (densified around a defect by the
+    /// first inspection alone, where the removal is deepest) its distance before minus the
+    /// distance `after` measured around it (the inverse-distance mean of its nearest core
+    /// points within [`NEAR_POINT_MM`]); None where neither is.
+    pub fn removal_near(&self, i: usize) -> Option<f64> {
+        self.removal(i)
+            .or_else(|| Some(self.before.points[i].distance - self.near[i]?))
     }
 }
 
