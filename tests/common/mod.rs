@@ -11,6 +11,7 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 
+pub mod fit_grid;
 pub mod removal;
 pub mod replay;
 pub mod survey;
