@@ -206,8 +206,9 @@ pub(crate) fn cores_landed(
 /// the fit's after one): the guarded points and their budgets. The solve drives the dwell up
 /// to a binding budget, and a tool faster than the plan's k crosses it: on a 30-run survey
 /// (documented arm, cell seeds 29-31) the gouged conform points lost 0.050-0.054 mm in one
-/// grind, a ~0.04 mm budget times 1.3. Held this way no run of the 30 gouges (lowest true
-/// ground point -0.050 mm; at the plan's k 2 runs gouge), median share 31.2 -> 30.7 %.
+/// grind, a ~0.04 mm budget times 1.3. Held this way (with the k fit reading the densified
+/// points, `removal::matching`) no run of the 30 gouges (lowest true ground point -0.044 mm;
+/// at the plan's k 2 runs gouge), median share 31.2 -> 30.3 % (docs/ALGORITHMS.md).
 fn rim_guard(
     contacts: &[Contact],
     (inspection, setup): (&Inspection, &Setup),

@@ -52,16 +52,20 @@ pub(crate) fn chain_knots(pieces: &[&PlannedPass]) -> (Vec<f64>, Vec<Vec<f64>>, 
             let d = (Vector3::from(w[1].tip_m) - Vector3::from(w[0].tip_m)).norm();
             if d > 1e-9 {
                 let start = s.last().copied().unwrap_or(0.0);
-                let cuts = (d / KNOT_STEP_M).ceil().max(1.0) as usize;
-                for k in 1..=cuts {
+                let cuts = (d / KNOT_STEP_M).ceil() as usize;
+                for k in 1..cuts {
                     let f = k as f64 / cuts as f64;
                     s.push(start + d * f);
-                    let between = w[0].q.iter().zip(&w[1].q).map(|(a, b)| a + (b - a) * f);
-                    q.push(match k == cuts {
-                        true => w[1].q.clone(),
-                        false => between.collect(),
-                    });
+                    q.push(
+                        w[0].q
+                            .iter()
+                            .zip(&w[1].q)
+                            .map(|(a, b)| a + (b - a) * f)
+                            .collect(),
+                    );
                 }
+                s.push(start + d);
+                q.push(w[1].q.clone());
                 length += d;
             }
         }

@@ -63,20 +63,15 @@ pub fn predicted_removal(before: &Inspection, rows: &[PredictedRow]) -> Result<V
     Ok(removal)
 }
 
-/// Per core point of `before`, the index of the same core point in `after` (within
-/// [`SAME_POINT_MM`]), None for a point `after` has not.
-pub fn partners(before: &Inspection, after: &Inspection) -> Vec<Option<usize>> {
-    partners_in(before, &index_of(after))
-}
-
 /// The index of the core points of `inspection`.
 fn index_of(inspection: &Inspection) -> Neighbours {
     let pos: Vec<Point3<f64>> = inspection.points.iter().map(|p| p.position).collect();
     Neighbours::new(&pos)
 }
 
-/// [`partners`] with the index of `after`'s core points built.
-fn partners_in(before: &Inspection, index: &Neighbours) -> Vec<Option<usize>> {
+/// Per core point of `before`, the index of the same core point in the inspection whose core
+/// points `index` holds (within [`SAME_POINT_MM`]), None for a point it has not.
+fn partners(before: &Inspection, index: &Neighbours) -> Vec<Option<usize>> {
     before
         .points
         .iter()
@@ -85,39 +80,6 @@ fn partners_in(before: &Inspection, index: &Neighbours) -> Vec<Option<usize>> {
                 .nearest(&p.position)
                 .filter(|nb| nb.dist2 <= SAME_POINT_MM * SAME_POINT_MM)
                 .map(|nb| nb.index)
-        })
-        .collect()
-}
-
-/// Per core point of `before` with no partner, the distance `after` measured around it: the
-/// inverse-distance mean of its [`NEAR_POINTS`] nearest core points of `after` within
-/// [`NEAR_POINT_MM`] that face its way and were measured; None for a point with a partner or
-/// with no such neighbour.
-fn read_near(
-    before: &Inspection,
-    after: &Inspection,
-    index: &Neighbours,
-    partner: &[Option<usize>],
-) -> Vec<Option<f64>> {
-    before
-        .points
-        .iter()
-        .zip(partner)
-        .map(|(p, j)| {
-            if j.is_some() {
-                return None;
-            }
-            let (mut sum, mut weight) = (0.0, 0.0);
-            for nb in index.knn_within(&p.position, NEAR_POINTS, NEAR_POINT_MM) {
-                let a = &after.points[nb.index];
-                if a.distance.is_finite() && a.normal.dot(&p.normal) >= NEAR_NORMAL_COS {
-                    // a point at distance 0 is a partner, not read here
-                    let w = 1.0 / nb.dist2.sqrt();
-                    sum += w * a.distance;
-                    weight += w;
-                }
-            }
-            (weight > 0.0).then(|| sum / weight)
         })
         .collect()
 }
@@ -132,21 +94,20 @@ pub struct GrindPair<'a> {
     pub after: &'a Inspection,
     /// Per core point of `before`, the index of the same core point in `after`.
     partner: Vec<Option<usize>>,
-    /// Per core point of `before` with no partner, `after`'s distance read around it.
-    near: Vec<Option<f64>>,
+    /// The index of `after`'s core points, for the points with no partner
+    /// ([`Self::removal_near`]).
+    index: Neighbours,
 }
 
 impl<'a> GrindPair<'a> {
     /// Matches the core points of `before` to those of `after` ([`partners`]).
     pub fn new(before: &'a Inspection, after: &'a Inspection) -> Self {
         let index = index_of(after);
-        let partner = partners_in(before, &index);
-        let near = read_near(before, after, &index, &partner);
         GrindPair {
             before,
             after,
-            partner,
-            near,
+            partner: partners(before, &index),
+            index,
         }
     }
 
@@ -169,11 +130,28 @@ impl<'a> GrindPair<'a> {
 
     /// [`Self::removal`], or at a point with no partner (densified around a defect by the
     /// first inspection alone, where the removal is deepest) its distance before minus the
-    /// distance `after` measured around it (the inverse-distance mean of its nearest core
-    /// points within [`NEAR_POINT_MM`]); None where neither is.
+    /// distance `after` measured around it: the inverse-distance mean of its [`NEAR_POINTS`]
+    /// nearest core points of `after` within [`NEAR_POINT_MM`] that face its way and were
+    /// measured; None where neither is.
     pub fn removal_near(&self, i: usize) -> Option<f64> {
-        self.removal(i)
-            .or_else(|| Some(self.before.points[i].distance - self.near[i]?))
+        if let Some(m) = self.removal(i) {
+            return Some(m);
+        }
+        let p = &self.before.points[i];
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for nb in self
+            .index
+            .knn_within(&p.position, NEAR_POINTS, NEAR_POINT_MM)
+        {
+            let a = &self.after.points[nb.index];
+            if a.distance.is_finite() && a.normal.dot(&p.normal) >= NEAR_NORMAL_COS {
+                // beyond SAME_POINT_MM (no partner), so the weight is finite
+                let w = 1.0 / nb.dist2.sqrt();
+                sum += w * a.distance;
+                weight += w;
+            }
+        }
+        (weight > 0.0).then(|| p.distance - sum / weight)
     }
 }
 
