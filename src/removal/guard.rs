@@ -164,20 +164,27 @@ impl Guard {
         self.worst(t).into_iter().map(|(r, _)| r).collect()
     }
 
-    /// The guarded points over their budget at dwell `t`, each with the scenario that takes
-    /// most there and its excess ratio (removal / budget; infinite at a zero budget).
-    fn over(&self, t: &[f64]) -> Vec<(usize, usize, f64)> {
+    /// The guarded points over their budget times `room` at dwell `t`, each with the
+    /// scenario that takes most there and its excess ratio (removal / budget; infinite at a
+    /// zero budget).
+    fn over(&self, t: &[f64], room: f64) -> Vec<(usize, usize, f64)> {
         (self.worst(t).into_iter().zip(&self.limit).enumerate())
-            .filter(|(_, ((r, _), l))| *r > **l * (1.0 + SLACK) + f64::EPSILON)
+            .filter(|(_, ((r, _), l))| *r > **l * room + f64::EPSILON)
             .map(|(i, ((r, s), l))| (i, s, if *l > 0.0 { r / l } else { f64::INFINITY }))
             .collect()
     }
 }
 
+/// Share of a budget the kept contacts may take at their shortest dwell after
+/// [`lift_to_hold`] (1 - [`SLACK`]): strictly inside the budget, so that the bounded solve,
+/// which holds each budget itself (not the budget plus the slack), has room above every
+/// shortest dwell.
+const FLOOR_ROOM: f64 = 1.0 - SLACK;
+
 /// Lifts (`lift`, one flag per contact) the fewest contacts, those the relaxed solve wanted
-/// least first (`relaxed / lower`), until every budget of `guard` holds with every kept
-/// contact at its shortest dwell `lower` (s): the bounded problem is then feasible. Returns
-/// how many it lifted.
+/// least first (`relaxed / lower`), until every budget of `guard` holds within
+/// [`FLOOR_ROOM`] with every kept contact at its shortest dwell `lower` (s): the bounded
+/// problem is then feasible. Returns how many it lifted.
 pub fn lift_to_hold(guard: &Guard, lift: &mut [bool], lower: &[f64], relaxed: &[f64]) -> usize {
     let floor = |lift: &[bool]| -> Vec<f64> {
         (lift.iter().zip(lower))
@@ -188,7 +195,7 @@ pub fn lift_to_hold(guard: &Guard, lift: &mut [bool], lower: &[f64], relaxed: &[
     let mut lifted = 0;
     loop {
         let mut t = floor(lift);
-        let mut over = guard.over(&t);
+        let mut over = guard.over(&t, FLOOR_ROOM);
         if over.is_empty() {
             return lifted;
         }
@@ -200,7 +207,7 @@ pub fn lift_to_hold(guard: &Guard, lift: &mut [bool], lower: &[f64], relaxed: &[
             by_want.sort_by(|a, b| want(a.0).total_cmp(&want(b.0)));
             let mut value: f64 = row.iter().map(|&(j, v)| v * t[j]).sum();
             for (j, v) in by_want {
-                if value <= guard.limit[i] * (1.0 + SLACK) {
+                if value <= guard.limit[i] * FLOOR_ROOM {
                     break;
                 }
                 value -= v * t[j];
@@ -247,7 +254,7 @@ pub fn solve(
         count.solves += 1;
         let mut full = vec![0.0; all];
         keep.iter().zip(&t).for_each(|(&j, v)| full[j] = *v);
-        let fresh: Vec<(usize, usize)> = (guard.over(&full).into_iter())
+        let fresh: Vec<(usize, usize)> = (guard.over(&full, 1.0 + SLACK).into_iter())
             .map(|(i, s, _)| (i, s))
             .filter(|key| !taken.contains(key))
             .collect();
