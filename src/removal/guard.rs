@@ -362,4 +362,29 @@ mod tests {
         lift_to_hold(&none, &mut lift, &[1.0; 6], &relaxed);
         assert_eq!(lift, vec![false, true, false, false, true, false]);
     }
+
+    /// Two contacts at their shortest dwell (1 s) take 1.0004 mm off a guarded point that may
+    /// lose 1 mm: within the slack, yet over the budget the bounded solve holds, which then has
+    /// no feasible point (survey case 181's first plan left a whole region out so). Lifted
+    /// strictly inside the budget, the solve finds the dwell and holds the budget.
+    #[test]
+    fn a_budget_filled_within_the_slack_at_the_shortest_dwells_still_lifts_one_contact() {
+        let a: InfluenceColumns = vec![vec![(0, 1.0)], vec![(1, 1.0)]];
+        let guard = Guard {
+            rows: vec![vec![vec![(0, 0.5002), (1, 0.5002)]]],
+            limit: vec![1.0],
+            ..Guard::default()
+        };
+        let (lower, upper, target) = (vec![1.0; 2], vec![10.0; 2], vec![2.0; 2]);
+        let mut lift = vec![false; 2];
+        assert_eq!(lift_to_hold(&guard, &mut lift, &lower, &[2.0, 1.0]), 1);
+        assert_eq!(lift, vec![false, true]);
+        let (t, _) = solve(
+            (&vec![a[0].clone()], 2, &target),
+            (&lower[..1], &upper[..1], 0.0),
+            (&guard, &[0], 2),
+        )
+        .expect("feasible once a contact is lifted");
+        assert!(t[0] >= 1.0 && 0.5002 * t[0] <= 1.0 + SLACK, "{t:?}");
+    }
 }
