@@ -271,6 +271,7 @@ fn a_contacts_spindle_axis_is_the_arms_at_its_joint_angles() {
         kind: StrokeKind::Pass,
         feed_mm_s: 5.0,
         dwell_s: None,
+        contact_normal: None,
         points: vec![point(qa, 1.0), point(qb, 1.2)],
     };
     let c = contact(&piece, &robot, &reference_from_robot(&wc));

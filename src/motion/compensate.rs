@@ -1,8 +1,9 @@
 //! The arm's compliance compensated (issue 50, "compensate what repeats"): where servos.toml
 //! has a `[compliance]` table (`calibrate compliance`), the servos are commanded so that the
 //! loaded joints sit where the plan wants them. At every grinding sample the load is the arm's
-//! weight plus the planned contact force (the tool's preload force along the contact's outward
-//! normal, the direction the compliant tool presses in the removal model), and
+//! weight plus the planned contact force (the tool's preload force along the part's normal the
+//! inspection measured under the contact, the direction the compliant tool presses in the
+//! removal model), and
 //! [`Compliance::command`] gives the servo angles that bend and push the joints (stiffness and
 //! gear flank) onto the planned pose; from that the offset the workcell calibration already
 //! absorbed is taken away: the calibration touched the fixture with no contact force, so the
@@ -249,9 +250,19 @@ fn shifted(robot: &Robot, q: &[f64], by: &Vector3<f64>) -> Option<Vec<f64>> {
     (miss(&x).norm() <= SHIFT_MISS_M && turned <= MAX_COMMAND_OFFSET_RAD).then_some(x)
 }
 
-/// The unit contact force direction at loaded joints `q` of grinding pass `pass`: the outward
-/// normal (robot frame) of its contact nearest the tip, the way the part pushes the ball.
+/// The unit contact force direction at loaded joints `q` of grinding pass `pass`, robot frame,
+/// the way the part pushes the ball: the part's normal the inspection measured under the
+/// pass's patch (`contact_normal`, set with its dwell), else the outward nominal normal of its
+/// contact nearest the tip. The measured one is what sets the sign of the base yaw's load: on a
+/// face looking at the base the nominal normal points near the yaw's axis and its moment is
+/// 0.013-0.03 N m, while the part under the ball is yawed -4 to +6 degrees from it (survey
+/// case 161); pressed along the nominal normal, the simulated yaw sat on the other flank from
+/// the plan's at 5-22 % of the grinding samples and those strokes landed 1.3-2.2 mm across the
+/// pass (docs/ALGORITHMS.md, "The base yaw at a contact facing the base").
 fn contact_force(pass: &PlannedPass, robot: &Robot, wc: &Workcell, q: &[f64]) -> Vector3<f64> {
+    if let Some(n) = pass.contact_normal {
+        return wc.direction_from_reference(&Vector3::from(n)).normalize();
+    }
     let tip = robot.fk(q).position;
     let nearest = pass.points.iter().min_by(|a, b| {
         let d = |p: &super::program::PlannedPoint| (Vector3::from(p.tip_m) - tip).norm();

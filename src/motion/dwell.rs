@@ -375,6 +375,7 @@ pub fn set_dwell(
     for ((piece, t), c) in planned {
         piece.dwell_s = Some(*t);
         piece.feed_mm_s = c.length / t.max(f64::MIN_POSITIVE);
+        piece.contact_normal = Some(c.normal.into());
     }
     let lifted: Vec<PlannedPass> = (runs.iter().flatten().zip(&plan.lifted))
         .filter(|(_, l)| **l)

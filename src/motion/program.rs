@@ -63,6 +63,12 @@ pub struct PlannedPass {
     /// a stroke also holds the rest of its last bus period). Absent in rigid mode.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dwell_s: Option<f64>,
+    /// Removal mode: the part's normal under the contact's patch as the inspection measured
+    /// it, reference frame (`removal::Contact::normal` after the press: the way the part pushes
+    /// the ball, which the compliance compensation loads the arm along). Absent in rigid mode
+    /// and before the dwell solve (the points' nominal normal then).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_normal: Option<[f64; 3]>,
     /// The points.
     pub points: Vec<PlannedPoint>,
 }
@@ -186,6 +192,7 @@ pub(crate) fn walk(
             kind: stroke.kind,
             feed_mm_s: cfg.feed_mm_s,
             dwell_s: None,
+            contact_normal: None,
             points: Vec::new(),
         };
         for (pi, ((p, target), sol)) in stroke.points.iter().zip(&targets).zip(solved).enumerate() {

@@ -175,6 +175,7 @@ mod tests {
             kind: StrokeKind::Pass,
             feed_mm_s: 1.0,
             dwell_s: None,
+            contact_normal: None,
             points: (xs.iter())
                 .map(|&x| PlannedPoint {
                     surface_mm: [x, 0.0, 0.0],

@@ -320,6 +320,7 @@ mod tests {
             kind: StrokeKind::Pass,
             feed_mm_s: 1.0,
             dwell_s: Some(1.0),
+            contact_normal: None,
             points,
         }
     }

@@ -106,6 +106,7 @@ pub(super) fn synced(
                 kind: stroke.kind,
                 feed_mm_s: config.feed_mm_s,
                 dwell_s: None,
+                contact_normal: None,
                 points: Vec::new(),
             };
             if let Some(sub) = stroke_plan(cell, part, region, pass, &run) {

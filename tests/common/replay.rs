@@ -74,7 +74,8 @@ pub fn absorbed(sim: &slack::Arm, sent: &[[f64; 5]], wc: &Workcell) -> Vector3<f
 }
 
 /// Per sample of `plan`: the planned tip (the simulator's kinematics, m) and the contact force
-/// (N, robot frame: the tool's force along the nearest planned contact's outward normal) at
+/// (N, robot frame: the tool's force along the part's normal the inspection measured under the
+/// pass, `contact_normal`, else the nearest planned contact's outward nominal normal) at
 /// grinding samples, None elsewhere.
 pub fn planned_contacts(
     plan: &Plan,
@@ -101,8 +102,11 @@ pub fn planned_contacts(
                     d(&a.tip_m).total_cmp(&d(&b.tip_m))
                 })
                 .unwrap();
+            // the part pushes the ball along its own normal: the measured one under the pass's
+            // patch where the plan has it, else the nominal
+            let normal = plan.passes[pass].contact_normal.unwrap_or(p.normal);
             let nrm = wc
-                .direction_from_reference(&Vector3::from(p.normal))
+                .direction_from_reference(&Vector3::from(normal))
                 .normalize();
             *o = Some((planned, nrm * force));
         }
