@@ -208,7 +208,9 @@ pub(crate) fn cores_landed(
 /// (documented arm, cell seeds 29-31) the gouged conform points lost 0.050-0.054 mm in one
 /// grind, a ~0.04 mm budget times 1.3. Held this way (with the k fit reading the densified
 /// points, `removal::matching`) no run of the 30 gouges (lowest true ground point -0.044 mm;
-/// at the plan's k 2 runs gouge), median share 31.2 -> 30.3 % (docs/ALGORITHMS.md).
+/// at the plan's k 2 runs gouge), median share 31.2 -> 30.3 %; with the arm loaded along the
+/// measured contact normal (`motion::compensate`) none either, lowest -0.045 mm, median
+/// 28.9 % (docs/ALGORITHMS.md).
 fn rim_guard(
     contacts: &[Contact],
     (inspection, setup): (&Inspection, &Setup),

@@ -369,7 +369,8 @@ mod tests {
     /// strictly inside the budget, the solve finds the dwell and holds the budget.
     #[test]
     fn a_budget_filled_within_the_slack_at_the_shortest_dwells_still_lifts_one_contact() {
-        let a: InfluenceColumns = vec![vec![(0, 1.0)], vec![(1, 1.0)]];
+        // the kept contact's column (contact 1 is the one lifted)
+        let a: InfluenceColumns = vec![vec![(0, 1.0)]];
         let guard = Guard {
             rows: vec![vec![vec![(0, 0.5002), (1, 0.5002)]]],
             limit: vec![1.0],
@@ -380,7 +381,7 @@ mod tests {
         assert_eq!(lift_to_hold(&guard, &mut lift, &lower, &[2.0, 1.0]), 1);
         assert_eq!(lift, vec![false, true]);
         let (t, _) = solve(
-            (&vec![a[0].clone()], 2, &target),
+            (&a, 2, &target),
             (&lower[..1], &upper[..1], 0.0),
             (&guard, &[0], 2),
         )
