@@ -86,25 +86,15 @@ pub fn commands<E>(
     let dof = traj.dof;
     let absorbed = absorbed_offset(model, traj, robot, wc);
     let kinds = sample_kinds(loads.segments, n);
-    let exact: Vec<Option<Vec<f64>>> = (0..n)
-        .map(|i| match kinds[i] {
-            (SegmentKind::Grind, Some(pass)) => {
-                let q = traj.sample(i);
-                let force = contact_force(&loads.passes[pass], robot, wc, q) * loads.force_n;
-                correction(model, robot, q, &force, &absorbed)
-            }
-            _ => None,
-        })
-        .collect();
+    let bench = (model, robot, wc, &absorbed);
+    // the gears trail the servos' motion, and the correction is part of that motion: the
+    // flanks are taken from the planned motion, then from it with the correction added
+    let first = exact_corrections(traj, loads, &kinds, bench, &trailing(traj, None));
+    let rough = smoothed(&first, &kinds, dof, SMOOTH_WIDTHS[0]);
+    let exact = exact_corrections(traj, loads, &kinds, bench, &trailing(traj, Some(&rough)));
     let mut last = None;
     for width in SMOOTH_WIDTHS {
-        let mut delta = held(&exact, &kinds, dof, HOLD_INTO_TRANSIT * width);
-        // the ends (home) stay where they are: no correction within the smoothing's reach
-        let ends = (2 * width * dof).min(delta.len());
-        delta[..ends].fill(0.0);
-        let len = delta.len();
-        delta[len - ends..].fill(0.0);
-        smooth(&mut delta, dof, n, width);
+        let delta = smoothed(&exact, &kinds, dof, width);
         let raw: Vec<f64> = (0..n)
             .map(|i| share_within_range(robot, traj.sample(i), &delta[i * dof..(i + 1) * dof]))
             .collect();
@@ -133,23 +123,93 @@ pub fn commands<E>(
     last
 }
 
+/// The model, robot, workcell and absorbed offset a correction is computed on.
+type Bench<'a> = (&'a Compliance, &'a Robot, &'a Workcell, &'a Vector3<f64>);
+
+/// The exact correction at each grinding sample of `traj` (None elsewhere, or where
+/// [`correction`] finds none), its gears trailing on the flanks `trail` ([`trailing`]).
+fn exact_corrections(
+    traj: &JointTrajectory,
+    loads: &Loads,
+    kinds: &[(SegmentKind, Option<usize>)],
+    (model, robot, wc, absorbed): Bench,
+    trail: &[f64],
+) -> Vec<Option<Vec<f64>>> {
+    let dof = traj.dof;
+    (0..traj.len())
+        .map(|i| match kinds[i] {
+            (SegmentKind::Grind, Some(pass)) => {
+                let q = traj.sample(i);
+                let force = contact_force(&loads.passes[pass], robot, wc, q) * loads.force_n;
+                let side = &trail[i * dof..(i + 1) * dof];
+                correction(model, robot, q, (&force, side), absorbed)
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// The corrections `exact` held around the contacts ([`held`], [`HOLD_INTO_TRANSIT`] widths
+/// into the transits), zero within the smoothing's reach of the ends (home stays where it
+/// is), and smoothed ([`smooth`]) at `width`: row-major, `dof` a sample.
+fn smoothed(
+    exact: &[Option<Vec<f64>>],
+    kinds: &[(SegmentKind, Option<usize>)],
+    dof: usize,
+    width: usize,
+) -> Vec<f64> {
+    let n = exact.len();
+    let mut delta = held(exact, kinds, dof, HOLD_INTO_TRANSIT * width);
+    let ends = (2 * width * dof).min(delta.len());
+    delta[..ends].fill(0.0);
+    let len = delta.len();
+    delta[len - ends..].fill(0.0);
+    smooth(&mut delta, dof, n, width);
+    delta
+}
+
+/// A joint step under this is a joint held still, rad (1e-9: the trajectory's rounding; a
+/// grinding stroke turns the base yaw by about 1e-5 rad a sample).
+const STILL_RAD: f64 = 1e-9;
+
+/// Per sample (row-major, `dof` a sample), the flank each joint's gear trails its servo on
+/// (`Compliance::deflection_trailing`): -1 after a motion towards larger angles (the output
+/// lags the servo by half the band), 1 after one the other way, 0 before the joint first
+/// moved. The servos follow `traj` plus the correction `delta` (row-major) when given.
+fn trailing(traj: &JointTrajectory, delta: Option<&[f64]>) -> Vec<f64> {
+    let dof = traj.dof;
+    let at = |i: usize, k: usize| traj.sample(i)[k] + delta.map_or(0.0, |d| d[i * dof + k]);
+    let mut side = vec![0.0; dof];
+    let mut out = vec![0.0; traj.len() * dof];
+    for i in 1..traj.len() {
+        for (k, s) in side.iter_mut().enumerate() {
+            let step = at(i, k) - at(i - 1, k);
+            if step.abs() > STILL_RAD {
+                *s = -step.signum();
+            }
+        }
+        out[i * dof..(i + 1) * dof].copy_from_slice(&side);
+    }
+    out
+}
+
 /// A share of the correction at or above this counts as whole (1 - 1e-9: the moving
 /// averages of a run of ones round to within a few ulps of one).
 const WHOLE_SHARE: f64 = 1.0 - 1e-9;
 
 /// The servo angles minus the planned ones at loaded joints `q` under `force` (N, robot
-/// frame, on the tip): the loaded tip goes to the planned tip plus `absorbed` (where the
+/// frame, on the tip), the unloaded gears trailing on the flanks `trail`: the loaded tip goes to the planned tip plus `absorbed` (where the
 /// calibrated cell's frame has the planned tip), the tool axis kept. None where [`shifted`]
 /// finds no such pose near `q` (the sample then holds its neighbours' correction).
 fn correction(
     model: &Compliance,
     robot: &Robot,
     q: &[f64],
-    force: &Vector3<f64>,
+    (force, trail): (&Vector3<f64>, &[f64]),
     absorbed: &Vector3<f64>,
 ) -> Option<Vec<f64>> {
     let out = shifted(robot, q, absorbed)?;
-    let cmd = model.command(robot, &out, force);
+    let cmd = model.command_trailing(robot, &out, force, trail);
     Some(cmd.iter().zip(q).map(|(c, a)| c - a).collect())
 }
 
@@ -417,6 +477,24 @@ mod tests {
             .map(|i| (delta[i + 3] - 3.0 * delta[i + 2] + 3.0 * delta[i + 1] - delta[i]).abs())
             .fold(0.0, f64::max);
         assert!(most <= 2.0 * d / w.powi(3) * 1.05, "{most:e}");
+    }
+
+    /// A gear trails on the flank opposite to its servo's last motion: none before the joint
+    /// first moves, -1 while and after it turns to larger angles (held still too), 1 once it
+    /// turns back; a correction that reverses a held joint counts as its motion.
+    #[test]
+    fn the_trailing_flank_follows_the_last_motion_of_the_servo() {
+        let q = [0.0, 0.0, 0.1, 0.2, 0.2, 0.2, 0.1, 0.1];
+        let traj = JointTrajectory {
+            period: 0.02,
+            dof: 1,
+            positions: q.to_vec(),
+        };
+        let out = trailing(&traj, None);
+        assert_eq!(out, [0.0, 0.0, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0]);
+        let delta = [0.0, 0.0, 0.0, 0.0, 0.0, -0.05, -0.05, -0.05];
+        let out = trailing(&traj, Some(&delta));
+        assert_eq!(out, [0.0, 0.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0]);
     }
 
     /// The correction is held from a grinding sample through the press and approach next to
