@@ -54,7 +54,8 @@ pub(crate) fn assemble(
                 false => {
                     at.lift_off(&mut prog, &cell, unreachable)?;
                     let mark = prog.mark();
-                    if let Err(reason) = prog.enter(at.left.as_ref(), start, piece.region, &cell)? {
+                    let way = (start, cell.yaw_set(piece));
+                    if let Err(reason) = prog.enter(at.left.as_ref(), way, piece.region, &cell)? {
                         chain
                             .iter()
                             .for_each(|p| leave_out(p, &reason, unreachable));

@@ -320,7 +320,9 @@ fn stroke_plan(
     };
     let (first, last) = (&run[0].point, &run[run.len() - 1].point);
     let into = Assembly::new(robot, &wc_a, config, &scene_a);
-    prog.enter(None, first, region.id, &into).ok()?.ok()?;
+    prog.enter(None, (first, 0.0), region.id, &into)
+        .ok()?
+        .ok()?;
     // the ball centre's path on the part (reference frame), and the six-axis joint path
     let reach = robot.tool.radius_mm() + config.contact_offset_mm;
     let centre = |s: &Solved| {
