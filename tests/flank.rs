@@ -25,9 +25,20 @@ const REPLAYED_LATERAL_P95_MM: f64 = 0.5;
 /// simulated arm follows the part's own normal, and the nominal one put its base yaw on the
 /// other flank at 5-22 % of survey case 161's grinding samples), 0.047 (2026-12-06, with the
 /// guard's feasible lift): where the measured normal points at the base's axis the yaw's load
-/// is under the simulator's hold torque and its gear trails the motion. A known shortfall of
-/// issue 50's build item 2, bounded here so that it cannot grow unseen.
+/// is under the simulator's hold torque and its gear trails the motion; 0.046 (2026-12-07)
+/// with the model's gear trailing its motion there (`Compliance::deflection_trailing`) and the
+/// yaw set on the way down ([`PRESS_YAW_P95_MM`]): the history is now modelled, the share of
+/// samples it acts on is the part's. Bounded here so that it cannot grow unseen.
 const HISTORY_SHARE: f64 = 0.06;
+/// Largest 95th percentile, over the presses onto a first contact, of how far the base yaw's
+/// gear sits from its load's flank when the press starts, mm at the tip (0.5, the replayed
+/// error's own bound): the way down turns the yaw through 1.5 bands so that the gear touches
+/// down on the flank its contact loads (`motion::free_motion`'s yaw set). Measured
+/// 2026-12-07 on the demo-like part: median / p95 / max 0.000 / 0.000 / 1.102 mm over 84
+/// presses with the set, 0.090 / 1.657 / 2.174 mm without it (the gear where the transit left
+/// it): on a bump of a face looking at the base both flanks hold themselves once pressed, so
+/// the flank it touches down on is the one it grinds on.
+const PRESS_YAW_P95_MM: f64 = 0.5;
 
 /// The compensated plan replayed in time order through the simulator's mechanics (issue 50,
 /// build item 2: each joint on a known flank at every contact). A joint under the hold torque
@@ -40,7 +51,9 @@ const HISTORY_SHARE: f64 = 0.06;
 /// 1.587 mm (0.143 / 0.155 / 1.587 along the surface); under it 0.140 / 0.760 / 1.648 along
 /// the surface, 0.140 / 0.762 / 1.662 held still (the p95 a partly compensated sample); a gear's history moves the tip over 0.05 mm at 0.2 % of
 /// the grinding samples; with a tenth of the force (0.2 N) the base yaw trails at 75 % of
-/// them (1.1 mm p95) and this fails.
+/// them (1.1 mm p95) and this fails. 2026-12-07, with the gears trailing their motion in the
+/// model and the yaw set on the way down: the fully compensated samples' p95 along the surface
+/// 0.276 mm (0.368 before, 0.361 with the trailing model alone).
 #[test]
 fn compensated_tip_replayed_in_time_order_stays_on_the_planned_contacts() {
     let dir = common::tempdir();
@@ -54,12 +67,14 @@ fn compensated_tip_replayed_in_time_order_stays_on_the_planned_contacts() {
     };
     let plan = plan_part(&inspection, &compliant, &wc, &cfg).expect("compensated plan");
     assert!(plan.commands.is_some(), "no commands");
-    let (lateral, moved) = print_replayed(&plan, &compliant, &wc, &arm);
+    let (lateral, moved, yaw_press) = print_replayed(&plan, &compliant, &wc, &arm);
     let p95 = fully_compensated_p95(&lateral, plan.compensation.as_ref());
+    println!("fully compensated samples: p95 along the surface {p95:.3} mm");
     assert!(
-        p95 < REPLAYED_LATERAL_P95_MM && moved < HISTORY_SHARE,
+        p95 < REPLAYED_LATERAL_P95_MM && moved < HISTORY_SHARE && yaw_press < PRESS_YAW_P95_MM,
         "replayed error along the surface, p95 of the fully compensated samples {p95:.3} mm, \
-         {moved} of the samples on a flank their load does not set"
+         {moved} of the samples on a flank their load does not set, the base yaw {yaw_press:.3} \
+         mm off its flank at the presses' start (p95)"
     );
 }
 
@@ -72,5 +87,5 @@ fn replay_a_plan_file() {
     let path = std::env::var("POLISHBOT_REPLAY_PLAN").expect("POLISHBOT_REPLAY_PLAN");
     let plan = Plan::load(std::path::Path::new(&path)).unwrap();
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
-    print_replayed(&plan, &common::dofbot(), &wc, &GrindConfig::default());
+    let _ = print_replayed(&plan, &common::dofbot(), &wc, &GrindConfig::default());
 }

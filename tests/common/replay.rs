@@ -340,16 +340,22 @@ pub fn fully_compensated_p95(errors: &[f64], report: Option<&CompensationReport>
 }
 
 /// Prints [`Replayed`] of `plan` on `arm` (and the error of each sample held still) and
-/// returns the error along the surface of every grinding sample (mm) and the share of grinding samples where some gear's history moves
-/// the tip more than [`HISTORY_MOVE_MM`].
+/// returns the error along the surface of every grinding sample (mm), the share of grinding
+/// samples where some gear's history moves the tip more than [`HISTORY_MOVE_MM`], and the
+/// 95th percentile over the presses onto a first contact of how far the base yaw's gear then
+/// sits from its load's flank (mm at the tip, [`Replayed::press_start`]; NaN with no press).
 pub fn print_replayed(
     plan: &Plan,
     robot: &Robot,
     wc: &Workcell,
     arm: &GrindConfig,
-) -> (Vec<f64>, f64) {
+) -> (Vec<f64>, f64, f64) {
     let held = quantiles(tip_errors(plan, robot, wc, arm));
     let r = replayed(plan, robot, wc, arm);
+    let yaw_press = match r.press_start[0].is_empty() {
+        true => f64::NAN,
+        false => quantiles(r.press_start[0].clone())[1],
+    };
     for (k, n) in r.sign_changes.iter().enumerate() {
         println!(
             "joint {}: load torque changes sign {n} times while grinding",
@@ -401,5 +407,5 @@ pub fn print_replayed(
             t.len()
         );
     }
-    (r.lateral, moved)
+    (r.lateral, moved, yaw_press)
 }
