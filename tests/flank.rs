@@ -49,11 +49,12 @@ const PRESS_YAW_P95_MM: f64 = 0.5;
 /// along the measured normal the yaw trails at 4.7 % of the samples ([`HISTORY_SHARE`]).
 /// Measured 2026-12-06 before the rim guard: replayed error median / p95 / max 0.145 / 0.156 /
 /// 1.587 mm (0.143 / 0.155 / 1.587 along the surface); under it 0.140 / 0.760 / 1.648 along
-/// the surface, 0.140 / 0.762 / 1.662 held still (the p95 a partly compensated sample); a gear's history moves the tip over 0.05 mm at 0.2 % of
-/// the grinding samples; with a tenth of the force (0.2 N) the base yaw trails at 75 % of
-/// them (1.1 mm p95) and this fails. 2026-12-07, with the gears trailing their motion in the
-/// model and the yaw set on the way down: the fully compensated samples' p95 along the surface
-/// 0.276 mm (0.368 before, 0.361 with the trailing model alone).
+/// the surface, 0.140 / 0.762 / 1.662 held still (the p95 a partly compensated sample); a
+/// gear's history moves the tip over 0.05 mm at 0.2 % of the grinding samples; with a tenth
+/// of the force (0.2 N) the base yaw trails at 75 % of them (1.1 mm p95) and this fails.
+/// 2026-12-07, with the gears trailing their motion in the model and the yaw set on the way
+/// down: the fully compensated samples' p95 along the surface 0.276 mm (0.368 before, 0.361
+/// with the trailing model alone).
 #[test]
 fn compensated_tip_replayed_in_time_order_stays_on_the_planned_contacts() {
     let dir = common::tempdir();

@@ -198,9 +198,10 @@ fn trailing(traj: &JointTrajectory, delta: Option<&[f64]>) -> Vec<f64> {
 const WHOLE_SHARE: f64 = 1.0 - 1e-9;
 
 /// The servo angles minus the planned ones at loaded joints `q` under `force` (N, robot
-/// frame, on the tip), the unloaded gears trailing on the flanks `trail`: the loaded tip goes to the planned tip plus `absorbed` (where the
-/// calibrated cell's frame has the planned tip), the tool axis kept. None where [`shifted`]
-/// finds no such pose near `q` (the sample then holds its neighbours' correction).
+/// frame, on the tip), the unloaded gears trailing on the flanks `trail`: the loaded tip goes
+/// to the planned tip plus `absorbed` (where the calibrated cell's frame has the planned tip),
+/// the tool axis kept. None where [`shifted`] finds no such pose near `q` (the sample then
+/// holds its neighbours' correction).
 fn correction(
     model: &Compliance,
     robot: &Robot,

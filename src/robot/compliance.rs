@@ -17,9 +17,9 @@ pub const GRAVITY_M_S2: f64 = 9.81;
 /// Load torque, N m, over which the model trusts the flank a joint sits on: under it the
 /// backlash term scales down linearly to 0 (the gear may sit anywhere in its band; the
 /// planner assumes the middle), or, for an arm in motion, towards the flank the motion left
-/// the gear on (`Compliance::deflection_trailing`). 0.01: a tenth of the smallest gravity torque of the pitch
-/// joints over the DOFBOT's working volume, and small against the 2 N contact force's torques
-/// (0.2-0.6 N m), so loaded joints get the whole half band.
+/// the gear on (`Compliance::deflection_trailing`). 0.01: a tenth of the smallest gravity
+/// torque of the pitch joints over the DOFBOT's working volume, and small against the 2 N
+/// contact force's torques (0.2-0.6 N m), so loaded joints get the whole half band.
 pub const FLANK_TORQUE_NM: f64 = 0.01;
 /// Fixed-point passes of [`Compliance::command`]: the deflection changes by stiffness-times
 /// torque-slope (under 1 %) per pass, so three passes leave under 1e-6 of it.
