@@ -87,6 +87,11 @@ pub struct Inspection {
     pub regions: Vec<RegionInfo>,
     /// Every core point.
     pub points: Vec<SurfacePoint>,
+    /// Per core point of `points`, a second reading of its distance at the tool's footprint,
+    /// mm (the closed loop's rescans, `cycle::planner_input`; NaN where it has none): the rim
+    /// guard reads a conform point's loss by it (`motion::dwell::rim_budget`). Empty where
+    /// there is none (an inspection folder read back).
+    pub fine: Vec<f64>,
 }
 
 impl Inspection {
@@ -114,6 +119,7 @@ impl Inspection {
             tolerance: parsed.tolerance,
             regions: parsed.regions,
             points,
+            fine: Vec::new(),
         };
         inspection.check(&rfile)?;
         for (i, r) in inspection.regions.iter().enumerate() {

@@ -179,6 +179,7 @@ mod tests {
             tolerance: Some(0.05),
             regions: Vec::new(),
             points,
+            fine: Vec::new(),
         }
     }
 

@@ -139,6 +139,7 @@ fn inputs(args: &InspectArgs) -> inspect::Inputs {
         core: args.core.clone(),
         inspect_area: args.inspect_area.clone(),
         registration_error: args.registration_error,
+        fine_radius: None,
     }
 }
 

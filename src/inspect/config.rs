@@ -67,6 +67,10 @@ pub struct Inputs {
     pub inspect_area: Option<PathBuf>,
     /// Registration error of the level of detection, mm (default the registration's own).
     pub registration_error: Option<f64>,
+    /// Radius of a second, classic reading of every core point, mm (`Findings::fine`; None:
+    /// none is made). The closed loop reads its rescans at the tool's footprint this way
+    /// (`cycle::planner_input`).
+    pub fine_radius: Option<f64>,
 }
 
 /// An input geometry: a file to read, or a file this process wrote with what it wrote still

@@ -436,6 +436,7 @@ mod tests {
             core: None,
             inspect_area: None,
             registration_error: None,
+            fine_radius: None,
         };
         let p = provenance(&InspectConfig::default(), &inputs).unwrap();
         let on_disk = InputFile::hash("scan", &written).unwrap();

@@ -40,6 +40,9 @@ pub struct Findings {
     pub support: Vec<u32>,
     /// Per core point: distance, uncertainty, significance.
     pub deviations: Deviations,
+    /// Per core point of `deviations`, the classic M3C2 distance at `Inputs::fine_radius`
+    /// (NaN where its cylinders hold too few points); empty when none was asked.
+    pub fine: Vec<f64>,
     /// Defect regions and the verdict.
     pub regions: Regions,
     /// Lines for the report's provenance (label, text): reference normals, registration...
@@ -121,6 +124,15 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
 
     let compare_cfg = compare_settings(cfg, inputs, std::iter::once(&pose).chain(&more_poses));
     let deviations = compare::compare(&core.cloud, &reference.cloud, scan_cloud, &compare_cfg)?;
+    let fine = match inputs.fine_radius {
+        Some(radius) => fine_reading(
+            &deviations,
+            (&reference.cloud, scan_cloud),
+            &compare_cfg,
+            radius,
+        )?,
+        None => Vec::new(),
+    };
     let support = match clouds.len() {
         1 => Vec::new(),
         _ => scans::support(&deviations, &clouds),
@@ -140,6 +152,7 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         more_poses,
         support,
         deviations,
+        fine,
         regions,
         provenance,
         notices,
@@ -149,6 +162,29 @@ pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
         written: Vec::new(),
         report_html: None,
     })
+}
+
+/// The classic M3C2 distance at every core point of `deviations` with cylinders of `radius`
+/// mm (the comparison's other settings as `cfg`'s), between the `reference` and the registered
+/// `scan`: a reading of spots narrower than the adaptive radius (the closed loop's rim).
+fn fine_reading(
+    deviations: &Deviations,
+    (reference, scan): (&cloud::PointCloud, &cloud::PointCloud),
+    cfg: &CompareConfig,
+    radius: f64,
+) -> Result<Vec<f64>> {
+    let core = cloud::PointCloud {
+        points: deviations.points.clone(),
+        normals: Some(deviations.normals.clone()),
+        fields: Vec::new(),
+    };
+    let classic = CompareConfig {
+        method: compare::Method::Classic,
+        radius: Some(radius),
+        ..cfg.clone()
+    };
+    let read = compare::compare(&core, reference, scan, &classic)?;
+    Ok(read.values.iter().map(|v| v.distance).collect())
 }
 
 /// The comparison's settings for this run: the registration error of the level of detection

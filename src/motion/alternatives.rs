@@ -297,6 +297,7 @@ mod tests {
             tolerance: Some(0.05),
             regions: vec![region(0, 100.0), region(1, 20.0)],
             points: Vec::new(),
+            fine: Vec::new(),
         };
         for (alone_gain, moves) in [(false, false), (true, true)] {
             let plan_with = |k: usize, part: &Inspection| -> Result<Plan, PlanError> {
