@@ -166,6 +166,7 @@ fn inspection(points: Vec<SurfacePoint>) -> Inspection {
         tolerance: Some(0.05),
         regions,
         points,
+        fine: Vec::new(),
     }
 }
 

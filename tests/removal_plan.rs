@@ -187,6 +187,7 @@ fn a_region_out_of_reach_is_left_out_with_reasons_not_planned_as_nothing() {
         tolerance: Some(0.05),
         regions: vec![near, far],
         points,
+        fine: Vec::new(),
     };
     let robot = common::dofbot();
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
@@ -226,6 +227,7 @@ fn tall_bump_plan(name: &str, max_pass: f64) -> (Plan, PlanConfig) {
         tolerance: Some(TOLERANCE_MM),
         regions: vec![region],
         points,
+        fine: Vec::new(),
     };
     let robot = common::dofbot();
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();

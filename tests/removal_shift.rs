@@ -82,6 +82,7 @@ fn inspection(rng: &mut impl Rng) -> Inspection {
         tolerance: Some(0.05),
         regions: vec![region],
         points,
+        fine: Vec::new(),
     }
 }
 

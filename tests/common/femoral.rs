@@ -100,6 +100,7 @@ pub fn of_case(config: &SynthConfig) -> Inspection {
         tolerance: Some(TOLERANCE),
         regions,
         points,
+        fine: Vec::new(),
     }
 }
 

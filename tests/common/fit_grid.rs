@@ -52,6 +52,7 @@ pub fn before() -> (Inspection, Vec<f64>) {
         tolerance: Some(0.05),
         regions,
         points,
+        fine: Vec::new(),
     };
     (inspection, p)
 }
