@@ -175,7 +175,7 @@ impl Loop<'_> {
             Some(f) => (f.found, f.inspection_dir, Some((f.plan_file, f.planned))),
             None => {
                 let into = dir.join("inspection");
-                (self.inspect(&into, k)?, into, None)
+                (self.inspect(&into)?, into, None)
             }
         };
         let inspection = planner_input(&found, &inspection_dir);
@@ -277,10 +277,9 @@ impl Loop<'_> {
         outcome
     }
 
-    /// Inspects the scan of iteration `k` into `into` with the loop's inspection settings
-    /// (a rescan, `k` > 1, also read at [`FINE_RADIUS_MM`]); an incomplete verdict ends the
-    /// loop with the inspection's error.
-    fn inspect(&self, into: &Path, k: usize) -> anyhow::Result<inspect::Findings> {
+    /// Inspects the scan into `into` with the loop's inspection settings, also read at
+    /// [`FINE_RADIUS_MM`]; an incomplete verdict ends the loop with the inspection's error.
+    fn inspect(&self, into: &Path) -> anyhow::Result<inspect::Findings> {
         let inputs = inspect::Inputs {
             reference: self.inputs.reference.clone(),
             scan: self.scan.clone(),
@@ -290,7 +289,7 @@ impl Loop<'_> {
             core: None,
             inspect_area: None,
             registration_error: None,
-            fine_radius: (k > 1).then_some(FINE_RADIUS_MM),
+            fine_radius: Some(FINE_RADIUS_MM),
         };
         inspect::inspect_into(&self.cfg.inspect, &inputs, into)
     }
@@ -376,10 +375,16 @@ pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
     let dev = &found.deviations;
     let points = (dev.points.iter().zip(&dev.normals))
         .zip(dev.values.iter().zip(&found.regions.labels))
-        .map(|((p, n), (v, &region))| SurfacePoint {
+        .enumerate()
+        .map(|(i, ((p, n), (v, &region)))| SurfacePoint {
             position: *p,
             normal: n / n.norm(),
-            distance: v.distance,
+            distance: found
+                .fine
+                .get(i)
+                .copied()
+                .filter(|f| f.is_finite())
+                .unwrap_or(v.distance),
             uncertainty: v.uncertainty,
             region,
         })

@@ -17,7 +17,7 @@ pub mod refit;
 pub use config::{CycleConfig, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS};
 pub use engine::{
     planner_input, pose_rows, run_cycle, with_tool, CycleOutcome, Executor, First, GrindJob,
-    LoopInputs, Rescan,
+    LoopInputs, Rescan, FINE_RADIUS_MM,
 };
 pub use plan_stage::{plan_inputs, plan_into, PlanFileConfig, Planned};
 pub use record::{

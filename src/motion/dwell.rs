@@ -169,8 +169,8 @@ pub(crate) fn rim_budget(points: &[SurfacePoint], fine: &[f64], tolerance: f64) 
     (points.iter().zip(fine))
         .map(|(p, fine)| {
             let d = finite(p.distance);
-            let lost = match p.region < 0 && d.min(*fine) < 0.0 {
-                true => (d / RIM_READ_SHARE).min(d).min(fine.min(0.0)),
+            let lost = match p.region < 0 && d < 0.0 && !fine.is_finite() {
+                true => d / RIM_READ_SHARE,
                 false => d,
             };
             (lost + tolerance - finite(p.uncertainty)).max(0.0)
