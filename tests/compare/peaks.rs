@@ -445,3 +445,56 @@ fn wide_defects_are_measured_by_a_widened_model() {
     assert!(mean(&rms) <= 0.0025, "mean RMS {}", mean(&rms));
     assert!(mean(&iou) >= 0.96, "mean IoU {}", mean(&iou));
 }
+
+/// A grind's loss at a conform rim point, as the closed loop meets it (survey case 161, cell
+/// 29): a dip 0.03 mm deep and 1 mm wide at half depth, at the simulated scans' 8 points/mm²
+/// with 0.015 mm noise, core points 0.4 mm apart, 10 noise seeds. At the core point nearest
+/// its bottom (truth -0.0284 mm) the adaptive comparison's cylinders, grown to the radius the
+/// noise asks, read 0.29 of the depth on average (-0.0081 mm, one seed +0.0004), the classic
+/// reading at the tool's footprint (`cycle::FINE_RADIUS_MM`, which the loop's planner reads,
+/// `cycle::planner_input`) 0.60 (-0.0170 mm), deeper on every seed.
+#[test]
+fn a_ground_dip_reads_deeper_at_the_tools_footprint() {
+    let (mut wide, mut fine, mut truth) = (0.0, 0.0, 0.0);
+    let seeds = 1..=10;
+    for seed in seeds.clone() {
+        let mut dip = Bump::at_300k(
+            Point3::new(4.1, 3.9, 0.0),
+            (-0.03, 1.0),
+            Profile::Gaussian,
+            0.4,
+            seed,
+        );
+        dip.scan_density = 8.0;
+        let (mut core, reference, scan) = dip.case();
+        // off the plane the flat reference lattice lies in, which two slabs of a classic
+        // cylinder share and both leave out (`reference_near`)
+        core.points.iter_mut().for_each(|p| p.z += 1e-4);
+        let nearest = (0..core.points.len())
+            .min_by(|&a, &b| {
+                let d = |i: usize| (core.points[i] - dip.top).norm();
+                d(a).total_cmp(&d(b))
+            })
+            .unwrap();
+        let adaptive = compare(&core, &reference, &scan, &CompareConfig::default()).unwrap();
+        let classic = CompareConfig {
+            method: Method::Classic,
+            radius: Some(polishbot::cycle::FINE_RADIUS_MM),
+            ..CompareConfig::default()
+        };
+        let footprint = compare(&core, &reference, &scan, &classic).unwrap();
+        let p = core.points[nearest];
+        let (w, f) = (
+            adaptive.values[nearest].distance,
+            footprint.values[nearest].distance,
+        );
+        let t = dip.height_at(p.x, p.y);
+        eprintln!("seed {seed}: truth {t:.4}, adaptive {w:.4}, footprint {f:.4}");
+        assert!(f < w, "seed {seed}: the footprint read {f:.4} mm, the cylinders {w:.4} mm");
+        truth += t / 10.0;
+        wide += w / 10.0;
+        fine += f / 10.0;
+    }
+    eprintln!("mean: truth {truth:.4}, adaptive {wide:.4}, footprint {fine:.4}");
+    assert!(fine <= 0.5 * truth && wide >= 0.4 * truth, "{fine} {wide} {truth}");
+}
