@@ -87,10 +87,11 @@ pub struct Inspection {
     pub regions: Vec<RegionInfo>,
     /// Every core point.
     pub points: Vec<SurfacePoint>,
-    /// Per core point of `points`, a second reading of its distance at the tool's footprint,
-    /// mm (the closed loop's rescans, `cycle::planner_input`; NaN where it has none): the rim
-    /// guard reads a conform point's loss by it (`motion::dwell::rim_budget`). Empty where
-    /// there is none (an inspection folder read back).
+    /// Per core point of `points`, its reading at the tool's footprint, mm, which `points`
+    /// then carry as their distance (the closed loop's inspections, `cycle::planner_input`;
+    /// NaN where it has too few points): the rim guard counts a conform point's loss as read
+    /// there (`motion::dwell::rim_budget`). Empty where there is none (an inspection folder
+    /// read back).
     pub fine: Vec<f64>,
 }
 

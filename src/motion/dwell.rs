@@ -161,9 +161,10 @@ pub const RIM_READ_SHARE: f64 = 0.3;
 /// What removal each of `points` may take and stay conform (issue 50): its deviation plus the
 /// tolerance less its uncertainty (LoD95; unknown: none), at least 0, the deviation of a
 /// point outside every region that reads below nominal taken as [`RIM_READ_SHARE`] of its
-/// loss, or as the rescan's reading at the tool's footprint (`fine`, one per point, NaN: none;
-/// `cycle::FINE_RADIUS_MM`) where that reads lower: what earlier grinds took off counts
-/// through the deviation, and a point already at or below `-tolerance + U` takes nothing.
+/// loss unless its deviation is the reading at the tool's footprint (`fine`, one per point,
+/// finite: that reading, `cycle::FINE_RADIUS_MM`; NaN: the adaptive comparison's): what
+/// earlier grinds took off counts through the deviation, and a point already at or below
+/// `-tolerance + U` takes nothing.
 pub(crate) fn rim_budget(points: &[SurfacePoint], fine: &[f64], tolerance: f64) -> Vec<f64> {
     let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
     (points.iter().zip(fine))
@@ -559,9 +560,9 @@ mod tests {
     /// counts the loss at 1/0.3, so the next grind may take nothing there, where the measured
     /// budget (-0.012 + 0.05 - 0.01 = 0.028 mm) let it take 0.029 mm to -0.068 mm true. A
     /// region's point reads its broad removal as it is; a proven excess keeps its whole
-    /// budget; a pit takes nothing. Case 161's rim point read -0.004 mm (true -0.030 mm) and
-    /// -0.024 mm at the tool's footprint: that reading counts (0.016 mm left, not 0.023); one
-    /// above the other changes nothing, nor does one in a region.
+    /// budget; a pit takes nothing. A point read at the tool's footprint (case 161's rim
+    /// point: true -0.030 mm, -0.004 mm in the adaptive cylinders, -0.024 mm at the footprint)
+    /// counts its loss as read: 0.016 mm left there, 0.028 mm at -0.012 mm.
     #[test]
     fn a_rim_point_read_below_nominal_counts_its_loss_as_the_rescan_underreads_it() {
         let tol = 0.05;
@@ -574,14 +575,14 @@ mod tests {
                 point(0.2, 2),
                 point(-0.2, 3),
                 point(f64::NAN, -1),
-                point(-0.004, -1),
-                point(0.003, -1),
+                point(-0.024, -1),
+                point(-0.012, -1),
                 point(0.1, 2),
             ],
-            &[nan, nan, nan, nan, nan, nan, -0.024, 0.01, -0.02],
+            &[nan, nan, nan, nan, nan, nan, -0.024, -0.012, 0.1],
             tol,
         );
-        let want = [0.0, 0.044, 0.028, 0.24, 0.0, 0.04, 0.016, 0.043, 0.14];
+        let want = [0.0, 0.044, 0.028, 0.24, 0.0, 0.04, 0.016, 0.028, 0.14];
         for (got, want) in budget.iter().zip(want) {
             assert!((got - want).abs() < 1e-12, "{budget:?}");
         }
