@@ -115,13 +115,19 @@ impl Inspection {
             );
             return Err(InputError::new(&csv, format!("row {}", i + 1), msg));
         }
+        let footprint = dir.join(FOOTPRINT_FILE);
+        let fine = match footprint.exists() {
+            true => read_footprint(&footprint, points.len())?,
+            false => Vec::new(),
+        };
         let inspection = Inspection {
             dir: dir.to_path_buf(),
             tolerance: parsed.tolerance,
             regions: parsed.regions,
             points,
             fine: Vec::new(),
-        };
+        }
+        .read_at_footprint(fine);
         inspection.check(&rfile)?;
         for (i, r) in inspection.regions.iter().enumerate() {
             inspection
@@ -129,6 +135,19 @@ impl Inspection {
                 .map_err(|m| InputError::new(&rfile, format!("regions[{i}] (id {})", r.id), m))?;
         }
         Ok(inspection)
+    }
+
+    /// This inspection with each core point's distance its reading at the tool's footprint
+    /// `fine` (one per point; the distance kept where it is NaN), and `fine` kept beside
+    /// (`Inspection::fine`); unchanged when `fine` is empty.
+    pub fn read_at_footprint(mut self, fine: Vec<f64>) -> Inspection {
+        for (p, f) in self.points.iter_mut().zip(&fine) {
+            if f.is_finite() {
+                p.distance = *f;
+            }
+        }
+        self.fine = fine;
+        self
     }
 
     /// Points of region `id`, as indices into `points`.
@@ -321,4 +340,115 @@ fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, InputError> {
         return Err(InputError::new(file, "file", "no rows"));
     }
     Ok(out)
+}
+
+/// The inspection folder's file of the readings at the tool's footprint (`Inspection::fine`,
+/// written by the closed loop's inspections): the header `footprint_distance`, then one
+/// distance per core point in deviations.csv's order, mm (`NaN`: too few points).
+pub const FOOTPRINT_FILE: &str = "footprint.csv";
+
+/// [`FOOTPRINT_FILE`]'s text for the readings `fine`.
+pub fn footprint_text(fine: &[f64]) -> String {
+    let mut text = String::from("footprint_distance\n");
+    for f in fine {
+        text.push_str(&format!("{f}\n"));
+    }
+    text
+}
+
+/// Reads [`FOOTPRINT_FILE`] `file`, which must hold `rows` readings (deviations.csv's rows).
+fn read_footprint(file: &Path, rows: usize) -> Result<Vec<f64>, InputError> {
+    let text = read(file)?;
+    let mut lines = text.lines();
+    if lines.next().map(str::trim) != Some("footprint_distance") {
+        return Err(InputError::new(
+            file,
+            "line 1",
+            "header is not `footprint_distance`",
+        ));
+    }
+    let fine = lines
+        .enumerate()
+        .map(|(i, l)| {
+            let v: f64 = l.trim().parse().map_err(|_| {
+                InputError::new(
+                    file,
+                    format!("line {}", i + 2),
+                    format!("`{l}` is not a number"),
+                )
+            })?;
+            match v.is_infinite() {
+                true => Err(InputError::new(file, format!("line {}", i + 2), "infinite")),
+                false => Ok(v),
+            }
+        })
+        .collect::<Result<Vec<f64>, InputError>>()?;
+    if fine.len() != rows {
+        let msg = format!(
+            "{} readings, but deviations.csv has {rows} rows",
+            fine.len()
+        );
+        return Err(InputError::new(
+            file,
+            format!("line {}", fine.len() + 2),
+            msg,
+        ));
+    }
+    Ok(fine)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The footprint readings read back as written (NaN kept), and a file of the wrong length
+    /// or with a word in it is refused naming the file and the line.
+    #[test]
+    fn footprint_readings_round_trip_and_bad_rows_are_named() {
+        let dir = std::env::temp_dir().join(format!("polishbot-footprint-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join(FOOTPRINT_FILE);
+        std::fs::write(&file, footprint_text(&[0.012, f64::NAN, -0.03])).unwrap();
+        let back = read_footprint(&file, 3).unwrap();
+        assert_eq!(back[0], 0.012);
+        assert!(back[1].is_nan());
+        assert_eq!(back[2], -0.03);
+        let short = read_footprint(&file, 4).unwrap_err().to_string();
+        assert!(
+            short.contains("footprint.csv") && short.contains("line 5"),
+            "{short}"
+        );
+        std::fs::write(&file, "footprint_distance\n0.1\nabc\n").unwrap();
+        let word = read_footprint(&file, 2).unwrap_err().to_string();
+        assert!(word.contains("line 3") && word.contains("abc"), "{word}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A footprint reading replaces a point's distance where it is a number, not where it is
+    /// NaN, and an empty one changes nothing.
+    #[test]
+    fn the_footprint_reading_replaces_the_distance_where_it_has_one() {
+        let point = |distance| SurfacePoint {
+            position: Point3::origin(),
+            normal: Vector3::z(),
+            distance,
+            uncertainty: 0.01,
+            region: -1,
+        };
+        let inspection = Inspection {
+            dir: PathBuf::new(),
+            tolerance: Some(0.05),
+            regions: Vec::new(),
+            points: vec![point(0.1), point(-0.004)],
+            fine: Vec::new(),
+        };
+        let same = inspection.clone().read_at_footprint(Vec::new());
+        assert_eq!(same.points[1].distance, -0.004);
+        let read = inspection.read_at_footprint(vec![f64::NAN, -0.024]);
+        assert_eq!(
+            (read.points[0].distance, read.points[1].distance),
+            (0.1, -0.024)
+        );
+        assert_eq!(read.fine.len(), 2);
+    }
 }

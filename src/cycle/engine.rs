@@ -382,16 +382,10 @@ pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
     let dev = &found.deviations;
     let points = (dev.points.iter().zip(&dev.normals))
         .zip(dev.values.iter().zip(&found.regions.labels))
-        .enumerate()
-        .map(|(i, ((p, n), (v, &region)))| SurfacePoint {
+        .map(|((p, n), (v, &region))| SurfacePoint {
             position: *p,
             normal: n / n.norm(),
-            distance: found
-                .fine
-                .get(i)
-                .copied()
-                .filter(|f| f.is_finite())
-                .unwrap_or(v.distance),
+            distance: v.distance,
             uncertainty: v.uncertainty,
             region,
         })
@@ -401,8 +395,9 @@ pub fn planner_input(found: &inspect::Findings, dir: &Path) -> Inspection {
         tolerance: Some(found.regions.tolerance),
         regions: found.regions.regions.clone(),
         points,
-        fine: found.fine.clone(),
+        fine: Vec::new(),
     }
+    .read_at_footprint(found.fine.clone())
 }
 
 /// The setups and table angles a rescan needs to see the points of the regions `planned` (the

@@ -125,6 +125,11 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
         }),
     };
     let (files, page) = write_outputs(out, written, lines, &provenance)?;
+    if !found.fine.is_empty() {
+        let path = out.join(crate::repair::FOOTPRINT_FILE);
+        std::fs::write(&path, crate::repair::footprint_text(&found.fine))
+            .with_context(|| format!("{}: cannot write", path.display()))?;
+    }
     (found.written, found.report_html) = (files, Some(page));
     found.times.lap("files and report");
     print_summary(

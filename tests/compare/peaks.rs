@@ -490,11 +490,17 @@ fn a_ground_dip_reads_deeper_at_the_tools_footprint() {
         );
         let t = dip.height_at(p.x, p.y);
         eprintln!("seed {seed}: truth {t:.4}, adaptive {w:.4}, footprint {f:.4}");
-        assert!(f < w, "seed {seed}: the footprint read {f:.4} mm, the cylinders {w:.4} mm");
+        assert!(
+            f < w,
+            "seed {seed}: the footprint read {f:.4} mm, the cylinders {w:.4} mm"
+        );
         truth += t / 10.0;
         wide += w / 10.0;
         fine += f / 10.0;
     }
     eprintln!("mean: truth {truth:.4}, adaptive {wide:.4}, footprint {fine:.4}");
-    assert!(fine <= 0.5 * truth && wide >= 0.4 * truth, "{fine} {wide} {truth}");
+    assert!(
+        fine <= 0.5 * truth && wide >= 0.4 * truth,
+        "{fine} {wide} {truth}"
+    );
 }
