@@ -60,6 +60,7 @@ fn inspection() -> Inspection {
         tolerance: Some(0.05),
         regions: vec![region],
         points,
+        fine: Vec::new(),
     }
 }
 
