@@ -126,15 +126,15 @@ impl Inspection {
             regions: parsed.regions,
             points,
             fine: Vec::new(),
-        }
-        .read_at_footprint(fine);
+        };
         inspection.check(&rfile)?;
         for (i, r) in inspection.regions.iter().enumerate() {
             inspection
                 .check_against_rows(r, parsed.spacing, parsed.gap)
                 .map_err(|m| InputError::new(&rfile, format!("regions[{i}] (id {})", r.id), m))?;
         }
-        Ok(inspection)
+        // regions.json summarises deviations.csv's distances: checked before they are replaced
+        Ok(inspection.read_at_footprint(fine))
     }
 
     /// This inspection with each core point's distance its reading at the tool's footprint

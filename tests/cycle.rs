@@ -210,6 +210,8 @@ fn a_later_plan_that_fails_ends_the_loop_recorded_with_its_reason() {
     let cfg = CycleConfig {
         // the arm grinds nothing: no progress must not end the loop before grind 2's plan
         min_progress: 0.0,
+        // and the planner reads the part at the tool's footprint (footprint.csv, below)
+        footprint_radius_mm: Some(polishbot::cycle::FINE_RADIUS_MM),
         plan,
         ..CycleConfig::default()
     };
@@ -243,6 +245,35 @@ fn a_later_plan_that_fails_ends_the_loop_recorded_with_its_reason() {
     );
     let html = std::fs::read_to_string(&ended.html).unwrap();
     assert!(html.contains("Stopped because grind 2"), "{html}");
+    // each inspection wrote its footprint reading, which the folder's plan input reads back:
+    // a number on most rows (44858 of 50250: the 0.6 mm cylinders hold too few scan points at
+    // the scan's borders and sparse spots), and the adaptive distances (deviations.csv) replaced
+    let read = polishbot::repair::Inspection::load(&out.join("iter-1").join("inspection")).unwrap();
+    let rows = read.points.len();
+    let numbers = read.fine.iter().filter(|f| f.is_finite()).count();
+    assert!(
+        read.fine.len() == rows && numbers as f64 >= 0.85 * rows as f64,
+        "{numbers} of {rows}"
+    );
+    assert!(read
+        .points
+        .iter()
+        .zip(&read.fine)
+        .all(|(p, f)| !f.is_finite() || p.distance == *f));
+    let csv = std::fs::read_to_string(out.join("iter-1/inspection/deviations.csv")).unwrap();
+    let adaptive: Vec<f64> = (csv.lines().skip(1))
+        .map(|l| l.split(',').nth(6).unwrap().parse().unwrap())
+        .collect();
+    let moved = adaptive
+        .iter()
+        .zip(&read.points)
+        .filter(|(a, p)| **a != p.distance)
+        .count();
+    assert!(
+        moved as f64 > 0.5 * rows as f64,
+        "{moved} of {rows} read differently"
+    );
+    assert!(out.join("iter-2/inspection/footprint.csv").exists());
 }
 
 /// Least drop of a planted bump's true peak (p90) in the first grind, mm: the rigid layers

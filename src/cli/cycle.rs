@@ -53,6 +53,11 @@ pub struct CycleArgs {
     /// Least share of the planned excess volume an iteration must remove to go on.
     #[arg(long, default_value_t = DEFAULT_MIN_PROGRESS)]
     pub min_progress: f64,
+    /// Also read every inspection with classic M3C2 cylinders of this radius, mm, and plan on
+    /// that reading (footprint.csv; 0.6, the tool's patch radius, is what was measured:
+    /// docs/ALGORITHMS.md, "The loop reads at the tool's footprint") [default: off].
+    #[arg(long)]
+    pub footprint_radius: Option<f64>,
     /// Plan mode of every iteration, passed to `plan --mode` [default: plan's].
     #[arg(long, value_enum)]
     pub mode: Option<PlanMode>,
@@ -200,6 +205,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let mut cfg = CycleConfig {
         max_iterations: args.max_iterations,
         min_progress: args.min_progress,
+        footprint_radius_mm: args.footprint_radius,
         ..CycleConfig::default()
     };
     cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;

@@ -169,7 +169,7 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
         core: None,
         inspect_area: None,
         registration_error: None,
-        fine_radius: Some(crate::cycle::FINE_RADIUS_MM),
+        fine_radius: None,
     };
     let found = crate::inspect::inspect_into(&InspectConfig::default(), &inputs, &inspection_dir)?;
     let inspection = crate::cycle::planner_input(&found, &inspection_dir);

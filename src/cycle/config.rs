@@ -12,6 +12,10 @@ pub const DEFAULT_MIN_PROGRESS: f64 = 0.05;
 /// Default number of grinding iterations (issue 29: "after `--max-iterations` (3)").
 pub const DEFAULT_MAX_ITERATIONS: usize = 3;
 
+/// Largest `--footprint-radius`, mm (5: the adaptive comparison's widest cylinders are about
+/// 3.7 mm; a wider second reading smooths more than the first, not less).
+pub const MAX_FOOTPRINT_RADIUS_MM: f64 = 5.0;
+
 /// Settings of the loop: its stop rule and the settings every iteration's inspection and plan
 /// are made with (the run's are its executor's, [`super::Executor`]).
 #[derive(Debug, Clone)]
@@ -21,6 +25,11 @@ pub struct CycleConfig {
     /// Least share of the planned excess volume an iteration must remove (default
     /// [`DEFAULT_MIN_PROGRESS`]).
     pub min_progress: f64,
+    /// Radius of the second reading of every inspection that the planner reads, mm
+    /// (`--footprint-radius`; default None: the planner reads the adaptive comparison; the
+    /// tool's patch radius, `super::FINE_RADIUS_MM`, is what was measured: docs/ALGORITHMS.md,
+    /// "The loop reads at the tool's footprint").
+    pub footprint_radius_mm: Option<f64>,
     /// Every inspection's settings (`inspect`'s).
     pub inspect: InspectConfig,
     /// Every plan's settings (`plan`'s); the loop sets `robot.tool` to the tool file it fitted.
@@ -35,6 +44,7 @@ impl Default for CycleConfig {
         CycleConfig {
             max_iterations: DEFAULT_MAX_ITERATIONS,
             min_progress: DEFAULT_MIN_PROGRESS,
+            footprint_radius_mm: None,
             inspect: InspectConfig::default(),
             plan: PlanFileConfig::default(),
             plan_table: toml::Table::new(),
@@ -53,6 +63,14 @@ impl CycleConfig {
                 "--min-progress must be a share between 0 and 1, not {}",
                 self.min_progress
             ));
+        }
+        if let Some(r) = self.footprint_radius_mm {
+            if !(r.is_finite() && r > 0.0 && r <= MAX_FOOTPRINT_RADIUS_MM) {
+                return Err(format!(
+                    "--footprint-radius must be a radius in mm above 0 and at most \
+                     {MAX_FOOTPRINT_RADIUS_MM}, not {r}"
+                ));
+            }
         }
         Ok(())
     }
