@@ -509,6 +509,7 @@ fn two_acceptance_cases_refit_k_grind_down_and_leave_the_pits() {
 /// own); slow, run by hand: `cargo test --release --test cycle -- --ignored ten`; a subset
 /// with `POLISHBOT_ACCEPT_SEEDS=61,81` (seed 41's second plan ran over 20 min, issue 29);
 /// `POLISHBOT_ACCEPT_GRINDS=4` allows that many grinds instead of the cycle's default 3;
+/// `POLISHBOT_ACCEPT_FOOTPRINT=0.6` passes `--footprint-radius 0.6` (the surveys too);
 /// `POLISHBOT_ACCEPT_SIM="pressure_exponent = 1.0; k_noise = 0.0"` adds `[sim.grinding]` keys
 /// (docs/ALGORITHMS.md, "The acceptance cases": what each part of the truth costs).
 #[test]

@@ -200,6 +200,11 @@ pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptan
     if let Ok(grinds) = std::env::var("POLISHBOT_ACCEPT_GRINDS") {
         command.args(["--max-iterations", &grinds]);
     }
+    // the planner reading the part at the tool's footprint (docs/ALGORITHMS.md, "The loop
+    // reads at the tool's footprint"; run by hand)
+    if let Ok(radius) = std::env::var("POLISHBOT_ACCEPT_FOOTPRINT") {
+        command.args(["--footprint-radius", &radius]);
+    }
     let out = command.output().unwrap();
     println!("{}", String::from_utf8_lossy(&out.stdout));
     let code = out.status.code();
