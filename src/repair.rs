@@ -343,18 +343,10 @@ fn read_deviations(file: &Path) -> Result<Vec<SurfacePoint>, InputError> {
 }
 
 /// The inspection folder's file of the readings at the tool's footprint (`Inspection::fine`,
-/// written by the closed loop's inspections): the header `footprint_distance`, then one
-/// distance per core point in deviations.csv's order, mm (`NaN`: too few points).
-pub const FOOTPRINT_FILE: &str = "footprint.csv";
-
-/// [`FOOTPRINT_FILE`]'s text for the readings `fine`.
-pub fn footprint_text(fine: &[f64]) -> String {
-    let mut text = String::from("footprint_distance\n");
-    for f in fine {
-        text.push_str(&format!("{f}\n"));
-    }
-    text
-}
+/// written by the closed loop's inspections, `inspect::inspect_into`): the header
+/// `footprint_distance`, then one distance per core point in deviations.csv's order, mm
+/// (`NaN`: too few points; docs/FORMATS.md).
+const FOOTPRINT_FILE: &str = "footprint.csv";
 
 /// Reads [`FOOTPRINT_FILE`] `file`, which must hold `rows` readings (deviations.csv's rows).
 fn read_footprint(file: &Path, rows: usize) -> Result<Vec<f64>, InputError> {
@@ -408,7 +400,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("polishbot-footprint-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join(FOOTPRINT_FILE);
-        std::fs::write(&file, footprint_text(&[0.012, f64::NAN, -0.03])).unwrap();
+        std::fs::write(&file, "footprint_distance\n0.012\nNaN\n-0.03\n").unwrap();
         let back = read_footprint(&file, 3).unwrap();
         assert_eq!(back[0], 0.012);
         assert!(back[1].is_nan());

@@ -126,8 +126,8 @@ pub fn inspect_into(cfg: &InspectConfig, inputs: &Inputs, out: &Path) -> Result<
     };
     let (files, page) = write_outputs(out, written, lines, &provenance)?;
     if !found.fine.is_empty() {
-        let path = out.join(crate::repair::FOOTPRINT_FILE);
-        std::fs::write(&path, crate::repair::footprint_text(&found.fine))
+        let path = out.join(FOOTPRINT_FILE);
+        std::fs::write(&path, footprint_text(&found.fine))
             .with_context(|| format!("{}: cannot write", path.display()))?;
     }
     (found.written, found.report_html) = (files, Some(page));
@@ -160,6 +160,21 @@ struct Written<'a> {
     support: &'a [u32],
     /// With an incomplete verdict, the report's picture of the unmeasured area.
     unmeasured: Option<Unmeasured<'a>>,
+}
+
+/// The inspection folder's file of the readings at the tool's footprint (`Findings::fine`,
+/// docs/FORMATS.md; read back by `repair::Inspection::load`, which names it too, as it reads
+/// deviations.csv with its own parser).
+const FOOTPRINT_FILE: &str = "footprint.csv";
+
+/// [`FOOTPRINT_FILE`]'s text for the readings `fine`: the header `footprint_distance`, then
+/// one number per core point in deviations.csv's order (`NaN`: too few points).
+fn footprint_text(fine: &[f64]) -> String {
+    let mut text = String::from("footprint_distance\n");
+    for f in fine {
+        text.push_str(&format!("{f}\n"));
+    }
+    text
 }
 
 /// Writes deviations.csv, deviations.ply, regions.json and the report, all four at once
