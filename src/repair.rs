@@ -362,16 +362,11 @@ fn read_footprint(file: &Path, rows: usize) -> Result<Vec<f64>, InputError> {
     let fine = lines
         .enumerate()
         .map(|(i, l)| {
-            let v: f64 = l.trim().parse().map_err(|_| {
-                InputError::new(
-                    file,
-                    format!("line {}", i + 2),
-                    format!("`{l}` is not a number"),
-                )
-            })?;
-            match v.is_infinite() {
-                true => Err(InputError::new(file, format!("line {}", i + 2), "infinite")),
-                false => Ok(v),
+            let bad = |why: String| InputError::new(file, format!("line {}", i + 2), why);
+            match l.trim().parse::<f64>() {
+                Ok(v) if v.is_infinite() => Err(bad("infinite".into())),
+                Ok(v) => Ok(v),
+                Err(_) => Err(bad(format!("`{l}` is not a number"))),
             }
         })
         .collect::<Result<Vec<f64>, InputError>>()?;
@@ -393,7 +388,8 @@ fn read_footprint(file: &Path, rows: usize) -> Result<Vec<f64>, InputError> {
 mod tests {
     use super::*;
 
-    /// The footprint readings read back as written (NaN kept), and a file of the wrong length
+    /// The footprint readings read back as the loop writes them (NaN kept), and a file of the
+    /// wrong length
     /// or with a word in it is refused naming the file and the line.
     #[test]
     fn footprint_readings_round_trip_and_bad_rows_are_named() {

@@ -361,11 +361,10 @@ impl Loop<'_> {
 }
 
 /// Radius of the loop's second reading of each inspection, the one its planner then reads,
-/// as measured, mm (`cycle --footprint-radius`, off by default: it doubled the runs that
-/// ground a region point below the tolerance on the ideal arm, below). 0.6: the tool's patch
-/// radius, half its 1.2 mm footprint; at the simulated scans' 8
-/// points/mm^2 a cylinder holds about 9 scan points, a mean within 0.005 mm of the 0.015 mm
-/// noise). The adaptive comparison grows its cylinders to 1.8-3.7 mm where the noise asks,
+/// as measured, mm (`cycle --footprint-radius`, off by default: below, 2 ideal-arm runs
+/// gouged with it). 0.6: the tool's patch radius, half its 1.2 mm footprint; at the simulated
+/// scans' 8 points/mm^2 a cylinder holds about 9 scan points, a mean within 0.005 mm of the
+/// 0.015 mm noise. The adaptive comparison grows its cylinders to 1.8-3.7 mm where the noise asks,
 /// wider than what a grind leaves: it read a grind's narrow loss at a conform rim point at
 /// 0.13-0.19 of its depth (survey case 161, cell 29, documented arm: true -0.030/-0.052 mm
 /// after grinds 2/3 read -0.004/-0.010 mm), this radius at 0.7-0.8 (py4dgeo's M3C2 there:

@@ -68,8 +68,8 @@ pub struct Inputs {
     /// Registration error of the level of detection, mm (default the registration's own).
     pub registration_error: Option<f64>,
     /// Radius of a second, classic reading of every core point, mm (`Findings::fine`; None:
-    /// none is made). The closed loop reads its rescans at the tool's footprint this way
-    /// (`cycle::planner_input`).
+    /// none is made). The closed loop reads its inspections at the tool's footprint this way
+    /// when `cycle --footprint-radius` is given (`cycle::planner_input`).
     pub fine_radius: Option<f64>,
 }
 
