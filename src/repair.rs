@@ -389,8 +389,7 @@ mod tests {
     use super::*;
 
     /// The footprint readings read back as the loop writes them (NaN kept), and a file of the
-    /// wrong length
-    /// or with a word in it is refused naming the file and the line.
+    /// wrong length or with a word in it is refused naming the file and the line.
     #[test]
     fn footprint_readings_round_trip_and_bad_rows_are_named() {
         let dir = std::env::temp_dir().join(format!("polishbot-footprint-{}", std::process::id()));
