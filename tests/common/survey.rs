@@ -123,6 +123,9 @@ impl Run {
             .iter()
             .map(|i| format!("{:.2}", i.volume))
             .collect();
+        let shares: Vec<String> = (a.truth.iter().skip(1))
+            .map(|t| format!("{:.0}", 100.0 * t.share()))
+            .collect();
         let k = a.k_cell.map_or("-".into(), |k| format!("{k:.2}"));
         let plans: Vec<String> = a
             .planned_peaks
@@ -130,7 +133,8 @@ impl Run {
             .map(|(b, p)| format!("{b:.2}>{p:.2}"))
             .collect();
         format!(
-            "| {} | {} | {} | {:.1} % ({} above, {} never ground, {} below of {}) | {} | {} | \
+            "| {} | {} | {} | {:.1} % ({} above, {} never ground, {} below of {}; per grind {} %) | \
+             {} | {} | \
              {:.3} mm ({} of {}) | {:.3} | {} | {} | {} | {} |",
             self.case,
             self.cell,
@@ -140,6 +144,7 @@ impl Run {
             last.untouched,
             last.below,
             last.area,
+            shares.join(" -> "),
             volumes.join(" -> "),
             measured.join(" -> "),
             a.true_low.0,
@@ -156,7 +161,7 @@ impl Run {
 
 /// The table's header: see [`Run::row`].
 pub const HEADER: &str = "| case | cell seed | accepted | true area within +-tol after the \
-    loop | true volume above tol per grind (mm^3) | measured volume per inspection (mm^3) | \
+    loop (after each grind) | true volume above tol per grind (mm^3) | measured volume per inspection (mm^3) | \
     lowest true ground point (points below -tol of ground) | pits ground: most removed (mm) | \
     k after grind 1 / cell's Preston k | each plan's peak before > predicted after (mm) | outcome \
     | class |\n\
