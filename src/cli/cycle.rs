@@ -58,6 +58,11 @@ pub struct CycleArgs {
     /// docs/ALGORITHMS.md, "The loop reads at the tool's footprint") [default: off].
     #[arg(long)]
     pub footprint_radius: Option<f64>,
+    /// Plan every grind on the rescans' readings alone, without the removal ledger (each core
+    /// point read at most at its first reading less the removal the grinds so far were
+    /// predicted to make: docs/ALGORITHMS.md, "The removal ledger").
+    #[arg(long)]
+    pub no_removal_ledger: bool,
     /// Plan mode of every iteration, passed to `plan --mode` [default: plan's].
     #[arg(long, value_enum)]
     pub mode: Option<PlanMode>,
@@ -206,6 +211,7 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         max_iterations: args.max_iterations,
         min_progress: args.min_progress,
         footprint_radius_mm: args.footprint_radius,
+        removal_ledger: !args.no_removal_ledger,
         ..CycleConfig::default()
     };
     cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;

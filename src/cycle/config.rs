@@ -30,6 +30,9 @@ pub struct CycleConfig {
     /// tool's patch radius, `super::FINE_RADIUS_MM`, is what was measured: docs/ALGORITHMS.md,
     /// "The loop reads at the tool's footprint").
     pub footprint_radius_mm: Option<f64>,
+    /// Plan each grind from the 2nd on at the removal ledger's values where they are lower than
+    /// the rescan's (`super::ledger`; default on, `--no-removal-ledger` off).
+    pub removal_ledger: bool,
     /// Every inspection's settings (`inspect`'s).
     pub inspect: InspectConfig,
     /// Every plan's settings (`plan`'s); the loop sets `robot.tool` to the tool file it fitted.
@@ -45,6 +48,7 @@ impl Default for CycleConfig {
             max_iterations: DEFAULT_MAX_ITERATIONS,
             min_progress: DEFAULT_MIN_PROGRESS,
             footprint_radius_mm: None,
+            removal_ledger: true,
             inspect: InspectConfig::default(),
             plan: PlanFileConfig::default(),
             plan_table: toml::Table::new(),

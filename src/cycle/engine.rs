@@ -8,6 +8,7 @@ use anyhow::Context;
 
 use super::config::CycleConfig;
 use super::figures;
+use super::ledger::Ledger;
 use super::plan_stage::{plan_into, Planned};
 use super::record::{
     decide, decide_plan, table_html, table_json, table_text, IterationRecord, Measured, Outcome,
@@ -121,6 +122,7 @@ pub fn run_cycle(
         pooled: Vec::new(),
         figures: Vec::new(),
         aim: Aim::unmeasured(),
+        ledger: None,
     };
     for k in 1.. {
         if let Some(outcome) = state.iteration(k, executor)? {
@@ -154,6 +156,9 @@ struct Loop<'a> {
     /// Where the next plan aims: the removal shift measured and carried so far (none before
     /// the first grind: that plan's pass is capped, `motion::aim`).
     aim: Aim,
+    /// The removal ledger (`super::ledger`): opened on the first inspection, each grind's
+    /// predicted removal entered after its rescan; None with `removal_ledger` off.
+    ledger: Option<Ledger>,
 }
 
 impl Loop<'_> {
@@ -179,6 +184,9 @@ impl Loop<'_> {
             }
         };
         let inspection = planner_input(&found, &inspection_dir);
+        if self.cfg.removal_ledger && self.ledger.is_none() {
+            self.ledger = Some(Ledger::open(&inspection));
+        }
         let measured = Measured::of(found.regions.verdict, &inspection);
         let mut off_plan = None;
         if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
@@ -195,6 +203,13 @@ impl Loop<'_> {
                 &mut self.pooled,
             );
             (last.k_fitted, last.agreement, off_plan) = (done.k, done.agreement, done.off_plan);
+            if let (Some(ledger), Some((moved, plan_k))) = (self.ledger.as_mut(), &done.moved) {
+                ledger.enter(
+                    &before.inspection,
+                    moved,
+                    done.k.map_or(1.0, |k| k / plan_k),
+                );
+            }
             let carried: Vec<(usize, [f64; 3])> = (done.shifts.iter())
                 .filter_map(|s| Some((usize::try_from(s.region).ok()?, s.carried_mm)))
                 .collect();
@@ -225,7 +240,7 @@ impl Loop<'_> {
             // a later grind's plan that fails (its own path check, an unreachable aim) ends
             // the loop on the part as measured, recorded; the first plan's failure is the
             // settings' or the part's and is the caller's error, as `plan`'s
-            None if k > 1 => match self.plan(&inspection, &found, (&dir, k)) {
+            None if k > 1 => match self.plan(&self.ledger_view(&inspection), &found, (&dir, k)) {
                 Ok(made) => made,
                 Err(e) => {
                     let why = format!("grind {k}'s plan failed: {}", one_line(&e));
@@ -266,6 +281,23 @@ impl Loop<'_> {
         });
         print!("{}", table_text(&self.records));
         Ok(None)
+    }
+
+    /// `inspection` as the next plan reads it: at the removal ledger's values where they are
+    /// lower (`Ledger::bound`, said in a line), or as it is without a ledger.
+    fn ledger_view(&self, inspection: &Inspection) -> Inspection {
+        let Some(ledger) = &self.ledger else {
+            return inspection.clone();
+        };
+        let (view, done) = ledger.bound(inspection.clone());
+        if done.points > 0 {
+            println!(
+                "cycle: the removal ledger reads {} core points below their rescan's reading \
+                 (by up to {:.3} mm): the grinds so far were predicted to take more off them",
+                done.points, done.most_mm
+            );
+        }
+        view
     }
 
     /// Ends the loop with `outcome` for the reason `why` (one line), recorded on the last

@@ -10,6 +10,7 @@
 mod config;
 mod engine;
 mod figures;
+pub mod ledger;
 mod plan_stage;
 pub mod record;
 pub mod refit;

@@ -236,6 +236,10 @@ pub struct Refitted {
     /// What cycle.html draws: the plan's unshifted prediction per core point of the
     /// inspection before the grind, and each region's measured shift (None for a rigid plan).
     pub seen: Option<(Vec<f64>, Vec<RegionShift>)>,
+    /// The grind's prediction per core point of the inspection before it, moved by each
+    /// region's measured shift, and the k its plan was made with (None for a rigid plan): what
+    /// the loop's removal ledger enters (`cycle::ledger`).
+    pub moved: Option<(Vec<f64>, f64)>,
 }
 
 /// Refits k after the last grind from the points of every grind so far (`pooled`, which this
@@ -308,14 +312,16 @@ pub fn refit(
         }
     };
     let agreement = prediction
+        .as_ref()
         .ok()
-        .and_then(|(p, plan_k)| fit::agreement(pair, &p, k.map(|k| k / plan_k), ids));
+        .and_then(|(p, plan_k)| fit::agreement(pair, p, k.map(|k| k / plan_k), ids));
     Refitted {
         k,
         agreement,
         off_plan,
         seen,
         shifts: carried,
+        moved: prediction.ok(),
     }
 }
 
