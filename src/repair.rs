@@ -89,11 +89,9 @@ pub struct Inspection {
     pub points: Vec<SurfacePoint>,
     /// Per core point of `points`, its reading at the tool's footprint, mm, which `points`
     /// then carry as their distance (the closed loop's inspections, `cycle::planner_input`;
-    /// NaN where it has too few points), or the loop's removal ledger's value where the
-    /// planner reads that (`cycle::ledger::Ledger::bound`): the rim guard counts a conform
-    /// point's loss as it is there, not as a comparison's under-read
-    /// (`motion::dwell::rim_budget`). Empty where there is none (an inspection folder read
-    /// back).
+    /// NaN where it has too few points): the rim guard counts a conform point's loss as read
+    /// there (`motion::dwell::rim_budget`). Empty where there is none (an inspection folder
+    /// read back).
     pub fine: Vec<f64>,
 }
 

@@ -107,14 +107,13 @@ impl Ledger {
     }
 
     /// `inspection` as the planner reads it: each core point's distance lowered to its ledger
-    /// point's first reading less the removal entered, where that is lower, and that value
-    /// also its `fine` (a loss the rim guard takes as it is, not as a comparison's under-read:
-    /// `motion::dwell::rim_budget`); and how many points that moved, by how much at most.
+    /// point's first reading less the removal entered, where that is lower; and how many points
+    /// that moved, by how much at most. The rim guard takes a lowered value below nominal as
+    /// it takes a reading there (`motion::dwell::rim_budget`: the loss a comparison under-reads
+    /// scaled up), which can only hold a conform point's budget lower.
     pub fn bound(&self, mut inspection: Inspection) -> (Inspection, Bounded) {
         let mut done = Bounded::default();
-        let n = inspection.points.len();
-        inspection.fine.resize(n, f64::NAN);
-        for (p, fine) in inspection.points.iter_mut().zip(inspection.fine.iter_mut()) {
+        for p in inspection.points.iter_mut() {
             let Some(j) = self.entry(&p.position, &p.normal) else {
                 continue;
             };
@@ -123,7 +122,6 @@ impl Ledger {
                 done.points += 1;
                 done.most_mm = done.most_mm.max(p.distance - left);
                 p.distance = left;
-                *fine = left;
             }
         }
         (inspection, done)
@@ -174,7 +172,6 @@ mod tests {
         assert_eq!(d[1..], [0.01, 0.5]);
         assert_eq!(done.points, 1);
         assert!((done.most_mm - 0.08).abs() < 1e-12, "{done:?}");
-        assert!((read.fine[0] - 0.04).abs() < 1e-12 && read.fine[1].is_nan());
         let mut turned = inspection(&[0.12, 0.12, 0.12]);
         turned.points[0].normal = Vector3::x();
         let (read, done) = ledger.bound(turned);
