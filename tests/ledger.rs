@@ -1,6 +1,6 @@
-//! The loop's removal ledger (`cycle::ledger`, docs/ALGORITHMS.md "The removal ledger"): grind
-//! 2 is planned at the first reading less what grind 1 was predicted to take off, where the
-//! rescan reads higher. Here the arm grinds nothing, so the rescan reads what the first scan
+//! The loop's removal ledger (`cycle::ledger`, docs/ALGORITHMS.md "The removal ledger"), set
+//! to start at grind 2: grind 2 is planned at the first reading less what grind 1 was
+//! predicted to take off, where the rescan reads higher. Here the arm grinds nothing, so the rescan reads what the first scan
 //! read and the whole of grind 1's prediction shows as the ledger's lowering.
 mod common;
 
@@ -46,7 +46,7 @@ fn two_plans(name: &str, removal_ledger: bool) -> (Rows, Rows) {
         max_iterations: 2,
         // the arm grinds nothing: no progress must not end the loop before grind 2's plan
         min_progress: 0.0,
-        removal_ledger,
+        ledger_from_grind: removal_ledger.then_some(2),
         plan,
         ..CycleConfig::default()
     };
@@ -65,11 +65,12 @@ fn two_plans(name: &str, removal_ledger: bool) -> (Rows, Rows) {
 }
 
 /// Over the points grind 1 was predicted to take at least 0.02 mm off (a third of them at
-/// least found again among grind 2's planned points), grind 2 plans at a deviation lower than
-/// grind 1 planned at by at least half of that prediction on average (the prediction is
-/// entered moved by the measured shift, which an idle grind leaves near 0, and scaled by a k
-/// the idle grind does not refit); without the ledger it plans at what the rescan read, within
-/// the rescan's noise of grind 1's.
+/// least found again among grind 2's planned points), grind 2 (the ledger set to start there)
+/// plans at a deviation lower than grind 1 planned at by at least 0.9 of that prediction on
+/// average: the ledger enters the largest prediction within 1 mm of each point (at least its
+/// own; moved by the measured shift, which an idle grind leaves near 0, at a k the idle grind
+/// does not refit), measured 0.083 mm against 0.053 mm. Without the ledger grind 2 plans at
+/// what the rescan read, grind 1's reading (measured: 0.000 mm apart).
 #[test]
 fn grind_two_is_planned_below_the_rescans_reading_by_what_grind_one_was_predicted_to_take() {
     let mean_drop = |(first, second): &(Rows, Rows)| -> (usize, usize, f64, f64) {
@@ -88,7 +89,7 @@ fn grind_two_is_planned_below_the_rescans_reading_by_what_grind_one_was_predicte
     println!("ledger on: {n} of {ground} points, mean drop {drop:.4} mm, predicted {predicted:.4}");
     assert!(n * 3 >= ground && n >= 20, "{n} of {ground} found again");
     assert!(
-        drop >= 0.5 * predicted,
+        drop >= 0.9 * predicted,
         "with the ledger: mean drop {drop:.4} mm against {predicted:.4} mm predicted"
     );
     let (_, n, drop, predicted) = mean_drop(&two_plans("ledger-off", false));

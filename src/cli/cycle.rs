@@ -58,9 +58,10 @@ pub struct CycleArgs {
     /// docs/ALGORITHMS.md, "The loop reads at the tool's footprint") [default: off].
     #[arg(long)]
     pub footprint_radius: Option<f64>,
-    /// Plan every grind on the rescans' readings alone, without the removal ledger (each core
-    /// point read at most at its first reading less the removal the grinds so far were
-    /// predicted to make: docs/ALGORITHMS.md, "The removal ledger").
+    /// Plan every grind on the rescans' readings alone, without the removal ledger (from grind
+    /// 4 on, each core point read at most at its first reading less the removal the grinds so
+    /// far were predicted to make within 1 mm of it: docs/ALGORITHMS.md, "The removal
+    /// ledger").
     #[arg(long)]
     pub no_removal_ledger: bool,
     /// Plan mode of every iteration, passed to `plan --mode` [default: plan's].
@@ -211,7 +212,10 @@ pub fn run(args: CycleArgs, config: Option<&Path>) -> anyhow::Result<()> {
         max_iterations: args.max_iterations,
         min_progress: args.min_progress,
         footprint_radius_mm: args.footprint_radius,
-        removal_ledger: !args.no_removal_ledger,
+        ledger_from_grind: match args.no_removal_ledger {
+            true => None,
+            false => CycleConfig::default().ledger_from_grind,
+        },
         ..CycleConfig::default()
     };
     cfg.check().map_err(|m| anyhow::anyhow!("cycle: {m}"))?;

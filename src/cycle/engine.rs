@@ -157,7 +157,7 @@ struct Loop<'a> {
     /// the first grind: that plan's pass is capped, `motion::aim`).
     aim: Aim,
     /// The removal ledger (`super::ledger`): opened on the first inspection, each grind's
-    /// predicted removal entered after its rescan; None with `removal_ledger` off.
+    /// predicted removal entered after its rescan; None with `ledger_from_grind` None.
     ledger: Option<Ledger>,
 }
 
@@ -184,7 +184,7 @@ impl Loop<'_> {
             }
         };
         let inspection = planner_input(&found, &inspection_dir);
-        if self.cfg.removal_ledger && self.ledger.is_none() {
+        if self.cfg.ledger_from_grind.is_some() && self.ledger.is_none() {
             self.ledger = Some(Ledger::open(&inspection));
         }
         let measured = Measured::of(found.regions.verdict, &inspection);
@@ -240,14 +240,16 @@ impl Loop<'_> {
             // a later grind's plan that fails (its own path check, an unreachable aim) ends
             // the loop on the part as measured, recorded; the first plan's failure is the
             // settings' or the part's and is the caller's error, as `plan`'s
-            None if k > 1 => match self.plan(&self.ledger_view(&inspection), &found, (&dir, k)) {
-                Ok(made) => made,
-                Err(e) => {
-                    let why = format!("grind {k}'s plan failed: {}", one_line(&e));
-                    println!("cycle: stop: {why}");
-                    return Ok(Some(self.stop(Outcome::PlanFailed, why)));
+            None if k > 1 => {
+                match self.plan(&self.ledger_view(&inspection, k), &found, (&dir, k)) {
+                    Ok(made) => made,
+                    Err(e) => {
+                        let why = format!("grind {k}'s plan failed: {}", one_line(&e));
+                        println!("cycle: stop: {why}");
+                        return Ok(Some(self.stop(Outcome::PlanFailed, why)));
+                    }
                 }
-            },
+            }
             None => self.plan(&inspection, &found, (&dir, k))?,
         };
         let last = self.records.last_mut().expect("pushed above");
@@ -283,10 +285,12 @@ impl Loop<'_> {
         Ok(None)
     }
 
-    /// `inspection` as the next plan reads it: at the removal ledger's values where they are
-    /// lower (`Ledger::bound`, said in a line), or as it is without a ledger.
-    fn ledger_view(&self, inspection: &Inspection) -> Inspection {
-        let Some(ledger) = &self.ledger else {
+    /// `inspection` as grind `grind`'s plan reads it: from the loop's `ledger_from_grind` on
+    /// at the removal ledger's values where they are lower (`Ledger::bound`, said in a line),
+    /// else as it is.
+    fn ledger_view(&self, inspection: &Inspection, grind: usize) -> Inspection {
+        let from = self.cfg.ledger_from_grind.unwrap_or(usize::MAX);
+        let Some(ledger) = self.ledger.as_ref().filter(|_| grind >= from) else {
             return inspection.clone();
         };
         let (view, done) = ledger.bound(inspection.clone());

@@ -1,14 +1,16 @@
 //! The loop's removal ledger (issue 50, "a loop that never gouges"): per core point of the
-//! first inspection, its first reading and the removal every grind since was predicted to make
-//! there, moved to where the grind's removal was measured to land and scaled by the k fitted
-//! after it. The planner then reads each core point at the lower of its rescan's reading and
-//! the ledger's (first reading less the removal entered), so that a spot the rescans read
-//! higher than what the grinds took off it is not ground again on that reading.
+//! first inspection, its first reading and the removal the grinds since were predicted to make
+//! within [`LEDGER_REACH_MM`] of it (the largest such prediction each grind, moved to where the
+//! grind's removal was measured to land and scaled by the k fitted after it). From the loop's
+//! `ledger_from_grind` on (`cycle::LEDGER_FROM_GRIND`, 4) the planner reads each core point
+//! at the lower of its rescan's reading and the ledger's (first reading less the removal
+//! entered), so that a spot the rescans read higher than what the grinds took off it is not
+//! ground again on that reading.
 //!
 //! Why: a rescan reads a ground spot as the mean over its comparison cylinder (1.3-3.7 mm
 //! across where the noise asks, 0.6 mm with `--footprint-radius`), and a grind leaves dips
 //! narrower than that. Run for 8 grinds (30-run survey, documented arm, main 175a683), the
-//! loop took 7 of 18 runs below the tolerance, each through small losses in 4-8 grinds at
+//! loop took 10 of 30 runs below the tolerance, each through small losses over grinds 4-8 at
 //! points the rescans read 0.04-0.15 mm above their truth (case 61 cell 30: true 0.082 /
 //! -0.030 mm read 0.202 / 0.119 mm after grinds 3 / 6), while the first reading, made before
 //! any grind on a smooth part, was within 0.02 mm of the truth at 8 of 9 of those points.

@@ -15,7 +15,7 @@ mod plan_stage;
 pub mod record;
 pub mod refit;
 
-pub use config::{CycleConfig, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS};
+pub use config::{CycleConfig, DEFAULT_MAX_ITERATIONS, DEFAULT_MIN_PROGRESS, LEDGER_FROM_GRIND};
 pub use engine::{
     planner_input, pose_rows, run_cycle, with_tool, CycleOutcome, Executor, First, GrindJob,
     LoopInputs, Rescan, FINE_RADIUS_MM,
