@@ -184,9 +184,7 @@ impl Loop<'_> {
             }
         };
         let inspection = planner_input(&found, &inspection_dir);
-        if self.cfg.ledger_from_grind.is_some() && self.ledger.is_none() {
-            self.ledger = Some(Ledger::open(&inspection));
-        }
+        self.open_ledger(&inspection);
         let measured = Measured::of(found.regions.verdict, &inspection);
         let mut off_plan = None;
         if let (Some(last), Some(before)) = (self.records.last_mut(), &self.previous) {
@@ -283,6 +281,14 @@ impl Loop<'_> {
         });
         print!("{}", table_text(&self.records));
         Ok(None)
+    }
+
+    /// Opens the removal ledger on the loop's first inspection (`inspection`, the planner's
+    /// view), unless it is open or off.
+    fn open_ledger(&mut self, inspection: &Inspection) {
+        if self.cfg.ledger_from_grind.is_some() && self.ledger.is_none() {
+            self.ledger = Some(Ledger::open(inspection));
+        }
     }
 
     /// `inspection` as grind `grind`'s plan reads it: from the loop's `ledger_from_grind` on
