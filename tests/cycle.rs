@@ -216,14 +216,7 @@ fn a_later_plan_that_fails_ends_the_loop_recorded_with_its_reason() {
         ..CycleConfig::default()
     };
     let out = dir.join("cycle");
-    let inputs = polishbot::cycle::LoopInputs {
-        reference: polishbot::inspect::Source::file(dir.join("reference.ply")),
-        scan: polishbot::inspect::Source::file(dir.join("scan.ply")),
-        files: polishbot::inspect::FileInput::default(),
-        out: out.clone(),
-        cell: common::shipped_cell(),
-        first: None,
-    };
+    let inputs = common::loop_inputs(&dir, &out);
     let ended = polishbot::cycle::run_cycle(&cfg, inputs, &mut Blocked)
         .expect("a later plan's failure is an outcome, not an error");
     assert_eq!(ended.outcome, Outcome::PlanFailed);

@@ -51,14 +51,7 @@ fn two_plans(name: &str, removal_ledger: bool) -> (Rows, Rows) {
         ..CycleConfig::default()
     };
     let out = dir.join("cycle");
-    let inputs = polishbot::cycle::LoopInputs {
-        reference: polishbot::inspect::Source::file(dir.join("reference.ply")),
-        scan: polishbot::inspect::Source::file(dir.join("scan.ply")),
-        files: polishbot::inspect::FileInput::default(),
-        out: out.clone(),
-        cell: common::shipped_cell(),
-        first: None,
-    };
+    let inputs = common::loop_inputs(&dir, &out);
     polishbot::cycle::run_cycle(&cfg, inputs, &mut Idle).unwrap();
     let rows = |k: usize| predicted(&out.join(format!("iter-{k}/predicted.csv")));
     (rows(1), rows(2))

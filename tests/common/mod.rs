@@ -438,6 +438,19 @@ pub fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// The loop's inputs for a case written into `dir` by [`case`] (reference.ply, scan.ply), in
+/// the shipped cell, its first plan its own, its folders in `out`.
+pub fn loop_inputs(dir: &Path, out: &Path) -> polishbot::cycle::LoopInputs {
+    polishbot::cycle::LoopInputs {
+        reference: polishbot::inspect::Source::file(dir.join("reference.ply")),
+        scan: polishbot::inspect::Source::file(dir.join("scan.ply")),
+        files: polishbot::inspect::FileInput::default(),
+        out: out.to_path_buf(),
+        cell: shipped_cell(),
+        first: None,
+    }
+}
+
 /// `inspect` of `dir/scan` against `dir/reference.ply` into `dir/out`.
 pub fn inspect_in(dir: &Path, scan: &str, out: &str) -> std::process::Output {
     succeed(
