@@ -93,3 +93,21 @@ fn grind_two_is_planned_below_the_rescans_reading_by_what_grind_one_was_predicte
         "without the ledger: mean drop {drop:.4} mm against {predicted:.4} mm predicted"
     );
 }
+
+/// The ledger cannot start before grind 2 (grind 1 has nothing entered): asking for grind 1
+/// is refused with the reason; grind 2, the default and none are taken.
+#[test]
+fn a_ledger_asked_to_start_at_grind_one_is_refused() {
+    let with = |g| CycleConfig {
+        ledger_from_grind: g,
+        ..CycleConfig::default()
+    };
+    let why = with(Some(1)).check().unwrap_err();
+    assert!(why.contains("removal ledger"), "{why}");
+    assert!(with(Some(2)).check().is_ok());
+    assert!(with(None).check().is_ok());
+    assert_eq!(
+        CycleConfig::default().ledger_from_grind,
+        Some(polishbot::cycle::LEDGER_FROM_GRIND)
+    );
+}
