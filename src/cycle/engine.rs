@@ -2,6 +2,7 @@
 //! k, and again, until the stop rule ends it. The stages are called in memory (the inspection
 //! the plan is made from, the plan the run streams, the prediction the fit compares with);
 //! their files are outputs only. One iteration is [`Loop::iteration`].
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -284,9 +285,10 @@ impl Loop<'_> {
     }
 
     /// Opens the removal ledger on the loop's first inspection (`inspection`, the planner's
-    /// view), unless it is open or off.
+    /// view), unless it is open, off, or would start after the loop's last grind.
     fn open_ledger(&mut self, inspection: &Inspection) {
-        if self.cfg.ledger_from_grind.is_some() && self.ledger.is_none() {
+        let read = (self.cfg.ledger_from_grind).is_some_and(|g| g <= self.cfg.max_iterations);
+        if read && self.ledger.is_none() {
             self.ledger = Some(Ledger::open(inspection));
         }
     }
@@ -294,10 +296,10 @@ impl Loop<'_> {
     /// `inspection` as grind `grind`'s plan reads it: from the loop's `ledger_from_grind` on
     /// at the removal ledger's values where they are lower (`Ledger::bound`, said in a line),
     /// else as it is.
-    fn ledger_view(&self, inspection: &Inspection, grind: usize) -> Inspection {
+    fn ledger_view<'i>(&self, inspection: &'i Inspection, grind: usize) -> Cow<'i, Inspection> {
         let from = self.cfg.ledger_from_grind.unwrap_or(usize::MAX);
         let Some(ledger) = self.ledger.as_ref().filter(|_| grind >= from) else {
-            return inspection.clone();
+            return Cow::Borrowed(inspection);
         };
         let (view, done) = ledger.bound(inspection.clone());
         if done.points > 0 {
@@ -307,7 +309,7 @@ impl Loop<'_> {
                 done.points, done.most_mm
             );
         }
-        view
+        Cow::Owned(view)
     }
 
     /// Ends the loop with `outcome` for the reason `why` (one line), recorded on the last
