@@ -35,10 +35,10 @@ const SHALLOW_DEPTH_SHARE: f64 = 0.75;
 /// 0.45 mm wide, nothing within 1.5 mm of it predicted).
 pub const SHALLOW_LANDING_MM: f64 = 3.0;
 
-/// [`landing_margin`] from its terms, mm: the tip error `tip`, the spindle's slide `slide`, the
-/// carried removal shift's magnitude `carried` (at least [`UNMEASURED_LANDING_MM`]), widened
-/// to the loop's measured `reach` when it is known, and to [`SHALLOW_LANDING_MM`] for a
-/// `shallow` contact.
+/// [`landing_margin`] from its terms, mm: the tip error `tip`, the error of the spindle's slide
+/// `slide`, the carried removal shift's magnitude `carried` (at least
+/// [`UNMEASURED_LANDING_MM`]), widened to the loop's measured `reach` when it is known, and to
+/// [`SHALLOW_LANDING_MM`] for a `shallow` contact.
 fn margin_of(tip: f64, slide: f64, carried: f64, reach: Option<f64>, shallow: bool) -> f64 {
     let floored = tip + slide + carried.max(UNMEASURED_LANDING_MM);
     let measured = reach.map_or(floored, |r| floored.max(r));
@@ -49,16 +49,13 @@ fn margin_of(tip: f64, slide: f64, carried: f64, reach: Option<f64>, shallow: bo
 }
 
 /// How far from where each contact's removal is predicted it may land, mm: the tool-tip error
-/// the Monte Carlo draws (`removal::montecarlo::tip_error`), the spring-loaded spindle's
-/// slide `preload x tan(tilt)` (its patch lands that far from under the commanded centre;
-/// the aim moves the raster by it, but the part's excess and the axis the arm really holds
-/// change it, and the documented arm's joint 1 flips its lateral error with the stroke), and
-/// the carried removal shift's magnitude (its own error is of its size: the registration
-/// reads the stroke spacing's ripple), that shift term at least [`UNMEASURED_LANDING_MM`] on
-/// every grind; once the loop measured how far beyond its plans' footprints the removal
-/// really reached (`motion::aim::Aim::reach_mm`, read from the rescans by
-/// `cell::removal_reach`) the margin is at least that reach; a contact commanded shallow
-/// lands within [`SHALLOW_LANDING_MM`] ([`margin_of`]).
+/// the Monte Carlo draws (`removal::montecarlo::tip_error`), the error of the spring-loaded
+/// spindle's slide ([`slide_error`]), and the carried removal shift's magnitude (its own error
+/// is of its size: the registration reads the stroke spacing's ripple), that shift term at
+/// least [`UNMEASURED_LANDING_MM`] on every grind; once the loop measured how far beyond its
+/// plans' footprints the removal really reached (`motion::aim::Aim::reach_mm`, read from the
+/// rescans by `cell::removal_reach`) the margin is at least that reach; a contact commanded
+/// shallow lands within [`SHALLOW_LANDING_MM`] ([`margin_of`]).
 pub(crate) fn landing_margins(cs: &[Contact], tool: &ToolModel, config: &PlanConfig) -> Vec<f64> {
     let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
     cs.iter()
@@ -68,17 +65,30 @@ pub(crate) fn landing_margins(cs: &[Contact], tool: &ToolModel, config: &PlanCon
 
 /// [`landing_margins`] of one contact `c` with the tool-tip error `tip`, mm.
 fn landing_margin(c: &Contact, tip: f64, tool: &ToolModel, config: &PlanConfig) -> f64 {
-    let slide = match tool.compliance_direction {
-        removal::ComplianceDirection::SpindleAxis => {
-            let (tilt, _) = c.tilt();
-            let cos = tilt.cos.max(removal::press::MIN_AXIS_COS);
-            tool.preload_mm * tilt.sin / cos
-        }
-        removal::ComplianceDirection::SurfaceNormal => 0.0,
-    };
+    let slide = slide_error(c, tip, tool);
     let carried = config.aim.shift_at(&c.point, &c.normal).norm();
     let shallow = c.depth_mm < SHALLOW_DEPTH_SHARE * tool.preload_mm;
     margin_of(tip, slide, carried, config.aim.reach_mm, shallow)
+}
+
+/// How far a spring-loaded spindle's patch may land from where the plan puts it, mm: `tip x
+/// tan(tilt)`, the tool tip's error along the normal `tip` sliding the patch along the lean
+/// (`removal::press::axial_give`); 0 for a mount that gives along the normal. The slide itself,
+/// `preload x tan(tilt)` from under the commanded centre (0.7-1.7 mm at 20-40 degrees), is not
+/// an error: the contact's centre carries it (`removal::press::along_axis`) and the aim moves
+/// the raster by it (`motion::aim`). Until issue 50's session 19 the margin held the whole
+/// slide: on the 30-run survey (documented arm, cell seeds 29-31, 3 grinds) the rim budgets
+/// of that wider margin lifted most of the dwell of the later grinds (true volume above the
+/// tolerance after 3 grinds 0.40 of its start on median, halved in 22 of 30 runs); without
+/// it 0.21, halved in 30 of 30 (docs/ALGORITHMS.md, "Guarding the rim").
+fn slide_error(c: &Contact, tip: f64, tool: &ToolModel) -> f64 {
+    match tool.compliance_direction {
+        removal::ComplianceDirection::SpindleAxis => {
+            let (tilt, _) = c.tilt();
+            tip * tilt.sin / tilt.cos.max(removal::press::MIN_AXIS_COS)
+        }
+        removal::ComplianceDirection::SurfaceNormal => 0.0,
+    }
 }
 
 #[cfg(test)]
