@@ -177,9 +177,8 @@ pub fn run(args: DemoArgs, _config: Option<&Path>) -> Result<()> {
     let plan_file = out.join("plan.json");
     let refuse = |m: &str| anyhow::anyhow!("plan settings: {m}");
     let ros = out.join("trajectory.yaml");
-    // the loop's first plan: no removal shift measured yet, the pass capped (motion::aim)
-    let mut plan_cfg = PlanFileConfig::default();
-    plan_cfg.plan.aim = crate::motion::aim::Aim::unmeasured();
+    // the loop's first plan: no removal shift measured yet (motion::aim)
+    let plan_cfg = PlanFileConfig::default();
     let planned = plan_into(
         &plan_cfg,
         &cell,

@@ -122,7 +122,7 @@ pub fn run_cycle(
         previous: None,
         pooled: Vec::new(),
         figures: Vec::new(),
-        aim: Aim::unmeasured(),
+        aim: Aim::default(),
         ledger: None,
     };
     for k in 1.. {

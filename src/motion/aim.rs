@@ -5,9 +5,12 @@
 //! plane): the contacts, the dwell and the prediction stay at x (where the removal is wanted),
 //! only the tool target the IK solves for moves (`program::tool_target`). The part's
 //! placement is not touched, so collisions and `run`'s checks see the commanded tool against
-//! the part where it really sits. Before any grind was measured the shift is unknown: the
-//! plan then takes at most [`Aim::first_pass_share`] of the tolerance off any point, so that a
-//! removal landing beside its plan cannot cut conform surface below the tolerance.
+//! the part where it really sits. Before any grind was measured the shift is unknown: the rim
+//! guard (`motion::dwell`) then holds every point's budget under landings anywhere within
+//! the floor of the landing margin (`motion::landing::UNMEASURED_LANDING_MM`). A cap on what
+//! one pass takes off any point, [`Aim::first_pass_share`], stays as a setting (plan.toml
+//! `[plan.aim]`); the loop's first plan no longer sets it (docs/ALGORITHMS.md, "The first
+//! grind, before any shift is known").
 //!
 //! The other correction is the model's own, known before any grind: a spring-loaded spindle
 //! (tool.toml `compliance_direction = "spindle_axis"`) lands its patch away from the commanded
@@ -32,17 +35,6 @@ use serde::{Deserialize, Serialize};
 use super::raster::Stroke;
 use super::surface::Surface;
 
-/// Share of the tolerance the first grind of a loop (no shift measured yet) asks of any point
-/// at most (0.7): its removal may land a whole patch or more beside the plan (the documented
-/// arm's first grinds landed 1.4-1.9 mm off in every region of the demo, the patch being
-/// 1.2 mm across), so what it removes can fall on conform surface (deviation near 0); with the
-/// tool up to 1.3 x faster than the plan's k (issue 50's acceptance: k 30 % off), 0.7 x 1.3 =
-/// 0.91 of the tolerance keeps such a point above -tolerance. The demo's first grind at the
-/// full 0.25 mm pass cut to -0.143 mm; capping the pass by raising the allowance instead
-/// ground the bumps' tops only (6-15 contacts a region), too little to register the shift
-/// (0.99-2.06 mm, depth scale 0.34-1.35) or to make progress (3.5 % of the volume).
-pub const FIRST_PASS_SHARE: f64 = 0.7;
-
 /// A region's own measured shift, carried.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -61,8 +53,8 @@ pub struct AimRegion {
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Aim {
-    /// Share of the tolerance one pass takes off any point at most while no shift is known
-    /// (None: `removal.max_pass_mm` alone; a loop's first plan: [`FIRST_PASS_SHARE`]).
+    /// Share of the tolerance one pass takes off any point at most (None, the default:
+    /// `removal.max_pass_mm` alone).
     pub first_pass_share: Option<f64>,
     /// The cell-wide shift (the regions' mean, weighted by their points), reference frame,
     /// mm: a contact farther than every region's reach takes it.
@@ -77,14 +69,6 @@ pub struct Aim {
 }
 
 impl Aim {
-    /// The aim of a loop's first plan: no shift known, the pass capped.
-    pub fn unmeasured() -> Aim {
-        Aim {
-            first_pass_share: Some(FIRST_PASS_SHARE),
-            ..Aim::default()
-        }
-    }
-
     /// True when the aim changes nothing (plan.json then does not record it).
     pub fn is_empty(&self) -> bool {
         *self == Aim::default()
@@ -219,9 +203,13 @@ mod tests {
         );
         let far = aim.shift_at(&Point3::new(20.0, 0.0, 0.0), &z);
         assert_eq!(far, Vector3::new(1.0, 0.0, 0.0));
-        assert!(Aim::default().is_empty() && !Aim::unmeasured().is_empty());
-        assert!((Aim::unmeasured().cap(0.25, 0.05) - 0.035).abs() < 1e-12);
-        assert_eq!(Aim::unmeasured().cap(0.02, 0.05), 0.02);
+        let capped = Aim {
+            first_pass_share: Some(0.7),
+            ..Aim::default()
+        };
+        assert!(Aim::default().is_empty() && !capped.is_empty());
+        assert!((capped.cap(0.25, 0.05) - 0.035).abs() < 1e-12);
+        assert_eq!(capped.cap(0.02, 0.05), 0.02);
         assert_eq!(aim.cap(0.25, 0.05), 0.25);
         let bad = Aim {
             common_mm: [f64::NAN, 0.0, 0.0],

@@ -1,7 +1,7 @@
 //! A removal cap held on the solved dwell (issue 50, "no plan removes at a point that is not
 //! above the tolerance by more than its measurement uncertainty"): the caller's targets are
-//! capped (the first grind takes at most `motion::aim::FIRST_PASS_SHARE` of the tolerance off
-//! any point), but the dwell solve cannot hold a target below what its shortest dwell removes
+//! capped (with plan.toml's `[plan.aim] first_pass_share`, a pass takes at most that share of
+//! the tolerance off any point), but the dwell solve cannot hold a target below what its shortest dwell removes
 //! (`t_min = piece / fastest feed`), and the in-order rounds raise the targets where the pass
 //! ground in order removes less than the linear model. So the removal the solved dwell makes
 //! can exceed the cap (acceptance seed 21's first plan: 0.061 mm off a peak against the
