@@ -65,27 +65,37 @@ pub(crate) fn landing_margins(cs: &[Contact], tool: &ToolModel, config: &PlanCon
 
 /// [`landing_margins`] of one contact `c` with the tool-tip error `tip`, mm.
 fn landing_margin(c: &Contact, tip: f64, tool: &ToolModel, config: &PlanConfig) -> f64 {
-    let slide = slide_error(c, tip, tool);
+    let slide = slide_error(c, tool);
     let carried = config.aim.shift_at(&c.point, &c.normal).norm();
     let shallow = c.depth_mm < SHALLOW_DEPTH_SHARE * tool.preload_mm;
     margin_of(tip, slide, carried, config.aim.reach_mm, shallow)
 }
 
-/// How far a spring-loaded spindle's patch may land from where the plan puts it, mm: `tip x
-/// tan(tilt)`, the tool tip's error along the normal `tip` sliding the patch along the lean
-/// (`removal::press::axial_give`); 0 for a mount that gives along the normal. The slide itself,
-/// `preload x tan(tilt)` from under the commanded centre (0.7-1.7 mm at 20-40 degrees), is not
-/// an error: the contact's centre carries it (`removal::press::along_axis`) and the aim moves
-/// the raster by it (`motion::aim`). Until issue 50's session 19 the margin held the whole
-/// slide: on the 30-run survey (documented arm, cell seeds 29-31, 3 grinds) the rim budgets
-/// of that wider margin lifted most of the dwell of the later grinds (true volume above the
-/// tolerance after 3 grinds 0.40 of its start on median, halved in 22 of 30 runs); without
-/// it 0.21, halved in 30 of 30 (docs/ALGORITHMS.md, "Guarding the rim").
-fn slide_error(c: &Contact, tip: f64, tool: &ToolModel) -> f64 {
+/// Share of the spring-loaded spindle's slide `preload x tan(tilt)` the landing margin holds
+/// (0.75). The slide itself is modelled: the contact's centre carries it
+/// (`removal::press::along_axis`) and the aim moves the raster by it (`motion::aim`). What is
+/// left of it is its error: the part's excess compresses the spring further, the axis the arm
+/// holds differs from the first walk's, and the documented arm's joint 1 flips its lateral
+/// error with the stroke. That error is not modelled, so the share is measured. 30-run survey
+/// (cell seeds 29-31, true k 1.3 x, 3 grinds, the loop's first plan uncapped), documented arm:
+/// share 1.0 (the whole slide, as until 2026-12-07): no run gouged (lowest true ground point
+/// -0.048 mm), true volume above tolerance left 0.40 of its start on median, halved in 26 of
+/// 30; 0.75: none gouged (-0.049 mm), 0.34, halved in 27 (ideal arm: none, -0.028 mm, 0.30,
+/// 29); 0.5: 1 gouged (-0.058 mm), 0.30; 0 (or the tip error's slide alone): 5-6 gouged
+/// (-0.053..-0.071 mm), 0.21, halved in 30. The gouges of the narrow margins were in the
+/// defects' interior as often as at the rim, where the rescans read a ground spot above its
+/// truth (case 121, cell 30: 0.060 mm read, 0.020 mm true, before the grind that took it to
+/// -0.050 mm).
+pub const SLIDE_MARGIN_SHARE: f64 = 0.75;
+
+/// The part of the spring-loaded spindle's slide a contact `c`'s landing margin holds, mm:
+/// [`SLIDE_MARGIN_SHARE`] x `preload x tan(tilt)`; 0 for a mount that gives along the normal.
+fn slide_error(c: &Contact, tool: &ToolModel) -> f64 {
     match tool.compliance_direction {
         removal::ComplianceDirection::SpindleAxis => {
             let (tilt, _) = c.tilt();
-            tip * tilt.sin / tilt.cos.max(removal::press::MIN_AXIS_COS)
+            let cos = tilt.cos.max(removal::press::MIN_AXIS_COS);
+            SLIDE_MARGIN_SHARE * tool.preload_mm * tilt.sin / cos
         }
         removal::ComplianceDirection::SurfaceNormal => 0.0,
     }
