@@ -1,7 +1,8 @@
 //! The loop's removal ledger (`cycle::ledger`, docs/ALGORITHMS.md "The removal ledger"), set
 //! to start at grind 2: grind 2 is planned at the first reading less what grind 1 was
-//! predicted to take off, where the rescan reads higher. Here the arm grinds nothing, so the rescan reads what the first scan
-//! read and the whole of grind 1's prediction shows as the ledger's lowering.
+//! predicted to take off, where the rescan reads higher. Here the arm grinds nothing, so the
+//! rescan reads what the first scan read and the whole of grind 1's prediction shows as the
+//! ledger's lowering.
 mod common;
 
 use std::collections::HashMap;

@@ -155,7 +155,7 @@ struct Loop<'a> {
     /// cycle.html's figures of the grinds so far (drawn when each grind is judged).
     figures: Vec<Figure>,
     /// Where the next plan aims: the removal shift measured and carried so far (none before
-    /// the first grind: that plan's pass is capped, `motion::aim`).
+    /// the first grind, `motion::aim`).
     aim: Aim,
     /// The removal ledger (`super::ledger`): opened on the first inspection, each grind's
     /// predicted removal entered after its rescan; None with `ledger_from_grind` None.

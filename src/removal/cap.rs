@@ -1,10 +1,10 @@
 //! A removal cap held on the solved dwell (issue 50, "no plan removes at a point that is not
 //! above the tolerance by more than its measurement uncertainty"): the caller's targets are
 //! capped (with plan.toml's `[plan.aim] first_pass_share`, a pass takes at most that share of
-//! the tolerance off any point), but the dwell solve cannot hold a target below what its shortest dwell removes
-//! (`t_min = piece / fastest feed`), and the in-order rounds raise the targets where the pass
-//! ground in order removes less than the linear model. So the removal the solved dwell makes
-//! can exceed the cap (acceptance seed 21's first plan: 0.061 mm off a peak against the
+//! the tolerance off any point), but the dwell solve cannot hold a target below what its shortest
+//! dwell removes (`t_min = piece / fastest feed`), and the in-order rounds raise the targets where
+//! the pass ground in order removes less than the linear model. So the removal the solved dwell
+//! makes can exceed the cap (acceptance seed 21's first plan: 0.061 mm off a peak against the
 //! 0.035 mm cap). [`hold`] lowers the dwell of each contact reaching a point over its limit
 //! by that point's excess ratio, lifts the tool over a contact already at its shortest dwell,
 //! and repeats until no point is over its limit.
