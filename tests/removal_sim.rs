@@ -21,7 +21,7 @@
 //! nominal surface. With the simulator's default exponents 1.1/0.9 the law itself differs from
 //! the planner's (`POLISHBOT_SIM_EXPONENTS=1.1,0.9 cargo test --release --test removal_sim --
 //! --nocapture`). `POLISHBOT_SIM_DEMO=DIR` grinds a `demo --out DIR` instead (its plan.json
-//! and inspection/).
+//! and inspection/, under the mount its plan was made with).
 mod common;
 
 use std::path::Path;
@@ -82,7 +82,8 @@ fn truth(robot: &Robot) -> GrindConfig {
 }
 
 /// The mount's direction on both sides, the planner's tool.toml key and the simulator's:
-/// `POLISHBOT_SIM_MOUNT` (`surface_normal`, the default, or `spindle_axis`, the shipped tool's).
+/// `POLISHBOT_SIM_MOUNT` (`surface_normal` or `spindle_axis`, the shipped tool's); unset,
+/// `default` (`surface_normal` here, the plan's own in the demo mode: [`recorded_mount`]).
 /// Measured with `spindle_axis` (issue 50, the patch aimed `preload x tan` ahead,
 /// `motion/aim.rs`): on the part 0.970 / 0.670 / 0.993 / 0.938 (regions 4 / 0 / 3 / 1), per
 /// band 0.51-2.15: the planner measures the part's deviation and slope at the commanded point,
@@ -90,11 +91,24 @@ fn truth(robot: &Robot) -> GrindConfig {
 /// (the flank tilts the surface away from the axis, 1 / cos^2) and the force check refuses
 /// the plan. Open: the spindle mount on a bumpy part is not held here yet (the flat plate's
 /// closed form is, tests/mount_direction.rs).
-fn mount() -> (&'static str, MountGive) {
-    match std::env::var("POLISHBOT_SIM_MOUNT").as_deref() {
-        Ok("spindle_axis") => ("spindle_axis", MountGive::SpindleAxis),
+fn mount(default: &str) -> (&'static str, MountGive) {
+    let named = std::env::var("POLISHBOT_SIM_MOUNT").unwrap_or_else(|_| default.to_string());
+    match named.as_str() {
+        "spindle_axis" => ("spindle_axis", MountGive::SpindleAxis),
         _ => ("surface_normal", MountGive::SurfaceNormal),
     }
+}
+
+/// The mount a demo's plan (`dir`/plan.json) was made with: its provenance's
+/// `removal_tool.compliance_direction`. Ground under the other mount the demo's first plan read
+/// 0.46-0.63 of its prediction per region; under its own, 0.91-0.99 (2026-12-07).
+fn recorded_mount(dir: &Path) -> String {
+    let text = std::fs::read_to_string(dir.join("plan.json")).unwrap();
+    let plan: serde_json::Value = serde_json::from_str(&text).unwrap();
+    plan["provenance"]["config"]["removal_tool"]["compliance_direction"]
+        .as_str()
+        .unwrap_or("surface_normal")
+        .to_string()
 }
 
 /// The part: every core point moved out by `lift` of its deviation, PCA normals turned
@@ -179,14 +193,19 @@ fn tilts(plan: &Plan, region: usize, robot: &Robot, wc: &Workcell) -> (f64, f64)
 #[test]
 fn the_simulator_removes_what_the_plan_predicts_per_region() {
     let mut robot = common::dofbot();
-    let give = mount();
+    let demo = std::env::var("POLISHBOT_SIM_DEMO").ok();
+    let give = mount(
+        &demo
+            .as_deref()
+            .map_or("surface_normal".into(), |d| recorded_mount(Path::new(d))),
+    );
     if let Some(toml::Value::Table(t)) = robot.tool.removal.as_mut() {
         t.insert("compliance_direction".into(), give.0.into());
     }
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let dir = common::tempdir();
-    let (inspection, plan) = match std::env::var("POLISHBOT_SIM_DEMO") {
-        Ok(demo) => {
+    let (inspection, plan) = match demo {
+        Some(demo) => {
             let d = Path::new(&demo);
             let mut plan = Plan::load(&d.join("plan.json")).unwrap();
             let text = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
@@ -194,7 +213,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
             plan.removal.as_mut().expect("a removal plan").rows = rows;
             (Inspection::load(&d.join("inspection")).unwrap(), plan)
         }
-        Err(_) => {
+        None => {
             let inspection = common::synthetic::demo_like(dir.path());
             let started = std::time::Instant::now();
             let plan = plan_part(&inspection, &robot, &wc, &PlanConfig::default()).expect("plan");
