@@ -99,12 +99,11 @@ fn mount(default: &str) -> (&'static str, MountGive) {
     }
 }
 
-/// The mount a demo's plan (`dir`/plan.json) was made with: its provenance's
+/// The mount a demo's plan was made with (`plan`, its plan.json's text): its provenance's
 /// `removal_tool.compliance_direction`. Ground under the other mount the demo's first plan read
 /// 0.46-0.63 of its prediction per region; under its own, 0.91-0.99 (2026-12-07).
-fn recorded_mount(dir: &Path) -> String {
-    let text = std::fs::read_to_string(dir.join("plan.json")).unwrap();
-    let plan: serde_json::Value = serde_json::from_str(&text).unwrap();
+fn recorded_mount(plan: &str) -> String {
+    let plan: serde_json::Value = serde_json::from_str(plan).unwrap();
     plan["provenance"]["config"]["removal_tool"]["compliance_direction"]
         .as_str()
         .unwrap_or("surface_normal")
@@ -193,11 +192,16 @@ fn tilts(plan: &Plan, region: usize, robot: &Robot, wc: &Workcell) -> (f64, f64)
 #[test]
 fn the_simulator_removes_what_the_plan_predicts_per_region() {
     let mut robot = common::dofbot();
-    let demo = std::env::var("POLISHBOT_SIM_DEMO").ok();
+    // the demo mode's folder and its plan.json, read once
+    let demo = std::env::var("POLISHBOT_SIM_DEMO").ok().map(|d| {
+        let file = Path::new(&d).join("plan.json");
+        let text = std::fs::read_to_string(&file).unwrap();
+        (file, text)
+    });
     let give = mount(
         &demo
-            .as_deref()
-            .map_or("surface_normal".into(), |d| recorded_mount(Path::new(d))),
+            .as_ref()
+            .map_or("surface_normal".into(), |(_, text)| recorded_mount(text)),
     );
     if let Some(toml::Value::Table(t)) = robot.tool.removal.as_mut() {
         t.insert("compliance_direction".into(), give.0.into());
@@ -205,11 +209,11 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
     let wc = Workcell::load(&common::calib("workcell.toml")).unwrap();
     let dir = common::tempdir();
     let (inspection, plan) = match demo {
-        Some(demo) => {
-            let d = Path::new(&demo);
-            let mut plan = Plan::load(&d.join("plan.json")).unwrap();
-            let text = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
-            let rows = polishbot::removal::fit::parse_predicted(&text).unwrap();
+        Some((file, text)) => {
+            let d = file.parent().unwrap();
+            let mut plan = Plan::parse(&file, &text).unwrap();
+            let csv = std::fs::read_to_string(d.join("predicted.csv")).unwrap();
+            let rows = polishbot::removal::fit::parse_predicted(&csv).unwrap();
             plan.removal.as_mut().expect("a removal plan").rows = rows;
             (Inspection::load(&d.join("inspection")).unwrap(), plan)
         }
