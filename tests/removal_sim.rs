@@ -83,7 +83,7 @@ fn truth(robot: &Robot) -> GrindConfig {
 
 /// The mount's direction on both sides, the planner's tool.toml key and the simulator's:
 /// `POLISHBOT_SIM_MOUNT` (`surface_normal` or `spindle_axis`, the shipped tool's); unset,
-/// `default` (`surface_normal` here, the plan's own in the demo mode: [`recorded_mount`]).
+/// `recorded` (the plan's own in the demo mode: [`recorded_mount`]), else `surface_normal`.
 /// Measured with `spindle_axis` (issue 50, the patch aimed `preload x tan` ahead,
 /// `motion/aim.rs`): on the part 0.970 / 0.670 / 0.993 / 0.938 (regions 4 / 0 / 3 / 1), per
 /// band 0.51-2.15: the planner measures the part's deviation and slope at the commanded point,
@@ -91,9 +91,9 @@ fn truth(robot: &Robot) -> GrindConfig {
 /// (the flank tilts the surface away from the axis, 1 / cos^2) and the force check refuses
 /// the plan. Open: the spindle mount on a bumpy part is not held here yet (the flat plate's
 /// closed form is, tests/mount_direction.rs).
-fn mount(default: &str) -> (&'static str, MountGive) {
-    let named = std::env::var("POLISHBOT_SIM_MOUNT").unwrap_or_else(|_| default.to_string());
-    match named.as_str() {
+fn mount(recorded: Option<String>) -> (&'static str, MountGive) {
+    let named = std::env::var("POLISHBOT_SIM_MOUNT").ok().or(recorded);
+    match named.as_deref().unwrap_or("surface_normal") {
         "spindle_axis" => ("spindle_axis", MountGive::SpindleAxis),
         _ => ("surface_normal", MountGive::SurfaceNormal),
     }
@@ -101,13 +101,13 @@ fn mount(default: &str) -> (&'static str, MountGive) {
 
 /// The mount a demo's plan was made with (`plan`, its plan.json's text): its provenance's
 /// `removal_tool.compliance_direction`. Ground under the other mount the demo's first plan read
-/// 0.46-0.63 of its prediction per region; under its own, 0.91-0.99 (2026-12-07).
-fn recorded_mount(plan: &str) -> String {
+/// 0.46-0.63 of its prediction per region; under its own, 0.91-0.99 (2026-12-07). None for a
+/// plan made before the key (the normal mount, [`mount`]'s fallback).
+fn recorded_mount(plan: &str) -> Option<String> {
     let plan: serde_json::Value = serde_json::from_str(plan).unwrap();
     plan["provenance"]["config"]["removal_tool"]["compliance_direction"]
         .as_str()
-        .unwrap_or("surface_normal")
-        .to_string()
+        .map(str::to_string)
 }
 
 /// The part: every core point moved out by `lift` of its deviation, PCA normals turned
@@ -198,11 +198,7 @@ fn the_simulator_removes_what_the_plan_predicts_per_region() {
         let text = std::fs::read_to_string(&file).unwrap();
         (file, text)
     });
-    let give = mount(
-        &demo
-            .as_ref()
-            .map_or("surface_normal".into(), |(_, text)| recorded_mount(text)),
-    );
+    let give = mount(demo.as_ref().and_then(|(_, text)| recorded_mount(text)));
     if let Some(toml::Value::Table(t)) = robot.tool.removal.as_mut() {
         t.insert("compliance_direction".into(), give.0.into());
     }
