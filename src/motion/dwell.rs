@@ -140,7 +140,7 @@ pub(crate) fn cores_near(
 ) -> Vec<usize> {
     let mut keep = vec![false; inspection.points.len()];
     for c in contacts {
-        let radius = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
+        let radius = influence.reach_at(c.force_ratio) + 0.5 * c.length;
         // the index's radius widened for rounding; the test below decides
         let centre = c.centre();
         for nb in index.within_unsorted(&centre, radius * (1.0 + 1e-9)) {
@@ -191,7 +191,7 @@ pub(crate) fn cores_landed(
 ) -> Vec<usize> {
     let mut keep = vec![false; inspection.points.len()];
     for (c, m) in contacts.iter().zip(margin) {
-        let radius = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length + m;
+        let radius = influence.reach_at(c.force_ratio) + 0.5 * c.length + m;
         let centre = c.centre();
         for nb in index.within_unsorted(&centre, radius * (1.0 + 1e-9)) {
             keep[nb.index] |= (inspection.points[nb.index].position - centre).norm() <= radius;

@@ -33,7 +33,16 @@ pub struct Influence {
     omega: f64,
     /// Preston coefficient, mm^2/N.
     k: f64,
+    /// Radius of the placement stencil's ring, mm: `sqrt(3)` times the tool's
+    /// `placement_sd_mm` (0: the patch lands where the model puts it).
+    ring_mm: f64,
 }
+
+/// Weight of the placement stencil's centre (1/3); the rest is spread evenly over four points
+/// on a ring of radius `sqrt(3) sd` along the patch's two axes, which gives the stencil the
+/// placement's variance, `sd^2`, along each axis and no mean shift: the removal's footprint
+/// widens by exactly that variance and keeps its volume (the unit test below).
+const STENCIL_CENTRE: f64 = 1.0 / 3.0;
 
 impl Influence {
     /// The influence of `tool` with a ball of radius `ball_mm`.
@@ -69,6 +78,7 @@ impl Influence {
             ball_mm,
             omega: tool.omega(),
             k: tool.preston_k_mm2_n,
+            ring_mm: (2.0 / (1.0 - STENCIL_CENTRE)).sqrt() * tool.placement_sd_mm,
         }
     }
 
@@ -95,6 +105,7 @@ impl Influence {
             ball_mm: self.ball_mm,
             omega: self.omega,
             k: self.k,
+            ring_mm: self.ring_mm,
         }
     }
 
@@ -117,6 +128,12 @@ impl Influence {
             Pressure::Hertz { a, .. } => a * ratio.cbrt(),
             Pressure::Table(_) => self.patch_radius(),
         }
+    }
+
+    /// How far from a contact's centre its removal reaches under `ratio` times the preload's
+    /// force, mm: the patch radius and the placement stencil's ring.
+    pub fn reach_at(&self, ratio: f64) -> f64 {
+        self.patch_radius_at(ratio) + self.ring_mm
     }
 
     /// Contact pressure at `r` mm from the patch centre, MPa (N/mm^2).
@@ -143,6 +160,21 @@ impl Influence {
         let axis = Vector3::new(tilt.sin, 0.0, -tilt.cos);
         let along = w.dot(&axis);
         self.omega * (w.norm_squared() - along * along).max(0.0).sqrt()
+    }
+
+    /// [`Influence::rate`] where the patch lands with the tool's placement scatter
+    /// (`placement_sd_mm`): the mean over the placement stencil ([`STENCIL_CENTRE`]).
+    pub fn placed_rate(&self, x: f64, y: f64, tilt: Tilt) -> f64 {
+        if self.ring_mm == 0.0 {
+            return self.rate(x, y, tilt);
+        }
+        let (r, side) = (self.ring_mm, 0.25 * (1.0 - STENCIL_CENTRE));
+        STENCIL_CENTRE * self.rate(x, y, tilt)
+            + side
+                * [(r, 0.0), (-r, 0.0), (0.0, r), (0.0, -r)]
+                    .iter()
+                    .map(|(dx, dy)| self.rate(x - dx, y - dy, tilt))
+                    .sum::<f64>()
     }
 
     /// Removal depth rate at patch offset (x, y) mm under a spindle tilted by `tilt`, mm/s.
@@ -258,7 +290,7 @@ impl<'a> Reach<'a> {
     /// One column of A: the removal depth per second of dwell at contact `c` at every core
     /// point in reach, the influence averaged over the contact's piece of stroke.
     pub fn column(&self, influence: &Influence, c: &Contact) -> Vec<(usize, f64)> {
-        let reach = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
+        let reach = influence.reach_at(c.force_ratio) + 0.5 * c.length;
         let near = self.index.within(&c.centre(), reach);
         self.column_over(influence, c, near.iter().map(|nb| nb.index))
     }
@@ -279,7 +311,7 @@ impl<'a> Reach<'a> {
         c: &Contact,
         candidates: &[usize],
     ) -> Vec<(usize, f64)> {
-        let reach = influence.patch_radius_at(c.force_ratio) + 0.5 * c.length;
+        let reach = influence.reach_at(c.force_ratio) + 0.5 * c.length;
         let o = c.centre();
         let centre = [o.x, o.y, o.z];
         let inside = candidates.iter().copied().filter(|&i| {
@@ -310,7 +342,7 @@ impl<'a> Reach<'a> {
                 .map(|s| {
                     let f = (s as f64 + 0.5) / SUBSAMPLES as f64 - 0.5;
                     let d = p - (c.centre() + c.along * (f * c.length));
-                    pressed.rate(d.dot(&tx), d.dot(&ty), tilt)
+                    pressed.placed_rate(d.dot(&tx), d.dot(&ty), tilt)
                 })
                 .sum::<f64>()
                 / SUBSAMPLES as f64;
@@ -379,6 +411,57 @@ mod tests {
         let grow = 1.3f64.cbrt();
         assert!((more.patch_radius() - one.patch_radius() * grow).abs() < 1e-12);
         assert!((more.pressure(0.0) - one.pressure(0.0) * grow).abs() < 1e-12);
+    }
+
+    /// A spot contact's removal on a flat grid, the tool landing with a placement scatter of
+    /// 0.15 mm: the same volume and centroid as without it, and a footprint wider by exactly
+    /// that variance along both axes of the surface (the stencil's moments).
+    #[test]
+    fn a_placement_scatter_widens_the_footprint_by_its_variance_and_keeps_its_volume() {
+        let (pitch, half) = (0.02, 75i32);
+        let cores: Vec<(Point3<f64>, Vector3<f64>)> = (-half..=half)
+            .flat_map(|i| (-half..=half).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let p = Point3::new(pitch * f64::from(i), pitch * f64::from(j), 0.0);
+                (p, Vector3::z())
+            })
+            .collect();
+        let spin = Vector3::new(20f64.to_radians().sin(), 0.0, -20f64.to_radians().cos());
+        let spot = Contact {
+            point: Point3::origin(),
+            normal: Vector3::z(),
+            along: Vector3::y(),
+            spin,
+            length: 0.0,
+            force_ratio: 1.0,
+            offset: Vector3::zeros(),
+            depth_mm: 2.0,
+        };
+        let reach = Reach::new(&cores);
+        // volume, centroid (x, y), variance (x, y) of a column
+        let moments = |sd: f64| {
+            let tool = ToolModel {
+                placement_sd_mm: sd,
+                ..ToolModel::default()
+            };
+            let column = reach.column(&Influence::new(&tool, 3.0), &spot);
+            let sum: f64 = column.iter().map(|e| e.1).sum();
+            let mean = |f: &dyn Fn(&Point3<f64>) -> f64| {
+                column.iter().map(|&(i, v)| f(&cores[i].0) * v).sum::<f64>() / sum
+            };
+            let (mx, my) = (mean(&|p| p.x), mean(&|p| p.y));
+            let (vx, vy) = (mean(&|p| (p.x - mx).powi(2)), mean(&|p| (p.y - my).powi(2)));
+            (sum, mx, my, vx, vy)
+        };
+        let (sd, sharp, placed) = (0.15, moments(0.0), moments(0.15));
+        assert!(
+            (placed.0 / sharp.0 - 1.0).abs() < 1e-3,
+            "{sharp:?} {placed:?}"
+        );
+        assert!((placed.1 - sharp.1).abs() < 1e-4 && (placed.2 - sharp.2).abs() < 1e-4);
+        for (v0, v1) in [(sharp.3, placed.3), (sharp.4, placed.4)] {
+            assert!((v1 - v0 - sd * sd).abs() < 0.02 * sd * sd, "{v0} {v1}");
+        }
     }
 
     #[test]

@@ -189,7 +189,7 @@ pub fn spread(
     let gathered: Vec<(f64, Vec<usize>)> = contacts
         .iter()
         .map(|c| {
-            let patch = nominal.patch_radius_at(c.force_ratio);
+            let patch = nominal.reach_at(c.force_ratio);
             let radius = CANDIDATE_REACH_FACTOR * (patch + 0.5 * c.length);
             (radius, reach.candidates(&c.centre(), radius))
         })
@@ -215,8 +215,7 @@ pub fn spread(
                 if moved.force_ratio <= 0.0 {
                     continue;
                 }
-                let needs =
-                    (moved.point - c.point).norm() + influence.patch_radius_at(moved.force_ratio);
+                let needs = (moved.point - c.point).norm() + influence.reach_at(moved.force_ratio);
                 let column = match needs + 0.5 * c.length <= *radius * (1.0 - ROUNDING) {
                     true => reach.column_among(&influence, &moved, near),
                     false => reach.column(&influence, &moved),
