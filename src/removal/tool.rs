@@ -280,6 +280,18 @@ mod tests {
                 "[removal]\ninfluence_table = [[0.5, 1.0], [1.0, 0.0]]\n",
                 "removal.influence_table",
             ),
+            (
+                "[removal]\nplacement_sd_mm = -0.1\n",
+                "removal.placement_sd_mm",
+            ),
+            (
+                "[removal]\nplacement_sd_mm = nan\n",
+                "removal.placement_sd_mm",
+            ),
+            (
+                "[removal]\nplacement_sd_mm = 3.0\n",
+                "removal.placement_sd_mm",
+            ),
         ] {
             let e = load_text(text).unwrap_err();
             assert!(e.contains(key) && e.contains("tool.toml"), "{e}");
@@ -289,6 +301,8 @@ mod tests {
         assert!(e.contains("removal.verified_tip_error_mm"), "{e}");
         let m = load_text("[removal]\nverified_tip_error_mm = 0.3\n").unwrap();
         assert_eq!(m.verified_tip_error_mm, Some(0.3));
+        let m = load_text("[removal]\nplacement_sd_mm = 0.08\n").unwrap();
+        assert_eq!(m.placement_sd_mm, 0.08);
         let e = load_text("[removal]\nspring_rate = 2.0\n").unwrap_err();
         assert!(e.contains("spring_rate") && e.contains("[removal]"), "{e}");
     }
