@@ -453,7 +453,8 @@ mod tests {
             let (vx, vy) = (mean(&|p| (p.x - mx).powi(2)), mean(&|p| (p.y - my).powi(2)));
             (sum, mx, my, vx, vy)
         };
-        let (sd, sharp, placed) = (0.15, moments(0.0), moments(0.15));
+        let sd = 0.15;
+        let (sharp, placed) = (moments(0.0), moments(sd));
         assert!(
             (placed.0 / sharp.0 - 1.0).abs() < 1e-3,
             "{sharp:?} {placed:?}"

@@ -189,8 +189,8 @@ pub fn spread(
     let gathered: Vec<(f64, Vec<usize>)> = contacts
         .iter()
         .map(|c| {
-            let patch = nominal.reach_at(c.force_ratio);
-            let radius = CANDIDATE_REACH_FACTOR * (patch + 0.5 * c.length);
+            let extent = nominal.reach_at(c.force_ratio);
+            let radius = CANDIDATE_REACH_FACTOR * (extent + 0.5 * c.length);
             (radius, reach.candidates(&c.centre(), radius))
         })
         .collect();
