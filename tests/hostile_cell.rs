@@ -244,9 +244,14 @@ fn simulator_settings_outside_physical_ranges_are_refused_naming_the_key() {
 
 /// `plan` with the shipped cell's tool.toml edited by `edit`: its one-line refusal.
 fn plan_with_tool(edit: impl Fn(&str) -> String) -> String {
+    plan_with_cell_file("tool.toml", edit)
+}
+
+/// `plan` with the shipped cell's file `name` edited by `edit`: its one-line refusal.
+fn plan_with_cell_file(name: &str, edit: impl Fn(&str) -> String) -> String {
     let dir = case();
     let tmp = common::tempdir();
-    let cell = cell_copy(tmp.path(), "tool.toml", edit);
+    let cell = cell_copy(tmp.path(), name, edit);
     let out = polishbot()
         .args(["plan", "--inspection"])
         .arg(dir.join("inspection"))
@@ -347,4 +352,111 @@ fn cycle_blames_a_bad_setting_on_the_users_file_and_line() {
             assert!(line.contains(w), "{w:?} not in {line}");
         }
     }
+}
+
+/// A URDF whose joint the kinematics cannot take is refused naming the file and the joint
+/// (the probe's reversed and NaN limits panicked in the `k` crate; a prismatic joint planned
+/// "0 passes" with exit 0), and a workcell placement written in millimetres into the metres
+/// file is refused at its key (it planned "0 passes", the wrist 279.78 m from the shoulder).
+#[test]
+fn a_urdf_joint_the_arm_cannot_have_and_a_placement_in_millimetres_are_refused() {
+    let limit = r#"<limit lower="-1.5708" upper="1.5708" effort="100" velocity="1.0"/>"#;
+    let edits: [(&str, &str, &str); 4] = [
+        (
+            limit,
+            r#"<limit lower="1.5708" upper="-1.5708" effort="100" velocity="1.0"/>"#,
+            "lower <= upper",
+        ),
+        (
+            limit,
+            r#"<limit lower="nan" upper="1.5708" effort="100" velocity="1.0"/>"#,
+            "finite",
+        ),
+        (r#"<axis xyz="0 0 -1"/>"#, r#"<axis xyz="0 0 0"/>"#, "axis"),
+        (
+            r#"name="arm_joint1" type="revolute""#,
+            r#"name="arm_joint1" type="prismatic""#,
+            "revolute",
+        ),
+    ];
+    for (from, to, why) in edits {
+        let line = plan_with_cell_file("dofbot.urdf", |t| {
+            assert!(t.contains(from), "{from} not in the shipped URDF");
+            t.replacen(from, to, 1)
+        });
+        assert!(
+            line.contains("dofbot.urdf") && line.contains("arm_joint1") && line.contains(why),
+            "{to}: {line}"
+        );
+    }
+    let line = plan_with_cell_file("workcell.toml", |t| t.replace("0.28],", "280.0],"));
+    assert!(
+        line.contains("workcell.toml")
+            && line.contains("robot_from_reference")
+            && line.contains("millimetres"),
+        "{line}"
+    );
+}
+
+/// A plan whose `provenance` block was deleted by hand cannot be checked against the cell and
+/// inspection it was made for, so `run` refuses it before anything is sent (the probe's copy
+/// streamed all 11,128 frames to a cell whose part had moved 20 mm).
+#[test]
+fn a_plan_without_its_provenance_record_is_refused() {
+    let dir = case();
+    let tmp = common::tempdir();
+    let mut value: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("plan.json")).unwrap()).unwrap();
+    value.as_object_mut().unwrap().remove("provenance");
+    let plan = tmp.path().join("plan.json");
+    std::fs::write(&plan, value.to_string()).unwrap();
+    let same = cell_copy(tmp.path(), "", |t| t.to_string());
+    let line = one_line_failure(&dry_run(&plan, &same).output().unwrap());
+    assert!(
+        line.contains("plan.json") && line.contains("provenance.inputs"),
+        "{line}"
+    );
+}
+
+/// Settings that would switch a safety check off are refused at their key: a force share
+/// over the servo's rated torque, a tool-axis cone wider than square, and validation
+/// tolerances so wide that `run` refused the valid plan blaming the plan.
+#[test]
+fn settings_that_would_switch_a_safety_check_off_are_refused_at_their_key() {
+    let dir = case();
+    let tmp = common::tempdir();
+    for (n, text, key) in [
+        (1, "[plan]\nforce_share = 2.0\n", "force_share"),
+        (
+            2,
+            "[plan.ik]\nmax_axis_miss_deg = 1000.0\n",
+            "max_axis_miss_deg",
+        ),
+        (
+            3,
+            "[plan.validation]\nderivative_tolerance = 1e308\n",
+            "derivative_tolerance",
+        ),
+    ] {
+        let cfg = tmp.path().join(format!("plan{n}.toml"));
+        std::fs::write(&cfg, text).unwrap();
+        let mut cmd = polishbot();
+        cmd.arg("--config").arg(&cfg).args(["plan", "--inspection"]);
+        cmd.arg(dir.join("inspection"))
+            .arg("-o")
+            .arg(tmp.path().join("p.json"));
+        let line = one_line_failure(&cmd.output().unwrap());
+        assert!(line.contains(key) && line.contains("outside"), "{line}");
+    }
+    let cfg = tmp.path().join("run.toml");
+    std::fs::write(&cfg, "[validation]\n\nderivative_tolerance = 1e308\n").unwrap();
+    let mut cmd = polishbot();
+    cmd.arg("--config").arg(&cfg);
+    cmd.args(["run", "--dry-run", "--sim", "--plan"])
+        .arg(dir.join("plan.json"));
+    let line = one_line_failure(&cmd.output().unwrap());
+    assert!(
+        line.contains("run.toml: line 3: [validation] `derivative_tolerance`"),
+        "{line}"
+    );
 }

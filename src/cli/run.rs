@@ -128,7 +128,7 @@ fn check_fresh_journal(path: &Path, sha: &str) -> anyhow::Result<()> {
 /// Refuses a plan made from other files than `run` is given: each file plan.json's
 /// provenance records (the inspection's and the cell's, by role; the cell's as held, `cell`)
 /// must have the recorded SHA-256 now; a file the plan did not have must still be absent. A
-/// plan without a provenance block (written by hand or by an older version) is not checked.
+/// plan without the record (written by hand, or its provenance block removed) is refused.
 fn check_made_for(
     plan_path: &Path,
     text: &str,
@@ -136,8 +136,14 @@ fn check_made_for(
     (robot, cell): (&RobotConfig, &CellFiles),
 ) -> anyhow::Result<()> {
     let value: serde_json::Value = serde_json::from_str(text)?;
+    // every plan `plan` writes records its inputs; one without the record cannot be checked
+    // against the cell and inspection it was made for, so nothing of it reaches the arm
     let Some(recorded) = value["provenance"]["inputs"].as_array() else {
-        return Ok(());
+        anyhow::bail!(
+            "{}: refused: no `provenance.inputs` (the files the plan was made from): it cannot \
+             be checked against this cell and inspection; re-plan",
+            plan_path.display()
+        );
     };
     let now = crate::cycle::plan_inputs(Path::new(&plan.inspection), robot);
     for (role, path) in &now {
@@ -230,6 +236,7 @@ pub fn settings(file: &ConfigFile, cell: Option<&Path>) -> anyhow::Result<RunFil
         .check()
         .map_err(|m| file.refuse("sim.grinding", &m))?;
     check_run_settings(file, &cfg.run)?;
+    (cfg.validation.check()).map_err(|m| file.refuse("validation", &m))?;
     if let Some(dir) = cell {
         cfg.robot.use_cell(dir);
     }

@@ -216,6 +216,16 @@ pub const MAX_LAYERS: f64 = 100.0;
 /// for about 5.5 hours.
 pub const MAX_CONTACT_POINTS: f64 = 200_000.0;
 
+/// Largest `[plan.ik] max_axis_miss_deg`, degrees (90): a tool axis farther than square to
+/// the wanted one grinds with the shank, not the ball (the default cone is 45 degrees).
+const MAX_AXIS_MISS_DEG: f64 = 90.0;
+/// Largest `[plan.ik] verify_tolerance` (1e-3: a millimetre or a milliradian between FK(IK)
+/// and the target; the default is 1e-9, solutions are exact to about that).
+const MAX_IK_VERIFY: f64 = 1e-3;
+/// Largest `[plan.ik] limit_margin`, rad (0.5, 29 degrees: the DOFBOT's joints turn 180
+/// degrees, so a wider margin leaves under two thirds of a joint's range).
+const MAX_IK_LIMIT_MARGIN: f64 = 0.5;
+
 impl PlanConfig {
     /// Checks every setting against its range ([`RANGES`]: the message names the key in
     /// backticks, with the value and unit), the home pose and the period against `robot`.
@@ -247,17 +257,34 @@ impl PlanConfig {
             .map_err(PlanError::Config)?;
         self.removal.check().map_err(PlanError::Config)?;
         self.monte_carlo.check().map_err(PlanError::Config)?;
+        (self.validation.check()).map_err(|m| PlanError::Config(format!("validation: {m}")))?;
         self.aim.check().map_err(PlanError::Config)?;
         self.finish.check().map_err(PlanError::Config)?;
-        for (name, v) in [
-            ("force_share", self.force_share),
-            ("tolerance_mm", self.tolerance_mm),
+        for (name, v, hi) in [
+            ("force_share", self.force_share, 1.0),
+            ("tolerance_mm", self.tolerance_mm, 10.0),
+            (
+                "ik.max_axis_miss_deg",
+                self.ik.max_axis_miss_deg,
+                MAX_AXIS_MISS_DEG,
+            ),
+            (
+                "ik.verify_tolerance",
+                self.ik.verify_tolerance,
+                MAX_IK_VERIFY,
+            ),
         ] {
-            if !(v.is_finite() && v > 0.0 && v <= 10.0) {
+            if !(v.is_finite() && v > 0.0 && v <= hi) {
                 return Err(PlanError::Config(format!(
-                    "`{name}` = {v:?} is outside 0 (excluded)..=10"
+                    "`{name}` = {v:?} is outside 0 (excluded)..={hi}"
                 )));
             }
+        }
+        let m = self.ik.limit_margin;
+        if !(m.is_finite() && (0.0..=MAX_IK_LIMIT_MARGIN).contains(&m)) {
+            return Err(PlanError::Config(format!(
+                "`ik.limit_margin` = {m:?} rad is outside 0..={MAX_IK_LIMIT_MARGIN} rad"
+            )));
         }
         if self.table_pieces > MAX_TABLE_PIECES {
             return Err(PlanError::Config(format!(

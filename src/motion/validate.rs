@@ -27,6 +27,40 @@ impl Default for ValidationConfig {
     }
 }
 
+/// Largest `derivative_tolerance` (0.1): finite differences of a sampled time-optimal
+/// trajectory exceed a limit by about 1 % (the default); over a tenth the check no longer
+/// holds the servos to their limits.
+pub const MAX_DERIVATIVE_TOLERANCE: f64 = 0.1;
+/// Largest `position_tolerance`, rad (1e-3, 0.06 degrees: a fifth of a servo count; the
+/// default is 1e-9).
+pub const MAX_POSITION_TOLERANCE: f64 = 1e-3;
+
+impl ValidationConfig {
+    /// The first setting outside its range, its key in backticks (0..=
+    /// [`MAX_DERIVATIVE_TOLERANCE`], 0..=[`MAX_POSITION_TOLERANCE`] rad).
+    pub fn check(&self) -> Result<(), String> {
+        for (key, v, hi, unit) in [
+            (
+                "derivative_tolerance",
+                self.derivative_tolerance,
+                MAX_DERIVATIVE_TOLERANCE,
+                "",
+            ),
+            (
+                "position_tolerance",
+                self.position_tolerance,
+                MAX_POSITION_TOLERANCE,
+                " rad",
+            ),
+        ] {
+            if !(v.is_finite() && (0.0..=hi).contains(&v)) {
+                return Err(format!("`{key}` = {v:?}{unit} is outside 0..={hi}{unit}"));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Which limit a sample breaks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

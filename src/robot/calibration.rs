@@ -380,6 +380,11 @@ struct WorkcellFile {
     turntable: Option<toml::Value>,
 }
 
+/// Farthest a workcell may place the part from the robot base, m (5): the DOFBOT reaches
+/// about 0.35 m and a turntable sits beside it, so a translation over this is a millimetre
+/// value written into the metres file (the probe's 280.0 for 0.28 m planned "0 passes").
+pub const MAX_PART_DISTANCE_M: f64 = 5.0;
+
 impl Workcell {
     /// Loads and checks `workcell.toml` (rows of the matrix, last row `[0, 0, 0, 1]`).
     pub fn load(file: &Path) -> Result<Self, RobotError> {
@@ -403,7 +408,18 @@ impl Workcell {
         let r = m.fixed_slice::<3, 3>(0, 0);
         let err = (r.transpose() * r - nalgebra::Matrix3::identity()).norm();
         if err > 1e-6 || r.determinant() < 0.0 {
-            let msg = format!("upper-left 3x3 must be a rotation (|R^T R - I| = {err:.2e})");
+            let msg = format!(
+                "upper-left 3x3 must be a rotation (|R^T R - I| = {err:.2e}, determinant {:.3})",
+                r.determinant()
+            );
+            return Err(RobotError::bad(file, key, msg));
+        }
+        let far = m.fixed_slice::<3, 1>(0, 3).norm();
+        if far > MAX_PART_DISTANCE_M {
+            let msg = format!(
+                "the part lies {far:.3} m from the robot base, over {MAX_PART_DISTANCE_M} m \
+                 (the file is in metres: a value in millimetres?)"
+            );
             return Err(RobotError::bad(file, key, msg));
         }
         Ok(Workcell {

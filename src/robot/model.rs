@@ -123,6 +123,7 @@ impl Robot {
                 "must end the chain",
             ));
         }
+        check_joints(&description, urdf_file)?;
         let whole = k::Chain::<f64>::from(&description);
         let end = whole
             .find(&tool.joint)
@@ -136,6 +137,13 @@ impl Robot {
                 continue;
             }
             let name = joint.name.clone();
+            if !matches!(joint.joint_type, k::JointType::Rotational { .. }) {
+                return Err(RobotError::bad(
+                    urdf_file,
+                    format!("joint {name}"),
+                    "the arm's joints must be revolute (each is a servo that turns)",
+                ));
+            }
             let urdf_limit = joint.limits.as_ref().map(|r| [r.min, r.max]);
             drop(joint);
             joints.push(joint_spec(
@@ -274,4 +282,36 @@ fn joint_spec(
         acceleration: servo.acceleration.unwrap_or(0.0),
         jerk: servo.jerk.unwrap_or(0.0),
     })
+}
+
+/// Refuses a URDF whose joints the kinematics cannot take (the `k` crate panics on a range
+/// whose lower limit exceeds its upper): per joint, a finite origin, a finite non-zero axis
+/// for a moving joint, and finite limits with lower <= upper for a revolute or prismatic
+/// one; each refusal names the file and the joint.
+fn check_joints(description: &urdf_rs::Robot, urdf_file: &Path) -> Result<(), RobotError> {
+    for j in &description.joints {
+        let bad = |what: &str| RobotError::bad(urdf_file, format!("joint {}", j.name), what);
+        let origin = j.origin.xyz.0.iter().chain(&j.origin.rpy.0);
+        if !origin.into_iter().all(|v| v.is_finite()) {
+            return Err(bad("origin xyz/rpy must be finite"));
+        }
+        if matches!(j.joint_type, urdf_rs::JointType::Fixed) {
+            continue;
+        }
+        let axis = j.axis.xyz.0;
+        if !axis.iter().all(|v| v.is_finite()) || axis.iter().all(|v| *v == 0.0) {
+            return Err(bad("axis must be finite and not zero"));
+        }
+        let limited = matches!(
+            j.joint_type,
+            urdf_rs::JointType::Revolute | urdf_rs::JointType::Prismatic
+        );
+        let (lo, hi) = (j.limit.lower, j.limit.upper);
+        if limited && !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(bad(&format!(
+                "limit lower {lo} and upper {hi} must be finite with lower <= upper"
+            )));
+        }
+    }
+    Ok(())
 }
