@@ -414,7 +414,12 @@ fn routine(
             let worst =
                 super::calibrate_verify::run(bus, cell, table, &poses, fixture.as_ref(), w)?;
             match scripted {
-                None => super::calibrate_verify::check_table(bus, cell, ctx.sim, ctx.servos_in)?,
+                None => super::calibrate_verify::check_table(
+                    bus,
+                    cell,
+                    (ctx.sim, "calibrate verify"),
+                    ctx.servos_in,
+                )?,
                 Some(_) if cell.robot.servos.compliance.is_some() => say(&format!(
                     "calibrate verify: [compliance] of {} not checked (scripted --targets make \
                      no loaded touch-offs; run verify without --targets to check it)",

@@ -150,12 +150,12 @@ const CHECK_KEY: &str = "[calibrate] max_compliance_check_rms_mm";
 
 /// The guard on servos.toml's `[compliance]` (calibrate/compliance_check.rs): nothing on a cell
 /// without the table; else the loaded touch-offs (from the simulated operator of `sim`, else
-/// the jog terminal) and the verdict printed, and a table they contradict refused naming
-/// `servos` and the key.
+/// the jog terminal) and the verdict printed after `who` (the command), and a table they
+/// contradict refused naming `servos` and the key.
 pub fn check_table<T: Transport>(
     bus: &mut Bus<T>,
     cell: &Cell,
-    sim: Option<&GrindConfig>,
+    (sim, who): (Option<&GrindConfig>, &str),
     servos: &Path,
 ) -> Result<(), CalibError> {
     let Some(table) = cell.robot.servos.compliance.as_ref() else {
@@ -168,7 +168,7 @@ pub fn check_table<T: Transport>(
         )),
         None => {
             say(&format!(
-                "calibrate verify: {} carries a [compliance] table; check it with {} loaded \
+                "{who}: {} carries a [compliance] table; check it with {} loaded \
                  touch-offs: for each, jog the tool tip onto the point (the first touch of a \
                  point fixes it) while a spring scale pulls the tip with the listed load (N, \
                  robot frame), then record the touch",
@@ -192,12 +192,52 @@ pub fn check_table<T: Transport>(
         c.touches,
         c.limit_mm
     );
-    say(&format!("calibrate verify: {verdict}"));
+    say(&format!("{who}: {verdict}"));
     match c.agrees() {
         true => Ok(()),
         false => Err(CalibError::Refused(format!(
             "{verdict}: this arm contradicts the table (it was learned on another arm); run \
              calibrate compliance on this one, or remove the table"
         ))),
+    }
+}
+
+/// The loop's check of its simulated arm before the first grind (`cycle --sim`, `demo`): the
+/// loaded touch-offs of [`check_table`] made by the simulated operator on a simulated arm of
+/// `sim` (the run's `[sim]`, the arm the loop grinds with) against the cell's `[compliance]`
+/// table, as `calibrate verify` makes them. Some(why) when the arm contradicts the table
+/// (learned on another arm: the plans would bend every command by a deflection this arm does
+/// not have, or miss one it has); None when it agrees or the cell has no table.
+pub fn check_loop_arm(
+    cell: &crate::robot::CellFiles,
+    sim: &crate::sim::SimOptions,
+    bus_cfg: &crate::bus::BusConfig,
+) -> anyhow::Result<Option<String>> {
+    let robot = cell.robot()?;
+    if robot.servos.compliance.is_none() {
+        return Ok(None);
+    }
+    let mut bus_cfg = bus_cfg.clone();
+    bus_cfg.servo_map = crate::motion::frames::servo_map(&robot)?;
+    let map = bus_cfg.servo_map.clone();
+    let sim = super::arm::sim_with_table(sim, cell.turntable()?.as_ref())?;
+    let link = Box::new(crate::sim::SimArm::new(&sim, &map)?.transport());
+    let mut bus = Bus::connect(link, bus_cfg, crate::bus::Journal::none())?;
+    let cfg = CalibrationConfig::default();
+    let arm = Cell {
+        robot: &robot,
+        map: &map,
+        gripper_deg: crate::motion::frames::gripper(&robot)?
+            .hold_deg
+            .unwrap_or(90.0),
+        cfg: &cfg,
+    };
+    let who = (Some(&sim.grinding), "cycle: the arm before the first grind");
+    match check_table(&mut bus, &arm, who, &cell.servos.path) {
+        Ok(()) => Ok(None),
+        Err(CalibError::Refused(why)) => Ok(Some(why)),
+        Err(e) => Err(anyhow::anyhow!(
+            "cycle: checking the arm before the first grind: {e}"
+        )),
     }
 }

@@ -485,6 +485,20 @@ pub struct LoopArm {
 }
 
 impl crate::cycle::Executor for LoopArm {
+    /// The simulated arm's loaded touch-offs against the cell's `[compliance]` table
+    /// (`calibrate_verify::check_loop_arm`); a real arm's is `calibrate verify`'s, made by its
+    /// operator before the loop (docs/CALIBRATION.md, section 4).
+    fn check_arm(&mut self) -> anyhow::Result<Option<String>> {
+        match self.device.sim {
+            true => super::calibrate_verify::check_loop_arm(
+                &self.cell,
+                &self.settings.sim,
+                &self.settings.bus,
+            ),
+            false => Ok(None),
+        }
+    }
+
     fn grind(&mut self, job: &crate::cycle::GrindJob) -> anyhow::Result<crate::cycle::Rescan> {
         let after = job.dir.join("after.ply");
         let sim = self.device.sim;

@@ -92,6 +92,13 @@ pub struct Rescan {
 pub trait Executor {
     /// Grinds `job`'s plan and returns the rescan.
     fn grind(&mut self, job: &GrindJob) -> anyhow::Result<Rescan>;
+
+    /// Checks, before the loop's first grind, that the arm is the one the cell was calibrated
+    /// on: Some(why) when it contradicts the calibration (the loop then stops before anything
+    /// is ground). The default checks nothing.
+    fn check_arm(&mut self) -> anyhow::Result<Option<String>> {
+        Ok(None)
+    }
 }
 
 /// How the loop ended, its records and its page.
@@ -256,6 +263,12 @@ impl Loop<'_> {
         let outcome = decide_plan(last);
         if outcome != Outcome::Continue {
             return Ok(Some(outcome));
+        }
+        if self.previous.is_none() {
+            if let Some(why) = executor.check_arm()? {
+                println!("cycle: stop: {why}");
+                return Ok(Some(self.stop(Outcome::ArmMismatch, why)));
+            }
         }
         println!("== cycle: iteration {k}: grind");
         let setups = rescan_setups(&inspection, &last.planned_regions, &found, self.cfg);

@@ -213,6 +213,10 @@ pub enum Outcome {
     /// The next grind's plan failed (its own checks refused it; the last record's `stopped`
     /// names the failure): the part stays as last measured.
     PlanFailed,
+    /// Before the first grind, the arm contradicted the cell's calibration (its loaded
+    /// touch-offs against servos.toml's `[compliance]`; the last record's `stopped` holds the
+    /// measured scatter): nothing was ground.
+    ArmMismatch,
 }
 
 impl Outcome {
@@ -237,6 +241,10 @@ impl Outcome {
             Outcome::PlanFailed => {
                 "stopped: the next grind's plan failed (the failure above); the part is as last \
                  measured"
+            }
+            Outcome::ArmMismatch => {
+                "stopped before grinding: the arm contradicts the cell's calibration (measured \
+                 above); calibrate this arm (calibrate compliance) and run again"
             }
         }
     }
