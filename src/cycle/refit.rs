@@ -10,6 +10,7 @@ use super::plan_stage::Planned;
 use crate::calibrate::files;
 use crate::cell::removal_reach::{self, ReachConfig};
 use crate::cell::removal_shift::{self, CarriedShift, RegionShift, ShiftConfig};
+use crate::cell::stray;
 use crate::motion::aim::Aim;
 use crate::motion::Plan;
 use crate::removal::fit::{self, Agreement, Evidence, FitConfig, GrindPair, RemovalFit};
@@ -285,6 +286,9 @@ pub fn refit(
             Err(why) => off_plan = Some(why),
         }
         let moved = removal_shift::shifted_prediction(&before.inspection, &p, &shifts, &shift_cfg);
+        if let (None, Some(s)) = (&off_plan, stray::stray(pair, &moved, &shift_cfg)) {
+            off_plan = Some(stray::describe(&s, &shift_cfg));
+        }
         seen = Some((p, shifts));
         (moved, k)
     });
