@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: data paths, the oracle Python, the binary.
 #![allow(dead_code)]
 pub mod accept;
+pub mod chromium;
 pub mod compensation;
 pub mod femoral;
 pub mod hostile;
