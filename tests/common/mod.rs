@@ -276,6 +276,16 @@ pub fn dofbot() -> polishbot::robot::Robot {
     .expect("load calibration")
 }
 
+/// A joint vector drawn uniformly within every joint's limits of `robot`.
+pub fn random_q(robot: &polishbot::robot::Robot, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
+    use rand::Rng;
+    robot
+        .joints
+        .iter()
+        .map(|j| rng.gen_range(j.lower..=j.upper))
+        .collect()
+}
+
 /// Arguments of `cmd` (`inspect` or `register`) on a reference and a scan that need not exist:
 /// for settings that are refused before any file is read.
 pub fn pair_args(cmd: &'static str) -> [&'static str; 7] {
