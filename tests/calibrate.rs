@@ -225,19 +225,7 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
     let arm = SimArm::new(&options, &frames::servo_map(&nominal).unwrap()).unwrap();
 
     // 1. Servos: the arm is held at the physical zero pose.
-    let mut bus = bus_for(&arm, &nominal);
-    let map = frames::servo_map(&nominal).unwrap();
-    let r = calibrate::servo_offsets(&mut bus, &map, &cfg, &mut || Ok(()), false).unwrap();
-    for s in &r.servos {
-        let err = s.zero_offset_deg - (90.0 + OFFSETS[s.id as usize - 1]);
-        eprintln!("servo {}: offset error {err:+.4} deg", s.id);
-        assert!(err.abs() < 0.2, "servo {}: {err} deg", s.id);
-    }
-    let servos_file = dir.path().join("servos.toml");
-    let zero: Vec<(u8, f64)> = r.servos.iter().map(|s| (s.id, s.zero_offset_deg)).collect();
-    files::write_servos(&shipped("servos.toml"), &servos_file, &zero).unwrap();
-    let text = std::fs::read_to_string(&servos_file).unwrap();
-    assert!(text.contains("# DOFBOT bus servos"), "comments kept");
+    let (servos_file, zero) = servo_offsets_recovered(&arm, &nominal, &cfg, dir.path());
 
     // 2. Tool: pivot touches computed on the true arm, commanded through the new servo map.
     let robot = robot_from(&shipped("tool.toml"), &servos_file);
@@ -306,13 +294,47 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
         robot: &loaded,
         ..cell
     };
-    let report = calibrate::verify(
-        &mut bus,
-        &cell,
-        &calibrate::verify::DEFAULT_CHECK_POSES,
-        None,
-    )
-    .unwrap();
+    verify_puts_the_arm_where_the_files_say(&mut bus, &cell, &map, &fix, &w, &arm);
+}
+
+/// Servos: the arm (`nominal`'s servo map) held at the physical zero pose; every recovered
+/// zero offset within 0.2 degrees of the planted one, written into `dir`'s servos.toml with
+/// the shipped file's comments. Returns that file and the offsets (servo id, degrees).
+fn servo_offsets_recovered(
+    arm: &SimArm,
+    nominal: &Robot,
+    cfg: &CalibrationConfig,
+    dir: &Path,
+) -> (PathBuf, Vec<(u8, f64)>) {
+    let mut bus = bus_for(arm, nominal);
+    let map = frames::servo_map(nominal).unwrap();
+    let r = calibrate::servo_offsets(&mut bus, &map, cfg, &mut || Ok(()), false).unwrap();
+    for s in &r.servos {
+        let err = s.zero_offset_deg - (90.0 + OFFSETS[s.id as usize - 1]);
+        eprintln!("servo {}: offset error {err:+.4} deg", s.id);
+        assert!(err.abs() < 0.2, "servo {}: {err} deg", s.id);
+    }
+    let servos_file = dir.join("servos.toml");
+    let zero: Vec<(u8, f64)> = r.servos.iter().map(|s| (s.id, s.zero_offset_deg)).collect();
+    files::write_servos(&shipped("servos.toml"), &servos_file, &zero).unwrap();
+    let text = std::fs::read_to_string(&servos_file).unwrap();
+    assert!(text.contains("# DOFBOT bus servos"), "comments kept");
+    (servos_file, zero)
+}
+
+/// Verify with the calibrated `cell`: the default poses, and the fiducials of `fix` against
+/// the written workcell `w`; and the arm really is where the calibrated model says (its
+/// physical joints from the hidden truth).
+fn verify_puts_the_arm_where_the_files_say(
+    bus: &mut Bus<polishbot::sim::SimTransport>,
+    cell: &Cell,
+    map: &ServoMap,
+    fix: &Fixture,
+    w: &Workcell,
+    arm: &SimArm,
+) {
+    let report =
+        calibrate::verify(bus, cell, &calibrate::verify::DEFAULT_CHECK_POSES, None).unwrap();
     assert!(report.ok, "{report:?}");
     let per_count = 180.0 / 2200.0;
     for e in report.max_servo_error_deg {
@@ -321,8 +343,8 @@ fn sim_chain_recovers_planted_offsets_tool_and_workcell_and_files_round_trip() {
             "servo error {e} deg beyond the noise"
         );
     }
-    let poses = fiducial_targets(&map, &fix);
-    let report = calibrate::verify(&mut bus, &cell, &poses, Some((&fix, &w))).unwrap();
+    let poses = fiducial_targets(map, fix);
+    let report = calibrate::verify(bus, cell, &poses, Some((fix, w))).unwrap();
     eprintln!("verify: fiducials {:?} mm", report.max_fiducial_error_mm);
     assert!(report.ok && report.max_fiducial_error_mm.unwrap() < 1.0);
     // The arm really is where the calibrated model says: physical joints from the hidden truth.

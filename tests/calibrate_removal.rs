@@ -6,6 +6,8 @@
 //! per point). The closed-form grid: tests/common/fit_grid.rs.
 mod common;
 
+use std::path::Path;
+
 use polishbot::motion::Inspection;
 use polishbot::removal::fit::{
     agreement, evidence, fit, parse_predicted, pool, predicted_removal, Evidence, FitConfig,
@@ -342,24 +344,7 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
         )
     };
     plan("removal", "plan.json");
-    std::fs::write(
-        dir.join("run.toml"),
-        format!(
-            "[robot]\nservos = {servos:?}\n[sim.grinding]\n{}ideal_arm = true\n",
-            common::SIM_TOOL
-        ),
-    )
-    .unwrap();
-    common::succeed(polishbot().args(["run", "--config", &d("run.toml")]).args([
-        "--plan",
-        &d("plan.json"),
-        "--sim",
-        "--part",
-        &d("scan.ply"),
-        "--ground-out",
-        &d("after.ply"),
-    ]));
-    common::inspect_in(&dir, "after.ply", "after");
+    grind_on_the_ideal_arm(&dir, &servos);
     let shipped = std::fs::read_to_string(common::calib("tool.toml")).unwrap();
     std::fs::write(dir.join("tool.toml"), &shipped).unwrap();
     let calibrate = |plan: &str| {
@@ -373,17 +358,7 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     println!("{stdout}");
 
-    // k and its uncertainty written on their own lines, every other line (the comments) kept
-    let written = std::fs::read_to_string(dir.join("tool.toml")).unwrap();
-    let changed: Vec<(&str, &str)> = shipped
-        .lines()
-        .zip(written.lines())
-        .filter(|(a, b)| a != b)
-        .collect();
-    assert_eq!(shipped.lines().count(), written.lines().count());
-    assert_eq!(changed.len(), 2, "{changed:?}");
-    assert!(changed[0].1.starts_with("preston_k_mm2_n = "));
-    assert!(changed[1].1.starts_with("preston_k_rel_sd = "));
+    only_k_and_its_sd_rewritten(&shipped, &dir);
     let tool = polishbot::removal::ToolModel::load(&dir.join("tool.toml")).unwrap();
     let k = tool.preston_k_mm2_n;
     // the uncertainty now the fit's (the shipped 30 % is a guess before any grind): the
@@ -433,4 +408,44 @@ fn the_binary_fits_k_from_a_simulated_grind_within_a_tenth_of_the_true_k() {
         std::fs::read_to_string(dir.join("tool.toml")).unwrap(),
         written
     );
+}
+
+/// `run --sim` of the removal plan in `dir` (plan.json) on synth's scan with the simulator's
+/// tool (`common::SIM_TOOL`) on the ideal arm with the cell's servos.toml `servos`, and the
+/// ground part (after.ply) inspected into `after`.
+fn grind_on_the_ideal_arm(dir: &Path, servos: &Path) {
+    let d = |f: &str| dir.join(f).display().to_string();
+    std::fs::write(
+        dir.join("run.toml"),
+        format!(
+            "[robot]\nservos = {servos:?}\n[sim.grinding]\n{}ideal_arm = true\n",
+            common::SIM_TOOL
+        ),
+    )
+    .unwrap();
+    common::succeed(polishbot().args(["run", "--config", &d("run.toml")]).args([
+        "--plan",
+        &d("plan.json"),
+        "--sim",
+        "--part",
+        &d("scan.ply"),
+        "--ground-out",
+        &d("after.ply"),
+    ]));
+    common::inspect_in(dir, "after.ply", "after");
+}
+
+/// k and its uncertainty written on their own lines of `dir`'s tool.toml, every other line of
+/// the `shipped` file (the comments) kept.
+fn only_k_and_its_sd_rewritten(shipped: &str, dir: &Path) {
+    let written = std::fs::read_to_string(dir.join("tool.toml")).unwrap();
+    let changed: Vec<(&str, &str)> = shipped
+        .lines()
+        .zip(written.lines())
+        .filter(|(a, b)| a != b)
+        .collect();
+    assert_eq!(shipped.lines().count(), written.lines().count());
+    assert_eq!(changed.len(), 2, "{changed:?}");
+    assert!(changed[0].1.starts_with("preston_k_mm2_n = "));
+    assert!(changed[1].1.starts_with("preston_k_rel_sd = "));
 }

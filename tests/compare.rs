@@ -568,9 +568,9 @@ fn dense_scan_finds_every_defect_of_ten_more_cases() {
 /// 300,000 scan points RMS is met since the model fill (0.0042 / 0.0048 mm on seeds 11 / 12;
 /// every one of seeds 11-34 within 0.0087 mm) and IoU on seed 11 (0.975), not on seed 12
 /// (0.935: a few of its 120 true error points read just inside the tolerance, a few just
-/// outside read just beyond it; docs/ALGORITHMS.md, step 13, "What is left"), and seed 11's narrow 0.29 mm bump is reported -11 %.
-/// At 1.2 million (POLISHBOT_SCAN_POINTS=1200000) every target is met on both seeds.
-/// docs/ALGORITHMS.md, adaptive step 13. Run with --ignored.
+/// outside read just beyond it; docs/ALGORITHMS.md, step 13, "What is left"), and seed 11's narrow
+/// 0.29 mm bump is reported -11 %. At 1.2 million (POLISHBOT_SCAN_POINTS=1200000) every target is
+/// met on both seeds. docs/ALGORITHMS.md, adaptive step 13. Run with --ignored.
 #[test]
 #[ignore]
 fn acceptance_targets() {

@@ -6,8 +6,8 @@
 //! (`sim::grind::slack`: its kinematics, flanks and bending, under the arm's weight and the
 //! tool's 2 N along the contact normal), less the offset a workcell calibration without force
 //! absorbed (the simulator's rule: the gravity-only offset averaged over the poses nearest the
-//! part's origin), and lands at a distance from the tip the plan wants. Uncompensated the loaded tip
-//! sits 1-2 mm off along the surface (the wrist-pitch gear crossing its band under the contact
+//! part's origin), and lands at a distance from the tip the plan wants. Uncompensated the loaded
+//! tip sits 1-2 mm off along the surface (the wrist-pitch gear crossing its band under the contact
 //! force, and the sag); compensated it must be much nearer.
 mod common;
 

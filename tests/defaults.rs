@@ -38,8 +38,8 @@ fn stated_defaults(source: &str, struct_name: &str) -> Vec<(String, String)> {
 }
 
 /// The token after the first "default" (or "Default", "default:") in `doc`: up to a space,
-/// `;`, `)`, a `:` ending a word or a `,` that does not go on with a number ("30,000", "4, -3, 0" stay whole,
-/// spaces dropped); a closing `.` dropped.
+/// `;`, `)`, a `:` ending a word or a `,` that does not go on with a number ("30,000", "4, -3, 0"
+/// stay whole, spaces dropped); a closing `.` dropped.
 fn default_in(doc: &str) -> Option<String> {
     let at = doc.find("default ").or_else(|| doc.find("Default "))?;
     let rest = doc[at + "default ".len()..].trim_start_matches(": ");

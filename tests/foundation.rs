@@ -140,57 +140,7 @@ fn every_format_reads_the_same_tetrahedron() {
         [0.0, 0.0, 10.0],
     ];
     let faces_expect = 4;
-    let stl_ascii = "solid t\n".to_string()
-        + &[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
-            .iter()
-            .map(|f: &[usize; 3]| {
-                let v: String = f
-                    .iter()
-                    .map(|&i| {
-                        format!(
-                            "vertex {} {} {}\n",
-                            expect[i][0], expect[i][1], expect[i][2]
-                        )
-                    })
-                    .collect();
-                format!("facet normal 0 0 0\nouter loop\n{v}endloop\nendfacet\n")
-            })
-            .collect::<String>()
-        + "endsolid t\n";
-    let mut stl_bin = vec![0u8; 80];
-    stl_bin.extend_from_slice(&4u32.to_le_bytes());
-    for f in [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] {
-        stl_bin.extend_from_slice(&[0u8; 12]);
-        for i in f {
-            for c in expect[i] {
-                stl_bin.extend_from_slice(&(c as f32).to_le_bytes());
-            }
-        }
-        stl_bin.extend_from_slice(&[0, 0]);
-    }
-    let obj =
-        "# t\nv 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1/1 2/2 4/4\nf -4 -1 -2\nf 2 3 4\n";
-    let off = "OFF\n# comment\n4 4 6\n0 0 0\n10 0 0\n0 10 0\n0 0 10\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
-    let ply_ascii = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n10 0 0\n0 10 0\n0 0 10\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
-    let mut ply_be = b"ply\nformat binary_big_endian 1.0\nelement vertex 4\nproperty double x\nproperty double y\nproperty double z\nelement face 4\nproperty list uchar uint vertex_indices\nend_header\n".to_vec();
-    for p in expect {
-        for c in p {
-            ply_be.extend_from_slice(&c.to_be_bytes());
-        }
-    }
-    for f in [[0u32, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] {
-        ply_be.push(3);
-        f.iter()
-            .for_each(|v| ply_be.extend_from_slice(&v.to_be_bytes()));
-    }
-    let meshes: Vec<(&str, Vec<u8>, Format)> = vec![
-        ("ascii stl", stl_ascii.into_bytes(), Format::Stl),
-        ("binary stl", stl_bin, Format::Stl),
-        ("obj", obj.as_bytes().to_vec(), Format::Obj),
-        ("off", off.as_bytes().to_vec(), Format::Off),
-        ("ascii ply", ply_ascii.as_bytes().to_vec(), Format::Ply),
-        ("big-endian ply", ply_be, Format::Ply),
-    ];
+    let meshes = tetrahedron_files(expect);
     for (name, bytes, format) in meshes {
         let g = cloud::parse(&bytes, format).unwrap_or_else(|e| panic!("{name}: {e}"));
         let Geometry::Mesh { mesh, .. } = g else {
@@ -257,6 +207,63 @@ fn every_format_reads_the_same_tetrahedron() {
             assert_eq!(c.field(f).unwrap(), &v, "{name}");
         }
     }
+}
+
+/// The tetrahedron with the corners `expect` (faces wound outward) as the bytes of each mesh
+/// format: ASCII and binary STL, OBJ (with texture indices and negative indices), OFF, ASCII
+/// and big-endian binary PLY; each with its name and format.
+fn tetrahedron_files(expect: [[f64; 3]; 4]) -> Vec<(&'static str, Vec<u8>, Format)> {
+    let stl_ascii = "solid t\n".to_string()
+        + &[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+            .iter()
+            .map(|f: &[usize; 3]| {
+                let v: String = f
+                    .iter()
+                    .map(|&i| {
+                        format!(
+                            "vertex {} {} {}\n",
+                            expect[i][0], expect[i][1], expect[i][2]
+                        )
+                    })
+                    .collect();
+                format!("facet normal 0 0 0\nouter loop\n{v}endloop\nendfacet\n")
+            })
+            .collect::<String>()
+        + "endsolid t\n";
+    let mut stl_bin = vec![0u8; 80];
+    stl_bin.extend_from_slice(&4u32.to_le_bytes());
+    for f in [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] {
+        stl_bin.extend_from_slice(&[0u8; 12]);
+        for i in f {
+            for c in expect[i] {
+                stl_bin.extend_from_slice(&(c as f32).to_le_bytes());
+            }
+        }
+        stl_bin.extend_from_slice(&[0, 0]);
+    }
+    let obj =
+        "# t\nv 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1/1 2/2 4/4\nf -4 -1 -2\nf 2 3 4\n";
+    let off = "OFF\n# comment\n4 4 6\n0 0 0\n10 0 0\n0 10 0\n0 0 10\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+    let ply_ascii = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n10 0 0\n0 10 0\n0 0 10\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+    let mut ply_be = b"ply\nformat binary_big_endian 1.0\nelement vertex 4\nproperty double x\nproperty double y\nproperty double z\nelement face 4\nproperty list uchar uint vertex_indices\nend_header\n".to_vec();
+    for p in expect {
+        for c in p {
+            ply_be.extend_from_slice(&c.to_be_bytes());
+        }
+    }
+    for f in [[0u32, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]] {
+        ply_be.push(3);
+        f.iter()
+            .for_each(|v| ply_be.extend_from_slice(&v.to_be_bytes()));
+    }
+    vec![
+        ("ascii stl", stl_ascii.into_bytes(), Format::Stl),
+        ("binary stl", stl_bin, Format::Stl),
+        ("obj", obj.as_bytes().to_vec(), Format::Obj),
+        ("off", off.as_bytes().to_vec(), Format::Off),
+        ("ascii ply", ply_ascii.as_bytes().to_vec(), Format::Ply),
+        ("big-endian ply", ply_be, Format::Ply),
+    ]
 }
 
 /// Bad files give a one-line error naming the file and the place.

@@ -457,66 +457,7 @@ fn a_ground_rescan_is_a_plain_inspect_input_and_regions_shrink_only_where_the_si
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("grind_sim");
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    let d = |f: &str| dir.join(f).display().to_string();
-    // tests/e2e.rs's case: three defects, one of them in the arm's reach, one layer
-    let synth = "synth --seed 9 --defects 3 --reference-points 200000 --scan-points 150000 \
-                 --height-range 0.15,0.35 --width-range 2,3 --out";
-    common::succeed(polishbot().args(synth.split(' ')).arg(d("")));
-    let inspect = |scan: &str, out: &str| {
-        common::succeed(
-            polishbot()
-                .args(["inspect", "--reference", &d("reference.ply")])
-                .args(["--scan", &d(scan), "-o", &d(out)]),
-        )
-    };
-    inspect("scan.ply", "before");
-    std::fs::write(
-        dir.join("plan.toml"),
-        "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\ncompensate_compliance = false\n",
-    )
-    .unwrap();
-    let plan = [
-        "plan",
-        "--config",
-        &d("plan.toml"),
-        "--inspection",
-        &d("before"),
-        "-o",
-    ];
-    common::succeed(polishbot().args(plan).arg(d("plan.json")));
-    // a true k three times the nominal 1e-4 mm^2/N: one pass at the nominal k takes 0.03 mm
-    // off the region's mean (measured), too close to the rescan's own 0.01 mm to assert on;
-    // a rigid plan is for a rigid burr: the simulated mount is stiff (20 N/mm), with the
-    // 10 MPa abrasive at 5000 rpm this test was written for (the simulator's defaults before
-    // its tool became the shipped tool.toml's), on the ideal arm the plan is made for (no
-    // compensation of the documented arm's sag: tests/cycle.rs's rigid loop), the burr giving
-    // along the normal as a stiff burr's holder does. The cell's defaults now are the
-    // documented arm and the shipped tool's spring-loaded spindle (issue 50): there the stiff
-    // burr kept contact in 707 of 11,525 steps and region 1's mean fell 0.019 mm (0.022 mm with
-    // the normal mount alone), under the 0.03 mm this test can tell from a rescan's drift
-    std::fs::write(
-        dir.join("run.toml"),
-        "[sim.grinding]\npreston_k = 1e-4\nk_factor = 3.0\nspring_rate_n_mm = 20.0\n\
-         modulus_mpa = 10.0\nspindle_rpm = 5000.0\nideal_arm = true\n\
-         compliance_direction = \"surface_normal\"\n",
-    )
-    .unwrap();
-    let run = [
-        "run",
-        "--config",
-        &d("run.toml"),
-        "--plan",
-        &d("plan.json"),
-        "--sim",
-    ];
-    let out = common::succeed(polishbot().args(run).args([
-        "--part",
-        &d("scan.ply"),
-        "--ground-out",
-        &d("after.ply"),
-    ]));
-    println!("{}", String::from_utf8_lossy(&out.stdout));
-    inspect("after.ply", "after");
+    grind_and_rescan(&dir);
 
     let truth = polishbot::cloud::load_cloud(&dir.join("after_truth.ply"), None, None).unwrap();
     let removal = truth.field("removal").unwrap();
@@ -577,4 +518,70 @@ fn a_ground_rescan_is_a_plain_inspect_input_and_regions_shrink_only_where_the_si
         .collect();
     let mean = far.iter().sum::<f64>() / far.len() as f64;
     assert!(mean < 0.01, "mean change away from the grind {mean} mm");
+}
+
+/// tests/e2e.rs's case synthesised into `dir` and inspected (`before`), planned in rigid
+/// layers and ground by the simulator with a true k three times the nominal (`after.ply`, the
+/// truth in `after_truth.ply`), and the ground part inspected (`after`).
+fn grind_and_rescan(dir: &Path) {
+    let d = |f: &str| dir.join(f).display().to_string();
+    // tests/e2e.rs's case: three defects, one of them in the arm's reach, one layer
+    let synth = "synth --seed 9 --defects 3 --reference-points 200000 --scan-points 150000 \
+                 --height-range 0.15,0.35 --width-range 2,3 --out";
+    common::succeed(polishbot().args(synth.split(' ')).arg(d("")));
+    let inspect = |scan: &str, out: &str| {
+        common::succeed(
+            polishbot()
+                .args(["inspect", "--reference", &d("reference.ply")])
+                .args(["--scan", &d(scan), "-o", &d(out)]),
+        )
+    };
+    inspect("scan.ply", "before");
+    std::fs::write(
+        dir.join("plan.toml"),
+        "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\ncompensate_compliance = false\n",
+    )
+    .unwrap();
+    let plan = [
+        "plan",
+        "--config",
+        &d("plan.toml"),
+        "--inspection",
+        &d("before"),
+        "-o",
+    ];
+    common::succeed(polishbot().args(plan).arg(d("plan.json")));
+    // a true k three times the nominal 1e-4 mm^2/N: one pass at the nominal k takes 0.03 mm
+    // off the region's mean (measured), too close to the rescan's own 0.01 mm to assert on;
+    // a rigid plan is for a rigid burr: the simulated mount is stiff (20 N/mm), with the
+    // 10 MPa abrasive at 5000 rpm this test was written for (the simulator's defaults before
+    // its tool became the shipped tool.toml's), on the ideal arm the plan is made for (no
+    // compensation of the documented arm's sag: tests/cycle.rs's rigid loop), the burr giving
+    // along the normal as a stiff burr's holder does. The cell's defaults now are the
+    // documented arm and the shipped tool's spring-loaded spindle (issue 50): there the stiff
+    // burr kept contact in 707 of 11,525 steps and region 1's mean fell 0.019 mm (0.022 mm with
+    // the normal mount alone), under the 0.03 mm this test can tell from a rescan's drift
+    std::fs::write(
+        dir.join("run.toml"),
+        "[sim.grinding]\npreston_k = 1e-4\nk_factor = 3.0\nspring_rate_n_mm = 20.0\n\
+         modulus_mpa = 10.0\nspindle_rpm = 5000.0\nideal_arm = true\n\
+         compliance_direction = \"surface_normal\"\n",
+    )
+    .unwrap();
+    let run = [
+        "run",
+        "--config",
+        &d("run.toml"),
+        "--plan",
+        &d("plan.json"),
+        "--sim",
+    ];
+    let out = common::succeed(polishbot().args(run).args([
+        "--part",
+        &d("scan.ply"),
+        "--ground-out",
+        &d("after.ply"),
+    ]));
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    inspect("after.ply", "after");
 }

@@ -1,11 +1,12 @@
 //! Issue 28's acceptance on synth cases of the real femoral component (femoral_dm, defects on
 //! its articular surface) with bumps and ridges of 0.08-0.5 mm: the removal plan (the default
 //! mode) removes excess from every planned region, predicts no over-grind (nominal and at the
-//! Monte Carlo's quantile) and passes every force check or names its refusal. Two seeds run in the suite, ten in the
-//! ignored test (`cargo test --release --test removal_accept -- --ignored --nocapture`), each
-//! with the shipped tool (Preston's k known to 30 %) and with k known to 10 %
-//! (`CALIBRATED_K_REL_SD`). The residual peaks are printed, not held to the tolerance: they
-//! are not within it yet (docs/ALGORITHMS.md, "What one pass can promise").
+//! Monte Carlo's quantile) and passes every force check or names its refusal. Two seeds run in the
+//! suite, ten in the ignored test
+//! (`cargo test --release --test removal_accept -- --ignored --nocapture`), each with the shipped
+//! tool (Preston's k known to 30 %) and with k known to 10 % (`CALIBRATED_K_REL_SD`). The residual
+//! peaks are printed, not held to the tolerance: they are not within it yet (docs/ALGORITHMS.md,
+//! "What one pass can promise").
 mod common;
 
 use polishbot::motion::{plan_part, Inspection, PlanConfig, PlanError};

@@ -1,7 +1,7 @@
 //! Removal mode end to end through the CLI on the demo part: the predicted part meets the
-//! tolerance (issue 28's acceptance) where it grinds, every contact is entered touching the surface and pressed
-//! in to the tool's preload under the grinding rule only, and the collision re-check `run`
-//! makes accepts the preload exactly where the plan grinds.
+//! tolerance (issue 28's acceptance) where it grinds, every contact is entered touching the surface
+//! and pressed in to the tool's preload under the grinding rule only, and the collision re-check
+//! `run` makes accepts the preload exactly where the plan grinds.
 mod common;
 
 use std::path::Path;

@@ -256,8 +256,8 @@ fn calibrate_turntable_on_the_cli_writes_the_fitted_axis_and_centre() {
 
 /// `calibrate workcell --sim --cell calibration/turntable`: touching four fiducials placed by
 /// the shipped turntable workcell rewrites `robot_from_reference` (it reads back within 1 mm
-/// and 0.5 degree of the shipped placement, as tests/calibrate.rs) and keeps the `[turntable]` section, its comments and the axis
-/// and centre the table loads with, unchanged.
+/// and 0.5 degree of the shipped placement, as tests/calibrate.rs) and keeps the `[turntable]`
+/// section, its comments and the axis and centre the table loads with, unchanged.
 #[test]
 fn calibrate_workcell_on_a_turntable_cell_keeps_the_turntable() {
     let cell = |name: &str| common::calib(&format!("turntable/{name}"));

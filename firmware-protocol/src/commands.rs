@@ -221,22 +221,16 @@ impl Command {
     /// Parses a decoded host frame back into a command (what a board or a simulator does).
     /// Out-of-range values are refused exactly as when building the command.
     pub fn parse(frame: &Frame) -> Result<Command, ParseError> {
-        let f = frame.kind();
-        let p = frame.payload();
-        let want = |n: usize| {
-            if p.len() == n {
-                Ok(())
-            } else {
-                Err(ParseError::BadPayload {
-                    func: f,
-                    len: p.len(),
-                })
-            }
-        };
+        Self::parse_motion(frame.kind(), frame.payload())
+    }
+
+    /// [`Command::parse`] of the moves and the position reads (FUNC `f`, payload `p`); any
+    /// other FUNC goes on to [`Command::parse_setting`].
+    fn parse_motion(f: u8, p: &[u8]) -> Result<Command, ParseError> {
         let u16_at = |i: usize| u16::from_be_bytes([p[i], p[i + 1]]);
         let cmd = match f {
             0x11..=0x16 => {
-                want(4)?;
+                expect_len(f, p, 4)?;
                 let id = ServoId::new(f - FUNC_MOVE_SERVO_BASE)?;
                 Command::MoveServo {
                     target: Target::new(id, u16_at(0))?,
@@ -244,7 +238,7 @@ impl Command {
                 }
             }
             FUNC_MOVE_ALL => {
-                want(2 * SERVO_COUNT + 2)?;
+                expect_len(f, p, 2 * SERVO_COUNT + 2)?;
                 let mut raw = [0u16; SERVO_COUNT];
                 for (i, r) in raw.iter_mut().enumerate() {
                     *r = u16_at(2 * i);
@@ -255,7 +249,7 @@ impl Command {
                 }
             }
             FUNC_MOVE_ANY => {
-                want(5)?;
+                expect_len(f, p, 5)?;
                 let target = AnyTarget::new(BusId::new(p[0])?, u16_at(1))?;
                 Command::MoveAny {
                     target,
@@ -263,23 +257,31 @@ impl Command {
                 }
             }
             FUNC_MOVE_EVERY => {
-                want(4)?;
+                expect_len(f, p, 4)?;
                 Command::MoveEvery {
                     raw: EveryRaw::new(u16_at(0))?,
                     time_ms: u16_at(2),
                 }
             }
             0x31..=0x36 => {
-                want(0)?;
+                expect_len(f, p, 0)?;
                 Command::ReadPosition(ServoId::new(f - FUNC_READ_BASE)?)
             }
+            _ => return Self::parse_setting(f, p),
+        };
+        Ok(cmd)
+    }
+
+    /// [`Command::parse`] of the bus, board, buzzer and LED commands (FUNC `f`, payload `p`).
+    fn parse_setting(f: u8, p: &[u8]) -> Result<Command, ParseError> {
+        let cmd = match f {
             FUNC_PING | FUNC_READ_ANY => {
-                want(1)?;
+                expect_len(f, p, 1)?;
                 let id = BusId::new(p[0])?;
                 [Command::Ping(id), Command::ReadAny(id)][usize::from(f == FUNC_READ_ANY)]
             }
             FUNC_TORQUE => {
-                want(1)?;
+                expect_len(f, p, 1)?;
                 match p[0] {
                     0 => Command::Torque(false),
                     1 => Command::Torque(true),
@@ -292,11 +294,11 @@ impl Command {
                 }
             }
             FUNC_SET_ID => {
-                want(1)?;
+                expect_len(f, p, 1)?;
                 Command::SetId(BusId::new(p[0])?)
             }
             FUNC_STORE_MID => {
-                want(1)?;
+                expect_len(f, p, 1)?;
                 Command::StoreMidOffset(if p[0] == 0 {
                     None
                 } else {
@@ -304,11 +306,11 @@ impl Command {
                 })
             }
             FUNC_OFFSET_STATE => {
-                want(0)?;
+                expect_len(f, p, 0)?;
                 Command::ReadOffsetState
             }
             FUNC_BUZZER => {
-                want(1)?;
+                expect_len(f, p, 1)?;
                 Command::Buzzer(match p[0] {
                     0 => Buzzer::OFF,
                     0xFF => Buzzer::ON,
@@ -316,7 +318,7 @@ impl Command {
                 })
             }
             FUNC_RGB => {
-                want(3)?;
+                expect_len(f, p, 3)?;
                 Command::Rgb {
                     r: p[0],
                     g: p[1],
@@ -324,7 +326,7 @@ impl Command {
                 }
             }
             FUNC_RESET => {
-                want(1)?;
+                expect_len(f, p, 1)?;
                 if p[0] != 1 {
                     return Err(ParseError::BadValue {
                         func: f,
@@ -334,12 +336,24 @@ impl Command {
                 Command::Reset
             }
             FUNC_VERSION => {
-                want(0)?;
+                expect_len(f, p, 0)?;
                 Command::Version
             }
             _ => return Err(ParseError::UnknownFunc { func: f }),
         };
         Ok(cmd)
+    }
+}
+
+/// Checks that the payload `p` of the FUNC `f` is `n` bytes long.
+fn expect_len(f: u8, p: &[u8], n: usize) -> Result<(), ParseError> {
+    if p.len() == n {
+        Ok(())
+    } else {
+        Err(ParseError::BadPayload {
+            func: f,
+            len: p.len(),
+        })
     }
 }
 

@@ -124,7 +124,8 @@ pub(super) fn overlap(
 /// Aligns `src` onto `dst` from `init`: ICP at the start distance, a middle distance and the
 /// final distance; the first two stages use every 4th and every 2nd sample point and the
 /// coarse target ([`COARSE_EVERY`]; they only pull the pose in). With `short`, only the final
-/// stage runs (a short-range refinement that cannot wander far from `init`). Returns the pose and its fitness at the final distance.
+/// stage runs (a short-range refinement that cannot wander far from `init`). Returns the pose and
+/// its fitness at the final distance.
 pub(super) fn pair_icp(
     src: &Prepared,
     dst: &Prepared,

@@ -19,7 +19,8 @@ const MIN_MODEL_OVERLAP: f64 = 0.05;
 /// Every how many sample points the overlap test uses (it only needs a share, not a fit).
 const OVERLAP_EVERY: usize = 8;
 
-/// How many placed views (nearest in angle first) coarse registration is tried against when ICP gives no match within the bound (each costs a full `register()`).
+/// How many placed views (nearest in angle first) coarse registration is tried against when ICP
+/// gives no match within the bound (each costs a full `register()`).
 const COARSE_TRIES: usize = 2;
 
 /// Largest union a new view is aligned against, in multiples of `icp_target_points`.
@@ -90,10 +91,16 @@ pub(super) struct Placed {
 
 /// The inputs of [`place_views`].
 pub(super) struct Inputs<'a> {
+    /// The views, as read.
     pub views: &'a [PointCloud],
+    /// Each view prepared as an ICP target and as a source.
     pub prepared: &'a [Prepared],
+    /// Each view's name, for messages.
     pub names: &'a [String],
+    /// Each view's nominal table angle, degrees.
     pub angles: &'a [f64],
+    /// Each view's nominal pose: the table turned back by its angle from the first view's,
+    /// about the axis and centre.
     pub nominal: &'a [Isometry3<f64>],
     /// The table axis (first view's frame).
     pub axis: &'a Unit<Vector3<f64>>,

@@ -1,8 +1,8 @@
 //! The DOFBOT bus: a [`Transport`] (serial port, the Python mock on a pseudo-terminal, the
 //! board's I2C interface ([`I2cTransport`] over Linux i2c-dev or the simulator's
-//! [`crate::sim::FakeI2c`]), or the in-process [`crate::sim::SimArm`]), the [`Bus`] driver over it and the journal; the servo map is robot's
-//! ([`crate::robot::ServoMap`], re-exported here).
-//! Frames come only from `dofbot-protocol`'s validated commands.
+//! [`crate::sim::FakeI2c`]), or the in-process [`crate::sim::SimArm`]), the [`Bus`] driver over it
+//! and the journal; the servo map is robot's ([`crate::robot::ServoMap`], re-exported here). Frames
+//! come only from `dofbot-protocol`'s validated commands.
 //!
 //! ```no_run
 //! use polishbot::bus::{Bus, BusConfig, Journal};

@@ -209,8 +209,8 @@ fn send_table_step<T: Transport>(
 
 /// Sends the table frame `frame` of synced stretch `stretch` at step `k` (right after its arm
 /// frame, in the same period) and, with `read` (the read-back tolerance, counts), reads the
-/// table back against it within that tolerance plus its step between the last two frames (the servo may lag one
-/// frame). Returns the read-back's difference, counts, when it read.
+/// table back against it within that tolerance plus its step between the last two frames (the servo
+/// may lag one frame). Returns the read-back's difference, counts, when it read.
 fn send_synced<T: Transport>(
     bus: &mut Bus<T>,
     plan: &CheckedPlan,

@@ -20,10 +20,16 @@ const DENSITY_SAMPLES: usize = 1000;
 /// points, whose radii the caller's checks refuse anyway.
 const FALLBACK_DENSITY: f64 = 1.0;
 
+/// The clouds a comparison reads and their grids (for the adaptive method, each cloud in its
+/// grid's storage order).
 pub(crate) struct Clouds<'a> {
+    /// The reference cloud.
     pub reference: &'a PointCloud,
+    /// The scan cloud.
     pub scan: &'a PointCloud,
+    /// The reference's points bucketed into rows along x.
     pub ref_grid: Grid,
+    /// The scan's points bucketed into rows along x.
     pub scan_grid: Grid,
     /// The scan's median surface density, points per mm² ([`surface_density`]).
     pub scan_density: f64,

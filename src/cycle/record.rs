@@ -253,8 +253,8 @@ impl Outcome {
 /// The stop rule, applied after each inspection. `records` are the loop's inspections in
 /// order; every record but the last was planned and ground (and followed by the next).
 /// Order: within tolerance; undecided (the verdict's decision rule, ISO 14253-1: nothing
-/// proven to grind, nothing proven conform); nothing repairable left; the last grind's progress under
-/// `min_progress`; `max_iterations` grinds made; else grind again.
+/// proven to grind, nothing proven conform); nothing repairable left; the last grind's progress
+/// under `min_progress`; `max_iterations` grinds made; else grind again.
 pub fn decide(records: &[IterationRecord], cfg: &CycleConfig) -> Outcome {
     let Some(last) = records.last() else {
         return Outcome::Continue;

@@ -140,9 +140,9 @@ fn neighbours(ctx: &Context, c: &Candidate, place: f64, turn: f64) -> Vec<Candid
     out
 }
 
-/// Of `all` (the refined winner first; None when none is buildable), the candidate whose setups (`setups::setups`, on the
-/// ranking's samples and table angle step) reach most together; ties (within one sample) go
-/// to the larger share of the first setup, then to the earlier candidate.
+/// Of `all` (the refined winner first; None when none is buildable), the candidate whose setups
+/// (`setups::setups`, on the ranking's samples and table angle step) reach most together; ties
+/// (within one sample) go to the larger share of the first setup, then to the earlier candidate.
 fn over_setups(ctx: &Context, cfg: &DesignConfig, all: Vec<Candidate>) -> Option<Candidate> {
     let tie = 0.5 / cfg.samples.max(1) as f64;
     let mut best: Option<(Candidate, f64, f64)> = None;

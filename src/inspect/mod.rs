@@ -64,7 +64,8 @@ pub struct Findings {
 }
 
 /// Inspects `inputs` with `cfg`. A registration failure is returned as the
-/// [`crate::register::RegisterError`] (its diagnostics inside), other errors name the file at fault.
+/// [`crate::register::RegisterError`] (its diagnostics inside), other errors name the file at
+/// fault.
 pub fn run(cfg: &InspectConfig, inputs: &Inputs) -> Result<Findings> {
     let mut times = StageTimes::default();
     let mut notices = Vec::new();

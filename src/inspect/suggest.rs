@@ -73,10 +73,10 @@ pub fn suggest(
 
 /// The views that would show the core points of `surface` (points and outward unit normals,
 /// reference frame) where `wanted` holds (shares of the area where `in_area` holds, all
-/// without it; `Suggestion::unmeasured` is then their share): the table angles of this setup that face them, and the share no table angle
-/// faces; a table angle is listed when it faces at least `min_share` of the area.
-/// [`suggest`] asks it for the unmeasured points; the loop's rescan for the points a plan
-/// ground ([`rescan_setups`]).
+/// without it; `Suggestion::unmeasured` is then their share): the table angles of this setup that
+/// face them, and the share no table angle faces; a table angle is listed when it faces at least
+/// `min_share` of the area. [`suggest`] asks it for the unmeasured points; the loop's rescan for
+/// the points a plan ground ([`rescan_setups`]).
 pub fn views_for(
     (points, normals): (&[Point3<f64>], &[Vector3<f64>]),
     in_area: Option<&[bool]>,
@@ -137,9 +137,9 @@ pub struct RescanSetup {
 }
 
 /// The setups (and table angles) a rescan must scan to see the points of `surface` (as
-/// [`views_for`]) where `wanted` holds (the area a plan ground, or the unmeasured area): the first scan's setup
-/// at the table angles facing at least [`RESCAN_MIN_SHARE`] of the wanted area, and the part
-/// turned over when at least that share faces no table angle of it. Empty when nothing is
+/// [`views_for`]) where `wanted` holds (the area a plan ground, or the unmeasured area): the first
+/// scan's setup at the table angles facing at least [`RESCAN_MIN_SHARE`] of the wanted area, and
+/// the part turned over when at least that share faces no table angle of it. Empty when nothing is
 /// wanted.
 pub fn rescan_setups(
     surface: (&[Point3<f64>], &[Vector3<f64>]),

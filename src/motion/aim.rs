@@ -139,10 +139,10 @@ fn key(p: [f64; 3]) -> [u64; 3] {
 
 /// `strokes` with every pressed point (negative offset) moved along the surface by
 /// `-offset x a_t / cos`, a the unit spindle axis (shank to tip, reference frame) the `trial`
-/// walk of the same strokes held there (each walked point's `surface_mm` and robot-frame axis), `a_t` its part along the surface and cos its angle
-/// with the inward normal; the moved point is projected onto `surface` with its normal there.
-/// `back` turns robot-frame directions into the reference frame. Points the trial left out
-/// stay where they were.
+/// walk of the same strokes held there (each walked point's `surface_mm` and robot-frame axis),
+/// `a_t` its part along the surface and cos its angle with the inward normal; the moved point is
+/// projected onto `surface` with its normal there. `back` turns robot-frame directions into the
+/// reference frame. Points the trial left out stay where they were.
 pub(crate) fn aimed(
     strokes: &[Stroke],
     trial: impl IntoIterator<Item = ([f64; 3], [f64; 3])>,

@@ -40,8 +40,8 @@ const INSIDE_MM: f64 = 1e-3;
 /// off by about 1e-16; a normal this close to the limit gets its angle computed).
 const COS_SLACK: f64 = 1e-9;
 
-/// Allowance for rounding in a bound that stands in for a search, mm (coordinates of hundreds of mm carry
-/// rounding errors near 1e-13 mm; 1e-6 mm is far above them and far below any clearance).
+/// Allowance for rounding in a bound that stands in for a search, mm (coordinates of hundreds of mm
+/// carry rounding errors near 1e-13 mm; 1e-6 mm is far above them and far below any clearance).
 const ROUNDING_MM: f64 = 1e-6;
 
 /// The last nearest query of a search and its answer (a query repeated at the same point

@@ -3,7 +3,8 @@
 //! while the arm's error makes it over-grind, solved again with a raised allowance:
 //! `predict.rs`, `by_region.rs`), each stroke ground without stopping at the feed its
 //! contacts' dwells ask for (`stroke.rs`), the force checked at each contact's joint angles,
-//! and the predicted part from the dwell the trajectory really spends. Method: docs/ALGORITHMS.md, "Removal planning".
+//! and the predicted part from the dwell the trajectory really spends. Method: docs/ALGORITHMS.md,
+//! "Removal planning".
 use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 
 use super::config::PlanConfig;

@@ -78,7 +78,8 @@ impl JointSpline {
             {
                 let (m0, m1) = (self.m[i][j], self.m[i + 1][j]);
                 let slope = (self.q[i + 1][j] - self.q[i][j]) / h;
-                // q'(x) at x = s - s_i: slope - m0 (h - x)^2 / (2h) + m1 x^2 / (2h) - (m1 - m0) h / 6
+                // q'(x) at x = s - s_i:
+                // slope - m0 (h - x)^2 / (2h) + m1 x^2 / (2h) - (m1 - m0) h / 6
                 let d1 = |x: f64| {
                     slope - m0 * (h - x) * (h - x) / (2.0 * h) + m1 * x * x / (2.0 * h)
                         - (m1 - m0) * h / 6.0

@@ -130,8 +130,8 @@ pub struct SetupPart {
     pub setup: usize,
     /// The workcell file planned on.
     pub workcell: String,
-    /// SHA-256 of the placement (`setups::placement_sha256`): the setup streams only to a cell whose
-    /// workcell file gives the same.
+    /// SHA-256 of the placement (`setups::placement_sha256`): the setup streams only to a cell
+    /// whose workcell file gives the same.
     pub placement_sha256: String,
     /// Regions planned in this setup.
     pub regions: Vec<usize>,

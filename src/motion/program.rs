@@ -141,9 +141,9 @@ fn arr(v: &Vector3<f64>) -> [f64; 3] {
 
 /// Solves every stroke of one region in order from `prev` (with `min_tilt`, removal mode,
 /// rad: holding the tool at least that far from the normal where the arm can, see
-/// [`solve_stroke`](super::tilt::solve_stroke)); splits into runs where a point is unreachable or the joints would jump
-/// more than `max_joint_step`. Returns the runs; records the points left out in `unreachable`
-/// and counts jumps.
+/// [`solve_stroke`](super::tilt::solve_stroke)); splits into runs where a point is unreachable or
+/// the joints would jump more than `max_joint_step`. Returns the runs; records the points left out
+/// in `unreachable` and counts jumps.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn walk(
     strokes: &[Stroke],

@@ -85,6 +85,7 @@ mod scale_keys {
         inverted: bool,
     }
 
+    /// Writes the scale `s` as its keys (its id is the joint's `servo`, not written).
     pub fn serialize<S: Serializer>(s: &ServoScale, ser: S) -> Result<S::Ok, S::Error> {
         Keys {
             deg_max: s.deg_max,
@@ -95,6 +96,7 @@ mod scale_keys {
         .serialize(ser)
     }
 
+    /// Reads a scale from its keys (the id set later, from the joint's `servo`).
     pub fn deserialize<'de, D: Deserializer<'de>>(de: D) -> Result<ServoScale, D::Error> {
         let k = Keys::deserialize(de)?;
         Ok(ServoScale {

@@ -1,7 +1,7 @@
 //! The part turntable: a bus servo (`[turntable]` in `servos.toml`, driven with 0x19 frames)
 //! turning the part about an axis of the robot frame (`[turntable]` in `workcell.toml`). The
-//! workcell's `robot_from_reference` is the part's pose at table angle 0; [`Turntable::workcell_at`]
-//! gives it at any angle. The URDF stays the arm's.
+//! workcell's `robot_from_reference` is the part's pose at table angle 0;
+//! [`Turntable::workcell_at`] gives it at any angle. The URDF stays the arm's.
 use std::path::Path;
 
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};

@@ -6,7 +6,8 @@ use polishbot::motion::collide::{Allow, Body, Scene};
 use polishbot::motion::{plan_part, CollisionConfig, Plan, PlanConfig, SurfacePoint};
 use polishbot::robot::{Robot, Workcell};
 
-use super::{arm, grid, measure, point, to_ref, wedge};
+use super::scenes::{grid, point, wedge};
+use super::{arm, measure, to_ref};
 use crate::common::dofbot;
 
 /// The arm, the part placed in the robot frame as it is (mm to m only) and the rigid plan's

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use nalgebra::{Point3, Vector3};
 use polishbot::spatial::Neighbours;
-use polishbot::synth::{DefectKind, Truth};
+use polishbot::synth::{DefectKind, SiteProbe, Truth};
 
 use super::polishbot;
 use super::true_part::TruePart;
@@ -161,58 +161,7 @@ pub fn acceptance_with(seed: u64, sim: &str) -> Acceptance {
 pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptance {
     let dir = super::scratch(name);
     let truth = super::case(seed, &dir);
-    let cfg = dir.join("cycle.toml");
-    // more of the simulated cell's truth, to take it apart by hand: `;`-separated
-    // `[sim.grinding]` lines whose keys SIM_TOOL does not set (e.g. "pressure_exponent = 1.0;
-    // k_noise = 0.0")
-    let extra = std::env::var("POLISHBOT_ACCEPT_SIM")
-        .unwrap_or_default()
-        .replace(';', "\n");
-    // a cell whose servos.toml has `[compliance]` (issue 50's compensation): `fitted`, the
-    // table `calibrate compliance` fits on this case's simulated arm, or a file given by hand
-    let mut servos = servos.to_string();
-    let arm: polishbot::sim::GrindConfig =
-        toml::from_str(&format!("{}{sim}{extra}", super::SIM_TOOL)).unwrap();
-    if servos == "fitted" {
-        let c = super::compensation::fitted(&arm);
-        println!("fitted [compliance]: {c:?}");
-        servos = super::compensation::servos_with(&c, &dir)
-            .display()
-            .to_string();
-    }
-    let robot = match servos.is_empty() {
-        true => String::new(),
-        false => format!("[plan.robot]\nservos = {servos:?}\n[run.robot]\nservos = {servos:?}\n"),
-    };
-    std::fs::write(
-        &cfg,
-        format!(
-            "{robot}[run.sim.grinding]\n{}{sim}{extra}\n",
-            super::SIM_TOOL
-        ),
-    )
-    .unwrap();
-    let mut command = cycle(&dir, "cycle");
-    command
-        .args(["--sim", "--mode", "removal", "--config"])
-        .arg(&cfg);
-    // more grinds than the issue's 3, to see what a 4th would do (run by hand)
-    if let Ok(grinds) = std::env::var("POLISHBOT_ACCEPT_GRINDS") {
-        command.args(["--max-iterations", &grinds]);
-    }
-    // the planner reading the part at the tool's footprint (docs/ALGORITHMS.md, "The loop
-    // reads at the tool's footprint"; run by hand)
-    if let Ok(radius) = std::env::var("POLISHBOT_ACCEPT_FOOTPRINT") {
-        command.args(["--footprint-radius", &radius]);
-    }
-    let out = command.output().unwrap();
-    println!("{}", String::from_utf8_lossy(&out.stdout));
-    let code = out.status.code();
-    assert!(
-        code == Some(0) || code == Some(4),
-        "{code:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let arm = run_removal_loop(&dir, sim, servos);
     let near_pit = |p: &Point3<f64>| {
         truth.defects.iter().any(|d| {
             d.kind == DefectKind::Pit
@@ -229,51 +178,7 @@ pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptan
         let Ok(i) = polishbot::repair::Inspection::load(&it.join("inspection")) else {
             break;
         };
-        let rep: Vec<_> = i.regions.iter().filter(|r| r.repairable).collect();
-        let sure = measured_within(&it.join("inspection"), TOLERANCE_MM);
-        assert_eq!(sure.len(), i.points.len());
-        let judged: Vec<_> = i
-            .points
-            .iter()
-            .zip(&sure)
-            .filter(|(p, s)| **s && p.distance.is_finite() && !near_pit(&p.position))
-            .map(|(p, _)| p)
-            .collect();
-        let lowest = judged
-            .iter()
-            .map(|p| p.distance)
-            .fold(f64::INFINITY, f64::min);
-        let ground = part.ground();
-        let ground_index = (!ground.is_empty()).then(|| Neighbours::new(&ground));
-        let lowest_ground = judged
-            .iter()
-            .filter(|p| {
-                ground_index
-                    .as_ref()
-                    .is_some_and(|g| !g.within(&p.position, GROUND_REACH_MM).is_empty())
-            })
-            .map(|p| p.distance)
-            .fold(f64::INFINITY, f64::min);
-        // the issue's "reachable area": the tool reaches the point square to the reference
-        // surface within the planner's axis limit (a defect at the part's edge has a rim the
-        // 5-DOF arm cannot tilt to: plan.json lists its raster points as unreachable)
-        let open = i
-            .points
-            .iter()
-            .filter(|p| {
-                rep.iter().any(|r| r.id as i64 == p.region)
-                    && p.distance > TOLERANCE_MM
-                    && reach(&[(p.position, p.normal)])
-            })
-            .count();
-        inspections.push(Inspected {
-            regions: rep.len(),
-            volume: rep.iter().map(|r| r.volume).sum(),
-            peak: rep.iter().map(|r| r.peak).fold(0.0, f64::max),
-            lowest,
-            lowest_ground,
-            open,
-        });
+        inspections.push(inspected(&it, &i, &part, &near_pit, &reach));
         if it.join("after_truth.ply").is_file() {
             part.grind(&dir, &truth, k, &in_area);
             if k == 1 {
@@ -317,6 +222,122 @@ pub fn acceptance_in(seed: u64, sim: &str, name: &str, servos: &str) -> Acceptan
         std::fs::write(dir.join("gouged.csv"), rows).unwrap();
     }
     a
+}
+
+/// Writes the loop's settings into `dir` (cycle.toml: `super::SIM_TOOL`, `sim`, the
+/// `[sim.grinding]` lines of `POLISHBOT_ACCEPT_SIM`, and the cell's servos.toml `servos` as in
+/// [`acceptance_in`]) and runs `cycle --mode removal` there; returns the simulated arm's
+/// settings.
+fn run_removal_loop(dir: &Path, sim: &str, servos: &str) -> polishbot::sim::GrindConfig {
+    let cfg = dir.join("cycle.toml");
+    // more of the simulated cell's truth, to take it apart by hand: `;`-separated
+    // `[sim.grinding]` lines whose keys SIM_TOOL does not set (e.g. "pressure_exponent = 1.0;
+    // k_noise = 0.0")
+    let extra = std::env::var("POLISHBOT_ACCEPT_SIM")
+        .unwrap_or_default()
+        .replace(';', "\n");
+    // a cell whose servos.toml has `[compliance]` (issue 50's compensation): `fitted`, the
+    // table `calibrate compliance` fits on this case's simulated arm, or a file given by hand
+    let mut servos = servos.to_string();
+    let arm: polishbot::sim::GrindConfig =
+        toml::from_str(&format!("{}{sim}{extra}", super::SIM_TOOL)).unwrap();
+    if servos == "fitted" {
+        let c = super::compensation::fitted(&arm);
+        println!("fitted [compliance]: {c:?}");
+        servos = super::compensation::servos_with(&c, dir)
+            .display()
+            .to_string();
+    }
+    let robot = match servos.is_empty() {
+        true => String::new(),
+        false => format!("[plan.robot]\nservos = {servos:?}\n[run.robot]\nservos = {servos:?}\n"),
+    };
+    std::fs::write(
+        &cfg,
+        format!(
+            "{robot}[run.sim.grinding]\n{}{sim}{extra}\n",
+            super::SIM_TOOL
+        ),
+    )
+    .unwrap();
+    let mut command = cycle(dir, "cycle");
+    command
+        .args(["--sim", "--mode", "removal", "--config"])
+        .arg(&cfg);
+    // more grinds than the issue's 3, to see what a 4th would do (run by hand)
+    if let Ok(grinds) = std::env::var("POLISHBOT_ACCEPT_GRINDS") {
+        command.args(["--max-iterations", &grinds]);
+    }
+    // the planner reading the part at the tool's footprint (docs/ALGORITHMS.md, "The loop
+    // reads at the tool's footprint"; run by hand)
+    if let Ok(radius) = std::env::var("POLISHBOT_ACCEPT_FOOTPRINT") {
+        command.args(["--footprint-radius", &radius]);
+    }
+    let out = command.output().unwrap();
+    println!("{}", String::from_utf8_lossy(&out.stdout));
+    let code = out.status.code();
+    assert!(
+        code == Some(0) || code == Some(4),
+        "{code:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    arm
+}
+
+/// One inspection's numbers (`it`: its iteration's folder, `i` the inspection read from it;
+/// `part`: the true part as ground so far, `near_pit` and `reach` the area judged).
+fn inspected(
+    it: &Path,
+    i: &polishbot::repair::Inspection,
+    part: &TruePart,
+    near_pit: &dyn Fn(&Point3<f64>) -> bool,
+    reach: &dyn Fn(&[SiteProbe]) -> bool,
+) -> Inspected {
+    let rep: Vec<_> = i.regions.iter().filter(|r| r.repairable).collect();
+    let sure = measured_within(&it.join("inspection"), TOLERANCE_MM);
+    assert_eq!(sure.len(), i.points.len());
+    let judged: Vec<_> = i
+        .points
+        .iter()
+        .zip(&sure)
+        .filter(|(p, s)| **s && p.distance.is_finite() && !near_pit(&p.position))
+        .map(|(p, _)| p)
+        .collect();
+    let lowest = judged
+        .iter()
+        .map(|p| p.distance)
+        .fold(f64::INFINITY, f64::min);
+    let ground = part.ground();
+    let ground_index = (!ground.is_empty()).then(|| Neighbours::new(&ground));
+    let lowest_ground = judged
+        .iter()
+        .filter(|p| {
+            ground_index
+                .as_ref()
+                .is_some_and(|g| !g.within(&p.position, GROUND_REACH_MM).is_empty())
+        })
+        .map(|p| p.distance)
+        .fold(f64::INFINITY, f64::min);
+    // the issue's "reachable area": the tool reaches the point square to the reference
+    // surface within the planner's axis limit (a defect at the part's edge has a rim the
+    // 5-DOF arm cannot tilt to: plan.json lists its raster points as unreachable)
+    let open = i
+        .points
+        .iter()
+        .filter(|p| {
+            rep.iter().any(|r| r.id as i64 == p.region)
+                && p.distance > TOLERANCE_MM
+                && reach(&[(p.position, p.normal)])
+        })
+        .count();
+    Inspected {
+        regions: rep.len(),
+        volume: rep.iter().map(|r| r.volume).sum(),
+        peak: rep.iter().map(|r| r.peak).fold(0.0, f64::max),
+        lowest,
+        lowest_ground,
+        open,
+    }
 }
 
 /// The loop's k in `dir` against the true k: the first refit's ratio (None: not refitted),

@@ -1,9 +1,71 @@
-//! The synth -> inspect -> plan case the hostile tests (tests/hostile.rs, hostile_cell.rs)
-//! run their inputs against: e2e's part (seed 9, three 0.15-0.35 mm defects 2-3 mm wide) with
-//! one layer per region.
+//! The synth -> inspect -> plan case the hostile tests (tests/hostile.rs, hostile_plan.rs,
+//! hostile_cell.rs) run their inputs against: e2e's part (seed 9, three 0.15-0.35 mm defects
+//! 2-3 mm wide) with one layer per region; and the check that a hostile input is refused.
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
 
 use super::{polishbot, succeed};
+
+/// Each case's bound (the probe allows 20 s; these are small inputs).
+const CASE_LIMIT: Duration = Duration::from_secs(20);
+
+/// synth -> inspect -> plan once (e2e's case: seed 9, three defects, one layer per region).
+pub struct Case {
+    dir: PathBuf,
+}
+
+impl Case {
+    /// The file or folder `name` of the case's folder.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+}
+
+/// `p` as a command-line argument.
+pub fn arg(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// The case of tests/hostile.rs and hostile_plan.rs (200,000 reference and 150,000 scan
+/// points, registered by inspect), made once per test binary in a folder named after it.
+pub fn case() -> &'static Case {
+    static CASE: OnceLock<Case> = OnceLock::new();
+    CASE.get_or_init(|| Case {
+        dir: synth_inspect_plan(env!("CARGO_CRATE_NAME"), 200_000, 150_000, false),
+    })
+}
+
+/// Runs `cmd`, which must fail within [`CASE_LIMIT`] with one line on stderr that contains
+/// every one of `needles` and no panic; returns that line.
+pub fn refused(cmd: &mut Command, needles: &[&str]) -> String {
+    let start = Instant::now();
+    let out: Output = cmd.output().expect("start polishbot");
+    let took = start.elapsed();
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(took < CASE_LIMIT, "took {took:?}: {err}");
+    assert!(!out.status.success(), "accepted: {err}");
+    assert_eq!(out.status.code(), Some(1), "exit status: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("polishbot: "))
+        .unwrap_or_else(|| panic!("no error line: {err}"))
+        .to_string();
+    for n in needles {
+        assert!(line.contains(n), "{n:?} not in {line:?}");
+    }
+    assert!(!line.contains(" { "), "Debug text in {line:?}");
+    line
+}
+
+/// The JSON file at `path`.
+pub fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
 
 /// Synthesises the part into `CARGO_TARGET_TMPDIR/name` (`reference_points` and
 /// `scan_points` points), inspects it (with `--pose truth.json` when `given_pose`) into

@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: data paths, the oracle Python, the binary.
 #![allow(dead_code)]
 pub mod accept;
+pub mod chromium;
 pub mod compensation;
 pub mod femoral;
 pub mod hostile;
@@ -273,6 +274,16 @@ pub fn dofbot() -> polishbot::robot::Robot {
         &calib("servos.toml"),
     )
     .expect("load calibration")
+}
+
+/// A joint vector drawn uniformly within every joint's limits of `robot`.
+pub fn random_q(robot: &polishbot::robot::Robot, rng: &mut rand_chacha::ChaCha8Rng) -> Vec<f64> {
+    use rand::Rng;
+    robot
+        .joints
+        .iter()
+        .map(|j| rng.gen_range(j.lower..=j.upper))
+        .collect()
 }
 
 /// Arguments of `cmd` (`inspect` or `register`) on a reference and a scan that need not exist:

@@ -49,12 +49,6 @@ pub const UNTOUCHED_MM: f64 = 1.0;
 /// points at the scans' 0.3 mm spacing, under a defect's 2-4 mm width).
 pub const PATCH_MM: f64 = 1.0;
 
-/// The true part through the grinds without the scan's noise: the deviation synth planted at
-/// each point of the simulated part (its truth files keep their points in order from grind to
-/// grind) less the removal the simulator summed there over the grinds so far. The truth
-/// files' own points carry the first scan's 0.015 mm noise (the first grind's part is that
-/// scan), which on single points reads as -0.06..-0.08 mm where the ground surface averages
-/// -0.01..-0.05 within 0.5 mm.
 /// Farthest a point's place before a grind, found from its place after it (moved back along
 /// its normal by its removal), lies from where the previous truth file has it, mm (0.1: the
 /// normal turns by up to 10 degrees over a grind's 0.25 mm, 0.04 mm off; the points lie
@@ -65,6 +59,12 @@ const MATCH_MM: f64 = 0.1;
 /// 20 degrees, so its point lies farther off than 0.1 mm and the walk ran off the end.
 const MATCH_PER_MM_REMOVED: f64 = 0.35;
 
+/// The true part through the grinds without the scan's noise: the deviation synth planted at
+/// each point of the simulated part (its truth files keep their points in order from grind to
+/// grind) less the removal the simulator summed there over the grinds so far. The truth
+/// files' own points carry the first scan's 0.015 mm noise (the first grind's part is that
+/// scan), which on single points reads as -0.06..-0.08 mm where the ground surface averages
+/// -0.01..-0.05 within 0.5 mm.
 #[derive(Default)]
 pub struct TruePart {
     points: Vec<Point3<f64>>,

@@ -135,9 +135,10 @@ impl PeakFit {
     /// The guard: the centre ([`PeakFit::offset`]) within half the window, the narrow width at
     /// most the window radius (a wider defect is the quadric estimates' case) and supported by
     /// [`MIN_SUPPORT`] points, A and the peak of the start's sign, the residual SD at most
-    /// `max_misfit` × noise and at most 1 + 2 % of the points trimmed (the model describes the data, not a subset that
-    /// suits it), the peak's standard error at most a tenth of its height, and the peak at
-    /// most twice the larger of the start and the highest point kept, plus 4 noise SD.
+    /// `max_misfit` × noise and at most 1 + 2 % of the points trimmed (the model describes the
+    /// data, not a subset that suits it), the peak's standard error at most a tenth of its height,
+    /// and the peak at most twice the larger of the start and the highest point kept, plus 4 noise
+    /// SD.
     pub fn accepted(&self, w: &PeakWindow) -> bool {
         self.describes(w, MIN_SUPPORT) && self.se <= MAX_RELATIVE_SE * self.peak.abs()
     }

@@ -10,7 +10,8 @@
 //! nominal `robot_from_reference` moved by the hidden offsets `mount_offset_mm` and
 //! `mount_rotation_deg` (given in the reference frame). The servos' physical angles over
 //! virtual time ([`trace::ServoTrace`]) give the ball centre through [`fk`] and the sim's own
-//! `tip_offset_mm`, through the gear backlash and the gravity sag of [`slack`]. Method and parameters: docs/ALGORITHMS.md, "Simulated grinding".
+//! `tip_offset_mm`, through the gear backlash and the gravity sag of [`slack`]. Method and
+//! parameters: docs/ALGORITHMS.md, "Simulated grinding".
 //!
 //! Front function: [`grind`] with a [`GrindConfig`]; result: [`GrindReport`].
 pub mod fk;
