@@ -243,6 +243,26 @@ pub fn in_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result
     }
 }
 
+/// Checks that `value` (a setting `key` in `unit`) is finite, above `min` and at most `max`
+/// (as [`in_range`] with `min` itself refused: a length or scale that must be positive).
+pub fn above(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), String> {
+    match value.is_finite() && value > min && value <= max {
+        true => Ok(()),
+        false => Err(format!(
+            "`{key}` = {value:?} {unit} is outside {min:?} (excluded)..={max:?} {unit}"
+        )),
+    }
+}
+
+/// Checks that a count `n` (a setting `key` in `unit`) is at least `min` (a count that must
+/// not be 0: a search with no neighbours, a fit with no points).
+pub fn at_least(key: &str, n: usize, min: usize, unit: &str) -> Result<(), String> {
+    match n >= min {
+        true => Ok(()),
+        false => Err(format!("`{key}` = {n} {unit} is less than {min} {unit}")),
+    }
+}
+
 /// Slowest and fastest line speed the simulated board accepts, baud (the DOFBOT runs 115200;
 /// outside this a byte's time is meaningless or overflows a wait).
 const BAUD_RANGE: (f64, f64) = (300.0, 10_000_000.0);
@@ -365,5 +385,13 @@ mod tests {
         let e = in_range("settle_ms", 1e300, 0.0, 1e3, "ms").unwrap_err();
         assert!(e.starts_with("`settle_ms` = 1e300 ms"), "{e}");
         assert!(in_range("x", f64::NAN, 0.0, 1.0, "mm").is_err());
+        assert!(above("h", 0.05, 0.0, 1.0, "mm").is_ok());
+        assert!(above("h", 1.0, 0.0, 1.0, "mm").is_ok());
+        let e = above("h", 0.0, 0.0, 1.0, "mm").unwrap_err();
+        assert!(
+            e.starts_with("`h` = 0.0 mm is outside 0.0 (excluded)"),
+            "{e}"
+        );
+        assert!(above("h", f64::INFINITY, 0.0, f64::INFINITY, "mm").is_err());
     }
 }
