@@ -232,36 +232,7 @@ pub fn line_of_key(text: &str, section: &str, key: &str) -> Option<usize> {
     None
 }
 
-/// Checks that `value` (a setting `key` in `unit`) is finite and within `min..=max`; the
-/// message names the key in backticks for [`ConfigFile::refuse`].
-pub fn in_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), String> {
-    match value.is_finite() && (min..=max).contains(&value) {
-        true => Ok(()),
-        false => Err(format!(
-            "`{key}` = {value:?} {unit} is outside {min:?}..={max:?} {unit}"
-        )),
-    }
-}
-
-/// Checks that `value` (a setting `key` in `unit`) is finite, above `min` and at most `max`
-/// (as [`in_range`] with `min` itself refused: a length or scale that must be positive).
-pub fn above(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), String> {
-    match value.is_finite() && value > min && value <= max {
-        true => Ok(()),
-        false => Err(format!(
-            "`{key}` = {value:?} {unit} is outside {min:?} (excluded)..={max:?} {unit}"
-        )),
-    }
-}
-
-/// Checks that a count `n` (a setting `key` in `unit`) is at least `min` (a count that must
-/// not be 0: a search with no neighbours, a fit with no points).
-pub fn at_least(key: &str, n: usize, min: usize, unit: &str) -> Result<(), String> {
-    match n >= min {
-        true => Ok(()),
-        false => Err(format!("`{key}` = {n} {unit} is less than {min} {unit}")),
-    }
-}
+pub use crate::settings::{above, at_least, in_range};
 
 /// Slowest and fastest line speed the simulated board accepts, baud (the DOFBOT runs 115200;
 /// outside this a byte's time is meaningless or overflows a wait).

@@ -5,7 +5,7 @@
 //! keys are refused (a typo would otherwise run the default silently).
 use serde::{Deserialize, Serialize};
 
-use crate::cli::settings::{above, at_least, in_range};
+use crate::settings::{above, at_least, in_range};
 
 /// The tolerance on |distance| the comparison works to when its caller gives none, mm
 /// (`inspect`'s default `[regions] tolerance`; a test checks that they agree).

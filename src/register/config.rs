@@ -125,7 +125,7 @@ impl RegisterConfig {
     /// (for `ConfigFile::refuse`). What needs the clouds (the voxel against their extent) the
     /// stage checks when it runs.
     pub fn check(&self) -> Result<(), String> {
-        use crate::cli::settings::{above, at_least, in_range};
+        use crate::settings::{above, at_least, in_range};
         let lengths = [
             ("voxel", self.voxel),
             ("normal_radius", self.normal_radius),
