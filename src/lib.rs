@@ -22,6 +22,7 @@ pub mod removal;
 pub mod repair;
 pub mod report;
 pub mod robot;
+pub mod settings;
 pub mod sim;
 pub mod spatial;
 pub mod synth;

@@ -78,25 +78,11 @@ pub fn settings(
         .map_err(|m| file.refuse("", &m))?;
     super::settings::check_filter(file, "filter", &cfg.filter, None)?;
     if let Some(e) = args.and_then(|a| a.registration_error) {
-        anyhow::ensure!(
-            e.is_finite() && e >= 0.0,
-            "--registration-error: {e} mm is not a non-negative number of mm"
-        );
+        let max = crate::compare::MAX_LENGTH_MM;
+        super::settings::in_range("registration_error", e, 0.0, max, "mm")
+            .map_err(|m| anyhow::anyhow!("--registration-error: {m}"))?;
     }
-    let sg = &cfg.suggest;
-    let finite = |v: [f64; 3]| v.iter().all(|x| x.is_finite()) && v != [0.0; 3];
-    anyhow::ensure!(
-        finite(sg.table_axis) && finite(sg.scanner_direction),
-        "[suggest] table_axis and scanner_direction must be finite non-zero vectors"
-    );
-    anyhow::ensure!(
-        sg.max_incidence_deg > 0.0 && sg.max_incidence_deg <= 90.0,
-        "[suggest] max_incidence_deg must be in (0, 90]"
-    );
-    anyhow::ensure!(
-        sg.step_deg >= 1.0 && sg.step_deg <= 360.0,
-        "[suggest] step_deg must be in 1..=360"
-    );
+    check_settings(file, &cfg)?;
     if let Some(a) = args {
         anyhow::ensure!(
             a.pose.is_none() || a.scan.len() == 1,
@@ -117,12 +103,57 @@ pub fn settings(
     if let Some(m) = args.and_then(|a| a.method) {
         cfg.compare.method = m;
     }
-    anyhow::ensure!(
-        (0.0..=1.0).contains(&cfg.regions.min_coverage),
-        "[regions] min_coverage must be a share between 0 and 1, not {}",
-        cfg.regions.min_coverage
-    );
     Ok(cfg)
+}
+
+/// Largest `[regions] gap_factor`, core-point spacings: 100 spacings (57 mm at the default
+/// 0.57 mm) span a femoral component, so beyond it every error point is one region anyway,
+/// and the neighbour search's radius grows with it.
+pub const MAX_GAP_FACTOR: f64 = 100.0;
+
+/// Checks the `[register]`, `[compare]`, `[regions]`, `[core]` and `[suggest]` settings that
+/// need no cloud: a refusal names the file, the line, the table and the key.
+fn check_settings(file: &super::settings::ConfigFile, cfg: &InspectConfig) -> Result<()> {
+    use super::settings::{above, at_least, in_range};
+    let refuse = |section: &'static str| move |m: String| file.refuse(section, &m);
+    cfg.register.check().map_err(refuse("register"))?;
+    cfg.compare.check().map_err(refuse("compare"))?;
+    let r = &cfg.regions;
+    let regions = [
+        above(
+            "gap_factor",
+            r.gap_factor,
+            0.0,
+            MAX_GAP_FACTOR,
+            "(spacings)",
+        ),
+        at_least("min_points", r.min_points, 1, "points"),
+        in_range("min_coverage", r.min_coverage, 0.0, 1.0, "(share)"),
+    ];
+    regions
+        .into_iter()
+        .try_for_each(|c| c.map_err(refuse("regions")))?;
+    let c = &cfg.core;
+    let core = [
+        at_least("count", c.count.unwrap_or(1), 1, "points"),
+        in_range("uniform_ratio", c.uniform_ratio, 0.0, 1.0, "(share)"),
+    ];
+    core.into_iter()
+        .try_for_each(|c| c.map_err(refuse("core")))?;
+    let sg = &cfg.suggest;
+    let vector = |key: &str, v: [f64; 3]| match v.iter().all(|x| x.is_finite()) && v != [0.0; 3] {
+        true => Ok(()),
+        false => Err(format!("`{key}` = {v:?} is not a finite non-zero vector")),
+    };
+    let suggest = [
+        vector("table_axis", sg.table_axis),
+        vector("scanner_direction", sg.scanner_direction),
+        above("max_incidence_deg", sg.max_incidence_deg, 0.0, 90.0, "deg"),
+        in_range("step_deg", sg.step_deg, 1.0, 360.0, "deg"),
+    ];
+    suggest
+        .into_iter()
+        .try_for_each(|c| c.map_err(refuse("suggest")))
 }
 
 /// The library's inputs from the flags.

@@ -36,9 +36,12 @@ pub struct RegisterArgs {
 
 /// Registers and writes registration.json (also on failure, with `"status": "failed"`).
 pub fn run(args: RegisterArgs, config: Option<&Path>) -> Result<()> {
-    let mut cfg: RegisterConfig = super::common::load_config(config)?;
+    let file = super::settings::ConfigFile::read(config)?;
+    let mut cfg: RegisterConfig = file.parse()?;
+    cfg.check().map_err(|m| file.refuse("", &m))?;
     if args.voxel.is_some() {
         cfg.voxel = args.voxel;
+        cfg.check().map_err(|m| anyhow::anyhow!("--voxel: {m}"))?;
     }
     let reference = super::common::load_reference(
         &args.reference,

@@ -232,16 +232,7 @@ pub fn line_of_key(text: &str, section: &str, key: &str) -> Option<usize> {
     None
 }
 
-/// Checks that `value` (a setting `key` in `unit`) is finite and within `min..=max`; the
-/// message names the key in backticks for [`ConfigFile::refuse`].
-pub fn in_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), String> {
-    match value.is_finite() && (min..=max).contains(&value) {
-        true => Ok(()),
-        false => Err(format!(
-            "`{key}` = {value:?} {unit} is outside {min:?}..={max:?} {unit}"
-        )),
-    }
-}
+pub use crate::settings::{above, at_least, in_range};
 
 /// Slowest and fastest line speed the simulated board accepts, baud (the DOFBOT runs 115200;
 /// outside this a byte's time is meaningless or overflows a wait).
@@ -365,5 +356,13 @@ mod tests {
         let e = in_range("settle_ms", 1e300, 0.0, 1e3, "ms").unwrap_err();
         assert!(e.starts_with("`settle_ms` = 1e300 ms"), "{e}");
         assert!(in_range("x", f64::NAN, 0.0, 1.0, "mm").is_err());
+        assert!(above("h", 0.05, 0.0, 1.0, "mm").is_ok());
+        assert!(above("h", 1.0, 0.0, 1.0, "mm").is_ok());
+        let e = above("h", 0.0, 0.0, 1.0, "mm").unwrap_err();
+        assert!(
+            e.starts_with("`h` = 0.0 mm is outside 0.0 (excluded)"),
+            "{e}"
+        );
+        assert!(above("h", f64::INFINITY, 0.0, f64::INFINITY, "mm").is_err());
     }
 }

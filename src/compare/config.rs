@@ -3,8 +3,9 @@
 //! `[compare.adaptive.densify]`, `[compare.adaptive.fill]`). Every default is written once,
 //! in the `Default` impls here, with its reason; docs/ALGORITHMS.md has the method. Unknown
 //! keys are refused (a typo would otherwise run the default silently).
-use anyhow::{ensure, Result};
 use serde::{Deserialize, Serialize};
+
+use crate::settings::{above, at_least, in_range};
 
 /// The tolerance on |distance| the comparison works to when its caller gives none, mm
 /// (`inspect`'s default `[regions] tolerance`; a test checks that they agree).
@@ -279,56 +280,161 @@ impl Default for FillConfig {
     }
 }
 
+/// Largest cylinder radius, half-length, weight scale `h`, noise or registration error
+/// accepted, mm: a fifth of a femoral component, as `inspect`'s largest tolerance. The default
+/// radii are 0.3-0.9 mm; a wider cylinder averages across the part's curvature and each core
+/// point reads most of the cloud (classic `radius = 1e308` ran past 120 s).
+pub const MAX_LENGTH_MM: f64 = 10.0;
+
+/// Most candidate radii of the adaptive variant (`adaptive.radii`): each costs a quadric fit
+/// per core point; the default is 4 (r0 to 2.83 r0), and 10,000 radii ran past 120 s.
+pub const MAX_RADII: usize = 16;
+
 impl CompareConfig {
-    /// Checks the settings the adaptive variant reads: one line naming the key.
-    pub(crate) fn check_adaptive(&self) -> Result<()> {
-        let a = &self.adaptive;
-        ensure!(
-            a.lambda > 0.0 && a.h > 0.0,
-            "adaptive lambda and h must be positive"
-        );
-        ensure!(
-            self.refine_above() >= 0.0 && self.densify_above() >= 0.0,
-            "adaptive refine_above and densify_above must be non-negative (inf turns them off)"
-        );
-        ensure!(
-            self.tolerance.is_finite() && self.tolerance >= 0.0,
-            "the tolerance must be a finite non-negative number of mm, not {}",
-            self.tolerance
-        );
-        let positive = |key: &str, value: f64| {
-            ensure!(
-                value.is_finite() && value > 0.0,
-                "adaptive.{key} must be a finite positive number, not {value}"
-            );
-            Ok(())
-        };
-        positive("peak.min_window", a.peak.min_window)?;
+    /// Checks every setting: a refusal is one line naming the key within `[compare]` (dotted
+    /// below it, `adaptive.h`) in backticks, with its range, for `ConfigFile::refuse`.
+    pub fn check(&self) -> Result<(), String> {
+        let len = MAX_LENGTH_MM;
+        if let Some(r) = self.radius {
+            above("radius", r, 0.0, len, "mm")?;
+        }
+        in_range("max_distance", self.max_distance, 0.0, len, "mm")?;
+        in_range(
+            "registration_error",
+            self.registration_error,
+            0.0,
+            len,
+            "mm",
+        )?;
+        at_least("min_points", self.min_points, 1, "points")?;
+        let radii = &self.adaptive.radii;
+        if radii.len() > MAX_RADII {
+            return Err(format!(
+                "`adaptive.radii` lists {} radii, more than {MAX_RADII} (each costs a fit per core point)",
+                radii.len()
+            ));
+        }
+        for &r in radii {
+            above("adaptive.radii", r, 0.0, len, "mm")?;
+        }
+        if !radii.windows(2).all(|w| w[0] < w[1]) {
+            return Err("`adaptive.radii` must be in strictly ascending order".into());
+        }
+        self.check_adaptive()
+    }
+
+    /// Checks the settings the adaptive variant reads (every key of `[compare.adaptive]` but
+    /// the radii, and the tolerance): one line naming the key, as [`CompareConfig::check`].
+    fn check_adaptive(&self) -> Result<(), String> {
+        let (a, inf) = (&self.adaptive, f64::INFINITY);
+        above("adaptive.lambda", a.lambda, 0.0, inf, "(factor)")?;
+        above("adaptive.h", a.h, 0.0, MAX_LENGTH_MM, "mm")?;
+        in_range("adaptive.similarity", a.similarity, 0.0, 1.0, "(share)")?;
+        in_range(
+            "adaptive.max_normal_angle",
+            a.max_normal_angle,
+            0.0,
+            180.0,
+            "deg",
+        )?;
+        if let Some(n) = a.noise {
+            above("adaptive.noise", n, 0.0, MAX_LENGTH_MM, "mm")?;
+        }
+        in_range("adaptive.gamma", a.gamma, 0.0, inf, "(SDs)")?;
+        above("adaptive.max_misfit", a.max_misfit, 0.0, inf, "(noise SDs)")?;
+        for (key, v) in [
+            ("refine_above", a.refine_above),
+            ("densify_above", a.densify_above),
+        ] {
+            if let Some(v) = v.filter(|v| v.is_nan() || *v < 0.0) {
+                return Err(format!(
+                    "`adaptive.{key}` = {v:?} mm is not a number of mm >= 0 (inf turns it off)"
+                ));
+            }
+        }
+        in_range("tolerance", self.tolerance, 0.0, inf, "mm")?;
+        above(
+            "adaptive.peak.min_window",
+            a.peak.min_window,
+            0.0,
+            inf,
+            "mm",
+        )?;
         let d = &a.densify;
-        ensure!(
-            (0.0..=1.0).contains(&d.min_coverage),
-            "adaptive.densify.min_coverage must be a share between 0 and 1, not {}",
-            d.min_coverage
-        );
-        positive("densify.min_width", d.min_width)?;
-        positive("densify.far_noise", d.far_noise)?;
+        in_range(
+            "adaptive.densify.min_coverage",
+            d.min_coverage,
+            0.0,
+            1.0,
+            "(share)",
+        )?;
+        above(
+            "adaptive.densify.min_width",
+            d.min_width,
+            0.0,
+            inf,
+            "(spacings)",
+        )?;
+        above(
+            "adaptive.densify.far_noise",
+            d.far_noise,
+            0.0,
+            inf,
+            "(noise SDs)",
+        )?;
         let f = &a.fill;
-        ensure!(
-            f.min_share > 0.0 && f.min_share < 1.0,
-            "adaptive.fill.min_share must be a share between 0 and 1 (exclusive), not {}",
-            f.min_share
-        );
-        positive("fill.lack_of_fit", f.lack_of_fit)?;
-        positive("fill.wide_window", f.wide_window)?;
-        ensure!(
-            f.max_widening.is_finite() && f.max_widening >= 1.0,
-            "adaptive.fill.max_widening must be a finite number of at least 1, not {}",
-            f.max_widening
-        );
-        ensure!(
-            f.min_local >= 1,
-            "adaptive.fill.min_local must be at least 1"
-        );
-        Ok(())
+        above("adaptive.fill.min_share", f.min_share, 0.0, 1.0, "(share)")?;
+        if f.min_share == 1.0 {
+            return Err("`adaptive.fill.min_share` = 1.0 (share) must be below 1".into());
+        }
+        above(
+            "adaptive.fill.lack_of_fit",
+            f.lack_of_fit,
+            0.0,
+            inf,
+            "(SEs)",
+        )?;
+        above(
+            "adaptive.fill.wide_window",
+            f.wide_window,
+            0.0,
+            inf,
+            "(SDs)",
+        )?;
+        in_range(
+            "adaptive.fill.max_widening",
+            f.max_widening,
+            1.0,
+            inf,
+            "(factor)",
+        )?;
+        at_least("adaptive.fill.min_local", f.min_local, 1, "points")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_pass_and_each_bad_value_names_its_key() {
+        assert_eq!(CompareConfig::default().check(), Ok(()));
+        let refused = |set: fn(&mut CompareConfig)| {
+            let mut c = CompareConfig::default();
+            set(&mut c);
+            c.check().unwrap_err()
+        };
+        let e = refused(|c| c.radius = Some(1e308));
+        assert!(e.starts_with("`radius` = 1e308 mm"), "{e}");
+        let e = refused(|c| c.adaptive.radii = vec![0.1; MAX_RADII + 1]);
+        assert!(e.starts_with("`adaptive.radii` lists 17"), "{e}");
+        let e = refused(|c| c.adaptive.noise = Some(f64::NAN));
+        assert!(e.starts_with("`adaptive.noise`"), "{e}");
+        let e = refused(|c| c.adaptive.densify.min_coverage = 2.0);
+        assert!(e.starts_with("`adaptive.densify.min_coverage`"), "{e}");
+        let mut c = CompareConfig::default();
+        c.adaptive.densify_above = Some(f64::INFINITY);
+        c.adaptive.gamma = 0.0;
+        assert_eq!(c.check(), Ok(()));
     }
 }

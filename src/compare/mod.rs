@@ -19,7 +19,7 @@ use anyhow::{ensure, Result};
 use self::clouds::{in_storage_order, run, surface_density, Clouds};
 pub use self::config::{
     AdaptiveConfig, Aggregate, CompareConfig, DensifyConfig, FillConfig, Method, PeakConfig,
-    DEFAULT_TOLERANCE,
+    DEFAULT_TOLERANCE, MAX_LENGTH_MM, MAX_RADII,
 };
 pub use self::core::{
     area_share, area_shares, cloud_reference, core_points, default_count, mesh_reference,
@@ -53,14 +53,7 @@ pub fn compare(
         .ok_or_else(|| anyhow::anyhow!("core points have no normals"))?;
     ensure!(!reference.is_empty(), "reference has no points");
     ensure!(!scan.is_empty(), "scan has no points");
-    ensure!(
-        cfg.max_distance.is_finite() && cfg.max_distance >= 0.0,
-        "max_distance must be a finite non-negative number"
-    );
-    ensure!(
-        cfg.registration_error.is_finite() && cfg.registration_error >= 0.0,
-        "registration_error must be a finite non-negative number"
-    );
+    cfg.check().map_err(|m| anyhow::anyhow!("[compare] {m}"))?;
     // The grids' cells only set the speed (every query is exact); the scan's density, from
     // its grid, sets the default radii.
     let (mut ref_grid, mut scan_grid) = rayon::join(
@@ -76,7 +69,7 @@ pub fn compare(
                 .unwrap_or_else(|| radius_for(CLASSIC_RADIUS_POINTS));
             ensure!(
                 radius > 0.0 && radius.is_finite(),
-                "radius must be positive"
+                "the default classic radius {radius} mm (from the scan's density) is not positive"
             );
             (radius, Vec::new())
         }

@@ -106,3 +106,99 @@ impl Default for RegisterConfig {
         }
     }
 }
+
+/// Largest length setting accepted (`voxel`, the radii, the thresholds, the ICP's distances),
+/// mm: a metre, beyond any part the cell holds (the arm reaches about 0.3 m); past it a value
+/// is a unit slip, not a part.
+pub const MAX_LENGTH_MM: f64 = 1000.0;
+
+/// Longest clique search accepted (`clique_time_budget`), s: an hour, 120 times the default
+/// guard of 30 s (itself a 300x margin on the 0.1 s search); a budget past it never bounds
+/// the search, and `inf`, NaN or 1e308 s cannot be a timer.
+pub const MAX_CLIQUE_TIME_BUDGET_S: f64 = 3600.0;
+
+/// Smallest clique (`min_clique`): three correspondences fix a rigid pose, fewer leave it free.
+pub const MIN_CLIQUE: usize = 3;
+
+impl RegisterConfig {
+    /// Checks every setting: a refusal is one line naming the key in backticks with its range
+    /// (for `ConfigFile::refuse`). What needs the clouds (the voxel against their extent) the
+    /// stage checks when it runs.
+    pub fn check(&self) -> Result<(), String> {
+        use crate::settings::{above, at_least, in_range};
+        let lengths = [
+            ("voxel", self.voxel),
+            ("normal_radius", self.normal_radius),
+            ("feature_radius", self.feature_radius),
+            ("compat_sigma", self.compat_sigma),
+            ("inlier_threshold", self.inlier_threshold),
+            ("icp_max_distance", self.icp_max_distance),
+            ("icp_kernel_scale", self.icp_kernel_scale),
+            ("fitness_distance", self.fitness_distance),
+        ];
+        for (key, v) in lengths {
+            if let Some(v) = v {
+                above(key, v, 0.0, MAX_LENGTH_MM, "mm")?;
+            }
+        }
+        let counts = [
+            ("feature_max_nn", self.feature_max_nn, 1, "neighbours"),
+            ("max_keypoints", self.max_keypoints, 1, "points"),
+            ("max_correspondences", self.max_correspondences, 1, "pairs"),
+            ("min_clique", self.min_clique, MIN_CLIQUE, "pairs"),
+            ("max_cliques", self.max_cliques, 1, "cliques"),
+            ("top_k", self.top_k, 1, "cliques"),
+            ("icp_max_points", self.icp_max_points, 1, "points"),
+            (
+                "icp_max_iterations",
+                self.icp_max_iterations,
+                1,
+                "iterations",
+            ),
+        ];
+        for (key, n, min, unit) in counts {
+            at_least(key, n, min, unit)?;
+        }
+        let budget = MAX_CLIQUE_TIME_BUDGET_S;
+        above(
+            "clique_time_budget",
+            self.clique_time_budget,
+            0.0,
+            budget,
+            "s",
+        )?;
+        in_range(
+            "compat_min_score",
+            self.compat_min_score,
+            0.0,
+            1.0,
+            "(score)",
+        )?;
+        in_range("min_fitness", self.min_fitness, 0.0, 1.0, "(share)")?;
+        let tol = self.icp_relative_tolerance;
+        in_range("icp_relative_tolerance", tol, 0.0, 1.0, "(relative)")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_pass_and_each_bad_value_names_its_key() {
+        assert_eq!(RegisterConfig::default().check(), Ok(()));
+        let refused = |set: fn(&mut RegisterConfig)| {
+            let mut c = RegisterConfig::default();
+            set(&mut c);
+            c.check().unwrap_err()
+        };
+        let e = refused(|c| c.clique_time_budget = f64::INFINITY);
+        assert!(e.starts_with("`clique_time_budget` = inf s"), "{e}");
+        let e = refused(|c| c.feature_max_nn = 0);
+        assert!(e.starts_with("`feature_max_nn` = 0 neighbours"), "{e}");
+        let e = refused(|c| c.voxel = Some(f64::NAN));
+        assert!(e.starts_with("`voxel` = NaN mm"), "{e}");
+        let e = refused(|c| c.min_fitness = 2.0);
+        assert!(e.starts_with("`min_fitness`"), "{e}");
+    }
+}

@@ -176,6 +176,8 @@ pub fn register_with_progress(
     progress: &dyn Fn(&str),
 ) -> Result<Registration, RegisterError> {
     let start = Instant::now();
+    cfg.check()
+        .map_err(|m| RegisterError::Input(format!("[register] {m}")))?;
     check_sizes(scan, reference)?;
     let mut times = Times::default();
     progress("down-sampling and normals");

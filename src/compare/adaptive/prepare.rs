@@ -68,7 +68,6 @@ pub(super) fn prepare<'a>(
     let ref_normals = clouds.reference.normals.as_deref().ok_or_else(|| {
         anyhow::anyhow!("the adaptive method needs reference normals (give a mesh or normals)")
     })?;
-    cfg.check_adaptive()?;
     // A scan point inside a cylinder around a reference point is within `reach` of it.
     let r_max = *radii.last().expect("radii");
     let reach = r_max.hypot(cfg.max_distance.max(r_max)) * (1.0 + REACH_MARGIN);
