@@ -53,7 +53,7 @@ pub fn stray(pair: &GrindPair, predicted: &[f64], cfg: &ShiftConfig) -> Option<S
         .filter(|(p, _)| index.within(p, STRAY_RADIUS_MM).len() > STRAY_NEIGHBOURS)
         .collect();
     let deepest = packed.iter().max_by(|a, b| a.1.total_cmp(&b.1))?;
-    (packed.len() > cfg.unplanned_points).then(|| Stray {
+    (packed.len() > cfg.unplanned_points).then_some(Stray {
         points: packed.len(),
         deepest_mm: deepest.1,
         at: deepest.0,
