@@ -2,31 +2,14 @@
 //! old keys and the nested tables read; the tolerance an input that sets the thresholds.
 mod common;
 
-use common::{polishbot, tempdir};
+use common::tempdir;
 use polishbot::compare::{CompareConfig, DEFAULT_TOLERANCE};
 use polishbot::regions::RegionConfig;
 
 /// Runs `inspect --config` with `toml` (the inputs need not exist: settings are read first).
 fn inspect_with_config(toml: &str) -> (std::process::Output, std::path::PathBuf) {
     let tmp = tempdir();
-    let dir = tmp.path();
-    let config = dir.join("bad.toml");
-    std::fs::write(&config, toml).unwrap();
-    let out = polishbot()
-        .args([
-            "inspect",
-            "--reference",
-            "missing.ply",
-            "--scan",
-            "missing.ply",
-            "-o",
-        ])
-        .arg(dir.join("out"))
-        .arg("--config")
-        .arg(&config)
-        .output()
-        .expect("run polishbot");
-    (out, config)
+    common::run_with_config("inspect", tmp.path(), toml)
 }
 
 #[test]

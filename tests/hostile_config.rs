@@ -3,37 +3,12 @@
 //! a changed answer), and the edge values the docs call valid still load.
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::Output;
-
-use common::{polishbot, tempdir};
-
-/// Runs `polishbot COMMAND --config FILE` with `toml` in FILE, on inputs that do not exist:
-/// the settings are checked before any file is read.
-fn run_with_config(command: &str, dir: &Path, toml: &str) -> (Output, PathBuf) {
-    let config = dir.join("hostile.toml");
-    std::fs::write(&config, toml).unwrap();
-    let out = polishbot()
-        .args([
-            command,
-            "--reference",
-            "missing.ply",
-            "--scan",
-            "missing.ply",
-            "-o",
-        ])
-        .arg(dir.join("out"))
-        .arg("--config")
-        .arg(&config)
-        .output()
-        .expect("run polishbot");
-    (out, config)
-}
+use common::tempdir;
 
 /// Asserts that `toml` is refused by `command` in one line: `config: line N: [table] `key``.
 fn assert_refused(command: &str, toml: &str, table: &str, key: &str, line: usize) {
     let tmp = tempdir();
-    let (out, config) = run_with_config(command, tmp.path(), toml);
+    let (out, config) = common::run_with_config(command, tmp.path(), toml);
     let err = String::from_utf8_lossy(&out.stderr);
     let err = err.trim_end();
     assert_eq!(out.status.code(), Some(1), "{toml}: {err}");
@@ -191,7 +166,7 @@ fn edge_values_the_docs_call_valid_still_load() {
                 [register]\nmin_inliers = 0\nrank_candidates = 0\nclique_time_budget = 3600.0\n\
                 [regions]\nmin_coverage = 0.0\n[core]\nuniform_ratio = 1.0\ncount = 1\n";
     let tmp = tempdir();
-    let (out, _) = run_with_config("inspect", tmp.path(), toml);
+    let (out, _) = common::run_with_config("inspect", tmp.path(), toml);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     // settings accepted: the first error is the missing input

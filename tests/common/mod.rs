@@ -474,3 +474,25 @@ pub fn inspect_in(dir: &Path, scan: &str, out: &str) -> std::process::Output {
             .arg(dir.join(out)),
     )
 }
+
+/// Runs `polishbot COMMAND --config FILE` with `toml` in FILE, on inputs that do not exist:
+/// the settings are checked before any file is read.
+pub fn run_with_config(command: &str, dir: &Path, toml: &str) -> (std::process::Output, PathBuf) {
+    let config = dir.join("settings.toml");
+    std::fs::write(&config, toml).unwrap();
+    let out = polishbot()
+        .args([
+            command,
+            "--reference",
+            "missing.ply",
+            "--scan",
+            "missing.ply",
+            "-o",
+        ])
+        .arg(dir.join("out"))
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .expect("run polishbot");
+    (out, config)
+}
