@@ -42,36 +42,26 @@ fn turntable_case(seed: u64) -> TurntableScore {
     let cfg = d.join("synth.toml");
     std::fs::write(&cfg, "[turntable]\nline_of_sight_noise = true\n").unwrap();
     let seed_arg = seed.to_string();
-    let out = common::polishbot()
-        .arg("--config")
-        .arg(&cfg)
-        .args(["synth", "--out"])
-        .arg(d)
-        .args(["--views", "12", "--seed", &seed_arg])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::succeed(
+        common::polishbot()
+            .arg("--config")
+            .arg(&cfg)
+            .args(["synth", "--out"])
+            .arg(d)
+            .args(["--views", "12", "--seed", &seed_arg]),
     );
     let views: Vec<String> = (0..12)
         .map(|i| d.join(format!("view_{i:03}.ply")).display().to_string())
         .collect();
     let merged = d.join("merged.ply");
-    let out = common::polishbot()
-        .arg("merge")
-        .args(&views)
-        .args([
-            "--step", "30", "--axis", "0,0,1", "--centre", "4,-3,0", "-o",
-        ])
-        .arg(&merged)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::succeed(
+        common::polishbot()
+            .arg("merge")
+            .args(&views)
+            .args([
+                "--step", "30", "--axis", "0,0,1", "--centre", "4,-3,0", "-o",
+            ])
+            .arg(&merged),
     );
     let insp = d.join("inspection");
     let out = common::inspect_cmd(&d.join("reference.ply"), &merged, None, &insp)

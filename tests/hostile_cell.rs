@@ -37,6 +37,21 @@ fn cell_copy(dir: &Path, name: &str, edit: impl Fn(&str) -> String) -> PathBuf {
     cell
 }
 
+/// `cycle --sim` on the case's reference and scan with the settings `cfg`, into `out`.
+fn sim_cycle(cfg: &Path, out: &Path) -> Command {
+    let dir = case();
+    let mut cmd = polishbot();
+    cmd.arg("--config")
+        .arg(cfg)
+        .args(["cycle", "--sim", "--reference"]);
+    cmd.arg(dir.join("reference.ply"))
+        .arg("--scan")
+        .arg(dir.join("scan.ply"))
+        .arg("-o")
+        .arg(out);
+    cmd
+}
+
 fn dry_run(plan: &Path, cell: &Path) -> Command {
     let mut cmd = polishbot();
     cmd.args(["run", "--dry-run", "--sim", "--plan"])
@@ -321,7 +336,6 @@ fn a_part_file_that_is_not_the_inspected_part_is_refused() {
 /// cycle's own iter-1/run.toml).
 #[test]
 fn cycle_blames_a_bad_setting_on_the_users_file_and_line() {
-    let dir = case();
     let tmp = common::tempdir();
     for (n, text, needles) in [
         (
@@ -337,14 +351,7 @@ fn cycle_blames_a_bad_setting_on_the_users_file_and_line() {
     ] {
         let cfg = tmp.path().join(format!("cycle{n}.toml"));
         std::fs::write(&cfg, text).unwrap();
-        let mut cmd = polishbot();
-        cmd.arg("--config")
-            .arg(&cfg)
-            .args(["cycle", "--sim", "--reference"]);
-        cmd.arg(dir.join("reference.ply"))
-            .arg("--scan")
-            .arg(dir.join("scan.ply"));
-        cmd.arg("-o").arg(tmp.path().join(format!("out{n}")));
+        let mut cmd = sim_cycle(&cfg, &tmp.path().join(format!("out{n}")));
         let line = one_line_failure(&cmd.output().unwrap());
         let name = format!("cycle{n}.toml: ");
         assert!(line.contains(&name), "{line}");
@@ -468,22 +475,12 @@ fn settings_that_would_switch_a_safety_check_off_are_refused_at_their_key() {
 /// Main ground such an arm's parts to -0.055..-0.075 mm in 5 of 10 acceptance cases.
 #[test]
 fn cycle_stops_before_grinding_on_an_arm_its_calibration_was_not_made_on() {
-    let dir = case();
     let tmp = common::tempdir();
     let cfg = tmp.path().join("cycle.toml");
     let worn = "[run.sim.grinding]\nbacklash_deg = [1.0, 1.0, 1.0, 1.0, 1.0]\n";
     std::fs::write(&cfg, worn).unwrap();
     let out_dir = tmp.path().join("out");
-    let mut cmd = polishbot();
-    cmd.arg("--config")
-        .arg(&cfg)
-        .args(["cycle", "--sim", "--reference"]);
-    cmd.arg(dir.join("reference.ply"))
-        .arg("--scan")
-        .arg(dir.join("scan.ply"))
-        .arg("-o")
-        .arg(&out_dir);
-    let out = cmd.output().unwrap();
+    let out = sim_cycle(&cfg, &out_dir).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(4), "{stdout}");
     assert!(
