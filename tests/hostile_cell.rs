@@ -492,3 +492,24 @@ fn cycle_stops_before_grinding_on_an_arm_its_calibration_was_not_made_on() {
     assert_eq!(json["outcome"], "arm_mismatch");
     assert!(!out_dir.join("iter-1").join("after.ply").exists());
 }
+
+/// A NaN tool axis (it passed the unit-vector check and was reported as the home pose
+/// colliding) and a joint stiffness of 1e-300 N m/rad (accepted) are refused at their keys.
+#[test]
+fn a_nan_tool_axis_and_a_vanishing_joint_stiffness_are_refused_at_their_keys() {
+    let line = plan_with_tool(|t| t.replace("axis = [0.0, 0.0, 1.0]", "axis = [nan, 0.0, 1.0]"));
+    assert!(
+        line.contains("cell/tool.toml") && line.contains("axis") && line.contains("unit"),
+        "{line}"
+    );
+    let line = plan_with_cell_file("servos.toml", |t| {
+        t.replace(
+            "stiffness_nm_rad = [109.397876",
+            "stiffness_nm_rad = [1e-300",
+        )
+    });
+    assert!(
+        line.contains("servos.toml") && line.contains("compliance.stiffness_nm_rad[0]"),
+        "{line}"
+    );
+}

@@ -28,10 +28,15 @@ pub struct UnreachablePoint {
 impl fmt::Display for UnreachablePoint {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let [x, y, z] = self.surface_mm;
+        // a contact the removal planner lifted over belongs to no stroke (usize::MAX)
+        let stroke = match self.stroke {
+            usize::MAX => String::new(),
+            s => format!(" stroke {s}"),
+        };
         write!(
             f,
-            "region {} layer {} stroke {} point {} at ({x:.2}, {y:.2}, {z:.2}) mm: {}",
-            self.region, self.layer, self.stroke, self.point, self.reason
+            "region {} layer {}{stroke} point {} at ({x:.2}, {y:.2}, {z:.2}) mm: {}",
+            self.region, self.layer, self.point, self.reason
         )
     }
 }

@@ -65,7 +65,8 @@ impl Tool {
     pub fn parse(file: &Path, text: &str) -> Result<Self, RobotError> {
         let tool: Tool = parse_toml(file, text)?;
         let n = Vector3::from(tool.axis).norm();
-        if (n - 1.0).abs() > 1e-9 {
+        // written so that a NaN norm fails too
+        if !((n - 1.0).abs() <= 1e-9) {
             return Err(RobotError::bad(
                 file,
                 "axis",
@@ -452,14 +453,20 @@ pub struct Compliance {
     pub masses_kg: [f64; LUMPED_MASSES],
 }
 
+/// Range of a joint's stiffness in `[compliance]`, N m/rad (1 to 1e7): the DOFBOT's joints
+/// are about 110-120 (5 mm of sag at full reach); under 1 a newton-metre would turn a joint a
+/// radian (the probe's 1e-300 was accepted), and `calibrate compliance` writes at most 1e6
+/// (its compliance floor, 1e-6 rad/N m) for a joint the touches find rigid.
+pub const STIFFNESS_RANGE_NM_RAD: (f64, f64) = (1.0, 1e7);
+
 impl Compliance {
     /// The first problem of the table (`[compliance]` key and why), if any.
     pub fn problem(&self) -> Option<(String, String)> {
         let bad =
             |key: &str, i: usize, why: &str| Some((format!("compliance.{key}[{i}]"), why.into()));
         for (i, k) in self.stiffness_nm_rad.iter().enumerate() {
-            if !(k.is_finite() && *k > 0.0) {
-                return bad("stiffness_nm_rad", i, "must be a finite number > 0");
+            if !(STIFFNESS_RANGE_NM_RAD.0..=STIFFNESS_RANGE_NM_RAD.1).contains(k) {
+                return bad("stiffness_nm_rad", i, "must be in 1..1e7 N m/rad");
             }
         }
         for (i, b) in self.backlash_deg.iter().enumerate() {
