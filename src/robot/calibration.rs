@@ -65,8 +65,7 @@ impl Tool {
     pub fn parse(file: &Path, text: &str) -> Result<Self, RobotError> {
         let tool: Tool = parse_toml(file, text)?;
         let n = Vector3::from(tool.axis).norm();
-        // written so that a NaN norm fails too
-        if !((n - 1.0).abs() <= 1e-9) {
+        if n.is_nan() || (n - 1.0).abs() > 1e-9 {
             return Err(RobotError::bad(
                 file,
                 "axis",
