@@ -343,10 +343,12 @@ fn a_lower_bound_peak_is_carried_into_the_plan_with_a_warning() {
 fn run_refuses_a_tampered_plan_before_sending_anything() {
     let tmp = common::tempdir();
     let (p, path) = small_plan(tmp.path());
+    let provenance = common::hostile::stamp(&path, &common::hostile::provenance_of(tmp.path()));
     let (robot, _) = dofbot();
     let refuse = |bad: &Plan, why: &str| {
         let f = tmp.path().join("bad.json");
         bad.save(&f).unwrap();
+        common::hostile::stamp(&f, &provenance);
         let out = common::polishbot()
             .args(["run", "--sim", "--plan"])
             .arg(&f)

@@ -1,6 +1,7 @@
 //! The synth -> inspect -> plan case the hostile tests (tests/hostile.rs, hostile_plan.rs,
 //! hostile_cell.rs) run their inputs against: e2e's part (seed 9, three 0.15-0.35 mm defects
-//! 2-3 mm wide) with one layer per region; and the check that a hostile input is refused.
+//! 2-3 mm wide) with one layer per region; the check that a hostile input is refused; and
+//! the provenance block `run` needs on a plan a test saves through the library.
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
@@ -105,4 +106,35 @@ pub fn synth_inspect_plan(
         succeed(polishbot().args(step.split_whitespace()));
     }
     dir
+}
+
+/// The `provenance` block `plan` writes for the inspection in `dir`/inspection (tests/plan.rs's
+/// `small_plan`) and the shipped cell: `run` refuses a plan without one (it cannot be checked against the cell and
+/// inspection it was made for), so the plans a test saves through the library carry it
+/// ([`stamp`]) to reach the checks each test is about.
+pub fn provenance_of(dir: &Path) -> serde_json::Value {
+    let cfg = dir.join("rigid.toml");
+    std::fs::write(&cfg, "[plan]\nmode = \"rigid\"\ndepth_step_mm = 1.0\n").unwrap();
+    let made = dir.join("made.json");
+    super::succeed(
+        super::polishbot()
+            .arg("--config")
+            .arg(&cfg)
+            .args(["plan", "--inspection"])
+            .arg(dir.join("inspection"))
+            .arg("-o")
+            .arg(&made),
+    );
+    let text = std::fs::read_to_string(&made).unwrap();
+    serde_json::from_str::<serde_json::Value>(&text).unwrap()["provenance"].clone()
+}
+
+/// Writes `provenance` into the plan file `path` (saved by the library, which writes none);
+/// returns it.
+pub fn stamp(path: &Path, provenance: &serde_json::Value) -> serde_json::Value {
+    let mut plan: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    plan["provenance"] = provenance.clone();
+    std::fs::write(path, plan.to_string()).unwrap();
+    provenance.clone()
 }
