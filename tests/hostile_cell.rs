@@ -426,14 +426,16 @@ fn a_plan_without_its_provenance_record_is_refused() {
 }
 
 /// Settings that would switch a safety check off are refused at their key: a force share
-/// over the servo's rated torque, a tool-axis cone wider than square, and validation
-/// tolerances so wide that `run` refused the valid plan blaming the plan.
+/// over the servo's rated torque, a Monte Carlo of no draws (refused before with a Debug dump
+/// of its whole config), a tool-axis cone wider than square, and validation tolerances so
+/// wide that `run` refused the valid plan blaming the plan.
 #[test]
 fn settings_that_would_switch_a_safety_check_off_are_refused_at_their_key() {
     let dir = case();
     let tmp = common::tempdir();
     for (n, text, key) in [
         (1, "[plan]\nforce_share = 2.0\n", "force_share"),
+        (4, "[plan.monte_carlo]\ndraws = 0\n", "monte_carlo.draws"),
         (
             2,
             "[plan.ik]\nmax_axis_miss_deg = 1000.0\n",

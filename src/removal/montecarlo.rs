@@ -91,17 +91,24 @@ impl Default for MonteCarloConfig {
 }
 
 impl MonteCarloConfig {
-    /// Checks the settings against their ranges (one message naming them all).
+    /// Checks the settings against their ranges; the message names the first key outside its
+    /// range with its value.
     pub fn check(&self) -> Result<(), String> {
-        let ok = (1..=10_000).contains(&self.draws)
-            && (0.0..=10.0).contains(&self.backlash_deg)
-            && (0.0..=50.0).contains(&self.tip_error_mm)
-            && (0.5..1.0).contains(&self.quantile);
-        match ok {
+        let ranges = [
+            ("draws", self.draws as f64, 1.0, 10_000.0),
+            ("backlash_deg", self.backlash_deg, 0.0, 10.0),
+            ("tip_error_mm", self.tip_error_mm, 0.0, 50.0),
+        ];
+        for (key, v, lo, hi) in ranges {
+            if !(lo..=hi).contains(&v) {
+                return Err(format!("`monte_carlo.{key}` = {v} is outside {lo}..={hi}"));
+            }
+        }
+        match (0.5..1.0).contains(&self.quantile) {
             true => Ok(()),
             false => Err(format!(
-                "`monte_carlo` {self:?} is outside draws 1..=10000, backlash_deg 0..=10, \
-                 tip_error_mm 0..=50, quantile 0.5..1"
+                "`monte_carlo.quantile` = {} is outside 0.5..1 (1 excluded)",
+                self.quantile
             )),
         }
     }
