@@ -203,7 +203,7 @@ pub fn run(args: CalibrateArgs, config: Option<&Path>) -> anyhow::Result<()> {
     let robot = Robot::load(&cfg.robot.urdf, &tool_in, &servos_in)?;
     let mut bus_cfg = cfg.bus.clone();
     bus_cfg.servo_map = frames::servo_map(&robot)?;
-    let gripper_deg = frames::gripper(&robot)?.hold_deg.unwrap_or(90.0);
+    let gripper_deg = frames::gripper_hold_deg(&robot)?;
     let map = bus_cfg.servo_map.clone();
     let name = routine_name(&args.routine);
     // Checks that need no arm come first: nothing moves on bad input.

@@ -227,9 +227,7 @@ pub fn check_loop_arm(
     let arm = Cell {
         robot: &robot,
         map: &map,
-        gripper_deg: crate::motion::frames::gripper(&robot)?
-            .hold_deg
-            .unwrap_or(90.0),
+        gripper_deg: crate::motion::frames::gripper_hold_deg(&robot)?,
         cfg: &cfg,
     };
     let who = (Some(&sim.grinding), "cycle: the arm before the first grind");

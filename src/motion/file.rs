@@ -261,7 +261,7 @@ impl Plan {
             ));
         }
         let map = frames::servo_map(robot)?;
-        let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+        let hold = frames::gripper_hold_deg(robot)?;
         let expected = frames::encode(&qs, &map, hold, self.period)?;
         let time_ms = frames::frame_time_ms(self.period)?;
         let mut raw = Vec::with_capacity(expected.len());

@@ -23,6 +23,12 @@ pub fn gripper(robot: &Robot) -> Result<&Servo, PlanError> {
     robot.servos.gripper().ok_or_else(|| frame_err(NO_GRIPPER))
 }
 
+/// The angle the gripper is held at during every move, degrees: its `hold_deg`, else 90
+/// (mid-range).
+pub fn gripper_hold_deg(robot: &Robot) -> Result<f64, PlanError> {
+    Ok(gripper(robot)?.hold_deg.unwrap_or(90.0))
+}
+
 /// Move time of every frame, ms: the period.
 pub fn frame_time_ms(period: f64) -> Result<u16, PlanError> {
     let ms = (period * 1000.0).round();

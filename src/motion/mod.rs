@@ -335,7 +335,7 @@ pub(super) fn samples_and_frames(
         })
         .collect();
     let map = frames::servo_map(robot)?;
-    let hold = frames::gripper(robot)?.hold_deg.unwrap_or(90.0);
+    let hold = frames::gripper_hold_deg(robot)?;
     let sent = commanded.unwrap_or(traj);
     let qs: Vec<Vec<f64>> = (0..sent.len()).map(|i| sent.sample(i).to_vec()).collect();
     let stream = frames::encode(&qs, &map, hold, traj.period)?;
