@@ -202,8 +202,11 @@ pub fn survey(arm: Arm, cases: &[u64], cells: &[u64], jobs: usize, out: &PathBuf
                 };
                 let name = format!("survey-{}-{case}-{cell}", arm.name);
                 let sim = format!("{}seed = {cell}\n", arm.sim);
+                // `POLISHBOT_ACCEPT_SERVOS` (as in `acceptance_with`) overrides the arm's table
+                let servos = std::env::var("POLISHBOT_ACCEPT_SERVOS");
+                let servos = servos.as_deref().unwrap_or(arm.servos);
                 let result = catch_unwind(AssertUnwindSafe(|| {
-                    acceptance_in(case, &sim, &name, arm.servos)
+                    acceptance_in(case, &sim, &name, servos)
                 }))
                 .map_err(|e| {
                     e.downcast_ref::<String>()
