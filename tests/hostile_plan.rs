@@ -368,3 +368,40 @@ fn calibration_files_come_from_the_working_directory_not_the_source_tree() {
     assert!(err.contains("calibration/"), "{err}");
     assert!(!err.contains(env!("CARGO_MANIFEST_DIR")), "{err}");
 }
+
+/// A URDF joint's `<limit velocity>` is read: NaN, 0 or negative is refused naming the file
+/// and the joint (it was ignored), and a URDF limit below servos.toml `velocity` is the one the
+/// planner keeps (the intersection, as for the position limits).
+#[test]
+fn a_urdf_velocity_limit_is_checked_and_bounds_the_planner() {
+    use polishbot::robot::{FileText, Robot, Tool};
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration");
+    let read = |f: &str| FileText::read(&shipped.join(f)).unwrap();
+    let (urdf, servos) = (read("dofbot.urdf"), read("servos.toml"));
+    let with_velocity = |v: &str| {
+        let text = urdf
+            .text
+            .replacen("velocity=\"1.0\"", &format!("velocity=\"{v}\""), 1);
+        let urdf = FileText {
+            path: urdf.path.clone(),
+            text,
+        };
+        let tool = Tool::load(&shipped.join("tool.toml")).unwrap();
+        Robot::from_texts(&urdf, tool, &servos)
+    };
+    for bad in ["nan", "0", "-1", "inf"] {
+        let Err(e) = with_velocity(bad) else {
+            panic!("velocity {bad} accepted")
+        };
+        let e = e.to_string();
+        assert!(
+            e.contains("dofbot.urdf") && e.contains("arm_joint1") && e.contains("velocity"),
+            "{bad}: {e}"
+        );
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+    let robot = with_velocity("0.5").unwrap();
+    assert_eq!(robot.joints[0].velocity, 0.5);
+    // a URDF limit above servos.toml's leaves the servos' (1.0 rad/s)
+    assert_eq!(with_velocity("4.0").unwrap().joints[0].velocity, 1.0);
+}
