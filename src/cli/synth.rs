@@ -127,7 +127,7 @@ pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<
         if let Some(e) = args.elevation {
             anyhow::ensure!(
                 e.is_finite() && e.abs() < 90.0,
-                "--elevation: {e} deg is not between -90 and 90"
+                "--elevation: {e:?} deg is not between -90 and 90"
             );
             let e = e.to_radians();
             t.scanner_direction = [0.0, -e.cos(), e.sin()];
