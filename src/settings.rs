@@ -24,6 +24,17 @@ pub fn above(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<()
     }
 }
 
+/// Checks that a count `n` (a setting `key` in `unit`) is within `min..=max` (a count that
+/// must not be 0, and past `max` only costs time or memory without changing the answer).
+pub fn count_in(key: &str, n: usize, min: usize, max: usize, unit: &str) -> Result<(), String> {
+    match (min..=max).contains(&n) {
+        true => Ok(()),
+        false => Err(format!(
+            "`{key}` = {n} {unit} is outside {min}..={max} {unit}"
+        )),
+    }
+}
+
 /// Checks that a count `n` (a setting `key` in `unit`) is at least `min` (a count that must
 /// not be 0: a search with no neighbours, a fit with no points).
 pub fn at_least(key: &str, n: usize, min: usize, unit: &str) -> Result<(), String> {

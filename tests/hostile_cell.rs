@@ -470,6 +470,59 @@ fn settings_that_would_switch_a_safety_check_off_are_refused_at_their_key() {
     );
 }
 
+/// `[plan.collision]` and `[plan.monte_carlo]` settings out of range are refused at the line
+/// that sets them, like every other `[plan]` key (collision's were printed without a line), and
+/// a huge value is printed compactly (1e300 came out as 301 digits).
+#[test]
+fn plan_collision_and_monte_carlo_settings_are_refused_at_their_line() {
+    let dir = case();
+    let tmp = common::tempdir();
+    for (n, text, key) in [
+        (
+            1,
+            "[plan.collision]\n\nmargin_mm = -1.0\n",
+            "collision.margin_mm",
+        ),
+        (
+            2,
+            "[plan.collision]\n\nglide_mm = nan\n",
+            "collision.glide_mm",
+        ),
+        (
+            3,
+            "[plan]\n[plan.collision]\ncontact_tolerance_mm = -0.1\n",
+            "collision.contact_tolerance_mm",
+        ),
+        (
+            4,
+            "[plan.collision]\n\nlink_radius_mm = [30.0, 20.0]\n",
+            "collision.link_radius_mm",
+        ),
+        (
+            5,
+            "[plan.monte_carlo]\n\ntip_error_mm = 1e300\n",
+            "monte_carlo.tip_error_mm",
+        ),
+        (
+            6,
+            "[plan.monte_carlo]\n\nbacklash_deg = -1.0\n",
+            "monte_carlo.backlash_deg",
+        ),
+    ] {
+        let cfg = tmp.path().join(format!("mc{n}.toml"));
+        std::fs::write(&cfg, text).unwrap();
+        let mut cmd = polishbot();
+        cmd.arg("--config").arg(&cfg).args(["plan", "--inspection"]);
+        cmd.arg(dir.join("inspection"))
+            .arg("-o")
+            .arg(tmp.path().join("p.json"));
+        let line = one_line_failure(&cmd.output().unwrap());
+        let place = format!("mc{n}.toml: line 3: [plan] `{key}`");
+        assert!(line.contains(&place), "{place:?} not in {line}");
+        assert!(!line.contains("0000000000"), "{line}");
+    }
+}
+
 /// `cycle` checks its arm against the cell's compliance table before the first grind: on an
 /// arm with 1 degree of backlash per joint (DOFBOT.md's worn arm) the shipped table, learned
 /// on the documented arm, is contradicted, and the loop stops before anything is ground,

@@ -46,6 +46,18 @@ fn register_settings_out_of_range_name_the_key() {
         ("voxel = 0.0", "voxel"),
         ("voxel = -1.0", "voxel"),
         ("voxel = nan", "voxel"),
+        ("rank_candidates = 0", "rank_candidates"),
+        ("rank_candidates = 1001", "rank_candidates"),
+        ("rank_candidates = 4611686018427387904", "rank_candidates"),
+        ("feature_max_nn = 1000000000", "feature_max_nn"),
+        ("icp_max_iterations = 10001", "icp_max_iterations"),
+        ("max_cliques = 9223372036854775807", "max_cliques"),
+        ("top_k = 100001", "top_k"),
+        ("max_keypoints = 100000001", "max_keypoints"),
+        ("icp_max_points = 100000001", "icp_max_points"),
+        ("max_correspondences = 1000001", "max_correspondences"),
+        ("min_clique = 1000001", "min_clique"),
+        ("min_inliers = 1000001", "min_inliers"),
     ];
     for (setting, key) in cases {
         let toml = format!("# hostile\n[register]\n{setting}\n");
@@ -163,7 +175,10 @@ fn edge_values_the_docs_call_valid_still_load() {
     let toml = "[compare]\nmax_distance = 0.0\nmin_points = 1\n\
                 [compare.adaptive]\nsimilarity = 0.0\ngamma = 0.0\ndensify_above = inf\n\
                 refine_above = inf\nmax_normal_angle = 180.0\nradii = [0.3, 0.6]\n\
-                [register]\nmin_inliers = 0\nrank_candidates = 0\nclique_time_budget = 3600.0\n\
+                [register]\nmin_inliers = 0\nrank_candidates = 1000\nclique_time_budget = 3600.0\n\
+                feature_max_nn = 10000\nicp_max_iterations = 10000\nmax_cliques = 10000000\n\
+                top_k = 100000\nmax_keypoints = 100000000\nicp_max_points = 100000000\n\
+                max_correspondences = 1000000\nmin_clique = 3\n\
                 [regions]\nmin_coverage = 0.0\n[core]\nuniform_ratio = 1.0\ncount = 1\n";
     let tmp = tempdir();
     let (out, _) = common::run_with_config("inspect", tmp.path(), toml);

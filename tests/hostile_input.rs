@@ -367,3 +367,97 @@ fn parse_errors_carry_their_place() {
     };
     assert_eq!(c.field("red").unwrap(), &[1.0, 255.0, 3.0]);
 }
+
+/// A PCD header whose `POINTS` is not `WIDTH` × `HEIGHT` and an OBJ face corner with a
+/// texture or normal index that is not a number were read as if they were fine; both are
+/// refused at their line. The valid forms beside them read.
+#[test]
+fn pcd_point_counts_and_obj_face_corners_must_agree_with_themselves() {
+    let dir = tempdir();
+    let pcd = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 6\n";
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1/1 2/2/2 3/3/3\n";
+    for (name, text, says) in [
+        (
+            "width.pcd",
+            pcd.replace("WIDTH 2", "WIDTH 3"),
+            vec!["line 8", "POINTS 2", "WIDTH"],
+        ),
+        (
+            "height.pcd",
+            pcd.replace("HEIGHT 1", "HEIGHT 2"),
+            vec!["line 8", "2 × 2 = 4"],
+        ),
+        (
+            "texture.obj",
+            obj.replace("f 1/1/1", "f 1/x/1"),
+            vec!["line 4", "1/x/1"],
+        ),
+        (
+            "normal.obj",
+            obj.replace("3/3/3", "3/3/n"),
+            vec!["line 4", "3/3/n"],
+        ),
+        (
+            "corner.obj",
+            obj.replace("2/2/2", "2/2/2/2"),
+            vec!["line 4", "2/2/2/2"],
+        ),
+    ] {
+        let (path, out) = info_on(dir.path(), name, text.as_bytes());
+        assert_refused(&out, &path, &says);
+    }
+    let faces = |text: &str| match cloud::parse(text.as_bytes(), Format::Obj) {
+        Ok(Geometry::Mesh { mesh, .. }) => mesh.faces.len(),
+        other => panic!("{text}: {:?}", other.err()),
+    };
+    assert_eq!(faces(obj), 1);
+    assert_eq!(
+        faces(
+            &obj.replace("/1/1", "//1")
+                .replace("/2/2", "//2")
+                .replace("/3/3", "//3")
+        ),
+        1
+    );
+    assert_eq!(
+        faces(
+            &obj.replace("/1/1", "/1")
+                .replace("/2/2", "/2")
+                .replace("/3/3", "/3")
+        ),
+        1
+    );
+    let Ok(Geometry::Cloud(c)) = cloud::parse(pcd.as_bytes(), Format::Pcd) else {
+        panic!("valid PCD refused")
+    };
+    assert_eq!(c.len(), 2);
+}
+
+/// An ascii STL in capitals (`SOLID`, `FACET NORMAL`, `VERTEX`: what many CAD exporters
+/// write) was taken for binary and refused with a triangle count from its header's bytes; its
+/// keywords are read in any case now, its errors name its lines, and a binary STL whose
+/// 80-byte header begins with "solid" is still binary.
+#[test]
+fn ascii_stl_keywords_are_read_in_any_case() {
+    let facet = "FACET NORMAL 0 0 1\n OUTER LOOP\n  VERTEX 0 0 0\n  Vertex 1 0 0\n  VERTEX 0 1 0\n ENDLOOP\nENDFACET\n";
+    let upper = format!("SOLID part\n{facet}{facet}ENDSOLID part\n");
+    let Ok(Geometry::Mesh { mesh, .. }) = cloud::parse(upper.as_bytes(), Format::Stl) else {
+        panic!("uppercase ascii STL refused")
+    };
+    assert_eq!((mesh.faces.len(), mesh.vertices.len()), (2, 3));
+    let dir = tempdir();
+    let cut = upper.replacen("ENDLOOP\n", "", 1);
+    let (path, out) = info_on(dir.path(), "upper.stl", cut.as_bytes());
+    assert_refused(&out, &path, &["line 7", "endfacet"]);
+    let mut bin = b"solid written by a binary exporter".to_vec();
+    bin.resize(80, b' ');
+    bin.extend_from_slice(&1u32.to_le_bytes());
+    for v in [0f32, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    bin.extend_from_slice(&[0, 0]);
+    let Ok(Geometry::Mesh { mesh, .. }) = cloud::parse(&bin, Format::Stl) else {
+        panic!("binary STL with a solid header refused")
+    };
+    assert_eq!(mesh.faces.len(), 1);
+}

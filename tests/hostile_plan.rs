@@ -368,3 +368,76 @@ fn calibration_files_come_from_the_working_directory_not_the_source_tree() {
     assert!(err.contains("calibration/"), "{err}");
     assert!(!err.contains(env!("CARGO_MANIFEST_DIR")), "{err}");
 }
+
+/// A URDF joint's `<limit velocity>` is read: NaN, 0 or negative is refused naming the file
+/// and the joint (it was ignored), and a URDF limit below servos.toml `velocity` is the one the
+/// planner keeps (the intersection, as for the position limits).
+#[test]
+fn a_urdf_velocity_limit_is_checked_and_bounds_the_planner() {
+    use polishbot::robot::{FileText, Robot, Tool};
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("calibration");
+    let read = |f: &str| FileText::read(&shipped.join(f)).unwrap();
+    let (urdf, servos) = (read("dofbot.urdf"), read("servos.toml"));
+    let with_velocity = |v: &str| {
+        let text = urdf
+            .text
+            .replacen("velocity=\"1.0\"", &format!("velocity=\"{v}\""), 1);
+        let urdf = FileText {
+            path: urdf.path.clone(),
+            text,
+        };
+        let tool = Tool::load(&shipped.join("tool.toml")).unwrap();
+        Robot::from_texts(&urdf, tool, &servos)
+    };
+    for bad in ["nan", "0", "-1", "inf"] {
+        let Err(e) = with_velocity(bad) else {
+            panic!("velocity {bad} accepted")
+        };
+        let e = e.to_string();
+        assert!(
+            e.contains("dofbot.urdf") && e.contains("arm_joint1") && e.contains("velocity"),
+            "{bad}: {e}"
+        );
+        assert_eq!(e.lines().count(), 1, "{e}");
+    }
+    let robot = with_velocity("0.5").unwrap();
+    assert_eq!(robot.joints[0].velocity, 0.5);
+    // a URDF limit above servos.toml's leaves the servos' (1.0 rad/s)
+    assert_eq!(with_velocity("4.0").unwrap().joints[0].velocity, 1.0);
+}
+
+/// A negative synth setting given as a flag (`--noise -1` was taken by clap for a flag and
+/// ended in its usage text, exit 2) and a defect range out of bounds or reversed are refused
+/// in one line naming the flag and the range; the documented edges still pass the check.
+#[test]
+fn synth_flags_out_of_range_name_the_flag_and_the_range() {
+    let tmp = common::tempdir();
+    let out = tmp.path().join("case");
+    for (flag, value, says) in [
+        ("--noise", "-1", "0..=5 mm"),
+        ("--noise", "inf", "0..=5 mm"),
+        ("--outliers", "-0.1", "0..=0.49"),
+        ("--width-range", "0.01,3", "0.05..=100 mm"),
+        ("--width-range", "3,1", "min <= max"),
+        ("--height-range", "-1,0.5", "0..=10 mm"),
+    ] {
+        let line = refused(
+            polishbot().args(["synth", "--out", arg(&out), flag, value]),
+            &[&format!("polishbot: {flag}: "), says],
+        );
+        assert_eq!(line.lines().count(), 1);
+        assert!(
+            !out.join("reference.ply").exists(),
+            "{flag} {value} wrote files"
+        );
+    }
+    let mut cfg = polishbot::synth::SynthConfig {
+        width_range: [0.05, 100.0],
+        height_range: [0.0, 10.0],
+        noise: 0.0,
+        ..Default::default()
+    };
+    assert_eq!(cfg.check(), Ok(()));
+    cfg.width_range = [2.0, 2.0];
+    assert_eq!(cfg.check(), Ok(()));
+}

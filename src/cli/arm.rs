@@ -288,7 +288,7 @@ fn act<T: Transport>(mut bus: Bus<T>, action: &ArmAction) -> anyhow::Result<()> 
             })?;
             let time = match time {
                 Some(t) if !(t.is_finite() && *t > 0.0 && *t <= MAX_MOVE_TIME_S) => {
-                    anyhow::bail!("--time: {t} s is outside 0..={MAX_MOVE_TIME_S} s")
+                    anyhow::bail!("--time: {t:?} s is outside 0..={MAX_MOVE_TIME_S} s")
                 }
                 Some(t) => Some(Duration::from_secs_f64(*t)),
                 None => None,

@@ -28,10 +28,10 @@ pub struct SynthArgs {
     #[arg(long)]
     pub defects: Option<usize>,
     /// Noise standard deviation per coordinate, mm [default: 0.015].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub noise: Option<f64>,
     /// Outlier share of scan points [default: 0.01].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub outliers: Option<f64>,
     /// Points in reference.ply [default: 400000].
     #[arg(long)]
@@ -40,22 +40,22 @@ pub struct SynthArgs {
     #[arg(long)]
     pub scan_points: Option<usize>,
     /// Defect |height| range in mm, "min,max" [default: 0.04,0.5].
-    #[arg(long, value_parser = parse_range)]
+    #[arg(long, value_parser = parse_range, allow_hyphen_values = true)]
     pub height_range: Option<[f64; 2]>,
     /// Defect width (FWHM) range in mm, "min,max" [default: 0.4,3].
-    #[arg(long, value_parser = parse_range)]
+    #[arg(long, value_parser = parse_range, allow_hyphen_values = true)]
     pub width_range: Option<[f64; 2]>,
     /// Largest translation of the scan's random pose, mm [default: 60].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub max_translation: Option<f64>,
     /// Also write this many turntable range views (view_000.ply.., turntable.json).
     #[arg(long)]
     pub views: Option<usize>,
     /// Nominal turntable step between views, degrees [default: 360 / views].
-    #[arg(long, requires = "views")]
+    #[arg(long, requires = "views", allow_hyphen_values = true)]
     pub step: Option<f64>,
     /// Largest error of a view's true angle against its nominal one, degrees [default: 3].
-    #[arg(long, requires = "views")]
+    #[arg(long, requires = "views", allow_hyphen_values = true)]
     pub angle_error: Option<f64>,
     /// Points per turntable view [default: 100000].
     #[arg(long, requires = "views")]
@@ -71,14 +71,16 @@ pub struct SynthArgs {
     pub elevation: Option<f64>,
 }
 
+/// "min,max" as two numbers (their order and range are checked with the other settings, so
+/// that the message names the option and its range).
 fn parse_range(s: &str) -> Result<[f64; 2], String> {
     let v: Vec<f64> = s
         .split(',')
         .map(|t| t.trim().parse::<f64>().map_err(|e| format!("{t:?}: {e}")))
         .collect::<Result<_, _>>()?;
     match v.as_slice() {
-        [a, b] if a <= b => Ok([*a, *b]),
-        _ => Err("expected \"min,max\" with min <= max".into()),
+        [a, b] => Ok([*a, *b]),
+        _ => Err("expected \"min,max\"".into()),
     }
 }
 
@@ -86,8 +88,13 @@ fn parse_range(s: &str) -> Result<[f64; 2], String> {
 pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<()> {
     let file = super::settings::ConfigFile::read(config)?;
     let mut cfg: SynthConfig = file.parse()?;
+    // the settings given as flags: a refusal of one names its flag, not the config file
+    let mut flags = Vec::new();
     macro_rules! set {
-        ($($field:ident),*) => {$(if let Some(v) = args.$field { cfg.$field = v; })*};
+        ($($field:ident),*) => {$(if let Some(v) = args.$field {
+            cfg.$field = v;
+            flags.push(stringify!($field));
+        })*};
     }
     set!(
         seed,
@@ -120,13 +127,19 @@ pub fn run(args: SynthArgs, config: Option<&std::path::Path>) -> anyhow::Result<
         if let Some(e) = args.elevation {
             anyhow::ensure!(
                 e.is_finite() && e.abs() < 90.0,
-                "--elevation: {e} deg is not between -90 and 90"
+                "--elevation: {e:?} deg is not between -90 and 90"
             );
             let e = e.to_radians();
             t.scanner_direction = [0.0, -e.cos(), e.sin()];
         }
     }
-    cfg.check().map_err(|m| file.refuse("", &m))?;
+    cfg.check().map_err(|m| {
+        let key = m.split('`').nth(1).unwrap_or("");
+        match flags.contains(&key) {
+            true => anyhow::anyhow!("--{}: {m}", key.replace('_', "-")),
+            false => file.refuse("", &m),
+        }
+    })?;
     let case = synth(&cfg)?;
     case.write(&args.out)?;
     let t = &case.truth;

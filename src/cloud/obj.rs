@@ -24,10 +24,7 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
             Some("f") => {
                 let mut idx = Vec::new();
                 for t in tok {
-                    let first = t.split('/').next().unwrap_or("");
-                    let i: i64 = first.parse().map_err(|_| {
-                        ParseError::new(place, format!("bad face index {:?}", text::shorten(t)))
-                    })?;
+                    let i = face_corner(t, place)?;
                     let n = points.len() as i64;
                     let abs = if i > 0 { i - 1 } else { n + i };
                     if i == 0 || abs < 0 || abs >= n {
@@ -70,6 +67,25 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
         },
         attributes: cloud,
     })
+}
+
+/// The vertex index of a face corner `v`, `v/t`, `v//n` or `v/t/n`: every index given must be
+/// a non-zero integer (texture and normal indices are not used, but a corner `1/x/1` is not
+/// a face this reader understands).
+fn face_corner(t: &str, place: Place) -> Result<i64, ParseError> {
+    let bad = || ParseError::new(place, format!("bad face corner {:?}", text::shorten(t)));
+    let parts: Vec<&str> = t.split('/').collect();
+    if parts.len() > 3 {
+        return Err(bad());
+    }
+    let index = |s: &str| s.parse::<i64>().ok().filter(|&i| i != 0);
+    for (k, s) in parts.iter().enumerate().skip(1) {
+        // `v//n`: the texture index may be left out
+        if !(k == 1 && s.is_empty() && parts.len() == 3) && index(s).is_none() {
+            return Err(bad());
+        }
+    }
+    parts[0].parse().map_err(|_| bad())
 }
 
 fn xyz<'a>(tok: &mut impl Iterator<Item = &'a str>, place: Place) -> Result<[f64; 3], ParseError> {

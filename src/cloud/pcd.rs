@@ -61,8 +61,8 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
 fn header(bytes: &[u8]) -> Result<Header, ParseError> {
     let (mut names, mut sizes, mut kinds, mut counts) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let mut points: Option<usize> = None;
-    let (mut width, mut height) = (None, 1usize);
+    let mut points: Option<(usize, Place)> = None;
+    let (mut width, mut height) = (None, (1usize, None));
     let mut data = None;
     for item in text::lines(bytes) {
         let (line_no, start, line) = item?;
@@ -93,11 +93,9 @@ fn header(bytes: &[u8]) -> Result<Header, ParseError> {
                     .map(|s| text::count(s, place))
                     .collect::<Result<_, _>>()?
             }
-            Some("WIDTH") => width = Some(text::count(rest.first().copied().unwrap_or(""), place)?),
-            Some("HEIGHT") => height = text::count(rest.first().copied().unwrap_or(""), place)?,
-            Some("POINTS") => {
-                points = Some(text::count(rest.first().copied().unwrap_or(""), place)?)
-            }
+            Some("WIDTH") => width = Some((text::count(first(&rest), place)?, place)),
+            Some("HEIGHT") => height = (text::count(first(&rest), place)?, Some(place)),
+            Some("POINTS") => points = Some((text::count(first(&rest), place)?, place)),
             Some("DATA") => {
                 let body = (start + line.len() + 1).min(bytes.len());
                 data = Some((
@@ -155,13 +153,7 @@ fn header(bytes: &[u8]) -> Result<Header, ParseError> {
             );
         }
     }
-    let n = match (points, width) {
-        (Some(n), _) => n,
-        (None, Some(w)) => w
-            .checked_mul(height)
-            .ok_or_else(|| ParseError::new(data_place, "WIDTH × HEIGHT is too large"))?,
-        (None, None) => return fail(data_place, "no POINTS or WIDTH"),
-    };
+    let n = point_count(points, width, height, data_place)?;
     Ok(Header {
         fields,
         n,
@@ -170,6 +162,39 @@ fn header(bytes: &[u8]) -> Result<Header, ParseError> {
         body_line,
         data_place,
     })
+}
+
+/// The first token of a header line's values ("" when there is none: refused as a count).
+fn first<'a>(rest: &[&'a str]) -> &'a str {
+    rest.first().copied().unwrap_or("")
+}
+
+/// The points the header declares: `POINTS`, which must equal `WIDTH` × `HEIGHT` when `WIDTH`
+/// is given too (a disagreement is refused at the `POINTS` line), else `WIDTH` × `HEIGHT`.
+fn point_count(
+    points: Option<(usize, Place)>,
+    width: Option<(usize, Place)>,
+    (height, height_place): (usize, Option<Place>),
+    data_place: Place,
+) -> Result<usize, ParseError> {
+    let area = match width {
+        Some((w, place)) => Some(w.checked_mul(height).ok_or_else(|| {
+            ParseError::new(height_place.unwrap_or(place), "WIDTH × HEIGHT is too large")
+        })?),
+        None => None,
+    };
+    match (points, area) {
+        (Some((n, place)), Some(a)) if n != a => fail(
+            place,
+            format!(
+                "POINTS {n} is not WIDTH × HEIGHT ({} × {height} = {a})",
+                width.map_or(0, |w| w.0)
+            ),
+        ),
+        (Some((n, _)), _) => Ok(n),
+        (None, Some(a)) => Ok(a),
+        (None, None) => fail(data_place, "no POINTS or WIDTH"),
+    }
 }
 
 /// The ascii data: `n` rows of the fields' values, each checked against its type.

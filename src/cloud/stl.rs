@@ -1,4 +1,4 @@
-//! STL reader (binary and ascii). Vertices are merged by exact position, so the mesh counts
+//! STL reader (binary and ascii; ascii keywords in any case). Vertices are merged by exact position, so the mesh counts
 //! unique vertices; facet normals in the file are ignored (winding defines them).
 use std::collections::HashMap;
 
@@ -54,7 +54,10 @@ pub fn read(bytes: &[u8]) -> Result<Geometry, ParseError> {
         }
     }
     let head = String::from_utf8_lossy(&bytes[..bytes.len().min(512)]);
-    if head.trim_start().starts_with("solid") && std::str::from_utf8(bytes).is_ok() {
+    let head = head.trim_start().as_bytes();
+    // keywords in any case: CAD exporters write `SOLID`, `FACET NORMAL`, `VERTEX`
+    let solid = head.len() >= 5 && head[..5].eq_ignore_ascii_case(b"solid");
+    if solid && std::str::from_utf8(bytes).is_ok() {
         return read_ascii(bytes);
     }
     if bytes.len() < 84 {
@@ -113,7 +116,9 @@ fn read_ascii(bytes: &[u8]) -> Result<Geometry, ParseError> {
         last_line = line_no;
         let place = Place::Line(line_no);
         let mut tok = text::tokens(line);
-        let word = tok.next();
+        let first = tok.next();
+        let word = first.map(str::to_ascii_lowercase);
+        let word = word.as_deref();
         if ended && !matches!(word, None | Some("solid")) {
             return fail(
                 place,
@@ -171,11 +176,12 @@ fn read_ascii(bytes: &[u8]) -> Result<Geometry, ParseError> {
             },
             Some("solid") => ended = false,
             Some("outer") | None => {}
-            Some(other) => {
+            Some(_) => {
+                let other = first.unwrap_or("");
                 return fail(
                     place,
                     format!("unexpected {:?} in ascii STL", text::shorten(other)),
-                )
+                );
             }
         }
     }

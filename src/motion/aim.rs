@@ -103,12 +103,12 @@ impl Aim {
             .filter(|s| !(0.01..=100.0).contains(s))
         {
             return Err(format!(
-                "`aim.first_pass_share` = {s} is outside 0.01..=100 (x tolerance)"
+                "`aim.first_pass_share` = {s:?} is outside 0.01..=100 (x tolerance)"
             ));
         }
         if let Some(r) = self.reach_mm.filter(|r| !(r.is_finite() && *r >= 0.0)) {
             return Err(format!(
-                "`aim.reach_mm` = {r} is not a finite distance >= 0 (mm)"
+                "`aim.reach_mm` = {r:?} is not a finite distance >= 0 (mm)"
             ));
         }
         let finite = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());

@@ -295,7 +295,7 @@ impl PlanConfig {
         if !(self.joint_margin > 0.0 && self.joint_margin <= 1.0) {
             let m = self.joint_margin;
             return Err(PlanError::Config(format!(
-                "`joint_margin` = {m} is outside 0 (excluded)..=1"
+                "`joint_margin` = {m:?} is outside 0 (excluded)..=1"
             )));
         }
         if self.home.len() != robot.dof() {

@@ -74,13 +74,13 @@ fn check(cfg: &CurvatureSampleConfig, n: usize) -> Result<()> {
     }
     if !(0.0..=1.0).contains(&cfg.uniform_ratio) {
         bail!(
-            "curvature sampling: uniform ratio J must be in [0, 1] (got {})",
+            "curvature sampling: uniform ratio J must be in [0, 1] (got {:?})",
             cfg.uniform_ratio
         );
     }
     if !(cfg.feature_angle_deg >= 0.0 && cfg.feature_angle_deg <= 90.0) {
         bail!(
-            "curvature sampling: feature angle must be in [0, 90] degrees (got {})",
+            "curvature sampling: feature angle must be in [0, 90] degrees (got {:?})",
             cfg.feature_angle_deg
         );
     }
@@ -92,7 +92,7 @@ fn check(cfg: &CurvatureSampleConfig, n: usize) -> Result<()> {
     }
     if let Some(r) = cfg.radius {
         if !(r > 0.0 && r.is_finite()) {
-            bail!("curvature sampling: radius must be a positive number of mm (got {r})");
+            bail!("curvature sampling: radius must be a positive number of mm (got {r:?})");
         }
     }
     Ok(())

@@ -163,7 +163,7 @@ pub fn estimate_normals(cloud: &PointCloud, cfg: &NormalConfig) -> Result<Normal
     }
     if let Some(r) = cfg.radius {
         if !(r > 0.0 && r.is_finite()) {
-            bail!("normals: radius must be a positive number of mm (got {r})");
+            bail!("normals: radius must be a positive number of mm (got {r:?})");
         }
     }
     let orientation = match cfg.orientation {

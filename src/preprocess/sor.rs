@@ -92,7 +92,7 @@ pub fn check_settings(cfg: &SorConfig) -> Result<(), (&'static str, String)> {
         return Err((
             "std_ratio",
             format!(
-                "outlier filter: std ratio must be a finite number >= 0 (got {})",
+                "outlier filter: std ratio must be a finite number >= 0 (got {:?})",
                 cfg.std_ratio
             ),
         ));

@@ -37,7 +37,7 @@ pub fn check_voxel(cloud: &PointCloud, voxel_mm: f64, option: &str) -> anyhow::R
 /// mm. The message names `option`.
 pub fn check_voxel_value(voxel_mm: f64, option: &str) -> anyhow::Result<()> {
     if !(voxel_mm > 0.0 && voxel_mm.is_finite()) {
-        anyhow::bail!("{option}: the voxel must be a positive number of mm (got {voxel_mm})");
+        anyhow::bail!("{option}: the voxel must be a positive number of mm (got {voxel_mm:?})");
     }
     Ok(())
 }

@@ -120,12 +120,41 @@ pub const MAX_CLIQUE_TIME_BUDGET_S: f64 = 3600.0;
 /// Smallest clique (`min_clique`): three correspondences fix a rigid pose, fewer leave it free.
 pub const MIN_CLIQUE: usize = 3;
 
+/// Most FPFH neighbours (`feature_max_nn`): 100 times the default 100 (Open3D's); the work
+/// per described point grows with it, and the radius bounds the neighbourhood anyway.
+pub const MAX_FEATURE_NN: usize = 10_000;
+
+/// Largest point cap (`max_keypoints`, `icp_max_points`): a hundred million points, 250 times
+/// the 400k-point bench scan; a cap above a cloud's size takes all of it.
+pub const MAX_POINTS_CAP: usize = 100_000_000;
+
+/// Most correspondences (`max_correspondences`; also the most `min_clique` and `min_inliers`
+/// can ask for): 333 times the default 3,000; the compatibility graph is shrunk to its work
+/// cap long before.
+pub const MAX_CORRESPONDENCES: usize = 1_000_000;
+
+/// Most maximal cliques enumerated (`max_cliques`): 333 times the default 30,000; each is held
+/// until the `top_k` selection.
+pub const MAX_CLIQUES: usize = 10_000_000;
+
+/// Most cliques kept (`top_k`): 500 times the default 200; each is scored against every
+/// correspondence.
+pub const MAX_TOP_K: usize = 100_000;
+
+/// Most hypotheses ranked by a short ICP (`rank_candidates`): 200 times the default 5; each is
+/// an ICP run, and no more can come out than `top_k` cliques.
+pub const MAX_RANK_CANDIDATES: usize = 1_000;
+
+/// Most fine ICP iterations (`icp_max_iterations`): 100 times the default 100; ICP converges in
+/// tens, and at a relative tolerance of 0 the cap is what stops it.
+pub const MAX_ICP_ITERATIONS: usize = 10_000;
+
 impl RegisterConfig {
     /// Checks every setting: a refusal is one line naming the key in backticks with its range
     /// (for `ConfigFile::refuse`). What needs the clouds (the voxel against their extent) the
     /// stage checks when it runs.
     pub fn check(&self) -> Result<(), String> {
-        use crate::settings::{above, at_least, in_range};
+        use crate::settings::{above, count_in, in_range};
         let lengths = [
             ("voxel", self.voxel),
             ("normal_radius", self.normal_radius),
@@ -141,23 +170,45 @@ impl RegisterConfig {
                 above(key, v, 0.0, MAX_LENGTH_MM, "mm")?;
             }
         }
+        let (points, pairs) = (MAX_POINTS_CAP, MAX_CORRESPONDENCES);
         let counts = [
-            ("feature_max_nn", self.feature_max_nn, 1, "neighbours"),
-            ("max_keypoints", self.max_keypoints, 1, "points"),
-            ("max_correspondences", self.max_correspondences, 1, "pairs"),
-            ("min_clique", self.min_clique, MIN_CLIQUE, "pairs"),
-            ("max_cliques", self.max_cliques, 1, "cliques"),
-            ("top_k", self.top_k, 1, "cliques"),
-            ("icp_max_points", self.icp_max_points, 1, "points"),
+            (
+                "feature_max_nn",
+                self.feature_max_nn,
+                1,
+                MAX_FEATURE_NN,
+                "neighbours",
+            ),
+            ("max_keypoints", self.max_keypoints, 1, points, "points"),
+            (
+                "max_correspondences",
+                self.max_correspondences,
+                1,
+                pairs,
+                "pairs",
+            ),
+            ("min_clique", self.min_clique, MIN_CLIQUE, pairs, "pairs"),
+            ("max_cliques", self.max_cliques, 1, MAX_CLIQUES, "cliques"),
+            ("top_k", self.top_k, 1, MAX_TOP_K, "cliques"),
+            (
+                "rank_candidates",
+                self.rank_candidates,
+                1,
+                MAX_RANK_CANDIDATES,
+                "poses",
+            ),
+            ("icp_max_points", self.icp_max_points, 1, points, "points"),
             (
                 "icp_max_iterations",
                 self.icp_max_iterations,
                 1,
+                MAX_ICP_ITERATIONS,
                 "iterations",
             ),
+            ("min_inliers", self.min_inliers, 0, pairs, "pairs"),
         ];
-        for (key, n, min, unit) in counts {
-            at_least(key, n, min, unit)?;
+        for (key, n, min, max, unit) in counts {
+            count_in(key, n, min, max, unit)?;
         }
         let budget = MAX_CLIQUE_TIME_BUDGET_S;
         above(

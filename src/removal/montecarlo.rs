@@ -94,25 +94,46 @@ impl MonteCarloConfig {
     /// Checks the settings against their ranges; the message names the first key outside its
     /// range with its value.
     pub fn check(&self) -> Result<(), String> {
-        let ranges = [
-            ("draws", self.draws as f64, 1.0, 10_000.0),
-            ("backlash_deg", self.backlash_deg, 0.0, 10.0),
-            ("tip_error_mm", self.tip_error_mm, 0.0, 50.0),
-        ];
-        for (key, v, lo, hi) in ranges {
-            if !(lo..=hi).contains(&v) {
-                return Err(format!("`monte_carlo.{key}` = {v} is outside {lo}..={hi}"));
-            }
+        use crate::settings::in_range;
+        if !(1..=MAX_DRAWS).contains(&self.draws) {
+            let n = self.draws;
+            return Err(format!(
+                "`monte_carlo.draws` = {n} is outside 1..={MAX_DRAWS}"
+            ));
         }
+        let backlash = self.backlash_deg;
+        in_range(
+            "monte_carlo.backlash_deg",
+            backlash,
+            0.0,
+            MAX_BACKLASH_DEG,
+            "deg",
+        )?;
+        let tip = self.tip_error_mm;
+        in_range(
+            "monte_carlo.tip_error_mm",
+            tip,
+            0.0,
+            super::tool::MAX_TIP_ERROR_MM,
+            "mm",
+        )?;
         match (0.5..1.0).contains(&self.quantile) {
             true => Ok(()),
             false => Err(format!(
-                "`monte_carlo.quantile` = {} is outside 0.5..1 (1 excluded)",
+                "`monte_carlo.quantile` = {:?} is outside 0.5..1 (1 excluded)",
                 self.quantile
             )),
         }
     }
 }
+
+/// Most draws (`monte_carlo.draws`): 200 times the default 50; each draw re-evaluates every
+/// contact's patch, so more only costs time without changing the 95th percentile.
+const MAX_DRAWS: usize = 10_000;
+
+/// Largest backlash per servo drawn (`monte_carlo.backlash_deg`), degrees: ten times
+/// DOFBOT.md's worst case of 1 degree; more is a worn-out arm, not a tolerance.
+const MAX_BACKLASH_DEG: f64 = 10.0;
 
 /// How one contact's joints move its tip: `sensitivity` (3 x dof, mm per rad, the frame of
 /// the contact points) and each joint's quantisation half-step, rad (half a raw count).

@@ -179,7 +179,7 @@ impl ToolModel {
         }
         if let Some(e) = self.verified_tip_error_mm {
             if !(0.0..=MAX_TIP_ERROR_MM).contains(&e) {
-                let msg = format!("{e} is outside 0..={MAX_TIP_ERROR_MM} mm");
+                let msg = format!("{e:?} is outside 0..={MAX_TIP_ERROR_MM} mm");
                 return Err(("removal.verified_tip_error_mm".to_string(), msg));
             }
         }

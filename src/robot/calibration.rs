@@ -224,7 +224,7 @@ impl Servo {
     pub fn scale(&self) -> Result<ServoScale, String> {
         if self.degree_range[0] != 0.0 {
             return Err(format!(
-                "servo {}: the bus needs degree_range to start at 0 (got {})",
+                "servo {}: the bus needs degree_range to start at 0 (got {:?})",
                 self.id, self.degree_range[0]
             ));
         }

@@ -146,9 +146,17 @@ impl Robot {
             }
             let urdf_limit = joint.limits.as_ref().map(|r| [r.min, r.max]);
             drop(joint);
+            let urdf_velocity = description
+                .joints
+                .iter()
+                .find(|j| j.name == name)
+                .map(|j| j.limit.velocity);
             joints.push(joint_spec(
                 &name,
-                urdf_limit,
+                UrdfLimits {
+                    position: urdf_limit,
+                    velocity: urdf_velocity,
+                },
                 &servos,
                 urdf_file,
                 servos_file,
@@ -243,9 +251,20 @@ impl Robot {
     }
 }
 
+/// What the URDF says of one actuated joint: its position limits and its `<limit velocity>`.
+struct UrdfLimits {
+    /// `[lower, upper]`, rad (none without a `<limit>`).
+    position: Option<[f64; 2]>,
+    /// `<limit velocity>`, rad/s (none when the joint is not in the description).
+    velocity: Option<f64>,
+}
+
+/// The joint's limits: positions the intersection of the URDF's, the servo's degree range and
+/// servos.toml `joint_limits`; velocity the smaller of servos.toml `velocity` and the URDF's
+/// `<limit velocity>` (refused unless finite and above 0).
 fn joint_spec(
     name: &str,
-    urdf_limit: Option<[f64; 2]>,
+    urdf: UrdfLimits,
     servos: &Servos,
     urdf_file: &Path,
     servos_file: &Path,
@@ -257,9 +276,17 @@ fn joint_spec(
             format!("no servo for URDF joint {name}"),
         )
     })?;
-    let [a, b] = urdf_limit.ok_or_else(|| {
+    let [a, b] = urdf.position.ok_or_else(|| {
         RobotError::bad(urdf_file, format!("joint {name}"), "needs position limits")
     })?;
+    let urdf_velocity = match urdf.velocity {
+        Some(v) if !(v.is_finite() && v > 0.0) => {
+            let msg = format!("<limit velocity=\"{v}\"> must be finite and above 0 rad/s");
+            return Err(RobotError::bad(urdf_file, format!("joint {name}"), msg));
+        }
+        Some(v) => v,
+        None => f64::INFINITY,
+    };
     let [sa, sb] = servo.joint_range();
     let [ca, cb] = servo
         .joint_limits
@@ -278,7 +305,7 @@ fn joint_spec(
         servo_id: servo.id,
         lower,
         upper,
-        velocity: servo.velocity.unwrap_or(0.0),
+        velocity: servo.velocity.unwrap_or(0.0).min(urdf_velocity),
         acceleration: servo.acceleration.unwrap_or(0.0),
         jerk: servo.jerk.unwrap_or(0.0),
     })

@@ -6,7 +6,7 @@ use nalgebra::{Point3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use super::femoral::FemoralShape;
-use super::limits::{outside, MAX_POINTS};
+use super::limits::{outside, range_outside, MAX_POINTS};
 use super::turntable::TurntableConfig;
 use crate::cloud::Units;
 
@@ -80,8 +80,6 @@ impl SynthConfig {
     /// names the key in backticks.
     pub fn check(&self) -> std::result::Result<(), String> {
         let n = |v: usize| v as f64;
-        let [h0, h1] = self.height_range;
-        let [w0, w1] = self.width_range;
         let (s, mm, share) = (&self.shape, "mm", "(share)");
         let shape = MAX_SHAPE_MM;
         let table = [
@@ -100,16 +98,6 @@ impl SynthConfig {
                 "points",
             ),
             ("defects", n(self.defects), 0.0, n(MAX_DEFECTS), "defects"),
-            ("height_range", h0, 0.0, h1.min(MAX_DEFECT_HEIGHT_MM), mm),
-            ("height_range", h1, h0.max(0.0), MAX_DEFECT_HEIGHT_MM, mm),
-            ("width_range", w0, MIN_DEFECT_WIDTH_MM, w1, mm),
-            (
-                "width_range",
-                w1,
-                w0.max(MIN_DEFECT_WIDTH_MM),
-                MAX_DEFECT_WIDTH_MM,
-                mm,
-            ),
             (
                 "pit_share",
                 self.pit_share,
@@ -143,9 +131,23 @@ impl SynthConfig {
             ),
             ("x_step", s.x_step, 0.01, shape, mm),
         ];
+        let ranges = [
+            ("height_range", self.height_range, 0.0, MAX_DEFECT_HEIGHT_MM),
+            (
+                "width_range",
+                self.width_range,
+                MIN_DEFECT_WIDTH_MM,
+                MAX_DEFECT_WIDTH_MM,
+            ),
+        ];
+        let pairs = ranges
+            .iter()
+            .map(|&(key, v, lo, hi)| range_outside(key, v, lo, hi, mm));
         if let Some(m) = table
             .iter()
-            .find_map(|&(key, v, lo, hi, unit)| outside(key, v, lo, hi, unit))
+            .map(|&(key, v, lo, hi, unit)| outside(key, v, lo, hi, unit))
+            .chain(pairs)
+            .find_map(|m| m)
         {
             return Err(m);
         }

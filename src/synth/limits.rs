@@ -8,3 +8,18 @@ pub(super) fn outside(key: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Option
     (!(v.is_finite() && (lo..=hi).contains(&v)))
         .then(|| format!("`{key}` = {v:?} {unit} is outside {lo}..={hi} {unit}"))
 }
+
+/// A "min,max" range setting `key = [a, b] unit` that is not `lo <= a <= b <= hi` (or not
+/// finite) as a message naming the key and the range both ends must lie in.
+pub(super) fn range_outside(
+    key: &str,
+    [a, b]: [f64; 2],
+    lo: f64,
+    hi: f64,
+    unit: &str,
+) -> Option<String> {
+    let fine = a.is_finite() && b.is_finite() && lo <= a && a <= b && b <= hi;
+    (!fine).then(|| {
+        format!("`{key}` = [{a:?}, {b:?}] {unit}: needs min <= max, both within {lo}..={hi} {unit}")
+    })
+}

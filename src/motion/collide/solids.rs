@@ -72,15 +72,20 @@ impl CollisionConfig {
         ];
         for (name, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(format!("collision.{name} must be > 0 (got {v})"));
+                return Err(format!(
+                    "`collision.{name}` = {v:?} must be finite and above 0"
+                ));
             }
         }
-        if !(self.contact_tolerance_mm >= 0.0 && self.contact_tolerance_mm.is_finite()) {
-            return Err("collision.contact_tolerance_mm must be >= 0".into());
+        let tolerance = self.contact_tolerance_mm;
+        if !(tolerance >= 0.0 && tolerance.is_finite()) {
+            return Err(format!(
+                "`collision.contact_tolerance_mm` = {tolerance:?} mm must be finite and >= 0"
+            ));
         }
         if self.link_radius_mm.len() + 1 != dof {
             return Err(format!(
-                "collision.link_radius_mm has {} radii, the arm {} links before the tool",
+                "`collision.link_radius_mm` has {} radii, the arm {} links before the tool",
                 self.link_radius_mm.len(),
                 dof.saturating_sub(1)
             ));
@@ -90,13 +95,13 @@ impl CollisionConfig {
             .iter()
             .any(|r| !(*r >= 0.0 && r.is_finite()))
         {
-            return Err("collision.link_radius_mm must be >= 0".into());
+            return Err("`collision.link_radius_mm`: every radius must be finite and >= 0".into());
         }
         for (i, s) in self.solids.iter().enumerate() {
             if !(0..3).all(|k| s.min[k] < s.max[k] && s.min[k].is_finite() && s.max[k].is_finite())
             {
                 return Err(format!(
-                    "collision.solids[{i}] ({}): min must be below max",
+                    "`collision.solids` [{i}] ({}): min must be below max",
                     s.name
                 ));
             }
