@@ -215,12 +215,12 @@ pub(crate) fn cores_landed(
 /// measured contact normal (`motion::compensate`) none either, lowest -0.045 mm, median
 /// 28.9 % (docs/ALGORITHMS.md).
 fn rim_guard(
-    contacts: &[Contact],
+    (pieces, contacts): (&[&PlannedPass], &[Contact]),
     (inspection, setup): (&Inspection, &Setup),
     influence: &Influence,
     tolerance: f64,
 ) -> (Vec<SurfacePoint>, removal::guard::Guard) {
-    let margin = landing_margins(contacts, setup.tool, setup.config);
+    let margin = landing_margins(pieces, contacts, setup);
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let fine: Vec<f64> = (near.iter())
@@ -356,7 +356,7 @@ pub fn set_dwell(
     let aim: Vec<f64> = (aim.iter())
         .map(|t| config.finish.cap(config.aim.cap(*t, tolerance)))
         .collect();
-    let (guarded, guard) = rim_guard(&contacts, bench, &influence, tolerance);
+    let (guarded, guard) = rim_guard((&pieces, &contacts), bench, &influence, tolerance);
     let (mut plan, cuts) = match solve_in_order(
         &placed,
         setup.tool,

@@ -199,7 +199,7 @@ fn region_verdict(
     let tolerance = inspection.tolerance.unwrap_or(config.tolerance_mm);
     let placed = placed_contacts(pieces, setup);
     let contacts = pressed_contacts(&placed, inspection, setup, allowance_mm);
-    let (idx, nominal) = verdict_points(inspection, setup, &contacts, &influence);
+    let (idx, nominal) = verdict_points(inspection, setup, (pieces, &contacts), &influence);
     let cores: Vec<(Point3<f64>, Vector3<f64>, f64)> = idx
         .iter()
         .map(|&i| {
@@ -304,11 +304,11 @@ fn region_verdict(
 fn verdict_points(
     inspection: &Inspection,
     setup: &Setup,
-    contacts: &[removal::Contact],
+    (pieces, contacts): (&[&PlannedPass], &[removal::Contact]),
     influence: &Influence,
 ) -> (Vec<usize>, Vec<bool>) {
     let near = cores_near(inspection, setup.index, contacts, influence);
-    let margin = landing_margins(contacts, setup.tool, setup.config);
+    let margin = landing_margins(pieces, contacts, setup);
     let wide = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let nominal = wide.iter().map(|i| near.binary_search(i).is_ok()).collect();
     (wide, nominal)
