@@ -229,7 +229,18 @@ fn rim_guard(
     let limit: Vec<f64> = (rim_budget(&guarded, &fine, tolerance).iter())
         .map(|b| b / (1.0 + setup.tool.preston_k_rel_sd))
         .collect();
-    let guard = removal::guard::Guard::landed(contacts, (&guarded, &limit), influence, &margin);
+    // a contact whose gear flank the force does not settle may press harder than planned
+    let flank = super::landing::flank_errors(pieces, contacts, setup);
+    let pressed: Vec<Contact> = (contacts.iter().zip(&flank))
+        .map(|(c, f)| match *f > 0.0 {
+            true => Contact {
+                force_ratio: c.force_ratio * super::landing::FORCE_SPAN,
+                ..*c
+            },
+            false => *c,
+        })
+        .collect();
+    let guard = removal::guard::Guard::landed(&pressed, (&guarded, &limit), influence, &margin);
     (guarded, guard)
 }
 
