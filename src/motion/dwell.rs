@@ -213,7 +213,10 @@ pub(crate) fn cores_landed(
 /// points, `removal::matching`) no run of the 30 gouges (lowest true ground point -0.044 mm;
 /// at the plan's k 2 runs gouge), median share 31.2 -> 30.3 %; with the arm loaded along the
 /// measured contact normal (`motion::compensate`) none either, lowest -0.045 mm, median
-/// 28.9 % (docs/ALGORITHMS.md).
+/// 28.9 % (docs/ALGORITHMS.md). A contact whose gear flank the force does not settle
+/// (`landing::flank_errors`) is held as pressed `landing::FORCE_SPAN` times harder: on a
+/// 1-degree arm such contacts pressed 2.5-4 times the planned force (none on the documented
+/// arm, whose bands the landing floor holds).
 fn rim_guard(
     (pieces, contacts): (&[&PlannedPass], &[Contact]),
     (inspection, setup): (&Inspection, &Setup),
