@@ -447,14 +447,7 @@ fn settings_that_would_switch_a_safety_check_off_are_refused_at_their_key() {
             "derivative_tolerance",
         ),
     ] {
-        let cfg = tmp.path().join(format!("plan{n}.toml"));
-        std::fs::write(&cfg, text).unwrap();
-        let mut cmd = polishbot();
-        cmd.arg("--config").arg(&cfg).args(["plan", "--inspection"]);
-        cmd.arg(dir.join("inspection"))
-            .arg("-o")
-            .arg(tmp.path().join("p.json"));
-        let line = one_line_failure(&cmd.output().unwrap());
+        let line = plan_refusal(dir, tmp.path(), &format!("plan{n}.toml"), text);
         assert!(line.contains(key) && line.contains("outside"), "{line}");
     }
     let cfg = tmp.path().join("run.toml");
@@ -468,6 +461,19 @@ fn settings_that_would_switch_a_safety_check_off_are_refused_at_their_key() {
         line.contains("run.toml: line 3: [validation] `derivative_tolerance`"),
         "{line}"
     );
+}
+
+/// The one-line refusal of `plan` on the case's inspection `dir` with the settings `text`,
+/// written to `name` in `tmp`.
+fn plan_refusal(dir: &Path, tmp: &Path, name: &str, text: &str) -> String {
+    let cfg = tmp.join(name);
+    std::fs::write(&cfg, text).unwrap();
+    let mut cmd = polishbot();
+    cmd.arg("--config").arg(&cfg).args(["plan", "--inspection"]);
+    cmd.arg(dir.join("inspection"))
+        .arg("-o")
+        .arg(tmp.join("p.json"));
+    one_line_failure(&cmd.output().unwrap())
 }
 
 /// `[plan.collision]` and `[plan.monte_carlo]` settings out of range are refused at the line
@@ -509,14 +515,7 @@ fn plan_collision_and_monte_carlo_settings_are_refused_at_their_line() {
             "monte_carlo.backlash_deg",
         ),
     ] {
-        let cfg = tmp.path().join(format!("mc{n}.toml"));
-        std::fs::write(&cfg, text).unwrap();
-        let mut cmd = polishbot();
-        cmd.arg("--config").arg(&cfg).args(["plan", "--inspection"]);
-        cmd.arg(dir.join("inspection"))
-            .arg("-o")
-            .arg(tmp.path().join("p.json"));
-        let line = one_line_failure(&cmd.output().unwrap());
+        let line = plan_refusal(dir, tmp.path(), &format!("mc{n}.toml"), text);
         let place = format!("mc{n}.toml: line 3: [plan] `{key}`");
         assert!(line.contains(&place), "{place:?} not in {line}");
         assert!(!line.contains("0000000000"), "{line}");
