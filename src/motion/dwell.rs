@@ -5,7 +5,7 @@
 //! contacts' dwells ask for (`stroke.rs`), the force checked at each contact's joint angles,
 //! and the predicted part from the dwell the trajectory really spends. Method: docs/ALGORITHMS.md,
 //! "Removal planning".
-use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
+use nalgebra::{Matrix3, Point3, Vector3};
 
 use super::config::PlanConfig;
 use super::error::{DwellError, PlanError};
@@ -13,7 +13,6 @@ use super::feed::JointSpline;
 use super::landing::landing_margins;
 use super::program::{PlannedPass, Run};
 use super::stroke::{chain_knots, chain_limits};
-use crate::removal::montecarlo::JointError;
 use crate::removal::{self, force, Contact, Influence, ToolModel};
 use crate::repair::RegionInfo;
 use crate::repair::{Inspection, SurfacePoint};
@@ -79,32 +78,6 @@ pub(crate) fn pressed_contacts(
     let cores = (inspection.points.as_slice(), setup.index);
     removal::press::press(&mut contacts, setup.tool, &influence, cores, allowance);
     contacts
-}
-
-/// How the joints of a piece's first pose move the tip (mm/rad, reference frame) and each
-/// servo's half raw count (rad), as `robot/resolution.rs` quantises them.
-pub(crate) fn joint_error(robot: &Robot, q: &[f64], back: &Matrix3<f64>) -> JointError {
-    let jac = robot.jacobian(q);
-    let position = mm(jac.rows(0, 3).into_owned());
-    let sensitivity: DMatrix<f64> = DMatrix::from_fn(3, robot.dof(), |r, c| {
-        (0..3).map(|k| back[(r, k)] * position[(k, c)]).sum()
-    });
-    let half_count = robot
-        .joints
-        .iter()
-        .map(|joint| {
-            robot
-                .servos
-                .servos
-                .iter()
-                .find(|s| s.id == joint.servo_id)
-                .map_or(0.0, |s| 0.5 / s.counts_per_degree().to_degrees())
-        })
-        .collect();
-    JointError {
-        sensitivity,
-        half_count,
-    }
 }
 
 /// Splits every piece of `runs` into two-point pieces (one contact each).
@@ -223,7 +196,7 @@ fn rim_guard(
     influence: &Influence,
     tolerance: f64,
 ) -> (Vec<SurfacePoint>, removal::guard::Guard) {
-    let margin = landing_margins(pieces, contacts, setup);
+    let margin = landing_margins(pieces, contacts, &setup.landing_cell());
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let fine: Vec<f64> = (near.iter())
@@ -232,17 +205,7 @@ fn rim_guard(
     let limit: Vec<f64> = (rim_budget(&guarded, &fine, tolerance).iter())
         .map(|b| b / (1.0 + setup.tool.preston_k_rel_sd))
         .collect();
-    // a contact whose gear flank the force does not settle may press harder than planned
-    let flank = super::landing::flank_errors(pieces, contacts, setup);
-    let pressed: Vec<Contact> = (contacts.iter().zip(&flank))
-        .map(|(c, f)| match *f > 0.0 {
-            true => Contact {
-                force_ratio: c.force_ratio * super::landing::FORCE_SPAN,
-                ..*c
-            },
-            false => *c,
-        })
-        .collect();
+    let pressed = super::landing::pressed_harder(pieces, contacts, &setup.landing_cell());
     let guard = removal::guard::Guard::landed(&pressed, (&guarded, &limit), influence, &margin);
     (guarded, guard)
 }
@@ -285,6 +248,19 @@ pub struct Setup<'a> {
     pub config: &'a PlanConfig,
     /// The inspection's core points indexed by position (in inspection order).
     pub index: &'a Neighbours,
+}
+
+impl Setup<'_> {
+    /// The parts of the cell the landing margins read (`motion::landing`).
+    pub(crate) fn landing_cell(&self) -> super::landing::Cell<'_> {
+        let (robot, workcell, tool, config) = (self.robot, self.workcell, self.tool, self.config);
+        super::landing::Cell {
+            robot,
+            workcell,
+            tool,
+            config,
+        }
+    }
 }
 
 /// A region's runs with the dwell solved at an allowance.

@@ -1,13 +1,25 @@
 //! How far from its prediction a contact's removal may land (issue 50): the margin the rim
 //! guard (`motion::dwell`, `removal::guard`) and the Monte Carlo's landing (`motion::predict`)
 //! move a region's contacts within.
-use super::dwell::Setup;
+use super::config::PlanConfig;
 use super::program::PlannedPass;
 use crate::removal::{self, Contact, ToolModel};
 use crate::robot::compliance::{Compliance, FLANK_TORQUE_NM};
 use crate::robot::units::mm;
-use crate::robot::Robot;
+use crate::robot::{Robot, Workcell};
 use nalgebra::Vector3;
+
+/// What the landing margins read of the cell (`motion::dwell::Setup` lends its parts).
+pub(crate) struct Cell<'a> {
+    /// The arm, with its `[compliance]` table.
+    pub robot: &'a Robot,
+    /// Robot base from the reference frame.
+    pub workcell: &'a Workcell,
+    /// The compliant tool.
+    pub tool: &'a ToolModel,
+    /// The planner's settings.
+    pub config: &'a PlanConfig,
+}
 
 /// Landing error and reach beyond the model's patch of a grind, the floor of
 /// [`landing_margin`]'s shift term on every grind, mm (1.8): the documented arm's first grinds
@@ -70,10 +82,10 @@ fn margin_of(
 /// (`motion::aim::Aim::reach_mm`, read from the rescans by `cell::removal_reach`) the margin
 /// is at least that reach; a contact commanded shallow lands within [`SHALLOW_LANDING_MM`]
 /// ([`margin_of`]). `pieces` are the contacts' one-contact pieces, in order.
-pub(crate) fn landing_margins(pieces: &[&PlannedPass], cs: &[Contact], setup: &Setup) -> Vec<f64> {
-    let (tool, config) = (setup.tool, setup.config);
+pub(crate) fn landing_margins(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell) -> Vec<f64> {
+    let (tool, config) = (cell.tool, cell.config);
     let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
-    let flank = flank_errors(pieces, cs, setup);
+    let flank = flank_errors(pieces, cs, cell);
     cs.iter()
         .zip(flank)
         .map(|(c, f)| landing_margin(c, (tip, f), tool, config))
@@ -86,7 +98,7 @@ fn landing_margin(
     c: &Contact,
     (tip, flank): (f64, f64),
     tool: &ToolModel,
-    config: &super::config::PlanConfig,
+    config: &PlanConfig,
 ) -> f64 {
     let slide = slide_error(c, tool);
     let carried = config.aim.shift_at(&c.point, &c.normal).norm();
@@ -120,18 +132,34 @@ pub const FLOOR_BAND_DEG: f64 = 0.55;
 /// through the joint's lever to the tip) from where the compensation put it. The table is
 /// what `calibrate compliance` measured: on the documented arm's bands (about 0.5 degree) a
 /// joint's whole band is 1.5-2.5 mm at the ball, on a 1-degree arm twice that.
-pub(crate) fn flank_errors(pieces: &[&PlannedPass], cs: &[Contact], setup: &Setup) -> Vec<f64> {
-    let Some(table) = setup.robot.servos.compliance.as_ref() else {
+pub(crate) fn flank_errors(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell) -> Vec<f64> {
+    let Some(table) = cell.robot.servos.compliance.as_ref() else {
         return vec![0.0; cs.len()];
     };
-    let force = setup.tool.force_n();
+    let force = cell.tool.force_n();
     (pieces.iter().zip(cs))
         .map(|(p, c)| {
-            let push = setup.workcell.direction_from_reference(&c.normal) * force * c.force_ratio;
+            let push = cell.workcell.direction_from_reference(&c.normal) * force * c.force_ratio;
             let ends = [p.points.first(), p.points.last()];
             (ends.iter().flatten())
-                .map(|e| flank_error(table, setup.robot, &e.q, &push))
+                .map(|e| flank_error(table, cell.robot, &e.q, &push))
                 .fold(0.0, f64::max)
+        })
+        .collect()
+}
+
+/// `cs` as the rim guard holds them: a contact whose gear flank the force does not settle
+/// ([`flank_errors`]) pressed [`FORCE_SPAN`] times harder, since the force that decides its
+/// flank is not the plan's.
+pub(crate) fn pressed_harder(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell) -> Vec<Contact> {
+    let flank = flank_errors(pieces, cs, cell);
+    (cs.iter().zip(&flank))
+        .map(|(c, f)| match *f > 0.0 {
+            true => Contact {
+                force_ratio: c.force_ratio * FORCE_SPAN,
+                ..*c
+            },
+            false => *c,
         })
         .collect()
 }

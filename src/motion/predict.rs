@@ -8,11 +8,10 @@
 //! as rehearsed. Method: docs/ALGORITHMS.md, "Removal planning".
 use std::collections::HashMap;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::{DMatrix, Matrix3, Point3, Vector3};
 
 use super::dwell::{
-    cores_landed, cores_near, joint_error, placed_contacts, pressed_contacts, reference_from_robot,
-    Setup,
+    cores_landed, cores_near, placed_contacts, pressed_contacts, reference_from_robot, Setup,
 };
 use super::error::PlanError;
 use super::free_motion::{pressed, Assembly};
@@ -308,7 +307,7 @@ fn verdict_points(
     influence: &Influence,
 ) -> (Vec<usize>, Vec<bool>) {
     let near = cores_near(inspection, setup.index, contacts, influence);
-    let margin = landing_margins(pieces, contacts, setup);
+    let margin = landing_margins(pieces, contacts, &setup.landing_cell());
     let wide = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let nominal = wide.iter().map(|i| near.binary_search(i).is_ok()).collect();
     (wide, nominal)
@@ -427,6 +426,32 @@ pub(crate) fn predict(
         }
     }
     Ok((report, failed))
+}
+
+/// How the joints of a piece's first pose move the tip (mm/rad, reference frame) and each
+/// servo's half raw count (rad), as `robot/resolution.rs` quantises them.
+fn joint_error(robot: &Robot, q: &[f64], back: &Matrix3<f64>) -> JointError {
+    let jac = robot.jacobian(q);
+    let position = mm(jac.rows(0, 3).into_owned());
+    let sensitivity: DMatrix<f64> = DMatrix::from_fn(3, robot.dof(), |r, c| {
+        (0..3).map(|k| back[(r, k)] * position[(k, c)]).sum()
+    });
+    let half_count = robot
+        .joints
+        .iter()
+        .map(|joint| {
+            robot
+                .servos
+                .servos
+                .iter()
+                .find(|s| s.id == joint.servo_id)
+                .map_or(0.0, |s| 0.5 / s.counts_per_degree().to_degrees())
+        })
+        .collect();
+    JointError {
+        sensitivity,
+        half_count,
+    }
 }
 
 #[cfg(test)]
