@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Point3, Vector3};
 use super::config::PlanConfig;
 use super::error::{DwellError, PlanError};
 use super::feed::JointSpline;
-use super::landing::landing_margins;
+use super::landing;
 use super::program::{PlannedPass, Run};
 use super::stroke::{chain_knots, chain_limits};
 use crate::removal::{self, force, Contact, Influence, ToolModel};
@@ -176,7 +176,7 @@ pub(crate) fn cores_landed(
 
 /// Guards the rim of a region (issue 50: the gouges were conform points 1-3 mm outside every
 /// region, ground a little in each grind): every core point within the reach of a contact
-/// landed anywhere within its [`landing_margins`] keeps its [`rim_budget`] on the removal of
+/// landed anywhere within its [`landing::landing_margins`] keeps its [`rim_budget`] on the removal of
 /// every landing (`removal::guard::Guard::landed`) at the plan's k times 1 + its relative
 /// uncertainty (tool.toml `preston_k_rel_sd`: 0.3 before any fit, issue 50's "k 30 % off";
 /// the fit's after one): the guarded points and their budgets. The solve drives the dwell up
@@ -196,7 +196,9 @@ fn rim_guard(
     influence: &Influence,
     tolerance: f64,
 ) -> (Vec<SurfacePoint>, removal::guard::Guard) {
-    let margin = landing_margins(pieces, contacts, &setup.landing_cell());
+    let cell = setup.landing_cell();
+    let flank = landing::flank_errors(pieces, contacts, &cell);
+    let margin = landing::margins_with(contacts, &flank, &cell);
     let near = cores_landed(inspection, setup.index, contacts, influence, &margin);
     let guarded: Vec<SurfacePoint> = near.iter().map(|&i| inspection.points[i]).collect();
     let fine: Vec<f64> = (near.iter())
@@ -205,7 +207,7 @@ fn rim_guard(
     let limit: Vec<f64> = (rim_budget(&guarded, &fine, tolerance).iter())
         .map(|b| b / (1.0 + setup.tool.preston_k_rel_sd))
         .collect();
-    let pressed = super::landing::pressed_harder(pieces, contacts, &setup.landing_cell());
+    let pressed = landing::pressed_harder(contacts, &flank);
     let guard = removal::guard::Guard::landed(&pressed, (&guarded, &limit), influence, &margin);
     (guarded, guard)
 }

@@ -83,12 +83,16 @@ fn margin_of(
 /// is at least that reach; a contact commanded shallow lands within [`SHALLOW_LANDING_MM`]
 /// ([`margin_of`]). `pieces` are the contacts' one-contact pieces, in order.
 pub(crate) fn landing_margins(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell) -> Vec<f64> {
+    margins_with(cs, &flank_errors(pieces, cs, cell), cell)
+}
+
+/// [`landing_margins`] of the contacts `cs` whose [`flank_errors`] are `flank`.
+pub(crate) fn margins_with(cs: &[Contact], flank: &[f64], cell: &Cell) -> Vec<f64> {
     let (tool, config) = (cell.tool, cell.config);
     let tip = removal::montecarlo::tip_error(tool, &config.monte_carlo).mm;
-    let flank = flank_errors(pieces, cs, cell);
     cs.iter()
         .zip(flank)
-        .map(|(c, f)| landing_margin(c, (tip, f), tool, config))
+        .map(|(c, f)| landing_margin(c, (tip, *f), tool, config))
         .collect()
 }
 
@@ -133,7 +137,9 @@ pub const FLOOR_BAND_DEG: f64 = 0.55;
 /// what `calibrate compliance` measured: on the documented arm's bands (about 0.5 degree) a
 /// joint's whole band is 1.5-2.5 mm at the ball, on a 1-degree arm twice that.
 pub(crate) fn flank_errors(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell) -> Vec<f64> {
-    let Some(table) = cell.robot.servos.compliance.as_ref() else {
+    // no band beyond the floor's: nothing to add (the documented arm's plans, at no cost)
+    let table = cell.robot.servos.compliance.as_ref();
+    let Some(table) = table.filter(|t| t.backlash_deg.iter().any(|b| *b > FLOOR_BAND_DEG)) else {
         return vec![0.0; cs.len()];
     };
     let force = cell.tool.force_n();
@@ -149,11 +155,10 @@ pub(crate) fn flank_errors(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell)
 }
 
 /// `cs` as the rim guard holds them: a contact whose gear flank the force does not settle
-/// ([`flank_errors`]) pressed [`FORCE_SPAN`] times harder, since the force that decides its
+/// (its [`flank_errors`] in `flank` above 0) pressed [`FORCE_SPAN`] times harder, since the force that decides its
 /// flank is not the plan's.
-pub(crate) fn pressed_harder(pieces: &[&PlannedPass], cs: &[Contact], cell: &Cell) -> Vec<Contact> {
-    let flank = flank_errors(pieces, cs, cell);
-    (cs.iter().zip(&flank))
+pub(crate) fn pressed_harder(cs: &[Contact], flank: &[f64]) -> Vec<Contact> {
+    (cs.iter().zip(flank))
         .map(|(c, f)| match *f > 0.0 {
             true => Contact {
                 force_ratio: c.force_ratio * FORCE_SPAN,
